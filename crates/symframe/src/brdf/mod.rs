@@ -1,0 +1,29 @@
+//! Analytic and measured BRDF models, each evaluated in a local frame.
+//!
+//! Local frame convention (shared by every model): `x` = the model's first anisotropy axis,
+//! `y` = its second, `z` = the surface normal. Directions point away from the surface and are
+//! unit length. Which of x or y is "the tangent" follows method.md: the axis of the larger
+//! roughness (see [`Brdf::tangent_axis`]).
+
+/// Which local axis of a model is the tangent (the axis of the wider highlight).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TangentAxis {
+    /// The model's local x axis.
+    X,
+    /// The model's local y axis.
+    Y,
+    /// The model is isotropic: no tangent is defined.
+    None,
+}
+
+/// A BRDF evaluated in the local frame (x, y, z = normal).
+pub trait Brdf: Send + Sync {
+    /// The BRDF value `f(light, view)` per RGB channel (1/sr), zero below the horizon.
+    fn eval(&self, light_in_local: glam::DVec3, view_in_local: glam::DVec3) -> [f64; 3];
+
+    /// Which local axis is the tangent (larger roughness); `None` for isotropic models.
+    fn tangent_axis(&self) -> TangentAxis;
+
+    /// Short human-readable name with parameters, for reports.
+    fn name(&self) -> String;
+}
