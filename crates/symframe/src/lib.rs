@@ -3,8 +3,23 @@
 //!
 //! Frames: the camera frame has x = image right, y = image up, z = toward the camera; the view
 //! vector is `(0, 0, 1)` for every pixel (orthographic). Each pixel's local frame is (n, t, b).
+//!
+//! Where things live: [`rig`] (lights, halfway vectors, triangulation, point location),
+//! [`slice`] (per-pixel interpolation), [`symmetry`] (the objective), [`optim`] (Nelder-Mead),
+//! [`estimate`] (the per-pixel estimator and the whole-stack pipeline), [`brdf`] (models),
+//! [`render`] (the synthetic renderer), [`stack`] (the measurement stack).
 
 pub mod brdf;
+pub mod error;
+pub mod estimate;
+pub mod optim;
+pub mod render;
+pub mod rig;
+pub mod slice;
 pub mod stack;
+pub mod symmetry;
 
+pub use error::{Error, Result};
+pub use estimate::{estimate_stack, EstimateMaps, Estimator, EstimatorParams, PixelStatus};
+pub use rig::{Rig, RigOptions};
 pub use stack::Stack;

@@ -1,0 +1,466 @@
+//! The estimator pipeline: per pixel, the normal that makes the slice most symmetric under
+//! `G_n`, then the tangent that makes it most symmetric under `G_nt` and `G_nb`, the
+//! widest-highlight choice of t over b, a confidence and an anisotropy measure; and the whole
+//! stack, in parallel over row bands.
+
+use glam::DVec3;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::optim::{nelder_mead, NelderMeadOptions};
+use crate::rig::Rig;
+use crate::slice::{gather_slice, interpolate};
+use crate::stack::Stack;
+use crate::symmetry::{
+    default_min_domain, symmetry_term, tangent_basis, CosineMode, Symmetry, SymmetryTerm,
+};
+
+/// Parameters of the symmetry estimator.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct EstimatorParams {
+    /// Cosine handling in the symmetry distance.
+    pub cosine: CosineMode,
+    /// Smallest domain (lights) that counts as non-empty; `None` = [`default_min_domain`].
+    pub min_domain: Option<u32>,
+    /// Pixels whose confidence is below this are culled (no estimate).
+    pub min_confidence: f32,
+    /// Pixels whose anisotropy is below this get no tangent (the slice is isotropic).
+    pub min_anisotropy: f32,
+    /// Whether to estimate tangents at all.
+    pub tangents: bool,
+    /// Evaluation budget of the 2D normal search.
+    pub max_normal_evals: u32,
+}
+
+impl Default for EstimatorParams {
+    fn default() -> Self {
+        Self {
+            cosine: CosineMode::CrossMultiplied,
+            min_domain: None,
+            min_confidence: 0.0,
+            min_anisotropy: 0.2,
+            tangents: true,
+            max_normal_evals: 300,
+        }
+    }
+}
+
+/// What happened at a pixel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PixelStatus {
+    /// A normal was estimated (the tangent may still be undefined: isotropic slice).
+    Estimated,
+    /// Outside the mask: not looked at.
+    Masked,
+    /// No valid sample, or no light brighter than zero: nothing to estimate from.
+    NoData,
+    /// A symmetry domain is empty at the solution (normal beyond the rig's reach).
+    Discarded,
+    /// Confidence below the user's threshold.
+    Culled,
+}
+
+/// The estimate at one pixel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelEstimate {
+    /// What happened.
+    pub status: PixelStatus,
+    /// Unit normal in the camera frame, when estimated.
+    pub normal: Option<DVec3>,
+    /// Unit tangent (an axis: sign arbitrary) in the camera frame, when the slice is anisotropic.
+    pub tangent: Option<DVec3>,
+    /// Confidence in [0, 1] (0 where nothing was estimated).
+    pub confidence: f32,
+    /// Anisotropy in [0, 1]: how much the tangent objective varies with the tangent's angle.
+    pub anisotropy: f32,
+    /// Symmetry distances at the solution: `[SD_n, SD_nt, SD_nb]`.
+    pub residual: [f64; 3],
+    /// Objective evaluations spent.
+    pub evals: u32,
+}
+
+impl PixelEstimate {
+    fn empty(status: PixelStatus) -> Self {
+        Self {
+            status,
+            normal: None,
+            tangent: None,
+            confidence: 0.0,
+            anisotropy: f32::NAN,
+            residual: [f64::NAN; 3],
+            evals: 0,
+        }
+    }
+}
+
+/// Number of angles the tangent objective is scanned at over its period (90 degrees) before
+/// the 1D refinement; also the samples of the anisotropy measure.
+const TANGENT_SCAN: usize = 12;
+
+/// Absolute floor of the anisotropy ratio's denominator: symmetry distances below this are
+/// interpolation noise, not anisotropy.
+const ANISOTROPY_FLOOR: f64 = 2e-4;
+
+/// The per-pixel estimator for one rig.
+#[derive(Debug, Clone)]
+pub struct Estimator<'a> {
+    rig: &'a Rig,
+    params: EstimatorParams,
+    min_domain: u32,
+}
+
+impl<'a> Estimator<'a> {
+    /// An estimator for `rig`.
+    pub fn new(rig: &'a Rig, params: EstimatorParams) -> Self {
+        let min_domain = params
+            .min_domain
+            .unwrap_or_else(|| default_min_domain(rig.n_used()));
+        Self {
+            rig,
+            params,
+            min_domain,
+        }
+    }
+
+    /// The rig this estimator uses.
+    pub fn rig(&self) -> &Rig {
+        self.rig
+    }
+
+    /// The domain size under which a symmetry distance counts as empty.
+    pub fn min_domain(&self) -> u32 {
+        self.min_domain
+    }
+
+    fn term(&self, slice: &[f32], s: Symmetry, n: DVec3, t: DVec3) -> SymmetryTerm {
+        symmetry_term(self.rig, slice, s, n, t, n.cross(t), self.params.cosine)
+    }
+
+    /// `SD_n` at a candidate normal.
+    pub fn normal_distance(&self, slice: &[f32], n: DVec3) -> f64 {
+        if n.z <= 0.0 {
+            return crate::symmetry::EMPTY_DISTANCE;
+        }
+        self.term(slice, Symmetry::N, n, DVec3::X)
+            .distance(self.min_domain)
+    }
+
+    /// `SD_nt + SD_nb` at a candidate tangent of a fixed normal.
+    pub fn tangent_distance(&self, slice: &[f32], n: DVec3, t: DVec3) -> f64 {
+        self.term(slice, Symmetry::Nt, n, t).distance(self.min_domain)
+            + self.term(slice, Symmetry::Nb, n, t).distance(self.min_domain)
+    }
+
+    /// Estimates the frame at one pixel from its slice (rig order, `rig.n_used() * 3` values).
+    pub fn estimate_pixel(&self, slice: &[f32]) -> PixelEstimate {
+        let rig = self.rig;
+        // Start: the halfway vector of the brightest sample (method.md). The brightest light
+        // itself is also tried: for diffuse surfaces it is the better guess.
+        let mut brightest = None;
+        let mut best = 0.0f32;
+        for (j, s) in slice.chunks_exact(3).enumerate() {
+            let y = s[0] + s[1] + s[2];
+            if y.is_finite() && y > best {
+                best = y;
+                brightest = Some(j);
+            }
+        }
+        let Some(j) = brightest else {
+            return PixelEstimate::empty(PixelStatus::NoData);
+        };
+        let mut evals = 0u32;
+        let mut start = rig.halfway_in_camera[j];
+        let light = rig.lights_in_camera[j];
+        if light.z > 0.0
+            && self.normal_distance(slice, light) < self.normal_distance(slice, start)
+        {
+            start = light;
+        }
+        evals += 2;
+
+        // 2D Nelder-Mead on the tangent plane of the start (gnomonic chart), then a restart
+        // from the solution with a small simplex to guard against premature collapse.
+        let mut n = start;
+        for (step, budget) in [(0.12, self.params.max_normal_evals), (0.02, 60)] {
+            let (u, w) = tangent_basis(n);
+            let center = n;
+            let chart = |x: &[f64; 2]| (center + x[0] * u + x[1] * w).normalize();
+            let m = nelder_mead(
+                |x: &[f64; 2]| self.normal_distance(slice, chart(x)),
+                [0.0, 0.0],
+                [step, step],
+                NelderMeadOptions {
+                    max_evals: budget,
+                    x_tolerance: 2e-5,
+                    f_tolerance: 1e-14,
+                },
+            );
+            evals += m.evals;
+            n = chart(&m.x);
+        }
+        let term_n = self.term(slice, Symmetry::N, n, DVec3::X);
+        if term_n.count < self.min_domain || term_n.denominator <= 0.0 || n.z <= 0.0 {
+            return PixelEstimate {
+                evals,
+                ..PixelEstimate::empty(PixelStatus::Discarded)
+            };
+        }
+        let sd_n = term_n.numerator / term_n.denominator;
+
+        // Tangent: scan the objective over its 90-degree period, refine the best angle.
+        let (u, w) = tangent_basis(n);
+        let tangent_at = |psi: f64| u * psi.cos() + w * psi.sin();
+        let period = std::f64::consts::FRAC_PI_2;
+        let mut scan = [0.0f64; TANGENT_SCAN];
+        for (k, v) in scan.iter_mut().enumerate() {
+            *v = self.tangent_distance(slice, n, tangent_at(period * k as f64 / TANGENT_SCAN as f64));
+        }
+        evals += TANGENT_SCAN as u32 * 2;
+        let (k_best, _) = scan
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(b.1))
+            .unwrap_or((0, &0.0));
+        let psi0 = period * k_best as f64 / TANGENT_SCAN as f64;
+        let m = nelder_mead(
+            |x: &[f64; 1]| self.tangent_distance(slice, n, tangent_at(x[0])),
+            [psi0],
+            [period / TANGENT_SCAN as f64 / 2.0],
+            NelderMeadOptions {
+                max_evals: 60,
+                x_tolerance: 2e-5,
+                f_tolerance: 1e-14,
+            },
+        );
+        evals += m.evals * 2;
+        let mut t = tangent_at(m.x[0]);
+        let term_nt = self.term(slice, Symmetry::Nt, n, t);
+        let term_nb = self.term(slice, Symmetry::Nb, n, t);
+        if term_nt.count < self.min_domain
+            || term_nb.count < self.min_domain
+            || term_nt.denominator <= 0.0
+            || term_nb.denominator <= 0.0
+        {
+            return PixelEstimate {
+                evals,
+                ..PixelEstimate::empty(PixelStatus::Discarded)
+            };
+        }
+        let sd_nt = term_nt.numerator / term_nt.denominator;
+        let sd_nb = term_nb.numerator / term_nb.denominator;
+        let f_min = (sd_nt + sd_nb).min(scan.iter().copied().fold(f64::INFINITY, f64::min));
+        let f_max = scan.iter().copied().fold(0.0, f64::max);
+        let anisotropy = ((f_max - f_min) / (f_max + f_min + ANISOTROPY_FLOOR)).clamp(0.0, 1.0);
+
+        let tangent = if self.params.tangents && anisotropy >= self.params.min_anisotropy as f64 {
+            if self.highlight_wider_along(slice, n, n.cross(t), t) {
+                t = n.cross(t);
+            }
+            Some(t)
+        } else {
+            None
+        };
+
+        let confidence = self.confidence(slice, n, &term_n, sd_n + sd_nt + sd_nb);
+        let status = if confidence < self.params.min_confidence {
+            PixelStatus::Culled
+        } else {
+            PixelStatus::Estimated
+        };
+        let keep = status == PixelStatus::Estimated;
+        PixelEstimate {
+            status,
+            normal: keep.then_some(n),
+            tangent: if keep { tangent } else { None },
+            confidence,
+            anisotropy: anisotropy as f32,
+            residual: [sd_n, sd_nt, sd_nb],
+            evals,
+        }
+    }
+
+    /// The widest-highlight heuristic: is the slice, around `n` in halfway space, brighter along
+    /// `candidate` than along `current` at equal angles? Compares symmetric pairs `n cos d +- a
+    /// sin d` for several `d` where all four points have data, so uneven sample density cannot
+    /// bias it.
+    fn highlight_wider_along(&self, slice: &[f32], n: DVec3, candidate: DVec3, current: DVec3) -> bool {
+        let mut along_candidate = 0.0;
+        let mut along_current = 0.0;
+        for k in 1..=12 {
+            let d = (2.0 * k as f64).to_radians();
+            let (s, c) = d.sin_cos();
+            let probe = |a: DVec3| {
+                let h = n * c + a * s;
+                interpolate(self.rig, slice, h).map(|v| v[0] + v[1] + v[2])
+            };
+            if let (Some(a), Some(b), Some(p), Some(q)) = (
+                probe(candidate),
+                probe(-candidate),
+                probe(current),
+                probe(-current),
+            ) {
+                along_candidate += a + b;
+                along_current += p + q;
+            }
+        }
+        along_candidate > along_current
+    }
+
+    /// Confidence from the residual and the share of the pixel's signal inside the normal's
+    /// symmetry domain (method.md, Optimisation 3): low where the domain covers little of the
+    /// measured slice (normals near the rig's reach), and where the slice is not symmetric
+    /// (shadows, interreflections, noise).
+    fn confidence(&self, slice: &[f32], n: DVec3, term_n: &SymmetryTerm, residual: f64) -> f32 {
+        let mut total = 0.0;
+        for (s, l) in slice.chunks_exact(3).zip(&self.rig.lights_in_camera) {
+            let nl = n.dot(*l);
+            if nl > 0.0 && s[0].is_finite() {
+                total += nl * nl * (s[0] as f64).powi(2)
+                    + nl * nl * (s[1] as f64).powi(2)
+                    + nl * nl * (s[2] as f64).powi(2);
+            }
+        }
+        let coverage = if total > 0.0 {
+            (term_n.denominator / total / 0.25).min(1.0)
+        } else {
+            0.0
+        };
+        let fit = 1.0 / (1.0 + residual / 0.02);
+        (coverage * fit) as f32
+    }
+}
+
+/// Counts of what happened to the pixels of a stack.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PixelCounts {
+    /// Pixels with a normal.
+    pub estimated: usize,
+    /// Estimated pixels whose tangent is defined (anisotropic slice).
+    pub with_tangent: usize,
+    /// Pixels below the confidence threshold.
+    pub culled: usize,
+    /// Pixels whose symmetry domains were empty at the solution.
+    pub discarded: usize,
+    /// Pixels without usable samples.
+    pub no_data: usize,
+    /// Pixels outside the mask.
+    pub masked: usize,
+}
+
+/// The estimated maps of a whole stack, row-major, row 0 at the top.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EstimateMaps {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Unit normals, `H x W x 3`, NaN where no estimate.
+    pub normals: Vec<f32>,
+    /// Unit tangents, `H x W x 3`, NaN where no estimate or isotropic.
+    pub tangents: Vec<f32>,
+    /// Confidence, `H x W`, NaN where nothing was estimated.
+    pub confidence: Vec<f32>,
+    /// Anisotropy, `H x W`, NaN where nothing was estimated.
+    pub anisotropy: Vec<f32>,
+    /// Per-pixel status.
+    pub status: Vec<PixelStatus>,
+    /// Status counts.
+    pub counts: PixelCounts,
+    /// Total symmetry-objective evaluations.
+    pub evals: u64,
+}
+
+/// Rows per parallel task: enough work per task to amortise scheduling, small enough to balance.
+const ROWS_PER_TASK: usize = 2;
+
+/// Estimates every pixel of a stack (inside `mask` when given), in parallel over row bands.
+/// `progress` is called with the number of pixels finished by each band.
+pub fn estimate_stack(
+    stack: &Stack,
+    rig: &Rig,
+    mask: Option<&[bool]>,
+    params: EstimatorParams,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<EstimateMaps> {
+    if stack.n_lights != rig.n_input {
+        return Err(Error::LightCountMismatch {
+            stack: stack.n_lights,
+            rig: rig.n_input,
+        });
+    }
+    if let Some(m) = mask {
+        if m.len() != stack.n_pixels() {
+            return Err(Error::BadMask(format!(
+                "mask has {} pixels but the images have {}",
+                m.len(),
+                stack.n_pixels()
+            )));
+        }
+        if !m.iter().any(|&v| v) {
+            return Err(Error::BadMask("mask is empty: no pixel inside".into()));
+        }
+    }
+    let estimator = Estimator::new(rig, params);
+    let (w, h) = (stack.width, stack.height);
+    let bands: Vec<Vec<PixelEstimate>> = (0..h.div_ceil(ROWS_PER_TASK))
+        .into_par_iter()
+        .map_init(
+            || vec![0.0f32; rig.n_used() * 3],
+            |slice, band| {
+                let rows = band * ROWS_PER_TASK..((band + 1) * ROWS_PER_TASK).min(h);
+                let out: Vec<PixelEstimate> = rows
+                    .flat_map(|y| (0..w).map(move |x| y * w + x))
+                    .map(|p| {
+                        if mask.is_some_and(|m| !m[p]) {
+                            return PixelEstimate::empty(PixelStatus::Masked);
+                        }
+                        gather_slice(rig, stack, p, slice);
+                        estimator.estimate_pixel(slice)
+                    })
+                    .collect();
+                progress(out.len());
+                out
+            },
+        )
+        .collect();
+
+    let n = w * h;
+    let mut maps = EstimateMaps {
+        width: w,
+        height: h,
+        normals: vec![f32::NAN; n * 3],
+        tangents: vec![f32::NAN; n * 3],
+        confidence: vec![f32::NAN; n],
+        anisotropy: vec![f32::NAN; n],
+        status: Vec::with_capacity(n),
+        counts: PixelCounts::default(),
+        evals: 0,
+    };
+    for (p, e) in bands.into_iter().flatten().enumerate() {
+        maps.evals += e.evals as u64;
+        maps.status.push(e.status);
+        let c = &mut maps.counts;
+        match e.status {
+            PixelStatus::Estimated => c.estimated += 1,
+            PixelStatus::Masked => c.masked += 1,
+            PixelStatus::NoData => c.no_data += 1,
+            PixelStatus::Discarded => c.discarded += 1,
+            PixelStatus::Culled => c.culled += 1,
+        }
+        if matches!(e.status, PixelStatus::Estimated | PixelStatus::Culled) {
+            maps.confidence[p] = e.confidence;
+            maps.anisotropy[p] = e.anisotropy;
+        }
+        if let Some(nv) = e.normal {
+            maps.normals[p * 3..p * 3 + 3].copy_from_slice(&nv.as_vec3().to_array());
+        }
+        if let Some(t) = e.tangent {
+            c.with_tangent += 1;
+            maps.tangents[p * 3..p * 3 + 3].copy_from_slice(&t.as_vec3().to_array());
+        }
+    }
+    Ok(maps)
+}
+

@@ -1,0 +1,245 @@
+//! The symmetry objective (Equation 2 of Holroyd et al. 2008, ratio form reconstructed in
+//! method.md): how far a pixel's measured slice is from being symmetric under a reflection of
+//! the halfway vector in a candidate frame (n, t, b).
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+use crate::rig::{light_from_halfway, Rig};
+use crate::slice::interpolate;
+
+/// The three reflections of the halfway vector in a frame (n, t, b = n x t).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Symmetry {
+    /// Reflect across the n-t plane: `h' = h - 2 (h.b) b`.
+    Nt,
+    /// Reflect across the n-b plane: `h' = h - 2 (h.t) t`.
+    Nb,
+    /// Reflect across the normal axis: `h' = 2 (h.n) n - h` (independent of t).
+    N,
+}
+
+impl Symmetry {
+    /// Applies the reflection to a halfway vector given the frame.
+    #[inline]
+    pub fn reflect(self, h: DVec3, n: DVec3, t: DVec3, b: DVec3) -> DVec3 {
+        match self {
+            Symmetry::Nt => h - 2.0 * h.dot(b) * b,
+            Symmetry::Nb => h - 2.0 * h.dot(t) * t,
+            Symmetry::N => 2.0 * h.dot(n) * n - h,
+        }
+    }
+}
+
+/// How the cosine factor of the measured radiance is handled when comparing a light with its
+/// reflection (method.md, Optimisation 4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CosineMode {
+    /// The paper's form: `(n.G(l)) I(l)` against `(n.l) I(G(l))`; exact for symmetric BRDFs
+    /// (diffuse included).
+    #[default]
+    CrossMultiplied,
+    /// Raw radiances `I(l)` against `I(G(l))`: exact for microfacet models whose `f (n.l)` is
+    /// symmetric; wrong for diffuse surfaces.
+    Raw,
+}
+
+/// The sums of one symmetry distance over its domain.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SymmetryTerm {
+    /// Sum of squared differences (numerator of Equation 2).
+    pub numerator: f64,
+    /// Sum of squared reference values (denominator of Equation 2).
+    pub denominator: f64,
+    /// Number of lights in the domain.
+    pub count: u32,
+}
+
+/// The value a symmetry distance takes when its domain is (too) small: larger than any ratio a
+/// real slice produces, so the optimiser walks away from it.
+pub const EMPTY_DISTANCE: f64 = 1.0e3;
+
+impl SymmetryTerm {
+    /// The ratio `numerator / denominator`, or [`EMPTY_DISTANCE`] when the domain has fewer
+    /// than `min_count` lights or no signal.
+    #[inline]
+    pub fn distance(&self, min_count: u32) -> f64 {
+        if self.count < min_count.max(1) || self.denominator <= 0.0 {
+            EMPTY_DISTANCE
+        } else {
+            self.numerator / self.denominator
+        }
+    }
+}
+
+/// Evaluates one symmetry term of a pixel's slice (rig order, `rig.n_used() * 3` values, NaN =
+/// invalid) in the frame (n, t, b). Allocation-free; `t` and `b` are ignored for [`Symmetry::N`].
+///
+/// The domain is the lights with `n.l > 0` whose reflected halfway vector is inside the cone,
+/// maps to a light with `n.G(l) > 0`, and has data in the slice.
+#[inline]
+pub fn symmetry_term(
+    rig: &Rig,
+    slice: &[f32],
+    symmetry: Symmetry,
+    n: DVec3,
+    t: DVec3,
+    b: DVec3,
+    cosine: CosineMode,
+) -> SymmetryTerm {
+    let mut term = SymmetryTerm::default();
+    for (j, (&l, &h)) in rig
+        .lights_in_camera
+        .iter()
+        .zip(&rig.halfway_in_camera)
+        .enumerate()
+    {
+        let s = &slice[j * 3..j * 3 + 3];
+        if !s[0].is_finite() {
+            continue;
+        }
+        let n_dot_l = n.dot(l);
+        if n_dot_l <= 0.0 {
+            continue;
+        }
+        let h_reflected = symmetry.reflect(h, n, t, b);
+        if !rig.in_cone(h_reflected) {
+            continue;
+        }
+        let n_dot_lr = n.dot(light_from_halfway(h_reflected));
+        if n_dot_lr <= 0.0 {
+            continue;
+        }
+        let Some(ir) = interpolate(rig, slice, h_reflected) else {
+            continue;
+        };
+        let (wa, wb) = match cosine {
+            CosineMode::CrossMultiplied => (n_dot_lr, n_dot_l),
+            CosineMode::Raw => (1.0, 1.0),
+        };
+        let mut num = 0.0;
+        let mut den = 0.0;
+        for c in 0..3 {
+            let a = wa * s[c] as f64;
+            let d = a - wb * ir[c];
+            num += d * d;
+            den += a * a;
+        }
+        term.numerator += num;
+        term.denominator += den;
+        term.count += 1;
+    }
+    term
+}
+
+/// The smallest domain (in lights) that counts as non-empty for a rig: a share of the rig's
+/// lights, so sparse rigs are not all discarded while degenerate one- or two-light domains never
+/// produce spurious zero distances (method.md).
+pub fn default_min_domain(n_used: usize) -> u32 {
+    ((n_used as f64 * 0.015).ceil() as u32).clamp(6, 30)
+}
+
+/// An orthonormal tangent-plane basis (u, w) for a unit normal, continuous away from `n = -z`.
+#[inline]
+pub fn tangent_basis(n: DVec3) -> (DVec3, DVec3) {
+    // Rotate the camera x and y axes along the great circle from z to n.
+    let k = 1.0 / (1.0 + n.z);
+    let u = DVec3::new(1.0 - n.x * n.x * k, -n.x * n.y * k, -n.x);
+    let w = DVec3::new(-n.x * n.y * k, 1.0 - n.y * n.y * k, -n.y);
+    (u, w)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rig::{uniform_cone_lights, RigOptions};
+
+    /// A symmetric "BRDF" slice: diffuse plus an anisotropic lobe around n in halfway space,
+    /// radiance `I = f (n.l)` with `f` a function of (h.t, h.b, h.n) even in h.t and h.b.
+    fn render_slice(rig: &Rig, n: DVec3, t: DVec3) -> Vec<f32> {
+        let b = n.cross(t);
+        rig.lights_in_camera
+            .iter()
+            .zip(&rig.halfway_in_camera)
+            .flat_map(|(&l, &h)| {
+                let nl = n.dot(l).max(0.0);
+                let (ht, hb, hn) = (h.dot(t), h.dot(b), h.dot(n).max(1e-6));
+                let spec = (-((ht / hn).powi(2) / 0.04 + (hb / hn).powi(2) / 0.25)).exp();
+                let f = 0.3 + 2.0 * spec;
+                [(f * nl) as f32, (0.8 * f * nl) as f32, (0.5 * f * nl) as f32]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn reflections_are_involutions_and_keep_the_right_axes() {
+        let n = DVec3::new(0.3, -0.2, 0.9).normalize();
+        let (u, w) = tangent_basis(n);
+        assert!(u.dot(n).abs() < 1e-12 && w.dot(n).abs() < 1e-12 && u.dot(w).abs() < 1e-12);
+        assert!((u.length() - 1.0).abs() < 1e-12 && (w.length() - 1.0).abs() < 1e-12);
+        let (t, b) = (u, n.cross(u));
+        let h = DVec3::new(0.1, 0.2, 0.95).normalize();
+        for s in [Symmetry::Nt, Symmetry::Nb, Symmetry::N] {
+            let r = s.reflect(h, n, t, b);
+            assert!((r.length() - 1.0).abs() < 1e-12);
+            assert!((s.reflect(r, n, t, b) - h).length() < 1e-12);
+            assert!((r.dot(n) - h.dot(n)).abs() < 1e-12, "all keep the angle to n");
+        }
+        let r = Symmetry::Nt.reflect(h, n, t, b);
+        assert!((r.dot(t) - h.dot(t)).abs() < 1e-12 && (r.dot(b) + h.dot(b)).abs() < 1e-12);
+        let r = Symmetry::Nb.reflect(h, n, t, b);
+        assert!((r.dot(b) - h.dot(b)).abs() < 1e-12 && (r.dot(t) + h.dot(t)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn distance_is_near_zero_at_the_true_frame_and_larger_away_from_it() {
+        let rig = Rig::new(&uniform_cone_lights(1000, 65.0), RigOptions::default()).unwrap();
+        let n = DVec3::new(0.4, 0.2, 1.0).normalize();
+        let (u, w) = tangent_basis(n);
+        let t = (u * 0.6 + w * 0.8).normalize();
+        let b = n.cross(t);
+        let slice = render_slice(&rig, n, t);
+        let min = default_min_domain(rig.n_used());
+        let sd = |n: DVec3, t: DVec3, s: Symmetry| {
+            symmetry_term(&rig, &slice, s, n, t, n.cross(t), CosineMode::CrossMultiplied)
+                .distance(min)
+        };
+        let at_truth = [sd(n, t, Symmetry::N), sd(n, t, Symmetry::Nt), sd(n, t, Symmetry::Nb)];
+        for v in at_truth {
+            // Not exactly zero: linear interpolation between samples ~4 degrees apart.
+            assert!(v < 1e-3, "at the true frame: {at_truth:?}");
+        }
+        // Tilt the normal by 3 degrees: SD_n grows by orders of magnitude.
+        let tilted = (n + 0.0524 * b).normalize();
+        assert!(sd(tilted, t, Symmetry::N) > 20.0 * at_truth[0].max(1e-6));
+        // Rotate the tangent by 10 degrees: the tangent terms grow.
+        let (tu, tw) = (t, b);
+        let rot = (tu * 10f64.to_radians().cos() + tw * 10f64.to_radians().sin()).normalize();
+        assert!(sd(n, rot, Symmetry::Nt) > 20.0 * at_truth[1].max(1e-6));
+        assert!(sd(n, rot, Symmetry::Nb) > 20.0 * at_truth[2].max(1e-6));
+    }
+
+    #[test]
+    fn small_domains_count_as_empty() {
+        let term = SymmetryTerm {
+            numerator: 0.0,
+            denominator: 1.0,
+            count: 2,
+        };
+        assert_eq!(term.distance(10), EMPTY_DISTANCE);
+        assert_eq!(term.distance(2), 0.0);
+        assert_eq!(SymmetryTerm::default().distance(1), EMPTY_DISTANCE);
+        assert_eq!(default_min_domain(96), 6);
+        assert_eq!(default_min_domain(1000), 15);
+    }
+
+    #[test]
+    fn invalid_samples_are_outside_the_domain() {
+        let rig = Rig::new(&uniform_cone_lights(300, 65.0), RigOptions::default()).unwrap();
+        let slice = vec![f32::NAN; rig.n_used() * 3];
+        let n = DVec3::Z;
+        let term = symmetry_term(&rig, &slice, Symmetry::N, n, DVec3::X, DVec3::Y, CosineMode::Raw);
+        assert_eq!(term.count, 0);
+    }
+}
