@@ -39,7 +39,7 @@ impl Default for EstimatorParams {
             cosine: CosineMode::CrossMultiplied,
             min_domain: None,
             min_confidence: 0.0,
-            min_anisotropy: 0.2,
+            min_anisotropy: 0.6,
             tangents: true,
             max_normal_evals: 300,
         }
@@ -101,7 +101,7 @@ const TANGENT_SCAN: usize = 12;
 
 /// Absolute floor of the anisotropy ratio's denominator: symmetry distances below this are
 /// interpolation noise, not anisotropy.
-const ANISOTROPY_FLOOR: f64 = 2e-4;
+const ANISOTROPY_FLOOR: f64 = 1e-3;
 
 /// The per-pixel estimator for one rig.
 #[derive(Debug, Clone)]

@@ -12,6 +12,7 @@
 pub mod brdf;
 pub mod error;
 pub mod estimate;
+pub mod eval;
 pub mod optim;
 pub mod render;
 pub mod rig;

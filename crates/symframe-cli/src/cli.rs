@@ -1,0 +1,90 @@
+//! Command-line flags.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+/// Surface normals and tangents from photographs under many lights, by BRDF symmetry
+/// (Holroyd et al. 2008).
+#[derive(Debug, Parser)]
+#[command(name = "symframe", version, about, long_about = None)]
+pub struct Cli {
+    /// Worker threads (default: all cores).
+    #[arg(long, global = true, value_parser = clap::value_parser!(usize))]
+    pub threads: Option<usize>,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Estimate normal and tangent maps from a capture (.lp file or DiLiGenT-style folder).
+    Estimate(EstimateArgs),
+    /// Render a built-in synthetic object, estimate its frames and report the error (no download).
+    Demo(DemoArgs),
+}
+
+/// Cosine handling in the symmetry distance.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CosineArg {
+    /// The paper's cross-multiplied cosines (exact for diffuse; default).
+    Cross,
+    /// Raw radiances (exact for microfacet lobes, wrong for diffuse).
+    Raw,
+}
+
+/// Flags of `symframe estimate`.
+#[derive(Debug, Clone, Args)]
+pub struct EstimateArgs {
+    /// A `.lp` light file, a folder holding one, or a DiLiGenT-style folder.
+    pub input: PathBuf,
+    /// Output folder (created; files in it with the same names are replaced).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Mask image: only pixels where it is non-zero are estimated (default: mask.png beside
+    /// the input, if any).
+    #[arg(long)]
+    pub mask: Option<PathBuf>,
+    /// Light cone: lights whose halfway vector is more than this many degrees from the view are
+    /// dropped.
+    #[arg(long, default_value_t = 65.0)]
+    pub theta_d_max: f64,
+    /// Pixels with confidence below this are culled (NaN in the maps).
+    #[arg(long, default_value_t = 0.0)]
+    pub min_confidence: f32,
+    /// Pixels with anisotropy below this get no tangent (NaN): the slice is isotropic.
+    #[arg(long, default_value_t = 0.6)]
+    pub min_anisotropy: f32,
+    /// Smallest symmetry domain, in lights, that counts as non-empty (default: 1.5% of the
+    /// lights used, at least 6).
+    #[arg(long)]
+    pub min_domain: Option<u32>,
+    /// Cosine handling in the symmetry distance.
+    #[arg(long, value_enum, default_value_t = CosineArg::Cross)]
+    pub cosine: CosineArg,
+    /// Treat 8-bit images as linear (default: sRGB-decode them).
+    #[arg(long)]
+    pub linear: bool,
+    /// Integer samples at or above this fraction of the format's maximum are saturated and
+    /// excluded.
+    #[arg(long, default_value_t = 0.995)]
+    pub saturation: f32,
+    /// Skip tangents (normals only; faster).
+    #[arg(long)]
+    pub no_tangents: bool,
+}
+
+/// Flags of `symframe demo`.
+#[derive(Debug, Clone, Args)]
+pub struct DemoArgs {
+    /// Output folder for the rendered dataset and the estimated maps.
+    #[arg(short, long, default_value = "symframe-demo")]
+    pub output: PathBuf,
+    /// Image size in pixels (the sphere fills it).
+    #[arg(long, default_value_t = 96)]
+    pub size: usize,
+    /// Number of lights, uniform over the 65-degree cone.
+    #[arg(long, default_value_t = 1000)]
+    pub lights: usize,
+}
