@@ -32,6 +32,9 @@ pub enum CosineArg {
     Cross,
     /// Raw radiances (exact for microfacet lobes, wrong for diffuse).
     Raw,
+    /// Diffuse-compensated power form (see --cosine-power): exact for diffuse plus a lobe
+    /// whose radiance goes as (n.l)^p; refines the paper's solution.
+    Compensated,
 }
 
 /// Flags of `symframe estimate`.
@@ -63,6 +66,10 @@ pub struct EstimateArgs {
     /// Cosine handling in the symmetry distance.
     #[arg(long, value_enum, default_value_t = CosineArg::Cross)]
     pub cosine: CosineArg,
+    /// Cosine power p of `--cosine compensated` (0.5 is exact for Ward, 0 for Cook-Torrance-like
+    /// lobes, 1 for Blinn-Phong).
+    #[arg(long, default_value_t = 0.5)]
+    pub cosine_power: f64,
     /// Treat 8-bit images as linear (default: sRGB-decode them).
     #[arg(long)]
     pub linear: bool,

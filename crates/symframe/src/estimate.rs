@@ -134,23 +134,51 @@ impl<'a> Estimator<'a> {
         self.min_domain
     }
 
-    fn term(&self, slice: &[f32], s: Symmetry, n: DVec3, t: DVec3) -> SymmetryTerm {
-        symmetry_term(self.rig, slice, s, n, t, n.cross(t), self.params.cosine)
+    fn term(&self, slice: &[f32], s: Symmetry, n: DVec3, t: DVec3, c: CosineMode) -> SymmetryTerm {
+        symmetry_term(self.rig, slice, s, n, t, n.cross(t), c)
     }
 
     /// `SD_n` at a candidate normal.
-    pub fn normal_distance(&self, slice: &[f32], n: DVec3) -> f64 {
+    pub fn normal_distance(&self, slice: &[f32], n: DVec3, cosine: CosineMode) -> f64 {
         if n.z <= 0.0 {
             return crate::symmetry::EMPTY_DISTANCE;
         }
-        self.term(slice, Symmetry::N, n, DVec3::X)
+        self.term(slice, Symmetry::N, n, DVec3::X, cosine)
             .distance(self.min_domain)
     }
 
     /// `SD_nt + SD_nb` at a candidate tangent of a fixed normal.
-    pub fn tangent_distance(&self, slice: &[f32], n: DVec3, t: DVec3) -> f64 {
-        self.term(slice, Symmetry::Nt, n, t).distance(self.min_domain)
-            + self.term(slice, Symmetry::Nb, n, t).distance(self.min_domain)
+    pub fn tangent_distance(&self, slice: &[f32], n: DVec3, t: DVec3, cosine: CosineMode) -> f64 {
+        self.term(slice, Symmetry::Nt, n, t, cosine)
+            .distance(self.min_domain)
+            + self
+                .term(slice, Symmetry::Nb, n, t, cosine)
+                .distance(self.min_domain)
+    }
+
+    /// Minimises `SD_n` with 2D Nelder-Mead on the gnomonic chart of the tangent plane at
+    /// `start`, initial simplex `step` radians; returns the normal and the evaluations used.
+    fn search_normal(
+        &self,
+        slice: &[f32],
+        start: DVec3,
+        cosine: CosineMode,
+        step: f64,
+        budget: u32,
+    ) -> (DVec3, u32) {
+        let (u, w) = tangent_basis(start);
+        let chart = |x: &[f64; 2]| (start + x[0] * u + x[1] * w).normalize();
+        let m = nelder_mead(
+            |x: &[f64; 2]| self.normal_distance(slice, chart(x), cosine),
+            [0.0, 0.0],
+            [step, step],
+            NelderMeadOptions {
+                max_evals: budget,
+                x_tolerance: 2e-5,
+                f_tolerance: 1e-14,
+            },
+        );
+        (chart(&m.x), m.evals)
     }
 
     /// Estimates the frame at one pixel from its slice (rig order, `rig.n_used() * 3` values).
@@ -171,36 +199,35 @@ impl<'a> Estimator<'a> {
             return PixelEstimate::empty(PixelStatus::NoData);
         };
         let mut evals = 0u32;
+        // With a compensated measure, the search starts in the paper's form (p = 1).
+        let mut cosine = match self.params.cosine {
+            CosineMode::Compensated(_) => CosineMode::CrossMultiplied,
+            c => c,
+        };
         let mut start = rig.halfway_in_camera[j];
         let light = rig.lights_in_camera[j];
         if light.z > 0.0
-            && self.normal_distance(slice, light) < self.normal_distance(slice, start)
+            && self.normal_distance(slice, light, cosine)
+                < self.normal_distance(slice, start, cosine)
         {
             start = light;
         }
         evals += 2;
 
-        // 2D Nelder-Mead on the tangent plane of the start (gnomonic chart), then a restart
-        // from the solution with a small simplex to guard against premature collapse.
-        let mut n = start;
-        for (step, budget) in [(0.12, self.params.max_normal_evals), (0.02, 60)] {
-            let (u, w) = tangent_basis(n);
-            let center = n;
-            let chart = |x: &[f64; 2]| (center + x[0] * u + x[1] * w).normalize();
-            let m = nelder_mead(
-                |x: &[f64; 2]| self.normal_distance(slice, chart(x)),
-                [0.0, 0.0],
-                [step, step],
-                NelderMeadOptions {
-                    max_evals: budget,
-                    x_tolerance: 2e-5,
-                    f_tolerance: 1e-14,
-                },
-            );
-            evals += m.evals;
-            n = chart(&m.x);
+        // 2D Nelder-Mead on the tangent plane of the start, then a restart from the solution
+        // with a small simplex to guard against premature collapse.
+        let (n1, e1) = self.search_normal(slice, start, cosine, 0.12, self.params.max_normal_evals);
+        let (mut n, e2) = self.search_normal(slice, n1, cosine, 0.02, 60);
+        evals += e1 + e2;
+        if let CosineMode::Compensated(_) = self.params.cosine {
+            // The compensated measure is flatter far from the solution: refine the paper's
+            // solution with it (where p = 1 the two coincide).
+            cosine = self.params.cosine;
+            let (m, e) = self.search_normal(slice, n, cosine, 0.06, 150);
+            evals += e;
+            n = m;
         }
-        let term_n = self.term(slice, Symmetry::N, n, DVec3::X);
+        let term_n = self.term(slice, Symmetry::N, n, DVec3::X, cosine);
         if term_n.count < self.min_domain || term_n.denominator <= 0.0 || n.z <= 0.0 {
             return PixelEstimate {
                 evals,
@@ -215,7 +242,8 @@ impl<'a> Estimator<'a> {
         let period = std::f64::consts::FRAC_PI_2;
         let mut scan = [0.0f64; TANGENT_SCAN];
         for (k, v) in scan.iter_mut().enumerate() {
-            *v = self.tangent_distance(slice, n, tangent_at(period * k as f64 / TANGENT_SCAN as f64));
+            let t = tangent_at(period * k as f64 / TANGENT_SCAN as f64);
+            *v = self.tangent_distance(slice, n, t, cosine);
         }
         evals += TANGENT_SCAN as u32 * 2;
         let (k_best, _) = scan
@@ -225,7 +253,7 @@ impl<'a> Estimator<'a> {
             .unwrap_or((0, &0.0));
         let psi0 = period * k_best as f64 / TANGENT_SCAN as f64;
         let m = nelder_mead(
-            |x: &[f64; 1]| self.tangent_distance(slice, n, tangent_at(x[0])),
+            |x: &[f64; 1]| self.tangent_distance(slice, n, tangent_at(x[0]), cosine),
             [psi0],
             [period / TANGENT_SCAN as f64 / 2.0],
             NelderMeadOptions {
@@ -236,8 +264,8 @@ impl<'a> Estimator<'a> {
         );
         evals += m.evals * 2;
         let mut t = tangent_at(m.x[0]);
-        let term_nt = self.term(slice, Symmetry::Nt, n, t);
-        let term_nb = self.term(slice, Symmetry::Nb, n, t);
+        let term_nt = self.term(slice, Symmetry::Nt, n, t, cosine);
+        let term_nb = self.term(slice, Symmetry::Nb, n, t, cosine);
         if term_nt.count < self.min_domain
             || term_nb.count < self.min_domain
             || term_nt.denominator <= 0.0
@@ -285,7 +313,13 @@ impl<'a> Estimator<'a> {
     /// `candidate` than along `current` at equal angles? Compares symmetric pairs `n cos d +- a
     /// sin d` for several `d` where all four points have data, so uneven sample density cannot
     /// bias it.
-    fn highlight_wider_along(&self, slice: &[f32], n: DVec3, candidate: DVec3, current: DVec3) -> bool {
+    fn highlight_wider_along(
+        &self,
+        slice: &[f32],
+        n: DVec3,
+        candidate: DVec3,
+        current: DVec3,
+    ) -> bool {
         let mut along_candidate = 0.0;
         let mut along_current = 0.0;
         for k in 1..=12 {
@@ -463,4 +497,3 @@ pub fn estimate_stack(
     }
     Ok(maps)
 }
-

@@ -91,12 +91,16 @@ pub fn evaluate(
         if mask.is_some_and(|m| !m[p]) {
             continue;
         }
-        let Some(gn) = vec_at(gt_normals, p) else { continue };
+        let Some(gn) = vec_at(gt_normals, p) else {
+            continue;
+        };
         if gn.z < cos_max {
             continue;
         }
         pixels += 1;
-        let Some(n) = vec_at(normals, p) else { continue };
+        let Some(n) = vec_at(normals, p) else {
+            continue;
+        };
         ne.push(n.dot(gn).clamp(-1.0, 1.0).acos().to_degrees());
         let (Some(t), Some(gt)) = (vec_at(tangents, p), gt_tangents.and_then(|g| vec_at(g, p)))
         else {
@@ -155,20 +159,53 @@ mod tests {
         // Pixel 1: normal exact, tangent along the true binormal (a swap).
         // Pixel 2: no estimate. Pixel 3: true normal 70 degrees from the view (not evaluated).
         let a = 10f64.to_radians();
-        let gt_n = [0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.9397, 0.3420];
+        let gt_n = [
+            0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.9397, 0.3420,
+        ];
         let gt_t = [1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0];
         let n = [
-            a.sin() as f32, 0.0, a.cos() as f32, 0.0, 0.0, 1.0, f32::NAN, f32::NAN, f32::NAN, 0.0,
-            0.9397, 0.3420,
+            a.sin() as f32,
+            0.0,
+            a.cos() as f32,
+            0.0,
+            0.0,
+            1.0,
+            f32::NAN,
+            f32::NAN,
+            f32::NAN,
+            0.0,
+            0.9397,
+            0.3420,
         ];
-        let t = [-1.0, 0.0, 0.0, 0.0, 1.0, 0.0, f32::NAN, 0.0, 0.0, 1.0, 0.0, 0.0];
+        let t = [
+            -1.0,
+            0.0,
+            0.0,
+            0.0,
+            1.0,
+            0.0,
+            f32::NAN,
+            0.0,
+            0.0,
+            1.0,
+            0.0,
+            0.0,
+        ];
         let e = evaluate(&n, &t, &gt_n, Some(&gt_t), None, 60.0);
         assert_eq!(e.pixels, 3);
         assert!((e.coverage - 2.0 / 3.0).abs() < 1e-12);
         assert_eq!(e.normal_error.count, 2);
-        assert!((e.normal_error.mean - 5.0).abs() < 1e-4, "{:?}", e.normal_error);
+        assert!(
+            (e.normal_error.mean - 5.0).abs() < 1e-4,
+            "{:?}",
+            e.normal_error
+        );
         assert!((e.normal_error.max - 10.0).abs() < 1e-4);
-        assert!((e.tangent_error.mean - 45.0).abs() < 1e-4, "{:?}", e.tangent_error);
+        assert!(
+            (e.tangent_error.mean - 45.0).abs() < 1e-4,
+            "{:?}",
+            e.tangent_error
+        );
         assert!(e.tangent_error_swap_free.max < 1e-3);
         assert!((e.swapped_share - 0.5).abs() < 1e-12);
         let m = normal_error_map(&n, &gt_n);

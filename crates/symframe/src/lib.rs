@@ -5,7 +5,7 @@
 //! vector is `(0, 0, 1)` for every pixel (orthographic). Each pixel's local frame is (n, t, b).
 //!
 //! Where things live: [`rig`] (lights, halfway vectors, triangulation, point location),
-//! [`slice`] (per-pixel interpolation), [`symmetry`] (the objective), [`optim`] (Nelder-Mead),
+//! [`slice`](mod@slice) (per-pixel interpolation), [`symmetry`] (the objective), [`optim`] (Nelder-Mead),
 //! [`estimate`] (the per-pixel estimator and the whole-stack pipeline), [`brdf`] (models),
 //! [`render`] (the synthetic renderer), [`stack`] (the measurement stack).
 

@@ -61,7 +61,7 @@ where
     };
     let mut pts = [[0.0f64; N]; 8];
     let mut vals = [0.0f64; 8];
-    assert!(N + 1 <= pts.len(), "nelder_mead supports up to 7 dimensions");
+    assert!(N < pts.len(), "nelder_mead supports up to 7 dimensions");
     pts[0] = x0;
     vals[0] = eval(&x0, &mut evals);
     for i in 0..N {
@@ -144,9 +144,10 @@ where
             continue;
         }
         // Shrink toward the best vertex.
+        let best = pts[0];
         for i in 1..m {
-            for k in 0..N {
-                pts[i][k] = pts[0][k] + 0.5 * (pts[i][k] - pts[0][k]);
+            for (x, b) in pts[i].iter_mut().zip(best) {
+                *x = b + 0.5 * (*x - b);
             }
             let p = pts[i];
             vals[i] = eval(&p, &mut evals);
@@ -175,7 +176,10 @@ mod tests {
                 f_tolerance: 1e-16,
             },
         );
-        assert!((r.x[0] - 1.0).abs() < 1e-4 && (r.x[1] - 1.0).abs() < 1e-4, "{r:?}");
+        assert!(
+            (r.x[0] - 1.0).abs() < 1e-4 && (r.x[1] - 1.0).abs() < 1e-4,
+            "{r:?}"
+        );
     }
 
     #[test]

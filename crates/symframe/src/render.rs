@@ -25,7 +25,10 @@ impl TangentField {
                 .unwrap_or_else(|| (DVec3::X - n.x * n).normalize())
         };
         match *self {
-            TangentField::Circular => DVec3::Z.cross(n).try_normalize().unwrap_or_else(|| fallback(DVec3::X)),
+            TangentField::Circular => DVec3::Z
+                .cross(n)
+                .try_normalize()
+                .unwrap_or_else(|| fallback(DVec3::X)),
             TangentField::Axial(d) => fallback(d),
         }
     }

@@ -373,7 +373,10 @@ mod tests {
 
     #[test]
     fn bad_rigs_are_errors() {
-        assert_eq!(Rig::new(&[], RigOptions::default()).unwrap_err(), Error::NoLights);
+        assert_eq!(
+            Rig::new(&[], RigOptions::default()).unwrap_err(),
+            Error::NoLights
+        );
         let bad = [DVec3::Z, DVec3::ZERO, DVec3::X];
         assert_eq!(
             Rig::new(&bad, RigOptions::default()).unwrap_err(),
@@ -404,7 +407,9 @@ mod tests {
         // Random queries: same answer as scanning all triangles.
         let mut s = 12345u64;
         let mut rnd = || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (s >> 11) as f64 / (1u64 << 53) as f64
         };
         let mut inside = 0;
@@ -433,6 +438,8 @@ mod tests {
         assert!(inside > 1000);
         assert!(worst > -1e-9, "most negative weight {worst}");
         // Far outside the cone: no data.
-        assert!(rig.locate(DVec3::new(0.99, 0.0, 0.141).normalize()).is_none());
+        assert!(rig
+            .locate(DVec3::new(0.99, 0.0, 0.141).normalize())
+            .is_none());
     }
 }

@@ -51,7 +51,11 @@ mod tests {
     #[test]
     fn exact_at_samples_and_linear_fields_are_reproduced() {
         let rig = Rig::new(&uniform_cone_lights(300, 65.0), RigOptions::default()).unwrap();
-        let slice: Vec<f32> = rig.halfway_in_camera.iter().flat_map(|&h| linear_field(h)).collect();
+        let slice: Vec<f32> = rig
+            .halfway_in_camera
+            .iter()
+            .flat_map(|&h| linear_field(h))
+            .collect();
         for (i, &h) in rig.halfway_in_camera.iter().enumerate() {
             let v = interpolate(&rig, &slice, h).unwrap();
             for c in 0..3 {
@@ -71,8 +75,13 @@ mod tests {
 
     #[test]
     fn invalid_corners_and_outside_queries_have_no_data() {
-        let rig = Rig::new(&uniform_cone_lights(200, 40.0), RigOptions { theta_d_max_deg: 40.0 })
-            .unwrap();
+        let rig = Rig::new(
+            &uniform_cone_lights(200, 40.0),
+            RigOptions {
+                theta_d_max_deg: 40.0,
+            },
+        )
+        .unwrap();
         let mut slice = vec![1.0f32; rig.n_used() * 3];
         // Far outside the 40-degree cone.
         assert!(interpolate(&rig, &slice, DVec3::new(0.9, 0.0, 0.3).normalize()).is_none());
@@ -99,7 +108,11 @@ mod tests {
         }
         let mut out = vec![0.0; rig.n_used() * 3];
         gather_slice(&rig, &stack, 1, &mut out);
-        let want: Vec<f32> = rig.input_index.iter().flat_map(|&i| [i as f32; 3]).collect();
+        let want: Vec<f32> = rig
+            .input_index
+            .iter()
+            .flat_map(|&i| [i as f32; 3])
+            .collect();
         assert_eq!(out, want);
         assert!(!out.contains(&3.0));
     }

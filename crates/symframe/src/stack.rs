@@ -50,7 +50,11 @@ impl Stack {
     /// # Panics
     /// If the image has the wrong length or `light >= n_lights`.
     pub fn set_image(&mut self, light: usize, rgb: &[f32]) {
-        assert_eq!(rgb.len(), self.n_pixels() * 3, "image size does not match the stack");
+        assert_eq!(
+            rgb.len(),
+            self.n_pixels() * 3,
+            "image size does not match the stack"
+        );
         assert!(light < self.n_lights, "light index out of range");
         let n = self.n_lights * 3;
         for (p, px) in rgb.chunks_exact(3).enumerate() {

@@ -33,7 +33,7 @@ impl Symmetry {
 
 /// How the cosine factor of the measured radiance is handled when comparing a light with its
 /// reflection (method.md, Optimisation 4).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum CosineMode {
     /// The paper's form: `(n.G(l)) I(l)` against `(n.l) I(G(l))`; exact for symmetric BRDFs
@@ -43,6 +43,15 @@ pub enum CosineMode {
     /// Raw radiances `I(l)` against `I(G(l))`: exact for microfacet models whose `f (n.l)` is
     /// symmetric; wrong for diffuse surfaces.
     Raw,
+    /// `(n.G(l))^p I(l)` against `(n.l)^p I(G(l))` for a fixed power `p` (1 = cross-multiplied,
+    /// 0 = raw; 0.5 is exact for Ward's `1/sqrt(cos_i cos_o)` lobe).
+    Power(f64),
+    /// The power-`p` form after removing a per-pixel diffuse term `d (n.l)` (RGB `d >= 0`
+    /// fitted in closed form inside the sum): exact for `I = d (n.l) + S(h) (n.l)^p` with `S`
+    /// symmetric, i.e. for Lambertian surfaces at any `p` and for a diffuse plus Ward (p = 0.5),
+    /// Blinn-Phong (p = 1) or Cook-Torrance-like (p = 0) lobe. The estimator searches with
+    /// the paper's form first and refines with this one.
+    Compensated(f64),
 }
 
 /// The sums of one symmetry distance over its domain.
@@ -89,6 +98,8 @@ pub fn symmetry_term(
     cosine: CosineMode,
 ) -> SymmetryTerm {
     let mut term = SymmetryTerm::default();
+    let mut diffuse_dot = [0.0f64; 3];
+    let mut diffuse_sq = 0.0f64;
     for (j, (&l, &h)) in rig
         .lights_in_camera
         .iter()
@@ -117,7 +128,12 @@ pub fn symmetry_term(
         let (wa, wb) = match cosine {
             CosineMode::CrossMultiplied => (n_dot_lr, n_dot_l),
             CosineMode::Raw => (1.0, 1.0),
+            CosineMode::Power(p) | CosineMode::Compensated(p) => {
+                (n_dot_lr.powf(p), n_dot_l.powf(p))
+            }
         };
+        // What a unit diffuse term contributes to the difference (zero for p = 1).
+        let diffuse = wa * n_dot_l - wb * n_dot_lr;
         let mut num = 0.0;
         let mut den = 0.0;
         for c in 0..3 {
@@ -125,10 +141,22 @@ pub fn symmetry_term(
             let d = a - wb * ir[c];
             num += d * d;
             den += a * a;
+            diffuse_dot[c] += d * diffuse;
         }
+        diffuse_sq += diffuse * diffuse;
         term.numerator += num;
         term.denominator += den;
         term.count += 1;
+    }
+    if matches!(cosine, CosineMode::Compensated(_)) && diffuse_sq > 1e-12 * term.count as f64 {
+        // Least-squares diffuse albedo per channel, kept non-negative; its part of the
+        // difference is removed from the numerator.
+        for dd in diffuse_dot {
+            if dd > 0.0 {
+                term.numerator -= dd * dd / diffuse_sq;
+            }
+        }
+        term.numerator = term.numerator.max(0.0);
     }
     term
 }
@@ -167,7 +195,11 @@ mod tests {
                 let (ht, hb, hn) = (h.dot(t), h.dot(b), h.dot(n).max(1e-6));
                 let spec = (-((ht / hn).powi(2) / 0.04 + (hb / hn).powi(2) / 0.25)).exp();
                 let f = 0.3 + 2.0 * spec;
-                [(f * nl) as f32, (0.8 * f * nl) as f32, (0.5 * f * nl) as f32]
+                [
+                    (f * nl) as f32,
+                    (0.8 * f * nl) as f32,
+                    (0.5 * f * nl) as f32,
+                ]
             })
             .collect()
     }
@@ -184,7 +216,10 @@ mod tests {
             let r = s.reflect(h, n, t, b);
             assert!((r.length() - 1.0).abs() < 1e-12);
             assert!((s.reflect(r, n, t, b) - h).length() < 1e-12);
-            assert!((r.dot(n) - h.dot(n)).abs() < 1e-12, "all keep the angle to n");
+            assert!(
+                (r.dot(n) - h.dot(n)).abs() < 1e-12,
+                "all keep the angle to n"
+            );
         }
         let r = Symmetry::Nt.reflect(h, n, t, b);
         assert!((r.dot(t) - h.dot(t)).abs() < 1e-12 && (r.dot(b) + h.dot(b)).abs() < 1e-12);
@@ -202,10 +237,22 @@ mod tests {
         let slice = render_slice(&rig, n, t);
         let min = default_min_domain(rig.n_used());
         let sd = |n: DVec3, t: DVec3, s: Symmetry| {
-            symmetry_term(&rig, &slice, s, n, t, n.cross(t), CosineMode::CrossMultiplied)
-                .distance(min)
+            symmetry_term(
+                &rig,
+                &slice,
+                s,
+                n,
+                t,
+                n.cross(t),
+                CosineMode::CrossMultiplied,
+            )
+            .distance(min)
         };
-        let at_truth = [sd(n, t, Symmetry::N), sd(n, t, Symmetry::Nt), sd(n, t, Symmetry::Nb)];
+        let at_truth = [
+            sd(n, t, Symmetry::N),
+            sd(n, t, Symmetry::Nt),
+            sd(n, t, Symmetry::Nb),
+        ];
         for v in at_truth {
             // Not exactly zero: linear interpolation between samples ~4 degrees apart.
             assert!(v < 1e-3, "at the true frame: {at_truth:?}");
@@ -239,7 +286,15 @@ mod tests {
         let rig = Rig::new(&uniform_cone_lights(300, 65.0), RigOptions::default()).unwrap();
         let slice = vec![f32::NAN; rig.n_used() * 3];
         let n = DVec3::Z;
-        let term = symmetry_term(&rig, &slice, Symmetry::N, n, DVec3::X, DVec3::Y, CosineMode::Raw);
+        let term = symmetry_term(
+            &rig,
+            &slice,
+            Symmetry::N,
+            n,
+            DVec3::X,
+            DVec3::Y,
+            CosineMode::Raw,
+        );
         assert_eq!(term.count, 0);
     }
 }

@@ -27,3 +27,26 @@ pub trait Brdf: Send + Sync {
     /// Short human-readable name with parameters, for reports.
     fn name(&self) -> String;
 }
+
+pub mod ashikhmin_shirley;
+pub mod blinn_phong;
+pub mod cook_torrance;
+pub mod ggx;
+pub mod lambertian;
+pub mod merl;
+pub mod microfacet;
+pub mod spec;
+#[cfg(test)]
+mod testutil;
+pub mod torrance_sparrow;
+pub mod ward;
+
+pub use ashikhmin_shirley::AshikhminShirley;
+pub use blinn_phong::BlinnPhong;
+pub use cook_torrance::CookTorrance;
+pub use ggx::Ggx;
+pub use lambertian::Lambertian;
+pub use merl::{Merl, MerlError};
+pub use spec::parse_model;
+pub use torrance_sparrow::TorranceSparrow;
+pub use ward::Ward;

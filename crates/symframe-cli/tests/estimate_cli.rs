@@ -1,0 +1,372 @@
+//! End-to-end tests of `symframe estimate` and `symframe demo`: real files in, maps out, and
+//! bad input refused with a one-line error naming the file, leaving no output folder behind.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use glam::DVec3;
+use symframe::brdf::ward::Ward;
+use symframe::eval::evaluate;
+use symframe::render::{Scene, TangentField};
+use symframe::rig::uniform_cone_lights;
+use symframe_io::{read_npy_f32, write_lp_dataset, ImageFormat};
+
+fn symframe(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_symframe"))
+        .args(args)
+        .output()
+        .expect("run symframe")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A small anisotropic sphere dataset in `.lp` form; returns the scene and the .lp path.
+fn small_dataset(
+    dir: &Path,
+    size: usize,
+    n_lights: usize,
+    format: ImageFormat,
+) -> (Scene, PathBuf) {
+    let scene = Scene::sphere(size, TangentField::Circular);
+    let lights = uniform_cone_lights(n_lights, 65.0);
+    let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
+    // Exposure 0.5 keeps 16-bit data below saturation.
+    let images: Vec<Vec<f32>> = lights
+        .iter()
+        .map(|&l| {
+            scene
+                .render(&brdf, l)
+                .into_iter()
+                .map(|v| 0.5 * v)
+                .collect()
+        })
+        .collect();
+    let lp = write_lp_dataset(
+        dir,
+        &lights,
+        &images,
+        size,
+        size,
+        format,
+        Some(&scene.gt_normals()),
+        Some(&scene.gt_tangents()),
+        Some(&scene.mask),
+    )
+    .unwrap();
+    (scene, lp)
+}
+
+fn assert_fails_naming(o: &Output, needle: &str, out: &Path) {
+    let err = stderr(o);
+    assert!(!o.status.success(), "expected failure, stderr: {err}");
+    assert!(err.contains(needle), "error should name {needle:?}: {err}");
+    assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(!out.exists(), "no output folder may be left behind");
+    let parent = out.parent().unwrap();
+    for e in fs::read_dir(parent).unwrap() {
+        let name = e.unwrap().file_name().to_string_lossy().into_owned();
+        assert!(
+            !name.contains(".partial"),
+            "staging folder left behind: {name}"
+        );
+    }
+}
+
+#[test]
+fn estimate_on_an_lp_dataset_writes_every_output_and_is_accurate() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (scene, lp) = small_dataset(&tmp.path().join("data"), 28, 600, ImageFormat::Png16);
+    let out = tmp.path().join("out");
+    let o = symframe(&[
+        "estimate",
+        lp.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [
+        "normals.npy",
+        "tangents.npy",
+        "confidence.npy",
+        "anisotropy.npy",
+        "normals.exr",
+        "tangents.exr",
+        "normals.png",
+        "tangents.png",
+        "confidence.png",
+        "report.json",
+    ] {
+        assert!(out.join(f).is_file(), "missing {f}");
+    }
+    let (shape, normals) = read_npy_f32(&out.join("normals.npy")).unwrap();
+    assert_eq!(shape, vec![28, 28, 3]);
+    let (_, tangents) = read_npy_f32(&out.join("tangents.npy")).unwrap();
+    let e = evaluate(
+        &normals,
+        &tangents,
+        &scene.gt_normals(),
+        Some(&scene.gt_tangents()),
+        Some(&scene.mask),
+        60.0,
+    );
+    assert!(e.normal_error.mean < 1.0, "{e:?}");
+    assert!(e.tangent_error_swap_free.mean < 2.0, "{e:?}");
+    let report: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["lights"]["input"], 600);
+    assert_eq!(report["lights"]["used"], 600);
+    assert_eq!(report["width"], 28);
+    let estimated = report["pixels"]["estimated"].as_u64().unwrap();
+    assert!(estimated > 400, "{report}");
+    // Outside the sphere (mask.png beside the .lp): NaN.
+    assert!(normals[0].is_nan());
+}
+
+#[test]
+fn estimate_on_a_diligent_folder_divides_by_light_intensities() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("obj");
+    fs::create_dir_all(&dir).unwrap();
+    let size = 24;
+    let scene = Scene::sphere(size, TangentField::Axial(DVec3::Y));
+    let lights = uniform_cone_lights(400, 65.0);
+    let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
+    let (mut names, mut dirs, mut ints) = (String::new(), String::new(), String::new());
+    for (i, &l) in lights.iter().enumerate() {
+        // Each light has its own colour; the images carry it and the tool must divide it out.
+        let k = [0.5 + 0.001 * i as f32, 0.8, 1.2 - 0.0005 * i as f32];
+        let img: Vec<f32> = scene
+            .render(&brdf, l)
+            .chunks_exact(3)
+            .flat_map(|p| [p[0] * k[0], p[1] * k[1], p[2] * k[2]])
+            .collect();
+        let name = format!("{i:03}.exr");
+        symframe_io::write_exr_rgb(&dir.join(&name), size, size, &img).unwrap();
+        names += &format!("{name}\n");
+        dirs += &format!("{} {} {}\n", l.x, l.y, l.z);
+        ints += &format!("{} {} {}\n", k[0], k[1], k[2]);
+    }
+    fs::write(dir.join("filenames.txt"), names).unwrap();
+    fs::write(dir.join("light_directions.txt"), dirs).unwrap();
+    fs::write(dir.join("light_intensities.txt"), ints).unwrap();
+    let mask: Vec<f32> = scene
+        .mask
+        .iter()
+        .flat_map(|&m| [m as u8 as f32; 3])
+        .collect();
+    symframe_io::write_png8_rgb(&dir.join("mask.png"), size, size, &mask, false).unwrap();
+    let out = tmp.path().join("out");
+    // An axial field puts the wide highlight in the plane of tilt: the compensated measure
+    // avoids the paper form's bias there (see the accuracy tests).
+    let o = symframe(&[
+        "estimate",
+        dir.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--cosine",
+        "compensated",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (_, normals) = read_npy_f32(&out.join("normals.npy")).unwrap();
+    let (_, tangents) = read_npy_f32(&out.join("tangents.npy")).unwrap();
+    let e = evaluate(
+        &normals,
+        &tangents,
+        &scene.gt_normals(),
+        Some(&scene.gt_tangents()),
+        Some(&scene.mask),
+        60.0,
+    );
+    assert!(e.normal_error.mean < 1.0, "{e:?}");
+    assert!(e.coverage > 0.9, "{e:?}");
+}
+
+/// A valid small `.lp` dataset to break in the bad-input tests.
+fn breakable(tmp: &Path) -> PathBuf {
+    small_dataset(&tmp.join("data"), 12, 60, ImageFormat::Exr).1
+}
+
+#[test]
+fn mismatched_image_sizes_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = breakable(tmp.path());
+    let img = lp.parent().unwrap().join("images/img_0007.exr");
+    symframe_io::write_exr_rgb(&img, 10, 12, &vec![0.1; 10 * 12 * 3]).unwrap();
+    let out = tmp.path().join("out");
+    let o = symframe(&[
+        "estimate",
+        lp.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_fails_naming(&o, "img_0007.exr", &out);
+}
+
+#[test]
+fn missing_and_unreadable_images_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = breakable(tmp.path());
+    let images = lp.parent().unwrap().join("images");
+    fs::write(images.join("img_0003.exr"), b"this is not an exr file").unwrap();
+    let out = tmp.path().join("out");
+    let o = symframe(&[
+        "estimate",
+        lp.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_fails_naming(&o, "img_0003.exr", &out);
+    fs::remove_file(images.join("img_0003.exr")).unwrap();
+    let o = symframe(&[
+        "estimate",
+        lp.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_fails_naming(&o, "img_0003.exr", &out);
+}
+
+#[test]
+fn bad_light_files_are_refused_with_file_and_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = breakable(tmp.path());
+    let text = fs::read_to_string(&lp).unwrap();
+    let out = tmp.path().join("out");
+    // Wrong count.
+    let wrong_count = text.replacen("60\n", "61\n", 1);
+    fs::write(&lp, &wrong_count).unwrap();
+    let o = symframe(&[
+        "estimate",
+        lp.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_fails_naming(&o, "lights.lp", &out);
+    // A non-finite light on the third entry (line 4).
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let first = lines[3].split_whitespace().next().unwrap().to_string();
+    lines[3] = format!("{first} nan 0 1");
+    fs::write(&lp, lines.join("\n") + "\n").unwrap();
+    let o = symframe(&[
+        "estimate",
+        lp.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_fails_naming(&o, "lights.lp:4", &out);
+}
+
+#[test]
+fn all_lights_outside_the_cone_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = breakable(tmp.path());
+    let out = tmp.path().join("out");
+    // A 10-degree cone: the rig's lights reach 130 degrees, but a handful stay inside, so
+    // flip every light behind the object instead.
+    let text = fs::read_to_string(&lp).unwrap();
+    let flipped: Vec<String> = text
+        .lines()
+        .map(|l| {
+            let f: Vec<&str> = l.split_whitespace().collect();
+            if f.len() == 4 {
+                let z: f64 = f[3].parse().unwrap();
+                format!("{} {} {} {}", f[0], f[1], f[2], -z.abs() - 0.9)
+            } else {
+                l.to_string()
+            }
+        })
+        .collect();
+    fs::write(&lp, flipped.join("\n") + "\n").unwrap();
+    let o = symframe(&[
+        "estimate",
+        lp.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_fails_naming(&o, "lights.lp", &out);
+    assert!(
+        stderr(&o).contains("outside the light cone"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn empty_and_wrong_size_masks_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = breakable(tmp.path());
+    let out = tmp.path().join("out");
+    let empty = tmp.path().join("empty.png");
+    symframe_io::write_png8_rgb(&empty, 12, 12, &vec![0.0; 12 * 12 * 3], false).unwrap();
+    let o = symframe(&[
+        "estimate",
+        lp.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--mask",
+        empty.to_str().unwrap(),
+    ]);
+    assert_fails_naming(&o, "empty.png", &out);
+    assert!(stderr(&o).contains("empty"), "{}", stderr(&o));
+    let small = tmp.path().join("small.png");
+    symframe_io::write_png8_rgb(&small, 5, 5, &vec![1.0; 5 * 5 * 3], false).unwrap();
+    let o = symframe(&[
+        "estimate",
+        lp.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--mask",
+        small.to_str().unwrap(),
+    ]);
+    assert_fails_naming(&o, "small.png", &out);
+}
+
+#[test]
+fn bad_flags_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = breakable(tmp.path());
+    let out = tmp.path().join("out");
+    let o = symframe(&[
+        "estimate",
+        lp.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--theta-d-max",
+        "120",
+    ]);
+    assert_fails_naming(&o, "--theta-d-max", &out);
+    let o = symframe(&[
+        "estimate",
+        "/no/such/dataset.lp",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_fails_naming(&o, "/no/such/dataset.lp", &out);
+}
+
+#[test]
+fn demo_runs_end_to_end_and_reports_small_errors() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("demo");
+    let o = symframe(&[
+        "demo",
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        "24",
+        "--lights",
+        "500",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("normals.png"), "{stdout}");
+    assert!(out.join("estimate/normals.png").is_file());
+    let eval: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(out.join("estimate/eval.json")).unwrap()).unwrap();
+    let mean = eval["normal_error"]["mean"].as_f64().unwrap();
+    assert!(mean < 1.5, "{eval}");
+}

@@ -1,0 +1,415 @@
+//! A photometric dataset description: which images, lit from which directions, with what
+//! intensities, and an optional mask. Opening a dataset reads only text files, not images.
+
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+
+use crate::error::{Error, Result};
+use crate::lights;
+
+/// Where a dataset's images are and how each was lit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dataset {
+    /// The file or folder the dataset was opened from (for messages).
+    pub source: PathBuf,
+    /// Unit light directions (surface toward light, camera frame), one per image.
+    pub lights: Vec<DVec3>,
+    /// Image paths (absolute, or relative to the current directory), one per light.
+    pub images: Vec<PathBuf>,
+    /// Optional per-light RGB intensities; images are divided by them when loaded.
+    pub intensities: Option<Vec<[f32; 3]>>,
+    /// Optional mask image (`mask.png` beside the light file): non-zero pixels are processed.
+    pub mask: Option<PathBuf>,
+}
+
+/// File names of a DiLiGenT-style folder.
+const FILENAMES: &str = "filenames.txt";
+const DIRECTIONS: &str = "light_directions.txt";
+const INTENSITIES: &str = "light_intensities.txt";
+const MASK: &str = "mask.png";
+
+/// Opens a dataset from an RTI `.lp` file, a folder holding exactly one `.lp` file, or a
+/// DiLiGenT-style folder (`filenames.txt`, `light_directions.txt`, optional
+/// `light_intensities.txt` and `mask.png`).
+///
+/// `.lp` format: the light count `N` on the first meaningful line, then `N` lines
+/// `<image> <lx> <ly> <lz>`, image paths relative to the `.lp` file's folder and without spaces.
+/// Blank lines and `#` comments are allowed. Directions are normalised; every listed image must
+/// exist.
+pub fn open_dataset(input: &Path) -> Result<Dataset> {
+    if input.is_dir() {
+        return open_folder(input);
+    }
+    if !input.exists() {
+        return Err(Error::read(
+            input,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or folder"),
+        ));
+    }
+    let name = input.file_name().and_then(|n| n.to_str()).unwrap_or("");
+    if is_lp(input) {
+        return open_lp(input);
+    }
+    if name == FILENAMES || name == DIRECTIONS || name == INTENSITIES {
+        let dir = parent_dir(input);
+        return open_diligent(&dir, input);
+    }
+    Err(Error::invalid(
+        input,
+        "not a dataset: expected a .lp light file or a folder with one .lp file or with \
+         filenames.txt and light_directions.txt",
+    ))
+}
+
+/// Whether `p` has the `.lp` extension (case-insensitive).
+fn is_lp(p: &Path) -> bool {
+    p.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("lp"))
+}
+
+/// The folder of a file, `""` (the current directory) when the path has none.
+fn parent_dir(p: &Path) -> PathBuf {
+    p.parent().map(Path::to_path_buf).unwrap_or_default()
+}
+
+/// `dir/mask.png` if it is a file.
+fn mask_in(dir: &Path) -> Option<PathBuf> {
+    let m = dir.join(MASK);
+    m.is_file().then_some(m)
+}
+
+/// Opens a dataset folder: one `.lp` file, else the DiLiGenT tables.
+fn open_folder(dir: &Path) -> Result<Dataset> {
+    let rd = std::fs::read_dir(dir).map_err(|e| Error::read(dir, e))?;
+    let mut lps = Vec::new();
+    for entry in rd {
+        let entry = entry.map_err(|e| Error::read(dir, e))?;
+        let p = entry.path();
+        if p.is_file() && is_lp(&p) {
+            lps.push(p);
+        }
+    }
+    lps.sort();
+    if lps.len() == 1 {
+        return open_lp(&lps[0]);
+    }
+    if dir.join(FILENAMES).is_file() && dir.join(DIRECTIONS).is_file() {
+        return open_diligent(dir, dir);
+    }
+    if lps.len() > 1 {
+        let names: Vec<String> = lps
+            .iter()
+            .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+            .collect();
+        return Err(Error::invalid(
+            dir,
+            format!(
+                "not a dataset: found several .lp files ({}); give one of them",
+                names.join(", ")
+            ),
+        ));
+    }
+    Err(Error::invalid(
+        dir,
+        "not a dataset: looked for one .lp light file, or filenames.txt and \
+         light_directions.txt",
+    ))
+}
+
+/// Opens an `.lp` dataset; `mask.png` beside it is picked up.
+fn open_lp(lp: &Path) -> Result<Dataset> {
+    let (images, lights) = lights::parse_lp(lp)?;
+    Ok(Dataset {
+        source: lp.to_path_buf(),
+        lights,
+        images,
+        intensities: None,
+        mask: mask_in(&parent_dir(lp)),
+    })
+}
+
+/// Opens a DiLiGenT-style folder; `source` is what the user named (folder or one of its files).
+fn open_diligent(dir: &Path, source: &Path) -> Result<Dataset> {
+    let names_path = dir.join(FILENAMES);
+    let dirs_path = dir.join(DIRECTIONS);
+    for p in [&names_path, &dirs_path] {
+        if !p.is_file() {
+            return Err(Error::invalid(
+                dir,
+                format!(
+                    "not a dataset: {} is missing (a DiLiGenT folder needs filenames.txt and \
+                     light_directions.txt)",
+                    p.display()
+                ),
+            ));
+        }
+    }
+    let images = lights::parse_filenames(&names_path, dir)?;
+    let lights = lights::parse_directions(&dirs_path)?;
+    if lights.len() != images.len() {
+        return Err(Error::invalid(
+            &dirs_path,
+            format!(
+                "{} light directions but {} lists {} images",
+                lights.len(),
+                names_path.display(),
+                images.len()
+            ),
+        ));
+    }
+    let int_path = dir.join(INTENSITIES);
+    let intensities = if int_path.is_file() {
+        let v = lights::parse_intensities(&int_path)?;
+        if v.len() != images.len() {
+            return Err(Error::invalid(
+                &int_path,
+                format!(
+                    "{} light intensities but {} lists {} images",
+                    v.len(),
+                    names_path.display(),
+                    images.len()
+                ),
+            ));
+        }
+        Some(v)
+    } else {
+        None
+    };
+    Ok(Dataset {
+        source: source.to_path_buf(),
+        lights,
+        images,
+        intensities,
+        mask: mask_in(dir),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::fs;
+
+    /// Creates empty image files `names` in `dir`.
+    fn touch(dir: &Path, names: &[&str]) {
+        for n in names {
+            let p = dir.join(n);
+            fs::create_dir_all(p.parent().unwrap()).unwrap();
+            fs::write(p, b"").unwrap();
+        }
+    }
+
+    fn err_string(r: Result<Dataset>) -> String {
+        r.expect_err("expected an error").to_string()
+    }
+
+    #[test]
+    fn lp_with_comments_and_blank_lines() {
+        let d = tempfile::tempdir().unwrap();
+        touch(d.path(), &["img/a.png", "img/b.png", "img/c.png"]);
+        let lp = d.path().join("rig.lp");
+        fs::write(
+            &lp,
+            "# a comment\n\n3   # three lights\nimg/a.png 0 0 2\n\n# middle\n\
+             img/b.png 3 0 4 # trailing\n  img/c.png\t-1 1 0\n",
+        )
+        .unwrap();
+        let ds = open_dataset(&lp).unwrap();
+        assert_eq!(ds.images.len(), 3);
+        assert_eq!(ds.images[1], d.path().join("img/b.png"));
+        assert!((ds.lights[0] - DVec3::Z).length() < 1e-15);
+        assert!((ds.lights[1] - DVec3::new(0.6, 0.0, 0.8)).length() < 1e-15);
+        let s = 0.5f64.sqrt();
+        assert!((ds.lights[2] - DVec3::new(-s, s, 0.0)).length() < 1e-15);
+        assert_eq!(ds.mask, None);
+        assert_eq!(ds.intensities, None);
+        assert_eq!(ds.source, lp);
+
+        // The folder resolves to its only .lp file and picks up mask.png beside it.
+        touch(d.path(), &["mask.png"]);
+        let ds2 = open_dataset(d.path()).unwrap();
+        assert_eq!(ds2.images, ds.images);
+        assert_eq!(ds2.mask, Some(d.path().join("mask.png")));
+    }
+
+    #[test]
+    fn lp_too_few_entries_names_file() {
+        let d = tempfile::tempdir().unwrap();
+        touch(d.path(), &["a.png", "b.png"]);
+        let lp = d.path().join("few.lp");
+        fs::write(&lp, "3\na.png 0 0 1\nb.png 0 1 1\n").unwrap();
+        let e = err_string(open_dataset(&lp));
+        assert!(e.contains("few.lp"), "{e}");
+        assert!(e.contains("3 lights declared on line 1 but only 2"), "{e}");
+    }
+
+    #[test]
+    fn lp_too_many_entries_names_file_and_line() {
+        let d = tempfile::tempdir().unwrap();
+        touch(d.path(), &["a.png", "b.png"]);
+        let lp = d.path().join("many.lp");
+        fs::write(&lp, "1\na.png 0 0 1\n# extra\nb.png 0 1 1\n").unwrap();
+        let e = err_string(open_dataset(&lp));
+        assert!(
+            e.contains("many.lp:4: more entries than the 1 lights"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn lp_zero_and_nan_lights_name_line() {
+        let d = tempfile::tempdir().unwrap();
+        touch(d.path(), &["a.png", "b.png"]);
+        let lp = d.path().join("zero.lp");
+        fs::write(&lp, "2\na.png 0 0 1\nb.png 0 0 0\n").unwrap();
+        let e = err_string(open_dataset(&lp));
+        assert!(
+            e.contains("zero.lp:3: light direction is zero or not finite"),
+            "{e}"
+        );
+
+        fs::write(&lp, "2\na.png NaN 0 1\nb.png 0 0 1\n").unwrap();
+        let e = err_string(open_dataset(&lp));
+        assert!(
+            e.contains("zero.lp:2: light direction is zero or not finite"),
+            "{e}"
+        );
+
+        fs::write(&lp, "2\na.png 0 0 1\nb.png 0 x 1\n").unwrap();
+        let e = err_string(open_dataset(&lp));
+        assert!(e.contains("zero.lp:3:") && e.contains("'x'"), "{e}");
+    }
+
+    #[test]
+    fn lp_bad_count_spaces_and_missing_image() {
+        let d = tempfile::tempdir().unwrap();
+        touch(d.path(), &["a.png"]);
+        let lp = d.path().join("bad.lp");
+        fs::write(&lp, "\n# c\nthree\na.png 0 0 1\n").unwrap();
+        let e = err_string(open_dataset(&lp));
+        assert!(e.contains("bad.lp:3: expected the number of lights"), "{e}");
+
+        fs::write(&lp, "1\nmy image.png 0 0 1\n").unwrap();
+        let e = err_string(open_dataset(&lp));
+        assert!(e.contains("bad.lp:2:") && e.contains("spaces"), "{e}");
+
+        fs::write(&lp, "1\nmissing.png 0 0 1\n").unwrap();
+        let e = err_string(open_dataset(&lp));
+        assert!(e.contains("bad.lp:2:") && e.contains("missing.png"), "{e}");
+
+        fs::write(&lp, "# nothing\n").unwrap();
+        let e = err_string(open_dataset(&lp));
+        assert!(e.contains("bad.lp") && e.contains("empty"), "{e}");
+    }
+
+    /// Writes a DiLiGenT-style folder with `n` images.
+    fn diligent(dir: &Path, n: usize) {
+        let names: Vec<String> = (0..n).map(|i| format!("{:03}.png", i + 1)).collect();
+        let refs: Vec<&str> = names.iter().map(String::as_str).collect();
+        touch(dir, &refs);
+        fs::write(dir.join("filenames.txt"), names.join("\n") + "\n").unwrap();
+    }
+
+    #[test]
+    fn diligent_folder_with_intensities_and_mask() {
+        let d = tempfile::tempdir().unwrap();
+        diligent(d.path(), 2);
+        touch(d.path(), &["mask.png"]);
+        fs::write(d.path().join("light_directions.txt"), "0 0 1\n0 -2 0\n").unwrap();
+        fs::write(
+            d.path().join("light_intensities.txt"),
+            "1 2 3\n0.5 0.5 0.25\n",
+        )
+        .unwrap();
+        let ds = open_dataset(d.path()).unwrap();
+        assert_eq!(
+            ds.images,
+            vec![d.path().join("001.png"), d.path().join("002.png")]
+        );
+        assert_eq!(ds.lights, vec![DVec3::Z, DVec3::NEG_Y]);
+        assert_eq!(
+            ds.intensities,
+            Some(vec![[1.0, 2.0, 3.0], [0.5, 0.5, 0.25]])
+        );
+        assert_eq!(ds.mask, Some(d.path().join("mask.png")));
+        // Naming one of the folder's files opens the same dataset.
+        let ds2 = open_dataset(&d.path().join("filenames.txt")).unwrap();
+        assert_eq!(ds2.lights, ds.lights);
+        assert_eq!(ds2.images, ds.images);
+    }
+
+    #[test]
+    fn diligent_mismatched_rows_name_the_file() {
+        let d = tempfile::tempdir().unwrap();
+        diligent(d.path(), 3);
+        fs::write(d.path().join("light_directions.txt"), "0 0 1\n0 1 1\n").unwrap();
+        let e = err_string(open_dataset(d.path()));
+        assert!(
+            e.contains("light_directions.txt: 2 light directions"),
+            "{e}"
+        );
+        assert!(e.contains("3 images"), "{e}");
+
+        fs::write(
+            d.path().join("light_directions.txt"),
+            "0 0 1\n0 1 1\n1 0 1\n",
+        )
+        .unwrap();
+        fs::write(d.path().join("light_intensities.txt"), "1 1 1\n").unwrap();
+        let e = err_string(open_dataset(d.path()));
+        assert!(
+            e.contains("light_intensities.txt: 1 light intensities"),
+            "{e}"
+        );
+
+        fs::write(
+            d.path().join("light_intensities.txt"),
+            "1 1 1\n1 0 1\n1 1 1\n",
+        )
+        .unwrap();
+        let e = err_string(open_dataset(d.path()));
+        assert!(
+            e.contains("light_intensities.txt:2: light intensity must be finite"),
+            "{e}"
+        );
+
+        fs::remove_file(d.path().join("light_intensities.txt")).unwrap();
+        fs::write(
+            d.path().join("light_directions.txt"),
+            "0 0 1\n0 1 1\n0 0 0\n",
+        )
+        .unwrap();
+        let e = err_string(open_dataset(d.path()));
+        assert!(
+            e.contains("light_directions.txt:3: light direction is zero"),
+            "{e}"
+        );
+
+        fs::write(d.path().join("light_directions.txt"), "0 0 1\n0 1\n1 0 1\n").unwrap();
+        let e = err_string(open_dataset(d.path()));
+        assert!(
+            e.contains("light_directions.txt:2: expected 3 numbers"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn folder_without_dataset_says_what_was_looked_for() {
+        let d = tempfile::tempdir().unwrap();
+        touch(d.path(), &["x.png"]);
+        let e = err_string(open_dataset(d.path()));
+        assert!(e.contains(".lp") && e.contains("filenames.txt"), "{e}");
+        assert!(e.contains(&d.path().display().to_string()), "{e}");
+
+        touch(d.path(), &["a.lp", "b.lp"]);
+        let e = err_string(open_dataset(d.path()));
+        assert!(e.contains("several .lp files") && e.contains("a.lp"), "{e}");
+
+        let e = err_string(open_dataset(&d.path().join("x.png")));
+        assert!(e.contains("x.png: not a dataset"), "{e}");
+
+        let e = err_string(open_dataset(&d.path().join("nope.lp")));
+        assert!(e.contains("nope.lp: cannot read"), "{e}");
+    }
+}

@@ -1,0 +1,164 @@
+//! The crate's error type: every variant names the file it is about, so a message alone tells
+//! the user what to fix.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong reading or writing a dataset, image or output map.
+///
+/// Each variant carries the offending file's path (and the line for text-file parse errors) and
+/// formats as a single line.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// The file could not be opened or read (missing, permissions, I/O failure).
+    #[error("{}: cannot read: {source}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The underlying I/O error.
+        source: std::io::Error,
+    },
+
+    /// The file (or its temporary sibling) could not be created, written or renamed.
+    #[error("{}: cannot write: {source}", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// The underlying I/O error.
+        source: std::io::Error,
+    },
+
+    /// A text file has a bad line (parse error, zero light direction, ...).
+    #[error("{}:{line}: {msg}", path.display())]
+    Parse {
+        /// The text file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// What was wrong.
+        msg: String,
+    },
+
+    /// A file's content is wrong as a whole (counts disagree, mask empty, not a dataset, ...).
+    #[error("{}: {msg}", path.display())]
+    Invalid {
+        /// The file or folder.
+        path: PathBuf,
+        /// What was wrong.
+        msg: String,
+    },
+
+    /// An image (or array) file is truncated or corrupt.
+    #[error("{}: cannot decode: {msg}", path.display())]
+    Decode {
+        /// The file.
+        path: PathBuf,
+        /// The decoder's complaint.
+        msg: String,
+    },
+
+    /// A file uses a format or layout this crate does not read.
+    #[error("{}: unsupported: {msg}", path.display())]
+    Unsupported {
+        /// The file.
+        path: PathBuf,
+        /// What is not supported.
+        msg: String,
+    },
+
+    /// An image of a stack has a different size from the stack's first image.
+    #[error(
+        "{}: image is {width}x{height} but the first image ({}) is {first_width}x{first_height}",
+        path.display(),
+        first.display()
+    )]
+    SizeMismatch {
+        /// The offending image.
+        path: PathBuf,
+        /// Its width.
+        width: usize,
+        /// Its height.
+        height: usize,
+        /// The stack's first image.
+        first: PathBuf,
+        /// The first image's width.
+        first_width: usize,
+        /// The first image's height.
+        first_height: usize,
+    },
+
+    /// An encoder failed while writing an output file.
+    #[error("{}: cannot encode: {msg}", path.display())]
+    Encode {
+        /// The file.
+        path: PathBuf,
+        /// The encoder's complaint.
+        msg: String,
+    },
+}
+
+/// Result with this crate's [`Error`].
+pub type Result<T> = std::result::Result<T, Error>;
+
+impl Error {
+    /// A read error for `path`.
+    pub(crate) fn read(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Read {
+            path: path.into(),
+            source,
+        }
+    }
+
+    /// A write error for `path`.
+    pub(crate) fn write(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Write {
+            path: path.into(),
+            source,
+        }
+    }
+
+    /// A parse error at `line` of `path`.
+    pub(crate) fn parse(path: impl Into<PathBuf>, line: usize, msg: impl Into<String>) -> Self {
+        Error::Parse {
+            path: path.into(),
+            line,
+            msg: msg.into(),
+        }
+    }
+
+    /// A whole-file content error.
+    pub(crate) fn invalid(path: impl Into<PathBuf>, msg: impl Into<String>) -> Self {
+        Error::Invalid {
+            path: path.into(),
+            msg: msg.into(),
+        }
+    }
+
+    /// A decode (corrupt/truncated) error.
+    pub(crate) fn decode(path: impl Into<PathBuf>, msg: impl ToString) -> Self {
+        Error::Decode {
+            path: path.into(),
+            msg: one_line(&msg.to_string()),
+        }
+    }
+
+    /// An unsupported-format error.
+    pub(crate) fn unsupported(path: impl Into<PathBuf>, msg: impl Into<String>) -> Self {
+        Error::Unsupported {
+            path: path.into(),
+            msg: msg.into(),
+        }
+    }
+
+    /// An encoder error.
+    pub(crate) fn encode(path: impl Into<PathBuf>, msg: impl ToString) -> Self {
+        Error::Encode {
+            path: path.into(),
+            msg: one_line(&msg.to_string()),
+        }
+    }
+}
+
+/// Collapses a possibly multi-line library message onto one line.
+fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}

@@ -1,0 +1,198 @@
+//! Parsers of light files: RTI light-position files (`.lp`) and DiLiGenT-style text tables.
+//!
+//! All text files accept blank lines and `#` comments (whole-line or trailing), so a `#` can not
+//! be part of an image path.
+
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+
+use crate::error::{Error, Result};
+
+/// Reads a text file and returns its meaningful lines as `(1-based line number, content)`, with
+/// comments stripped and surrounding whitespace trimmed; blank lines are dropped.
+pub(crate) fn content_lines(path: &Path) -> Result<Vec<(usize, String)>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::read(path, e))?;
+    let text =
+        String::from_utf8(bytes).map_err(|_| Error::decode(path, "not a UTF-8 text file"))?;
+    Ok(text
+        .lines()
+        .enumerate()
+        .filter_map(|(i, l)| {
+            let l = l.split('#').next().unwrap_or("").trim();
+            (!l.is_empty()).then(|| (i + 1, l.to_string()))
+        })
+        .collect())
+}
+
+/// Parses three whitespace-separated numbers of `what` at `line` of `path`.
+pub(crate) fn parse_triple(
+    path: &Path,
+    line: usize,
+    tokens: &[&str],
+    what: &str,
+) -> Result<[f64; 3]> {
+    if tokens.len() != 3 {
+        return Err(Error::parse(
+            path,
+            line,
+            format!("expected 3 numbers for the {what}, found {}", tokens.len()),
+        ));
+    }
+    let mut v = [0.0; 3];
+    for (o, t) in v.iter_mut().zip(tokens) {
+        *o = t.parse::<f64>().map_err(|_| {
+            Error::parse(
+                path,
+                line,
+                format!("{what}: cannot parse '{t}' as a number"),
+            )
+        })?;
+    }
+    Ok(v)
+}
+
+/// Normalises a light direction, rejecting zero and non-finite vectors with a line-level error.
+pub(crate) fn unit_direction(path: &Path, line: usize, v: [f64; 3]) -> Result<DVec3> {
+    let d = DVec3::from_array(v);
+    let len = d.length();
+    let n = d.normalize();
+    if !d.is_finite() || len == 0.0 || !len.is_finite() || !n.is_finite() {
+        return Err(Error::parse(
+            path,
+            line,
+            "light direction is zero or not finite",
+        ));
+    }
+    Ok(n)
+}
+
+/// Parses an RTI light-position file: the count `N`, then `N` lines `<image> <lx> <ly> <lz>`.
+///
+/// Image paths are relative to the `.lp` file's folder (absolute paths are kept) and may not
+/// contain spaces or `#`. Returns the resolved image paths and unit light directions.
+pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
+    let lines = content_lines(path)?;
+    let dir = path.parent().unwrap_or(Path::new(""));
+    let Some((count_line, count_text)) = lines.first() else {
+        return Err(Error::invalid(
+            path,
+            "empty light file: expected the number of lights on the first line",
+        ));
+    };
+    let count: usize = count_text.parse().map_err(|_| {
+        Error::parse(
+            path,
+            *count_line,
+            format!("expected the number of lights, found '{count_text}'"),
+        )
+    })?;
+    if count == 0 {
+        return Err(Error::parse(path, *count_line, "the light count is zero"));
+    }
+    let entries = &lines[1..];
+    if entries.len() > count {
+        let (extra_line, _) = entries[count];
+        return Err(Error::parse(
+            path,
+            extra_line,
+            format!(
+                "more entries than the {count} lights declared on line {count_line} ({} found)",
+                entries.len()
+            ),
+        ));
+    }
+    if entries.len() < count {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "{count} lights declared on line {count_line} but only {} entries found",
+                entries.len()
+            ),
+        ));
+    }
+    let mut images = Vec::with_capacity(count);
+    let mut lights = Vec::with_capacity(count);
+    for (line, text) in entries {
+        let tokens: Vec<&str> = text.split_whitespace().collect();
+        if tokens.len() != 4 {
+            return Err(Error::parse(
+                path,
+                *line,
+                format!(
+                    "expected '<image> <lx> <ly> <lz>' (image paths may not contain spaces), \
+                     found {} fields",
+                    tokens.len()
+                ),
+            ));
+        }
+        let v = parse_triple(path, *line, &tokens[1..], "light direction")?;
+        lights.push(unit_direction(path, *line, v)?);
+        let img = dir.join(tokens[0]);
+        if !img.is_file() {
+            return Err(Error::parse(
+                path,
+                *line,
+                format!("image {} does not exist", img.display()),
+            ));
+        }
+        images.push(img);
+    }
+    Ok((images, lights))
+}
+
+/// Parses a DiLiGenT `filenames.txt`: one image filename per line, relative to `dir`.
+pub(crate) fn parse_filenames(path: &Path, dir: &Path) -> Result<Vec<PathBuf>> {
+    let lines = content_lines(path)?;
+    if lines.is_empty() {
+        return Err(Error::invalid(path, "no image filenames"));
+    }
+    lines
+        .into_iter()
+        .map(|(line, text)| {
+            let img = dir.join(&text);
+            if img.is_file() {
+                Ok(img)
+            } else {
+                Err(Error::parse(
+                    path,
+                    line,
+                    format!("image {} does not exist", img.display()),
+                ))
+            }
+        })
+        .collect()
+}
+
+/// Parses a table of `x y z` light directions (DiLiGenT `light_directions.txt`), normalised.
+pub(crate) fn parse_directions(path: &Path) -> Result<Vec<DVec3>> {
+    content_lines(path)?
+        .into_iter()
+        .map(|(line, text)| {
+            let tokens: Vec<&str> = text.split_whitespace().collect();
+            let v = parse_triple(path, line, &tokens, "light direction")?;
+            unit_direction(path, line, v)
+        })
+        .collect()
+}
+
+/// Parses a table of `r g b` light intensities (DiLiGenT `light_intensities.txt`); each must be
+/// finite and positive since images are divided by them.
+pub(crate) fn parse_intensities(path: &Path) -> Result<Vec<[f32; 3]>> {
+    content_lines(path)?
+        .into_iter()
+        .map(|(line, text)| {
+            let tokens: Vec<&str> = text.split_whitespace().collect();
+            let v = parse_triple(path, line, &tokens, "light intensity")?;
+            let out = v.map(|x| x as f32);
+            if out.iter().any(|x| !x.is_finite() || *x <= 0.0) {
+                return Err(Error::parse(
+                    path,
+                    line,
+                    "light intensity must be finite and greater than zero",
+                ));
+            }
+            Ok(out)
+        })
+        .collect()
+}

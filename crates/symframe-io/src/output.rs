@@ -1,0 +1,357 @@
+//! Writers of result maps (NPY, float EXR) and their colour-coded pictures (8-bit PNG).
+//!
+//! Every writer writes to a temporary file in the destination folder and renames it, so an
+//! interrupted or failed write never leaves half a file behind.
+
+use std::path::Path;
+
+use ndarray::{ArrayD, ArrayViewD, IxDyn};
+use ndarray_npy::{ReadNpyExt, WriteNpyExt};
+
+use crate::atomic::write_atomic;
+use crate::error::{Error, Result};
+use crate::image::{check_len, planes, write_exr_channels, write_png};
+
+/// Writes `data` (row-major, C order) as a little-endian `float32` `.npy` array of `shape`,
+/// e.g. `[H, W, 3]` for normals or `[H, W]` for a confidence map.
+pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
+    let fits = shape
+        .iter()
+        .try_fold(1usize, |a, &b| a.checked_mul(b))
+        .is_some_and(|n| n == data.len());
+    let view = ArrayViewD::from_shape(IxDyn(shape), data)
+        .ok()
+        .filter(|_| fits)
+        .ok_or_else(|| {
+            Error::invalid(
+                path,
+                format!("cannot write shape {shape:?} from {} values", data.len()),
+            )
+        })?;
+    write_atomic(path, |w| {
+        view.write_npy(w).map_err(|e| Error::encode(path, e))
+    })
+}
+
+/// Reads a `float32` `.npy` array: its shape and its values in row-major (C) order.
+pub fn read_npy_f32(path: &Path) -> Result<(Vec<usize>, Vec<f32>)> {
+    let file = std::fs::File::open(path).map_err(|e| Error::read(path, e))?;
+    let arr = ArrayD::<f32>::read_npy(std::io::BufReader::new(file))
+        .map_err(|e| Error::decode(path, e))?;
+    Ok((arr.shape().to_vec(), arr.iter().copied().collect()))
+}
+
+/// Writes a float32 OpenEXR map of `channels` interleaved values per pixel: 3 channels are
+/// named R, G, B and 1 channel Y. `NaN` is kept, marking pixels without a result.
+pub fn write_exr_map(
+    path: &Path,
+    width: usize,
+    height: usize,
+    channels: usize,
+    data: &[f32],
+) -> Result<()> {
+    let names: &[&str] = match channels {
+        1 => &["Y"],
+        3 => &["R", "G", "B"],
+        _ => {
+            return Err(Error::invalid(
+                path,
+                format!("EXR maps have 1 or 3 channels, not {channels}"),
+            ))
+        }
+    };
+    check_len(path, width, height, channels, data.len())?;
+    let chans = names.iter().copied().zip(planes(data, channels)).collect();
+    write_exr_channels(path, width, height, chans)
+}
+
+/// Clamps to `[0, 1]` and scales to a byte.
+fn byte(v: f64) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// Colours unit normals (`H x W x 3`, `NaN` = no result) as `(r, g, b) = ((nx+1)/2, (ny+1)/2,
+/// nz)`, written as bytes directly (a data colour map, not sRGB-encoded); `NaN` pixels black.
+pub fn normal_map_rgb8(normals: &[f32]) -> Vec<u8> {
+    normals
+        .chunks_exact(3)
+        .flat_map(|n| {
+            if n.iter().any(|v| v.is_nan()) {
+                return [0, 0, 0];
+            }
+            let [x, y, z] = [n[0] as f64, n[1] as f64, n[2] as f64];
+            [byte((x + 1.0) / 2.0), byte((y + 1.0) / 2.0), byte(z)]
+        })
+        .collect()
+}
+
+/// HSV with saturation and value 1 to RGB bytes; `hue` in turns (`[0, 1)`, wrapped).
+fn hue_rgb8(hue: f64) -> [u8; 3] {
+    let h = hue.rem_euclid(1.0) * 6.0;
+    let sector = (h.floor() as usize).min(5);
+    let f = h - sector as f64;
+    let (r, g, b) = match sector {
+        0 => (1.0, f, 0.0),
+        1 => (1.0 - f, 1.0, 0.0),
+        2 => (0.0, 1.0, f),
+        3 => (0.0, 1.0 - f, 1.0),
+        4 => (f, 0.0, 1.0),
+        _ => (1.0, 0.0, 1.0 - f),
+    };
+    [byte(r), byte(g), byte(b)]
+}
+
+/// Colours tangents (`H x W x 3`) by the angle `phi` of their image-plane projection from the
+/// x axis: HSV hue `2 * phi` (so `t` and `-t` get the same colour), saturation 1, value 1.
+/// `NaN` pixels are black; a tangent along z (no projection) gets hue 0 (red).
+pub fn tangent_map_rgb8(tangents: &[f32]) -> Vec<u8> {
+    tangents
+        .chunks_exact(3)
+        .flat_map(|t| {
+            if t.iter().any(|v| v.is_nan()) {
+                return [0, 0, 0];
+            }
+            let phi = (t[1] as f64).atan2(t[0] as f64);
+            hue_rgb8(2.0 * phi / std::f64::consts::TAU)
+        })
+        .collect()
+}
+
+/// The viridis colour map at `t` in `[0, 1]` (polynomial fit, within about 1% of matplotlib's).
+fn viridis(t: f64) -> [u8; 3] {
+    const C: [[f64; 3]; 7] = [
+        [
+            0.277_727_327_223_417_7,
+            0.005_407_344_544_966_578,
+            0.334_099_805_335_306_1,
+        ],
+        [
+            0.105_093_043_108_577_4,
+            1.404_613_529_898_575,
+            1.384_590_162_594_685,
+        ],
+        [
+            -0.330_861_828_725_556_3,
+            0.214_847_559_468_213,
+            0.095_095_163_028_236_59,
+        ],
+        [
+            -4.634_230_498_983_486,
+            -5.799_100_973_351_585,
+            -19.332_440_956_279_87,
+        ],
+        [
+            6.228_269_936_347_081,
+            14.179_933_366_805_09,
+            56.690_552_600_681_05,
+        ],
+        [
+            4.776_384_997_670_288,
+            -13.745_145_377_746_01,
+            -65.353_032_633_372_34,
+        ],
+        [
+            -5.435_455_855_934_631,
+            4.645_852_612_178_535,
+            26.312_435_249_583_2,
+        ],
+    ];
+    let t = t.clamp(0.0, 1.0);
+    let mut out = [0u8; 3];
+    for (c, o) in out.iter_mut().enumerate() {
+        let v = C.iter().rev().fold(0.0, |acc, k| acc * t + k[c]);
+        *o = byte(v);
+    }
+    out
+}
+
+/// Colours scalar values (confidence, error) with the perceptual viridis map, `lo` dark purple
+/// to `hi` yellow, clamped outside; `NaN` pixels black. If `hi <= lo` every value maps to `lo`.
+pub fn gray_map_rgb8(values: &[f32], lo: f32, hi: f32) -> Vec<u8> {
+    let range = hi as f64 - lo as f64;
+    values
+        .iter()
+        .flat_map(|&v| {
+            if v.is_nan() {
+                return [0, 0, 0];
+            }
+            let t = if range > 0.0 {
+                (v as f64 - lo as f64) / range
+            } else {
+                0.0
+            };
+            viridis(t)
+        })
+        .collect()
+}
+
+/// Writes 8-bit RGB bytes (`width * height * 3`, e.g. from the colour maps above) as a PNG.
+pub fn write_png_rgb8(path: &Path, width: usize, height: usize, rgb: &[u8]) -> Result<()> {
+    if width.checked_mul(height).and_then(|n| n.checked_mul(3)) != Some(rgb.len()) {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "cannot write a {width}x{height} RGB picture from {} bytes",
+                rgb.len()
+            ),
+        ));
+    }
+    write_png(path, width, height, rgb, ::image::ExtendedColorType::Rgb8)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::{read_image, DecodeOptions};
+
+    #[test]
+    fn npy_round_trip_and_shape_check() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("n.npy");
+        let v: Vec<f32> = (0..2 * 3 * 3).map(|i| i as f32 * 0.5).collect();
+        write_npy_f32(&p, &[2, 3, 3], &v).unwrap();
+        assert_eq!(read_npy_f32(&p).unwrap(), (vec![2, 3, 3], v.clone()));
+        let mut c = v[..6].to_vec();
+        c[2] = f32::NAN;
+        write_npy_f32(&p, &[2, 3], &c).unwrap();
+        let (shape, back) = read_npy_f32(&p).unwrap();
+        assert_eq!(shape, vec![2, 3]);
+        assert!(back[2].is_nan() && back[5] == 2.5);
+        let e = write_npy_f32(&p, &[4, 4], &v).unwrap_err().to_string();
+        assert!(e.contains("n.npy") && e.contains("[4, 4]"), "{e}");
+        std::fs::write(&p, b"\x93NUMPY garbage").unwrap();
+        assert!(read_npy_f32(&p).unwrap_err().to_string().contains("n.npy"));
+    }
+
+    #[test]
+    fn exr_maps_keep_nan_and_name_channels() {
+        use exr::prelude::*;
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("c.exr");
+        let v = [0.5f32, f32::NAN, 2.0, -1.0];
+        write_exr_map(&p, 2, 2, 1, &v).unwrap();
+        let img = read_first_flat_layer_from_file(&p).unwrap();
+        let names: Vec<String> = img
+            .layer_data
+            .channel_data
+            .list
+            .iter()
+            .map(|c| c.name.to_string())
+            .collect();
+        assert_eq!(names, vec!["Y"]);
+        let back: Vec<f32> = img.layer_data.channel_data.list[0]
+            .sample_data
+            .values_as_f32()
+            .collect();
+        assert_eq!(back[0], 0.5);
+        assert!(back[1].is_nan());
+        assert_eq!(&back[2..], &v[2..]);
+
+        let n = [0.0f32, 0.0, 1.0, f32::NAN, f32::NAN, f32::NAN];
+        write_exr_map(&p, 2, 1, 3, &n).unwrap();
+        let img = read_first_flat_layer_from_file(&p).unwrap();
+        let names: Vec<String> = img
+            .layer_data
+            .channel_data
+            .list
+            .iter()
+            .map(|c| c.name.to_string())
+            .collect();
+        assert_eq!(names, vec!["B", "G", "R"]);
+        // The stack reader sees the NaN pixel as invalid, the other exactly.
+        let r = read_image(&p, &DecodeOptions::default()).unwrap();
+        assert_eq!(&r.data[..3], &[0.0, 0.0, 1.0]);
+        assert!(r.data[3..].iter().all(|x| x.is_nan()));
+        assert!(write_exr_map(&p, 2, 1, 2, &[0.0; 4]).is_err());
+    }
+
+    #[test]
+    fn normal_map_colours() {
+        let s = 0.5f32.sqrt();
+        let n = [
+            0.0,
+            0.0,
+            1.0, //
+            1.0,
+            0.0,
+            0.0, //
+            -s,
+            s,
+            0.0, //
+            f32::NAN,
+            0.0,
+            1.0,
+        ];
+        assert_eq!(
+            normal_map_rgb8(&n),
+            vec![128, 128, 255, 255, 128, 0, 37, 218, 0, 0, 0, 0]
+        );
+    }
+
+    #[test]
+    fn tangent_map_colours_are_axis_symmetric() {
+        let s = 0.5f32.sqrt();
+        let t = [
+            1.0,
+            0.0,
+            0.0, // phi 0 -> red
+            0.0,
+            1.0,
+            0.0, // phi 90 -> hue 180 -> cyan
+            s,
+            s,
+            0.0, // phi 45 -> hue 90 -> (0.5, 1, 0)
+            f32::NAN,
+            0.0,
+            0.0,
+        ];
+        let c = tangent_map_rgb8(&t);
+        assert_eq!(c, vec![255, 0, 0, 0, 255, 255, 128, 255, 0, 0, 0, 0]);
+        for k in 0..50 {
+            let a = k as f32 * 0.37;
+            let v = [a.cos() * 0.8, a.sin() * 0.8, 0.6];
+            let m = [-v[0], -v[1], -v[2]];
+            assert_eq!(tangent_map_rgb8(&v), tangent_map_rgb8(&m));
+        }
+        // Perpendicular axes differ (hue 180 degrees apart).
+        assert_ne!(
+            tangent_map_rgb8(&[1.0, 0.0, 0.0]),
+            tangent_map_rgb8(&[0.0, 1.0, 0.0])
+        );
+    }
+
+    #[test]
+    fn gray_map_is_viridis() {
+        let c = gray_map_rgb8(&[0.0, 10.0, f32::NAN, -5.0, 99.0], 0.0, 10.0);
+        let near = |a: &[u8], b: [u8; 3]| a.iter().zip(b).all(|(&x, y)| x.abs_diff(y) <= 4);
+        assert!(near(&c[0..3], [68, 1, 84]), "{:?}", &c[0..3]);
+        assert!(near(&c[3..6], [253, 231, 37]), "{:?}", &c[3..6]);
+        assert_eq!(&c[6..9], &[0, 0, 0]);
+        assert_eq!(&c[9..12], &c[0..3]);
+        assert_eq!(&c[12..15], &c[3..6]);
+        // Luminance increases monotonically.
+        let vals: Vec<f32> = (0..=100).map(|i| i as f32 / 100.0).collect();
+        let m = gray_map_rgb8(&vals, 0.0, 1.0);
+        let lum: Vec<f32> = m
+            .chunks(3)
+            .map(|p| 0.2126 * p[0] as f32 + 0.7152 * p[1] as f32 + 0.0722 * p[2] as f32)
+            .collect();
+        assert!(lum.windows(2).all(|w| w[1] >= w[0] - 0.5), "{lum:?}");
+        assert_eq!(
+            gray_map_rgb8(&[3.0], 1.0, 1.0),
+            gray_map_rgb8(&[0.0], 0.0, 1.0)
+        );
+    }
+
+    #[test]
+    fn png_rgb8_writes_bytes_verbatim() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("pic.png");
+        let bytes = [1u8, 2, 3, 250, 251, 252];
+        write_png_rgb8(&p, 2, 1, &bytes).unwrap();
+        let img = ::image::open(&p).unwrap().to_rgb8();
+        assert_eq!(img.into_raw(), bytes.to_vec());
+        let e = write_png_rgb8(&p, 2, 2, &bytes).unwrap_err().to_string();
+        assert!(e.contains("pic.png"), "{e}");
+    }
+}

@@ -1,0 +1,248 @@
+//! Loading a dataset's images into a pixel-major [`Stack`], and reading masks.
+
+use std::path::Path;
+
+use rayon::prelude::*;
+use symframe::Stack;
+
+use crate::dataset::Dataset;
+use crate::error::{Error, Result};
+use crate::image::{read_image, DecodeOptions};
+
+/// Decodes every image of `ds` (in parallel) into a pixel-major stack, divided by the lights'
+/// intensities when the dataset has them; saturated or non-finite pixels are `NaN`.
+///
+/// All images must have the size of the first one (the error names the offending file and both
+/// sizes). Images are decoded in parallel chunks and scattered into the stack chunk by chunk, so
+/// only one chunk of decoded images is held beside the stack. `on_image` is called once per
+/// decoded image (from worker threads), e.g. to advance a progress bar.
+pub fn load_stack(
+    ds: &Dataset,
+    opts: &DecodeOptions,
+    on_image: &(dyn Fn() + Sync),
+) -> Result<Stack> {
+    let n = ds.images.len();
+    if n == 0 {
+        return Err(Error::invalid(&ds.source, "the dataset has no images"));
+    }
+    if ds.lights.len() != n {
+        return Err(Error::invalid(
+            &ds.source,
+            format!("{} lights for {n} images", ds.lights.len()),
+        ));
+    }
+    if let Some(int) = &ds.intensities {
+        if int.len() != n {
+            return Err(Error::invalid(
+                &ds.source,
+                format!("{} light intensities for {n} images", int.len()),
+            ));
+        }
+    }
+    let chunk = 32.max(2 * rayon::current_num_threads());
+    let mut stack: Option<Stack> = None;
+    for start in (0..n).step_by(chunk) {
+        let end = n.min(start + chunk);
+        let decoded: Vec<Result<(usize, usize, Vec<f32>)>> = (start..end)
+            .into_par_iter()
+            .map(|i| {
+                let img = read_image(&ds.images[i], opts)?;
+                let (w, h) = (img.width, img.height);
+                let mut rgb = img.into_rgb();
+                if let Some(int) = &ds.intensities {
+                    let k = int[i];
+                    for px in rgb.chunks_exact_mut(3) {
+                        for c in 0..3 {
+                            px[c] /= k[c];
+                        }
+                    }
+                }
+                on_image();
+                Ok((w, h, rgb))
+            })
+            .collect();
+        let mut images = Vec::with_capacity(decoded.len());
+        for (j, r) in decoded.into_iter().enumerate() {
+            let (w, h, rgb) = r?;
+            let s = stack.get_or_insert_with(|| Stack::zeros(w, h, n));
+            if (w, h) != (s.width, s.height) {
+                return Err(Error::SizeMismatch {
+                    path: ds.images[start + j].clone(),
+                    width: w,
+                    height: h,
+                    first: ds.images[0].clone(),
+                    first_width: s.width,
+                    first_height: s.height,
+                });
+            }
+            images.push(rgb);
+        }
+        let s = stack.as_mut().expect("the first chunk created the stack");
+        let stride = n * 3;
+        s.data
+            .par_chunks_mut(stride * 256)
+            .enumerate()
+            .for_each(|(block, dst)| {
+                for (k, px) in dst.chunks_exact_mut(stride).enumerate() {
+                    let p = block * 256 + k;
+                    for (j, img) in images.iter().enumerate() {
+                        let o = (start + j) * 3;
+                        px[o..o + 3].copy_from_slice(&img[p * 3..p * 3 + 3]);
+                    }
+                }
+            });
+    }
+    Ok(stack.expect("at least one image"))
+}
+
+/// Reads a mask image: a pixel is inside where its first channel is non-zero (any format
+/// [`read_image`] reads; no sRGB decoding or saturation test). The mask must be
+/// `width x height` and have at least one pixel inside.
+pub fn read_mask(path: &Path, width: usize, height: usize) -> Result<Vec<bool>> {
+    let opts = DecodeOptions {
+        linear_8bit: true,
+        saturation: f32::INFINITY,
+    };
+    let img = read_image(path, &opts)?;
+    if (img.width, img.height) != (width, height) {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "mask is {}x{} but the images are {width}x{height}",
+                img.width, img.height
+            ),
+        ));
+    }
+    let mask: Vec<bool> = img
+        .data
+        .chunks_exact(img.channels)
+        .map(|px| px[0] != 0.0 && !px[0].is_nan())
+        .collect();
+    if !mask.iter().any(|&m| m) {
+        return Err(Error::invalid(path, "mask is empty (no pixel is inside)"));
+    }
+    Ok(mask)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::{write_exr_rgb, write_png};
+    use glam::DVec3;
+    use std::path::PathBuf;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    /// A dataset over `paths`, lights all +z.
+    fn ds(paths: Vec<PathBuf>) -> Dataset {
+        Dataset {
+            source: PathBuf::from("test.lp"),
+            lights: vec![DVec3::Z; paths.len()],
+            images: paths,
+            intensities: None,
+            mask: None,
+        }
+    }
+
+    #[test]
+    fn load_stack_scatters_pixel_major_over_several_chunks() {
+        let d = tempfile::tempdir().unwrap();
+        let (w, h, n) = (3usize, 2usize, 70usize);
+        let paths: Vec<PathBuf> = (0..n)
+            .map(|i| {
+                let p = d.path().join(format!("{i}.exr"));
+                let rgb: Vec<f32> = (0..w * h * 3).map(|k| (i * 1000 + k) as f32).collect();
+                write_exr_rgb(&p, w, h, &rgb).unwrap();
+                p
+            })
+            .collect();
+        let count = AtomicUsize::new(0);
+        let s = load_stack(&ds(paths), &DecodeOptions::default(), &|| {
+            count.fetch_add(1, Ordering::Relaxed);
+        })
+        .unwrap();
+        assert_eq!(count.load(Ordering::Relaxed), n);
+        assert_eq!((s.width, s.height, s.n_lights), (w, h, n));
+        for p in 0..w * h {
+            for i in 0..n {
+                for c in 0..3 {
+                    assert_eq!(s.data[(p * n + i) * 3 + c], (i * 1000 + p * 3 + c) as f32);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn load_stack_divides_by_intensity_and_replicates_grey() {
+        let d = tempfile::tempdir().unwrap();
+        let a = d.path().join("a.exr");
+        write_exr_rgb(&a, 1, 2, &[1.0, 2.0, 3.0, 4.0, 5.0, f32::NAN]).unwrap();
+        let b = d.path().join("b.pfm");
+        crate::image::write_pfm(&b, 1, 2, 1, &[8.0, 16.0]).unwrap();
+        let mut dset = ds(vec![a, b]);
+        dset.intensities = Some(vec![[1.0, 2.0, 4.0], [2.0, 4.0, 8.0]]);
+        let s = load_stack(&dset, &DecodeOptions::default(), &|| {}).unwrap();
+        assert_eq!(s.pixel(0), &[1.0, 1.0, 0.75, 4.0, 2.0, 1.0]);
+        let p1 = s.pixel(1);
+        assert!(p1[..3].iter().all(|v| v.is_nan()));
+        assert_eq!(&p1[3..], &[8.0, 4.0, 2.0]);
+    }
+
+    #[test]
+    fn load_stack_size_mismatch_names_second_file() {
+        let d = tempfile::tempdir().unwrap();
+        let a = d.path().join("first.exr");
+        let b = d.path().join("second.exr");
+        write_exr_rgb(&a, 2, 2, &[0.0; 12]).unwrap();
+        write_exr_rgb(&b, 3, 2, &[0.0; 18]).unwrap();
+        let e = load_stack(&ds(vec![a, b]), &DecodeOptions::default(), &|| {})
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("second.exr: image is 3x2 but the first image")
+                && e.contains("first.exr) is 2x2"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn load_stack_missing_image_is_named() {
+        let d = tempfile::tempdir().unwrap();
+        let a = d.path().join("a.exr");
+        write_exr_rgb(&a, 1, 1, &[0.0; 3]).unwrap();
+        let gone = d.path().join("gone.exr");
+        let e = load_stack(&ds(vec![a, gone]), &DecodeOptions::default(), &|| {})
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("gone.exr: cannot read"), "{e}");
+        let e = load_stack(&ds(vec![]), &DecodeOptions::default(), &|| {})
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("test.lp: the dataset has no images"), "{e}");
+    }
+
+    #[test]
+    fn masks() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("mask.png");
+        write_png(&p, 3, 1, &[0, 255, 1], ::image::ExtendedColorType::L8).unwrap();
+        assert_eq!(read_mask(&p, 3, 1).unwrap(), vec![false, true, true]);
+        let e = read_mask(&p, 4, 2).unwrap_err().to_string();
+        assert!(
+            e.contains("mask.png: mask is 3x1 but the images are 4x2"),
+            "{e}"
+        );
+        // First channel decides for RGB masks.
+        write_png(
+            &p,
+            2,
+            1,
+            &[0, 9, 9, 7, 0, 0],
+            ::image::ExtendedColorType::Rgb8,
+        )
+        .unwrap();
+        assert_eq!(read_mask(&p, 2, 1).unwrap(), vec![false, true]);
+        write_png(&p, 2, 1, &[0, 0], ::image::ExtendedColorType::L8).unwrap();
+        let e = read_mask(&p, 2, 1).unwrap_err().to_string();
+        assert!(e.contains("mask.png: mask is empty"), "{e}");
+    }
+}
