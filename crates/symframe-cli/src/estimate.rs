@@ -127,6 +127,7 @@ pub fn run(args: &EstimateArgs) -> Result<(EstimateMaps, Report)> {
         &ds.lights,
         RigOptions {
             theta_d_max_deg: args.theta_d_max,
+            ..RigOptions::default()
         },
     )
     .with_context(|| ds.source.display().to_string())?;

@@ -10,10 +10,10 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, Result};
 use crate::optim::{nelder_mead, NelderMeadOptions};
 use crate::rig::Rig;
-use crate::slice::{gather_slice, interpolate};
+use crate::slice::{gather_slice, ExactSlice, ResampledSlice, SliceLookup};
 use crate::stack::Stack;
 use crate::symmetry::{
-    default_min_domain, symmetry_term, tangent_basis, CosineMode, Symmetry, SymmetryTerm,
+    default_min_domain, symmetry_term, tangent_basis, CosineMode, Frame, Symmetry, SymmetryTerm,
 };
 
 /// Parameters of the symmetry estimator.
@@ -31,6 +31,19 @@ pub struct EstimatorParams {
     pub tangents: bool,
     /// Evaluation budget of the 2D normal search.
     pub max_normal_evals: u32,
+    /// How the slice is reconstructed between samples.
+    pub interpolation: Interpolation,
+}
+
+/// How the objective reads a pixel's slice between the measured samples.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Interpolation {
+    /// Resampled once per pixel onto the rig's grid, then bilinear lookups (fast path).
+    #[default]
+    Resampled,
+    /// Triangle location and spherical barycentric weights at every query (reference path).
+    Exact,
 }
 
 impl Default for EstimatorParams {
@@ -42,6 +55,7 @@ impl Default for EstimatorParams {
             min_anisotropy: 0.6,
             tangents: true,
             max_normal_evals: 300,
+            interpolation: Interpolation::default(),
         }
     }
 }
@@ -97,7 +111,7 @@ impl PixelEstimate {
 
 /// Number of angles the tangent objective is scanned at over its period (90 degrees) before
 /// the 1D refinement; also the samples of the anisotropy measure.
-const TANGENT_SCAN: usize = 12;
+const TANGENT_SCAN: usize = 9;
 
 /// Absolute floor of the anisotropy ratio's denominator: symmetry distances below this are
 /// interpolation noise, not anisotropy.
@@ -134,33 +148,55 @@ impl<'a> Estimator<'a> {
         self.min_domain
     }
 
-    fn term(&self, slice: &[f32], s: Symmetry, n: DVec3, t: DVec3, c: CosineMode) -> SymmetryTerm {
-        symmetry_term(self.rig, slice, s, n, t, n.cross(t), c)
+    fn term<L: SliceLookup>(
+        &self,
+        slice: &[f32],
+        lookup: &L,
+        s: Symmetry,
+        n: DVec3,
+        t: DVec3,
+        c: CosineMode,
+    ) -> SymmetryTerm {
+        symmetry_term(self.rig, slice, lookup, s, Frame::new(n, t), c)
     }
 
     /// `SD_n` at a candidate normal.
-    pub fn normal_distance(&self, slice: &[f32], n: DVec3, cosine: CosineMode) -> f64 {
+    pub fn normal_distance<L: SliceLookup>(
+        &self,
+        slice: &[f32],
+        lookup: &L,
+        n: DVec3,
+        cosine: CosineMode,
+    ) -> f64 {
         if n.z <= 0.0 {
             return crate::symmetry::EMPTY_DISTANCE;
         }
-        self.term(slice, Symmetry::N, n, DVec3::X, cosine)
+        self.term(slice, lookup, Symmetry::N, n, DVec3::X, cosine)
             .distance(self.min_domain)
     }
 
     /// `SD_nt + SD_nb` at a candidate tangent of a fixed normal.
-    pub fn tangent_distance(&self, slice: &[f32], n: DVec3, t: DVec3, cosine: CosineMode) -> f64 {
-        self.term(slice, Symmetry::Nt, n, t, cosine)
+    pub fn tangent_distance<L: SliceLookup>(
+        &self,
+        slice: &[f32],
+        lookup: &L,
+        n: DVec3,
+        t: DVec3,
+        cosine: CosineMode,
+    ) -> f64 {
+        self.term(slice, lookup, Symmetry::Nt, n, t, cosine)
             .distance(self.min_domain)
             + self
-                .term(slice, Symmetry::Nb, n, t, cosine)
+                .term(slice, lookup, Symmetry::Nb, n, t, cosine)
                 .distance(self.min_domain)
     }
 
     /// Minimises `SD_n` with 2D Nelder-Mead on the gnomonic chart of the tangent plane at
     /// `start`, initial simplex `step` radians; returns the normal and the evaluations used.
-    fn search_normal(
+    fn search_normal<L: SliceLookup>(
         &self,
         slice: &[f32],
+        lookup: &L,
         start: DVec3,
         cosine: CosineMode,
         step: f64,
@@ -169,13 +205,13 @@ impl<'a> Estimator<'a> {
         let (u, w) = tangent_basis(start);
         let chart = |x: &[f64; 2]| (start + x[0] * u + x[1] * w).normalize();
         let m = nelder_mead(
-            |x: &[f64; 2]| self.normal_distance(slice, chart(x), cosine),
+            |x: &[f64; 2]| self.normal_distance(slice, lookup, chart(x), cosine),
             [0.0, 0.0],
             [step, step],
             NelderMeadOptions {
                 max_evals: budget,
-                x_tolerance: 2e-5,
-                f_tolerance: 1e-14,
+                x_tolerance: 1e-4,
+                f_tolerance: f64::INFINITY,
             },
         );
         (chart(&m.x), m.evals)
@@ -183,6 +219,45 @@ impl<'a> Estimator<'a> {
 
     /// Estimates the frame at one pixel from its slice (rig order, `rig.n_used() * 3` values).
     pub fn estimate_pixel(&self, slice: &[f32]) -> PixelEstimate {
+        match self.params.interpolation {
+            Interpolation::Exact => self.solve(
+                slice,
+                &ExactSlice {
+                    rig: self.rig,
+                    samples: slice,
+                },
+            ),
+            Interpolation::Resampled => {
+                let mut scratch = ResampledSlice::new(self.rig);
+                self.estimate_pixel_with(slice, &mut scratch)
+            }
+        }
+    }
+
+    /// [`Estimator::estimate_pixel`] with the caller's resampling buffer (the fast path without
+    /// a per-pixel allocation; unused when the interpolation is exact).
+    pub fn estimate_pixel_with(
+        &self,
+        slice: &[f32],
+        scratch: &mut ResampledSlice,
+    ) -> PixelEstimate {
+        match self.params.interpolation {
+            Interpolation::Exact => self.solve(
+                slice,
+                &ExactSlice {
+                    rig: self.rig,
+                    samples: slice,
+                },
+            ),
+            Interpolation::Resampled => {
+                scratch.fill(self.rig, slice);
+                self.solve(slice, &*scratch)
+            }
+        }
+    }
+
+    /// The estimate of one pixel with a given reconstruction of its slice.
+    fn solve<L: SliceLookup>(&self, slice: &[f32], lookup: &L) -> PixelEstimate {
         let rig = self.rig;
         // Start: the halfway vector of the brightest sample (method.md). The brightest light
         // itself is also tried: for diffuse surfaces it is the better guess.
@@ -207,8 +282,8 @@ impl<'a> Estimator<'a> {
         let mut start = rig.halfway_in_camera[j];
         let light = rig.lights_in_camera[j];
         if light.z > 0.0
-            && self.normal_distance(slice, light, cosine)
-                < self.normal_distance(slice, start, cosine)
+            && self.normal_distance(slice, lookup, light, cosine)
+                < self.normal_distance(slice, lookup, start, cosine)
         {
             start = light;
         }
@@ -216,18 +291,25 @@ impl<'a> Estimator<'a> {
 
         // 2D Nelder-Mead on the tangent plane of the start, then a restart from the solution
         // with a small simplex to guard against premature collapse.
-        let (n1, e1) = self.search_normal(slice, start, cosine, 0.12, self.params.max_normal_evals);
-        let (mut n, e2) = self.search_normal(slice, n1, cosine, 0.02, 60);
+        let (n1, e1) = self.search_normal(
+            slice,
+            lookup,
+            start,
+            cosine,
+            0.12,
+            self.params.max_normal_evals,
+        );
+        let (mut n, e2) = self.search_normal(slice, lookup, n1, cosine, 0.01, 40);
         evals += e1 + e2;
         if let CosineMode::Compensated(_) = self.params.cosine {
             // The compensated measure is flatter far from the solution: refine the paper's
             // solution with it (where p = 1 the two coincide).
             cosine = self.params.cosine;
-            let (m, e) = self.search_normal(slice, n, cosine, 0.06, 150);
+            let (m, e) = self.search_normal(slice, lookup, n, cosine, 0.06, 150);
             evals += e;
             n = m;
         }
-        let term_n = self.term(slice, Symmetry::N, n, DVec3::X, cosine);
+        let term_n = self.term(slice, lookup, Symmetry::N, n, DVec3::X, cosine);
         if term_n.count < self.min_domain || term_n.denominator <= 0.0 || n.z <= 0.0 {
             return PixelEstimate {
                 evals,
@@ -243,7 +325,7 @@ impl<'a> Estimator<'a> {
         let mut scan = [0.0f64; TANGENT_SCAN];
         for (k, v) in scan.iter_mut().enumerate() {
             let t = tangent_at(period * k as f64 / TANGENT_SCAN as f64);
-            *v = self.tangent_distance(slice, n, t, cosine);
+            *v = self.tangent_distance(slice, lookup, n, t, cosine);
         }
         evals += TANGENT_SCAN as u32 * 2;
         let (k_best, _) = scan
@@ -253,19 +335,19 @@ impl<'a> Estimator<'a> {
             .unwrap_or((0, &0.0));
         let psi0 = period * k_best as f64 / TANGENT_SCAN as f64;
         let m = nelder_mead(
-            |x: &[f64; 1]| self.tangent_distance(slice, n, tangent_at(x[0]), cosine),
+            |x: &[f64; 1]| self.tangent_distance(slice, lookup, n, tangent_at(x[0]), cosine),
             [psi0],
             [period / TANGENT_SCAN as f64 / 2.0],
             NelderMeadOptions {
                 max_evals: 60,
-                x_tolerance: 2e-5,
-                f_tolerance: 1e-14,
+                x_tolerance: 1e-4,
+                f_tolerance: f64::INFINITY,
             },
         );
         evals += m.evals * 2;
         let mut t = tangent_at(m.x[0]);
-        let term_nt = self.term(slice, Symmetry::Nt, n, t, cosine);
-        let term_nb = self.term(slice, Symmetry::Nb, n, t, cosine);
+        let term_nt = self.term(slice, lookup, Symmetry::Nt, n, t, cosine);
+        let term_nb = self.term(slice, lookup, Symmetry::Nb, n, t, cosine);
         if term_nt.count < self.min_domain
             || term_nb.count < self.min_domain
             || term_nt.denominator <= 0.0
@@ -283,7 +365,7 @@ impl<'a> Estimator<'a> {
         let anisotropy = ((f_max - f_min) / (f_max + f_min + ANISOTROPY_FLOOR)).clamp(0.0, 1.0);
 
         let tangent = if self.params.tangents && anisotropy >= self.params.min_anisotropy as f64 {
-            if self.highlight_wider_along(slice, n, n.cross(t), t) {
+            if self.highlight_wider_along(lookup, n, n.cross(t), t) {
                 t = n.cross(t);
             }
             Some(t)
@@ -313,9 +395,9 @@ impl<'a> Estimator<'a> {
     /// `candidate` than along `current` at equal angles? Compares symmetric pairs `n cos d +- a
     /// sin d` for several `d` where all four points have data, so uneven sample density cannot
     /// bias it.
-    fn highlight_wider_along(
+    fn highlight_wider_along<L: SliceLookup>(
         &self,
-        slice: &[f32],
+        lookup: &L,
         n: DVec3,
         candidate: DVec3,
         current: DVec3,
@@ -327,7 +409,7 @@ impl<'a> Estimator<'a> {
             let (s, c) = d.sin_cos();
             let probe = |a: DVec3| {
                 let h = n * c + a * s;
-                interpolate(self.rig, slice, h).map(|v| v[0] + v[1] + v[2])
+                lookup.value(h).map(|v| v[0] + v[1] + v[2])
             };
             if let (Some(a), Some(b), Some(p), Some(q)) = (
                 probe(candidate),
@@ -441,8 +523,8 @@ pub fn estimate_stack(
     let bands: Vec<Vec<PixelEstimate>> = (0..h.div_ceil(ROWS_PER_TASK))
         .into_par_iter()
         .map_init(
-            || vec![0.0f32; rig.n_used() * 3],
-            |slice, band| {
+            || (vec![0.0f32; rig.n_used() * 3], ResampledSlice::new(rig)),
+            |(slice, scratch), band| {
                 let rows = band * ROWS_PER_TASK..((band + 1) * ROWS_PER_TASK).min(h);
                 let out: Vec<PixelEstimate> = rows
                     .flat_map(|y| (0..w).map(move |x| y * w + x))
@@ -451,7 +533,7 @@ pub fn estimate_stack(
                             return PixelEstimate::empty(PixelStatus::Masked);
                         }
                         gather_slice(rig, stack, p, slice);
-                        estimator.estimate_pixel(slice)
+                        estimator.estimate_pixel_with(slice, scratch)
                     })
                     .collect();
                 progress(out.len());

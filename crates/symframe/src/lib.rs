@@ -21,6 +21,8 @@ pub mod stack;
 pub mod symmetry;
 
 pub use error::{Error, Result};
-pub use estimate::{estimate_stack, EstimateMaps, Estimator, EstimatorParams, PixelStatus};
+pub use estimate::{
+    estimate_stack, EstimateMaps, Estimator, EstimatorParams, Interpolation, PixelStatus,
+};
 pub use rig::{Rig, RigOptions};
 pub use stack::Stack;

@@ -60,12 +60,15 @@ struct LocateGrid {
 pub struct RigOptions {
     /// Lights with `theta_d = angle(l, h) >= theta_d_max` are dropped (degrees; default 65).
     pub theta_d_max_deg: f64,
+    /// Nodes per side of the per-pixel resampling grid ([`ResampleGrid`]).
+    pub resample_size: usize,
 }
 
 impl Default for RigOptions {
     fn default() -> Self {
         Self {
             theta_d_max_deg: 65.0,
+            resample_size: DEFAULT_RESAMPLE_SIZE,
         }
     }
 }
@@ -88,6 +91,82 @@ pub struct Rig {
     pub cos_theta_d_max: f64,
     triangles: Vec<Triangle>,
     grid: LocateGrid,
+    /// Precomputed locations of a regular grid of halfway vectors, for per-pixel resampling.
+    pub resample: ResampleGrid,
+}
+
+/// A regular `size x size` grid over the stereographic projection of the halfway cone,
+/// `s = (h.x, h.y) / (1 + h.z)`, with each node's location in the triangulation precomputed
+/// once per rig. A pixel's slice resampled onto it ([`crate::slice::ResampledSlice`]) is looked
+/// up by bilinear interpolation: no triangle search in the per-pixel hot loop.
+///
+/// Stereographic rather than the disc projection: its scale varies only from 0.5 to 0.7 over a
+/// 65-degree cone, so the nodes are nearly evenly spaced in angle.
+#[derive(Debug, Clone)]
+pub struct ResampleGrid {
+    /// Nodes per side.
+    pub size: usize,
+    /// Stereographic coordinate of node 0 (both axes).
+    pub min: f64,
+    /// Nodes per stereographic unit.
+    pub inv_step: f64,
+    /// Per node: rig light indices of the triangle's corners (`u32::MAX` = no data).
+    pub vertices: Vec<[u32; 3]>,
+    /// Per node: interpolation weights of the corners.
+    pub weights: Vec<[f32; 3]>,
+}
+
+/// The grid resolution used by default: nodes about 0.5 degrees apart over a 65-degree cone,
+/// several per triangle even at the paper's 1,512 lights.
+pub const DEFAULT_RESAMPLE_SIZE: usize = 160;
+
+/// The stereographic projection of a unit halfway vector, `(h.x, h.y) / (1 + h.z)`.
+#[inline]
+pub fn stereographic(h: DVec3) -> DVec2 {
+    let k = 1.0 / (1.0 + h.z);
+    DVec2::new(h.x * k, h.y * k)
+}
+
+/// The unit vector whose stereographic projection is `s`.
+#[inline]
+pub fn from_stereographic(s: DVec2) -> DVec3 {
+    let r2 = s.length_squared();
+    DVec3::new(2.0 * s.x, 2.0 * s.y, 1.0 - r2) / (1.0 + r2)
+}
+
+impl ResampleGrid {
+    fn new(
+        rig_locate: impl Fn(DVec3) -> Option<Location>,
+        theta_d_max_deg: f64,
+        size: usize,
+    ) -> Self {
+        let extent = (theta_d_max_deg.to_radians() / 2.0).tan() * 1.001;
+        let min = -extent;
+        let step = 2.0 * extent / (size - 1) as f64;
+        let cos_max = theta_d_max_deg.to_radians().cos();
+        let mut vertices = vec![[u32::MAX; 3]; size * size];
+        let mut weights = vec![[0.0f32; 3]; size * size];
+        for j in 0..size {
+            for i in 0..size {
+                let s = DVec2::new(min + i as f64 * step, min + j as f64 * step);
+                let h = from_stereographic(s);
+                if h.z <= cos_max {
+                    continue;
+                }
+                if let Some(loc) = rig_locate(h) {
+                    vertices[j * size + i] = loc.vertices;
+                    weights[j * size + i] = loc.weights.map(|w| w as f32);
+                }
+            }
+        }
+        Self {
+            size,
+            min,
+            inv_step: 1.0 / step,
+            vertices,
+            weights,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -134,6 +213,13 @@ impl Rig {
                 input_index.push(index);
             }
         }
+        // Spatially coherent order (Morton code on the disc): the objective visits the lights in
+        // this order and looks up their reflections, which are then close in memory too.
+        let mut order: Vec<usize> = (0..lights_in_camera.len()).collect();
+        order.sort_by_key(|&i| morton(halfway_in_camera[i]));
+        let lights_in_camera: Vec<DVec3> = order.iter().map(|&i| lights_in_camera[i]).collect();
+        let halfway_in_camera: Vec<DVec3> = order.iter().map(|&i| halfway_in_camera[i]).collect();
+        let input_index: Vec<usize> = order.iter().map(|&i| input_index[i]).collect();
         if lights_in_camera.is_empty() {
             return Err(Error::AllLightsOutsideCone {
                 n_lights: lights.len(),
@@ -147,6 +233,17 @@ impl Rig {
         }
         let triangles = triangulate(&halfway_in_camera)?;
         let grid = LocateGrid::new(&triangles, &halfway_in_camera);
+        let resample = ResampleGrid::new(
+            |h| {
+                let cell = grid.cell_of(DVec2::new(h.x, h.y))?;
+                let (lo, hi) = (grid.start[cell] as usize, grid.start[cell + 1] as usize);
+                grid.triangles[lo..hi]
+                    .iter()
+                    .find_map(|&t| triangles[t as usize].weights(h))
+            },
+            theta,
+            options.resample_size.max(2),
+        );
         Ok(Self {
             lights_in_camera,
             halfway_in_camera,
@@ -156,6 +253,7 @@ impl Rig {
             cos_theta_d_max,
             triangles,
             grid,
+            resample,
         })
     }
 
@@ -219,6 +317,19 @@ impl Triangle {
             None
         }
     }
+}
+
+/// Morton (Z-order) code of a halfway vector's disc position, 16 bits per axis.
+fn morton(h: DVec3) -> u64 {
+    let q = |v: f64| (((v + 1.0) * 0.5).clamp(0.0, 1.0) * 65535.0) as u64;
+    let spread = |mut x: u64| {
+        x = (x | (x << 16)) & 0x0000_ffff_0000_ffff;
+        x = (x | (x << 8)) & 0x00ff_00ff_00ff_00ff;
+        x = (x | (x << 4)) & 0x0f0f_0f0f_0f0f_0f0f;
+        x = (x | (x << 2)) & 0x3333_3333_3333_3333;
+        (x | (x << 1)) & 0x5555_5555_5555_5555
+    };
+    spread(q(h.x)) | (spread(q(h.y)) << 1)
 }
 
 /// Delaunay triangulation of the halfway vectors projected onto the disc.
@@ -367,6 +478,16 @@ mod tests {
         lights.push(DVec3::new(1.0, 0.0, -0.9)); // 132 degrees from view: outside
         let rig = Rig::new(&lights, RigOptions::default()).unwrap();
         assert_eq!(rig.n_used(), 100);
+        let mut seen = rig.input_index.clone();
+        seen.sort();
+        assert_eq!(
+            seen,
+            (0..100).collect::<Vec<_>>(),
+            "every used light maps back once"
+        );
+        for (l, &i) in rig.lights_in_camera.iter().zip(&rig.input_index) {
+            assert!((*l - lights[i].normalize()).length() < 1e-12);
+        }
         assert_eq!(rig.n_dropped(), 2);
         assert!(rig.halfway_in_camera.iter().all(|h| rig.in_cone(*h)));
     }

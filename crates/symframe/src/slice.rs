@@ -35,6 +35,102 @@ pub fn interpolate(rig: &Rig, slice: &[f32], halfway: DVec3) -> Option<[f64; 3]>
     out.iter().all(|v| v.is_finite()).then_some(out)
 }
 
+/// A pixel's slice as the symmetry objective reads it: the value at any halfway vector.
+pub trait SliceLookup {
+    /// RGB radiance at a unit halfway vector, `None` where there is no data.
+    fn value(&self, halfway: DVec3) -> Option<[f64; 3]>;
+}
+
+/// The reference reconstruction: triangle location and spherical barycentric weights at every
+/// query ([`interpolate`]).
+#[derive(Debug, Clone, Copy)]
+pub struct ExactSlice<'a> {
+    /// The rig.
+    pub rig: &'a Rig,
+    /// The pixel's samples in rig order.
+    pub samples: &'a [f32],
+}
+
+impl SliceLookup for ExactSlice<'_> {
+    #[inline]
+    fn value(&self, halfway: DVec3) -> Option<[f64; 3]> {
+        interpolate(self.rig, self.samples, halfway)
+    }
+}
+
+/// A pixel's slice resampled once onto the rig's [`ResampleGrid`]
+/// (crate::rig::ResampleGrid) and read by bilinear interpolation: the fast path. Reused across
+/// pixels (one per thread) so nothing allocates per pixel.
+#[derive(Debug, Clone)]
+pub struct ResampledSlice {
+    size: usize,
+    min: f64,
+    inv_step: f64,
+    /// RGB per node, NaN where there is no data.
+    values: Vec<[f32; 3]>,
+}
+
+impl ResampledSlice {
+    /// An empty buffer sized for `rig`'s grid.
+    pub fn new(rig: &Rig) -> Self {
+        let g = &rig.resample;
+        Self {
+            size: g.size,
+            min: g.min,
+            inv_step: g.inv_step,
+            values: vec![[f32::NAN; 3]; g.size * g.size],
+        }
+    }
+
+    /// Resamples one pixel's slice (rig order) onto the grid.
+    pub fn fill(&mut self, rig: &Rig, samples: &[f32]) {
+        let g = &rig.resample;
+        debug_assert_eq!(g.size, self.size);
+        for ((out, v), w) in self.values.iter_mut().zip(&g.vertices).zip(&g.weights) {
+            if v[0] == u32::MAX {
+                *out = [f32::NAN; 3];
+                continue;
+            }
+            let mut acc = [0.0f32; 3];
+            for k in 0..3 {
+                let o = v[k] as usize * 3;
+                acc[0] += w[k] * samples[o];
+                acc[1] += w[k] * samples[o + 1];
+                acc[2] += w[k] * samples[o + 2];
+            }
+            *out = acc;
+        }
+    }
+}
+
+impl SliceLookup for ResampledSlice {
+    #[inline(always)]
+    fn value(&self, halfway: DVec3) -> Option<[f64; 3]> {
+        let k = 1.0 / (1.0 + halfway.z);
+        let gx = (halfway.x * k - self.min) * self.inv_step;
+        let gy = (halfway.y * k - self.min) * self.inv_step;
+        if !(gx >= 0.0 && gy >= 0.0) {
+            return None;
+        }
+        let (ix, iy) = (gx as usize, gy as usize);
+        if ix + 1 >= self.size || iy + 1 >= self.size {
+            return None;
+        }
+        let (fx, fy) = ((gx - ix as f64) as f32, (gy - iy as f64) as f32);
+        let i = iy * self.size + ix;
+        let (a, b) = (self.values[i], self.values[i + 1]);
+        let (c, d) = (self.values[i + self.size], self.values[i + self.size + 1]);
+        let mut out = [0.0f64; 3];
+        for ch in 0..3 {
+            let top = a[ch] + fx * (b[ch] - a[ch]);
+            let bottom = c[ch] + fx * (d[ch] - c[ch]);
+            out[ch] = (top + fy * (bottom - top)) as f64;
+        }
+        // A node without data (NaN) poisons the result: no data here.
+        out.iter().all(|v| v.is_finite()).then_some(out)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -79,6 +175,7 @@ mod tests {
             &uniform_cone_lights(200, 40.0),
             RigOptions {
                 theta_d_max_deg: 40.0,
+                ..RigOptions::default()
             },
         )
         .unwrap();
@@ -95,6 +192,47 @@ mod tests {
             .0;
         slice[top * 3..top * 3 + 3].fill(f32::NAN);
         assert!(interpolate(&rig, &slice, rig.halfway_in_camera[top]).is_none());
+    }
+
+    #[test]
+    fn resampled_slice_agrees_with_the_exact_one() {
+        let rig = Rig::new(&uniform_cone_lights(500, 65.0), RigOptions::default()).unwrap();
+        let lobe = |h: DVec3| {
+            let e = (-(h.x * h.x / 0.04 + h.y * h.y / 0.2) / (h.z * h.z)).exp();
+            [(0.2 + e) as f32, (0.3 + 0.5 * e) as f32, 0.1]
+        };
+        let slice: Vec<f32> = rig
+            .halfway_in_camera
+            .iter()
+            .flat_map(|&h| lobe(h))
+            .collect();
+        let exact = ExactSlice {
+            rig: &rig,
+            samples: &slice,
+        };
+        let mut fast = ResampledSlice::new(&rig);
+        fast.fill(&rig, &slice);
+        let (mut both, mut worst) = (0, 0.0f64);
+        for i in 0..40 {
+            for j in 0..40 {
+                let h = crate::rig::from_stereographic(glam::DVec2::new(
+                    -0.6 + 0.03 * i as f64,
+                    -0.6 + 0.03 * j as f64,
+                ));
+                if let (Some(a), Some(b)) = (exact.value(h), fast.value(h)) {
+                    both += 1;
+                    for c in 0..3 {
+                        worst = worst.max((a[c] - b[c]).abs());
+                    }
+                }
+            }
+        }
+        assert!(both > 800, "{both}");
+        // Bilinear on 0.5-degree nodes of a piecewise-linear field: close to the exact one.
+        assert!(worst < 0.02, "worst difference {worst}");
+        // Far outside the cone: no data on either path.
+        let out = DVec3::new(0.95, 0.0, 0.2).normalize();
+        assert!(exact.value(out).is_none() && fast.value(out).is_none());
     }
 
     #[test]

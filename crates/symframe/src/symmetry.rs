@@ -6,7 +6,7 @@ use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 use crate::rig::{light_from_halfway, Rig};
-use crate::slice::interpolate;
+use crate::slice::SliceLookup;
 
 /// The three reflections of the halfway vector in a frame (n, t, b = n x t).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -54,6 +54,29 @@ pub enum CosineMode {
     Compensated(f64),
 }
 
+/// A candidate local frame in the camera frame: normal, tangent and binormal `b = n x t`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Frame {
+    /// Unit normal.
+    pub n: DVec3,
+    /// Unit tangent, perpendicular to `n`.
+    pub t: DVec3,
+    /// `n x t`.
+    pub b: DVec3,
+}
+
+impl Frame {
+    /// The frame of a normal and a tangent (`b = n x t`).
+    #[inline]
+    pub fn new(n: DVec3, t: DVec3) -> Self {
+        Self {
+            n,
+            t,
+            b: n.cross(t),
+        }
+    }
+}
+
 /// The sums of one symmetry distance over its domain.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct SymmetryTerm {
@@ -83,20 +106,20 @@ impl SymmetryTerm {
 }
 
 /// Evaluates one symmetry term of a pixel's slice (rig order, `rig.n_used() * 3` values, NaN =
-/// invalid) in the frame (n, t, b). Allocation-free; `t` and `b` are ignored for [`Symmetry::N`].
+/// invalid; `lookup` reconstructs it between samples) in the frame (n, t, b). Allocation-free; `t` and `b` are ignored for [`Symmetry::N`].
 ///
 /// The domain is the lights with `n.l > 0` whose reflected halfway vector is inside the cone,
 /// maps to a light with `n.G(l) > 0`, and has data in the slice.
 #[inline]
-pub fn symmetry_term(
+pub fn symmetry_term<L: SliceLookup>(
     rig: &Rig,
     slice: &[f32],
+    lookup: &L,
     symmetry: Symmetry,
-    n: DVec3,
-    t: DVec3,
-    b: DVec3,
+    frame: Frame,
     cosine: CosineMode,
 ) -> SymmetryTerm {
+    let Frame { n, t, b } = frame;
     let mut term = SymmetryTerm::default();
     let mut diffuse_dot = [0.0f64; 3];
     let mut diffuse_sq = 0.0f64;
@@ -122,7 +145,7 @@ pub fn symmetry_term(
         if n_dot_lr <= 0.0 {
             continue;
         }
-        let Some(ir) = interpolate(rig, slice, h_reflected) else {
+        let Some(ir) = lookup.value(h_reflected) else {
             continue;
         };
         let (wa, wb) = match cosine {
@@ -182,6 +205,7 @@ pub fn tangent_basis(n: DVec3) -> (DVec3, DVec3) {
 mod tests {
     use super::*;
     use crate::rig::{uniform_cone_lights, RigOptions};
+    use crate::slice::ExactSlice;
 
     /// A symmetric "BRDF" slice: diffuse plus an anisotropic lobe around n in halfway space,
     /// radiance `I = f (n.l)` with `f` a function of (h.t, h.b, h.n) even in h.t and h.b.
@@ -236,14 +260,17 @@ mod tests {
         let b = n.cross(t);
         let slice = render_slice(&rig, n, t);
         let min = default_min_domain(rig.n_used());
+        let exact = ExactSlice {
+            rig: &rig,
+            samples: &slice,
+        };
         let sd = |n: DVec3, t: DVec3, s: Symmetry| {
             symmetry_term(
                 &rig,
                 &slice,
+                &exact,
                 s,
-                n,
-                t,
-                n.cross(t),
+                Frame::new(n, t),
                 CosineMode::CrossMultiplied,
             )
             .distance(min)
@@ -286,13 +313,16 @@ mod tests {
         let rig = Rig::new(&uniform_cone_lights(300, 65.0), RigOptions::default()).unwrap();
         let slice = vec![f32::NAN; rig.n_used() * 3];
         let n = DVec3::Z;
+        let exact = ExactSlice {
+            rig: &rig,
+            samples: &slice,
+        };
         let term = symmetry_term(
             &rig,
             &slice,
+            &exact,
             Symmetry::N,
-            n,
-            DVec3::X,
-            DVec3::Y,
+            Frame::new(n, DVec3::X),
             CosineMode::Raw,
         );
         assert_eq!(term.count, 0);
