@@ -397,7 +397,7 @@ impl LocateGrid {
             max = max.max(*hi);
         }
         // About one triangle per cell keeps the candidate lists short.
-        let cells = ((triangles.len() as f64).sqrt().ceil() as usize).clamp(1, 256);
+        let cells = ((triangles.len() as f64).sqrt().ceil() as usize).clamp(1, 1024);
         let extent = (max - min).max(DVec2::splat(1e-12));
         let inv_cell = DVec2::splat(cells as f64) / extent;
         let cell_range = |lo: f64, hi: f64, m: f64, inv: f64| {
