@@ -86,6 +86,11 @@ pub enum Error {
         first_height: usize,
     },
 
+    /// The user interrupted the work (Ctrl-C) before it finished; what was done is kept and a
+    /// rerun resumes it.
+    #[error("interrupted")]
+    Interrupted,
+
     /// An encoder failed while writing an output file.
     #[error("{}: cannot encode: {msg}", path.display())]
     Encode {

@@ -1,16 +1,19 @@
 //! Dataset I/O for symframe: light files (`.lp`, DiLiGenT folders), image decoding into a
-//! pixel-major [`symframe::Stack`], result-map writers and synthetic-dataset output.
+//! pixel-major [`symframe::Stack`] or an on-disk tile cache, per-tile results, result-map writers and synthetic-dataset output.
 
 #![warn(missing_docs)]
 
 mod atomic;
 pub mod dataset;
 pub mod error;
+pub mod fingerprint;
 pub mod image;
 mod lights;
 pub mod output;
 pub mod stack;
 pub mod synth_out;
+pub mod tile_cache;
+pub mod tile_results;
 
 pub use dataset::{open_dataset, Dataset};
 pub use error::{Error, Result};
@@ -24,3 +27,5 @@ pub use output::{
 };
 pub use stack::{load_stack, read_mask};
 pub use synth_out::{write_lp_dataset, ImageFormat};
+pub use tile_cache::{CacheInfo, CacheOptions, TileCache, TileGrid};
+pub use tile_results::{read_tile_result, tile_result_done, tile_result_path, write_tile_result};

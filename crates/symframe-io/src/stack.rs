@@ -21,24 +21,8 @@ pub fn load_stack(
     opts: &DecodeOptions,
     on_image: &(dyn Fn() + Sync),
 ) -> Result<Stack> {
+    check_dataset(ds)?;
     let n = ds.images.len();
-    if n == 0 {
-        return Err(Error::invalid(&ds.source, "the dataset has no images"));
-    }
-    if ds.lights.len() != n {
-        return Err(Error::invalid(
-            &ds.source,
-            format!("{} lights for {n} images", ds.lights.len()),
-        ));
-    }
-    if let Some(int) = &ds.intensities {
-        if int.len() != n {
-            return Err(Error::invalid(
-                &ds.source,
-                format!("{} light intensities for {n} images", int.len()),
-            ));
-        }
-    }
     let chunk = 32.max(2 * rayon::current_num_threads());
     let mut stack: Option<Stack> = None;
     for start in (0..n).step_by(chunk) {
@@ -46,19 +30,9 @@ pub fn load_stack(
         let decoded: Vec<Result<(usize, usize, Vec<f32>)>> = (start..end)
             .into_par_iter()
             .map(|i| {
-                let img = read_image(&ds.images[i], opts)?;
-                let (w, h) = (img.width, img.height);
-                let mut rgb = img.into_rgb();
-                if let Some(int) = &ds.intensities {
-                    let k = int[i];
-                    for px in rgb.chunks_exact_mut(3) {
-                        for c in 0..3 {
-                            px[c] /= k[c];
-                        }
-                    }
-                }
+                let r = decode_stack_image(ds, i, opts)?;
                 on_image();
-                Ok((w, h, rgb))
+                Ok(r)
             })
             .collect();
         let mut images = Vec::with_capacity(decoded.len());
@@ -93,6 +67,50 @@ pub fn load_stack(
             });
     }
     Ok(stack.expect("at least one image"))
+}
+
+/// Checks that a dataset has images, and one light (and intensity, if any) per image.
+pub(crate) fn check_dataset(ds: &Dataset) -> Result<()> {
+    let n = ds.images.len();
+    if n == 0 {
+        return Err(Error::invalid(&ds.source, "the dataset has no images"));
+    }
+    if ds.lights.len() != n {
+        return Err(Error::invalid(
+            &ds.source,
+            format!("{} lights for {n} images", ds.lights.len()),
+        ));
+    }
+    if let Some(int) = &ds.intensities {
+        if int.len() != n {
+            return Err(Error::invalid(
+                &ds.source,
+                format!("{} light intensities for {n} images", int.len()),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Decodes image `i` of `ds` as a stack stores it: interleaved RGB (grey replicated), divided
+/// by the light's intensity when the dataset has intensities. Returns width, height, samples.
+pub(crate) fn decode_stack_image(
+    ds: &Dataset,
+    i: usize,
+    opts: &DecodeOptions,
+) -> Result<(usize, usize, Vec<f32>)> {
+    let img = read_image(&ds.images[i], opts)?;
+    let (w, h) = (img.width, img.height);
+    let mut rgb = img.into_rgb();
+    if let Some(int) = &ds.intensities {
+        let k = int[i];
+        for px in rgb.chunks_exact_mut(3) {
+            for c in 0..3 {
+                px[c] /= k[c];
+            }
+        }
+    }
+    Ok((w, h, rgb))
 }
 
 /// Reads a mask image: a pixel is inside where its first channel is non-zero (any format

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, Result};
 use crate::optim::{nelder_mead, NelderMeadOptions};
 use crate::rig::Rig;
-use crate::slice::{gather_slice, ExactSlice, ResampledSlice, SliceLookup};
+use crate::slice::{gather_pixel, ExactSlice, ResampledSlice, SliceLookup};
 use crate::stack::Stack;
 use crate::symmetry::{
     default_min_domain, symmetry_term, tangent_basis, CosineMode, Frame, Symmetry, SymmetryTerm,
@@ -488,6 +488,145 @@ pub struct EstimateMaps {
     pub evals: u64,
 }
 
+impl PixelCounts {
+    /// Counts one pixel of status `status` (`with_tangent`: its tangent is defined).
+    pub fn add(&mut self, status: PixelStatus, with_tangent: bool) {
+        match status {
+            PixelStatus::Estimated => self.estimated += 1,
+            PixelStatus::Masked => self.masked += 1,
+            PixelStatus::NoData => self.no_data += 1,
+            PixelStatus::Discarded => self.discarded += 1,
+            PixelStatus::Culled => self.culled += 1,
+        }
+        if with_tangent {
+            self.with_tangent += 1;
+        }
+    }
+}
+
+/// What the maps hold at one pixel: the values of [`EstimateMaps`] there, as stored per tile by
+/// the tiled pipeline and assembled into maps by [`EstimateMaps::put`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelRecord {
+    /// What happened.
+    pub status: PixelStatus,
+    /// Unit normal (`NaN` where none).
+    pub normal: [f32; 3],
+    /// Unit tangent (`NaN` where none).
+    pub tangent: [f32; 3],
+    /// Confidence (`NaN` unless estimated or culled).
+    pub confidence: f32,
+    /// Anisotropy (`NaN` unless estimated or culled).
+    pub anisotropy: f32,
+    /// Objective evaluations spent.
+    pub evals: u32,
+}
+
+impl PixelRecord {
+    /// A pixel outside the mask.
+    pub const MASKED: PixelRecord = PixelRecord {
+        status: PixelStatus::Masked,
+        normal: [f32::NAN; 3],
+        tangent: [f32::NAN; 3],
+        confidence: f32::NAN,
+        anisotropy: f32::NAN,
+        evals: 0,
+    };
+
+    /// The map values of an estimate.
+    pub fn from_estimate(e: &PixelEstimate) -> Self {
+        let scored = matches!(e.status, PixelStatus::Estimated | PixelStatus::Culled);
+        Self {
+            status: e.status,
+            normal: e.normal.map_or([f32::NAN; 3], |n| n.as_vec3().to_array()),
+            tangent: e.tangent.map_or([f32::NAN; 3], |t| t.as_vec3().to_array()),
+            confidence: if scored { e.confidence } else { f32::NAN },
+            anisotropy: if scored { e.anisotropy } else { f32::NAN },
+            evals: e.evals,
+        }
+    }
+
+    /// Whether the tangent is defined.
+    pub fn has_tangent(&self) -> bool {
+        !self.tangent[0].is_nan()
+    }
+}
+
+impl EstimateMaps {
+    /// Maps of `width x height` pixels with nothing estimated yet (every value `NaN`, no
+    /// status, counts zero): fill them with [`EstimateMaps::put`] for every pixel.
+    pub fn empty(width: usize, height: usize) -> Self {
+        let n = width * height;
+        Self {
+            width,
+            height,
+            normals: vec![f32::NAN; n * 3],
+            tangents: vec![f32::NAN; n * 3],
+            confidence: vec![f32::NAN; n],
+            anisotropy: vec![f32::NAN; n],
+            status: vec![PixelStatus::Masked; n],
+            counts: PixelCounts::default(),
+            evals: 0,
+        }
+    }
+
+    /// Stores pixel `p`'s record (each pixel once: the counts add up).
+    pub fn put(&mut self, p: usize, r: &PixelRecord) {
+        self.evals += r.evals as u64;
+        self.status[p] = r.status;
+        self.counts.add(r.status, r.has_tangent());
+        self.confidence[p] = r.confidence;
+        self.anisotropy[p] = r.anisotropy;
+        self.normals[p * 3..p * 3 + 3].copy_from_slice(&r.normal);
+        self.tangents[p * 3..p * 3 + 3].copy_from_slice(&r.tangent);
+    }
+}
+
+/// Per-thread buffers of [`estimate_block`].
+#[derive(Debug, Clone)]
+pub struct BlockScratch {
+    slice: Vec<f32>,
+    resampled: ResampledSlice,
+}
+
+impl BlockScratch {
+    /// Buffers sized for `rig`.
+    pub fn new(rig: &Rig) -> Self {
+        Self {
+            slice: vec![0.0; rig.n_used() * 3],
+            resampled: ResampledSlice::new(rig),
+        }
+    }
+}
+
+/// Estimates a block of pixels stored pixel-major with every input light
+/// (`samples.len() / (rig.n_input * 3)` pixels, each `rig.n_input * 3` values in input order):
+/// a band of a [`Stack`] or a tile of an on-disk cache. Pixel `k` of the block is estimated when
+/// `inside(k)`, else recorded as masked. Both the in-memory and the tiled pipelines go through
+/// this function, so they give identical results.
+pub fn estimate_block(
+    estimator: &Estimator,
+    samples: &[f32],
+    inside: impl Fn(usize) -> bool,
+    scratch: &mut BlockScratch,
+) -> Vec<PixelRecord> {
+    let rig = estimator.rig();
+    let stride = rig.n_input * 3;
+    debug_assert_eq!(samples.len() % stride.max(1), 0);
+    samples
+        .chunks_exact(stride)
+        .enumerate()
+        .map(|(k, px)| {
+            if !inside(k) {
+                return PixelRecord::MASKED;
+            }
+            gather_pixel(rig, px, &mut scratch.slice);
+            let e = estimator.estimate_pixel_with(&scratch.slice, &mut scratch.resampled);
+            PixelRecord::from_estimate(&e)
+        })
+        .collect()
+}
+
 /// Rows per parallel task: enough work per task to amortise scheduling, small enough to balance.
 const ROWS_PER_TASK: usize = 2;
 
@@ -500,82 +639,62 @@ pub fn estimate_stack(
     params: EstimatorParams,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<EstimateMaps> {
-    if stack.n_lights != rig.n_input {
+    check_inputs(stack.width, stack.height, stack.n_lights, rig, mask)?;
+    let estimator = Estimator::new(rig, params);
+    let (w, h) = (stack.width, stack.height);
+    let band_len = ROWS_PER_TASK * w * stack.n_lights * 3;
+    let bands: Vec<Vec<PixelRecord>> = stack
+        .data
+        .par_chunks(band_len.max(1))
+        .enumerate()
+        .map_init(
+            || BlockScratch::new(rig),
+            |scratch, (band, samples)| {
+                let p0 = band * ROWS_PER_TASK * w;
+                let out = estimate_block(
+                    &estimator,
+                    samples,
+                    |k| !mask.is_some_and(|m| !m[p0 + k]),
+                    scratch,
+                );
+                progress(out.len());
+                out
+            },
+        )
+        .collect();
+    let mut maps = EstimateMaps::empty(w, h);
+    for (p, r) in bands.iter().flatten().enumerate() {
+        maps.put(p, r);
+    }
+    Ok(maps)
+}
+
+/// Checks that a stack of `width x height` pixels and `n_lights` lights fits `rig` and `mask`
+/// (the checks of [`estimate_stack`], for pipelines that read the stack piecewise).
+pub fn check_inputs(
+    width: usize,
+    height: usize,
+    n_lights: usize,
+    rig: &Rig,
+    mask: Option<&[bool]>,
+) -> Result<()> {
+    if n_lights != rig.n_input {
         return Err(Error::LightCountMismatch {
-            stack: stack.n_lights,
+            stack: n_lights,
             rig: rig.n_input,
         });
     }
     if let Some(m) = mask {
-        if m.len() != stack.n_pixels() {
+        if m.len() != width * height {
             return Err(Error::BadMask(format!(
                 "mask has {} pixels but the images have {}",
                 m.len(),
-                stack.n_pixels()
+                width * height
             )));
         }
         if !m.iter().any(|&v| v) {
             return Err(Error::BadMask("mask is empty: no pixel inside".into()));
         }
     }
-    let estimator = Estimator::new(rig, params);
-    let (w, h) = (stack.width, stack.height);
-    let bands: Vec<Vec<PixelEstimate>> = (0..h.div_ceil(ROWS_PER_TASK))
-        .into_par_iter()
-        .map_init(
-            || (vec![0.0f32; rig.n_used() * 3], ResampledSlice::new(rig)),
-            |(slice, scratch), band| {
-                let rows = band * ROWS_PER_TASK..((band + 1) * ROWS_PER_TASK).min(h);
-                let out: Vec<PixelEstimate> = rows
-                    .flat_map(|y| (0..w).map(move |x| y * w + x))
-                    .map(|p| {
-                        if mask.is_some_and(|m| !m[p]) {
-                            return PixelEstimate::empty(PixelStatus::Masked);
-                        }
-                        gather_slice(rig, stack, p, slice);
-                        estimator.estimate_pixel_with(slice, scratch)
-                    })
-                    .collect();
-                progress(out.len());
-                out
-            },
-        )
-        .collect();
-
-    let n = w * h;
-    let mut maps = EstimateMaps {
-        width: w,
-        height: h,
-        normals: vec![f32::NAN; n * 3],
-        tangents: vec![f32::NAN; n * 3],
-        confidence: vec![f32::NAN; n],
-        anisotropy: vec![f32::NAN; n],
-        status: Vec::with_capacity(n),
-        counts: PixelCounts::default(),
-        evals: 0,
-    };
-    for (p, e) in bands.into_iter().flatten().enumerate() {
-        maps.evals += e.evals as u64;
-        maps.status.push(e.status);
-        let c = &mut maps.counts;
-        match e.status {
-            PixelStatus::Estimated => c.estimated += 1,
-            PixelStatus::Masked => c.masked += 1,
-            PixelStatus::NoData => c.no_data += 1,
-            PixelStatus::Discarded => c.discarded += 1,
-            PixelStatus::Culled => c.culled += 1,
-        }
-        if matches!(e.status, PixelStatus::Estimated | PixelStatus::Culled) {
-            maps.confidence[p] = e.confidence;
-            maps.anisotropy[p] = e.anisotropy;
-        }
-        if let Some(nv) = e.normal {
-            maps.normals[p * 3..p * 3 + 3].copy_from_slice(&nv.as_vec3().to_array());
-        }
-        if let Some(t) = e.tangent {
-            c.with_tangent += 1;
-            maps.tangents[p * 3..p * 3 + 3].copy_from_slice(&t.as_vec3().to_array());
-        }
-    }
-    Ok(maps)
+    Ok(())
 }

@@ -22,7 +22,8 @@ pub mod symmetry;
 
 pub use error::{Error, Result};
 pub use estimate::{
-    estimate_stack, EstimateMaps, Estimator, EstimatorParams, Interpolation, PixelStatus,
+    estimate_block, estimate_stack, BlockScratch, EstimateMaps, Estimator, EstimatorParams,
+    Interpolation, PixelRecord, PixelStatus,
 };
 pub use rig::{Rig, RigOptions};
 pub use stack::Stack;

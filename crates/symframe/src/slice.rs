@@ -12,9 +12,15 @@ use crate::stack::Stack;
 /// The stack holds every input light; the rig uses those inside the cone.
 #[inline]
 pub fn gather_slice(rig: &Rig, stack: &Stack, pixel: usize, out: &mut [f32]) {
-    let src = stack.pixel(pixel);
+    gather_pixel(rig, stack.pixel(pixel), out);
+}
+
+/// Gathers one pixel's samples, given as every input light's RGB in input order
+/// (`rig.n_input * 3` values, e.g. a pixel of a [`Stack`] or of an on-disk tile), into rig order.
+#[inline]
+pub fn gather_pixel(rig: &Rig, samples: &[f32], out: &mut [f32]) {
     for (dst, &i) in out.chunks_exact_mut(3).zip(&rig.input_index) {
-        dst.copy_from_slice(&src[i * 3..i * 3 + 3]);
+        dst.copy_from_slice(&samples[i * 3..i * 3 + 3]);
     }
 }
 

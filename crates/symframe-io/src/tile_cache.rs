@@ -1,0 +1,912 @@
+//! A pixel-major on-disk tile cache of a dataset's images, for stacks that do not fit in memory.
+//!
+//! Each image is decoded once and its samples are scattered into one cache file, laid out tile
+//! by tile (tiles of `tile x tile` pixels, row-major over the tile grid, the right and bottom
+//! tiles cropped), each tile pixel-major (its pixels row-major, each pixel's samples under
+//! every input light contiguous, RGB `f32`): exactly the layout of a [`symframe::Stack`]
+//! restricted to the tile. Estimation then maps one tile at a time.
+//!
+//! File: a 4,096-byte header (magic, format version, an endianness mark, width, height, lights,
+//! tile size, the inputs' fingerprint, the number of images already scattered, a completion
+//! flag), then the samples in native byte order (`f32`, so the tiled estimate equals the
+//! in-memory one bit for bit). The fingerprint covers every image's path, size and
+//! modification time, the light intensities, the decode options and the crate version: the
+//! cache is reused when they match and rebuilt when they do not.
+//!
+//! Memory: images are decoded in parallel in batches of `batch_bytes / (width * height * 12)`
+//! images (at least one), and each batch is scattered into the memory-mapped file group of tiles
+//! by group; after each group the pages just written are dropped from the process's mapping
+//! (`madvise(MADV_DONTNEED)`: for a shared file mapping the data stays in the page cache and goes
+//! to disk as usual). So the resident set holds one batch of decoded images plus one group of
+//! mapped pages, whatever the stack's size. Readers likewise release each tile once read
+//! ([`TileCache::release`]).
+//!
+//! Concurrency and interruption: a lock file beside the cache (`flock`, Unix) lets several
+//! processes share one cache folder: one builds while the others wait, then all read. Building
+//! writes `<name>.stack.partial`, records after every batch how many images it holds (so an
+//! interrupted build resumes where it stopped), and is renamed to `<name>.stack` when complete.
+//! The cache must not be modified by other programs while it is mapped.
+
+use std::fs::{self, File, OpenOptions};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Instant, UNIX_EPOCH};
+
+use memmap2::{Mmap, MmapMut};
+use rayon::prelude::*;
+
+use crate::dataset::Dataset;
+use crate::error::{Error, Result};
+use crate::fingerprint::Fingerprint;
+use crate::image::DecodeOptions;
+use crate::stack::{check_dataset, decode_stack_image};
+
+/// Format version of the cache file (bumped whenever the layout changes).
+pub const CACHE_VERSION: u32 = 1;
+const MAGIC: &[u8; 8] = b"SYMFCACH";
+const HEADER_BYTES: usize = 4096;
+const ENDIAN_MARK: u32 = 0x0102_0304;
+/// Bytes of mapped cache a scatter group covers before its pages are released.
+const GROUP_BYTES: usize = 256 << 20;
+
+/// The tiles of a `width x height` image, `tile x tile` pixels each (the last column and row of
+/// tiles cropped), numbered row-major over the tile grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TileGrid {
+    /// Image width in pixels.
+    pub width: usize,
+    /// Image height in pixels.
+    pub height: usize,
+    /// Tile side in pixels.
+    pub tile: usize,
+}
+
+/// A tile's pixel rectangle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TileRect {
+    /// Left column.
+    pub x0: usize,
+    /// Top row.
+    pub y0: usize,
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+}
+
+impl TileGrid {
+    /// The grid of `tile`-pixel tiles over a `width x height` image.
+    ///
+    /// # Panics
+    /// If `tile` is zero.
+    pub fn new(width: usize, height: usize, tile: usize) -> Self {
+        assert!(tile > 0, "tile size must be positive");
+        Self {
+            width,
+            height,
+            tile,
+        }
+    }
+
+    /// Tiles per row of tiles.
+    pub fn tiles_x(&self) -> usize {
+        self.width.div_ceil(self.tile)
+    }
+
+    /// Rows of tiles.
+    pub fn tiles_y(&self) -> usize {
+        self.height.div_ceil(self.tile)
+    }
+
+    /// Number of tiles.
+    pub fn n_tiles(&self) -> usize {
+        self.tiles_x() * self.tiles_y()
+    }
+
+    /// The pixels of tile `t`.
+    pub fn rect(&self, t: usize) -> TileRect {
+        let (tx, ty) = (t % self.tiles_x(), t / self.tiles_x());
+        let (x0, y0) = (tx * self.tile, ty * self.tile);
+        TileRect {
+            x0,
+            y0,
+            width: self.tile.min(self.width - x0),
+            height: self.tile.min(self.height - y0),
+        }
+    }
+
+    /// Number of pixels of tile `t`.
+    pub fn tile_pixels(&self, t: usize) -> usize {
+        let r = self.rect(t);
+        r.width * r.height
+    }
+
+    /// Position of tile `t`'s first pixel in tile order (all pixels of the tiles before it).
+    pub fn first_pixel(&self, t: usize) -> usize {
+        if t >= self.n_tiles() {
+            return self.width * self.height;
+        }
+        let r = self.rect(t);
+        // Every row of tiles above is full height; the tiles to the left share this row's height.
+        r.y0 * self.width + r.x0 * r.height
+    }
+
+    /// Image pixel indices (`y * width + x`) of tile `t`'s pixels, in tile order (row-major
+    /// inside the tile).
+    pub fn pixels(&self, t: usize) -> impl Iterator<Item = usize> {
+        let r = self.rect(t);
+        let w = self.width;
+        (r.y0..r.y0 + r.height).flat_map(move |y| (r.x0..r.x0 + r.width).map(move |x| y * w + x))
+    }
+}
+
+/// How the cache is built.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CacheOptions {
+    /// Tile side in pixels.
+    pub tile: usize,
+    /// Memory budget of one batch of decoded images, in bytes (at least one image per batch).
+    pub batch_bytes: usize,
+}
+
+impl Default for CacheOptions {
+    /// 32-pixel tiles, 1 GiB batches.
+    fn default() -> Self {
+        Self {
+            tile: 32,
+            batch_bytes: 1 << 30,
+        }
+    }
+}
+
+/// What opening the cache did.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct CacheInfo {
+    /// The cache file.
+    pub path: PathBuf,
+    /// Its size in bytes.
+    pub bytes: u64,
+    /// Whether a complete cache for these inputs was found (no image decoded).
+    pub hit: bool,
+    /// Images decoded by this call.
+    pub images_decoded: usize,
+    /// Images already in a partial cache left by an interrupted build, reused.
+    pub images_resumed: usize,
+    /// Images per decoding batch.
+    pub batch_images: usize,
+    /// Seconds spent decoding images (wall clock, all threads together).
+    pub decode_s: f64,
+    /// Seconds spent scattering decoded images into the cache.
+    pub scatter_s: f64,
+    /// The inputs' fingerprint (hex).
+    pub fingerprint: String,
+}
+
+/// A complete tile cache, memory-mapped read-only.
+#[derive(Debug)]
+pub struct TileCache {
+    map: Mmap,
+    grid: TileGrid,
+    n_lights: usize,
+    fingerprint: u64,
+    path: PathBuf,
+    /// Held (shared) while the cache is mapped, so no other process rebuilds it meanwhile.
+    _lock: CacheLock,
+}
+
+/// The fixed header fields.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Header {
+    width: usize,
+    height: usize,
+    n_lights: usize,
+    tile: usize,
+    fingerprint: u64,
+    images_done: usize,
+    complete: bool,
+}
+
+impl Header {
+    fn data_bytes(&self) -> u64 {
+        (self.width as u64) * (self.height as u64) * (self.n_lights as u64) * 12
+    }
+
+    fn encode(&self) -> [u8; 72] {
+        let mut b = [0u8; 72];
+        b[..8].copy_from_slice(MAGIC);
+        b[8..12].copy_from_slice(&CACHE_VERSION.to_le_bytes());
+        b[12..16].copy_from_slice(&ENDIAN_MARK.to_ne_bytes());
+        let fields = [
+            self.width as u64,
+            self.height as u64,
+            self.n_lights as u64,
+            self.tile as u64,
+            self.fingerprint,
+            self.images_done as u64,
+            self.complete as u64,
+        ];
+        for (k, v) in fields.iter().enumerate() {
+            b[16 + 8 * k..24 + 8 * k].copy_from_slice(&v.to_le_bytes());
+        }
+        b
+    }
+
+    /// Decodes a header; `None` when it is not a cache of this version and byte order.
+    fn decode(b: &[u8]) -> Option<Self> {
+        if b.len() < 72 || &b[..8] != MAGIC {
+            return None;
+        }
+        let u32_at = |o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap());
+        if u32_at(8) != CACHE_VERSION
+            || u32::from_ne_bytes(b[12..16].try_into().unwrap()) != ENDIAN_MARK
+        {
+            return None;
+        }
+        let f = |k: usize| u64::from_le_bytes(b[16 + 8 * k..24 + 8 * k].try_into().unwrap());
+        Some(Self {
+            width: f(0) as usize,
+            height: f(1) as usize,
+            n_lights: f(2) as usize,
+            tile: f(3) as usize,
+            fingerprint: f(4),
+            images_done: f(5) as usize,
+            complete: f(6) == 1,
+        })
+    }
+}
+
+/// The fingerprint of a dataset's decoded samples: every image's path (canonical when
+/// possible), size and modification time, the light intensities, the decode options, the cache
+/// format and the crate version.
+pub fn inputs_fingerprint(ds: &Dataset, opts: &DecodeOptions) -> Result<u64> {
+    let mut f = Fingerprint::new();
+    f.str("symframe tile cache")
+        .u64(CACHE_VERSION as u64)
+        .str(env!("CARGO_PKG_VERSION"))
+        .u64(ds.images.len() as u64)
+        .u64(opts.linear_8bit as u64)
+        .f64(opts.saturation as f64);
+    for p in &ds.images {
+        let meta = fs::metadata(p).map_err(|e| Error::read(p, e))?;
+        let mtime = meta
+            .modified()
+            .ok()
+            .and_then(|t| t.duration_since(UNIX_EPOCH).ok())
+            .map_or(0, |d| d.as_nanos() as u64);
+        f.path(&fs::canonicalize(p).unwrap_or_else(|_| p.clone()))
+            .u64(meta.len())
+            .u64(mtime);
+    }
+    match &ds.intensities {
+        None => f.u64(0),
+        Some(v) => {
+            f.u64(1);
+            for k in v.iter().flatten() {
+                f.f64(*k as f64);
+            }
+            &mut f
+        }
+    };
+    Ok(f.finish())
+}
+
+/// The cache's file stem for a dataset: a readable name plus a hash of its canonical source, so
+/// datasets sharing a cache folder do not collide and one dataset always maps to one file.
+fn cache_stem(ds: &Dataset) -> String {
+    let src = fs::canonicalize(&ds.source).unwrap_or_else(|_| ds.source.clone());
+    let name: String = src
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default()
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .take(40)
+        .collect();
+    let hash = Fingerprint::new().path(&src).finish();
+    format!(
+        "{}-{hash:016x}",
+        if name.is_empty() { "stack" } else { &name }
+    )
+}
+
+/// An advisory lock on a cache (a lock file beside it; `flock` on Unix, nothing elsewhere).
+#[derive(Debug)]
+struct CacheLock {
+    file: File,
+    path: PathBuf,
+}
+
+impl CacheLock {
+    fn open(path: &Path) -> Result<Self> {
+        let file = OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(path)
+            .map_err(|e| Error::write(path, e))?;
+        Ok(Self {
+            file,
+            path: path.to_path_buf(),
+        })
+    }
+
+    #[cfg(unix)]
+    fn set(&self, exclusive: bool) -> Result<()> {
+        use std::os::unix::io::AsRawFd;
+        let op = if exclusive {
+            libc::LOCK_EX
+        } else {
+            libc::LOCK_SH
+        };
+        loop {
+            // SAFETY: flock on a file descriptor we own.
+            if unsafe { libc::flock(self.file.as_raw_fd(), op) } == 0 {
+                return Ok(());
+            }
+            let e = std::io::Error::last_os_error();
+            if e.kind() != std::io::ErrorKind::Interrupted {
+                return Err(Error::write(&self.path, e));
+            }
+        }
+    }
+
+    #[cfg(not(unix))]
+    fn set(&self, _exclusive: bool) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// Reads a file's header, `None` if the file is missing or too short.
+fn read_header(path: &Path) -> Result<Option<(Header, u64)>> {
+    use std::io::Read;
+    let mut f = match File::open(path) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(Error::read(path, e)),
+    };
+    let len = f.metadata().map_err(|e| Error::read(path, e))?.len();
+    let mut b = [0u8; 72];
+    if f.read_exact(&mut b).is_err() {
+        return Ok(None);
+    }
+    Ok(Header::decode(&b).map(|h| (h, len)))
+}
+
+/// Whether `h` (of a file `len` bytes long) is a cache of these inputs with this tile size.
+fn matches(h: &Header, len: u64, fingerprint: u64, tile: usize, n_lights: usize) -> bool {
+    h.fingerprint == fingerprint
+        && h.tile == tile
+        && h.n_lights == n_lights
+        && h.width > 0
+        && h.height > 0
+        && len == HEADER_BYTES as u64 + h.data_bytes()
+}
+
+impl TileCache {
+    /// Opens the cache of `ds` in `dir` (created if needed), building it first when it is
+    /// missing, incomplete or stale. `stop` is polled between images: when it is set the build
+    /// stops with [`Error::Interrupted`], keeping the images done for the next call.
+    /// `on_image` is called once per decoded image (from worker threads).
+    pub fn open_or_build(
+        ds: &Dataset,
+        opts: &DecodeOptions,
+        dir: &Path,
+        copts: CacheOptions,
+        stop: &AtomicBool,
+        on_image: &(dyn Fn() + Sync),
+    ) -> Result<(TileCache, CacheInfo)> {
+        check_dataset(ds)?;
+        if copts.tile == 0 {
+            return Err(Error::invalid(dir, "tile size must be positive"));
+        }
+        fs::create_dir_all(dir).map_err(|e| Error::write(dir, e))?;
+        let fingerprint = inputs_fingerprint(ds, opts)?;
+        let stem = cache_stem(ds);
+        let path = dir.join(format!("{stem}.stack"));
+        let partial = dir.join(format!("{stem}.stack.partial"));
+        let lock = CacheLock::open(&dir.join(format!("{stem}.lock")))?;
+        let n = ds.images.len();
+
+        // Fast path: a complete cache, read under a shared lock.
+        lock.set(false)?;
+        if let Some((h, len)) = read_header(&path)? {
+            if h.complete && matches(&h, len, fingerprint, copts.tile, n) {
+                return Self::map(path, h, lock, fingerprint, len, true);
+            }
+        }
+        // Build (or resume) under an exclusive lock; someone may have built it meanwhile.
+        lock.set(true)?;
+        if let Some((h, len)) = read_header(&path)? {
+            if h.complete && matches(&h, len, fingerprint, copts.tile, n) {
+                lock.set(false)?;
+                return Self::map(path, h, lock, fingerprint, len, true);
+            }
+        }
+        if path.exists() {
+            fs::remove_file(&path).map_err(|e| Error::write(&path, e))?;
+        }
+        let built = build(ds, opts, &partial, fingerprint, copts, stop, on_image)?;
+        fs::rename(&partial, &path).map_err(|e| Error::write(&path, e))?;
+        lock.set(false)?;
+        let (h, len) = read_header(&path)?
+            .ok_or_else(|| Error::invalid(&path, "cache vanished after it was built"))?;
+        let (cache, mut info) = Self::map(path, h, lock, fingerprint, len, false)?;
+        info.images_decoded = built.decoded;
+        info.images_resumed = built.resumed;
+        info.batch_images = built.batch;
+        info.decode_s = built.decode_s;
+        info.scatter_s = built.scatter_s;
+        Ok((cache, info))
+    }
+
+    fn map(
+        path: PathBuf,
+        h: Header,
+        lock: CacheLock,
+        fingerprint: u64,
+        len: u64,
+        hit: bool,
+    ) -> Result<(TileCache, CacheInfo)> {
+        let file = File::open(&path).map_err(|e| Error::read(&path, e))?;
+        // SAFETY: the cache is only written by this module under the exclusive lock, which no
+        // one can take while we hold the shared one (see the module docs).
+        let map = unsafe { Mmap::map(&file) }.map_err(|e| Error::read(&path, e))?;
+        if map.len() as u64 != len {
+            return Err(Error::invalid(&path, "cache changed size while opening"));
+        }
+        let info = CacheInfo {
+            path: path.clone(),
+            bytes: len,
+            hit,
+            images_decoded: 0,
+            images_resumed: 0,
+            batch_images: 0,
+            decode_s: 0.0,
+            scatter_s: 0.0,
+            fingerprint: format!("{fingerprint:016x}"),
+        };
+        Ok((
+            TileCache {
+                map,
+                grid: TileGrid::new(h.width, h.height, h.tile),
+                n_lights: h.n_lights,
+                fingerprint,
+                path,
+                _lock: lock,
+            },
+            info,
+        ))
+    }
+
+    /// The tile grid (image size and tile size).
+    pub fn grid(&self) -> &TileGrid {
+        &self.grid
+    }
+
+    /// Number of lights (images) per pixel.
+    pub fn n_lights(&self) -> usize {
+        self.n_lights
+    }
+
+    /// The inputs' fingerprint.
+    pub fn fingerprint(&self) -> u64 {
+        self.fingerprint
+    }
+
+    /// The cache file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Byte range of tile `t` in the file.
+    fn range(&self, t: usize) -> (usize, usize) {
+        let stride = self.n_lights * 12;
+        let p0 = self.grid.first_pixel(t);
+        (
+            HEADER_BYTES + p0 * stride,
+            self.grid.tile_pixels(t) * stride,
+        )
+    }
+
+    /// Tile `t`'s samples, pixel-major: for each of its pixels (row-major inside the tile,
+    /// [`TileGrid::pixels`]), every light's RGB in input order (`NaN` for invalid samples).
+    pub fn tile(&self, t: usize) -> &[f32] {
+        let (o, len) = self.range(t);
+        bytemuck::cast_slice(&self.map[o..o + len])
+    }
+
+    /// Drops tile `t`'s pages from this process's mapping (they stay in the page cache), so
+    /// the resident set does not grow with the number of tiles read. Reading the tile again
+    /// after this is fine: its pages are read back from the file.
+    pub fn release(&self, t: usize) {
+        #[cfg(unix)]
+        {
+            let (o, len) = self.range(t);
+            // SAFETY: a read-only shared file mapping: MADV_DONTNEED only unmaps the pages;
+            // later accesses read the same bytes back from the file (page cache).
+            let _ = unsafe {
+                self.map
+                    .unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, o, len)
+            };
+        }
+        #[cfg(not(unix))]
+        let _ = t;
+    }
+}
+
+/// What a build did.
+struct Built {
+    decoded: usize,
+    resumed: usize,
+    batch: usize,
+    decode_s: f64,
+    scatter_s: f64,
+}
+
+/// Creates `path` of `len` bytes, reserving the disk space up front where the file system can
+/// (so a full disk is an error here, not a fault while writing through the mapping).
+fn create_sized(path: &Path, len: u64) -> Result<File> {
+    let file = OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .open(path)
+        .map_err(|e| Error::write(path, e))?;
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::io::AsRawFd;
+        // SAFETY: fallocate on a file descriptor we own.
+        let r = unsafe { libc::fallocate(file.as_raw_fd(), 0, 0, len as libc::off_t) };
+        if r != 0 {
+            let e = std::io::Error::last_os_error();
+            if e.raw_os_error() != Some(libc::EOPNOTSUPP) {
+                return Err(Error::write(path, e));
+            }
+        }
+    }
+    file.set_len(len).map_err(|e| Error::write(path, e))?;
+    Ok(file)
+}
+
+/// Builds (or resumes building) the partial cache at `partial`; on success it is complete.
+fn build(
+    ds: &Dataset,
+    opts: &DecodeOptions,
+    partial: &Path,
+    fingerprint: u64,
+    copts: CacheOptions,
+    stop: &AtomicBool,
+    on_image: &(dyn Fn() + Sync),
+) -> Result<Built> {
+    let n = ds.images.len();
+    let decode_one = |i: usize| -> Result<(usize, usize, Vec<f32>)> {
+        if stop.load(Ordering::Relaxed) {
+            return Err(Error::Interrupted);
+        }
+        let r = decode_stack_image(ds, i, opts)?;
+        on_image();
+        Ok(r)
+    };
+    let mut decode_s = 0.0;
+    let mut first: Option<Vec<f32>> = None;
+    // Resume a partial build of the same inputs, else start afresh from the first image.
+    let resumable = read_header(partial)?
+        .filter(|(h, len)| !h.complete && matches(h, *len, fingerprint, copts.tile, n));
+    let (mut header, file) = match resumable {
+        Some((h, _)) => {
+            let file = OpenOptions::new()
+                .read(true)
+                .write(true)
+                .open(partial)
+                .map_err(|e| Error::write(partial, e))?;
+            (h, file)
+        }
+        None => {
+            if partial.exists() {
+                fs::remove_file(partial).map_err(|e| Error::write(partial, e))?;
+            }
+            let t = Instant::now();
+            let (w, h, rgb) = decode_one(0)?;
+            decode_s += t.elapsed().as_secs_f64();
+            if w == 0 || h == 0 {
+                return Err(Error::invalid(&ds.images[0], "image is empty"));
+            }
+            first = Some(rgb);
+            let header = Header {
+                width: w,
+                height: h,
+                n_lights: n,
+                tile: copts.tile,
+                fingerprint,
+                images_done: 0,
+                complete: false,
+            };
+            let file = create_sized(partial, HEADER_BYTES as u64 + header.data_bytes())?;
+            (header, file)
+        }
+    };
+    // SAFETY: the file is ours (created or reopened under the exclusive lock) and not resized
+    // while mapped.
+    let mut map = unsafe { MmapMut::map_mut(&file) }.map_err(|e| Error::write(partial, e))?;
+    map[..72].copy_from_slice(&header.encode());
+
+    let grid = TileGrid::new(header.width, header.height, header.tile);
+    let image_bytes = header.width * header.height * 12;
+    let batch = (copts.batch_bytes / image_bytes).clamp(1, n);
+    let resumed = header.images_done;
+    let mut decoded = first.is_some() as usize;
+    let mut scatter_s = 0.0;
+    let mut start = header.images_done;
+    while start < n {
+        if stop.load(Ordering::Relaxed) {
+            return Err(Error::Interrupted);
+        }
+        let end = n.min(start + batch);
+        let t = Instant::now();
+        let from = if start == 0 && first.is_some() {
+            1
+        } else {
+            start
+        };
+        let results: Vec<Result<(usize, usize, Vec<f32>)>> =
+            (from..end).into_par_iter().map(decode_one).collect();
+        decode_s += t.elapsed().as_secs_f64();
+        let mut images = Vec::with_capacity(end - start);
+        if from > start {
+            images.extend(first.take());
+        }
+        // The first error in image order, as the in-memory loader reports it.
+        for (j, r) in results.into_iter().enumerate() {
+            let (w, h, rgb) = r?;
+            if (w, h) != (header.width, header.height) {
+                return Err(Error::SizeMismatch {
+                    path: ds.images[from + j].clone(),
+                    width: w,
+                    height: h,
+                    first: ds.images[0].clone(),
+                    first_width: header.width,
+                    first_height: header.height,
+                });
+            }
+            images.push(rgb);
+        }
+        decoded += end - from;
+        let t = Instant::now();
+        scatter(&mut map, &grid, n, start, &images);
+        drop(images);
+        scatter_s += t.elapsed().as_secs_f64();
+        header.images_done = end;
+        map[..72].copy_from_slice(&header.encode());
+        start = end;
+    }
+    header.complete = true;
+    map[..72].copy_from_slice(&header.encode());
+    map.flush_range(0, HEADER_BYTES)
+        .map_err(|e| Error::write(partial, e))?;
+    Ok(Built {
+        decoded,
+        resumed,
+        batch,
+        decode_s,
+        scatter_s,
+    })
+}
+
+/// Writes images `start..start + images.len()` (interleaved RGB, row-major) into every pixel of
+/// the mapped cache, group of tiles by group, releasing each group's pages once written.
+fn scatter(map: &mut MmapMut, grid: &TileGrid, n_lights: usize, start: usize, images: &[Vec<f32>]) {
+    let stride = n_lights * 3;
+    let b = images.len();
+    let n_tiles = grid.n_tiles();
+    let mut t0 = 0;
+    while t0 < n_tiles {
+        let mut t1 = t0 + 1;
+        while t1 < n_tiles
+            && (grid.first_pixel(t1 + 1) - grid.first_pixel(t0)) * stride * 4 <= GROUP_BYTES
+        {
+            t1 += 1;
+        }
+        let (p0, p1) = (grid.first_pixel(t0), grid.first_pixel(t1));
+        let (o, len) = (HEADER_BYTES + p0 * stride * 4, (p1 - p0) * stride * 4);
+        {
+            let data: &mut [f32] = bytemuck::cast_slice_mut(&mut map[o..o + len]);
+            let mut tiles = Vec::with_capacity(t1 - t0);
+            let mut rest = data;
+            for t in t0..t1 {
+                let (head, tail) = rest.split_at_mut(grid.tile_pixels(t) * stride);
+                tiles.push((t, head));
+                rest = tail;
+            }
+            tiles.into_par_iter().for_each(|(t, dst)| {
+                for (k, p) in grid.pixels(t).enumerate() {
+                    let d = &mut dst[k * stride + start * 3..k * stride + (start + b) * 3];
+                    for (px, img) in d.chunks_exact_mut(3).zip(images) {
+                        px.copy_from_slice(&img[p * 3..p * 3 + 3]);
+                    }
+                }
+            });
+        }
+        #[cfg(unix)]
+        {
+            // SAFETY: a shared file mapping: MADV_DONTNEED unmaps the pages, whose (dirty) data
+            // stays in the page cache and is written to the file as usual.
+            let _ =
+                unsafe { map.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, o, len) };
+        }
+        t0 = t1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::write_exr_rgb;
+    use crate::stack::load_stack;
+    use glam::DVec3;
+
+    #[test]
+    fn grid_orders_every_pixel_once() {
+        for (w, h, t) in [(10, 7, 4), (8, 8, 8), (1, 5, 3), (33, 2, 32)] {
+            let g = TileGrid::new(w, h, t);
+            let mut seen = vec![false; w * h];
+            let mut k = 0;
+            for tile in 0..g.n_tiles() {
+                assert_eq!(g.first_pixel(tile), k, "{w}x{h}/{t} tile {tile}");
+                for p in g.pixels(tile) {
+                    assert!(!seen[p]);
+                    seen[p] = true;
+                    k += 1;
+                }
+                assert_eq!(k - g.first_pixel(tile), g.tile_pixels(tile));
+            }
+            assert!(seen.iter().all(|&s| s));
+            assert_eq!(g.first_pixel(g.n_tiles()), w * h);
+        }
+    }
+
+    fn dataset(dir: &Path, w: usize, h: usize, n: usize) -> Dataset {
+        let images: Vec<PathBuf> = (0..n)
+            .map(|i| {
+                let p = dir.join(format!("{i}.exr"));
+                let rgb: Vec<f32> = (0..w * h * 3)
+                    .map(|k| {
+                        if (i + k) % 17 == 0 {
+                            f32::NAN
+                        } else {
+                            (i * 1000 + k) as f32
+                        }
+                    })
+                    .collect();
+                write_exr_rgb(&p, w, h, &rgb).unwrap();
+                p
+            })
+            .collect();
+        Dataset {
+            source: dir.join("test.lp"),
+            lights: vec![DVec3::Z; n],
+            images,
+            intensities: Some((0..n).map(|i| [1.0, 2.0, 0.5 + i as f32]).collect()),
+            mask: None,
+        }
+    }
+
+    /// Checks every tile against the in-memory stack, bit for bit.
+    fn same_as_stack(cache: &TileCache, ds: &Dataset) {
+        let stack = load_stack(ds, &DecodeOptions::default(), &|| {}).unwrap();
+        let g = cache.grid();
+        assert_eq!(
+            (g.width, g.height, cache.n_lights()),
+            (stack.width, stack.height, stack.n_lights)
+        );
+        for t in 0..g.n_tiles() {
+            let tile = cache.tile(t);
+            let stride = stack.n_lights * 3;
+            for (k, p) in g.pixels(t).enumerate() {
+                let a = &tile[k * stride..(k + 1) * stride];
+                let b = stack.pixel(p);
+                assert!(
+                    a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()),
+                    "tile {t} px {p}"
+                );
+            }
+            cache.release(t);
+        }
+    }
+
+    #[test]
+    fn builds_in_batches_reuses_resumes_and_rebuilds() {
+        let d = tempfile::tempdir().unwrap();
+        let (w, h, n) = (11, 6, 9);
+        let ds = dataset(d.path(), w, h, n);
+        let dir = d.path().join("cache");
+        let opts = DecodeOptions::default();
+        // Batches of 2 images: 5 batches.
+        let copts = CacheOptions {
+            tile: 4,
+            batch_bytes: 2 * w * h * 12 + 5,
+        };
+        let go = AtomicBool::new(false);
+        let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
+        assert!(!info.hit);
+        assert_eq!((info.images_decoded, info.batch_images), (n, 2));
+        assert_eq!(info.bytes, (HEADER_BYTES + w * h * n * 12) as u64);
+        same_as_stack(&cache, &ds);
+        drop(cache);
+
+        let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
+        assert!(info.hit && info.images_decoded == 0);
+        same_as_stack(&cache, &ds);
+        drop(cache);
+
+        // Interrupted after 3 decoded images: the partial cache keeps whole batches.
+        let stop = AtomicBool::new(false);
+        let count = std::sync::atomic::AtomicUsize::new(0);
+        let mut ds2 = ds.clone();
+        ds2.intensities = None;
+        let e = TileCache::open_or_build(&ds2, &opts, &dir, copts, &stop, &|| {
+            if count.fetch_add(1, Ordering::SeqCst) + 1 >= 3 {
+                stop.store(true, Ordering::SeqCst);
+            }
+        })
+        .unwrap_err();
+        assert!(matches!(e, Error::Interrupted), "{e}");
+        let (cache, info) =
+            TileCache::open_or_build(&ds2, &opts, &dir, copts, &go, &|| {}).unwrap();
+        assert!(!info.hit);
+        assert!(info.images_resumed >= 2, "{info:?}");
+        assert_eq!(info.images_resumed + info.images_decoded, n, "{info:?}");
+        same_as_stack(&cache, &ds2);
+        drop(cache);
+
+        // A changed image invalidates it; a different tile size too.
+        let rgb: Vec<f32> = (0..w * h * 3).map(|k| k as f32 * 0.5).collect();
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        write_exr_rgb(&ds2.images[4], w, h, &rgb).unwrap();
+        let (cache, info) =
+            TileCache::open_or_build(&ds2, &opts, &dir, copts, &go, &|| {}).unwrap();
+        assert!(!info.hit && info.images_decoded == n);
+        same_as_stack(&cache, &ds2);
+        drop(cache);
+        let copts3 = CacheOptions { tile: 3, ..copts };
+        let (cache, info) =
+            TileCache::open_or_build(&ds2, &opts, &dir, copts3, &go, &|| {}).unwrap();
+        assert!(!info.hit);
+        same_as_stack(&cache, &ds2);
+        // One cache file per dataset, no partial left.
+        let names: Vec<String> = fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| !n.ends_with(".lock"))
+            .collect();
+        assert_eq!(names.len(), 1, "{names:?}");
+        assert!(
+            names[0].starts_with("test-") && names[0].ends_with(".stack"),
+            "{names:?}"
+        );
+    }
+
+    #[test]
+    fn size_mismatch_names_the_image() {
+        let d = tempfile::tempdir().unwrap();
+        let ds = dataset(d.path(), 4, 3, 5);
+        write_exr_rgb(&ds.images[3], 3, 3, &[0.0; 27]).unwrap();
+        let e = TileCache::open_or_build(
+            &ds,
+            &DecodeOptions::default(),
+            &d.path().join("c"),
+            CacheOptions::default(),
+            &AtomicBool::new(false),
+            &|| {},
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("3.exr: image is 3x3 but the first image"), "{e}");
+    }
+}
