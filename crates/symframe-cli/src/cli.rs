@@ -21,8 +21,44 @@ pub struct Cli {
 pub enum Command {
     /// Estimate normal and tangent maps from a capture (.lp file or DiLiGenT-style folder).
     Estimate(EstimateArgs),
+    /// Combine the outputs of `estimate --tiles K/N` shards into the full maps.
+    Merge(MergeArgs),
     /// Render a built-in synthetic object, estimate its frames and report the error (no download).
     Demo(DemoArgs),
+    /// Paper-scale benchmark: generate a synthetic stack once, time `estimate` on it.
+    #[command(hide = true)]
+    BenchPaper(BenchArgs),
+}
+
+/// One shard of a sharded run: the K-th (1-based) of N disjoint sets of tiles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ShardSpec {
+    /// 1-based shard number.
+    pub k: usize,
+    /// Number of shards.
+    pub n: usize,
+}
+
+impl std::str::FromStr for ShardSpec {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let bad = || format!("expected K/N with 1 <= K <= N (e.g. 3/32), got '{s}'");
+        let (k, n) = s.split_once('/').ok_or_else(bad)?;
+        let (k, n): (usize, usize) = (
+            k.trim().parse().map_err(|_| bad())?,
+            n.trim().parse().map_err(|_| bad())?,
+        );
+        if k == 0 || k > n {
+            return Err(bad());
+        }
+        Ok(Self { k, n })
+    }
+}
+
+impl std::fmt::Display for ShardSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}/{}", self.k, self.n)
+    }
 }
 
 /// Cosine handling in the symmetry distance.
@@ -80,6 +116,55 @@ pub struct EstimateArgs {
     /// Skip tangents (normals only; faster).
     #[arg(long)]
     pub no_tangents: bool,
+    /// Folder of the on-disk tile cache of the decoded images (default: OUTPUT/.symframe-cache).
+    /// A cache of the same images is reused; several runs (shards) may share one folder.
+    #[arg(long, value_name = "DIR")]
+    pub cache: Option<PathBuf>,
+    /// Delete the tile cache once the run has finished (default: keep it, so a rerun with other
+    /// parameters does not decode the images again).
+    #[arg(long)]
+    pub no_keep_cache: bool,
+    /// Estimate only the K-th of N disjoint sets of tiles (tiles t with t % N == K-1) into
+    /// OUTPUT (tile results and shard.json); combine the shards with `symframe merge`.
+    #[arg(long, value_name = "K/N")]
+    pub tiles: Option<ShardSpec>,
+    /// Tile side in pixels (the unit of work, of resumption and of the cache layout).
+    #[arg(long, default_value_t = 32)]
+    pub tile_size: usize,
+    /// Memory for one batch of decoded images while the cache is built, in MiB.
+    #[arg(long, default_value_t = 1024, value_name = "MIB")]
+    pub decode_memory: usize,
+    /// Testing aid: behave as if interrupted once this many tiles are finished.
+    #[arg(long, hide = true)]
+    pub stop_after_tiles: Option<usize>,
+}
+
+/// Flags of `symframe merge`.
+#[derive(Debug, Clone, Args)]
+pub struct MergeArgs {
+    /// Output folders of `symframe estimate --tiles K/N`, one per shard.
+    #[arg(required = true, num_args = 1..)]
+    pub shards: Vec<PathBuf>,
+    /// Output folder for the full maps.
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+/// Flags of `symframe bench-paper`.
+#[derive(Debug, Clone, Args)]
+pub struct BenchArgs {
+    /// Folder for the generated dataset (reused when it exists) and the runs' outputs.
+    #[arg(long, default_value = "symframe-bench")]
+    pub dir: PathBuf,
+    /// Image size in pixels (the paper's captures: 1024).
+    #[arg(long, default_value_t = 1024)]
+    pub size: usize,
+    /// Number of lights (the paper's captures: 1512).
+    #[arg(long, default_value_t = 1512)]
+    pub lights: usize,
+    /// Skip the baseline run even when `estimate --method woodham` exists.
+    #[arg(long)]
+    pub no_baseline: bool,
 }
 
 /// Flags of `symframe demo`.

@@ -72,12 +72,21 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         linear: false,
         saturation: 0.995,
         no_tangents: false,
+        cache: None,
+        no_keep_cache: true,
+        tiles: None,
+        tile_size: 32,
+        decode_memory: 1024,
+        stop_after_tiles: None,
     };
     eprintln!(
         "symframe demo: estimating normals and tangents from {}",
         lp.display()
     );
-    let (maps, _report) = crate::estimate::run(&est_args)?;
+    let crate::estimate::Done::Maps(done) = crate::estimate::run(&est_args)? else {
+        unreachable!("the demo does not run shards");
+    };
+    let (maps, _report) = *done;
     let e = evaluate(
         &maps.normals,
         &maps.tangents,

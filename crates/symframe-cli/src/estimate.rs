@@ -1,4 +1,9 @@
 //! `symframe estimate`: a capture folder in, normal/tangent maps, pictures and a report out.
+//!
+//! The images are decoded once into an on-disk tile cache and estimated tile by tile (see
+//! [`crate::tiled`]), so memory stays bounded whatever the stack's size, an interrupted run
+//! resumes, and `--tiles K/N` splits the work into shards. The results equal those of the
+//! in-memory pipeline ([`symframe::estimate_stack`]) bit for bit.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -7,12 +12,13 @@ use anyhow::{bail, Context, Result};
 use serde::Serialize;
 use symframe::estimate::PixelCounts;
 use symframe::symmetry::CosineMode;
-use symframe::{estimate_stack, EstimateMaps, EstimatorParams, Rig, RigOptions};
-use symframe_io::{Dataset, DecodeOptions};
+use symframe::{EstimateMaps, EstimatorParams, Rig, RigOptions};
+use symframe_io::{CacheInfo, CacheOptions, Dataset, DecodeOptions, TileCache};
 
 use crate::cli::{CosineArg, EstimateArgs};
 use crate::outdir::Staging;
 use crate::progress;
+use crate::tiled::{self, Interrupted};
 
 /// What `report.json` records about a run.
 #[derive(Debug, Serialize)]
@@ -37,8 +43,40 @@ pub struct Report {
     pub pixels: PixelCounts,
     /// Mean symmetry-objective evaluations per estimated pixel.
     pub evals_per_pixel: f64,
-    /// Wall-clock seconds per stage.
+    /// How the image was split into tiles and what this run did with them.
+    pub tiles: TileReport,
+    /// The on-disk tile cache of the decoded images.
+    pub cache: CacheReport,
+    /// Wall-clock seconds per stage, and peak memory.
     pub timings: Timings,
+}
+
+/// Tiles as recorded in the report.
+#[derive(Debug, Serialize)]
+pub struct TileReport {
+    /// Tile side in pixels.
+    pub size: usize,
+    /// Tiles of the whole image.
+    pub count: usize,
+    /// `K/N` for a shard, else absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shard: Option<String>,
+    /// Tiles this run was asked for (all, or the shard's).
+    pub this_run: usize,
+    /// Tiles estimated by this run.
+    pub computed: usize,
+    /// Tiles found finished by an interrupted earlier run of the same job and reused.
+    pub reused: usize,
+}
+
+/// The tile cache as recorded in the report.
+#[derive(Debug, Serialize)]
+pub struct CacheReport {
+    /// Where it is, its size, whether it was reused (`hit`), what was decoded.
+    #[serde(flatten)]
+    pub info: CacheInfo,
+    /// Whether it is kept after the run (`--no-keep-cache` removes it).
+    pub kept: bool,
 }
 
 /// Estimation parameters as recorded in the report.
@@ -71,7 +109,7 @@ pub struct LightCounts {
 /// Seconds per stage.
 #[derive(Debug, Serialize)]
 pub struct Timings {
-    /// Decoding the images.
+    /// Decoding the images into the tile cache, or opening it.
     pub load_s: f64,
     /// Building the rig.
     pub rig_s: f64,
@@ -81,6 +119,8 @@ pub struct Timings {
     pub write_s: f64,
     /// Everything.
     pub total_s: f64,
+    /// Peak resident memory of the process in bytes (`VmHWM`; Linux only).
+    pub peak_rss_bytes: Option<u64>,
 }
 
 /// Checks the flags that clap cannot.
@@ -115,12 +155,58 @@ fn validate(args: &EstimateArgs) -> Result<()> {
     if args.min_domain == Some(0) {
         bail!("--min-domain must be at least 1");
     }
+    if !(1..=4096).contains(&args.tile_size) {
+        bail!("--tile-size must be in [1, 4096], got {}", args.tile_size);
+    }
+    if args.decode_memory == 0 {
+        bail!("--decode-memory must be at least 1 MiB");
+    }
     Ok(())
 }
 
-/// Runs the command; returns the maps and the report written.
-pub fn run(args: &EstimateArgs) -> Result<(EstimateMaps, Report)> {
+/// What a run produced.
+#[derive(Debug)]
+pub enum Done {
+    /// A full run: the maps and the report written.
+    Maps(Box<(EstimateMaps, Report)>),
+    /// A shard (`--tiles K/N`): tile results and a manifest, no maps.
+    Shard,
+}
+
+/// Runs the command. On an error (not an interruption) an output folder this run created is
+/// removed again, so a failed run leaves nothing behind; an interrupted run keeps its cache and
+/// finished tiles for the rerun.
+pub fn run(args: &EstimateArgs) -> Result<Done> {
     validate(args)?;
+    let created = !args.output.exists();
+    let result = run_tiled(args);
+    if let Err(e) = &result {
+        if created && !e.is::<Interrupted>() {
+            let _ = std::fs::remove_dir_all(&args.output);
+        }
+    }
+    result
+}
+
+/// The estimator parameters the flags ask for.
+fn estimator_params(args: &EstimateArgs) -> EstimatorParams {
+    EstimatorParams {
+        cosine: match args.cosine {
+            CosineArg::Cross => CosineMode::CrossMultiplied,
+            CosineArg::Raw => CosineMode::Raw,
+            CosineArg::Compensated => CosineMode::Compensated(args.cosine_power),
+        },
+        min_domain: args.min_domain,
+        min_confidence: args.min_confidence,
+        min_anisotropy: args.min_anisotropy,
+        tangents: !args.no_tangents,
+        ..EstimatorParams::default()
+    }
+}
+
+/// Decodes the images once into the tile cache (or reuses it), estimates tile by tile into
+/// result files, then assembles and writes the maps (or, for a shard, its manifest).
+fn run_tiled(args: &EstimateArgs) -> Result<Done> {
     let t0 = Instant::now();
     let ds: Dataset = symframe_io::open_dataset(&args.input)?;
     let rig = Rig::new(
@@ -132,49 +218,74 @@ pub fn run(args: &EstimateArgs) -> Result<(EstimateMaps, Report)> {
     )
     .with_context(|| ds.source.display().to_string())?;
     let rig_s = t0.elapsed().as_secs_f64();
+    tiled::install_interrupt_handler();
 
     let t_load = Instant::now();
     let opts = DecodeOptions {
         linear_8bit: args.linear,
         saturation: args.saturation,
     };
-    let bar = progress::bar(ds.images.len() as u64, "loading");
-    let stack = symframe_io::load_stack(&ds, &opts, &|| bar.inc(1))?;
+    let cache_dir = args
+        .cache
+        .clone()
+        .unwrap_or_else(|| args.output.join(tiled::CACHE_DIR));
+    let bar = progress::bar(ds.images.len() as u64, "decoding");
+    let (cache, cache_info) = TileCache::open_or_build(
+        &ds,
+        &opts,
+        &cache_dir,
+        CacheOptions {
+            tile: args.tile_size,
+            batch_bytes: args.decode_memory << 20,
+        },
+        &tiled::STOP,
+        &|| bar.inc(1),
+    )
+    .map_err(tiled::io_err)?;
     bar.finish_and_clear();
     let load_s = t_load.elapsed().as_secs_f64();
+    let grid = *cache.grid();
 
     let mask_path = args.mask.clone().or_else(|| ds.mask.clone());
     let mask = match &mask_path {
-        Some(p) => Some(symframe_io::read_mask(p, stack.width, stack.height)?),
+        Some(p) => Some(symframe_io::read_mask(p, grid.width, grid.height)?),
         None => None,
     };
-
-    let params = EstimatorParams {
-        cosine: match args.cosine {
-            CosineArg::Cross => CosineMode::CrossMultiplied,
-            CosineArg::Raw => CosineMode::Raw,
-            CosineArg::Compensated => CosineMode::Compensated(args.cosine_power),
-        },
-        min_domain: args.min_domain,
-        min_confidence: args.min_confidence,
-        min_anisotropy: args.min_anisotropy,
-        tangents: !args.no_tangents,
-        ..EstimatorParams::default()
-    };
-    let min_domain_used = symframe::Estimator::new(&rig, params).min_domain();
-    let t_est = Instant::now();
-    let n_todo = mask.as_ref().map_or(stack.n_pixels(), |m| m.len()).max(1);
-    let bar = progress::bar(n_todo as u64, "estimating");
-    let maps = estimate_stack(&stack, &rig, mask.as_deref(), params, &|k| {
-        bar.inc(k as u64)
-    })
-    .with_context(|| match &mask_path {
+    let blame = || match &mask_path {
         Some(p) => p.display().to_string(),
         None => ds.source.display().to_string(),
-    })?;
-    bar.finish_and_clear();
-    drop(stack);
+    };
+    symframe::estimate::check_inputs(
+        grid.width,
+        grid.height,
+        cache.n_lights(),
+        &rig,
+        mask.as_deref(),
+    )
+    .with_context(blame)?;
+
+    let params = estimator_params(args);
+    let min_domain_used = symframe::Estimator::new(&rig, params).min_domain();
+    let job = tiled::job_fingerprint(&cache, &rig, &params, min_domain_used, mask.as_deref())?;
+    let tiles_dir = args.output.join(tiled::TILES_DIR);
+    let my_tiles = match args.tiles {
+        Some(s) => tiled::shard_tiles(grid.n_tiles(), s.k, s.n),
+        None => (0..grid.n_tiles()).collect(),
+    };
+    let t_est = Instant::now();
+    let counts = tiled::estimate_tiles(
+        &cache,
+        &rig,
+        params,
+        mask.as_deref(),
+        job,
+        &my_tiles,
+        &tiles_dir,
+        args.stop_after_tiles,
+    )?;
     let estimate_s = t_est.elapsed().as_secs_f64();
+    let cache_path = cache.path().to_path_buf();
+    drop(cache);
 
     let mut report = Report {
         version: env!("CARGO_PKG_VERSION"),
@@ -193,19 +304,81 @@ pub fn run(args: &EstimateArgs) -> Result<(EstimateMaps, Report)> {
             used: rig.n_used(),
             dropped: rig.n_dropped(),
         },
-        width: maps.width,
-        height: maps.height,
-        pixels: maps.counts,
-        evals_per_pixel: maps.evals as f64 / maps.counts.estimated.max(1) as f64,
+        width: grid.width,
+        height: grid.height,
+        pixels: PixelCounts::default(),
+        evals_per_pixel: 0.0,
+        tiles: TileReport {
+            size: grid.tile,
+            count: grid.n_tiles(),
+            shard: args.tiles.map(|s| s.to_string()),
+            this_run: my_tiles.len(),
+            computed: counts.computed,
+            reused: counts.reused,
+        },
+        cache: CacheReport {
+            info: cache_info,
+            kept: !args.no_keep_cache,
+        },
         timings: Timings {
             load_s,
             rig_s,
             estimate_s,
             write_s: 0.0,
             total_s: 0.0,
+            peak_rss_bytes: None,
         },
     };
+    let remove_cache = || -> Result<()> {
+        if args.no_keep_cache {
+            std::fs::remove_file(&cache_path)
+                .with_context(|| format!("{}: cannot remove", cache_path.display()))?;
+            // The folder too, when nothing else (another dataset's cache) is left in it.
+            let lock = cache_path.with_extension("lock");
+            let _ = std::fs::remove_file(lock);
+            let _ = std::fs::remove_dir(&cache_dir);
+        }
+        Ok(())
+    };
+
+    if let Some(shard) = args.tiles {
+        // Shard: the tile results stay; a manifest says they are complete.
+        report.timings.total_s = t0.elapsed().as_secs_f64();
+        report.timings.peak_rss_bytes = tiled::peak_rss_bytes();
+        let manifest = tiled::ShardManifest {
+            format: "symframe-shard".into(),
+            version: 1,
+            job: format!("{job:016x}"),
+            shard: shard.k,
+            of: shard.n,
+            width: grid.width,
+            height: grid.height,
+            tile_size: grid.tile,
+            n_tiles: grid.n_tiles(),
+            tiles: my_tiles,
+            report: serde_json::to_value(&report)?,
+        };
+        tiled::write_manifest(&args.output, &manifest)?;
+        remove_cache()?;
+        if progress::interactive() {
+            eprintln!(
+                "symframe: shard {shard} done: {} tiles ({} computed now) in {}; combine the \
+                 shards with `symframe merge`",
+                manifest.tiles.len(),
+                counts.computed,
+                args.output.display()
+            );
+        }
+        return Ok(Done::Shard);
+    }
+
+    let maps = tiled::assemble(&grid, job, |t| symframe_io::tile_result_path(&tiles_dir, t))?;
+    report.pixels = maps.counts;
+    report.evals_per_pixel = maps.evals as f64 / maps.counts.estimated.max(1) as f64;
     write_outputs(&args.output, &maps, &mut report, t0)?;
+    std::fs::remove_dir_all(&tiles_dir)
+        .with_context(|| format!("{}: cannot remove", tiles_dir.display()))?;
+    remove_cache()?;
     if progress::interactive() {
         let c = &maps.counts;
         eprintln!(
@@ -221,16 +394,32 @@ pub fn run(args: &EstimateArgs) -> Result<(EstimateMaps, Report)> {
             report.timings.total_s
         );
     }
-    Ok((maps, report))
+    Ok(Done::Maps(Box::new((maps, report))))
 }
 
 /// Writes every output file into a staging folder, then moves them into `out` together.
-/// The report's write and total timings are filled in just before it is written.
+/// The report's write and total timings and the peak memory are filled in just before it is
+/// written.
 pub fn write_outputs(
     out: &Path,
     maps: &EstimateMaps,
     report: &mut Report,
     t0: Instant,
+) -> Result<()> {
+    write_maps(out, maps, |write_s| {
+        report.timings.write_s = write_s;
+        report.timings.total_s = t0.elapsed().as_secs_f64();
+        report.timings.peak_rss_bytes = tiled::peak_rss_bytes();
+        Ok(serde_json::to_string_pretty(report)?)
+    })
+}
+
+/// Writes the maps, pictures and `report.json` (the text `report` returns, given the seconds
+/// spent writing the rest) into a staging folder, then moves them into `out` together.
+pub fn write_maps(
+    out: &Path,
+    maps: &EstimateMaps,
+    report: impl FnOnce(f64) -> Result<String>,
 ) -> Result<()> {
     let t_write = Instant::now();
     let (w, h) = (maps.width, maps.height);
@@ -259,9 +448,7 @@ pub fn write_outputs(
         h,
         &symframe_io::gray_map_rgb8(&maps.confidence, 0.0, 1.0),
     )?;
-    report.timings.write_s = t_write.elapsed().as_secs_f64();
-    report.timings.total_s = t0.elapsed().as_secs_f64();
-    let json = serde_json::to_string_pretty(report)?;
+    let json = report(t_write.elapsed().as_secs_f64())?;
     std::fs::write(staging.path("report.json"), json + "\n").context("cannot write report.json")?;
     staging.commit()
 }

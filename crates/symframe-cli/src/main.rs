@@ -1,11 +1,14 @@
 //! The `symframe` command: parses flags into a validated configuration, calls the libraries,
-//! and maps errors to exit codes (0 success, 1 failure with a one-line message, 2 usage).
+//! and maps errors to exit codes (0 success, 1 failure with a one-line message, 2 usage, 130
+//! interrupted: the same command resumes).
 
+mod bench;
 mod cli;
 mod demo;
 mod estimate;
 mod outdir;
 mod progress;
+mod tiled;
 
 use clap::Parser;
 
@@ -22,9 +25,15 @@ fn main() {
     }
     let result = match cli.command {
         cli::Command::Estimate(args) => estimate::run(&args).map(|_| ()),
+        cli::Command::Merge(args) => tiled::merge(&args),
         cli::Command::Demo(args) => demo::run(&args),
+        cli::Command::BenchPaper(args) => bench::run(&args),
     };
     if let Err(e) = result {
+        if e.is::<tiled::Interrupted>() {
+            eprintln!("symframe: {e}");
+            std::process::exit(130);
+        }
         // One line: the context chain joined, outermost first.
         let msg: Vec<String> = e.chain().map(|c| c.to_string()).collect();
         eprintln!("symframe: error: {}", msg.join(": "));

@@ -654,7 +654,10 @@ pub fn estimate_stack(
                 let out = estimate_block(
                     &estimator,
                     samples,
-                    |k| !mask.is_some_and(|m| !m[p0 + k]),
+                    |k| match mask {
+                        Some(m) => m[p0 + k],
+                        None => true,
+                    },
                     scratch,
                 );
                 progress(out.len());

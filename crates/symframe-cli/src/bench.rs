@@ -1,0 +1,191 @@
+//! `symframe bench-paper` (hidden): the paper-scale benchmark. Generates a synthetic stack once
+//! (a brushed-metal sphere, anisotropic Ward, under lights uniform over the 65-degree cone; RGB
+//! float EXR images and an `.lp` file, reused by later runs), then runs `symframe estimate` on it
+//! as a child process (so its peak memory is its own) and prints wall time, decoding and
+//! estimation time, pixels per second and peak resident memory, read from the run's
+//! `report.json`. When the binary has `estimate --method woodham`, that baseline runs too on the
+//! same cache and the time ratio is printed.
+//!
+//! The paper's captures are 1,512 lights at 1024x1024 (the defaults): about 10 GB of images,
+//! an 18 GB cache, and hours of estimation on two cores. `--size 256 --lights 380` is a quick
+//! try.
+
+use std::fmt::Write as _;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use rayon::prelude::*;
+use symframe::brdf::ward::Ward;
+use symframe::render::{Scene, TangentField};
+use symframe::rig::uniform_cone_lights;
+
+use crate::cli::BenchArgs;
+use crate::progress;
+
+/// Renders the dataset into `dir` unless a complete one is there; returns the `.lp` path.
+fn dataset(dir: &Path, size: usize, n: usize) -> Result<PathBuf> {
+    let lp = dir.join("lights.lp");
+    if lp.is_file() {
+        eprintln!("bench: reusing the dataset in {}", dir.display());
+        return Ok(lp);
+    }
+    let images = dir.join("images");
+    fs::create_dir_all(&images)
+        .with_context(|| format!("{}: cannot create folder", images.display()))?;
+    let scene = Scene::sphere(size, TangentField::Circular);
+    let lights = uniform_cone_lights(n, 65.0);
+    let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
+    eprintln!(
+        "bench: rendering {n} images of {size}x{size} into {} (once)",
+        dir.display()
+    );
+    let t = Instant::now();
+    let bar = progress::bar(n as u64, "rendering");
+    // One image per task: at most one image per thread in memory. Images already written by
+    // an interrupted generation are kept (they are written atomically).
+    (0..n).into_par_iter().try_for_each(|i| -> Result<()> {
+        let p = images.join(format!("img_{i:04}.exr"));
+        if !p.is_file() {
+            // Exposure 0.5, as the tests do.
+            let img: Vec<f32> = scene
+                .render(&brdf, lights[i])
+                .iter()
+                .map(|v| 0.5 * v)
+                .collect();
+            symframe_io::write_exr_rgb(&p, size, size, &img)?;
+        }
+        bar.inc(1);
+        Ok(())
+    })?;
+    bar.finish_and_clear();
+    let mask: Vec<f32> = scene
+        .mask
+        .iter()
+        .flat_map(|&m| [m as u8 as f32; 3])
+        .collect();
+    symframe_io::write_png8_rgb(&dir.join("mask.png"), size, size, &mask, false)?;
+    // The light file last: its presence marks a complete dataset.
+    let mut text = format!("{n}\n");
+    for (i, l) in lights.iter().enumerate() {
+        writeln!(text, "images/img_{i:04}.exr {:?} {:?} {:?}", l.x, l.y, l.z)?;
+    }
+    let tmp = dir.join(".lights.lp.tmp");
+    fs::write(&tmp, text).with_context(|| format!("{}: cannot write", tmp.display()))?;
+    fs::rename(&tmp, &lp).with_context(|| format!("{}: cannot write", lp.display()))?;
+    eprintln!("bench: rendered in {:.1} s", t.elapsed().as_secs_f64());
+    Ok(lp)
+}
+
+/// One timed `symframe estimate` run.
+struct RunFigures {
+    wall_s: f64,
+    report: serde_json::Value,
+}
+
+fn run_estimate(lp: &Path, out: &Path, cache: &Path, extra: &[&str]) -> Result<RunFigures> {
+    let exe = std::env::current_exe().context("cannot find the symframe binary")?;
+    let mut cmd = Command::new(exe);
+    cmd.arg("--threads")
+        .arg(rayon::current_num_threads().to_string())
+        .arg("estimate")
+        .arg(lp)
+        .arg("-o")
+        .arg(out)
+        .arg("--cache")
+        .arg(cache);
+    cmd.args(extra);
+    let t = Instant::now();
+    let status = cmd.status().context("cannot run symframe estimate")?;
+    let wall_s = t.elapsed().as_secs_f64();
+    if !status.success() {
+        bail!("symframe estimate {} failed ({status})", extra.join(" "));
+    }
+    let path = out.join("report.json");
+    let report = serde_json::from_str(
+        &fs::read_to_string(&path).with_context(|| format!("{}: cannot read", path.display()))?,
+    )
+    .with_context(|| format!("{}: bad report", path.display()))?;
+    Ok(RunFigures { wall_s, report })
+}
+
+fn print_figures(name: &str, f: &RunFigures) {
+    let r = &f.report;
+    let num = |p: &str| r.pointer(p).and_then(|v| v.as_f64()).unwrap_or(f64::NAN);
+    let (w, h) = (num("/width"), num("/height"));
+    let estimated = num("/pixels/estimated");
+    let masked = num("/pixels/masked");
+    let est_s = num("/timings/estimate_s");
+    let rss = num("/timings/peak_rss_bytes") / (1u64 << 20) as f64;
+    let hit = r
+        .pointer("/cache/hit")
+        .and_then(|v| v.as_bool())
+        .unwrap_or(false);
+    println!(
+        "{name:>9}: wall {:.1} s | decode {:.1} s{} | estimate {:.1} s | {:.0} pixels/s ({:.0} \
+         estimated of {:.0} in the mask) | peak RSS {:.0} MiB",
+        f.wall_s,
+        num("/timings/load_s"),
+        if hit { " (cache hit)" } else { "" },
+        est_s,
+        (w * h - masked) / est_s,
+        estimated,
+        w * h - masked,
+        rss
+    );
+}
+
+/// Runs the benchmark.
+pub fn run(args: &BenchArgs) -> Result<()> {
+    if !(8..=4096).contains(&args.size) || !(16..=20000).contains(&args.lights) {
+        bail!("--size must be in [8, 4096] and --lights in [16, 20000]");
+    }
+    let tag = format!("{}px-{}lights", args.size, args.lights);
+    let data = args.dir.join(format!("data-{tag}"));
+    let lp = dataset(&data, args.size, args.lights)?;
+    let cache = args.dir.join(format!("cache-{tag}"));
+    let sym = run_estimate(
+        &lp,
+        &args.dir.join(format!("out-{tag}-symmetry")),
+        &cache,
+        &[],
+    )?;
+    println!(
+        "bench: {0}x{0} pixels, {1} lights, {2} threads",
+        args.size,
+        args.lights,
+        rayon::current_num_threads()
+    );
+    print_figures("symmetry", &sym);
+    if args.no_baseline {
+        return Ok(());
+    }
+    // The baseline only where this binary has it (`estimate --method woodham`).
+    let exe = std::env::current_exe()?;
+    let help = Command::new(exe).args(["estimate", "--help"]).output()?;
+    let help = String::from_utf8_lossy(&help.stdout);
+    if !(help.contains("--method") && help.contains("woodham")) {
+        println!("  woodham: not available in this build (no `estimate --method woodham`)");
+        return Ok(());
+    }
+    let base = run_estimate(
+        &lp,
+        &args.dir.join(format!("out-{tag}-woodham")),
+        &cache,
+        &["--method", "woodham"],
+    )?;
+    print_figures("woodham", &base);
+    let est = |f: &RunFigures| {
+        f.report
+            .pointer("/timings/estimate_s")
+            .and_then(|v| v.as_f64())
+            .unwrap_or(f64::NAN)
+    };
+    println!(
+        "    ratio: symmetry / woodham estimation time {:.1}x",
+        est(&sym) / est(&base)
+    );
+    Ok(())
+}

@@ -1,0 +1,371 @@
+//! End-to-end tests of the tiled pipeline: the tiled result equals the in-memory one bit for
+//! bit; an interrupted run resumes to the same maps; the tile cache is reused and invalidated;
+//! shards merge into the single run's maps; merge refuses incomplete or mismatched shards.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use symframe::brdf::ward::Ward;
+use symframe::render::{Scene, TangentField};
+use symframe::rig::uniform_cone_lights;
+use symframe::symmetry::CosineMode;
+use symframe::{estimate_stack, EstimatorParams, Rig, RigOptions};
+use symframe_io::{read_npy_f32, write_lp_dataset, DecodeOptions, ImageFormat};
+
+const SIZE: usize = 40;
+const LIGHTS: usize = 100;
+/// 8-pixel tiles over 40x40: 25 tiles.
+const TILES: usize = 25;
+
+fn symframe(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_symframe"))
+        .args(args)
+        .output()
+        .expect("run symframe")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A 40x40 anisotropic sphere under 100 lights (float EXR, so decoding is exact).
+fn dataset(dir: &Path) -> PathBuf {
+    let scene = Scene::sphere(SIZE, TangentField::Circular);
+    let lights = uniform_cone_lights(LIGHTS, 65.0);
+    let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
+    let images: Vec<Vec<f32>> = lights.iter().map(|&l| scene.render(&brdf, l)).collect();
+    write_lp_dataset(
+        dir,
+        &lights,
+        &images,
+        SIZE,
+        SIZE,
+        ImageFormat::Exr,
+        None,
+        None,
+        Some(&scene.mask),
+    )
+    .unwrap()
+}
+
+/// `symframe estimate LP -o OUT --tile-size 8 EXTRA...`
+fn estimate(lp: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "estimate",
+        lp.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--tile-size",
+        "8",
+    ];
+    args.extend_from_slice(extra);
+    symframe(&args)
+}
+
+fn ok(o: &Output) {
+    assert!(o.status.success(), "{}", stderr(o));
+}
+
+fn report(out: &Path) -> serde_json::Value {
+    serde_json::from_str(&fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
+}
+
+const MAPS: [&str; 4] = [
+    "normals.npy",
+    "tangents.npy",
+    "confidence.npy",
+    "anisotropy.npy",
+];
+
+/// Bitwise equality (NaN equals NaN).
+fn same_bits(a: &[f32], b: &[f32]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+}
+
+/// The four maps of two output folders are identical.
+fn same_maps(a: &Path, b: &Path) {
+    for m in MAPS {
+        let (sa, va) = read_npy_f32(&a.join(m)).unwrap();
+        let (sb, vb) = read_npy_f32(&b.join(m)).unwrap();
+        assert_eq!(sa, sb, "{m}");
+        assert!(same_bits(&va, &vb), "{m} differs between {a:?} and {b:?}");
+    }
+    assert_eq!(report(a)["pixels"], report(b)["pixels"]);
+    assert_eq!(report(a)["evals_per_pixel"], report(b)["evals_per_pixel"]);
+}
+
+fn names(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = fs::read_dir(dir)
+        .map(|rd| {
+            rd.map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    v
+}
+
+#[test]
+fn tiled_result_equals_the_in_memory_result_exactly() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = dataset(&tmp.path().join("data"));
+    let ds = symframe_io::open_dataset(&lp).unwrap();
+    let stack = symframe_io::load_stack(&ds, &DecodeOptions::default(), &|| {}).unwrap();
+    let mask = symframe_io::read_mask(ds.mask.as_ref().unwrap(), SIZE, SIZE).unwrap();
+    let rig = Rig::new(&ds.lights, RigOptions::default()).unwrap();
+    for (k, (flags, params)) in [
+        (vec![], EstimatorParams::default()),
+        (
+            vec!["--cosine", "compensated", "--min-confidence", "0.3"],
+            EstimatorParams {
+                cosine: CosineMode::Compensated(0.5),
+                min_confidence: 0.3,
+                ..EstimatorParams::default()
+            },
+        ),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let out = tmp.path().join(format!("out{k}"));
+        ok(&estimate(&lp, &out, &flags));
+        let maps = estimate_stack(&stack, &rig, Some(&mask), params, &|_| {}).unwrap();
+        for (name, want) in MAPS.iter().zip([
+            &maps.normals,
+            &maps.tangents,
+            &maps.confidence,
+            &maps.anisotropy,
+        ]) {
+            let (_, got) = read_npy_f32(&out.join(name)).unwrap();
+            assert!(same_bits(&got, want), "{name} ({flags:?})");
+        }
+        let r = report(&out);
+        assert_eq!(r["pixels"], serde_json::to_value(maps.counts).unwrap());
+        assert_eq!(r["tiles"]["size"], 8);
+        assert_eq!(r["tiles"]["count"], TILES);
+        assert_eq!(r["tiles"]["computed"], TILES);
+        assert!(r["timings"]["peak_rss_bytes"].as_u64().unwrap() > 0, "{r}");
+        if k == 1 {
+            assert!(
+                maps.counts.culled > 0,
+                "the threshold should cull some pixels"
+            );
+        }
+        // The tile results are gone, the cache is kept.
+        assert!(!out.join(".symframe-tiles").exists());
+        let cache = names(&out.join(".symframe-cache"));
+        assert!(cache.iter().any(|n| n.ends_with(".stack")), "{cache:?}");
+    }
+}
+
+#[test]
+fn an_interrupted_run_resumes_to_the_same_maps_and_changed_parameters_recompute() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = dataset(&tmp.path().join("data"));
+    let whole = tmp.path().join("whole");
+    ok(&estimate(&lp, &whole, &[]));
+
+    let out = tmp.path().join("out");
+    let o = estimate(&lp, &out, &["--stop-after-tiles", "6", "--threads", "1"]);
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("interrupted; run the same command again to resume"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!out.join("normals.npy").exists());
+    let done = names(&out.join(".symframe-tiles"));
+    assert_eq!(done.len(), 6, "{done:?}");
+    assert!(done.iter().all(|n| n.starts_with("tile-")), "{done:?}");
+
+    // Interrupt once more (2 more tiles), then finish.
+    let o = estimate(&lp, &out, &["--stop-after-tiles", "2", "--threads", "1"]);
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    ok(&estimate(&lp, &out, &[]));
+    same_maps(&out, &whole);
+    let r = report(&out);
+    assert_eq!(r["tiles"]["reused"], 8, "{r}");
+    assert_eq!(r["tiles"]["computed"], TILES - 8, "{r}");
+    assert_eq!(r["cache"]["hit"], true, "{r}");
+    assert!(!out.join(".symframe-tiles").exists());
+
+    // Tiles of other parameters are stale: a rerun with new ones recomputes every tile.
+    let out2 = tmp.path().join("out2");
+    let o = estimate(&lp, &out2, &["--stop-after-tiles", "5", "--threads", "1"]);
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    ok(&estimate(&lp, &out2, &["--min-anisotropy", "0.3"]));
+    assert_eq!(report(&out2)["tiles"]["reused"], 0);
+    let whole2 = tmp.path().join("whole2");
+    ok(&estimate(&lp, &whole2, &["--min-anisotropy", "0.3"]));
+    same_maps(&out2, &whole2);
+}
+
+#[test]
+fn the_cache_is_reused_and_rebuilt_when_an_image_changes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let lp = dataset(&data);
+    let out = tmp.path().join("out");
+    ok(&estimate(&lp, &out, &[]));
+    let r = report(&out);
+    assert_eq!(r["cache"]["hit"], false, "{r}");
+    assert_eq!(r["cache"]["images_decoded"], LIGHTS, "{r}");
+    let first = r["cache"]["fingerprint"].clone();
+
+    // Same command: nothing decoded.
+    ok(&estimate(&lp, &out, &[]));
+    let r = report(&out);
+    assert_eq!(r["cache"]["hit"], true, "{r}");
+    assert_eq!(r["cache"]["images_decoded"], 0, "{r}");
+    let before = fs::read(out.join("normals.npy")).unwrap();
+
+    // A changed image: rebuilt, and the maps change with it.
+    let img = data.join("images/img_0042.exr");
+    symframe_io::write_exr_rgb(&img, SIZE, SIZE, &vec![0.25; SIZE * SIZE * 3]).unwrap();
+    ok(&estimate(&lp, &out, &[]));
+    let r = report(&out);
+    assert_eq!(r["cache"]["hit"], false, "{r}");
+    assert_eq!(r["cache"]["images_decoded"], LIGHTS, "{r}");
+    assert_ne!(r["cache"]["fingerprint"], first);
+    assert_ne!(fs::read(out.join("normals.npy")).unwrap(), before);
+    assert_eq!(
+        names(&out.join(".symframe-cache"))
+            .iter()
+            .filter(|n| n.contains(".stack"))
+            .count(),
+        1
+    );
+
+    // A shared cache folder serves another output; --no-keep-cache removes it at the end.
+    let shared = tmp.path().join("shared-cache");
+    let a = tmp.path().join("a");
+    ok(&estimate(&lp, &a, &["--cache", shared.to_str().unwrap()]));
+    assert_eq!(report(&a)["cache"]["hit"], false);
+    assert!(!a.join(".symframe-cache").exists());
+    let b = tmp.path().join("b");
+    ok(&estimate(
+        &lp,
+        &b,
+        &["--cache", shared.to_str().unwrap(), "--no-keep-cache"],
+    ));
+    assert_eq!(report(&b)["cache"]["hit"], true);
+    assert_eq!(report(&b)["cache"]["kept"], false);
+    assert!(!shared.exists(), "{:?}", names(&shared));
+    same_maps(&a, &b);
+}
+
+#[test]
+fn shards_merge_into_the_single_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = dataset(&tmp.path().join("data"));
+    let whole = tmp.path().join("whole");
+    ok(&estimate(&lp, &whole, &[]));
+    let cache = tmp.path().join("cache");
+    let shard = |k: usize| tmp.path().join(format!("shard_{k}"));
+    for k in 1..=3 {
+        let spec = format!("{k}/3");
+        ok(&estimate(
+            &lp,
+            &shard(k),
+            &["--tiles", &spec, "--cache", cache.to_str().unwrap()],
+        ));
+        let m: serde_json::Value =
+            serde_json::from_str(&fs::read_to_string(shard(k).join("shard.json")).unwrap())
+                .unwrap();
+        assert_eq!(m["shard"], k);
+        assert_eq!(m["of"], 3);
+        assert!(!shard(k).join("normals.npy").exists());
+        let tiles = names(&shard(k).join(".symframe-tiles"));
+        assert_eq!(tiles.len(), m["tiles"].as_array().unwrap().len());
+    }
+    let out = tmp.path().join("merged");
+    ok(&symframe(&[
+        "merge",
+        shard(1).to_str().unwrap(),
+        shard(2).to_str().unwrap(),
+        shard(3).to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]));
+    same_maps(&out, &whole);
+    for f in [
+        "normals.png",
+        "tangents.exr",
+        "confidence.png",
+        "report.json",
+    ] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    assert_eq!(report(&out)["shards"].as_array().unwrap().len(), 3);
+
+    // Errors: a missing shard, a shard of another job, a folder that is no shard.
+    let bad = tmp.path().join("bad");
+    let o = symframe(&[
+        "merge",
+        shard(1).to_str().unwrap(),
+        shard(3).to_str().unwrap(),
+        "-o",
+        bad.to_str().unwrap(),
+    ]);
+    let e = stderr(&o);
+    assert!(!o.status.success());
+    assert!(
+        e.contains("missing tiles 1, 4, 7") && e.contains("shard 2/3 not given"),
+        "{e}"
+    );
+    assert!(!bad.exists());
+
+    let other = tmp.path().join("other_2");
+    ok(&estimate(
+        &lp,
+        &other,
+        &[
+            "--tiles",
+            "2/3",
+            "--cache",
+            cache.to_str().unwrap(),
+            "--min-anisotropy",
+            "0.2",
+        ],
+    ));
+    let o = symframe(&[
+        "merge",
+        shard(1).to_str().unwrap(),
+        other.to_str().unwrap(),
+        shard(3).to_str().unwrap(),
+        "-o",
+        bad.to_str().unwrap(),
+    ]);
+    let e = stderr(&o);
+    assert!(!o.status.success());
+    assert!(
+        e.contains("other_2: belongs to another job than") && e.contains("shard_1"),
+        "{e}"
+    );
+    assert!(!bad.exists());
+
+    let o = symframe(&[
+        "merge",
+        shard(1).to_str().unwrap(),
+        whole.to_str().unwrap(),
+        "-o",
+        bad.to_str().unwrap(),
+    ]);
+    let e = stderr(&o);
+    assert!(e.contains("whole: not a finished shard"), "{e}");
+
+    // A shard whose tile file went missing: the file is named.
+    fs::remove_file(shard(2).join(".symframe-tiles/tile-000004.bin")).unwrap();
+    let o = symframe(&[
+        "merge",
+        shard(1).to_str().unwrap(),
+        shard(2).to_str().unwrap(),
+        shard(3).to_str().unwrap(),
+        "-o",
+        bad.to_str().unwrap(),
+    ]);
+    let e = stderr(&o);
+    assert!(e.contains("tile-000004.bin: cannot read"), "{e}");
+    assert!(!bad.exists());
+}
