@@ -86,6 +86,10 @@ struct RunFigures {
 }
 
 fn run_estimate(lp: &Path, out: &Path, cache: &Path, extra: &[&str]) -> Result<RunFigures> {
+    // A fresh output: finished tiles of an earlier bench run would be reused, not timed.
+    if out.exists() {
+        fs::remove_dir_all(out).with_context(|| format!("{}: cannot remove", out.display()))?;
+    }
     let exe = std::env::current_exe().context("cannot find the symframe binary")?;
     let mut cmd = Command::new(exe);
     cmd.arg("--threads")
@@ -103,36 +107,47 @@ fn run_estimate(lp: &Path, out: &Path, cache: &Path, extra: &[&str]) -> Result<R
     if !status.success() {
         bail!("symframe estimate {} failed ({status})", extra.join(" "));
     }
-    let path = out.join("report.json");
-    let report = serde_json::from_str(
+    // A shard's report is inside its manifest.
+    let shard = extra.contains(&"--tiles");
+    let path = out.join(if shard { "shard.json" } else { "report.json" });
+    let mut report: serde_json::Value = serde_json::from_str(
         &fs::read_to_string(&path).with_context(|| format!("{}: cannot read", path.display()))?,
     )
     .with_context(|| format!("{}: bad report", path.display()))?;
+    if shard {
+        report = report["report"].take();
+    }
     Ok(RunFigures { wall_s, report })
 }
 
 fn print_figures(name: &str, f: &RunFigures) {
     let r = &f.report;
     let num = |p: &str| r.pointer(p).and_then(|v| v.as_f64()).unwrap_or(f64::NAN);
-    let (w, h) = (num("/width"), num("/height"));
     let estimated = num("/pixels/estimated");
-    let masked = num("/pixels/masked");
+    let looked_at = ["estimated", "culled", "discarded", "no_data"]
+        .iter()
+        .map(|k| num(&format!("/pixels/{k}")))
+        .sum::<f64>();
     let est_s = num("/timings/estimate_s");
     let rss = num("/timings/peak_rss_bytes") / (1u64 << 20) as f64;
     let hit = r
         .pointer("/cache/hit")
         .and_then(|v| v.as_bool())
         .unwrap_or(false);
+    let cache_gib = num("/cache/bytes") / (1u64 << 30) as f64;
     println!(
-        "{name:>9}: wall {:.1} s | decode {:.1} s{} | estimate {:.1} s | {:.0} pixels/s ({:.0} \
-         estimated of {:.0} in the mask) | peak RSS {:.0} MiB",
+        "{name:>9}: wall {:.1} s | decode {:.1} s{} ({:.2} GiB cache, {:.0} images per batch) | \
+         estimate {:.1} s | {:.0} pixels/s ({:.0} estimated of {:.0} in the mask) | peak RSS \
+         {:.0} MiB",
         f.wall_s,
         num("/timings/load_s"),
         if hit { " (cache hit)" } else { "" },
+        cache_gib,
+        num("/cache/batch_images"),
         est_s,
-        (w * h - masked) / est_s,
+        looked_at / est_s,
         estimated,
-        w * h - masked,
+        looked_at,
         rss
     );
 }
@@ -146,17 +161,30 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let data = args.dir.join(format!("data-{tag}"));
     let lp = dataset(&data, args.size, args.lights)?;
     let cache = args.dir.join(format!("cache-{tag}"));
+    if args.cold && cache.exists() {
+        fs::remove_dir_all(&cache)
+            .with_context(|| format!("{}: cannot remove", cache.display()))?;
+    }
+    let mem = args.decode_memory.to_string();
+    let mut extra = vec!["--decode-memory", &mem];
+    let shard = args.tiles.map(|s| s.to_string());
+    if let Some(s) = &shard {
+        extra.extend(["--tiles", s]);
+    }
     let sym = run_estimate(
         &lp,
         &args.dir.join(format!("out-{tag}-symmetry")),
         &cache,
-        &[],
+        &extra,
     )?;
     println!(
-        "bench: {0}x{0} pixels, {1} lights, {2} threads",
+        "bench: {0}x{0} pixels, {1} lights, {2} threads{3}",
         args.size,
         args.lights,
-        rayon::current_num_threads()
+        rayon::current_num_threads(),
+        shard
+            .as_ref()
+            .map_or(String::new(), |s| format!(", tiles of shard {s} only"))
     );
     print_figures("symmetry", &sym);
     if args.no_baseline {
@@ -174,7 +202,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         &lp,
         &args.dir.join(format!("out-{tag}-woodham")),
         &cache,
-        &["--method", "woodham"],
+        &[&["--method", "woodham"], &extra[..]].concat(),
     )?;
     print_figures("woodham", &base);
     let est = |f: &RunFigures| {

@@ -165,6 +165,16 @@ pub struct BenchArgs {
     /// Skip the baseline run even when `estimate --method woodham` exists.
     #[arg(long)]
     pub no_baseline: bool,
+    /// Delete the tile cache first, so the run decodes every image (default: reuse it).
+    #[arg(long)]
+    pub cold: bool,
+    /// Passed to `estimate --decode-memory` (MiB per batch of decoded images).
+    #[arg(long, default_value_t = 1024, value_name = "MIB")]
+    pub decode_memory: usize,
+    /// Estimate only this shard of the tiles (`estimate --tiles K/N`): the whole cache is
+    /// still built, so decoding and memory are measured at full size in a fraction of the time.
+    #[arg(long, value_name = "K/N")]
+    pub tiles: Option<ShardSpec>,
 }
 
 /// Flags of `symframe demo`.

@@ -342,7 +342,11 @@ fn run_tiled(args: &EstimateArgs) -> Result<Done> {
     };
 
     if let Some(shard) = args.tiles {
-        // Shard: the tile results stay; a manifest says they are complete.
+        // Shard: the tile results stay; a manifest says they are complete. Its report counts
+        // the shard's pixels.
+        let (pixels, evals) = tiled::count_tiles(&grid, job, &tiles_dir, &my_tiles)?;
+        report.pixels = pixels;
+        report.evals_per_pixel = evals as f64 / pixels.estimated.max(1) as f64;
         report.timings.total_s = t0.elapsed().as_secs_f64();
         report.timings.peak_rss_bytes = tiled::peak_rss_bytes();
         let manifest = tiled::ShardManifest {

@@ -16,6 +16,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use symframe::estimate::PixelCounts;
 use symframe::{
     estimate_block, BlockScratch, EstimateMaps, Estimator, EstimatorParams, PixelRecord, Rig,
 };
@@ -248,6 +249,24 @@ pub fn assemble(
         }
     }
     Ok(maps)
+}
+
+/// Pixel counts and objective evaluations of `tiles`, read back from their result files.
+pub fn count_tiles(
+    grid: &TileGrid,
+    job: u64,
+    dir: &Path,
+    tiles: &[usize],
+) -> Result<(PixelCounts, u64)> {
+    let mut counts = PixelCounts::default();
+    let mut evals = 0;
+    for &t in tiles {
+        for r in read_tile_result(&tile_result_path(dir, t), job, t, grid.tile_pixels(t))? {
+            counts.add(r.status, r.has_tangent());
+            evals += r.evals as u64;
+        }
+    }
+    Ok((counts, evals))
 }
 
 /// A finished shard's manifest (`shard.json`).
