@@ -3,8 +3,9 @@
 //! resumed, or split into shards), and assembly of the tiles into full maps.
 //!
 //! Memory per worker thread: the mapped pages of the tile it estimates (released when done:
-//! `tile^2 * lights * 12` bytes, 18.6 MB for 32-pixel tiles of 1,512 lights), one pixel's slice
-//! and the resampling grid, and the tile's records (40 bytes per pixel). Assembly holds the full
+//! `tile^2 * lights * 12` bytes, 18.6 MB for 32-pixel tiles of 1,512 lights), a gather table
+//! (16 bytes per light), one pixel's slice and the resampling grid, and the tile's records
+//! (40 bytes per pixel). Assembly holds the full
 //! maps (33 bytes per pixel).
 
 use std::fs;
@@ -18,7 +19,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use symframe::estimate::PixelCounts;
 use symframe::{
-    estimate_block, BlockScratch, EstimateMaps, Estimator, EstimatorParams, PixelRecord, Rig,
+    estimate_pixels, BlockScratch, EstimateMaps, Estimator, EstimatorParams, PixelRecord, Rig,
 };
 use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{read_tile_result, tile_result_done, tile_result_path, write_tile_result};
@@ -196,13 +197,16 @@ pub fn estimate_tiles(
                     return Ok(false);
                 }
                 let pixels: Vec<usize> = grid.pixels(t).collect();
-                let records = estimate_block(
+                let tile = cache.tile(t);
+                let gather = tile.gatherer(&rig.input_index);
+                let records = estimate_pixels(
                     &estimator,
-                    cache.tile(t),
+                    tile.n_pixels(),
                     |k| match mask {
                         Some(m) => m[pixels[k]],
                         None => true,
                     },
+                    |k, out| gather.pixel(k, out),
                     scratch,
                 );
                 cache.release(t);

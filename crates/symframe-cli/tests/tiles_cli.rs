@@ -129,6 +129,11 @@ fn tiled_result_equals_the_in_memory_result_exactly() {
     .enumerate()
     {
         let out = tmp.path().join(format!("out{k}"));
+        // The second run builds its cache in batches of 54 images (1 MiB): two light blocks.
+        let mut flags = flags;
+        if k == 1 {
+            flags.extend(["--decode-memory", "1"]);
+        }
         ok(&estimate(&lp, &out, &flags));
         let maps = estimate_stack(&stack, &rig, Some(&mask), params, &|_| {}).unwrap();
         for (name, want) in MAPS.iter().zip([
@@ -145,6 +150,7 @@ fn tiled_result_equals_the_in_memory_result_exactly() {
         assert_eq!(r["tiles"]["size"], 8);
         assert_eq!(r["tiles"]["count"], TILES);
         assert_eq!(r["tiles"]["computed"], TILES);
+        assert_eq!(r["cache"]["batch_images"], [LIGHTS, 54][k]);
         assert!(r["timings"]["peak_rss_bytes"].as_u64().unwrap() > 0, "{r}");
         if k == 1 {
             assert!(
@@ -268,7 +274,14 @@ fn shards_merge_into_the_single_run() {
         ok(&estimate(
             &lp,
             &shard(k),
-            &["--tiles", &spec, "--cache", cache.to_str().unwrap()],
+            &[
+                "--tiles",
+                &spec,
+                "--cache",
+                cache.to_str().unwrap(),
+                "--decode-memory",
+                "1",
+            ],
         ));
         let m: serde_json::Value =
             serde_json::from_str(&fs::read_to_string(shard(k).join("shard.json")).unwrap())

@@ -2,20 +2,29 @@
 //!
 //! Each image is decoded once and its samples are scattered into one cache file, laid out tile
 //! by tile (tiles of `tile x tile` pixels, row-major over the tile grid, the right and bottom
-//! tiles cropped), each tile pixel-major (its pixels row-major, each pixel's samples under
-//! every input light contiguous, RGB `f32`): exactly the layout of a [`symframe::Stack`]
-//! restricted to the tile. Estimation then maps one tile at a time.
+//! tiles cropped; each tile one contiguous range of `pixels * lights * 12` bytes, so estimation
+//! maps one tile at a time). Inside a tile the lights come in blocks of `light_block` lights
+//! (the decoding batch; the last block shorter), each block pixel-major: the tile's pixels
+//! row-major, each pixel's RGB under the block's lights contiguous. When one batch holds every
+//! image (up to 1 GiB of decoded images by default: 1,365 images of 256x256, 85 of 1024x1024)
+//! there is one block and a tile is exactly a [`symframe::Stack`] of its pixels.
+//!
+//! Why blocks: a batch then writes one contiguous range per tile, so every page of the file is
+//! written once. With each pixel's samples under all lights contiguous instead, a batch of 85
+//! paper-size images writes 1 KB per pixel every 18 KB, and each 4 KB page is rewritten by
+//! four batches: 4x the disk writes, plus rereads once the 18 GB file no longer fits in the page
+//! cache. Readers see no difference: [`TileView`] gathers a pixel's samples in any light order.
 //!
 //! File: a 4,096-byte header (magic, format version, an endianness mark, width, height, lights,
 //! tile size, the inputs' fingerprint, the number of images already scattered, a completion
-//! flag), then the samples in native byte order (`f32`, so the tiled estimate equals the
-//! in-memory one bit for bit). The fingerprint covers every image's path, size and
+//! flag, the light block), then the samples in native byte order (`f32`, so the tiled estimate
+//! equals the in-memory one bit for bit). The fingerprint covers every image's path, size and
 //! modification time, the light intensities, the decode options and the crate version: the
 //! cache is reused when they match and rebuilt when they do not.
 //!
 //! Memory: images are decoded in parallel in batches of `batch_bytes / (width * height * 12)`
 //! images (at least one), and each batch is scattered into the memory-mapped file group of tiles
-//! by group; after each group the pages just written are dropped from the process's mapping
+//! by group (256 MiB of file per group); after each group the pages just written are dropped from the process's mapping
 //! (`madvise(MADV_DONTNEED)`: for a shared file mapping the data stays in the page cache and goes
 //! to disk as usual). So the resident set holds one batch of decoded images plus one group of
 //! mapped pages, whatever the stack's size. Readers likewise release each tile once read
@@ -188,6 +197,7 @@ pub struct TileCache {
     map: Mmap,
     grid: TileGrid,
     n_lights: usize,
+    light_block: usize,
     fingerprint: u64,
     path: PathBuf,
     /// Held (shared) while the cache is mapped, so no other process rebuilds it meanwhile.
@@ -204,15 +214,20 @@ struct Header {
     fingerprint: u64,
     images_done: usize,
     complete: bool,
+    /// Lights per block inside a tile (the decoding batch).
+    light_block: usize,
 }
+
+/// Bytes of the encoded header fields.
+const FIELDS: usize = 80;
 
 impl Header {
     fn data_bytes(&self) -> u64 {
         (self.width as u64) * (self.height as u64) * (self.n_lights as u64) * 12
     }
 
-    fn encode(&self) -> [u8; 72] {
-        let mut b = [0u8; 72];
+    fn encode(&self) -> [u8; FIELDS] {
+        let mut b = [0u8; FIELDS];
         b[..8].copy_from_slice(MAGIC);
         b[8..12].copy_from_slice(&CACHE_VERSION.to_le_bytes());
         b[12..16].copy_from_slice(&ENDIAN_MARK.to_ne_bytes());
@@ -224,6 +239,7 @@ impl Header {
             self.fingerprint,
             self.images_done as u64,
             self.complete as u64,
+            self.light_block as u64,
         ];
         for (k, v) in fields.iter().enumerate() {
             b[16 + 8 * k..24 + 8 * k].copy_from_slice(&v.to_le_bytes());
@@ -233,7 +249,7 @@ impl Header {
 
     /// Decodes a header; `None` when it is not a cache of this version and byte order.
     fn decode(b: &[u8]) -> Option<Self> {
-        if b.len() < 72 || &b[..8] != MAGIC {
+        if b.len() < FIELDS || &b[..8] != MAGIC {
             return None;
         }
         let u32_at = |o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap());
@@ -251,6 +267,7 @@ impl Header {
             fingerprint: f(4),
             images_done: f(5) as usize,
             complete: f(6) == 1,
+            light_block: f(7) as usize,
         })
     }
 }
@@ -371,7 +388,7 @@ fn read_header(path: &Path) -> Result<Option<(Header, u64)>> {
         Err(e) => return Err(Error::read(path, e)),
     };
     let len = f.metadata().map_err(|e| Error::read(path, e))?.len();
-    let mut b = [0u8; 72];
+    let mut b = [0u8; FIELDS];
     if f.read_exact(&mut b).is_err() {
         return Ok(None);
     }
@@ -385,6 +402,7 @@ fn matches(h: &Header, len: u64, fingerprint: u64, tile: usize, n_lights: usize)
         && h.n_lights == n_lights
         && h.width > 0
         && h.height > 0
+        && (1..=n_lights).contains(&h.light_block)
         && len == HEADER_BYTES as u64 + h.data_bytes()
 }
 
@@ -476,6 +494,7 @@ impl TileCache {
                 map,
                 grid: TileGrid::new(h.width, h.height, h.tile),
                 n_lights: h.n_lights,
+                light_block: h.light_block,
                 fingerprint,
                 path,
                 _lock: lock,
@@ -514,11 +533,20 @@ impl TileCache {
         )
     }
 
-    /// Tile `t`'s samples, pixel-major: for each of its pixels (row-major inside the tile,
-    /// [`TileGrid::pixels`]), every light's RGB in input order (`NaN` for invalid samples).
-    pub fn tile(&self, t: usize) -> &[f32] {
+    /// Lights per block inside a tile (all of them when the cache was built in one batch).
+    pub fn light_block(&self) -> usize {
+        self.light_block
+    }
+
+    /// Tile `t`'s samples.
+    pub fn tile(&self, t: usize) -> TileView<'_> {
         let (o, len) = self.range(t);
-        bytemuck::cast_slice(&self.map[o..o + len])
+        TileView {
+            data: bytemuck::cast_slice(&self.map[o..o + len]),
+            n_pixels: self.grid.tile_pixels(t),
+            n_lights: self.n_lights,
+            light_block: self.light_block,
+        }
     }
 
     /// Drops tile `t`'s pages from this process's mapping (they stay in the page cache), so
@@ -537,6 +565,68 @@ impl TileCache {
         }
         #[cfg(not(unix))]
         let _ = t;
+    }
+}
+
+/// The samples of one tile: blocks of `light_block` lights (the last block shorter), each block
+/// pixel-major (the tile's pixels in [`TileGrid::pixels`] order, each pixel's RGB under the
+/// block's lights contiguous). With one block this is a [`symframe::Stack`] of the tile.
+#[derive(Debug, Clone, Copy)]
+pub struct TileView<'a> {
+    data: &'a [f32],
+    n_pixels: usize,
+    n_lights: usize,
+    light_block: usize,
+}
+
+impl<'a> TileView<'a> {
+    /// Number of pixels of the tile.
+    pub fn n_pixels(&self) -> usize {
+        self.n_pixels
+    }
+
+    /// Where light `i`'s sample of pixel 0 is, and the step from one pixel to the next.
+    fn locate(&self, i: usize) -> (usize, usize) {
+        let b = i / self.light_block;
+        let len = self.light_block.min(self.n_lights - b * self.light_block);
+        (
+            (b * self.light_block * self.n_pixels + (i - b * self.light_block)) * 3,
+            len * 3,
+        )
+    }
+
+    /// A gatherer of the samples of `lights` (input indices), in that order, pixel by pixel.
+    pub fn gatherer(&self, lights: &[usize]) -> TileGather<'a> {
+        TileGather {
+            data: self.data,
+            table: lights.iter().map(|&i| self.locate(i)).collect(),
+        }
+    }
+
+    /// Every light's RGB at pixel `k` of the tile, in input order (`n_lights * 3` values).
+    pub fn pixel(&self, k: usize, out: &mut [f32]) {
+        for (i, o) in out.chunks_exact_mut(3).enumerate() {
+            let (base, step) = self.locate(i);
+            o.copy_from_slice(&self.data[base + k * step..base + k * step + 3]);
+        }
+    }
+}
+
+/// Gathers chosen lights' samples of a tile's pixels ([`TileView::gatherer`]).
+#[derive(Debug, Clone)]
+pub struct TileGather<'a> {
+    data: &'a [f32],
+    table: Vec<(usize, usize)>,
+}
+
+impl TileGather<'_> {
+    /// The chosen lights' RGB at pixel `k` of the tile (`3` values per light, in `out`).
+    #[inline]
+    pub fn pixel(&self, k: usize, out: &mut [f32]) {
+        for (&(base, step), o) in self.table.iter().zip(out.chunks_exact_mut(3)) {
+            let at = base + k * step;
+            o.copy_from_slice(&self.data[at..at + 3]);
+        }
     }
 }
 
@@ -627,6 +717,7 @@ fn build(
                 fingerprint,
                 images_done: 0,
                 complete: false,
+                light_block: (copts.batch_bytes / (w * h * 12)).clamp(1, n),
             };
             let file = create_sized(partial, HEADER_BYTES as u64 + header.data_bytes())?;
             (header, file)
@@ -635,11 +726,11 @@ fn build(
     // SAFETY: the file is ours (created or reopened under the exclusive lock) and not resized
     // while mapped.
     let mut map = unsafe { MmapMut::map_mut(&file) }.map_err(|e| Error::write(partial, e))?;
-    map[..72].copy_from_slice(&header.encode());
+    map[..FIELDS].copy_from_slice(&header.encode());
 
     let grid = TileGrid::new(header.width, header.height, header.tile);
-    let image_bytes = header.width * header.height * 12;
-    let batch = (copts.batch_bytes / image_bytes).clamp(1, n);
+    // One batch fills one block of lights in every tile (a resumed build keeps its blocks).
+    let batch = header.light_block;
     let resumed = header.images_done;
     let mut decoded = first.is_some() as usize;
     let mut scatter_s = 0.0;
@@ -683,11 +774,11 @@ fn build(
         drop(images);
         scatter_s += t.elapsed().as_secs_f64();
         header.images_done = end;
-        map[..72].copy_from_slice(&header.encode());
+        map[..FIELDS].copy_from_slice(&header.encode());
         start = end;
     }
     header.complete = true;
-    map[..72].copy_from_slice(&header.encode());
+    map[..FIELDS].copy_from_slice(&header.encode());
     map.flush_range(0, HEADER_BYTES)
         .map_err(|e| Error::write(partial, e))?;
     Ok(Built {
@@ -699,8 +790,10 @@ fn build(
     })
 }
 
-/// Writes images `start..start + images.len()` (interleaved RGB, row-major) into every pixel of
-/// the mapped cache, group of tiles by group, releasing each group's pages once written.
+/// Writes images `start..start + images.len()` (interleaved RGB, row-major; one block of
+/// lights, every block before it full) into every tile of the mapped cache, group of tiles
+/// by group, releasing the pages written once a group is done. The block of each tile is one
+/// contiguous range, so every page of the file is written by exactly one batch.
 fn scatter(map: &mut MmapMut, grid: &TileGrid, n_lights: usize, start: usize, images: &[Vec<f32>]) {
     let stride = n_lights * 3;
     let b = images.len();
@@ -714,9 +807,10 @@ fn scatter(map: &mut MmapMut, grid: &TileGrid, n_lights: usize, start: usize, im
             t1 += 1;
         }
         let (p0, p1) = (grid.first_pixel(t0), grid.first_pixel(t1));
-        let (o, len) = (HEADER_BYTES + p0 * stride * 4, (p1 - p0) * stride * 4);
+        let o = HEADER_BYTES + p0 * stride * 4;
         {
-            let data: &mut [f32] = bytemuck::cast_slice_mut(&mut map[o..o + len]);
+            let data: &mut [f32] =
+                bytemuck::cast_slice_mut(&mut map[o..o + (p1 - p0) * stride * 4]);
             let mut tiles = Vec::with_capacity(t1 - t0);
             let mut rest = data;
             for t in t0..t1 {
@@ -724,21 +818,25 @@ fn scatter(map: &mut MmapMut, grid: &TileGrid, n_lights: usize, start: usize, im
                 tiles.push((t, head));
                 rest = tail;
             }
-            tiles.into_par_iter().for_each(|(t, dst)| {
-                for (k, p) in grid.pixels(t).enumerate() {
-                    let d = &mut dst[k * stride + start * 3..k * stride + (start + b) * 3];
-                    for (px, img) in d.chunks_exact_mut(3).zip(images) {
-                        px.copy_from_slice(&img[p * 3..p * 3 + 3]);
+            tiles.into_par_iter().for_each(|(t, tile)| {
+                let np = grid.tile_pixels(t);
+                let dst = &mut tile[start * np * 3..(start + b) * np * 3];
+                for (px, p) in dst.chunks_exact_mut(b * 3).zip(grid.pixels(t)) {
+                    for (s, img) in px.chunks_exact_mut(3).zip(images) {
+                        s.copy_from_slice(&img[p * 3..p * 3 + 3]);
                     }
                 }
             });
         }
         #[cfg(unix)]
-        {
+        for t in t0..t1 {
+            let np = grid.tile_pixels(t);
+            let at = HEADER_BYTES + (grid.first_pixel(t) * stride + start * np * 3) * 4;
             // SAFETY: a shared file mapping: MADV_DONTNEED unmaps the pages, whose (dirty) data
             // stays in the page cache and is written to the file as usual.
-            let _ =
-                unsafe { map.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, o, len) };
+            let _ = unsafe {
+                map.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, at, b * np * 12)
+            };
         }
         t0 = t1;
     }
@@ -805,12 +903,26 @@ mod tests {
             (g.width, g.height, cache.n_lights()),
             (stack.width, stack.height, stack.n_lights)
         );
+        let mut a = vec![0.0f32; stack.n_lights * 3];
+        let mut c = vec![0.0f32; stack.n_lights * 3];
+        let reversed: Vec<usize> = (0..stack.n_lights).rev().collect();
         for t in 0..g.n_tiles() {
             let tile = cache.tile(t);
-            let stride = stack.n_lights * 3;
+            let gather = tile.gatherer(&reversed);
             for (k, p) in g.pixels(t).enumerate() {
-                let a = &tile[k * stride..(k + 1) * stride];
+                tile.pixel(k, &mut a);
                 let b = stack.pixel(p);
+                gather.pixel(k, &mut c);
+                for (i, rgb) in c.chunks_exact(3).enumerate() {
+                    let j = stack.n_lights - 1 - i;
+                    assert_eq!(
+                        rgb.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                        b[j * 3..j * 3 + 3]
+                            .iter()
+                            .map(|v| v.to_bits())
+                            .collect::<Vec<_>>()
+                    );
+                }
                 assert!(
                     a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()),
                     "tile {t} px {p}"
@@ -836,6 +948,7 @@ mod tests {
         let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
         assert!(!info.hit);
         assert_eq!((info.images_decoded, info.batch_images), (n, 2));
+        assert_eq!(cache.light_block(), 2);
         assert_eq!(info.bytes, (HEADER_BYTES + w * h * n * 12) as u64);
         same_as_stack(&cache, &ds);
         drop(cache);

@@ -601,9 +601,8 @@ impl BlockScratch {
 
 /// Estimates a block of pixels stored pixel-major with every input light
 /// (`samples.len() / (rig.n_input * 3)` pixels, each `rig.n_input * 3` values in input order):
-/// a band of a [`Stack`] or a tile of an on-disk cache. Pixel `k` of the block is estimated when
-/// `inside(k)`, else recorded as masked. Both the in-memory and the tiled pipelines go through
-/// this function, so they give identical results.
+/// a band of a [`Stack`]. Pixel `k` of the block is estimated when `inside(k)`, else recorded as
+/// masked.
 pub fn estimate_block(
     estimator: &Estimator,
     samples: &[f32],
@@ -613,14 +612,33 @@ pub fn estimate_block(
     let rig = estimator.rig();
     let stride = rig.n_input * 3;
     debug_assert_eq!(samples.len() % stride.max(1), 0);
-    samples
-        .chunks_exact(stride)
-        .enumerate()
-        .map(|(k, px)| {
+    estimate_pixels(
+        estimator,
+        samples.len() / stride.max(1),
+        inside,
+        |k, out| gather_pixel(rig, &samples[k * stride..(k + 1) * stride], out),
+        scratch,
+    )
+}
+
+/// Estimates `n` pixels whose samples `gather(k, out)` writes in rig order
+/// (`rig.n_used() * 3` values, as [`gather_pixel`] does): pixel `k` is estimated when
+/// `inside(k)`, else recorded as masked. Both the in-memory pipeline ([`estimate_block`]) and
+/// the tiled one (gathering from an on-disk tile) go through this function, so given the same
+/// samples they give identical results.
+pub fn estimate_pixels(
+    estimator: &Estimator,
+    n: usize,
+    inside: impl Fn(usize) -> bool,
+    gather: impl Fn(usize, &mut [f32]),
+    scratch: &mut BlockScratch,
+) -> Vec<PixelRecord> {
+    (0..n)
+        .map(|k| {
             if !inside(k) {
                 return PixelRecord::MASKED;
             }
-            gather_pixel(rig, px, &mut scratch.slice);
+            gather(k, &mut scratch.slice);
             let e = estimator.estimate_pixel_with(&scratch.slice, &mut scratch.resampled);
             PixelRecord::from_estimate(&e)
         })

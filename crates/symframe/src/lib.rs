@@ -22,8 +22,8 @@ pub mod symmetry;
 
 pub use error::{Error, Result};
 pub use estimate::{
-    estimate_block, estimate_stack, BlockScratch, EstimateMaps, Estimator, EstimatorParams,
-    Interpolation, PixelRecord, PixelStatus,
+    estimate_block, estimate_pixels, estimate_stack, BlockScratch, EstimateMaps, Estimator,
+    EstimatorParams, Interpolation, PixelRecord, PixelStatus,
 };
 pub use rig::{Rig, RigOptions};
 pub use stack::Stack;
