@@ -35,7 +35,9 @@
 //! mapped pages do not accumulate either.
 //!
 //! Concurrency and interruption: a lock file beside the cache (`flock`, Unix) lets several
-//! processes share one cache folder: one builds while the others wait, then all read. Building
+//! processes share one cache folder: one builds while the others wait, then all read (under a
+//! shared lock, held while the cache is mapped; a process that must rebuild an outdated cache
+//! waits until its readers are done). Building
 //! writes `<name>.stack.partial`, records after every batch how many images it holds (so an
 //! interrupted build resumes where it stopped), and is renamed to `<name>.stack` when complete.
 //! The cache must not be modified by other programs while it is mapped.
@@ -379,6 +381,30 @@ impl CacheLock {
     fn set(&self, _exclusive: bool) -> Result<()> {
         Ok(())
     }
+
+    /// Takes the exclusive lock if no one else holds the lock; `false` if someone does (then
+    /// this process holds no lock: a failed conversion gives up the shared one).
+    #[cfg(unix)]
+    fn try_exclusive(&self) -> Result<bool> {
+        use std::os::unix::io::AsRawFd;
+        loop {
+            // SAFETY: flock on a file descriptor we own.
+            if unsafe { libc::flock(self.file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
+                return Ok(true);
+            }
+            let e = std::io::Error::last_os_error();
+            match e.kind() {
+                std::io::ErrorKind::Interrupted => continue,
+                std::io::ErrorKind::WouldBlock => return Ok(false),
+                _ => return Err(Error::write(&self.path, e)),
+            }
+        }
+    }
+
+    #[cfg(not(unix))]
+    fn try_exclusive(&self) -> Result<bool> {
+        Ok(true)
+    }
 }
 
 /// Reads a file's header, `None` if the file is missing or too short.
@@ -433,15 +459,31 @@ impl TileCache {
         let lock = CacheLock::open(&dir.join(format!("{stem}.lock")))?;
         let n = ds.images.len();
 
-        // Fast path: a complete cache, read under a shared lock.
-        lock.set(false)?;
-        if let Some((h, len)) = read_header(&path)? {
-            if h.complete && matches(&h, len, fingerprint, copts.tile, n) {
-                return Self::map(path, h, lock, fingerprint, len, true);
+        // A complete cache is read under a shared lock (taking it waits while another process
+        // builds). Otherwise build it under an exclusive lock, taken without waiting: while
+        // others hold the shared lock (readers of a stale cache, or processes here for the same
+        // reason), release and retry, so that exactly one process builds and the others wait
+        // for it.
+        let mut tries = 0u64;
+        loop {
+            lock.set(false)?;
+            if let Some((h, len)) = read_header(&path)? {
+                if h.complete && matches(&h, len, fingerprint, copts.tile, n) {
+                    return Self::map(path, h, lock, fingerprint, len, true);
+                }
             }
+            if lock.try_exclusive()? {
+                break;
+            }
+            if stop.load(Ordering::Relaxed) {
+                return Err(Error::Interrupted);
+            }
+            // Jittered, so that processes arriving together do not retry in lockstep.
+            tries += 1;
+            let jitter = (std::process::id() as u64 + tries * 7919) % 300;
+            std::thread::sleep(std::time::Duration::from_millis(100 + jitter));
         }
-        // Build (or resume) under an exclusive lock; someone may have built it meanwhile.
-        lock.set(true)?;
+        // Someone may have finished building between our check and the exclusive lock.
         if let Some((h, len)) = read_header(&path)? {
             if h.complete && matches(&h, len, fingerprint, copts.tile, n) {
                 lock.set(false)?;
@@ -1010,6 +1052,34 @@ mod tests {
             names[0].starts_with("test-") && names[0].ends_with(".stack"),
             "{names:?}"
         );
+    }
+
+    #[test]
+    fn concurrent_openers_build_once() {
+        let d = tempfile::tempdir().unwrap();
+        let ds = dataset(d.path(), 9, 7, 12);
+        let dir = d.path().join("cache");
+        let opts = DecodeOptions::default();
+        let copts = CacheOptions {
+            tile: 4,
+            batch_bytes: 3 * 9 * 7 * 12,
+        };
+        let go = AtomicBool::new(false);
+        let infos: Vec<CacheInfo> = std::thread::scope(|s| {
+            let handles: Vec<_> = (0..3)
+                .map(|_| {
+                    s.spawn(|| {
+                        let (cache, info) =
+                            TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
+                        same_as_stack(&cache, &ds);
+                        info
+                    })
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        assert_eq!(infos.iter().filter(|i| !i.hit).count(), 1, "{infos:?}");
+        assert_eq!(infos.iter().map(|i| i.images_decoded).sum::<usize>(), 12);
     }
 
     #[test]
