@@ -272,6 +272,13 @@ fn run_tiled(args: &EstimateArgs) -> Result<Done> {
         Some(s) => tiled::shard_tiles(grid.n_tiles(), s.k, s.n),
         None => (0..grid.n_tiles()).collect(),
     };
+    if args.tiles.is_some() {
+        // The manifest says "complete": an earlier one goes until this shard is.
+        let m = args.output.join(tiled::MANIFEST);
+        if m.exists() {
+            std::fs::remove_file(&m).with_context(|| format!("{}: cannot remove", m.display()))?;
+        }
+    }
     let t_est = Instant::now();
     let counts = tiled::estimate_tiles(
         &cache,

@@ -417,7 +417,6 @@ pub fn merge(args: &MergeArgs) -> Result<()> {
     let missing: Vec<usize> = (0..owner.len()).filter(|&t| owner[t].is_none()).collect();
     if !missing.is_empty() {
         let mut absent: Vec<usize> = missing.iter().map(|t| t % first.of + 1).collect();
-        absent.dedup();
         absent.sort_unstable();
         absent.dedup();
         let shards: Vec<String> = absent.iter().map(|k| format!("{k}/{}", first.of)).collect();
