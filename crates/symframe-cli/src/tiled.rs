@@ -52,7 +52,7 @@ pub fn install_interrupt_handler() {
                 std::process::exit(130);
             }
             eprintln!(
-                "\nsymframe: stopping once the running tiles are done (Ctrl-C again to quit now)"
+                "\nsymframe: stopping after the images or tiles in progress (Ctrl-C again to quit now)"
             );
         });
     });
