@@ -299,7 +299,7 @@ impl<'a> Estimator<'a> {
             0.12,
             self.params.max_normal_evals,
         );
-        let (mut n, e2) = self.search_normal(slice, lookup, n1, cosine, 0.01, 40);
+        let (mut n, e2) = self.search_normal(slice, lookup, n1, cosine, 0.01, 20);
         evals += e1 + e2;
         if let CosineMode::Compensated(_) = self.params.cosine {
             // The compensated measure is flatter far from the solution: refine the paper's
