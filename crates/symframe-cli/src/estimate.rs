@@ -144,7 +144,7 @@ fn validate(args: &EstimateArgs) -> Result<()> {
 /// What the estimation stage will run.
 enum Plan {
     /// The symmetry method on this rig (built before loading, so a bad light file fails fast).
-    Symmetry(Rig),
+    Symmetry(Box<Rig>),
     /// A baseline, on every light.
     Baseline(Baseline),
 }
@@ -155,7 +155,7 @@ pub fn run(args: &EstimateArgs) -> Result<(EstimateMaps, Report)> {
     let t0 = Instant::now();
     let ds: Dataset = symframe_io::open_dataset(&args.input)?;
     let plan = match args.method {
-        MethodArg::Symmetry => Plan::Symmetry(
+        MethodArg::Symmetry => Plan::Symmetry(Box::new(
             Rig::new(
                 &ds.lights,
                 RigOptions {
@@ -163,7 +163,7 @@ pub fn run(args: &EstimateArgs) -> Result<(EstimateMaps, Report)> {
                 },
             )
             .with_context(|| ds.source.display().to_string())?,
-        ),
+        )),
         MethodArg::Woodham => Plan::Baseline(Baseline::Woodham),
         MethodArg::WoodhamRobust => Plan::Baseline(Baseline::WoodhamRobust),
         MethodArg::MaxReflectance => Plan::Baseline(Baseline::MaxReflectance),

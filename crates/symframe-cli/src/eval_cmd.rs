@@ -90,6 +90,14 @@ fn p95(values: &[f32], keep: &[bool]) -> Option<f64> {
     Some(v[((0.95 * (v.len() - 1) as f64).round() as usize).min(v.len() - 1)])
 }
 
+/// Whether pixel `p` is inside the mask (every pixel is without one).
+fn inside(mask: Option<&[bool]>, p: usize) -> bool {
+    match mask {
+        Some(m) => m[p],
+        None => true,
+    }
+}
+
 /// The evaluated pixels: inside the mask, with a true normal within `max_angle_deg` of the
 /// view (as [`evaluate`] counts them).
 fn evaluated(gt_normals: &[f32], mask: Option<&[bool]>, max_angle_deg: f64) -> Vec<bool> {
@@ -99,7 +107,7 @@ fn evaluated(gt_normals: &[f32], mask: Option<&[bool]>, max_angle_deg: f64) -> V
         .enumerate()
         .map(|(p, n)| {
             let len = (n[0] as f64).hypot(n[1] as f64).hypot(n[2] as f64);
-            !mask.is_some_and(|m| !m[p]) && len > 0.0 && n[2] as f64 / len >= cos_max
+            inside(mask, p) && len > 0.0 && n[2] as f64 / len >= cos_max
         })
         .collect()
 }
@@ -111,8 +119,8 @@ fn cells(errors: &[f32], reference: &[f32], mask: Option<&[bool]>) -> Vec<Cell> 
         .iter()
         .enumerate()
         .map(|(p, &e)| {
-            let has_ref = reference[p * 3..p * 3 + 3].iter().all(|v| v.is_finite())
-                && !mask.is_some_and(|m| !m[p]);
+            let has_ref =
+                reference[p * 3..p * 3 + 3].iter().all(|v| v.is_finite()) && inside(mask, p);
             match (has_ref, e.is_finite()) {
                 (false, _) => Cell::NoReference,
                 (true, true) => Cell::Error(e),
@@ -189,7 +197,14 @@ pub fn run(args: &EvalArgs) -> Result<EvalReport> {
     if !est.is_dir() {
         bail!("{}: no such estimate folder", est.display());
     }
-    let normals = read_vectors(&est.join("normals.npy"), size)?.1;
+    let n_path = est.join("normals.npy");
+    if !n_path.is_file() {
+        bail!(
+            "{}: missing: not an output folder of symframe estimate",
+            n_path.display()
+        );
+    }
+    let normals = read_vectors(&n_path, size)?.1;
     let t_path = est.join("tangents.npy");
     let tangents = if t_path.is_file() {
         read_vectors(&t_path, size)?.1
