@@ -23,6 +23,25 @@ pub enum Command {
     Estimate(EstimateArgs),
     /// Render a built-in synthetic object, estimate its frames and report the error (no download).
     Demo(DemoArgs),
+    /// Compare an estimate with a synthetic dataset's ground truth: eval.json, error-map
+    /// pictures with colour bars, and a summary table.
+    Eval(EvalArgs),
+}
+
+/// Which estimator `symframe estimate` runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MethodArg {
+    /// BRDF symmetry (Holroyd et al. 2008): normals and tangents, any material.
+    Symmetry,
+    /// Baseline: least-squares Lambertian photometric stereo over unshadowed samples (Woodham
+    /// 1980). Normals only; uses every light.
+    Woodham,
+    /// Baseline: Woodham, refitted without samples more than 2 standard deviations from the mean
+    /// residual (the paper's Figure 4). Normals only; uses every light.
+    WoodhamRobust,
+    /// Baseline: the halfway vector of the brightest sample, refined between samples
+    /// (specular surfaces). Normals only; uses every light.
+    MaxReflectance,
 }
 
 /// Cosine handling in the symmetry distance.
@@ -45,6 +64,12 @@ pub struct EstimateArgs {
     /// Output folder (created; files in it with the same names are replaced).
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Estimation method: the symmetry method, or a baseline to compare it with (baselines
+    /// estimate normals only, use every light given, and ignore the symmetry-only flags:
+    /// --theta-d-max, --min-confidence, --min-anisotropy, --min-domain, --cosine,
+    /// --cosine-power, --no-tangents).
+    #[arg(long, value_enum, default_value_t = MethodArg::Symmetry)]
+    pub method: MethodArg,
     /// Mask image: only pixels where it is non-zero are estimated (default: mask.png beside
     /// the input, if any).
     #[arg(long)]
@@ -94,4 +119,22 @@ pub struct DemoArgs {
     /// Number of lights, uniform over the 65-degree cone.
     #[arg(long, default_value_t = 1000)]
     pub lights: usize,
+}
+
+/// Flags of `symframe eval`.
+#[derive(Debug, Clone, Args)]
+pub struct EvalArgs {
+    /// Synthetic dataset folder (or its `.lp` file) holding `gt_normals.npy`, optionally
+    /// `gt_tangents.npy` and `mask.png`.
+    pub dataset: PathBuf,
+    /// Output folder of `symframe estimate` (`normals.npy`, optionally `tangents.npy`);
+    /// `eval.json`, `normal_error.png` and `tangent_error.png` are written into it.
+    pub estimate: PathBuf,
+    /// Only pixels whose true normal is within this many degrees of the view are evaluated.
+    #[arg(long, default_value_t = 60.0)]
+    pub max_angle: f64,
+    /// Top of the error pictures' colour scale, degrees (default: a round number near the
+    /// 95th percentile of each map; fix it to compare pictures of several runs).
+    #[arg(long)]
+    pub scale_max: Option<f64>,
 }

@@ -12,7 +12,7 @@ use symframe::render::{Scene, TangentField};
 use symframe::rig::uniform_cone_lights;
 use symframe_io::ImageFormat;
 
-use crate::cli::{CosineArg, DemoArgs, EstimateArgs};
+use crate::cli::{CosineArg, DemoArgs, EstimateArgs, MethodArg};
 use crate::progress;
 
 /// Runs the demo.
@@ -62,6 +62,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let est_args = EstimateArgs {
         input: lp.clone(),
         output: estimate_dir.clone(),
+        method: MethodArg::Symmetry,
         mask: None,
         theta_d_max: 65.0,
         min_confidence: 0.0,

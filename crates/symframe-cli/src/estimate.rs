@@ -5,12 +5,13 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
+use symframe::baseline::{estimate_stack_baseline_with, Baseline, BaselineParams};
 use symframe::estimate::PixelCounts;
 use symframe::symmetry::CosineMode;
 use symframe::{estimate_stack, EstimateMaps, EstimatorParams, Rig, RigOptions};
 use symframe_io::{Dataset, DecodeOptions};
 
-use crate::cli::{CosineArg, EstimateArgs};
+use crate::cli::{CosineArg, EstimateArgs, MethodArg};
 use crate::outdir::Staging;
 use crate::progress;
 
@@ -23,10 +24,10 @@ pub struct Report {
     pub input: PathBuf,
     /// The mask used, if any.
     pub mask: Option<PathBuf>,
-    /// The estimation method.
+    /// The estimation method: `symmetry`, `woodham`, `woodham-robust` or `max-reflectance`.
     pub method: &'static str,
-    /// Parameters in force.
-    pub parameters: Parameters,
+    /// Parameters in force (the method's own).
+    pub parameters: MethodParameters,
     /// Light counts.
     pub lights: LightCounts,
     /// Image size.
@@ -41,7 +42,29 @@ pub struct Report {
     pub timings: Timings,
 }
 
-/// Estimation parameters as recorded in the report.
+/// The parameters of whichever method ran, as recorded in the report.
+#[derive(Debug, Serialize)]
+#[serde(untagged)]
+pub enum MethodParameters {
+    /// The symmetry method's.
+    Symmetry(Parameters),
+    /// A baseline's.
+    Baseline(BaselineParameters),
+}
+
+/// Baseline parameters as recorded in the report.
+#[derive(Debug, Serialize)]
+pub struct BaselineParameters {
+    /// Shadow threshold, outlier rule.
+    #[serde(flatten)]
+    pub baseline: BaselineParams,
+    /// 8-bit inputs read as linear.
+    pub linear_8bit: bool,
+    /// Saturation threshold (fraction of the integer maximum).
+    pub saturation: f32,
+}
+
+/// Symmetry-method parameters as recorded in the report.
 #[derive(Debug, Serialize)]
 pub struct Parameters {
     /// Light cone half-angle in halfway space, degrees.
@@ -62,9 +85,9 @@ pub struct Parameters {
 pub struct LightCounts {
     /// Lights in the input.
     pub input: usize,
-    /// Lights inside the cone, used.
+    /// Lights used: inside the cone for the symmetry method, all of them for a baseline.
     pub used: usize,
-    /// Lights outside the cone, dropped.
+    /// Lights outside the cone, dropped (0 for a baseline).
     pub dropped: usize,
 }
 
@@ -73,7 +96,7 @@ pub struct LightCounts {
 pub struct Timings {
     /// Decoding the images.
     pub load_s: f64,
-    /// Building the rig.
+    /// Building the rig (0 for a baseline: it has none).
     pub rig_s: f64,
     /// Estimating.
     pub estimate_s: f64,
@@ -118,19 +141,34 @@ fn validate(args: &EstimateArgs) -> Result<()> {
     Ok(())
 }
 
+/// What the estimation stage will run.
+enum Plan {
+    /// The symmetry method on this rig (built before loading, so a bad light file fails fast).
+    Symmetry(Box<Rig>),
+    /// A baseline, on every light.
+    Baseline(Baseline),
+}
+
 /// Runs the command; returns the maps and the report written.
 pub fn run(args: &EstimateArgs) -> Result<(EstimateMaps, Report)> {
     validate(args)?;
     let t0 = Instant::now();
     let ds: Dataset = symframe_io::open_dataset(&args.input)?;
-    let rig = Rig::new(
-        &ds.lights,
-        RigOptions {
-            theta_d_max_deg: args.theta_d_max,
-            ..RigOptions::default()
-        },
-    )
-    .with_context(|| ds.source.display().to_string())?;
+    let plan = match args.method {
+        MethodArg::Symmetry => Plan::Symmetry(Box::new(
+            Rig::new(
+                &ds.lights,
+                RigOptions {
+                    theta_d_max_deg: args.theta_d_max,
+                    ..RigOptions::default()
+                },
+            )
+            .with_context(|| ds.source.display().to_string())?,
+        )),
+        MethodArg::Woodham => Plan::Baseline(Baseline::Woodham),
+        MethodArg::WoodhamRobust => Plan::Baseline(Baseline::WoodhamRobust),
+        MethodArg::MaxReflectance => Plan::Baseline(Baseline::MaxReflectance),
+    };
     let rig_s = t0.elapsed().as_secs_f64();
 
     let t_load = Instant::now();
@@ -148,30 +186,70 @@ pub fn run(args: &EstimateArgs) -> Result<(EstimateMaps, Report)> {
         Some(p) => Some(symframe_io::read_mask(p, stack.width, stack.height)?),
         None => None,
     };
-
-    let params = EstimatorParams {
-        cosine: match args.cosine {
-            CosineArg::Cross => CosineMode::CrossMultiplied,
-            CosineArg::Raw => CosineMode::Raw,
-            CosineArg::Compensated => CosineMode::Compensated(args.cosine_power),
-        },
-        min_domain: args.min_domain,
-        min_confidence: args.min_confidence,
-        min_anisotropy: args.min_anisotropy,
-        tangents: !args.no_tangents,
-        ..EstimatorParams::default()
-    };
-    let min_domain_used = symframe::Estimator::new(&rig, params).min_domain();
-    let t_est = Instant::now();
-    let n_todo = mask.as_ref().map_or(stack.n_pixels(), |m| m.len()).max(1);
-    let bar = progress::bar(n_todo as u64, "estimating");
-    let maps = estimate_stack(&stack, &rig, mask.as_deref(), params, &|k| {
-        bar.inc(k as u64)
-    })
-    .with_context(|| match &mask_path {
+    // Errors of the estimation stage are about the mask when one is given, else the dataset.
+    let blame = || match &mask_path {
         Some(p) => p.display().to_string(),
         None => ds.source.display().to_string(),
-    })?;
+    };
+
+    let t_est = Instant::now();
+    let n_todo = stack.n_pixels().max(1);
+    let bar = progress::bar(n_todo as u64, "estimating");
+    let (maps, parameters, lights) = match &plan {
+        Plan::Symmetry(rig) => {
+            let params = EstimatorParams {
+                cosine: match args.cosine {
+                    CosineArg::Cross => CosineMode::CrossMultiplied,
+                    CosineArg::Raw => CosineMode::Raw,
+                    CosineArg::Compensated => CosineMode::Compensated(args.cosine_power),
+                },
+                min_domain: args.min_domain,
+                min_confidence: args.min_confidence,
+                min_anisotropy: args.min_anisotropy,
+                tangents: !args.no_tangents,
+                ..EstimatorParams::default()
+            };
+            let min_domain_used = symframe::Estimator::new(rig, params).min_domain();
+            let maps = estimate_stack(&stack, rig, mask.as_deref(), params, &|k| bar.inc(k as u64))
+                .with_context(blame)?;
+            let parameters = MethodParameters::Symmetry(Parameters {
+                theta_d_max_deg: args.theta_d_max,
+                estimator: params,
+                min_domain_used,
+                linear_8bit: args.linear,
+                saturation: args.saturation,
+            });
+            let lights = LightCounts {
+                input: rig.n_input,
+                used: rig.n_used(),
+                dropped: rig.n_dropped(),
+            };
+            (maps, parameters, lights)
+        }
+        &Plan::Baseline(method) => {
+            let params = BaselineParams::default();
+            let maps = estimate_stack_baseline_with(
+                &stack,
+                &ds.lights,
+                mask.as_deref(),
+                method,
+                params,
+                &|k| bar.inc(k as u64),
+            )
+            .with_context(blame)?;
+            let parameters = MethodParameters::Baseline(BaselineParameters {
+                baseline: params,
+                linear_8bit: args.linear,
+                saturation: args.saturation,
+            });
+            let lights = LightCounts {
+                input: ds.lights.len(),
+                used: ds.lights.len(),
+                dropped: 0,
+            };
+            (maps, parameters, lights)
+        }
+    };
     bar.finish_and_clear();
     drop(stack);
     let estimate_s = t_est.elapsed().as_secs_f64();
@@ -180,19 +258,12 @@ pub fn run(args: &EstimateArgs) -> Result<(EstimateMaps, Report)> {
         version: env!("CARGO_PKG_VERSION"),
         input: args.input.clone(),
         mask: mask_path,
-        method: "symmetry",
-        parameters: Parameters {
-            theta_d_max_deg: args.theta_d_max,
-            estimator: params,
-            min_domain_used,
-            linear_8bit: args.linear,
-            saturation: args.saturation,
+        method: match plan {
+            Plan::Symmetry(_) => "symmetry",
+            Plan::Baseline(b) => b.name(),
         },
-        lights: LightCounts {
-            input: rig.n_input,
-            used: rig.n_used(),
-            dropped: rig.n_dropped(),
-        },
+        parameters,
+        lights,
         width: maps.width,
         height: maps.height,
         pixels: maps.counts,
@@ -209,15 +280,16 @@ pub fn run(args: &EstimateArgs) -> Result<(EstimateMaps, Report)> {
     if progress::interactive() {
         let c = &maps.counts;
         eprintln!(
-            "symframe: {} pixels estimated ({} with a tangent), {} discarded, {} culled, {} without data; \
+            "symframe ({}): {} pixels estimated ({} with a tangent), {} discarded, {} culled, {} without data; \
              {} of {} lights used; {:.1} s",
+            report.method,
             c.estimated,
             c.with_tangent,
             c.discarded,
             c.culled,
             c.no_data,
-            rig.n_used(),
-            rig.n_input,
+            report.lights.used,
+            report.lights.input,
             report.timings.total_s
         );
     }

@@ -2,8 +2,10 @@
 //! and maps errors to exit codes (0 success, 1 failure with a one-line message, 2 usage).
 
 mod cli;
+mod colorbar;
 mod demo;
 mod estimate;
+mod eval_cmd;
 mod outdir;
 mod progress;
 
@@ -23,6 +25,7 @@ fn main() {
     let result = match cli.command {
         cli::Command::Estimate(args) => estimate::run(&args).map(|_| ()),
         cli::Command::Demo(args) => demo::run(&args),
+        cli::Command::Eval(args) => eval_cmd::run(&args).map(|_| ()),
     };
     if let Err(e) = result {
         // One line: the context chain joined, outermost first.

@@ -7,8 +7,10 @@
 //! Where things live: [`rig`] (lights, halfway vectors, triangulation, point location),
 //! [`slice`](mod@slice) (per-pixel interpolation), [`symmetry`] (the objective), [`optim`] (Nelder-Mead),
 //! [`estimate`] (the per-pixel estimator and the whole-stack pipeline), [`brdf`] (models),
-//! [`render`] (the synthetic renderer), [`stack`] (the measurement stack).
+//! [`render`] (the synthetic renderer), [`stack`] (the measurement stack), [`baseline`] (the
+//! photometric-stereo and max-reflectance baselines the paper compares against).
 
+pub mod baseline;
 pub mod brdf;
 pub mod error;
 pub mod estimate;
@@ -20,6 +22,7 @@ pub mod slice;
 pub mod stack;
 pub mod symmetry;
 
+pub use baseline::{estimate_stack_baseline, Baseline};
 pub use error::{Error, Result};
 pub use estimate::{
     estimate_stack, EstimateMaps, Estimator, EstimatorParams, Interpolation, PixelStatus,
