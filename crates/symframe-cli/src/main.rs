@@ -6,6 +6,7 @@ mod demo;
 mod estimate;
 mod outdir;
 mod progress;
+mod synth;
 
 use clap::Parser;
 
@@ -23,6 +24,7 @@ fn main() {
     let result = match cli.command {
         cli::Command::Estimate(args) => estimate::run(&args).map(|_| ()),
         cli::Command::Demo(args) => demo::run(&args),
+        cli::Command::Synth(args) => synth::run(&args).map(|_| ()),
     };
     if let Err(e) = result {
         // One line: the context chain joined, outermost first.
