@@ -23,6 +23,8 @@ pub enum Command {
     Estimate(EstimateArgs),
     /// Render a built-in synthetic object, estimate its frames and report the error (no download).
     Demo(DemoArgs),
+    /// Render a synthetic capture with known normals and tangents into an .lp dataset folder.
+    Synth(SynthArgs),
     /// Compare an estimate with a synthetic dataset's ground truth: eval.json, error-map
     /// pictures with colour bars, and a summary table.
     Eval(EvalArgs),
@@ -137,4 +139,87 @@ pub struct EvalArgs {
     /// 95th percentile of each map; fix it to compare pictures of several runs).
     #[arg(long)]
     pub scale_max: Option<f64>,
+}
+
+/// Shapes of `symframe synth`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ShapeArg {
+    /// A sphere filling the frame (head-on).
+    Sphere,
+    /// A cylinder with its axis along image y, filling the frame.
+    Cylinder,
+    /// A flat patch (see --normal-angle, --normal-azimuth, --tangent-angle).
+    Plane,
+    /// Seeded random Gaussian bumps on flat ground, with cast shadows (see --bumps, --relief).
+    Bumps,
+}
+
+/// Image formats of `symframe synth`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FormatArg {
+    /// Float32 OpenEXR: exact, unclipped linear values.
+    Exr,
+    /// 16-bit linear PNG (values clipped to [0, 1]; 1 reads back as saturated).
+    Png16,
+    /// 8-bit sRGB PNG (values clipped to [0, 1]; 1 reads back as saturated).
+    Png8,
+}
+
+/// Flags of `symframe synth`.
+#[derive(Debug, Clone, Args)]
+pub struct SynthArgs {
+    /// Output dataset folder (created; images/, lights.lp, gt_normals.npy, gt_tangents.npy,
+    /// mask.png and scene.json in it are replaced).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// The rendered surface.
+    #[arg(long, value_enum, default_value_t = ShapeArg::Sphere)]
+    pub shape: ShapeArg,
+    /// Image width and height in pixels.
+    #[arg(long, default_value_t = 64)]
+    pub size: usize,
+    /// Reflectance model spec, e.g. `lambertian`, `ward:kd=0.5,ks=0.5,ax=0.1,ay=0.5`,
+    /// `ggx:ax=0.3,ay=0.1`, `merl:path=FILE`.
+    #[arg(long, default_value = "ward")]
+    pub model: String,
+    /// Tangent field: `circular` (default), `radial`, `swirl[:DEG]`, `axial:DEG` (image-plane
+    /// direction, degrees counter-clockwise from x) or `axial:X/Y/Z`.
+    #[arg(long)]
+    pub tangent_field: Option<String>,
+    /// Light rig: `cone:N[:THETA_D]` (N lights uniform over the cone of halfway angles up to
+    /// THETA_D degrees, default 65), `diligent` (96 lights on a 12 x 8 grid within 45 degrees
+    /// of the view) or `lp:PATH` (the lights of an .lp file or dataset).
+    #[arg(long, default_value = "cone:1000")]
+    pub rig: String,
+    /// Plane only: angle between the normal and the view, degrees (default 0).
+    #[arg(long)]
+    pub normal_angle: Option<f64>,
+    /// Plane only: image-plane direction the normal tilts toward, degrees counter-clockwise
+    /// from x (default 0: the normal lies in the x-z plane).
+    #[arg(long)]
+    pub normal_azimuth: Option<f64>,
+    /// Plane only: tangent angle about the normal from the projection of x, degrees
+    /// counter-clockwise as seen from the camera (default 0).
+    #[arg(long)]
+    pub tangent_angle: Option<f64>,
+    /// Bumps only: number of bumps (default 12).
+    #[arg(long)]
+    pub bumps: Option<usize>,
+    /// Bumps only: height scale; at 1 a lone bump's steepest slope is 20 to 40 degrees
+    /// (default 1).
+    #[arg(long)]
+    pub relief: Option<f64>,
+    /// Sensor noise: `none`, `gaussian:SIGMA` (standard deviation, 1 = full scale) or
+    /// `shot:PHOTONS` (photons at full scale).
+    #[arg(long, default_value = "none")]
+    pub noise: String,
+    /// Image file format.
+    #[arg(long, value_enum, default_value_t = FormatArg::Exr)]
+    pub format: FormatArg,
+    /// Scale applied to the rendered radiance before noise and quantisation.
+    #[arg(long, default_value_t = 1.0)]
+    pub exposure: f64,
+    /// Seed of the noise and of the bump layout.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
 }

@@ -8,6 +8,7 @@ mod estimate;
 mod eval_cmd;
 mod outdir;
 mod progress;
+mod synth;
 
 use clap::Parser;
 
@@ -26,6 +27,7 @@ fn main() {
         cli::Command::Estimate(args) => estimate::run(&args).map(|_| ()),
         cli::Command::Demo(args) => demo::run(&args),
         cli::Command::Eval(args) => eval_cmd::run(&args).map(|_| ()),
+        cli::Command::Synth(args) => synth::run(&args).map(|_| ()),
     };
     if let Err(e) = result {
         // One line: the context chain joined, outermost first.
