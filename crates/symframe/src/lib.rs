@@ -7,13 +7,16 @@
 //! Where things live: [`rig`] (lights, halfway vectors, triangulation, point location),
 //! [`slice`](mod@slice) (per-pixel interpolation), [`symmetry`] (the objective), [`optim`] (Nelder-Mead),
 //! [`estimate`] (the per-pixel estimator and the whole-stack pipeline), [`brdf`] (models),
-//! [`render`] (the synthetic renderer), [`stack`] (the measurement stack).
+//! [`render`] (the synthetic renderer), [`stack`] (the measurement stack), [`fit`] (per-pixel
+//! Ward fits in the estimated frames) and [`relight`] (rendering and editing the fits).
 
 pub mod brdf;
 pub mod error;
 pub mod estimate;
 pub mod eval;
+pub mod fit;
 pub mod optim;
+pub mod relight;
 pub mod render;
 pub mod rig;
 pub mod slice;
@@ -22,5 +25,7 @@ pub mod symmetry;
 
 pub use error::{Error, Result};
 pub use estimate::{estimate_stack, EstimateMaps, Estimator, EstimatorParams, PixelStatus};
+pub use fit::{fit_stack, FitMaps, FitParams, WardMaps};
+pub use relight::{Edits, Relighter};
 pub use rig::{Rig, RigOptions};
 pub use stack::Stack;

@@ -26,14 +26,7 @@ fn run_with(
     let lights = uniform_cone_lights(n_lights, 65.0);
     let stack = scene.render_stack(brdf, &lights);
     let rig = Rig::new(&lights, RigOptions::default()).unwrap();
-    let maps = estimate_stack(
-        &stack,
-        &rig,
-        Some(&scene.mask),
-        params,
-        &|_| {},
-    )
-    .unwrap();
+    let maps = estimate_stack(&stack, &rig, Some(&scene.mask), params, &|_| {}).unwrap();
     let e = evaluate(
         &maps.normals,
         &maps.tangents,
