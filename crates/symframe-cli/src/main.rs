@@ -4,8 +4,10 @@
 mod cli;
 mod demo;
 mod estimate;
+mod fit_cmd;
 mod outdir;
 mod progress;
+mod relight_cmd;
 
 use clap::Parser;
 
@@ -22,6 +24,8 @@ fn main() {
     }
     let result = match cli.command {
         cli::Command::Estimate(args) => estimate::run(&args).map(|_| ()),
+        cli::Command::Fit(args) => fit_cmd::run(&args).map(|_| ()),
+        cli::Command::Relight(args) => relight_cmd::run(&args).map(|_| ()),
         cli::Command::Demo(args) => demo::run(&args),
     };
     if let Err(e) = result {
