@@ -310,7 +310,11 @@ impl<'a> Estimator<'a> {
             n = m;
         }
         let term_n = self.term(slice, lookup, Symmetry::N, n, DVec3::X, cosine);
-        if term_n.count < self.min_domain || term_n.denominator <= 0.0 || n.z <= 0.0 {
+        if term_n.count < self.min_domain
+            || term_n.denominator <= 0.0
+            || n.z <= 0.0
+            || !centre_observed(lookup, n)
+        {
             return PixelEstimate {
                 evals,
                 ..PixelEstimate::empty(PixelStatus::Discarded)
@@ -446,6 +450,23 @@ impl<'a> Estimator<'a> {
         let fit = 1.0 / (1.0 + residual / 0.02);
         (coverage * fit) as f32
     }
+}
+
+/// Half-angle of the neighbourhood of `h = n` that must be observed for a normal to count as
+/// within the rig's reach (degrees).
+const CENTRE_RADIUS_DEG: f64 = 2.0;
+
+/// Whether the slice has data at `h = n` and around it in four directions: the centre of the
+/// symmetries must be observed. A normal beyond the rig's reach (a rig within 45 degrees of the
+/// view has halfway vectors within ~22) otherwise settles at the edge of the sampled region with
+/// a small but meaningless distance: a clamped guess, which method.md says never to return.
+fn centre_observed<L: SliceLookup>(lookup: &L, n: DVec3) -> bool {
+    let (u, w) = tangent_basis(n);
+    let (s, c) = CENTRE_RADIUS_DEG.to_radians().sin_cos();
+    lookup.value(n).is_some()
+        && [u, -u, w, -w]
+            .iter()
+            .all(|&a| lookup.value(n * c + a * s).is_some())
 }
 
 /// Counts of what happened to the pixels of a stack.
