@@ -234,7 +234,10 @@ fn normals_beyond_the_rigs_reach_are_discarded() {
     }
     eprintln!("near {near_ok}/{near} ok, far {far_returned}/{far} returned");
     // Measured: 14 of 16 within 2 degrees, 2 discarded (sparse rig, small domains).
-    assert!(near_ok as f64 >= 0.85 * near as f64, "near {near_ok}/{near}");
+    assert!(
+        near_ok as f64 >= 0.85 * near as f64,
+        "near {near_ok}/{near}"
+    );
     // Discarded, or (3 of 604 pixels measured) returned with a confidence that says so.
     assert!(
         far_returned * 100 <= far,
