@@ -10,12 +10,13 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
+use symframe::baseline::{baseline_lights, Baseline, BaselineParams};
 use symframe::estimate::PixelCounts;
 use symframe::symmetry::CosineMode;
 use symframe::{EstimateMaps, EstimatorParams, Rig, RigOptions};
 use symframe_io::{CacheInfo, CacheOptions, Dataset, DecodeOptions, TileCache};
 
-use crate::cli::{CosineArg, EstimateArgs};
+use crate::cli::{CosineArg, EstimateArgs, MethodArg};
 use crate::outdir::Staging;
 use crate::progress;
 use crate::tiled::{self, Interrupted};
@@ -29,10 +30,10 @@ pub struct Report {
     pub input: PathBuf,
     /// The mask used, if any.
     pub mask: Option<PathBuf>,
-    /// The estimation method.
+    /// The estimation method: `symmetry`, `woodham`, `woodham-robust` or `max-reflectance`.
     pub method: &'static str,
-    /// Parameters in force.
-    pub parameters: Parameters,
+    /// Parameters in force (the method's own).
+    pub parameters: MethodParameters,
     /// Light counts.
     pub lights: LightCounts,
     /// Image size.
@@ -79,7 +80,29 @@ pub struct CacheReport {
     pub kept: bool,
 }
 
-/// Estimation parameters as recorded in the report.
+/// The parameters of whichever method ran, as recorded in the report.
+#[derive(Debug, Serialize)]
+#[serde(untagged)]
+pub enum MethodParameters {
+    /// The symmetry method's.
+    Symmetry(Parameters),
+    /// A baseline's.
+    Baseline(BaselineParameters),
+}
+
+/// Baseline parameters as recorded in the report.
+#[derive(Debug, Serialize)]
+pub struct BaselineParameters {
+    /// Shadow threshold, outlier rule.
+    #[serde(flatten)]
+    pub baseline: BaselineParams,
+    /// 8-bit inputs read as linear.
+    pub linear_8bit: bool,
+    /// Saturation threshold (fraction of the integer maximum).
+    pub saturation: f32,
+}
+
+/// Symmetry-method parameters as recorded in the report.
 #[derive(Debug, Serialize)]
 pub struct Parameters {
     /// Light cone half-angle in halfway space, degrees.
@@ -100,9 +123,9 @@ pub struct Parameters {
 pub struct LightCounts {
     /// Lights in the input.
     pub input: usize,
-    /// Lights inside the cone, used.
+    /// Lights used: inside the cone for the symmetry method, all of them for a baseline.
     pub used: usize,
-    /// Lights outside the cone, dropped.
+    /// Lights outside the cone, dropped (0 for a baseline).
     pub dropped: usize,
 }
 
@@ -111,7 +134,7 @@ pub struct LightCounts {
 pub struct Timings {
     /// Decoding the images into the tile cache, or opening it.
     pub load_s: f64,
-    /// Building the rig.
+    /// Building the rig (0 for a baseline: it has none).
     pub rig_s: f64,
     /// Estimating.
     pub estimate_s: f64,
@@ -164,6 +187,14 @@ fn validate(args: &EstimateArgs) -> Result<()> {
     Ok(())
 }
 
+/// What the estimation stage runs.
+enum Plan {
+    /// The symmetry method on this rig.
+    Symmetry(Box<Rig>),
+    /// A baseline, on every light (unit directions).
+    Baseline(Baseline, Vec<glam::DVec3>),
+}
+
 /// What a run produced.
 #[derive(Debug)]
 pub enum Done {
@@ -209,14 +240,27 @@ fn estimator_params(args: &EstimateArgs) -> EstimatorParams {
 fn run_tiled(args: &EstimateArgs) -> Result<Done> {
     let t0 = Instant::now();
     let ds: Dataset = symframe_io::open_dataset(&args.input)?;
-    let rig = Rig::new(
-        &ds.lights,
-        RigOptions {
-            theta_d_max_deg: args.theta_d_max,
-            ..RigOptions::default()
-        },
-    )
-    .with_context(|| ds.source.display().to_string())?;
+    // The rig (or the baseline's unit lights) before decoding, so a bad light file fails fast.
+    let plan = match args.method {
+        MethodArg::Symmetry => Plan::Symmetry(Box::new(
+            Rig::new(
+                &ds.lights,
+                RigOptions {
+                    theta_d_max_deg: args.theta_d_max,
+                    ..RigOptions::default()
+                },
+            )
+            .with_context(|| ds.source.display().to_string())?,
+        )),
+        m => Plan::Baseline(
+            match m {
+                MethodArg::Woodham => Baseline::Woodham,
+                MethodArg::WoodhamRobust => Baseline::WoodhamRobust,
+                _ => Baseline::MaxReflectance,
+            },
+            baseline_lights(&ds.lights).with_context(|| ds.source.display().to_string())?,
+        ),
+    };
     let rig_s = t0.elapsed().as_secs_f64();
     tiled::install_interrupt_handler();
 
@@ -255,18 +299,32 @@ fn run_tiled(args: &EstimateArgs) -> Result<Done> {
         Some(p) => p.display().to_string(),
         None => ds.source.display().to_string(),
     };
+    let params = estimator_params(args);
+    let baseline_params = BaselineParams::default();
+    let method = match &plan {
+        Plan::Symmetry(rig) => tiled::Method::Symmetry { rig, params },
+        Plan::Baseline(b, lights) => {
+            baseline_params.validate()?;
+            tiled::Method::Baseline {
+                method: *b,
+                lights,
+                params: baseline_params,
+            }
+        }
+    };
+    let n_expected = match &plan {
+        Plan::Symmetry(rig) => rig.n_input,
+        Plan::Baseline(_, lights) => lights.len(),
+    };
     symframe::estimate::check_inputs(
         grid.width,
         grid.height,
         cache.n_lights(),
-        &rig,
+        n_expected,
         mask.as_deref(),
     )
     .with_context(blame)?;
-
-    let params = estimator_params(args);
-    let min_domain_used = symframe::Estimator::new(&rig, params).min_domain();
-    let job = tiled::job_fingerprint(&cache, &rig, &params, min_domain_used, mask.as_deref())?;
+    let job = tiled::job_fingerprint(&cache, &method, mask.as_deref())?;
     let tiles_dir = args.output.join(tiled::TILES_DIR);
     let my_tiles = match args.tiles {
         Some(s) => tiled::shard_tiles(grid.n_tiles(), s.k, s.n),
@@ -282,8 +340,7 @@ fn run_tiled(args: &EstimateArgs) -> Result<Done> {
     let t_est = Instant::now();
     let counts = tiled::estimate_tiles(
         &cache,
-        &rig,
-        params,
+        &method,
         mask.as_deref(),
         job,
         &my_tiles,
@@ -294,23 +351,44 @@ fn run_tiled(args: &EstimateArgs) -> Result<Done> {
     let cache_path = cache.path().to_path_buf();
     drop(cache);
 
+    let (parameters, lights) = match &plan {
+        Plan::Symmetry(rig) => (
+            MethodParameters::Symmetry(Parameters {
+                theta_d_max_deg: args.theta_d_max,
+                estimator: params,
+                min_domain_used: symframe::Estimator::new(rig, params).min_domain(),
+                linear_8bit: args.linear,
+                saturation: args.saturation,
+            }),
+            LightCounts {
+                input: rig.n_input,
+                used: rig.n_used(),
+                dropped: rig.n_dropped(),
+            },
+        ),
+        Plan::Baseline(_, l) => (
+            MethodParameters::Baseline(BaselineParameters {
+                baseline: baseline_params,
+                linear_8bit: args.linear,
+                saturation: args.saturation,
+            }),
+            LightCounts {
+                input: l.len(),
+                used: l.len(),
+                dropped: 0,
+            },
+        ),
+    };
     let mut report = Report {
         version: env!("CARGO_PKG_VERSION"),
         input: args.input.clone(),
         mask: mask_path,
-        method: "symmetry",
-        parameters: Parameters {
-            theta_d_max_deg: args.theta_d_max,
-            estimator: params,
-            min_domain_used,
-            linear_8bit: args.linear,
-            saturation: args.saturation,
+        method: match &plan {
+            Plan::Symmetry(_) => "symmetry",
+            Plan::Baseline(b, _) => b.name(),
         },
-        lights: LightCounts {
-            input: rig.n_input,
-            used: rig.n_used(),
-            dropped: rig.n_dropped(),
-        },
+        parameters,
+        lights,
         width: grid.width,
         height: grid.height,
         pixels: PixelCounts::default(),
@@ -393,15 +471,16 @@ fn run_tiled(args: &EstimateArgs) -> Result<Done> {
     if progress::interactive() {
         let c = &maps.counts;
         eprintln!(
-            "symframe: {} pixels estimated ({} with a tangent), {} discarded, {} culled, {} without data; \
+            "symframe ({}): {} pixels estimated ({} with a tangent), {} discarded, {} culled, {} without data; \
              {} of {} lights used; {:.1} s",
+            report.method,
             c.estimated,
             c.with_tangent,
             c.discarded,
             c.culled,
             c.no_data,
-            rig.n_used(),
-            rig.n_input,
+            report.lights.used,
+            report.lights.input,
             report.timings.total_s
         );
     }

@@ -15,15 +15,17 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
+use glam::DVec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use symframe::baseline::{baseline_pixel, Baseline, BaselineParams};
 use symframe::estimate::PixelCounts;
 use symframe::{
     estimate_pixels, BlockScratch, EstimateMaps, Estimator, EstimatorParams, PixelRecord, Rig,
 };
 use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{read_tile_result, tile_result_done, tile_result_path, write_tile_result};
-use symframe_io::{TileCache, TileGrid};
+use symframe_io::{TileCache, TileGrid, TileView};
 
 use crate::cli::MergeArgs;
 use crate::progress;
@@ -86,15 +88,92 @@ pub fn peak_rss_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
+/// What estimates the tiles: the symmetry method on a rig, or a baseline on every light.
+#[derive(Debug, Clone, Copy)]
+pub enum Method<'a> {
+    /// The symmetry method.
+    Symmetry {
+        /// The rig (lights inside the cone).
+        rig: &'a Rig,
+        /// The estimator's parameters.
+        params: EstimatorParams,
+    },
+    /// A baseline.
+    Baseline {
+        /// Which.
+        method: Baseline,
+        /// Unit light directions, one per input light.
+        lights: &'a [DVec3],
+        /// Its parameters.
+        params: BaselineParams,
+    },
+}
+
+/// Per-thread buffers of [`Method::estimate_tile`].
+enum Scratch {
+    Symmetry(Box<BlockScratch>),
+    Baseline { samples: Vec<f32>, buf: Vec<f64> },
+}
+
+impl Method<'_> {
+    fn scratch(&self) -> Scratch {
+        match self {
+            Method::Symmetry { rig, .. } => Scratch::Symmetry(Box::new(BlockScratch::new(rig))),
+            Method::Baseline { lights, .. } => Scratch::Baseline {
+                samples: vec![0.0; lights.len() * 3],
+                buf: Vec::with_capacity(lights.len()),
+            },
+        }
+    }
+
+    /// The records of one tile (pixel `k` estimated when `inside(k)`), computed exactly as the
+    /// in-memory pipelines compute them.
+    fn estimate_tile(
+        &self,
+        estimator: Option<&Estimator>,
+        tile: TileView,
+        inside: impl Fn(usize) -> bool,
+        scratch: &mut Scratch,
+    ) -> Vec<PixelRecord> {
+        match (self, scratch) {
+            (Method::Symmetry { rig, .. }, Scratch::Symmetry(scratch)) => {
+                let gather = tile.gatherer(&rig.input_index);
+                estimate_pixels(
+                    estimator.expect("the symmetry method has an estimator"),
+                    tile.n_pixels(),
+                    inside,
+                    |k, out| gather.pixel(k, out),
+                    scratch,
+                )
+            }
+            (
+                &Method::Baseline {
+                    method,
+                    lights,
+                    params,
+                },
+                Scratch::Baseline { samples, buf },
+            ) => {
+                let all: Vec<usize> = (0..lights.len()).collect();
+                let gather = tile.gatherer(&all);
+                (0..tile.n_pixels())
+                    .map(|k| {
+                        if !inside(k) {
+                            return PixelRecord::MASKED;
+                        }
+                        gather.pixel(k, samples);
+                        baseline_pixel(method, samples, lights, &params, buf).record()
+                    })
+                    .collect()
+            }
+            _ => unreachable!("scratch of another method"),
+        }
+    }
+}
+
 /// The fingerprint of everything a tile's results depend on: the cached inputs, the image and
-/// tile sizes, the lights and the cone, the estimator's parameters, the mask and the versions.
-pub fn job_fingerprint(
-    cache: &TileCache,
-    rig: &Rig,
-    params: &EstimatorParams,
-    min_domain: u32,
-    mask: Option<&[bool]>,
-) -> Result<u64> {
+/// tile sizes, the method with its lights and parameters, the mask and the versions.
+pub fn job_fingerprint(cache: &TileCache, method: &Method, mask: Option<&[bool]>) -> Result<u64> {
     let g = cache.grid();
     let mut f = Fingerprint::new();
     f.str("symframe job")
@@ -103,17 +182,33 @@ pub fn job_fingerprint(
         .u64(cache.fingerprint())
         .u64(g.width as u64)
         .u64(g.height as u64)
-        .u64(g.tile as u64)
-        .f64(rig.theta_d_max_deg)
-        .u64(rig.resample.size as u64)
-        .u64(rig.n_input as u64)
-        .str(&serde_json::to_string(params)?)
-        .u64(min_domain as u64);
-    for &i in &rig.input_index {
-        f.u64(i as u64);
-    }
-    for l in &rig.lights_in_camera {
-        f.f64(l.x).f64(l.y).f64(l.z);
+        .u64(g.tile as u64);
+    match method {
+        Method::Symmetry { rig, params } => {
+            let min_domain = Estimator::new(rig, *params).min_domain();
+            f.str("symmetry")
+                .f64(rig.theta_d_max_deg)
+                .u64(rig.resample.size as u64)
+                .u64(rig.n_input as u64)
+                .str(&serde_json::to_string(params)?)
+                .u64(min_domain as u64);
+            for &i in &rig.input_index {
+                f.u64(i as u64);
+            }
+            for l in &rig.lights_in_camera {
+                f.f64(l.x).f64(l.y).f64(l.z);
+            }
+        }
+        Method::Baseline {
+            method,
+            lights,
+            params,
+        } => {
+            f.str(method.name()).str(&serde_json::to_string(params)?);
+            for l in lights.iter() {
+                f.f64(l.x).f64(l.y).f64(l.z);
+            }
+        }
     }
     match mask {
         None => f.u64(0),
@@ -161,11 +256,9 @@ fn clean_temporaries(dir: &Path) {
 /// Estimates `tiles` of the cache into result files in `dir`, skipping those already done for
 /// this job. Stops starting tiles once [`STOP`] is set (then returns [`Interrupted`] if any
 /// tile is left); `stop_after` sets it after that many tiles of this run.
-#[allow(clippy::too_many_arguments)]
 pub fn estimate_tiles(
     cache: &TileCache,
-    rig: &Rig,
-    params: EstimatorParams,
+    method: &Method,
     mask: Option<&[bool]>,
     job: u64,
     tiles: &[usize],
@@ -184,29 +277,29 @@ pub fn estimate_tiles(
     if stop_after == Some(0) {
         STOP.store(true, Ordering::SeqCst);
     }
-    let estimator = Estimator::new(rig, params);
+    let estimator = match method {
+        Method::Symmetry { rig, params } => Some(Estimator::new(rig, *params)),
+        Method::Baseline { .. } => None,
+    };
     let bar = progress::bar(tiles.len() as u64, "tiles");
     bar.inc(reused as u64);
     let finished = AtomicUsize::new(0);
     let results: Vec<Result<bool>> = todo
         .par_iter()
         .map_init(
-            || BlockScratch::new(rig),
+            || method.scratch(),
             |scratch, &t| -> Result<bool> {
                 if STOP.load(Ordering::SeqCst) {
                     return Ok(false);
                 }
                 let pixels: Vec<usize> = grid.pixels(t).collect();
-                let tile = cache.tile(t);
-                let gather = tile.gatherer(&rig.input_index);
-                let records = estimate_pixels(
-                    &estimator,
-                    tile.n_pixels(),
+                let records = method.estimate_tile(
+                    estimator.as_ref(),
+                    cache.tile(t),
                     |k| match mask {
                         Some(m) => m[pixels[k]],
                         None => true,
                     },
-                    |k, out| gather.pixel(k, out),
                     scratch,
                 );
                 cache.release(t);

@@ -6,6 +6,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use symframe::baseline::{estimate_stack_baseline, Baseline};
 use symframe::brdf::ward::Ward;
 use symframe::render::{Scene, TangentField};
 use symframe::rig::uniform_cone_lights;
@@ -163,6 +164,47 @@ fn tiled_result_equals_the_in_memory_result_exactly() {
         let cache = names(&out.join(".symframe-cache"));
         assert!(cache.iter().any(|n| n.ends_with(".stack")), "{cache:?}");
     }
+}
+
+#[test]
+fn tiled_baselines_equal_the_in_memory_baselines_exactly() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = dataset(&tmp.path().join("data"));
+    let ds = symframe_io::open_dataset(&lp).unwrap();
+    let stack = symframe_io::load_stack(&ds, &DecodeOptions::default(), &|| {}).unwrap();
+    let mask = symframe_io::read_mask(ds.mask.as_ref().unwrap(), SIZE, SIZE).unwrap();
+    let cache = tmp.path().join("cache");
+    for b in Baseline::ALL {
+        let out = tmp.path().join(b.name());
+        ok(&estimate(
+            &lp,
+            &out,
+            &[
+                "--method",
+                b.name(),
+                "--cache",
+                cache.to_str().unwrap(),
+                "--decode-memory",
+                "1",
+            ],
+        ));
+        let maps = estimate_stack_baseline(&stack, &ds.lights, Some(&mask), b, &|_| {}).unwrap();
+        for (name, want) in MAPS.iter().zip([
+            &maps.normals,
+            &maps.tangents,
+            &maps.confidence,
+            &maps.anisotropy,
+        ]) {
+            let (_, got) = read_npy_f32(&out.join(name)).unwrap();
+            assert!(same_bits(&got, want), "{name} ({b})");
+        }
+        let r = report(&out);
+        assert_eq!(r["method"], b.name());
+        assert_eq!(r["pixels"], serde_json::to_value(maps.counts).unwrap());
+    }
+    // One cache served the three: decoded once.
+    let r = report(&tmp.path().join("max-reflectance"));
+    assert_eq!(r["cache"]["hit"], true, "{r}");
 }
 
 #[test]

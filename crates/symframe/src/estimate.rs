@@ -299,7 +299,7 @@ impl<'a> Estimator<'a> {
             0.12,
             self.params.max_normal_evals,
         );
-        let (mut n, e2) = self.search_normal(slice, lookup, n1, cosine, 0.01, 40);
+        let (mut n, e2) = self.search_normal(slice, lookup, n1, cosine, 0.01, 20);
         evals += e1 + e2;
         if let CosineMode::Compensated(_) = self.params.cosine {
             // The compensated measure is flatter far from the solution: refine the paper's
@@ -310,7 +310,11 @@ impl<'a> Estimator<'a> {
             n = m;
         }
         let term_n = self.term(slice, lookup, Symmetry::N, n, DVec3::X, cosine);
-        if term_n.count < self.min_domain || term_n.denominator <= 0.0 || n.z <= 0.0 {
+        if term_n.count < self.min_domain
+            || term_n.denominator <= 0.0
+            || n.z <= 0.0
+            || !centre_observed(lookup, n)
+        {
             return PixelEstimate {
                 evals,
                 ..PixelEstimate::empty(PixelStatus::Discarded)
@@ -446,6 +450,23 @@ impl<'a> Estimator<'a> {
         let fit = 1.0 / (1.0 + residual / 0.02);
         (coverage * fit) as f32
     }
+}
+
+/// Half-angle of the neighbourhood of `h = n` that must be observed for a normal to count as
+/// within the rig's reach (degrees).
+const CENTRE_RADIUS_DEG: f64 = 2.0;
+
+/// Whether the slice has data at `h = n` and around it in four directions: the centre of the
+/// symmetries must be observed. A normal beyond the rig's reach (a rig within 45 degrees of the
+/// view has halfway vectors within ~22) otherwise settles at the edge of the sampled region with
+/// a small but meaningless distance: a clamped guess, which method.md says never to return.
+fn centre_observed<L: SliceLookup>(lookup: &L, n: DVec3) -> bool {
+    let (u, w) = tangent_basis(n);
+    let (s, c) = CENTRE_RADIUS_DEG.to_radians().sin_cos();
+    lookup.value(n).is_some()
+        && [u, -u, w, -w]
+            .iter()
+            .all(|&a| lookup.value(n * c + a * s).is_some())
 }
 
 /// Counts of what happened to the pixels of a stack.
@@ -657,7 +678,7 @@ pub fn estimate_stack(
     params: EstimatorParams,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<EstimateMaps> {
-    check_inputs(stack.width, stack.height, stack.n_lights, rig, mask)?;
+    check_inputs(stack.width, stack.height, stack.n_lights, rig.n_input, mask)?;
     let estimator = Estimator::new(rig, params);
     let (w, h) = (stack.width, stack.height);
     let band_len = ROWS_PER_TASK * w * stack.n_lights * 3;
@@ -690,19 +711,20 @@ pub fn estimate_stack(
     Ok(maps)
 }
 
-/// Checks that a stack of `width x height` pixels and `n_lights` lights fits `rig` and `mask`
-/// (the checks of [`estimate_stack`], for pipelines that read the stack piecewise).
+/// Checks that a stack of `width x height` pixels and `n_lights` lights fits an estimator
+/// expecting `expected_lights` lights (a rig's `n_input`) and `mask` (the checks of
+/// [`estimate_stack`], for pipelines that read the stack piecewise).
 pub fn check_inputs(
     width: usize,
     height: usize,
     n_lights: usize,
-    rig: &Rig,
+    expected_lights: usize,
     mask: Option<&[bool]>,
 ) -> Result<()> {
-    if n_lights != rig.n_input {
+    if n_lights != expected_lights {
         return Err(Error::LightCountMismatch {
             stack: n_lights,
-            rig: rig.n_input,
+            rig: expected_lights,
         });
     }
     if let Some(m) = mask {
