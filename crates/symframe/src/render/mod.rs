@@ -1,5 +1,13 @@
 //! The synthetic renderer: scenes with known normals and tangents, rendered with any
-//! [`Brdf`] under distant point lights and an orthographic camera. Ground truth for every test.
+//! [`Brdf`] under distant point lights and an orthographic camera. Ground truth for every test
+//! and for `symframe synth`.
+//!
+//! - Scenes ([`Scene`]): [`Scene::sphere`], [`Scene::cylinder`], [`Scene::plane`] /
+//!   [`Scene::tilted_plane`] (see [`plane_frame`]), and height fields ([`Scene::height_field`],
+//!   [`Scene::bumps`], [`Scene::from_bumps`]) which cast shadows ([`shadow`]).
+//! - Tangent fields ([`TangentField`]): circular, axial, radial, swirl, or any function.
+//! - Light rigs ([`rigs`]): the uniform cone, a DiLiGenT-like 96-light grid.
+//! - Degradations ([`noise`]): exposure, Gaussian and shot noise, clipping, quantisation.
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -7,34 +15,18 @@ use rayon::prelude::*;
 use crate::brdf::{Brdf, TangentAxis};
 use crate::stack::Stack;
 
-/// How the tangent direction varies over a surface.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum TangentField {
-    /// Circles around the view axis: `t = normalize(z x n)` (a hue wheel in the tangent map).
-    Circular,
-    /// A fixed camera-frame direction projected onto each tangent plane.
-    Axial(DVec3),
-}
+pub mod noise;
+pub mod rigs;
+pub mod shadow;
+mod shapes;
+mod tangent;
 
-impl TangentField {
-    /// The unit tangent at normal `n`.
-    pub fn tangent_at(&self, n: DVec3) -> DVec3 {
-        let fallback = |d: DVec3| {
-            let p = d - d.dot(n) * n;
-            p.try_normalize()
-                .unwrap_or_else(|| (DVec3::X - n.x * n).normalize())
-        };
-        match *self {
-            TangentField::Circular => DVec3::Z
-                .cross(n)
-                .try_normalize()
-                .unwrap_or_else(|| fallback(DVec3::X)),
-            TangentField::Axial(d) => fallback(d),
-        }
-    }
-}
+pub use noise::{Degradation, Noise, Rng};
+pub use shapes::{plane_frame, Bump, BumpParams};
+pub use tangent::{image_position, project_to_tangent_plane, TangentField, TangentFn};
 
-/// A surface seen by the camera: per pixel, a normal and a tangent (camera frame), inside a mask.
+/// A surface seen by the camera: per pixel, a normal and a tangent (camera frame), inside a
+/// mask, and for height fields the surface height (which casts shadows).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scene {
     /// Width in pixels.
@@ -47,50 +39,13 @@ pub struct Scene {
     pub normals_in_camera: Vec<DVec3>,
     /// Unit tangents, perpendicular to the normals (meaningful inside the mask).
     pub tangents_in_camera: Vec<DVec3>,
+    /// Surface heights at pixel centres in pixel units, row-major, for height fields. When
+    /// present, [`Scene::render`] tests cast shadows ([`shadow`]); set to `None` to render
+    /// without them.
+    pub heights: Option<Vec<f64>>,
 }
 
 impl Scene {
-    /// A sphere filling a `size x size` image (pixel centres inside the disc), seen head-on.
-    pub fn sphere(size: usize, field: TangentField) -> Self {
-        let r = size as f64 / 2.0;
-        let n = size * size;
-        let mut scene = Self {
-            width: size,
-            height: size,
-            mask: vec![false; n],
-            normals_in_camera: vec![DVec3::Z; n],
-            tangents_in_camera: vec![DVec3::X; n],
-        };
-        for y in 0..size {
-            for x in 0..size {
-                let nx = (x as f64 + 0.5 - r) / r;
-                let ny = -(y as f64 + 0.5 - r) / r; // image up is +y
-                let rr = nx * nx + ny * ny;
-                if rr < 1.0 {
-                    let p = y * size + x;
-                    let normal = DVec3::new(nx, ny, (1.0 - rr).sqrt());
-                    scene.mask[p] = true;
-                    scene.normals_in_camera[p] = normal;
-                    scene.tangents_in_camera[p] = field.tangent_at(normal);
-                }
-            }
-        }
-        scene
-    }
-
-    /// A flat `width x height` patch with one normal and tangent everywhere.
-    pub fn plane(width: usize, height: usize, normal: DVec3, tangent: DVec3) -> Self {
-        let n = normal.normalize();
-        let t = TangentField::Axial(tangent).tangent_at(n);
-        Self {
-            width,
-            height,
-            mask: vec![true; width * height],
-            normals_in_camera: vec![n; width * height],
-            tangents_in_camera: vec![t; width * height],
-        }
-    }
-
     /// Number of pixels.
     pub fn n_pixels(&self) -> usize {
         self.width * self.height
@@ -131,10 +86,15 @@ impl Scene {
     }
 
     /// Renders the image under one distant light of unit intensity: interleaved linear RGB,
-    /// `radiance = f(l, v) (n.l)`, zero outside the mask and in attached shadow.
+    /// `radiance = f(l, v) (n.l)`, zero outside the mask, in attached shadow (`n.l <= 0`) and,
+    /// for scenes with [`Scene::heights`], in cast shadow ([`shadow`]).
     pub fn render(&self, brdf: &dyn Brdf, light_in_camera: DVec3) -> Vec<f32> {
         let l = light_in_camera.normalize();
         let axis = brdf.tangent_axis();
+        let tracer = self
+            .heights
+            .as_deref()
+            .map(|h| shadow::ShadowTracer::new(h, self.width, self.height));
         let mut out = vec![0.0f32; self.n_pixels() * 3];
         for (p, px) in out.chunks_exact_mut(3).enumerate() {
             if !self.mask[p] {
@@ -142,7 +102,7 @@ impl Scene {
             }
             let (x, y, n) = self.local_axes(p, axis);
             let n_dot_l = n.dot(l);
-            if n_dot_l <= 0.0 {
+            if n_dot_l <= 0.0 || tracer.as_ref().is_some_and(|t| t.shadowed(p, l)) {
                 continue;
             }
             let to_local = |d: DVec3| DVec3::new(d.dot(x), d.dot(y), d.dot(n));
@@ -154,11 +114,39 @@ impl Scene {
         out
     }
 
+    /// Renders image number `index` of a capture: [`Scene::render`] under `light`, then
+    /// `degradation` applied with that index (so a stack is deterministic in the seed whatever
+    /// order its images are rendered in).
+    pub fn render_degraded(
+        &self,
+        brdf: &dyn Brdf,
+        light_in_camera: DVec3,
+        index: usize,
+        degradation: &Degradation,
+    ) -> Vec<f32> {
+        let mut img = self.render(brdf, light_in_camera);
+        degradation.apply(&mut img, index);
+        img
+    }
+
     /// Renders the whole stack (one image per light), in parallel over lights.
     pub fn render_stack(&self, brdf: &dyn Brdf, lights_in_camera: &[DVec3]) -> Stack {
+        self.render_stack_degraded(brdf, lights_in_camera, &Degradation::default())
+    }
+
+    /// Renders the whole stack with a degradation (image `i` uses index `i`; see
+    /// [`Scene::render_degraded`]), in parallel over lights. To drop clipped samples as a
+    /// dataset reader would, apply [`noise::mark_saturated`] to the images instead.
+    pub fn render_stack_degraded(
+        &self,
+        brdf: &dyn Brdf,
+        lights_in_camera: &[DVec3],
+        degradation: &Degradation,
+    ) -> Stack {
         let images: Vec<Vec<f32>> = lights_in_camera
             .par_iter()
-            .map(|&l| self.render(brdf, l))
+            .enumerate()
+            .map(|(i, &l)| self.render_degraded(brdf, l, i, degradation))
             .collect();
         let mut stack = Stack::zeros(self.width, self.height, lights_in_camera.len());
         for (i, img) in images.iter().enumerate() {
@@ -217,5 +205,25 @@ mod tests {
         // Behind the surface: black.
         let img = s.render(&Constant, DVec3::new(0.0, -0.8, 0.6));
         assert!(img.iter().all(|&v| v == 0.0));
+    }
+
+    #[test]
+    fn degraded_stacks_are_deterministic_per_image() {
+        let s = Scene::sphere(12, TangentField::Circular);
+        let lights = rigs::diligent_lights();
+        let d = Degradation {
+            noise: Noise::Gaussian { sigma: 0.01 },
+            seed: 9,
+            ..Degradation::default()
+        };
+        let a = s.render_stack_degraded(&Constant, &lights, &d);
+        let b = s.render_stack_degraded(&Constant, &lights, &d);
+        assert_eq!(a, b);
+        assert_eq!(a.image(5), s.render_degraded(&Constant, lights[5], 5, &d));
+        assert_ne!(a, s.render_stack(&Constant, &lights));
+        assert_eq!(
+            s.render_stack_degraded(&Constant, &lights, &Degradation::default()),
+            s.render_stack(&Constant, &lights)
+        );
     }
 }
