@@ -21,8 +21,14 @@ pub struct Cli {
 pub enum Command {
     /// Estimate normal and tangent maps from a capture (.lp file or DiLiGenT-style folder).
     Estimate(EstimateArgs),
+    /// Fit an anisotropic Ward BRDF per pixel in estimated frames (for relighting and editing).
+    Fit(FitArgs),
+    /// Render fitted Ward maps under new lights, optionally edited.
+    Relight(RelightArgs),
     /// Render a built-in synthetic object, estimate its frames and report the error (no download).
     Demo(DemoArgs),
+    /// Render a synthetic capture with known normals and tangents into an .lp dataset folder.
+    Synth(SynthArgs),
     /// Compare an estimate with a synthetic dataset's ground truth: eval.json, error-map
     /// pictures with colour bars, and a summary table.
     Eval(EvalArgs),
@@ -137,4 +143,175 @@ pub struct EvalArgs {
     /// 95th percentile of each map; fix it to compare pictures of several runs).
     #[arg(long)]
     pub scale_max: Option<f64>,
+}
+
+/// Shapes of `symframe synth`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ShapeArg {
+    /// A sphere filling the frame (head-on).
+    Sphere,
+    /// A cylinder with its axis along image y, filling the frame.
+    Cylinder,
+    /// A flat patch (see --normal-angle, --normal-azimuth, --tangent-angle).
+    Plane,
+    /// Seeded random Gaussian bumps on flat ground, with cast shadows (see --bumps, --relief).
+    Bumps,
+}
+
+/// Image formats of `symframe synth`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FormatArg {
+    /// Float32 OpenEXR: exact, unclipped linear values.
+    Exr,
+    /// 16-bit linear PNG (values clipped to [0, 1]; 1 reads back as saturated).
+    Png16,
+    /// 8-bit sRGB PNG (values clipped to [0, 1]; 1 reads back as saturated).
+    Png8,
+}
+
+/// Flags of `symframe synth`.
+#[derive(Debug, Clone, Args)]
+pub struct SynthArgs {
+    /// Output dataset folder (created; images/, lights.lp, gt_normals.npy, gt_tangents.npy,
+    /// mask.png and scene.json in it are replaced).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// The rendered surface.
+    #[arg(long, value_enum, default_value_t = ShapeArg::Sphere)]
+    pub shape: ShapeArg,
+    /// Image width and height in pixels.
+    #[arg(long, default_value_t = 64)]
+    pub size: usize,
+    /// Reflectance model spec, e.g. `lambertian`, `ward:kd=0.5,ks=0.5,ax=0.1,ay=0.5`,
+    /// `ggx:ax=0.3,ay=0.1`, `merl:path=FILE`.
+    #[arg(long, default_value = "ward")]
+    pub model: String,
+    /// Tangent field: `circular` (default), `radial`, `swirl[:DEG]`, `axial:DEG` (image-plane
+    /// direction, degrees counter-clockwise from x) or `axial:X/Y/Z`.
+    #[arg(long)]
+    pub tangent_field: Option<String>,
+    /// Light rig: `cone:N[:THETA_D]` (N lights uniform over the cone of halfway angles up to
+    /// THETA_D degrees, default 65), `diligent` (96 lights on a 12 x 8 grid within 45 degrees
+    /// of the view) or `lp:PATH` (the lights of an .lp file or dataset).
+    #[arg(long, default_value = "cone:1000")]
+    pub rig: String,
+    /// Plane only: angle between the normal and the view, degrees (default 0).
+    #[arg(long)]
+    pub normal_angle: Option<f64>,
+    /// Plane only: image-plane direction the normal tilts toward, degrees counter-clockwise
+    /// from x (default 0: the normal lies in the x-z plane).
+    #[arg(long)]
+    pub normal_azimuth: Option<f64>,
+    /// Plane only: tangent angle about the normal from the projection of x, degrees
+    /// counter-clockwise as seen from the camera (default 0).
+    #[arg(long)]
+    pub tangent_angle: Option<f64>,
+    /// Bumps only: number of bumps (default 12).
+    #[arg(long)]
+    pub bumps: Option<usize>,
+    /// Bumps only: height scale; at 1 a lone bump's steepest slope is 20 to 40 degrees
+    /// (default 1).
+    #[arg(long)]
+    pub relief: Option<f64>,
+    /// Sensor noise: `none`, `gaussian:SIGMA` (standard deviation, 1 = full scale) or
+    /// `shot:PHOTONS` (photons at full scale).
+    #[arg(long, default_value = "none")]
+    pub noise: String,
+    /// Image file format.
+    #[arg(long, value_enum, default_value_t = FormatArg::Exr)]
+    pub format: FormatArg,
+    /// Scale applied to the rendered radiance before noise and quantisation.
+    #[arg(long, default_value_t = 1.0)]
+    pub exposure: f64,
+    /// Seed of the noise and of the bump layout.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+/// Flags of `symframe fit`.
+#[derive(Debug, Clone, Args)]
+pub struct FitArgs {
+    /// A `.lp` light file, a folder holding one, or a DiLiGenT-style folder (as for estimate).
+    pub input: PathBuf,
+    /// Output folder of `symframe estimate` for the same input (normals.npy, tangents.npy).
+    #[arg(long)]
+    pub frames: PathBuf,
+    /// Output folder (created; files in it with the same names are replaced).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Leave this many lights (evenly spaced in the input's order) out of the fit and report
+    /// the error on them.
+    #[arg(long, default_value_t = 0)]
+    pub holdout: usize,
+    /// Mask image: only pixels where it is non-zero are fitted (default: mask.png beside the
+    /// input, if any).
+    #[arg(long)]
+    pub mask: Option<PathBuf>,
+    /// Treat 8-bit images as linear (default: sRGB-decode them).
+    #[arg(long)]
+    pub linear: bool,
+    /// Integer samples at or above this fraction of the format's maximum are saturated and
+    /// excluded.
+    #[arg(long, default_value_t = 0.995)]
+    pub saturation: f32,
+    /// Levenberg-Marquardt iterations per pixel at most.
+    #[arg(long, default_value_t = 60)]
+    pub max_iterations: u32,
+    /// The fitted highlight's peak may be at most this many times the pixel's brightest sample.
+    #[arg(long, default_value_t = 8.0)]
+    pub max_peak_ratio: f64,
+}
+
+/// Parses a light direction written `x,y,z`.
+fn parse_light(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("expected x,y,z (three numbers), got '{s}'"))?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) && v.iter().any(|&c| c != 0.0) => {
+            Ok([x, y, z])
+        }
+        _ => Err(format!(
+            "expected x,y,z: three finite numbers, not all zero, got '{s}'"
+        )),
+    }
+}
+
+/// Flags of `symframe relight`.
+#[derive(Debug, Clone, Args)]
+#[command(group = clap::ArgGroup::new("light-source").required(true).multiple(true).args(["light", "lights"]))]
+pub struct RelightArgs {
+    /// Output folder of `symframe fit` (kd, ks, alpha_t, alpha_b, normals, tangents .npy).
+    pub fit_dir: PathBuf,
+    /// Output folder: relit_000.exr (linear) and relit_000.png (tone-mapped) per light.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// A light direction `x,y,z` (camera frame: x right, y up, z toward the camera; surface
+    /// toward light). Repeat for several images; they come before those of --lights.
+    #[arg(long, value_parser = parse_light, allow_hyphen_values = true)]
+    pub light: Vec<[f64; 3]>,
+    /// A file of light directions: `.lp` (names ignored) or `x y z` rows.
+    #[arg(long)]
+    pub lights: Option<PathBuf>,
+    /// Factor on the specular albedo.
+    #[arg(long, default_value_t = 1.0)]
+    pub specular_scale: f64,
+    /// Factor on the diffuse albedo.
+    #[arg(long, default_value_t = 1.0)]
+    pub diffuse_scale: f64,
+    /// Factor on both roughnesses (below 1 = glossier).
+    #[arg(long, default_value_t = 1.0)]
+    pub roughness_scale: f64,
+    /// Rotate the tangents about the normal by this many degrees (inside --region if given).
+    #[arg(long, allow_hyphen_values = true)]
+    pub rotate_tangents: Option<f64>,
+    /// Mask image limiting --rotate-tangents to its non-zero pixels.
+    #[arg(long, requires = "rotate_tangents")]
+    pub region: Option<PathBuf>,
+    /// Exposure of the PNG pictures in stops (linear values times 2^E, then clamped and
+    /// sRGB-encoded); the EXR files are not affected.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub exposure: f64,
 }

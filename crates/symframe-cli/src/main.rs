@@ -6,8 +6,11 @@ mod colorbar;
 mod demo;
 mod estimate;
 mod eval_cmd;
+mod fit_cmd;
 mod outdir;
 mod progress;
+mod relight_cmd;
+mod synth;
 
 use clap::Parser;
 
@@ -24,8 +27,11 @@ fn main() {
     }
     let result = match cli.command {
         cli::Command::Estimate(args) => estimate::run(&args).map(|_| ()),
+        cli::Command::Fit(args) => fit_cmd::run(&args).map(|_| ()),
+        cli::Command::Relight(args) => relight_cmd::run(&args).map(|_| ()),
         cli::Command::Demo(args) => demo::run(&args),
         cli::Command::Eval(args) => eval_cmd::run(&args).map(|_| ()),
+        cli::Command::Synth(args) => synth::run(&args).map(|_| ()),
     };
     if let Err(e) = result {
         // One line: the context chain joined, outermost first.

@@ -40,6 +40,11 @@ impl Staging {
         })
     }
 
+    /// The staging folder itself (for writers that lay out several files and folders).
+    pub fn dir(&self) -> &Path {
+        &self.staging
+    }
+
     /// The path a file named `name` is written to while staging.
     pub fn path(&self, name: &str) -> PathBuf {
         self.staging.join(name)

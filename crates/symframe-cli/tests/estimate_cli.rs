@@ -365,6 +365,12 @@ fn demo_runs_end_to_end_and_reports_small_errors() {
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(stdout.contains("normals.png"), "{stdout}");
     assert!(out.join("estimate/normals.png").is_file());
+    // Section 5.1: the Ward fit, a relit and an edited picture.
+    assert!(stdout.contains("relit/relit_000.png"), "{stdout}");
+    assert!(stdout.contains("relit-edited/relit_000.png"), "{stdout}");
+    assert!(out.join("relit/relit_000.png").is_file());
+    assert!(out.join("relit-edited/relit_000.png").is_file());
+    assert!(out.join("fit/fit.json").is_file());
     let eval: serde_json::Value =
         serde_json::from_str(&fs::read_to_string(out.join("estimate/eval.json")).unwrap()).unwrap();
     let mean = eval["normal_error"]["mean"].as_f64().unwrap();

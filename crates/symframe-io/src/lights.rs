@@ -141,6 +141,57 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
     Ok((images, lights))
 }
 
+/// Reads light directions alone (e.g. the lights to relight under), from either an `.lp`-style
+/// file (the count `N` on the first line, then `N` lines `<name> <lx> <ly> <lz>`; the names are
+/// ignored and need not exist) or a table of `x y z` rows (DiLiGenT `light_directions.txt`).
+/// The form is told by the first meaningful line: one integer means `.lp`. Directions are
+/// normalised; errors name the file and line.
+pub fn read_light_directions(path: &Path) -> Result<Vec<DVec3>> {
+    let lines = content_lines(path)?;
+    let Some((first_line, first)) = lines.first() else {
+        return Err(Error::invalid(path, "no light directions in the file"));
+    };
+    let tokens: Vec<&str> = first.split_whitespace().collect();
+    if tokens.len() != 1 {
+        return parse_directions(path);
+    }
+    let count: usize = tokens[0].parse().map_err(|_| {
+        Error::parse(
+            path,
+            *first_line,
+            format!("expected the number of lights or 'x y z', found '{first}'"),
+        )
+    })?;
+    let entries = &lines[1..];
+    if entries.len() != count || count == 0 {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "{count} lights declared on line {first_line} but {} entries found",
+                entries.len()
+            ),
+        ));
+    }
+    entries
+        .iter()
+        .map(|(line, text)| {
+            let tokens: Vec<&str> = text.split_whitespace().collect();
+            if tokens.len() != 4 {
+                return Err(Error::parse(
+                    path,
+                    *line,
+                    format!(
+                        "expected '<name> <lx> <ly> <lz>', found {} fields",
+                        tokens.len()
+                    ),
+                ));
+            }
+            let v = parse_triple(path, *line, &tokens[1..], "light direction")?;
+            unit_direction(path, *line, v)
+        })
+        .collect()
+}
+
 /// Parses a DiLiGenT `filenames.txt`: one image filename per line, relative to `dir`.
 pub(crate) fn parse_filenames(path: &Path, dir: &Path) -> Result<Vec<PathBuf>> {
     let lines = content_lines(path)?;
@@ -195,4 +246,31 @@ pub(crate) fn parse_intensities(path: &Path) -> Result<Vec<[f32; 3]>> {
             Ok(out)
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn light_directions_from_lp_or_table() {
+        let d = tempfile::tempdir().unwrap();
+        let lp = d.path().join("new.lp");
+        std::fs::write(&lp, "# relight\n2\nnone.png 0 0 2\nx 1 0 1 # comment\n").unwrap();
+        let l = read_light_directions(&lp).unwrap();
+        assert_eq!(l.len(), 2);
+        assert!((l[0] - DVec3::Z).length() < 1e-12);
+        assert!((l[1].x - 0.5f64.sqrt()).abs() < 1e-12);
+        let table = d.path().join("dirs.txt");
+        std::fs::write(&table, "0 0 1\n0 1 1\n").unwrap();
+        assert_eq!(read_light_directions(&table).unwrap().len(), 2);
+        std::fs::write(&lp, "2\nnone.png 0 0 1\n").unwrap();
+        let e = read_light_directions(&lp).unwrap_err().to_string();
+        assert!(e.contains("new.lp"), "{e}");
+        std::fs::write(&lp, "1\nnone.png 0 zero 1\n").unwrap();
+        let e = read_light_directions(&lp).unwrap_err().to_string();
+        assert!(e.contains("new.lp:2"), "{e}");
+        std::fs::write(&lp, "1\nnone.png 0 0 0\n").unwrap();
+        assert!(read_light_directions(&lp).is_err());
+    }
 }

@@ -8,14 +8,17 @@
 //! [`slice`](mod@slice) (per-pixel interpolation), [`symmetry`] (the objective), [`optim`] (Nelder-Mead),
 //! [`estimate`] (the per-pixel estimator and the whole-stack pipeline), [`brdf`] (models),
 //! [`render`] (the synthetic renderer), [`stack`] (the measurement stack), [`baseline`] (the
-//! photometric-stereo and max-reflectance baselines the paper compares against).
+//! photometric-stereo and max-reflectance baselines the paper compares against), [`fit`]
+//! (per-pixel Ward fits in the estimated frames) and [`relight`] (rendering and editing them).
 
 pub mod baseline;
 pub mod brdf;
 pub mod error;
 pub mod estimate;
 pub mod eval;
+pub mod fit;
 pub mod optim;
+pub mod relight;
 pub mod render;
 pub mod rig;
 pub mod slice;
@@ -27,5 +30,7 @@ pub use error::{Error, Result};
 pub use estimate::{
     estimate_stack, EstimateMaps, Estimator, EstimatorParams, Interpolation, PixelStatus,
 };
+pub use fit::{fit_stack, FitMaps, FitParams, WardMaps};
+pub use relight::{Edits, Relighter};
 pub use rig::{Rig, RigOptions};
 pub use stack::Stack;

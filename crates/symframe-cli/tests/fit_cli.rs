@@ -1,0 +1,339 @@
+//! End-to-end tests of `symframe fit` and `symframe relight`: a rendered capture in, Ward maps
+//! and relit pictures out, and bad input refused with a one-line error naming the file, leaving
+//! no output folder behind.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use glam::DVec3;
+use symframe::brdf::ward::Ward;
+use symframe::relight::image_psnr;
+use symframe::render::{Scene, TangentField};
+use symframe::rig::uniform_cone_lights;
+use symframe_io::{read_npy_f32, write_lp_dataset, write_npy_f32, DecodeOptions, ImageFormat};
+
+fn symframe(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_symframe"))
+        .args(args)
+        .output()
+        .expect("run symframe")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn material() -> Ward {
+    Ward::new([0.4, 0.3, 0.2], [0.3, 0.45, 0.6], 0.1, 0.35)
+}
+
+/// A rendered sphere in `.lp` form (EXR images, mask.png beside); returns the scene, the lights
+/// and the .lp path.
+fn dataset(dir: &Path, size: usize, n_lights: usize) -> (Scene, Vec<DVec3>, PathBuf) {
+    let scene = Scene::sphere(size, TangentField::Circular);
+    let lights = uniform_cone_lights(n_lights, 65.0);
+    let brdf = material();
+    let images: Vec<Vec<f32>> = lights.iter().map(|&l| scene.render(&brdf, l)).collect();
+    let lp = write_lp_dataset(
+        dir,
+        &lights,
+        &images,
+        size,
+        size,
+        ImageFormat::Exr,
+        Some(&scene.gt_normals()),
+        Some(&scene.gt_tangents()),
+        Some(&scene.mask),
+    )
+    .unwrap();
+    (scene, lights, lp)
+}
+
+/// A frames folder holding the true normals and tangents.
+fn true_frames(dir: &Path, scene: &Scene) -> PathBuf {
+    let n = scene.width;
+    fs::create_dir_all(dir).unwrap();
+    write_npy_f32(&dir.join("normals.npy"), &[n, n, 3], &scene.gt_normals()).unwrap();
+    write_npy_f32(&dir.join("tangents.npy"), &[n, n, 3], &scene.gt_tangents()).unwrap();
+    dir.to_path_buf()
+}
+
+fn assert_fails_naming(o: &Output, needle: &str, out: &Path) {
+    let err = stderr(o);
+    assert!(!o.status.success(), "expected failure, stderr: {err}");
+    assert!(err.contains(needle), "error should name {needle:?}: {err}");
+    assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(!out.exists(), "no output folder may be left behind");
+    for e in fs::read_dir(out.parent().unwrap()).unwrap() {
+        let name = e.unwrap().file_name().to_string_lossy().into_owned();
+        assert!(
+            !name.contains(".partial"),
+            "staging folder left behind: {name}"
+        );
+    }
+}
+
+fn read_exr(path: &Path) -> Vec<f32> {
+    symframe_io::read_image(path, &DecodeOptions::default())
+        .unwrap()
+        .into_rgb()
+}
+
+#[test]
+fn estimate_fit_relight_end_to_end() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (scene, lights, lp) = dataset(&tmp.path().join("data"), 24, 400);
+    let est = tmp.path().join("est");
+    let o = symframe(&["estimate", s(&lp), "-o", s(&est)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let fit = tmp.path().join("fit");
+    let o = symframe(&[
+        "fit",
+        s(&lp),
+        "--frames",
+        s(&est),
+        "-o",
+        s(&fit),
+        "--holdout",
+        "10",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [
+        "kd.npy",
+        "ks.npy",
+        "alpha_t.npy",
+        "alpha_b.npy",
+        "residual.npy",
+        "holdout_residual.npy",
+        "normals.npy",
+        "tangents.npy",
+        "kd.exr",
+        "ks.exr",
+        "alpha_t.exr",
+        "alpha_b.exr",
+        "residual.exr",
+        "kd.png",
+        "fit.json",
+    ] {
+        assert!(fit.join(f).is_file(), "missing {f}");
+    }
+    let (shape, kd) = read_npy_f32(&fit.join("kd.npy")).unwrap();
+    assert_eq!(shape, vec![24, 24, 3]);
+    let (shape, at) = read_npy_f32(&fit.join("alpha_t.npy")).unwrap();
+    assert_eq!(shape, vec![24, 24]);
+    let (_, ab) = read_npy_f32(&fit.join("alpha_b.npy")).unwrap();
+    // The centre pixels are close to the truth (estimated frames).
+    let w = material();
+    let mut kd_err = vec![];
+    let mut wide_err = vec![];
+    for p in 0..24 * 24 {
+        if scene.mask[p] && scene.normals_in_camera[p].z > 0.5 && !at[p].is_nan() {
+            kd_err.push((kd[p * 3] as f64 / w.kd[0] - 1.0).abs());
+            wide_err.push((at[p].max(ab[p]) as f64 / 0.35 - 1.0).abs());
+        }
+    }
+    kd_err.sort_by(f64::total_cmp);
+    wide_err.sort_by(f64::total_cmp);
+    assert!(kd_err.len() > 200);
+    assert!(kd_err[kd_err.len() / 2] < 0.03, "{kd_err:?}");
+    assert!(wide_err[wide_err.len() / 2] < 0.05, "{wide_err:?}");
+    let report: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(fit.join("fit.json")).unwrap()).unwrap();
+    assert_eq!(report["lights"]["held_out"], 10);
+    assert_eq!(report["lights"]["fitted"], 390);
+    assert_eq!(report["parameters"]["holdout"][0], 20);
+    let psnr = report["fit"]["holdout_psnr_db"].as_f64().unwrap();
+    assert!(psnr > 30.0, "{report}");
+
+    // Relight under two held-out lights, one given on the command line and one in a file.
+    let held: Vec<usize> = report["parameters"]["holdout"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap() as usize)
+        .collect();
+    let (l0, l1) = (lights[held[3]], lights[held[6]]);
+    let lfile = tmp.path().join("new.lp");
+    fs::write(&lfile, format!("1\nnew {} {} {}\n", l1.x, l1.y, l1.z)).unwrap();
+    let relit = tmp.path().join("relit");
+    let o = symframe(&[
+        "relight",
+        s(&fit),
+        "-o",
+        s(&relit),
+        "--light",
+        &format!("{},{},{}", l0.x, l0.y, l0.z),
+        "--lights",
+        s(&lfile),
+        "--exposure",
+        "-0.5",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut inside = scene.mask.clone();
+    for (p, m) in inside.iter_mut().enumerate() {
+        *m &= scene.normals_in_camera[p].z > 0.5;
+    }
+    for (i, l) in [l0, l1].into_iter().enumerate() {
+        assert!(relit.join(format!("relit_{i:03}.png")).is_file());
+        let img = read_exr(&relit.join(format!("relit_{i:03}.exr")));
+        let psnr = image_psnr(&img, &scene.render(&w, l), Some(&inside));
+        assert!(psnr > 35.0, "light {i}: {psnr} dB");
+    }
+    assert!(relit.join("relight.json").is_file());
+
+    // Edit: tangents turned inside the left half only.
+    let region: Vec<f32> = (0..24 * 24)
+        .flat_map(|p| [((p % 24) < 12) as u8 as f32; 3])
+        .collect();
+    let region_png = tmp.path().join("region.png");
+    symframe_io::write_png8_rgb(&region_png, 24, 24, &region, false).unwrap();
+    let edited = tmp.path().join("edited");
+    let o = symframe(&[
+        "relight",
+        s(&fit),
+        "-o",
+        s(&edited),
+        "--light",
+        &format!("{},{},{}", l0.x, l0.y, l0.z),
+        "--rotate-tangents",
+        "90",
+        "--region",
+        s(&region_png),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(edited.join("tangents_edited.png").is_file());
+    let (a, b) = (
+        read_exr(&relit.join("relit_000.exr")),
+        read_exr(&edited.join("relit_000.exr")),
+    );
+    let mut changed = 0;
+    for p in 0..24 * 24 {
+        let same = a[p * 3..p * 3 + 3] == b[p * 3..p * 3 + 3];
+        if p % 24 >= 12 {
+            assert!(same, "pixel {p} outside the region changed");
+        } else if !same {
+            changed += 1;
+        }
+    }
+    assert!(changed > 50, "{changed}");
+}
+
+#[test]
+fn fit_refuses_mismatched_or_missing_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (scene, _, lp) = dataset(&tmp.path().join("data"), 12, 60);
+    let frames = true_frames(&tmp.path().join("frames"), &scene);
+    let out = tmp.path().join("out");
+    // Normals of another size.
+    write_npy_f32(&frames.join("normals.npy"), &[10, 12, 3], &vec![0.0; 360]).unwrap();
+    let o = symframe(&["fit", s(&lp), "--frames", s(&frames), "-o", s(&out)]);
+    assert_fails_naming(&o, "normals.npy", &out);
+    // Tangents missing.
+    true_frames(&frames, &scene);
+    fs::remove_file(frames.join("tangents.npy")).unwrap();
+    let o = symframe(&["fit", s(&lp), "--frames", s(&frames), "-o", s(&out)]);
+    assert_fails_naming(&o, "tangents.npy", &out);
+    // Tangents not an array file.
+    fs::write(frames.join("tangents.npy"), b"not npy").unwrap();
+    let o = symframe(&["fit", s(&lp), "--frames", s(&frames), "-o", s(&out)]);
+    assert_fails_naming(&o, "tangents.npy", &out);
+    // Too many lights held out; a missing dataset.
+    true_frames(&frames, &scene);
+    let o = symframe(&[
+        "fit",
+        s(&lp),
+        "--frames",
+        s(&frames),
+        "-o",
+        s(&out),
+        "--holdout",
+        "40",
+    ]);
+    assert_fails_naming(&o, "--holdout", &out);
+    let o = symframe(&[
+        "fit",
+        "/no/such/data.lp",
+        "--frames",
+        s(&frames),
+        "-o",
+        s(&out),
+    ]);
+    assert_fails_naming(&o, "/no/such/data.lp", &out);
+    // A wrong-size mask.
+    let small = tmp.path().join("small.png");
+    symframe_io::write_png8_rgb(&small, 5, 5, &[1.0; 75], false).unwrap();
+    let o = symframe(&[
+        "fit",
+        s(&lp),
+        "--frames",
+        s(&frames),
+        "-o",
+        s(&out),
+        "--mask",
+        s(&small),
+    ]);
+    assert_fails_naming(&o, "small.png", &out);
+    // And the good case works with true frames.
+    let o = symframe(&["fit", s(&lp), "--frames", s(&frames), "-o", s(&out)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!out.join("holdout_residual.npy").exists());
+}
+
+#[test]
+fn relight_refuses_bad_fit_folders_regions_and_light_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (scene, _, lp) = dataset(&tmp.path().join("data"), 12, 60);
+    let frames = true_frames(&tmp.path().join("frames"), &scene);
+    let fit = tmp.path().join("fit");
+    let o = symframe(&["fit", s(&lp), "--frames", s(&frames), "-o", s(&fit)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = tmp.path().join("out");
+    let relight = |extra: &[&str]| {
+        let mut a = vec!["relight", s(&fit), "-o", s(&out)];
+        a.extend_from_slice(extra);
+        symframe(&a)
+    };
+    // Region of the wrong size.
+    let small = tmp.path().join("logo.png");
+    symframe_io::write_png8_rgb(&small, 5, 5, &[1.0; 75], false).unwrap();
+    let o = relight(&[
+        "--light",
+        "0,0,1",
+        "--rotate-tangents",
+        "90",
+        "--region",
+        s(&small),
+    ]);
+    assert_fails_naming(&o, "logo.png", &out);
+    // A bad light file.
+    let lfile = tmp.path().join("bad.lp");
+    fs::write(&lfile, "2\na 0 0 1\n").unwrap();
+    let o = relight(&["--lights", s(&lfile)]);
+    assert_fails_naming(&o, "bad.lp", &out);
+    let o = relight(&["--lights", "/no/such/lights.lp"]);
+    assert_fails_naming(&o, "/no/such/lights.lp", &out);
+    // Bad flag values.
+    let o = relight(&["--light", "0,0,1", "--roughness-scale", "0"]);
+    assert_fails_naming(&o, "--roughness-scale", &out);
+    // A roughness map of another size than the albedos.
+    write_npy_f32(&fit.join("alpha_t.npy"), &[12, 11], &[0.1; 132]).unwrap();
+    let o = relight(&["--light", "0,0,1"]);
+    assert_fails_naming(&o, "alpha_t.npy", &out);
+    // Frames of another size than the fit.
+    write_npy_f32(&fit.join("alpha_t.npy"), &[12, 12], &[0.1; 144]).unwrap();
+    write_npy_f32(&fit.join("normals.npy"), &[12, 13, 3], &[0.0; 468]).unwrap();
+    let o = relight(&["--light", "0,0,1"]);
+    assert_fails_naming(&o, "normals.npy", &out);
+    // A missing map, and a folder that is not a fit.
+    fs::remove_file(fit.join("kd.npy")).unwrap();
+    let o = relight(&["--light", "0,0,1"]);
+    assert_fails_naming(&o, "kd.npy", &out);
+    let o = symframe(&["relight", "/no/such/fit", "-o", s(&out), "--light", "0,0,1"]);
+    assert_fails_naming(&o, "/no/such/fit", &out);
+}
