@@ -6,6 +6,7 @@ mod colorbar;
 mod demo;
 mod estimate;
 mod eval_cmd;
+mod experiment;
 mod fit_cmd;
 mod outdir;
 mod progress;
@@ -32,6 +33,7 @@ fn main() {
         cli::Command::Demo(args) => demo::run(&args),
         cli::Command::Eval(args) => eval_cmd::run(&args).map(|_| ()),
         cli::Command::Synth(args) => synth::run(&args).map(|_| ()),
+        cli::Command::Experiment(args) => experiment::run(&args),
     };
     if let Err(e) = result {
         // One line: the context chain joined, outermost first.

@@ -1,0 +1,61 @@
+//! `symframe experiment ... --quick`: each experiment runs, writes its plots and report, and a
+//! sanity property of its numbers holds.
+
+use std::path::Path;
+use std::process::Command;
+
+fn run(which: &str, out: &Path) -> String {
+    let o = Command::new(env!("CARGO_BIN_EXE_symframe"))
+        .args(["experiment", which, "--quick", "-o"])
+        .arg(out)
+        .output()
+        .expect("run symframe");
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        o.status.success(),
+        "{which} failed: {}\n{stdout}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    stdout
+}
+
+fn pngs(dir: &Path, prefix: &str) -> usize {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| {
+            let n = e.file_name().to_string_lossy().into_owned();
+            n.starts_with(prefix) && n.ends_with(".png") && e.metadata().unwrap().len() > 1000
+        })
+        .count()
+}
+
+/// The cells of a markdown row whose first cell is `first`, in the table after `heading`.
+fn row_after(s: &str, heading: &str, first: &str) -> Vec<String> {
+    let rest = &s[s
+        .find(heading)
+        .unwrap_or_else(|| panic!("no '{heading}' in\n{s}"))..];
+    let line = rest
+        .lines()
+        .find(|l| l.starts_with(&format!("| {first} |")))
+        .unwrap_or_else(|| panic!("no row '{first}' after '{heading}'"));
+    line.trim_matches('|')
+        .split('|')
+        .map(|c| c.trim().to_string())
+        .collect()
+}
+
+#[test]
+fn fig3_quick() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run("fig3", dir.path());
+    assert!(dir.path().join("fig3.md").is_file());
+    assert_eq!(pngs(dir.path(), "fig3_"), 12);
+    // Ward, theta_n = 0, theta_d_max = 65: below 1 degree, normal and tangent.
+    let row = row_after(&out, "per theta_n", "0");
+    let ward: Vec<f64> = row[1]
+        .split('/')
+        .map(|v| v.trim().parse().unwrap())
+        .collect();
+    assert!(ward[0] < 1.0 && ward[1] < 1.0, "{row:?}");
+}
