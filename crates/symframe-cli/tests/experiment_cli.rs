@@ -59,3 +59,16 @@ fn fig3_quick() {
         .collect();
     assert!(ward[0] < 1.0 && ward[1] < 1.0, "{row:?}");
 }
+
+#[test]
+fn fig4_quick() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run("fig4", dir.path());
+    assert!(dir.path().join("fig4.md").is_file());
+    assert_eq!(pngs(dir.path(), "fig4_"), 3);
+    // Woodham-robust is near zero on the perfectly diffuse end; symmetry is good there too.
+    let row = row_after(&out, "Torrance-Sparrow", "0");
+    let num = |c: &str| c.split(' ').next().unwrap().parse::<f64>().unwrap();
+    assert!(num(&row[4]) < 0.1, "{row:?}");
+    assert!(num(&row[2]) < 1.0, "{row:?}");
+}

@@ -271,7 +271,7 @@ pub fn line_plot(
             };
         }
         if log_y {
-            let top = (ymax.max(floor) * 2.0).max(1.0);
+            let top = (ymax.max(floor) * 30.0).max(1.0);
             let chart = builder!()
                 .build_cartesian_2d(xr, (floor..top).log_scale())
                 .map_err(err)?;
