@@ -72,3 +72,16 @@ fn fig4_quick() {
     assert!(num(&row[4]) < 0.1, "{row:?}");
     assert!(num(&row[2]) < 1.0, "{row:?}");
 }
+
+#[test]
+fn fig10_quick() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run("fig10", dir.path());
+    assert!(dir.path().join("fig10.md").is_file());
+    assert_eq!(pngs(dir.path(), "fig10_"), 2);
+    // The sphere at the larger light count: a usable estimate over most pixels.
+    let row = row_after(&out, "| shape |", "sphere");
+    let mean: f64 = row[2].parse().unwrap();
+    let coverage: f64 = row[7].trim_end_matches('%').parse().unwrap();
+    assert!(mean < 5.0 && coverage > 90.0, "{row:?}");
+}
