@@ -85,3 +85,34 @@ fn fig10_quick() {
     let coverage: f64 = row[7].trim_end_matches('%').parse().unwrap();
     assert!(mean < 5.0 && coverage > 90.0, "{row:?}");
 }
+
+#[test]
+fn noise_quick() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run("noise", dir.path());
+    assert!(dir.path().join("noise.md").is_file());
+    assert_eq!(pngs(dir.path(), "noise_"), 2);
+    let clean: f64 = row_after(&out, "noise sigma", "0")[1].parse().unwrap();
+    let q16: f64 = row_after(&out, "quantisation", "16-bit")[1]
+        .parse()
+        .unwrap();
+    assert!(clean < 5.0 && q16 < 5.0, "{clean} {q16}");
+}
+
+#[test]
+fn all_quick_writes_the_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("validation");
+    run("all", &out_dir);
+    let md = std::fs::read_to_string(dir.path().join("validation.md")).unwrap();
+    for s in [
+        "Figure 3",
+        "Figure 4",
+        "Figure 10",
+        "Noise",
+        "validation/fig3_ward_paper_normal.png",
+        "cores",
+    ] {
+        assert!(md.contains(s), "report lacks '{s}'");
+    }
+}

@@ -82,7 +82,7 @@ pub fn run(ctx: &Ctx) -> Result<String> {
     for (name, _, _, desc) in &shapes {
         md += &format!("- `{name}`: {desc}.\n");
     }
-    md += "\nErrors over pixels whose true normal is within 60° of the view. `facet` is the \
+    md += "\nErrors over pixels whose true normal is within 60° of the view (the maps show every pixel; the bright rim of the sphere lies beyond that range). `facet` is the \
            mean over neighbouring pixel pairs of |angle between the estimated normals - angle \
            between the true normals| (degrees): it grows when the field breaks into facets.\n\n";
     let header: Vec<String> = [
