@@ -13,6 +13,9 @@ use symframe::{Rig, RigOptions};
 use super::plot::{self, md_table};
 use super::Ctx;
 
+/// Per light count: (lights, mean normal error, facet measure).
+type Facets = Vec<(usize, f64, f64)>;
+
 /// Top of the error maps' colour scale, degrees.
 const ERROR_MAX: f64 = 10.0;
 
@@ -99,7 +102,7 @@ pub fn run(ctx: &Ctx) -> Result<String> {
     .map(String::from)
     .to_vec();
     let mut table = Vec::new();
-    let mut facets: Vec<(String, Vec<(usize, f64, f64)>)> = Vec::new();
+    let mut facets: Vec<(String, Facets)> = Vec::new();
     for (name, scene, cone, _) in &shapes {
         let gt_n = scene.gt_normals();
         let gt_t = scene.gt_tangents();

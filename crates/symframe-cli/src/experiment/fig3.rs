@@ -159,11 +159,11 @@ pub fn run(ctx: &Ctx) -> Result<String> {
             let cells: &[CellResult] = &g.cells;
             let col = |c: usize| (0..nr).map(move |r| cells[r * nc + c]);
             let mut table = Vec::new();
-            for c in 0..nc {
+            for (c, cd) in cols.iter().enumerate() {
                 let ns: Vec<f64> = col(c).filter_map(|x| x.normal).collect();
                 let ts: Vec<f64> = col(c).filter_map(|x| x.tangent).collect();
                 table.push(vec![
-                    format!("{:.0}", cols[c]),
+                    format!("{cd:.0}"),
                     fmt_opt(mean(ns.iter().copied()), 2),
                     fmt_opt(max(ns.iter().copied()), 2),
                     fmt_opt(mean(ts.iter().copied()), 2),
@@ -248,9 +248,9 @@ pub fn run(ctx: &Ctx) -> Result<String> {
             for (i, (_, mfile, _)) in modes.iter().enumerate() {
                 header.push(format!("{mname} n/t ({mfile})"));
                 let g = grid(m, i);
-                for r in 0..nr {
+                for (r, row) in table.iter_mut().enumerate() {
                     let x = g.cells[r * nc + c];
-                    table[r].push(format!(
+                    row.push(format!(
                         "{} / {}",
                         fmt_opt(x.normal, 2),
                         fmt_opt(x.tangent, 2)

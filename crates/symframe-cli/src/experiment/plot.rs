@@ -46,7 +46,6 @@ fn text(size: i32) -> TextStyle<'static> {
 /// A heat map of `values` (row-major, `rows x cols`; `None` = no estimate, drawn magenta) with
 /// row and column labels, axis titles and a colour bar from 0 to `scale.max` (values above it
 /// get the top colour).
-#[allow(clippy::too_many_arguments)]
 pub fn heatmap(
     title: &str,
     row_title: &str,
@@ -292,6 +291,7 @@ pub fn line_plot(
 
 /// A grid of equally sized tiles (`tiles[row * cols + col]`, RGB, `tile_w x tile_h`) enlarged by
 /// `zoom`, with row labels on the left, column labels on top, a title and a footer line.
+#[allow(clippy::too_many_arguments)]
 pub fn grid(
     title: &str,
     row_labels: &[String],
