@@ -34,6 +34,9 @@ pub enum Command {
     /// Compare an estimate with a synthetic dataset's ground truth: eval.json, error-map
     /// pictures with colour bars, and a summary table.
     Eval(EvalArgs),
+    /// Re-run the paper's validation experiments in memory (Figures 3, 4, 10 and a noise
+    /// study): tables on stdout, PNG plots and a markdown report in the output folder.
+    Experiment(ExperimentArgs),
     /// Paper-scale benchmark: generate a synthetic stack once, time `estimate` on it.
     #[command(hide = true)]
     BenchPaper(BenchArgs),
@@ -68,6 +71,38 @@ impl std::fmt::Display for ShardSpec {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{}/{}", self.k, self.n)
     }
+}
+
+/// The experiments of `symframe experiment`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ExperimentArg {
+    /// Figure 3: error over normal angle x light cone, anisotropic materials.
+    Fig3,
+    /// Figure 4: symmetry against Woodham and max-reflectance, diffuse to shiny materials.
+    Fig4,
+    /// Figure 10: normal and error maps at 1512, 743, 380 and 172 lights.
+    Fig10,
+    /// Error against Gaussian noise and quantisation.
+    Noise,
+    /// Relighting from per-pixel Ward fits: held-out PSNR per model, side-by-side picture.
+    Relight,
+    /// Every experiment, then the report `<output>.md` (e.g. docs/validation.md).
+    All,
+}
+
+/// Flags of `symframe experiment`.
+#[derive(Debug, Clone, Args)]
+pub struct ExperimentArgs {
+    /// Which experiment to run.
+    #[arg(value_enum)]
+    pub which: ExperimentArg,
+    /// Output folder of the plots (created). A single experiment also writes `<name>.md` into
+    /// it; `all` writes the report beside it as `<output>.md`.
+    #[arg(short, long, default_value = "docs/validation")]
+    pub output: PathBuf,
+    /// Reduced sizes (for tests): fewer cells, lights and pixels.
+    #[arg(long)]
+    pub quick: bool,
 }
 
 /// Which estimator `symframe estimate` runs.

@@ -8,6 +8,7 @@ mod colorbar;
 mod demo;
 mod estimate;
 mod eval_cmd;
+mod experiment;
 mod fit_cmd;
 mod outdir;
 mod progress;
@@ -37,6 +38,7 @@ fn main() {
         cli::Command::BenchPaper(args) => bench::run(&args),
         cli::Command::Eval(args) => eval_cmd::run(&args).map(|_| ()),
         cli::Command::Synth(args) => synth::run(&args).map(|_| ()),
+        cli::Command::Experiment(args) => experiment::run(&args),
     };
     if let Err(e) = result {
         if e.is::<tiled::Interrupted>() {
