@@ -4,8 +4,7 @@
 use anyhow::Result;
 use glam::DVec3;
 use symframe::brdf::{Brdf, Ward};
-use symframe::estimate::{estimate_stack, EstimatorParams};
-use symframe::eval::{evaluate, normal_error_map};
+use symframe::eval::normal_error_map;
 use symframe::render::{BumpParams, Scene, TangentField};
 use symframe::rig::uniform_cone_lights;
 use symframe::{Rig, RigOptions};
@@ -118,21 +117,7 @@ pub fn run(ctx: &Ctx) -> Result<String> {
                 },
             )?;
             let stack = scene.render_stack(&brdf as &dyn Brdf, &lights);
-            let maps = estimate_stack(
-                &stack,
-                &rig,
-                Some(&scene.mask),
-                EstimatorParams::default(),
-                &|_| {},
-            )?;
-            let e = evaluate(
-                &maps.normals,
-                &maps.tangents,
-                &gt_n,
-                Some(&gt_t),
-                Some(&scene.mask),
-                60.0,
-            );
+            let (maps, e) = super::estimate_and_evaluate(scene, &stack, &rig, &gt_n, &gt_t)?;
             let facet = facet_excess(&maps.normals, &gt_n, &scene.mask, size, size);
             fs.push((n, e.normal_error.mean, facet));
             table.push(vec![

@@ -40,6 +40,33 @@ impl Ctx {
 
 type RunFn = fn(&Ctx) -> Result<String>;
 
+/// Estimates a rendered stack of `scene` with the default symmetry estimator and compares the
+/// maps with the scene's ground truth over pixels within 60 degrees of the view.
+pub fn estimate_and_evaluate(
+    scene: &symframe::render::Scene,
+    stack: &symframe::Stack,
+    rig: &symframe::Rig,
+    gt_normals: &[f32],
+    gt_tangents: &[f32],
+) -> Result<(symframe::EstimateMaps, symframe::eval::Evaluation)> {
+    let maps = symframe::estimate_stack(
+        stack,
+        rig,
+        Some(&scene.mask),
+        symframe::EstimatorParams::default(),
+        &|_| {},
+    )?;
+    let e = symframe::eval::evaluate(
+        &maps.normals,
+        &maps.tangents,
+        gt_normals,
+        Some(gt_tangents),
+        Some(&scene.mask),
+        60.0,
+    );
+    Ok((maps, e))
+}
+
 fn experiments(which: ExperimentArg) -> Vec<(&'static str, RunFn)> {
     let all: [(&str, RunFn); 5] = [
         ("fig3", fig3::run),

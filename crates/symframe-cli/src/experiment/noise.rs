@@ -2,8 +2,6 @@
 
 use anyhow::Result;
 use symframe::brdf::{Brdf, Ward};
-use symframe::estimate::{estimate_stack, EstimatorParams};
-use symframe::eval::evaluate;
 use symframe::render::{Degradation, Noise, Scene, TangentField};
 use symframe::rig::uniform_cone_lights;
 use symframe::{Rig, RigOptions};
@@ -39,21 +37,7 @@ pub fn run(ctx: &Ctx) -> Result<String> {
     let gt_t = scene.gt_tangents();
     let measure = |d: Degradation| -> Result<Figures> {
         let stack = scene.render_stack_degraded(&brdf as &dyn Brdf, &lights, &d);
-        let maps = estimate_stack(
-            &stack,
-            &rig,
-            Some(&scene.mask),
-            EstimatorParams::default(),
-            &|_| {},
-        )?;
-        let e = evaluate(
-            &maps.normals,
-            &maps.tangents,
-            &gt_n,
-            Some(&gt_t),
-            Some(&scene.mask),
-            60.0,
-        );
+        let (_, e) = super::estimate_and_evaluate(&scene, &stack, &rig, &gt_n, &gt_t)?;
         Ok([
             e.normal_error.mean,
             e.normal_error.median,

@@ -83,13 +83,8 @@ impl Brdf for AshikhminShirley {
     }
 
     fn tangent_axis(&self) -> TangentAxis {
-        if self.nu < self.nv {
-            TangentAxis::X
-        } else if self.nv < self.nu {
-            TangentAxis::Y
-        } else {
-            TangentAxis::None
-        }
+        // A larger exponent is a narrower highlight: the exponents order like inverse roughness.
+        TangentAxis::of_roughness(self.nv, self.nu)
     }
 
     fn name(&self) -> String {

@@ -81,13 +81,7 @@ impl Brdf for Ggx {
     }
 
     fn tangent_axis(&self) -> TangentAxis {
-        if self.alpha_x > self.alpha_y {
-            TangentAxis::X
-        } else if self.alpha_y > self.alpha_x {
-            TangentAxis::Y
-        } else {
-            TangentAxis::None
-        }
+        TangentAxis::of_roughness(self.alpha_x, self.alpha_y)
     }
 
     fn name(&self) -> String {

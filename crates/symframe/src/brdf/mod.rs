@@ -16,6 +16,20 @@ pub enum TangentAxis {
     None,
 }
 
+impl TangentAxis {
+    /// The tangent of a model with roughness `alpha_x` along x and `alpha_y` along y: the axis
+    /// of the larger roughness (method.md), none when they are equal.
+    pub fn of_roughness(alpha_x: f64, alpha_y: f64) -> Self {
+        if alpha_x > alpha_y {
+            TangentAxis::X
+        } else if alpha_y > alpha_x {
+            TangentAxis::Y
+        } else {
+            TangentAxis::None
+        }
+    }
+}
+
 /// A BRDF evaluated in the local frame (x, y, z = normal).
 pub trait Brdf: Send + Sync {
     /// The BRDF value `f(light, view)` per RGB channel (1/sr), zero below the horizon.
