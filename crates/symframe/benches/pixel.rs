@@ -7,8 +7,8 @@ use glam::DVec3;
 use symframe::brdf::ward::Ward;
 use symframe::render::Scene;
 use symframe::rig::uniform_cone_lights;
-use symframe::slice::{gather_slice, ResampledSlice};
-use symframe::{Estimator, EstimatorParams, Interpolation, Rig, RigOptions};
+use symframe::slice::gather_slice;
+use symframe::{Estimator, EstimatorParams, Interpolation, PixelScratch, Rig, RigOptions};
 
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("estimate_pixel");
@@ -31,7 +31,7 @@ fn bench(c: &mut Criterion) {
                 ..EstimatorParams::default()
             };
             let est = Estimator::new(&rig, params);
-            let mut scratch = ResampledSlice::new(&rig);
+            let mut scratch = PixelScratch::new(&rig);
             group.bench_with_input(BenchmarkId::new(name, n), &slice, |b, s| {
                 b.iter(|| est.estimate_pixel_with(std::hint::black_box(s), &mut scratch))
             });

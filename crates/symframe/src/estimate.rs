@@ -10,10 +10,11 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, Result};
 use crate::optim::{nelder_mead, NelderMeadOptions};
 use crate::rig::Rig;
-use crate::slice::{gather_pixel, ExactSlice, ResampledSlice, SliceLookup};
+use crate::objective::{ExactObjective, FastScratch, Level, Objective};
+use crate::slice::gather_pixel;
 use crate::stack::Stack;
 use crate::symmetry::{
-    default_min_domain, symmetry_term, tangent_basis, CosineMode, Frame, Symmetry, SymmetryTerm,
+    default_min_domain, tangent_basis, CosineMode, Frame, SymmetryTerm, EMPTY_DISTANCE,
 };
 
 /// Parameters of the symmetry estimator.
@@ -148,64 +149,67 @@ impl<'a> Estimator<'a> {
         self.min_domain
     }
 
-    fn term<L: SliceLookup>(
-        &self,
-        slice: &[f32],
-        lookup: &L,
-        s: Symmetry,
-        n: DVec3,
-        t: DVec3,
-        c: CosineMode,
-    ) -> SymmetryTerm {
-        symmetry_term(self.rig, slice, lookup, s, Frame::new(n, t), c)
+    /// The domain size under which a distance at `level` counts as empty: the rig's minimum
+    /// scaled to the share of lights the level visits (never below 6 lights).
+    fn min_count<O: Objective>(&self, objective: &O, level: Level) -> u32 {
+        let full = objective.queries(Level::Full).max(1);
+        let part = objective.queries(level);
+        if part >= full {
+            self.min_domain
+        } else {
+            ((self.min_domain as usize * part).div_ceil(full) as u32)
+                .max(6)
+                .min(self.min_domain)
+        }
     }
 
     /// `SD_n` at a candidate normal.
-    pub fn normal_distance<L: SliceLookup>(
+    fn normal_distance<O: Objective>(
         &self,
-        slice: &[f32],
-        lookup: &L,
+        objective: &O,
         n: DVec3,
         cosine: CosineMode,
+        level: Level,
     ) -> f64 {
         if n.z <= 0.0 {
-            return crate::symmetry::EMPTY_DISTANCE;
+            return EMPTY_DISTANCE;
         }
-        self.term(slice, lookup, Symmetry::N, n, DVec3::X, cosine)
-            .distance(self.min_domain)
+        probe_count(0, level);
+        objective
+            .normal_term(n, cosine, level)
+            .distance(self.min_count(objective, level))
     }
 
-    /// `SD_nt + SD_nb` at a candidate tangent of a fixed normal.
-    pub fn tangent_distance<L: SliceLookup>(
+    /// `SD_nt + SD_nb` at a candidate tangent of a fixed normal, and the smaller domain.
+    fn tangent_distance<O: Objective>(
         &self,
-        slice: &[f32],
-        lookup: &L,
+        objective: &O,
         n: DVec3,
         t: DVec3,
         cosine: CosineMode,
-    ) -> f64 {
-        self.term(slice, lookup, Symmetry::Nt, n, t, cosine)
-            .distance(self.min_domain)
-            + self
-                .term(slice, lookup, Symmetry::Nb, n, t, cosine)
-                .distance(self.min_domain)
+        level: Level,
+    ) -> (f64, u32) {
+        let min = self.min_count(objective, level);
+        probe_count(2, level);
+        let [nt, nb] = objective.tangent_terms(Frame::new(n, t), cosine, level);
+        (nt.distance(min) + nb.distance(min), nt.count.min(nb.count))
     }
 
     /// Minimises `SD_n` with 2D Nelder-Mead on the gnomonic chart of the tangent plane at
     /// `start`, initial simplex `step` radians; returns the normal and the evaluations used.
-    fn search_normal<L: SliceLookup>(
+    fn search_normal<O: Objective>(
         &self,
-        slice: &[f32],
-        lookup: &L,
+        objective: &O,
         start: DVec3,
         cosine: CosineMode,
+        level: Level,
         step: f64,
         budget: u32,
     ) -> (DVec3, u32) {
         let (u, w) = tangent_basis(start);
         let chart = |x: &[f64; 2]| (start + x[0] * u + x[1] * w).normalize();
         let m = nelder_mead(
-            |x: &[f64; 2]| self.normal_distance(slice, lookup, chart(x), cosine),
+            |x: &[f64; 2]| self.normal_distance(objective, chart(x), cosine, level),
             [0.0, 0.0],
             [step, step],
             NelderMeadOptions {
@@ -217,47 +221,119 @@ impl<'a> Estimator<'a> {
         (chart(&m.x), m.evals)
     }
 
+    /// Coarse to fine: Nelder-Mead on the coarse level `coarse` from `start` (simplex `step`,
+    /// at most `budget` evaluations), a restart there with a small simplex against premature
+    /// collapse, and a polish on the full level. Where the coarse domain at the coarse
+    /// solution is too small to trust, the coarse stages are repeated on a larger prefix.
+    fn minimise_normal<O: Objective>(
+        &self,
+        objective: &O,
+        start: DVec3,
+        cosine: CosineMode,
+        mut coarse: Level,
+        step: f64,
+        budget: u32,
+    ) -> (DVec3, u32) {
+        let mut evals = 0;
+        let mut n = start;
+        let mut step = step;
+        for _ in 0..3 {
+            let (m, e1) = self.search_normal(objective, n, cosine, coarse, step, budget);
+            let (m, e2) = self.search_normal(objective, m, cosine, coarse, 0.01, 20);
+            evals += e1 + e2;
+            let count = objective.normal_term(m, cosine, coarse).count;
+            evals += 1;
+            if coarse == Level::Full || count >= COARSE_RELIABLE {
+                n = m;
+                break;
+            }
+            // Too few lights: grow the prefix to reach the target domain, restart from the
+            // original start if the coarse solution has no domain at all.
+            coarse = coarse_level(objective, coarse, count, 2 * COARSE_RELIABLE);
+            if count >= 6 {
+                n = m;
+                step = step.min(0.05);
+            }
+        }
+        let v = variant();
+        if v.polish == 0 {
+            let (n, e) = self.search_normal(objective, n, cosine, Level::Full, 0.005, 20);
+            return (n, evals + e);
+        }
+        for it in 0..v.polish {
+            let r = v.radius_deg.to_radians() * if it > 0 { v.shrink } else { 1.0 };
+            let (m, e) = self.quadratic_polish(objective, n, cosine, r);
+            n = m;
+            evals += e;
+        }
+        (n, evals)
+    }
+
+    /// One quadratic-fit step on the full level: the objective at a 3x3 stencil of spacing `r`
+    /// radians around `centre` on its tangent plane, a least-squares quadratic through the nine
+    /// values, and its minimum (the best stencil point where the fit has no minimum nearby).
+    fn quadratic_polish<O: Objective>(
+        &self,
+        objective: &O,
+        centre: DVec3,
+        cosine: CosineMode,
+        r: f64,
+    ) -> (DVec3, u32) {
+        let (u, w) = tangent_basis(centre);
+        let chart = |x: f64, y: f64| (centre + x * u + y * w).normalize();
+        let mut f = [[0.0f64; 3]; 3];
+        let mut best = (f64::INFINITY, 0.0, 0.0);
+        for (i, row) in f.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                let (x, y) = ((i as f64 - 1.0) * r, (j as f64 - 1.0) * r);
+                *v = self.normal_distance(objective, chart(x, y), cosine, Level::Full);
+                if *v < best.0 {
+                    best = (*v, x, y);
+                }
+            }
+        }
+        if f.iter().flatten().any(|v| *v >= EMPTY_DISTANCE) {
+            return (chart(best.1, best.2), 9);
+        }
+        // Least-squares quadratic on the symmetric 3x3 stencil (orthogonal basis: closed form).
+        let col = |i: usize| f[i][0] + f[i][1] + f[i][2];
+        let row = |j: usize| f[0][j] + f[1][j] + f[2][j];
+        let gx = (col(2) - col(0)) / (6.0 * r);
+        let gy = (row(2) - row(0)) / (6.0 * r);
+        let hxx = (col(2) - 2.0 * col(1) + col(0)) / (3.0 * r * r);
+        let hyy = (row(2) - 2.0 * row(1) + row(0)) / (3.0 * r * r);
+        let hxy = (f[2][2] - f[2][0] - f[0][2] + f[0][0]) / (4.0 * r * r);
+        let det = hxx * hyy - hxy * hxy;
+        if hxx > 0.0 && det > 0.0 {
+            let x = -(hyy * gx - hxy * gy) / det;
+            let y = -(hxx * gy - hxy * gx) / det;
+            if x.abs() <= 1.5 * r && y.abs() <= 1.5 * r {
+                return (chart(x, y), 9);
+            }
+        }
+        (chart(best.1, best.2), 9)
+    }
+
     /// Estimates the frame at one pixel from its slice (rig order, `rig.n_used() * 3` values).
     pub fn estimate_pixel(&self, slice: &[f32]) -> PixelEstimate {
+        let mut scratch = PixelScratch::new(self.rig);
+        self.estimate_pixel_with(slice, &mut scratch)
+    }
+
+    /// [`Estimator::estimate_pixel`] with the caller's buffers (the fast path without a
+    /// per-pixel allocation; unused by the reference path).
+    pub fn estimate_pixel_with(&self, slice: &[f32], scratch: &mut PixelScratch) -> PixelEstimate {
         match self.params.interpolation {
-            Interpolation::Exact => self.solve(
-                slice,
-                &ExactSlice {
-                    rig: self.rig,
-                    samples: slice,
-                },
-            ),
+            Interpolation::Exact => self.solve(slice, &ExactObjective::new(self.rig, slice)),
             Interpolation::Resampled => {
-                let mut scratch = ResampledSlice::new(self.rig);
-                self.estimate_pixel_with(slice, &mut scratch)
+                let objective = scratch.fast.prepare(self.rig, slice);
+                self.solve(slice, &objective)
             }
         }
     }
 
-    /// [`Estimator::estimate_pixel`] with the caller's resampling buffer (the fast path without
-    /// a per-pixel allocation; unused when the interpolation is exact).
-    pub fn estimate_pixel_with(
-        &self,
-        slice: &[f32],
-        scratch: &mut ResampledSlice,
-    ) -> PixelEstimate {
-        match self.params.interpolation {
-            Interpolation::Exact => self.solve(
-                slice,
-                &ExactSlice {
-                    rig: self.rig,
-                    samples: slice,
-                },
-            ),
-            Interpolation::Resampled => {
-                scratch.fill(self.rig, slice);
-                self.solve(slice, &*scratch)
-            }
-        }
-    }
-
-    /// The estimate of one pixel with a given reconstruction of its slice.
-    fn solve<L: SliceLookup>(&self, slice: &[f32], lookup: &L) -> PixelEstimate {
+    /// The estimate of one pixel with a given objective of its slice.
+    fn solve<O: Objective>(&self, slice: &[f32], objective: &O) -> PixelEstimate {
         let rig = self.rig;
         // Start: the halfway vector of the brightest sample (method.md). The brightest light
         // itself is also tried: for diffuse surfaces it is the better guess.
@@ -279,41 +355,47 @@ impl<'a> Estimator<'a> {
             CosineMode::Compensated(_) => CosineMode::CrossMultiplied,
             c => c,
         };
+        // The two starts are compared on a quarter of the lights; the domain there sizes the
+        // coarse level of the search.
+        let quarter = Level::Coarse(objective.queries(Level::Full).div_ceil(4));
+        let at = |n: DVec3| {
+            let term = objective.normal_term(n, cosine, quarter);
+            (term.distance(self.min_count(objective, quarter)), term.count)
+        };
         let mut start = rig.halfway_in_camera[j];
+        let mut start_at = at(start);
         let light = rig.lights_in_camera[j];
-        if light.z > 0.0
-            && self.normal_distance(slice, lookup, light, cosine)
-                < self.normal_distance(slice, lookup, start, cosine)
-        {
-            start = light;
+        if light.z > 0.0 {
+            let light_at = at(light);
+            if light_at.0 < start_at.0 {
+                (start, start_at) = (light, light_at);
+            }
         }
         evals += 2;
+        let coarse = coarse_level(objective, quarter, start_at.1, variant().target_n);
 
-        // 2D Nelder-Mead on the tangent plane of the start, then a restart from the solution
-        // with a small simplex to guard against premature collapse.
-        let (n1, e1) = self.search_normal(
-            slice,
-            lookup,
+        let (mut n, e) = self.minimise_normal(
+            objective,
             start,
             cosine,
+            coarse,
             0.12,
             self.params.max_normal_evals,
         );
-        let (mut n, e2) = self.search_normal(slice, lookup, n1, cosine, 0.01, 20);
-        evals += e1 + e2;
+        evals += e;
         if let CosineMode::Compensated(_) = self.params.cosine {
             // The compensated measure is flatter far from the solution: refine the paper's
             // solution with it (where p = 1 the two coincide).
             cosine = self.params.cosine;
-            let (m, e) = self.search_normal(slice, lookup, n, cosine, 0.06, 150);
+            let (m, e) = self.minimise_normal(objective, n, cosine, coarse, 0.06, 150);
             evals += e;
             n = m;
         }
-        let term_n = self.term(slice, lookup, Symmetry::N, n, DVec3::X, cosine);
+        let term_n = objective.normal_term(n, cosine, Level::Full);
         if term_n.count < self.min_domain
             || term_n.denominator <= 0.0
             || n.z <= 0.0
-            || !centre_observed(lookup, n)
+            || !centre_observed(objective, n)
         {
             return PixelEstimate {
                 evals,
@@ -322,36 +404,66 @@ impl<'a> Estimator<'a> {
         }
         let sd_n = term_n.numerator / term_n.denominator;
 
-        // Tangent: scan the objective over its 90-degree period, refine the best angle.
+        // Tangent: scan the objective over its 90-degree period on a coarse level, refine the
+        // best angle there, then polish on the full level.
         let (u, w) = tangent_basis(n);
         let tangent_at = |psi: f64| u * psi.cos() + w * psi.sin();
         let period = std::f64::consts::FRAC_PI_2;
+        let (_, count) = self.tangent_distance(objective, n, u, cosine, quarter);
+        let coarse = coarse_level(objective, quarter, count, variant().target_t);
         let mut scan = [0.0f64; TANGENT_SCAN];
         for (k, v) in scan.iter_mut().enumerate() {
             let t = tangent_at(period * k as f64 / TANGENT_SCAN as f64);
-            *v = self.tangent_distance(slice, lookup, n, t, cosine);
+            *v = self.tangent_distance(objective, n, t, cosine, coarse).0;
         }
-        evals += TANGENT_SCAN as u32 * 2;
+        evals += 1 + TANGENT_SCAN as u32;
         let (k_best, _) = scan
             .iter()
             .enumerate()
             .min_by(|a, b| a.1.total_cmp(b.1))
             .unwrap_or((0, &0.0));
         let psi0 = period * k_best as f64 / TANGENT_SCAN as f64;
-        let m = nelder_mead(
-            |x: &[f64; 1]| self.tangent_distance(slice, lookup, n, tangent_at(x[0]), cosine),
-            [psi0],
-            [period / TANGENT_SCAN as f64 / 2.0],
-            NelderMeadOptions {
-                max_evals: 60,
-                x_tolerance: 1e-4,
-                f_tolerance: f64::INFINITY,
-            },
-        );
-        evals += m.evals * 2;
-        let mut t = tangent_at(m.x[0]);
-        let term_nt = self.term(slice, lookup, Symmetry::Nt, n, t, cosine);
-        let term_nb = self.term(slice, lookup, Symmetry::Nb, n, t, cosine);
+        let search_tangent = |psi: f64, step: f64, level: Level, budget: u32| {
+            nelder_mead(
+                |x: &[f64; 1]| {
+                    self.tangent_distance(objective, n, tangent_at(x[0]), cosine, level)
+                        .0
+                },
+                [psi],
+                [step],
+                NelderMeadOptions {
+                    max_evals: budget,
+                    x_tolerance: 1e-4,
+                    f_tolerance: f64::INFINITY,
+                },
+            )
+        };
+        let rough = search_tangent(psi0, period / TANGENT_SCAN as f64 / 2.0, coarse, 60);
+        evals += rough.evals;
+        let psi = if variant().tangent_polish == 0 {
+            let fine = search_tangent(rough.x[0], 0.005, Level::Full, 16);
+            evals += fine.evals;
+            fine.x[0]
+        } else {
+            // A parabola through three full-level values around the coarse solution.
+            let d = variant().tangent_step_deg.to_radians();
+            let f = [-d, 0.0, d].map(|o| {
+                self.tangent_distance(objective, n, tangent_at(rough.x[0] + o), cosine, Level::Full)
+                    .0
+            });
+            evals += 3;
+            let curvature = f[0] - 2.0 * f[1] + f[2];
+            let shift = if curvature > 0.0 {
+                (0.5 * d * (f[0] - f[2]) / curvature).clamp(-d, d)
+            } else if f[0] < f[2] {
+                -d
+            } else {
+                d
+            };
+            rough.x[0] + shift
+        };
+        let mut t = tangent_at(psi);
+        let [term_nt, term_nb] = objective.tangent_terms(Frame::new(n, t), cosine, Level::Full);
         if term_nt.count < self.min_domain
             || term_nb.count < self.min_domain
             || term_nt.denominator <= 0.0
@@ -364,12 +476,17 @@ impl<'a> Estimator<'a> {
         }
         let sd_nt = term_nt.numerator / term_nt.denominator;
         let sd_nb = term_nb.numerator / term_nb.denominator;
-        let f_min = (sd_nt + sd_nb).min(scan.iter().copied().fold(f64::INFINITY, f64::min));
-        let f_max = scan.iter().copied().fold(0.0, f64::max);
+        // Anisotropy: how much worse the tangent objective is half a period (45 degrees) away
+        // from the solution, on the full level.
+        let f_min = sd_nt + sd_nb;
+        let f_max = self
+            .tangent_distance(objective, n, tangent_at(psi + period / 2.0), cosine, Level::Full)
+            .0;
+        evals += 2;
         let anisotropy = ((f_max - f_min) / (f_max + f_min + ANISOTROPY_FLOOR)).clamp(0.0, 1.0);
 
         let tangent = if self.params.tangents && anisotropy >= self.params.min_anisotropy as f64 {
-            if self.highlight_wider_along(lookup, n, n.cross(t), t) {
+            if highlight_wider_along(objective, n, n.cross(t), t) {
                 t = n.cross(t);
             }
             Some(t)
@@ -393,39 +510,6 @@ impl<'a> Estimator<'a> {
             residual: [sd_n, sd_nt, sd_nb],
             evals,
         }
-    }
-
-    /// The widest-highlight heuristic: is the slice, around `n` in halfway space, brighter along
-    /// `candidate` than along `current` at equal angles? Compares symmetric pairs `n cos d +- a
-    /// sin d` for several `d` where all four points have data, so uneven sample density cannot
-    /// bias it.
-    fn highlight_wider_along<L: SliceLookup>(
-        &self,
-        lookup: &L,
-        n: DVec3,
-        candidate: DVec3,
-        current: DVec3,
-    ) -> bool {
-        let mut along_candidate = 0.0;
-        let mut along_current = 0.0;
-        for k in 1..=12 {
-            let d = (2.0 * k as f64).to_radians();
-            let (s, c) = d.sin_cos();
-            let probe = |a: DVec3| {
-                let h = n * c + a * s;
-                lookup.value(h).map(|v| v[0] + v[1] + v[2])
-            };
-            if let (Some(a), Some(b), Some(p), Some(q)) = (
-                probe(candidate),
-                probe(-candidate),
-                probe(current),
-                probe(-current),
-            ) {
-                along_candidate += a + b;
-                along_current += p + q;
-            }
-        }
-        along_candidate > along_current
     }
 
     /// Confidence from the residual and the share of the pixel's signal inside the normal's
@@ -452,6 +536,55 @@ impl<'a> Estimator<'a> {
     }
 }
 
+/// The widest-highlight heuristic: is the slice, around `n` in halfway space, brighter along
+/// `candidate` than along `current` at equal angles? Compares symmetric pairs `n cos d +- a
+/// sin d` for several `d` where all four points have data, so uneven sample density cannot
+/// bias it.
+fn highlight_wider_along<O: Objective>(
+    objective: &O,
+    n: DVec3,
+    candidate: DVec3,
+    current: DVec3,
+) -> bool {
+    let mut along_candidate = 0.0;
+    let mut along_current = 0.0;
+    for k in 1..=12 {
+        let d = (2.0 * k as f64).to_radians();
+        let (s, c) = d.sin_cos();
+        let probe = |a: DVec3| {
+            let h = n * c + a * s;
+            objective.value(h).map(|v| v[0] + v[1] + v[2])
+        };
+        if let (Some(a), Some(b), Some(p), Some(q)) = (
+            probe(candidate),
+            probe(-candidate),
+            probe(current),
+            probe(-current),
+        ) {
+            along_candidate += a + b;
+            along_current += p + q;
+        }
+    }
+    along_candidate > along_current
+}
+
+/// Coarse domains smaller than this (lights) do not locate a minimum reliably: the search
+/// repeats on a larger prefix.
+const COARSE_RELIABLE: u32 = 32;
+
+/// The coarse level whose domain holds about `target` lights, given that `level` has a domain
+/// of `count` lights; the full level where that is most of the lights anyway.
+fn coarse_level<O: Objective>(objective: &O, level: Level, count: u32, target: u32) -> Level {
+    let full = objective.queries(Level::Full);
+    let part = objective.queries(level);
+    let m = (part as u64 * target as u64).div_ceil(count.max(1) as u64) as usize;
+    if m >= full * 3 / 4 {
+        Level::Full
+    } else {
+        Level::Coarse(m.max(target as usize))
+    }
+}
+
 /// Half-angle of the neighbourhood of `h = n` that must be observed for a normal to count as
 /// within the rig's reach (degrees).
 const CENTRE_RADIUS_DEG: f64 = 2.0;
@@ -460,13 +593,69 @@ const CENTRE_RADIUS_DEG: f64 = 2.0;
 /// symmetries must be observed. A normal beyond the rig's reach (a rig within 45 degrees of the
 /// view has halfway vectors within ~22) otherwise settles at the edge of the sampled region with
 /// a small but meaningless distance: a clamped guess, which method.md says never to return.
-fn centre_observed<L: SliceLookup>(lookup: &L, n: DVec3) -> bool {
+fn centre_observed<O: Objective>(objective: &O, n: DVec3) -> bool {
     let (u, w) = tangent_basis(n);
     let (s, c) = CENTRE_RADIUS_DEG.to_radians().sin_cos();
-    lookup.value(n).is_some()
+    objective.value(n).is_some()
         && [u, -u, w, -w]
             .iter()
-            .all(|&a| lookup.value(n * c + a * s).is_some())
+            .all(|&a| objective.value(n * c + a * s).is_some())
+}
+
+/// Probe counters.
+pub static COUNTS: [std::sync::atomic::AtomicU64; 5] = [const { std::sync::atomic::AtomicU64::new(0) }; 5];
+
+fn probe_count(k: usize, level: Level) {
+    let i = k + matches!(level, Level::Full) as usize;
+    COUNTS[i].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+}
+
+#[derive(Clone, Copy)]
+struct Variant {
+    polish: usize,
+    radius_deg: f64,
+    shrink: f64,
+    target_n: u32,
+    target_t: u32,
+    tangent_polish: u32,
+    tangent_step_deg: f64,
+}
+
+fn variant() -> Variant {
+    static V: std::sync::OnceLock<Variant> = std::sync::OnceLock::new();
+    *V.get_or_init(|| {
+        let get = |k: &str, d: f64| {
+            std::env::var(k)
+                .ok()
+                .and_then(|s| s.parse().ok())
+                .unwrap_or(d)
+        };
+        Variant {
+            polish: get("SF_POLISH", 0.0) as usize,
+            radius_deg: get("SF_R", 1.0),
+            shrink: get("SF_SHRINK", 1.0),
+            target_n: get("SF_TN", 64.0) as u32,
+            target_t: get("SF_TT", 96.0) as u32,
+            tangent_polish: get("SF_TP", 1.0) as u32,
+            tangent_step_deg: get("SF_TSTEP", 1.0),
+        }
+    })
+}
+
+/// Per-thread buffers of the per-pixel estimator (the fast path's resampled slice and light
+/// layout), reused from pixel to pixel.
+#[derive(Debug, Clone)]
+pub struct PixelScratch {
+    fast: FastScratch,
+}
+
+impl PixelScratch {
+    /// Buffers sized for `rig`.
+    pub fn new(rig: &Rig) -> Self {
+        Self {
+            fast: FastScratch::new(rig),
+        }
+    }
 }
 
 /// Counts of what happened to the pixels of a stack.
@@ -607,7 +796,7 @@ impl EstimateMaps {
 #[derive(Debug, Clone)]
 pub struct BlockScratch {
     slice: Vec<f32>,
-    resampled: ResampledSlice,
+    pixel: PixelScratch,
 }
 
 impl BlockScratch {
@@ -615,7 +804,7 @@ impl BlockScratch {
     pub fn new(rig: &Rig) -> Self {
         Self {
             slice: vec![0.0; rig.n_used() * 3],
-            resampled: ResampledSlice::new(rig),
+            pixel: PixelScratch::new(rig),
         }
     }
 }
@@ -660,7 +849,7 @@ pub fn estimate_pixels(
                 return PixelRecord::MASKED;
             }
             gather(k, &mut scratch.slice);
-            let e = estimator.estimate_pixel_with(&scratch.slice, &mut scratch.resampled);
+            let e = estimator.estimate_pixel_with(&scratch.slice, &mut scratch.pixel);
             PixelRecord::from_estimate(&e)
         })
         .collect()

@@ -5,7 +5,8 @@
 //! vector is `(0, 0, 1)` for every pixel (orthographic). Each pixel's local frame is (n, t, b).
 //!
 //! Where things live: [`rig`] (lights, halfway vectors, triangulation, point location),
-//! [`slice`](mod@slice) (per-pixel interpolation), [`symmetry`] (the objective), [`optim`] (Nelder-Mead),
+//! [`slice`](mod@slice) (per-pixel interpolation), [`symmetry`] (the objective), [`objective`] (its reference and fast
+//! implementations), [`optim`] (Nelder-Mead),
 //! [`estimate`] (the per-pixel estimator and the whole-stack pipeline), [`brdf`] (models),
 //! [`render`] (the synthetic renderer), [`stack`] (the measurement stack), [`baseline`] (the
 //! photometric-stereo and max-reflectance baselines the paper compares against), [`fit`]
@@ -17,6 +18,7 @@ pub mod error;
 pub mod estimate;
 pub mod eval;
 pub mod fit;
+pub mod objective;
 pub mod optim;
 pub mod relight;
 pub mod render;
@@ -29,7 +31,7 @@ pub use baseline::{estimate_stack_baseline, Baseline};
 pub use error::{Error, Result};
 pub use estimate::{
     estimate_block, estimate_pixels, estimate_stack, BlockScratch, EstimateMaps, Estimator,
-    EstimatorParams, Interpolation, PixelRecord, PixelStatus,
+    EstimatorParams, Interpolation, PixelRecord, PixelScratch, PixelStatus,
 };
 pub use fit::{fit_stack, FitMaps, FitParams, WardMaps};
 pub use relight::{Edits, Relighter};

@@ -93,6 +93,19 @@ pub struct Rig {
     grid: LocateGrid,
     /// Precomputed locations of a regular grid of halfway vectors, for per-pixel resampling.
     pub resample: ResampleGrid,
+    /// The order the fast objective visits the lights in (rig indices): the Morton order
+    /// permuted by bit-reversed rank (a van der Corput sequence over the Morton curve), so that
+    /// every prefix of it is a subset spread evenly over the cone, and a coarse evaluation over
+    /// any number of lights is a prefix of the full one.
+    pub query_order: Vec<u32>,
+}
+
+/// Indices `0..n` ordered by their bit-reversed value: every prefix spreads evenly over
+/// `0..n` (for `n` a power of two, a prefix of `2^k` is every `n / 2^k`-th index).
+fn bit_reversed_order(n: usize) -> Vec<u32> {
+    let mut order: Vec<u32> = (0..n as u32).collect();
+    if std::env::var("SF_MORTON").is_err() { order.sort_by_key(|i| i.reverse_bits()); }
+    order
 }
 
 /// A regular `size x size` grid over the stereographic projection of the halfway cone,
@@ -244,6 +257,7 @@ impl Rig {
             theta,
             options.resample_size.max(2),
         );
+        let query_order = bit_reversed_order(lights_in_camera.len());
         Ok(Self {
             lights_in_camera,
             halfway_in_camera,
@@ -254,6 +268,7 @@ impl Rig {
             triangles,
             grid,
             resample,
+            query_order,
         })
     }
 

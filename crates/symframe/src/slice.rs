@@ -2,7 +2,7 @@
 //! reconstructed between the samples by spherical barycentric interpolation on the rig's
 //! triangulation.
 
-use glam::DVec3;
+use glam::{DVec3, Vec4};
 
 use crate::rig::Rig;
 use crate::stack::Stack;
@@ -72,8 +72,11 @@ pub struct ResampledSlice {
     size: usize,
     min: f64,
     inv_step: f64,
-    /// RGB per node, NaN where there is no data.
-    values: Vec<[f32; 3]>,
+    /// RGB per node (the fourth lane 0), all NaN where there is no data: one 16-byte load per
+    /// node, and the bilinear blend runs on the three channels at once.
+    values: Vec<Vec4>,
+    /// The pixel's samples as RGB_ lanes (rig order), for the resampling.
+    lanes: Vec<Vec4>,
 }
 
 impl ResampledSlice {
@@ -84,7 +87,8 @@ impl ResampledSlice {
             size: g.size,
             min: g.min,
             inv_step: g.inv_step,
-            values: vec![[f32::NAN; 3]; g.size * g.size],
+            values: vec![Vec4::NAN; g.size * g.size],
+            lanes: Vec::with_capacity(rig.n_used()),
         }
     }
 
@@ -92,29 +96,55 @@ impl ResampledSlice {
     pub fn fill(&mut self, rig: &Rig, samples: &[f32]) {
         let g = &rig.resample;
         debug_assert_eq!(g.size, self.size);
+        // The samples as 16-byte RGB_ lanes first: one aligned load per corner below.
+        self.lanes.clear();
+        self.lanes.extend(
+            samples
+                .chunks_exact(3)
+                .map(|s| Vec4::new(s[0], s[1], s[2], 0.0)),
+        );
+        let lanes = &self.lanes;
         for ((out, v), w) in self.values.iter_mut().zip(&g.vertices).zip(&g.weights) {
-            if v[0] == u32::MAX {
-                *out = [f32::NAN; 3];
-                continue;
-            }
-            let mut acc = [0.0f32; 3];
-            for k in 0..3 {
-                let o = v[k] as usize * 3;
-                acc[0] += w[k] * samples[o];
-                acc[1] += w[k] * samples[o + 1];
-                acc[2] += w[k] * samples[o + 2];
-            }
-            *out = acc;
+            *out = if v[0] == u32::MAX {
+                Vec4::NAN
+            } else {
+                lanes[v[0] as usize] * w[0]
+                    + lanes[v[1] as usize] * w[1]
+                    + lanes[v[2] as usize] * w[2]
+            };
+        }
+    }
+
+    /// The grid as the fast objective's kernel reads it.
+    #[inline]
+    pub fn view(&self) -> GridView<'_> {
+        GridView {
+            size: self.size,
+            scale: self.inv_step as f32,
+            offset: (self.min * self.inv_step) as f32,
+            values: &self.values,
         }
     }
 }
 
-impl SliceLookup for ResampledSlice {
+/// A resampled slice in single precision: `size x size` RGB nodes at stereographic coordinates
+/// `(i, j) / scale - offset / scale`.
+#[derive(Debug, Clone, Copy)]
+pub struct GridView<'a> {
+    pub(crate) size: usize,
+    pub(crate) scale: f32,
+    pub(crate) offset: f32,
+    pub(crate) values: &'a [Vec4],
+}
+
+impl GridView<'_> {
+    /// The bilinear value at the unit halfway vector `(x, y, z)`; NaN lanes where there is no
+    /// data, `None` outside the grid.
     #[inline(always)]
-    fn value(&self, halfway: DVec3) -> Option<[f64; 3]> {
-        let k = 1.0 / (1.0 + halfway.z);
-        let gx = (halfway.x * k - self.min) * self.inv_step;
-        let gy = (halfway.y * k - self.min) * self.inv_step;
+    pub fn value(&self, x: f32, y: f32, z: f32) -> Option<Vec4> {
+        let k = self.scale / (1.0 + z);
+        let gx = x * k - self.offset;
+        let gy = y * k - self.offset;
         if !(gx >= 0.0 && gy >= 0.0) {
             return None;
         }
@@ -122,18 +152,24 @@ impl SliceLookup for ResampledSlice {
         if ix + 1 >= self.size || iy + 1 >= self.size {
             return None;
         }
-        let (fx, fy) = ((gx - ix as f64) as f32, (gy - iy as f64) as f32);
+        let (fx, fy) = (gx - ix as f32, gy - iy as f32);
         let i = iy * self.size + ix;
-        let (a, b) = (self.values[i], self.values[i + 1]);
-        let (c, d) = (self.values[i + self.size], self.values[i + self.size + 1]);
-        let mut out = [0.0f64; 3];
-        for ch in 0..3 {
-            let top = a[ch] + fx * (b[ch] - a[ch]);
-            let bottom = c[ch] + fx * (d[ch] - c[ch]);
-            out[ch] = (top + fy * (bottom - top)) as f64;
-        }
+        let row = &self.values[i..i + self.size + 2];
+        let top = row[0] + (row[1] - row[0]) * fx;
+        let bottom = row[self.size] + (row[self.size + 1] - row[self.size]) * fx;
+        Some(top + (bottom - top) * fy)
+    }
+}
+
+impl SliceLookup for ResampledSlice {
+    #[inline]
+    fn value(&self, halfway: DVec3) -> Option<[f64; 3]> {
+        let v = self
+            .view()
+            .value(halfway.x as f32, halfway.y as f32, halfway.z as f32)?;
         // A node without data (NaN) poisons the result: no data here.
-        out.iter().all(|v| v.is_finite()).then_some(out)
+        v.is_finite()
+            .then(|| [v.x as f64, v.y as f64, v.z as f64])
     }
 }
 
