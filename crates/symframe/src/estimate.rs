@@ -8,9 +8,9 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::optim::{nelder_mead, NelderMeadOptions};
 use crate::rig::Rig;
-use crate::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::slice::gather_pixel;
 use crate::stack::Stack;
 use crate::symmetry::{
@@ -174,7 +174,6 @@ impl<'a> Estimator<'a> {
         if n.z <= 0.0 {
             return EMPTY_DISTANCE;
         }
-        probe_count(0, level);
         objective
             .normal_term(n, cosine, level)
             .distance(self.min_count(objective, level))
@@ -190,7 +189,6 @@ impl<'a> Estimator<'a> {
         level: Level,
     ) -> (f64, u32) {
         let min = self.min_count(objective, level);
-        probe_count(2, level);
         let [nt, nb] = objective.tangent_terms(Frame::new(n, t), cosine, level);
         (nt.distance(min) + nb.distance(min), nt.count.min(nb.count))
     }
@@ -255,18 +253,8 @@ impl<'a> Estimator<'a> {
                 step = step.min(0.05);
             }
         }
-        let v = variant();
-        if v.polish == 0 {
-            let (n, e) = self.search_normal(objective, n, cosine, Level::Full, 0.005, 20);
-            return (n, evals + e);
-        }
-        for it in 0..v.polish {
-            let r = v.radius_deg.to_radians() * if it > 0 { v.shrink } else { 1.0 };
-            let (m, e) = self.quadratic_polish(objective, n, cosine, r);
-            n = m;
-            evals += e;
-        }
-        (n, evals)
+        let (n, e) = self.quadratic_polish(objective, n, cosine, POLISH_RADIUS_DEG.to_radians());
+        (n, evals + e)
     }
 
     /// One quadratic-fit step on the full level: the objective at a 3x3 stencil of spacing `r`
@@ -355,12 +343,15 @@ impl<'a> Estimator<'a> {
             CosineMode::Compensated(_) => CosineMode::CrossMultiplied,
             c => c,
         };
-        // The two starts are compared on a quarter of the lights; the domain there sizes the
-        // coarse level of the search.
-        let quarter = Level::Coarse(objective.queries(Level::Full).div_ceil(4));
+        // The two starts are compared on a quarter of the lights (all of them on small rigs);
+        // the domain there sizes the coarse level of the search.
+        let quarter = Level::Coarse(objective.queries(Level::Full).div_ceil(4).max(256));
         let at = |n: DVec3| {
             let term = objective.normal_term(n, cosine, quarter);
-            (term.distance(self.min_count(objective, quarter)), term.count)
+            (
+                term.distance(self.min_count(objective, quarter)),
+                term.count,
+            )
         };
         let mut start = rig.halfway_in_camera[j];
         let mut start_at = at(start);
@@ -372,7 +363,7 @@ impl<'a> Estimator<'a> {
             }
         }
         evals += 2;
-        let coarse = coarse_level(objective, quarter, start_at.1, variant().target_n);
+        let coarse = coarse_level(objective, quarter, start_at.1, NORMAL_DOMAIN_TARGET);
 
         let (mut n, e) = self.minimise_normal(
             objective,
@@ -410,7 +401,7 @@ impl<'a> Estimator<'a> {
         let tangent_at = |psi: f64| u * psi.cos() + w * psi.sin();
         let period = std::f64::consts::FRAC_PI_2;
         let (_, count) = self.tangent_distance(objective, n, u, cosine, quarter);
-        let coarse = coarse_level(objective, quarter, count, variant().target_t);
+        let coarse = coarse_level(objective, quarter, count, TANGENT_DOMAIN_TARGET);
         let mut scan = [0.0f64; TANGENT_SCAN];
         for (k, v) in scan.iter_mut().enumerate() {
             let t = tangent_at(period * k as f64 / TANGENT_SCAN as f64);
@@ -440,16 +431,18 @@ impl<'a> Estimator<'a> {
         };
         let rough = search_tangent(psi0, period / TANGENT_SCAN as f64 / 2.0, coarse, 60);
         evals += rough.evals;
-        let psi = if variant().tangent_polish == 0 {
-            let fine = search_tangent(rough.x[0], 0.005, Level::Full, 16);
-            evals += fine.evals;
-            fine.x[0]
-        } else {
+        let psi = {
             // A parabola through three full-level values around the coarse solution.
-            let d = variant().tangent_step_deg.to_radians();
+            let d = TANGENT_POLISH_DEG.to_radians();
             let f = [-d, 0.0, d].map(|o| {
-                self.tangent_distance(objective, n, tangent_at(rough.x[0] + o), cosine, Level::Full)
-                    .0
+                self.tangent_distance(
+                    objective,
+                    n,
+                    tangent_at(rough.x[0] + o),
+                    cosine,
+                    Level::Full,
+                )
+                .0
             });
             evals += 3;
             let curvature = f[0] - 2.0 * f[1] + f[2];
@@ -480,7 +473,13 @@ impl<'a> Estimator<'a> {
         // from the solution, on the full level.
         let f_min = sd_nt + sd_nb;
         let f_max = self
-            .tangent_distance(objective, n, tangent_at(psi + period / 2.0), cosine, Level::Full)
+            .tangent_distance(
+                objective,
+                n,
+                tangent_at(psi + period / 2.0),
+                cosine,
+                Level::Full,
+            )
             .0;
         evals += 2;
         let anisotropy = ((f_max - f_min) / (f_max + f_min + ANISOTROPY_FLOOR)).clamp(0.0, 1.0);
@@ -572,6 +571,21 @@ fn highlight_wider_along<O: Objective>(
 /// repeats on a larger prefix.
 const COARSE_RELIABLE: u32 = 32;
 
+/// How many lights the coarse level's `SD_n` domain should hold: enough to place the minimum
+/// within the full level's basin (a fraction of a degree), few enough to be cheap.
+const NORMAL_DOMAIN_TARGET: u32 = 64;
+
+/// The same for the tangent terms' domains.
+const TANGENT_DOMAIN_TARGET: u32 = 96;
+
+/// Spacing of the full-level quadratic fit that ends the normal search (degrees): wide enough
+/// to average over the objective's ripples at the scale of the light spacing (the reference and
+/// fast paths then agree), narrow enough to stay quadratic.
+const POLISH_RADIUS_DEG: f64 = 1.0;
+
+/// Spacing of the full-level parabola that ends the tangent search (degrees).
+const TANGENT_POLISH_DEG: f64 = 1.0;
+
 /// The coarse level whose domain holds about `target` lights, given that `level` has a domain
 /// of `count` lights; the full level where that is most of the lights anyway.
 fn coarse_level<O: Objective>(objective: &O, level: Level, count: u32, target: u32) -> Level {
@@ -600,46 +614,6 @@ fn centre_observed<O: Objective>(objective: &O, n: DVec3) -> bool {
         && [u, -u, w, -w]
             .iter()
             .all(|&a| objective.value(n * c + a * s).is_some())
-}
-
-/// Probe counters.
-pub static COUNTS: [std::sync::atomic::AtomicU64; 5] = [const { std::sync::atomic::AtomicU64::new(0) }; 5];
-
-fn probe_count(k: usize, level: Level) {
-    let i = k + matches!(level, Level::Full) as usize;
-    COUNTS[i].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-}
-
-#[derive(Clone, Copy)]
-struct Variant {
-    polish: usize,
-    radius_deg: f64,
-    shrink: f64,
-    target_n: u32,
-    target_t: u32,
-    tangent_polish: u32,
-    tangent_step_deg: f64,
-}
-
-fn variant() -> Variant {
-    static V: std::sync::OnceLock<Variant> = std::sync::OnceLock::new();
-    *V.get_or_init(|| {
-        let get = |k: &str, d: f64| {
-            std::env::var(k)
-                .ok()
-                .and_then(|s| s.parse().ok())
-                .unwrap_or(d)
-        };
-        Variant {
-            polish: get("SF_POLISH", 0.0) as usize,
-            radius_deg: get("SF_R", 1.0),
-            shrink: get("SF_SHRINK", 1.0),
-            target_n: get("SF_TN", 64.0) as u32,
-            target_t: get("SF_TT", 96.0) as u32,
-            tangent_polish: get("SF_TP", 1.0) as u32,
-            tangent_step_deg: get("SF_TSTEP", 1.0),
-        }
-    })
 }
 
 /// Per-thread buffers of the per-pixel estimator (the fast path's resampled slice and light

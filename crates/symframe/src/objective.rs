@@ -248,7 +248,11 @@ impl Accumulator {
     fn flush(&mut self) {
         self.total_num += lanes_sum(self.num);
         self.total_den += lanes_sum(self.den);
-        for (t, v) in self.total_diffuse_dot.iter_mut().zip(self.diffuse_dot.to_array()) {
+        for (t, v) in self
+            .total_diffuse_dot
+            .iter_mut()
+            .zip(self.diffuse_dot.to_array())
+        {
             *t += v as f64;
         }
         self.total_diffuse_sq += self.diffuse_sq as f64;
@@ -366,7 +370,9 @@ impl FastObjective<'_> {
             let samples = &self.samples[start..end];
             let m = end - start;
             // n.h, and n.l with l = 2 (h.v) h - v, v = z.
-            for ((((a, l), &x), &y), &z) in hn[..m].iter_mut().zip(&mut nl[..m]).zip(hx).zip(hy).zip(hz) {
+            for ((((a, l), &x), &y), &z) in
+                hn[..m].iter_mut().zip(&mut nl[..m]).zip(hx).zip(hy).zip(hz)
+            {
                 *a = x * n.x + y * n.y + z * n.z;
                 *l = 2.0 * z * *a - n.z;
             }
@@ -388,10 +394,7 @@ impl FastObjective<'_> {
                 self.accumulate::<W>(&reflections, samples, m, &mut first);
             }
         }
-        [
-            first.finish(W::COMPENSATED),
-            second.finish(W::COMPENSATED),
-        ]
+        [first.finish(W::COMPENSATED), second.finish(W::COMPENSATED)]
     }
 
     /// The geometry of one reflection for the `m` lights of a block: grid cell and bilinear
@@ -452,7 +455,7 @@ impl FastObjective<'_> {
     ) {
         let size = self.grid.size;
         let values = self.grid.values;
-        for k in 0..m {
+        for (k, &s) in samples[..m].iter().enumerate() {
             if !r.inside[k] {
                 continue;
             }
@@ -465,7 +468,7 @@ impl FastObjective<'_> {
             if v.x.is_nan() {
                 continue;
             }
-            acc.add::<W>(samples[k], v, r.wa[k], r.wb[k], r.diffuse[k]);
+            acc.add::<W>(s, v, r.wa[k], r.wb[k], r.diffuse[k]);
         }
         acc.flush();
     }
@@ -511,7 +514,11 @@ mod tests {
                 let nl = n.dot(light_from_halfway(h)).max(0.0);
                 let (ht, hb, hn) = (h.dot(t), h.dot(b), h.dot(n).max(1e-6));
                 let f = 0.3 + 2.0 * (-((ht / hn).powi(2) / 0.04 + (hb / hn).powi(2) / 0.25)).exp();
-                [(f * nl) as f32, (0.8 * f * nl) as f32, (0.5 * f * nl) as f32]
+                [
+                    (f * nl) as f32,
+                    (0.8 * f * nl) as f32,
+                    (0.5 * f * nl) as f32,
+                ]
             })
             .collect()
     }
@@ -553,7 +560,10 @@ mod tests {
                 );
                 // Domain membership differs only where a reflection lands on the edge of the
                 // sampled region.
-                assert!(a.count.abs_diff(b.count) <= 2 + b.count / 50, "{a:?} vs {b:?}");
+                assert!(
+                    a.count.abs_diff(b.count) <= 2 + b.count / 50,
+                    "{a:?} vs {b:?}"
+                );
             };
             close(
                 fast.normal_term(n1, cosine, Level::Full),

@@ -104,7 +104,7 @@ pub struct Rig {
 /// `0..n` (for `n` a power of two, a prefix of `2^k` is every `n / 2^k`-th index).
 fn bit_reversed_order(n: usize) -> Vec<u32> {
     let mut order: Vec<u32> = (0..n as u32).collect();
-    if std::env::var("SF_MORTON").is_err() { order.sort_by_key(|i| i.reverse_bits()); }
+    order.sort_by_key(|i| i.reverse_bits());
     order
 }
 

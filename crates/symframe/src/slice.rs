@@ -168,8 +168,7 @@ impl SliceLookup for ResampledSlice {
             .view()
             .value(halfway.x as f32, halfway.y as f32, halfway.z as f32)?;
         // A node without data (NaN) poisons the result: no data here.
-        v.is_finite()
-            .then(|| [v.x as f64, v.y as f64, v.z as f64])
+        v.is_finite().then(|| [v.x as f64, v.y as f64, v.z as f64])
     }
 }
 
