@@ -1,8 +1,8 @@
 //! The per-pixel symmetry objective as the estimator reads it, behind one trait with two
 //! implementations:
 //!
-//! - [`ExactObjective`], the reference path: [`symmetry_term`] in double precision over every
-//!   light, with triangle lookups and spherical barycentric weights at every query.
+//! - [`ExactObjective`], the reference path: [`symmetry_term`] in double precision, with
+//!   triangle lookups and spherical barycentric weights at every query.
 //! - [`FastObjective`], the fast path: the slice resampled once onto the rig's grid, the lights
 //!   in single precision, structure-of-arrays, invalid samples dropped up front, both tangent
 //!   terms in one pass, and coarse levels summing over a prefix of [`Rig::query_order`] only
@@ -17,7 +17,9 @@ use glam::{DVec3, Vec4};
 
 use crate::rig::Rig;
 use crate::slice::{ExactSlice, GridView, ResampledSlice, SliceLookup};
-use crate::symmetry::{symmetry_term, CosineMode, Frame, Symmetry, SymmetryTerm};
+use crate::symmetry::{
+    symmetry_term, symmetry_term_over, CosineMode, Frame, Symmetry, SymmetryTerm,
+};
 
 /// Which lights an evaluation sums over.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -41,47 +43,66 @@ pub trait Objective {
     fn value(&self, halfway: DVec3) -> Option<[f64; 3]>;
 }
 
-/// The reference objective: [`symmetry_term`] with exact lookups over every light at both
-/// levels (no shortcuts).
-#[derive(Debug, Clone, Copy)]
+/// The reference objective: [`symmetry_term`] in double precision with exact lookups
+/// (triangle location and spherical barycentric weights at every query). Its coarse levels sum
+/// over the same prefix of [`Rig::query_order`] as the fast path's, so the two run the same
+/// search and differ only in how they read the slice.
+#[derive(Debug, Clone)]
 pub struct ExactObjective<'a> {
     rig: &'a Rig,
     slice: ExactSlice<'a>,
-    valid: usize,
+    /// The valid lights in query order.
+    order: Vec<u32>,
 }
 
 impl<'a> ExactObjective<'a> {
     /// The objective of one pixel's slice (rig order, `rig.n_used() * 3` values, NaN = invalid).
     pub fn new(rig: &'a Rig, samples: &'a [f32]) -> Self {
-        let valid = samples.chunks_exact(3).filter(|s| s[0].is_finite()).count();
+        let order = rig
+            .query_order
+            .iter()
+            .copied()
+            .filter(|&j| samples[j as usize * 3].is_finite())
+            .collect();
         Self {
             rig,
             slice: ExactSlice { rig, samples },
-            valid,
+            order,
+        }
+    }
+
+    fn term(&self, s: Symmetry, frame: Frame, cosine: CosineMode, level: Level) -> SymmetryTerm {
+        let (rig, samples) = (self.rig, self.slice.samples);
+        match level {
+            Level::Full => symmetry_term(rig, samples, &self.slice, s, frame, cosine),
+            Level::Coarse(m) => {
+                let lights = self.order[..m.min(self.order.len())]
+                    .iter()
+                    .map(|&j| j as usize);
+                symmetry_term_over(rig, samples, &self.slice, s, frame, cosine, lights)
+            }
         }
     }
 }
 
 impl Objective for ExactObjective<'_> {
-    fn queries(&self, _level: Level) -> usize {
-        self.valid
+    fn queries(&self, level: Level) -> usize {
+        match level {
+            Level::Coarse(m) => m.min(self.order.len()),
+            Level::Full => self.order.len(),
+        }
     }
 
-    fn normal_term(&self, n: DVec3, cosine: CosineMode, _level: Level) -> SymmetryTerm {
+    fn normal_term(&self, n: DVec3, cosine: CosineMode, level: Level) -> SymmetryTerm {
         let frame = Frame::new(n, crate::symmetry::tangent_basis(n).0);
-        symmetry_term(
-            self.rig,
-            self.slice.samples,
-            &self.slice,
-            Symmetry::N,
-            frame,
-            cosine,
-        )
+        self.term(Symmetry::N, frame, cosine, level)
     }
 
-    fn tangent_terms(&self, frame: Frame, cosine: CosineMode, _level: Level) -> [SymmetryTerm; 2] {
-        let term = |s| symmetry_term(self.rig, self.slice.samples, &self.slice, s, frame, cosine);
-        [term(Symmetry::Nt), term(Symmetry::Nb)]
+    fn tangent_terms(&self, frame: Frame, cosine: CosineMode, level: Level) -> [SymmetryTerm; 2] {
+        [
+            self.term(Symmetry::Nt, frame, cosine, level),
+            self.term(Symmetry::Nb, frame, cosine, level),
+        ]
     }
 
     fn value(&self, halfway: DVec3) -> Option<[f64; 3]> {
@@ -540,7 +561,7 @@ mod tests {
         assert_eq!(fast.queries(Level::Full), rig.n_used() - 4);
         assert_eq!(exact.queries(Level::Full), rig.n_used() - 4);
         assert_eq!(fast.queries(Level::Coarse(200)), 200);
-        assert_eq!(exact.queries(Level::Coarse(200)), rig.n_used() - 4);
+        assert_eq!(exact.queries(Level::Coarse(200)), 200);
         for cosine in [
             CosineMode::CrossMultiplied,
             CosineMode::Raw,

@@ -108,8 +108,8 @@ impl SymmetryTerm {
 /// Evaluates one symmetry term of a pixel's slice (rig order, `rig.n_used() * 3` values, NaN =
 /// invalid; `lookup` reconstructs it between samples) in the frame (n, t, b). Allocation-free; `t` and `b` are ignored for [`Symmetry::N`].
 ///
-/// The domain is the lights with `n.l > 0` whose reflected halfway vector is inside the cone,
-/// maps to a light with `n.G(l) > 0`, and has data in the slice.
+/// The domain is the lights with `n.l > 0` whose reflected halfway vector is inside the cone
+/// and [covered](Rig::covered), maps to a light with `n.G(l) > 0`, and has data in the slice.
 #[inline]
 pub fn symmetry_term<L: SliceLookup>(
     rig: &Rig,
@@ -119,16 +119,26 @@ pub fn symmetry_term<L: SliceLookup>(
     frame: Frame,
     cosine: CosineMode,
 ) -> SymmetryTerm {
+    symmetry_term_over(rig, slice, lookup, symmetry, frame, cosine, 0..rig.n_used())
+}
+
+/// [`symmetry_term`] summed over the given lights only (rig indices), e.g. a coarse subset.
+#[inline]
+pub fn symmetry_term_over<L: SliceLookup>(
+    rig: &Rig,
+    slice: &[f32],
+    lookup: &L,
+    symmetry: Symmetry,
+    frame: Frame,
+    cosine: CosineMode,
+    lights: impl Iterator<Item = usize>,
+) -> SymmetryTerm {
     let Frame { n, t, b } = frame;
     let mut term = SymmetryTerm::default();
     let mut diffuse_dot = [0.0f64; 3];
     let mut diffuse_sq = 0.0f64;
-    for (j, (&l, &h)) in rig
-        .lights_in_camera
-        .iter()
-        .zip(&rig.halfway_in_camera)
-        .enumerate()
-    {
+    for j in lights {
+        let (l, h) = (rig.lights_in_camera[j], rig.halfway_in_camera[j]);
         let s = &slice[j * 3..j * 3 + 3];
         if !s[0].is_finite() {
             continue;
@@ -138,7 +148,7 @@ pub fn symmetry_term<L: SliceLookup>(
             continue;
         }
         let h_reflected = symmetry.reflect(h, n, t, b);
-        if !rig.in_cone(h_reflected) {
+        if !rig.in_cone(h_reflected) || !rig.covered(h_reflected) {
             continue;
         }
         let n_dot_lr = n.dot(light_from_halfway(h_reflected));

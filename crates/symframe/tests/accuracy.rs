@@ -115,18 +115,29 @@ fn compensated_cosine_removes_the_tilt_bias_on_ward() {
     assert!(lambert.normal_error.mean <= 1.0, "{lambert:?}");
 }
 
-/// The fast path (slice resampled on a grid) against the reference path (triangle lookups,
-/// spherical barycentric weights at every query). Issue 5 asks for 0.1 degrees median and 0.5
-/// at the 99th percentile. The median holds; the 99th percentile does not yet (1.5 degrees,
-/// measured): the reference objective is piecewise smooth (kinks at triangle edges, domain
-/// membership changing with n) and has shallow local minima about a degree apart, so two
-/// slightly different objectives settle in different ones. Against ground truth the fast path
-/// is as accurate as the reference, which this test holds it to.
+/// The 99th percentile of a per-pixel angle map over the evaluated pixels (mask, true normal
+/// within 60 degrees of the view, both maps defined).
+fn p99(errors: Vec<f32>, scene: &Scene) -> f32 {
+    let mut d: Vec<f32> = errors
+        .into_iter()
+        .enumerate()
+        .filter(|&(p, d)| scene.mask[p] && scene.normals_in_camera[p].z >= 0.5 && d.is_finite())
+        .map(|(_, d)| d)
+        .collect();
+    d.sort_by(f32::total_cmp);
+    d[(d.len() - 1) * 99 / 100]
+}
+
+/// The fast path (slice resampled on a grid, single precision) against the reference path
+/// (triangle lookups and spherical barycentric weights at every query, double precision), both
+/// running the same coarse-to-fine search: issue 5 asks for 0.1 degrees median and 0.5 at the
+/// 99th percentile, normals and tangents, on the anisotropic validation sphere (measured:
+/// normals 0.02 / 0.44 at 1,512 lights). Against ground truth the fast path must be as accurate.
 #[test]
 fn fast_path_agrees_with_the_reference_path() {
     let scene = Scene::sphere(32, TangentField::Circular);
     let ward = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
-    let lights = uniform_cone_lights(1000, 65.0);
+    let lights = uniform_cone_lights(1512, 65.0);
     let stack = scene.render_stack(&ward, &lights);
     let rig = Rig::new(&lights, RigOptions::default()).unwrap();
     let maps = |interpolation| {
@@ -138,8 +149,8 @@ fn fast_path_agrees_with_the_reference_path() {
     };
     let fast = maps(symframe::Interpolation::Resampled);
     let exact = maps(symframe::Interpolation::Exact);
-    // Compare the fast maps against the exact ones as if those were ground truth; t and b may
-    // swap at the heuristic's tie points, so tangents are compared as frames (swap-free).
+    // The fast maps against the exact ones as if those were ground truth; tangents are axes,
+    // compared without sign.
     let e = evaluate(
         &fast.normals,
         &fast.tangents,
@@ -148,21 +159,19 @@ fn fast_path_agrees_with_the_reference_path() {
         Some(&scene.mask),
         60.0,
     );
-    // The 99th percentile over the evaluated pixels (true normal within 60 degrees).
-    let cos60 = 0.5;
-    let mut diffs: Vec<f32> = symframe::eval::normal_error_map(&fast.normals, &exact.normals)
-        .into_iter()
-        .enumerate()
-        .filter(|&(p, d)| scene.mask[p] && scene.normals_in_camera[p].z >= cos60 && d.is_finite())
-        .map(|(_, d)| d)
-        .collect();
-    diffs.sort_by(f32::total_cmp);
-    let normal_p99 = diffs[(diffs.len() - 1) * 99 / 100];
-    eprintln!("fast vs exact: {e:#?}, normal p99 {normal_p99}");
+    let normal_p99 = p99(
+        symframe::eval::normal_error_map(&fast.normals, &exact.normals),
+        &scene,
+    );
+    let tangent_p99 = p99(
+        symframe::eval::tangent_error_map(&fast.tangents, &exact.tangents),
+        &scene,
+    );
+    eprintln!("fast vs exact: {e:#?}, normal p99 {normal_p99}, tangent p99 {tangent_p99}");
     assert!(e.normal_error.median <= 0.1, "{e:?}");
-    assert!(normal_p99 <= 2.0, "normal p99 {normal_p99}");
-    assert!(e.tangent_error_swap_free.median <= 0.1, "{e:?}");
-    assert!(e.swapped_share <= 0.02, "{e:?}");
+    assert!(normal_p99 <= 0.5, "normal p99 {normal_p99}");
+    assert!(e.tangent_error.median <= 0.1, "{e:?}");
+    assert!(tangent_p99 <= 0.5, "tangent p99 {tangent_p99}");
     let truth = |m: &symframe::EstimateMaps| {
         evaluate(
             &m.normals,
