@@ -182,6 +182,11 @@ pub struct EstimateArgs {
     /// Skip tangents (normals only; faster).
     #[arg(long)]
     pub no_tangents: bool,
+    /// Use the reference path: exact triangle lookups with spherical barycentric weights in
+    /// double precision at every query (about 6x slower; for checking the default fast path,
+    /// which resamples each pixel's slice onto a grid, on your own data).
+    #[arg(long)]
+    pub reference: bool,
     /// Folder of the on-disk tile cache of the decoded images (default: OUTPUT/.symframe-cache).
     /// A cache of the same images is reused; several runs (shards) may share one folder.
     #[arg(long, value_name = "DIR")]

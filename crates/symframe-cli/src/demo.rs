@@ -76,6 +76,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         linear: false,
         saturation: 0.995,
         no_tangents: false,
+        reference: false,
         cache: None,
         no_keep_cache: true,
         tiles: None,

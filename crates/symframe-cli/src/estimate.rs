@@ -13,7 +13,7 @@ use serde::Serialize;
 use symframe::baseline::{baseline_lights, Baseline, BaselineParams};
 use symframe::estimate::PixelCounts;
 use symframe::symmetry::CosineMode;
-use symframe::{EstimateMaps, EstimatorParams, Rig, RigOptions};
+use symframe::{EstimateMaps, EstimatorParams, Interpolation, Rig, RigOptions};
 use symframe_io::{CacheInfo, CacheOptions, Dataset, DecodeOptions, TileCache};
 
 use crate::cli::{CosineArg, EstimateArgs, MethodArg};
@@ -231,6 +231,11 @@ fn estimator_params(args: &EstimateArgs) -> EstimatorParams {
         min_confidence: args.min_confidence,
         min_anisotropy: args.min_anisotropy,
         tangents: !args.no_tangents,
+        interpolation: if args.reference {
+            Interpolation::Exact
+        } else {
+            Interpolation::Resampled
+        },
         ..EstimatorParams::default()
     }
 }

@@ -124,6 +124,25 @@ fn estimate_on_an_lp_dataset_writes_every_output_and_is_accurate() {
     assert!(estimated > 400, "{report}");
     // Outside the sphere (mask.png beside the .lp): NaN.
     assert!(normals[0].is_nan());
+    assert_eq!(report["parameters"]["interpolation"], "resampled");
+
+    // The reference path on the same data: recorded in the report, and the default fast path
+    // agrees with it.
+    let reference = tmp.path().join("reference");
+    let o = symframe(&[
+        "estimate",
+        lp.to_str().unwrap(),
+        "-o",
+        reference.to_str().unwrap(),
+        "--reference",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(reference.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["parameters"]["interpolation"], "exact");
+    let (_, exact) = read_npy_f32(&reference.join("normals.npy")).unwrap();
+    let e = evaluate(&normals, &tangents, &exact, None, Some(&scene.mask), 60.0);
+    assert!(e.normal_error.median < 0.1, "fast vs reference {e:?}");
 }
 
 #[test]
