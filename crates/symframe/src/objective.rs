@@ -523,26 +523,9 @@ impl Default for Reflections {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rig::{light_from_halfway, uniform_cone_lights, RigOptions};
+    use crate::rig::{uniform_cone_lights, RigOptions};
     use crate::symmetry::tangent_basis;
-
-    /// An anisotropic slice: diffuse plus a lobe even in h.t and h.b, radiance `f (n.l)`.
-    fn render_slice(rig: &Rig, n: DVec3, t: DVec3) -> Vec<f32> {
-        let b = n.cross(t);
-        rig.halfway_in_camera
-            .iter()
-            .flat_map(|&h| {
-                let nl = n.dot(light_from_halfway(h)).max(0.0);
-                let (ht, hb, hn) = (h.dot(t), h.dot(b), h.dot(n).max(1e-6));
-                let f = 0.3 + 2.0 * (-((ht / hn).powi(2) / 0.04 + (hb / hn).powi(2) / 0.25)).exp();
-                [
-                    (f * nl) as f32,
-                    (0.8 * f * nl) as f32,
-                    (0.5 * f * nl) as f32,
-                ]
-            })
-            .collect()
-    }
+    use crate::symmetry::tests::render_slice;
 
     #[test]
     fn fast_terms_agree_with_the_reference_terms() {

@@ -212,14 +212,14 @@ pub fn tangent_basis(n: DVec3) -> (DVec3, DVec3) {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::rig::{uniform_cone_lights, RigOptions};
     use crate::slice::ExactSlice;
 
     /// A symmetric "BRDF" slice: diffuse plus an anisotropic lobe around n in halfway space,
     /// radiance `I = f (n.l)` with `f` a function of (h.t, h.b, h.n) even in h.t and h.b.
-    fn render_slice(rig: &Rig, n: DVec3, t: DVec3) -> Vec<f32> {
+    pub(crate) fn render_slice(rig: &Rig, n: DVec3, t: DVec3) -> Vec<f32> {
         let b = n.cross(t);
         rig.lights_in_camera
             .iter()
