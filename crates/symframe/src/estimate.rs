@@ -375,6 +375,15 @@ impl<'a> Estimator<'a> {
         );
         evals += e;
         if let CosineMode::Compensated(_) = self.params.cosine {
+            // A normal beyond the rig's reach in the paper's form stays discarded: the flatter
+            // compensated measure could otherwise walk it back inside the sampled region to a
+            // wrong but plausible-looking normal.
+            if n.z <= 0.0 || !centre_observed(objective, n) {
+                return PixelEstimate {
+                    evals,
+                    ..PixelEstimate::empty(PixelStatus::Discarded)
+                };
+            }
             // The compensated measure is flatter far from the solution: refine the paper's
             // solution with it (where p = 1 the two coincide).
             cosine = self.params.cosine;

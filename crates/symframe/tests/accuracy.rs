@@ -199,18 +199,25 @@ fn fast_path_agrees_with_the_reference_path() {
 /// degrees off).
 #[test]
 fn normals_beyond_the_rigs_reach_are_discarded() {
+    beyond_reach(EstimatorParams::default());
+}
+
+/// The same with the compensated measure, which refines the paper-form solution (see also
+/// `compensated_refinement_keeps_a_normal_beyond_reach_discarded`).
+#[test]
+fn normals_beyond_the_rigs_reach_are_discarded_with_the_compensated_measure() {
+    beyond_reach(EstimatorParams {
+        cosine: CosineMode::Compensated(0.5),
+        ..Default::default()
+    });
+}
+
+fn beyond_reach(params: EstimatorParams) {
     let scene = Scene::sphere(32, TangentField::Circular);
     let lights = symframe::render::rigs::diligent_lights();
     let stack = scene.render_stack(&Lambertian::new([0.7, 0.6, 0.5]), &lights);
     let rig = Rig::new(&lights, RigOptions::default()).unwrap();
-    let maps = estimate_stack(
-        &stack,
-        &rig,
-        Some(&scene.mask),
-        EstimatorParams::default(),
-        &|_| {},
-    )
-    .unwrap();
+    let maps = estimate_stack(&stack, &rig, Some(&scene.mask), params, &|_| {}).unwrap();
     let (mut near, mut near_ok, mut far, mut far_returned) = (0, 0, 0, 0);
     for p in 0..scene.n_pixels() {
         if !scene.mask[p] {
@@ -295,4 +302,31 @@ fn fast_path_agrees_with_the_reference_path_where_confident_on_shadowed_bumps() 
     assert!(median <= 0.1, "median {median}");
     assert!(sorted.len() * 2 >= all.len(), "most pixels are confident");
     assert!(p99 <= 0.5, "confident p99 {p99}");
+}
+
+/// Figure 3's cell at theta_n = 80 under the 65-degree cone, anisotropic Ward: beyond the
+/// rig's reach, so the compensated measure must discard it like the paper's form does (it once
+/// walked the paper-form solution back inside the sampled region: a 21-degree error returned).
+#[test]
+fn compensated_refinement_keeps_a_normal_beyond_reach_discarded() {
+    let lights = uniform_cone_lights(2000, 90.0);
+    let rig = Rig::new(&lights, RigOptions::default()).unwrap();
+    let scene = Scene::tilted_plane(1, 1, 80.0, 0.0, 25.0);
+    let ward = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
+    let slice: Vec<f32> = rig
+        .lights_in_camera
+        .iter()
+        .flat_map(|&l| scene.render(&ward, l))
+        .collect();
+    for cosine in [CosineMode::CrossMultiplied, CosineMode::Compensated(0.5)] {
+        let est = symframe::Estimator::new(
+            &rig,
+            EstimatorParams {
+                cosine,
+                ..Default::default()
+            },
+        )
+        .estimate_pixel(&slice);
+        assert_eq!(est.normal, None, "{cosine:?}: {est:?}");
+    }
 }
