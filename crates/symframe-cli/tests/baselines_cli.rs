@@ -2,50 +2,28 @@
 //! written as `.lp` files, the same outputs as the symmetry method, accuracy checked against
 //! ground truth (directly and through `symframe eval`).
 
+mod common;
+
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-use glam::DVec3;
+use common::{sphere_dataset, stderr, symframe, Truth};
+
 use symframe::brdf::lambertian::Lambertian;
 use symframe::brdf::spec::parse_model;
 use symframe::brdf::Brdf;
 use symframe::eval::{evaluate, Evaluation};
-use symframe::render::{Scene, TangentField};
-use symframe::rig::uniform_cone_lights;
-use symframe_io::{read_npy_f32, write_lp_dataset, ImageFormat};
-
-fn symframe(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_symframe"))
-        .args(args)
-        .output()
-        .expect("run symframe")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use symframe::render::Scene;
+use symframe_io::{read_npy_f32, ImageFormat};
 
 /// A float EXR sphere dataset of `brdf` under `n_lights` lights up to 130 degrees from the
 /// view; returns the scene and the `.lp` path.
 fn dataset(dir: &Path, brdf: &dyn Brdf, n_lights: usize) -> (Scene, PathBuf) {
-    let size = 24;
-    let scene = Scene::sphere(size, TangentField::Circular);
-    let lights: Vec<DVec3> = uniform_cone_lights(n_lights, 65.0);
-    let images: Vec<Vec<f32>> = lights.iter().map(|&l| scene.render(brdf, l)).collect();
-    let lp = write_lp_dataset(
-        dir,
-        &lights,
-        &images,
-        size,
-        size,
-        ImageFormat::Exr,
-        Some(&scene.gt_normals()),
-        None,
-        Some(&scene.mask),
-    )
-    .unwrap();
-    (scene, lp)
+    let truth = Truth {
+        normals: true,
+        tangents: false,
+    };
+    sphere_dataset(dir, 24, n_lights, brdf, ImageFormat::Exr, 1.0, truth)
 }
 
 /// Runs `estimate --method <method>` into `out`; checks the outputs and the report; returns the

@@ -1,79 +1,34 @@
 //! End-to-end tests of `symframe estimate` and `symframe demo`: real files in, maps out, and
 //! bad input refused with a one-line error naming the file, leaving no output folder behind.
 
+mod common;
+
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+
+use common::{assert_fails_naming, sphere_dataset, stderr, symframe, Truth};
 
 use glam::DVec3;
 use symframe::brdf::ward::Ward;
 use symframe::eval::evaluate;
 use symframe::render::{Scene, TangentField};
 use symframe::rig::uniform_cone_lights;
-use symframe_io::{read_npy_f32, write_lp_dataset, ImageFormat};
+use symframe_io::{read_npy_f32, ImageFormat};
 
-fn symframe(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_symframe"))
-        .args(args)
-        .output()
-        .expect("run symframe")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-/// A small anisotropic sphere dataset in `.lp` form; returns the scene and the .lp path.
+/// A small anisotropic Ward sphere dataset in `.lp` form with ground truth, exposure 0.5
+/// (keeps 16-bit data below saturation); returns the scene and the .lp path.
 fn small_dataset(
     dir: &Path,
     size: usize,
     n_lights: usize,
     format: ImageFormat,
 ) -> (Scene, PathBuf) {
-    let scene = Scene::sphere(size, TangentField::Circular);
-    let lights = uniform_cone_lights(n_lights, 65.0);
     let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
-    // Exposure 0.5 keeps 16-bit data below saturation.
-    let images: Vec<Vec<f32>> = lights
-        .iter()
-        .map(|&l| {
-            scene
-                .render(&brdf, l)
-                .into_iter()
-                .map(|v| 0.5 * v)
-                .collect()
-        })
-        .collect();
-    let lp = write_lp_dataset(
-        dir,
-        &lights,
-        &images,
-        size,
-        size,
-        format,
-        Some(&scene.gt_normals()),
-        Some(&scene.gt_tangents()),
-        Some(&scene.mask),
-    )
-    .unwrap();
-    (scene, lp)
-}
-
-fn assert_fails_naming(o: &Output, needle: &str, out: &Path) {
-    let err = stderr(o);
-    assert!(!o.status.success(), "expected failure, stderr: {err}");
-    assert!(err.contains(needle), "error should name {needle:?}: {err}");
-    assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
-    assert!(!err.contains("panicked"), "{err}");
-    assert!(!out.exists(), "no output folder may be left behind");
-    let parent = out.parent().unwrap();
-    for e in fs::read_dir(parent).unwrap() {
-        let name = e.unwrap().file_name().to_string_lossy().into_owned();
-        assert!(
-            !name.contains(".partial"),
-            "staging folder left behind: {name}"
-        );
-    }
+    let truth = Truth {
+        normals: true,
+        tangents: true,
+    };
+    sphere_dataset(dir, size, n_lights, &brdf, format, 0.5, truth)
 }
 
 #[test]

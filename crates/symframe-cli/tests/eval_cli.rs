@@ -2,23 +2,16 @@
 //! the ground truth rotated by known angles, so every figure of eval.json is known; and bad
 //! input refused with a one-line error naming the file.
 
+mod common;
+
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
+
+use common::{assert_one_line_error, stderr, symframe};
 
 use glam::{DQuat, DVec3};
 use symframe_io::{read_image, write_npy_f32, write_png8_rgb, DecodeOptions};
-
-fn symframe(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_symframe"))
-        .args(args)
-        .output()
-        .expect("run symframe")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 const W: usize = 8;
 const H: usize = 6;
@@ -193,11 +186,7 @@ fn max_angle_and_scale_flags() {
 }
 
 fn assert_fails_naming(o: &Output, needle: &str, est: &Path) {
-    let err = stderr(o);
-    assert!(!o.status.success(), "expected failure, stderr: {err}");
-    assert!(err.contains(needle), "error should name {needle:?}: {err}");
-    assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
-    assert!(!err.contains("panicked"), "{err}");
+    assert_one_line_error(o, needle);
     assert!(!est.join("eval.json").exists(), "no eval.json on failure");
     assert!(!est.join("normal_error.png").exists());
 }

@@ -2,31 +2,19 @@
 //! and relit pictures out, and bad input refused with a one-line error naming the file, leaving
 //! no output folder behind.
 
+mod common;
+
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+
+use common::{assert_fails_naming, s, sphere_dataset, stderr, symframe, Truth};
 
 use glam::DVec3;
 use symframe::brdf::ward::Ward;
 use symframe::relight::image_psnr;
-use symframe::render::{Scene, TangentField};
+use symframe::render::Scene;
 use symframe::rig::uniform_cone_lights;
-use symframe_io::{read_npy_f32, write_lp_dataset, write_npy_f32, DecodeOptions, ImageFormat};
-
-fn symframe(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_symframe"))
-        .args(args)
-        .output()
-        .expect("run symframe")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+use symframe_io::{read_npy_f32, write_npy_f32, DecodeOptions, ImageFormat};
 
 fn material() -> Ward {
     Ward::new([0.4, 0.3, 0.2], [0.3, 0.45, 0.6], 0.1, 0.35)
@@ -35,23 +23,20 @@ fn material() -> Ward {
 /// A rendered sphere in `.lp` form (EXR images, mask.png beside); returns the scene, the lights
 /// and the .lp path.
 fn dataset(dir: &Path, size: usize, n_lights: usize) -> (Scene, Vec<DVec3>, PathBuf) {
-    let scene = Scene::sphere(size, TangentField::Circular);
-    let lights = uniform_cone_lights(n_lights, 65.0);
-    let brdf = material();
-    let images: Vec<Vec<f32>> = lights.iter().map(|&l| scene.render(&brdf, l)).collect();
-    let lp = write_lp_dataset(
+    let truth = Truth {
+        normals: true,
+        tangents: true,
+    };
+    let (scene, lp) = sphere_dataset(
         dir,
-        &lights,
-        &images,
         size,
-        size,
+        n_lights,
+        &material(),
         ImageFormat::Exr,
-        Some(&scene.gt_normals()),
-        Some(&scene.gt_tangents()),
-        Some(&scene.mask),
-    )
-    .unwrap();
-    (scene, lights, lp)
+        1.0,
+        truth,
+    );
+    (scene, uniform_cone_lights(n_lights, 65.0), lp)
 }
 
 /// A frames folder holding the true normals and tangents.
@@ -61,22 +46,6 @@ fn true_frames(dir: &Path, scene: &Scene) -> PathBuf {
     write_npy_f32(&dir.join("normals.npy"), &[n, n, 3], &scene.gt_normals()).unwrap();
     write_npy_f32(&dir.join("tangents.npy"), &[n, n, 3], &scene.gt_tangents()).unwrap();
     dir.to_path_buf()
-}
-
-fn assert_fails_naming(o: &Output, needle: &str, out: &Path) {
-    let err = stderr(o);
-    assert!(!o.status.success(), "expected failure, stderr: {err}");
-    assert!(err.contains(needle), "error should name {needle:?}: {err}");
-    assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
-    assert!(!err.contains("panicked"), "{err}");
-    assert!(!out.exists(), "no output folder may be left behind");
-    for e in fs::read_dir(out.parent().unwrap()).unwrap() {
-        let name = e.unwrap().file_name().to_string_lossy().into_owned();
-        assert!(
-            !name.contains(".partial"),
-            "staging folder left behind: {name}"
-        );
-    }
 }
 
 fn read_exr(path: &Path) -> Vec<f32> {

@@ -2,21 +2,17 @@
 //! description, read back by `symframe estimate`, deterministic in the seed, and bad flags
 //! refused with a one-line error and no output folder.
 
+mod common;
+
 use std::fs;
 use std::path::Path;
-use std::process::{Command, Output};
+
+use common::{s, symframe};
 
 use glam::DVec3;
 use symframe::eval::evaluate;
 use symframe::render::plane_frame;
 use symframe_io::read_npy_f32;
-
-fn symframe(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_symframe"))
-        .args(args)
-        .output()
-        .expect("run symframe")
-}
 
 fn run_ok(args: &[&str]) {
     let o = symframe(args);
@@ -25,10 +21,6 @@ fn run_ok(args: &[&str]) {
         "symframe {args:?} failed: {}",
         String::from_utf8_lossy(&o.stderr)
     );
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 fn scene_json(dir: &Path) -> serde_json::Value {

@@ -2,52 +2,33 @@
 //! bit; an interrupted run resumes to the same maps; the tile cache is reused and invalidated;
 //! shards merge into the single run's maps; merge refuses incomplete or mismatched shards.
 
+mod common;
+
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
+
+use common::{sphere_dataset, stderr, symframe, Truth};
 
 use symframe::baseline::{estimate_stack_baseline, Baseline};
 use symframe::brdf::ward::Ward;
-use symframe::render::{Scene, TangentField};
-use symframe::rig::uniform_cone_lights;
 use symframe::symmetry::CosineMode;
 use symframe::{estimate_stack, EstimatorParams, Rig, RigOptions};
-use symframe_io::{read_npy_f32, write_lp_dataset, DecodeOptions, ImageFormat};
+use symframe_io::{read_npy_f32, DecodeOptions, ImageFormat};
 
 const SIZE: usize = 40;
 const LIGHTS: usize = 100;
 /// 8-pixel tiles over 40x40: 25 tiles.
 const TILES: usize = 25;
 
-fn symframe(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_symframe"))
-        .args(args)
-        .output()
-        .expect("run symframe")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
 /// A 40x40 anisotropic sphere under 100 lights (float EXR, so decoding is exact).
 fn dataset(dir: &Path) -> PathBuf {
-    let scene = Scene::sphere(SIZE, TangentField::Circular);
-    let lights = uniform_cone_lights(LIGHTS, 65.0);
     let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
-    let images: Vec<Vec<f32>> = lights.iter().map(|&l| scene.render(&brdf, l)).collect();
-    write_lp_dataset(
-        dir,
-        &lights,
-        &images,
-        SIZE,
-        SIZE,
-        ImageFormat::Exr,
-        None,
-        None,
-        Some(&scene.mask),
-    )
-    .unwrap()
+    let truth = Truth {
+        normals: false,
+        tangents: false,
+    };
+    sphere_dataset(dir, SIZE, LIGHTS, &brdf, ImageFormat::Exr, 1.0, truth).1
 }
 
 /// `symframe estimate LP -o OUT --tile-size 8 EXTRA...`

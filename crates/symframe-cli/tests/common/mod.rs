@@ -1,0 +1,101 @@
+//! Helpers shared by the CLI integration tests: running the binary, checking its failures, and
+//! writing a small rendered sphere dataset.
+
+// Each test binary uses a different subset.
+#![allow(dead_code)]
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use symframe::brdf::Brdf;
+use symframe::render::{Scene, TangentField};
+use symframe::rig::uniform_cone_lights;
+use symframe_io::{write_lp_dataset, ImageFormat};
+
+/// Runs the `symframe` binary with `args`.
+pub fn symframe(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_symframe"))
+        .args(args)
+        .output()
+        .expect("run symframe")
+}
+
+/// The run's standard error as text.
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A path as a command-line argument.
+pub fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// The run failed with a one-line error (no panic) that names `needle`.
+pub fn assert_one_line_error(o: &Output, needle: &str) {
+    let err = stderr(o);
+    assert!(!o.status.success(), "expected failure, stderr: {err}");
+    assert!(err.contains(needle), "error should name {needle:?}: {err}");
+    assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+/// [`assert_one_line_error`], and neither the output folder `out` nor a staging folder beside
+/// it was left behind.
+pub fn assert_fails_naming(o: &Output, needle: &str, out: &Path) {
+    assert_one_line_error(o, needle);
+    assert!(!out.exists(), "no output folder may be left behind");
+    for e in fs::read_dir(out.parent().unwrap()).unwrap() {
+        let name = e.unwrap().file_name().to_string_lossy().into_owned();
+        assert!(
+            !name.contains(".partial"),
+            "staging folder left behind: {name}"
+        );
+    }
+}
+
+/// Which ground-truth maps a dataset is written with.
+#[derive(Clone, Copy)]
+pub struct Truth {
+    pub normals: bool,
+    pub tangents: bool,
+}
+
+/// A `size x size` sphere (circular tangent field) of `brdf` rendered under `n_lights` lights
+/// uniform over the 65-degree cone, scaled by `exposure`, written as an `.lp` dataset with its
+/// mask (and the ground truth asked for) into `dir`; returns the scene and the `.lp` path.
+pub fn sphere_dataset(
+    dir: &Path,
+    size: usize,
+    n_lights: usize,
+    brdf: &dyn Brdf,
+    format: ImageFormat,
+    exposure: f32,
+    truth: Truth,
+) -> (Scene, PathBuf) {
+    let scene = Scene::sphere(size, TangentField::Circular);
+    let lights = uniform_cone_lights(n_lights, 65.0);
+    let images: Vec<Vec<f32>> = lights
+        .iter()
+        .map(|&l| {
+            let mut image = scene.render(brdf, l);
+            if exposure != 1.0 {
+                image.iter_mut().for_each(|v| *v *= exposure);
+            }
+            image
+        })
+        .collect();
+    let lp = write_lp_dataset(
+        dir,
+        &lights,
+        &images,
+        size,
+        size,
+        format,
+        truth.normals.then(|| scene.gt_normals()).as_deref(),
+        truth.tangents.then(|| scene.gt_tangents()).as_deref(),
+        Some(&scene.mask),
+    )
+    .unwrap();
+    (scene, lp)
+}
