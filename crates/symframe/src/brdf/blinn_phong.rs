@@ -23,7 +23,7 @@
 //! SIGGRAPH 1977; normalisation from F. Giesen, "The Blinn-Phong Normalization Zoo" (2009) and
 //! Sloan & Hoffman. Isotropic and reciprocal.
 
-use super::microfacet::half_vector_above;
+use super::microfacet::{diffuse_plus_lobe, half_vector_above};
 use super::{Brdf, TangentAxis};
 use glam::DVec3;
 use std::f64::consts::PI;
@@ -61,7 +61,7 @@ impl Brdf for BlinnPhong {
             return [0.0; 3];
         };
         let s = Self::normalisation(self.e) * h.z.powf(self.e);
-        std::array::from_fn(|c| self.kd[c] / PI + self.ks[c] * s)
+        diffuse_plus_lobe(&self.kd, &self.ks, s)
     }
 
     fn tangent_axis(&self) -> TangentAxis {

@@ -24,11 +24,10 @@
 //! 1(1), 1982. Isotropic and reciprocal.
 
 use super::microfacet::{
-    beckmann_d, cos_theta_d, fresnel_dielectric, half_vector_above, vcavity_g,
+    beckmann_d, cos_theta_d, diffuse_plus_lobe, fresnel_dielectric, half_vector_above, vcavity_g,
 };
 use super::{Brdf, TangentAxis};
 use glam::DVec3;
-use std::f64::consts::PI;
 
 /// Cook-Torrance BRDF (Beckmann D, exact dielectric Fresnel, V-cavity G).
 #[derive(Debug, Clone, PartialEq)]
@@ -62,7 +61,7 @@ impl Brdf for CookTorrance {
         };
         let f = fresnel_dielectric(cos_theta_d(l, v), self.ior);
         let s = f * beckmann_d(h, self.m, self.m) * vcavity_g(l, v, h) / (4.0 * l.z * v.z);
-        std::array::from_fn(|c| self.kd[c] / PI + self.ks[c] * s)
+        diffuse_plus_lobe(&self.kd, &self.ks, s)
     }
 
     fn tangent_axis(&self) -> TangentAxis {
@@ -85,6 +84,7 @@ impl Brdf for CookTorrance {
 mod tests {
     use super::*;
     use crate::brdf::testutil::*;
+    use std::f64::consts::PI;
 
     #[test]
     fn peak_value() {

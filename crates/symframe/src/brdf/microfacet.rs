@@ -46,6 +46,13 @@ pub fn cos_theta_d(l: DVec3, v: DVec3) -> f64 {
     (0.5 * (l + v).length()).min(1.0)
 }
 
+/// A Lambertian term plus a grey lobe scaled per channel, `kd / π + ks s`: the shape of every
+/// diffuse-plus-specular model here (Ward, Blinn-Phong, Torrance-Sparrow, Cook-Torrance).
+#[inline]
+pub fn diffuse_plus_lobe(kd: &[f64; 3], ks: &[f64; 3], lobe: f64) -> [f64; 3] {
+    std::array::from_fn(|c| kd[c] / std::f64::consts::PI + ks[c] * lobe)
+}
+
 /// The halfway vector of two directions that are both above the horizon (`z > 0`), or `None`
 /// when either is at or below it. Every model uses this to return zero below the horizon.
 #[inline]

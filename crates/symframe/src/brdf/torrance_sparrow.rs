@@ -24,10 +24,9 @@
 //! Surfaces", JOSA 57(9), 1967; the `1/(4 cosθ_i cosθ_o)` normalisation as corrected by Walter
 //! et al. 2007. Isotropic and reciprocal.
 
-use super::microfacet::{beckmann_d, half_vector_above, vcavity_g};
+use super::microfacet::{beckmann_d, diffuse_plus_lobe, half_vector_above, vcavity_g};
 use super::{Brdf, TangentAxis};
 use glam::DVec3;
-use std::f64::consts::PI;
 
 /// Torrance-Sparrow BRDF (Beckmann facets, V-groove masking, no Fresnel factor).
 #[derive(Debug, Clone, PartialEq)]
@@ -58,7 +57,7 @@ impl Brdf for TorranceSparrow {
             return [0.0; 3];
         };
         let s = beckmann_d(h, self.sigma, self.sigma) * vcavity_g(l, v, h) / (4.0 * l.z * v.z);
-        std::array::from_fn(|c| self.kd[c] / PI + self.ks[c] * s)
+        diffuse_plus_lobe(&self.kd, &self.ks, s)
     }
 
     fn tangent_axis(&self) -> TangentAxis {
@@ -80,6 +79,7 @@ impl Brdf for TorranceSparrow {
 mod tests {
     use super::*;
     use crate::brdf::testutil::*;
+    use std::f64::consts::PI;
 
     #[test]
     fn peak_value() {

@@ -27,7 +27,7 @@
 //! Tangent: the axis of the larger α (`X` if `alpha_x > alpha_y`, `Y` if smaller, `None` when
 //! equal).
 
-use super::microfacet::{aniso_slope2, half_vector_above};
+use super::microfacet::{aniso_slope2, diffuse_plus_lobe, half_vector_above};
 use super::{Brdf, TangentAxis};
 use glam::DVec3;
 use std::f64::consts::PI;
@@ -78,7 +78,7 @@ impl Brdf for Ward {
             return [0.0; 3];
         };
         let s = self.lobe(light_in_local, view_in_local, h);
-        std::array::from_fn(|c| self.kd[c] / PI + self.ks[c] * s)
+        diffuse_plus_lobe(&self.kd, &self.ks, s)
     }
 
     fn tangent_axis(&self) -> TangentAxis {
