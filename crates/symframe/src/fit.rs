@@ -54,6 +54,7 @@ use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
 use crate::error::{Error, Result};
+use crate::eval::vec_at;
 use crate::stack::Stack;
 use crate::symmetry::tangent_basis;
 
@@ -657,15 +658,6 @@ impl<'a> PixelFitter<'a> {
 
 /// Rows per parallel task.
 const ROWS_PER_TASK: usize = 2;
-
-/// Reads the unit vector at pixel `p` of an `H x W x 3` map; `None` for NaN or zero.
-fn vec_at(v: &[f32], p: usize) -> Option<DVec3> {
-    let s = &v[p * 3..p * 3 + 3];
-    s.iter()
-        .all(|x| x.is_finite())
-        .then(|| DVec3::new(s[0] as f64, s[1] as f64, s[2] as f64))
-        .and_then(|d| d.try_normalize())
-}
 
 /// Fits every pixel of a stack (inside `mask` when given) in its frame: `normals` and `tangents`
 /// are `H x W x 3` maps as [`crate::estimate_stack`] returns them (NaN tangent = isotropic),
