@@ -155,7 +155,6 @@ impl FastScratch {
         }
         FastObjective {
             grid: self.grid.view(),
-            lookup: &self.grid,
             hx: &self.hx,
             hy: &self.hy,
             hz: &self.hz,
@@ -170,7 +169,6 @@ impl FastScratch {
 #[derive(Debug, Clone, Copy)]
 pub struct FastObjective<'a> {
     grid: GridView<'a>,
-    lookup: &'a ResampledSlice,
     hx: &'a [f32],
     hy: &'a [f32],
     hz: &'a [f32],
@@ -196,7 +194,7 @@ impl Objective for FastObjective<'_> {
     }
 
     fn value(&self, halfway: DVec3) -> Option<[f64; 3]> {
-        self.lookup.value(halfway)
+        SliceLookup::value(&self.grid, halfway)
     }
 }
 

@@ -161,14 +161,19 @@ impl GridView<'_> {
     }
 }
 
+impl SliceLookup for GridView<'_> {
+    #[inline]
+    fn value(&self, halfway: DVec3) -> Option<[f64; 3]> {
+        let v = GridView::value(self, halfway.x as f32, halfway.y as f32, halfway.z as f32)?;
+        // A node without data (NaN) poisons the result: no data here.
+        v.is_finite().then(|| [v.x as f64, v.y as f64, v.z as f64])
+    }
+}
+
 impl SliceLookup for ResampledSlice {
     #[inline]
     fn value(&self, halfway: DVec3) -> Option<[f64; 3]> {
-        let v = self
-            .view()
-            .value(halfway.x as f32, halfway.y as f32, halfway.z as f32)?;
-        // A node without data (NaN) poisons the result: no data here.
-        v.is_finite().then(|| [v.x as f64, v.y as f64, v.z as f64])
+        SliceLookup::value(&self.view(), halfway)
     }
 }
 
