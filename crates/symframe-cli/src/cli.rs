@@ -182,9 +182,9 @@ pub struct EstimateArgs {
     /// Skip tangents (normals only; faster).
     #[arg(long)]
     pub no_tangents: bool,
-    /// Use the reference path: exact triangle lookups with spherical barycentric weights in
-    /// double precision at every query (about 6x slower; for checking the default fast path,
-    /// which resamples each pixel's slice onto a grid, on your own data).
+    /// Use the reference path: triangle lookups with spherical barycentric weights in double
+    /// precision at every query, every light visited (about 5x slower; for checking the
+    /// default fast path, which does the same in single precision, on your own data).
     #[arg(long)]
     pub reference: bool,
     /// Folder of the on-disk tile cache of the decoded images (default: OUTPUT/.symframe-cache).

@@ -234,7 +234,7 @@ fn estimator_params(args: &EstimateArgs) -> EstimatorParams {
         interpolation: if args.reference {
             Interpolation::Exact
         } else {
-            Interpolation::Resampled
+            Interpolation::Fast
         },
         ..EstimatorParams::default()
     }
@@ -252,7 +252,6 @@ fn run_tiled(args: &EstimateArgs) -> Result<Done> {
                 &ds.lights,
                 RigOptions {
                     theta_d_max_deg: args.theta_d_max,
-                    ..RigOptions::default()
                 },
             )
             .with_context(|| ds.source.display().to_string())?,

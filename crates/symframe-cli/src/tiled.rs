@@ -4,8 +4,8 @@
 //!
 //! Memory per worker thread: the mapped pages of the tile it estimates (released when done:
 //! `tile^2 * lights * 12` bytes, 18.6 MB for 32-pixel tiles of 1,512 lights), a gather table
-//! (16 bytes per light), one pixel's slice and the resampling grid, and the tile's records
-//! (40 bytes per pixel). Assembly holds the full
+//! (16 bytes per light), one pixel's slice and the fast objective's light layouts (~72 bytes
+//! per light), and the tile's records (40 bytes per pixel). Assembly holds the full
 //! maps (33 bytes per pixel).
 
 use std::fs;
@@ -188,7 +188,8 @@ pub fn job_fingerprint(cache: &TileCache, method: &Method, mask: Option<&[bool]>
             let min_domain = Estimator::new(rig, *params).min_domain();
             f.str("symmetry")
                 .f64(rig.theta_d_max_deg)
-                .u64(rig.resample.size as u64)
+                // How the fast path reads the slice (results from an older lookup do not mix).
+                .str("spherical-walk")
                 .u64(rig.n_input as u64)
                 .str(&serde_json::to_string(params)?)
                 .u64(min_domain as u64);

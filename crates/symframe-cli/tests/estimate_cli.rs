@@ -79,7 +79,7 @@ fn estimate_on_an_lp_dataset_writes_every_output_and_is_accurate() {
     assert!(estimated > 400, "{report}");
     // Outside the sphere (mask.png beside the .lp): NaN.
     assert!(normals[0].is_nan());
-    assert_eq!(report["parameters"]["interpolation"], "resampled");
+    assert_eq!(report["parameters"]["interpolation"], "fast");
 
     // The reference path on the same data: recorded in the report, and the default fast path
     // agrees with it.

@@ -23,7 +23,7 @@ fn bench(c: &mut Criterion) {
         let mut slice = vec![0.0; rig.n_used() * 3];
         gather_slice(&rig, &stack, 0, &mut slice);
         for (name, interpolation) in [
-            ("resampled", Interpolation::Resampled),
+            ("fast", Interpolation::Fast),
             ("exact", Interpolation::Exact),
         ] {
             let params = EstimatorParams {

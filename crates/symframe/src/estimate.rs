@@ -40,10 +40,13 @@ pub struct EstimatorParams {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Interpolation {
-    /// Resampled once per pixel onto the rig's grid, then bilinear lookups (fast path).
+    /// The fast path: the same spherical barycentric weights in single precision, located by a
+    /// walk from a grid cell, over the lights that can be in the domain.
     #[default]
-    Resampled,
-    /// Triangle location and spherical barycentric weights at every query (reference path).
+    #[serde(alias = "resampled")]
+    Fast,
+    /// Triangle location and spherical barycentric weights at every query in double
+    /// precision, every light visited (reference path).
     Exact,
 }
 
@@ -313,7 +316,7 @@ impl<'a> Estimator<'a> {
     pub fn estimate_pixel_with(&self, slice: &[f32], scratch: &mut PixelScratch) -> PixelEstimate {
         match self.params.interpolation {
             Interpolation::Exact => self.solve(slice, &ExactObjective::new(self.rig, slice)),
-            Interpolation::Resampled => {
+            Interpolation::Fast => {
                 let objective = scratch.fast.prepare(self.rig, slice);
                 self.solve(slice, &objective)
             }
@@ -378,7 +381,7 @@ impl<'a> Estimator<'a> {
             // A normal beyond the rig's reach in the paper's form stays discarded: the flatter
             // compensated measure could otherwise walk it back inside the sampled region to a
             // wrong but plausible-looking normal.
-            if n.z <= 0.0 || !centre_observed(objective, n) {
+            if n.z <= 0.0 || !centre_observed(rig, objective, n) {
                 return PixelEstimate {
                     evals,
                     ..PixelEstimate::empty(PixelStatus::Discarded)
@@ -395,7 +398,7 @@ impl<'a> Estimator<'a> {
         if term_n.count < self.min_domain
             || term_n.denominator <= 0.0
             || n.z <= 0.0
-            || !centre_observed(objective, n)
+            || !centre_observed(rig, objective, n)
         {
             return PixelEstimate {
                 evals,
@@ -585,7 +588,7 @@ const COARSE_RELIABLE: u32 = 32;
 const NORMAL_DOMAIN_TARGET: u32 = 64;
 
 /// The same for the tangent terms' domains.
-const TANGENT_DOMAIN_TARGET: u32 = 96;
+const TANGENT_DOMAIN_TARGET: u32 = 64;
 
 /// Spacing of the full-level quadratic fit that ends the normal search (degrees): wide enough
 /// to average over the objective's ripples at the scale of the light spacing (the reference and
@@ -616,16 +619,15 @@ const CENTRE_RADIUS_DEG: f64 = 2.0;
 /// symmetries must be observed. A normal beyond the rig's reach (a rig within 45 degrees of the
 /// view has halfway vectors within ~22) otherwise settles at the edge of the sampled region with
 /// a small but meaningless distance: a clamped guess, which method.md says never to return.
-fn centre_observed<O: Objective>(objective: &O, n: DVec3) -> bool {
+/// The points must lie in [covered](Rig::covered) cells, as the domains' lights do.
+fn centre_observed<O: Objective>(rig: &Rig, objective: &O, n: DVec3) -> bool {
     let (u, w) = tangent_basis(n);
     let (s, c) = CENTRE_RADIUS_DEG.to_radians().sin_cos();
-    objective.value(n).is_some()
-        && [u, -u, w, -w]
-            .iter()
-            .all(|&a| objective.value(n * c + a * s).is_some())
+    let observed = |h: DVec3| rig.covered(h) && objective.value(h).is_some();
+    observed(n) && [u, -u, w, -w].iter().all(|&a| observed(n * c + a * s))
 }
 
-/// Per-thread buffers of the per-pixel estimator (the fast path's resampled slice and light
+/// Per-thread buffers of the per-pixel estimator (the fast path's samples and light
 /// layout), reused from pixel to pixel.
 #[derive(Debug, Clone)]
 pub struct PixelScratch {

@@ -3,20 +3,23 @@
 //!
 //! - [`ExactObjective`], the reference path: [`symmetry_term`] in double precision, with
 //!   triangle lookups and spherical barycentric weights at every query.
-//! - [`FastObjective`], the fast path: the slice resampled once onto the rig's grid, the lights
-//!   in single precision, structure-of-arrays, invalid samples dropped up front, both tangent
-//!   terms in one pass, and coarse levels summing over a prefix of [`Rig::query_order`] only
-//!   (an evenly spread subset of the lights: the coarse-to-fine search's first stages).
+//! - [`FastObjective`], the fast path: the same spherical barycentric interpolation in single
+//!   precision, located by a walk from a grid cell ([`FastLocator`]), the lights
+//!   structure-of-arrays, invalid samples dropped up front, both tangent terms in one pass, and
+//!   coarse levels summing over a prefix of [`Rig::query_order`] only (an evenly spread subset
+//!   of the lights: the coarse-to-fine search's first stages).
 //!
 //! The fast kernel is written by hand rather than through [`symmetry_term`]'s generic lookup:
 //! it is the whole cost of an estimate (the profile of the generic path: half in the lookups,
 //! half in the per-light geometry in f64), and this layout measured about 2x faster per
 //! evaluation (`cargo bench -p symframe --bench pixel`).
 
-use glam::{DVec3, Vec4};
+use std::cell::RefCell;
 
-use crate::rig::Rig;
-use crate::slice::{ExactSlice, GridView, ResampledSlice, SliceLookup};
+use glam::{DVec3, Vec3, Vec4};
+
+use crate::rig::{Coverage, FastLocator, Rig};
+use crate::slice::{ExactSlice, SliceLookup};
 use crate::symmetry::{
     symmetry_term, symmetry_term_over, CosineMode, Frame, Symmetry, SymmetryTerm,
 };
@@ -113,11 +116,13 @@ impl Objective for ExactObjective<'_> {
 /// Per-thread buffers of the fast path, reused from pixel to pixel.
 #[derive(Debug, Clone)]
 pub struct FastScratch {
-    grid: ResampledSlice,
+    /// The pixel's samples in rig order as RGB_ lanes (NaN where invalid): what the lookups read.
+    lanes: Vec<Vec4>,
     hx: Vec<f32>,
     hy: Vec<f32>,
     hz: Vec<f32>,
     samples: Vec<Vec4>,
+    focus: RefCell<Focus>,
 }
 
 impl FastScratch {
@@ -125,18 +130,27 @@ impl FastScratch {
     pub fn new(rig: &Rig) -> Self {
         let n = rig.n_used();
         Self {
-            grid: ResampledSlice::new(rig),
+            lanes: Vec::with_capacity(n),
             hx: Vec::with_capacity(n),
             hy: Vec::with_capacity(n),
             hz: Vec::with_capacity(n),
             samples: Vec::with_capacity(n),
+            focus: RefCell::new(Focus::default()),
         }
     }
 
     /// Prepares the fast objective of one pixel's slice (rig order, `rig.n_used() * 3` values,
-    /// NaN = invalid): resamples it and lays out its valid lights coarse subset first.
+    /// NaN = invalid): lays out its samples for the lookups, and its valid lights coarse subset
+    /// first.
     pub fn prepare<'a>(&'a mut self, rig: &'a Rig, samples: &[f32]) -> FastObjective<'a> {
-        self.grid.fill(rig, samples);
+        self.lanes.clear();
+        self.lanes.extend(samples.chunks_exact(3).map(|s| {
+            if s[0].is_finite() {
+                Vec4::new(s[0], s[1], s[2], 0.0)
+            } else {
+                Vec4::NAN
+            }
+        }));
         self.hx.clear();
         self.hy.clear();
         self.hz.clear();
@@ -153,14 +167,80 @@ impl FastScratch {
             self.hz.push(h.z as f32);
             self.samples.push(Vec4::new(s[0], s[1], s[2], 0.0));
         }
+        self.focus.get_mut().built = false;
         FastObjective {
-            grid: self.grid.view(),
+            locator: &rig.fast,
+            coverage: &rig.coverage,
+            lanes: &self.lanes,
             hx: &self.hx,
             hy: &self.hy,
             hz: &self.hz,
             samples: &self.samples,
             cos_max: rig.cos_theta_d_max as f32,
+            focus: &self.focus,
         }
+    }
+}
+
+/// The lights that can be in the `SD_n` domain for any normal within [`FOCUS_RADIUS_DEG`] of a
+/// centre normal: a full-level `SD_n` near the centre sums over these only, the same domain at a
+/// fraction of the cost where the domain is small (normals far from the view, whose full-level
+/// searches otherwise visit every light for a hundred in the domain).
+///
+/// The reflection of `h` about `n` is in the cone exactly when `h` is within `theta_d_max` of
+/// the view reflected about `n`, `z'(n) = 2 n.z n - z`, which moves at most twice as far as `n`:
+/// lights farther than `theta_d_max + 2 * radius` from `z'(centre)` are never in the domain.
+#[derive(Debug, Clone, Default)]
+struct Focus {
+    /// Whether `centre` and the lights are this pixel's.
+    built: bool,
+    centre: DVec3,
+    /// Whether the subset is small enough to be worth using (else the full level runs).
+    useful: bool,
+    hx: Vec<f32>,
+    hy: Vec<f32>,
+    hz: Vec<f32>,
+    samples: Vec<Vec4>,
+}
+
+/// Radius of a [`Focus`] (degrees): a focus is rebuilt when a full-level `SD_n` is asked for
+/// farther than this from its centre.
+const FOCUS_RADIUS_DEG: f64 = 4.0;
+
+/// A focus is used where it keeps at most this share of the lights.
+const FOCUS_MAX_SHARE: f64 = 0.7;
+
+impl Focus {
+    fn covers(&self, n: DVec3) -> bool {
+        self.built && n.dot(self.centre) >= FOCUS_RADIUS_DEG.to_radians().cos()
+    }
+
+    /// Collects the lights of `all` that can be in the domain near `centre`.
+    fn build(&mut self, centre: DVec3, all: &FastObjective) {
+        self.built = true;
+        self.centre = centre;
+        // A tenth of a degree more for the single-precision test.
+        let reach = (all.cos_max as f64).acos() + (2.0 * FOCUS_RADIUS_DEG + 0.1).to_radians();
+        self.useful = false;
+        if reach >= std::f64::consts::PI {
+            return;
+        }
+        let z = (2.0 * centre.z * centre - DVec3::Z).as_vec3();
+        let cos_reach = reach.cos() as f32;
+        self.hx.clear();
+        self.hy.clear();
+        self.hz.clear();
+        self.samples.clear();
+        for (k, &s) in all.samples.iter().enumerate() {
+            let h = Vec3::new(all.hx[k], all.hy[k], all.hz[k]);
+            if h.dot(z) > cos_reach {
+                self.hx.push(h.x);
+                self.hy.push(h.y);
+                self.hz.push(h.z);
+                self.samples.push(s);
+            }
+        }
+        self.useful = (self.samples.len() as f64) < FOCUS_MAX_SHARE * all.samples.len() as f64;
     }
 }
 
@@ -168,12 +248,15 @@ impl FastScratch {
 /// [`FastScratch::prepare`].
 #[derive(Debug, Clone, Copy)]
 pub struct FastObjective<'a> {
-    grid: GridView<'a>,
+    locator: &'a FastLocator,
+    coverage: &'a Coverage,
+    lanes: &'a [Vec4],
     hx: &'a [f32],
     hy: &'a [f32],
     hz: &'a [f32],
     samples: &'a [Vec4],
     cos_max: f32,
+    focus: &'a RefCell<Focus>,
 }
 
 impl Objective for FastObjective<'_> {
@@ -185,7 +268,25 @@ impl Objective for FastObjective<'_> {
     }
 
     fn normal_term(&self, n: DVec3, cosine: CosineMode, level: Level) -> SymmetryTerm {
-        let [term, _] = self.run::<false>(Frame::new(n, DVec3::ZERO), cosine, level);
+        let frame = Frame::new(n, DVec3::ZERO);
+        if level == Level::Full {
+            // Over the focus around `n` where that is smaller: the same domain.
+            let mut focus = self.focus.borrow_mut();
+            if !focus.covers(n) {
+                focus.build(n, self);
+            }
+            if focus.useful {
+                let subset = FastObjective {
+                    hx: &focus.hx,
+                    hy: &focus.hy,
+                    hz: &focus.hz,
+                    samples: &focus.samples,
+                    ..*self
+                };
+                return subset.run::<false>(frame, cosine, level)[0];
+            }
+        }
+        let [term, _] = self.run::<false>(frame, cosine, level);
         term
     }
 
@@ -194,7 +295,10 @@ impl Objective for FastObjective<'_> {
     }
 
     fn value(&self, halfway: DVec3) -> Option<[f64; 3]> {
-        SliceLookup::value(&self.grid, halfway)
+        let h = halfway.as_vec3();
+        let start = self.locator.start[self.locator.cell(h.x, h.y, h.z)];
+        let v = self.interpolate(start, h.to_array())?;
+        Some([v.x as f64, v.y as f64, v.z as f64])
     }
 }
 
@@ -402,7 +506,7 @@ impl FastObjective<'_> {
                         let d = 2.0 * (hx[k] * axis.x + hy[k] * axis.y + hz[k] * axis.z);
                         (hx[k] - d * axis.x, hy[k] - d * axis.y, hz[k] - d * axis.z)
                     });
-                    self.accumulate::<W>(&reflections, samples, m, acc);
+                    self.accumulate::<W>(&mut reflections, samples, m, acc);
                 }
             } else {
                 // Across the normal axis: 2 (h.n) n - h.
@@ -410,14 +514,14 @@ impl FastObjective<'_> {
                     let d = 2.0 * hn[k];
                     (d * n.x - hx[k], d * n.y - hy[k], d * n.z - hz[k])
                 });
-                self.accumulate::<W>(&reflections, samples, m, &mut first);
+                self.accumulate::<W>(&mut reflections, samples, m, &mut first);
             }
         }
         [first.finish(W::COMPENSATED), second.finish(W::COMPENSATED)]
     }
 
-    /// The geometry of one reflection for the `m` lights of a block: grid cell and bilinear
-    /// fractions of the reflected halfway vector, cosine weights, and whether the light is in
+    /// The geometry of one reflection for the `m` lights of a block: the reflected halfway
+    /// vector and its locator cell, cosine weights, and whether the light is in
     /// the domain (`n.l > 0`, inside the cone, `n.G(l) > 0`). Every reflected halfway vector
     /// keeps its angle to n, so `n.G(l) = 2 r.z (h.n) - n.z`.
     #[inline(always)]
@@ -432,29 +536,45 @@ impl FastObjective<'_> {
         nz: f32,
         reflect: impl Fn(usize) -> (f32, f32, f32),
     ) {
-        let g = &self.grid;
-        let last = (g.size - 2) as f32;
+        let g = self.locator;
+        let last = (g.size - 1) as f32;
         // Slices of exactly `m` elements: no bounds checks in the loop, so it vectorises.
         let (hn, nl) = (&hn[..m], &nl[..m]);
-        let (cell, fx, fy) = (&mut out.cell[..m], &mut out.fx[..m], &mut out.fy[..m]);
+        let c = &self.coverage;
+        let c_last = (c.size - 1) as f32;
+        let coverage = &mut out.coverage[..m];
+        let (cell, rx_out, ry_out, rz_out) = (
+            &mut out.cell[..m],
+            &mut out.rx[..m],
+            &mut out.ry[..m],
+            &mut out.rz[..m],
+        );
         let (wa_out, wb_out) = (&mut out.wa[..m], &mut out.wb[..m]);
         let (diffuse, inside_out) = (&mut out.diffuse[..m], &mut out.inside[..m]);
         for k in 0..m {
             let (rx, ry, rz) = reflect(k);
             let nlr = 2.0 * rz * hn[k] - nz;
             let inside = (nl[k] > 0.0) & (rz > self.cos_max) & (nlr > 0.0);
-            // Stereographic grid coordinates, clamped so that the cell index is always valid.
+            // The locator's grid cell ([`FastLocator::cell`]), clamped so that it is always valid.
             let s = g.scale / (1.0 + rz.max(0.0));
             // `max` then `min` (not `clamp`): the result is never NaN.
-            let gx = (rx * s - g.offset).max(0.0).min(last);
-            let gy = (ry * s - g.offset).max(0.0).min(last);
-            // SAFETY: gx and gy are finite and in [0, size - 2], so they fit an i32. The
+            let gx = (rx * s + g.offset).max(0.0).min(last);
+            let gy = (ry * s + g.offset).max(0.0).min(last);
+            // SAFETY: gx and gy are finite and in [0, size - 1], so they fit an i32. The
             // unchecked conversion is what lets this loop vectorise (the saturating `as` does
             // not).
             let (ix, iy) = unsafe { (gx.to_int_unchecked::<i32>(), gy.to_int_unchecked::<i32>()) };
             cell[k] = (iy * g.size as i32 + ix) as u32;
-            fx[k] = gx - ix as f32;
-            fy[k] = gy - iy as f32;
+            // The same for the coverage grid's cell.
+            let s = c.scale / (1.0 + rz.max(0.0));
+            let gx = (rx * s + c.offset).max(0.0).min(c_last);
+            let gy = (ry * s + c.offset).max(0.0).min(c_last);
+            // SAFETY: as above.
+            let (ix, iy) = unsafe { (gx.to_int_unchecked::<i32>(), gy.to_int_unchecked::<i32>()) };
+            coverage[k] = (iy * c.size as i32 + ix) as u32;
+            rx_out[k] = rx;
+            ry_out[k] = ry;
+            rz_out[k] = rz;
             let (wa, wb) = weights.weights(nl[k].max(0.0), nlr.max(0.0));
             wa_out[k] = wa;
             wb_out[k] = wb;
@@ -463,57 +583,109 @@ impl FastObjective<'_> {
         }
     }
 
-    /// Looks up the reflections of a block in the grid and adds the domain's lights to `acc`.
+    /// Looks up the reflections of a block and adds the domain's lights to `acc`.
+    ///
+    /// In passes, so that the loads of different lights overlap: the domain's lights compacted,
+    /// then the weights in each one's starting triangle (no branches), then the few that need
+    /// to walk on, the interpolation and the sums.
     #[inline(always)]
     fn accumulate<W: Weights>(
         &self,
-        r: &Reflections,
+        r: &mut Reflections,
         samples: &[Vec4],
         m: usize,
         acc: &mut Accumulator,
     ) {
-        let size = self.grid.size;
-        let values = self.grid.values;
-        for (k, &s) in samples[..m].iter().enumerate() {
-            if !r.inside[k] {
+        let loc = self.locator;
+        let mut n = 0;
+        let covered = &self.coverage.covered;
+        for k in 0..m {
+            r.domain[n] = k as u8;
+            n += (r.inside[k] & covered[r.coverage[k] as usize]) as usize;
+        }
+        let mut walks = 0;
+        for j in 0..n {
+            let k = r.domain[j] as usize;
+            let t = loc.start[r.cell[k] as usize];
+            let w = loc.weights(t, [r.rx[k], r.ry[k], r.rz[k]]);
+            r.triangle[j] = t;
+            r.weights[j] = w;
+            r.walks[walks] = j as u8;
+            walks += !FastLocator::inside(w) as usize;
+        }
+        // The few that start outside their triangle walk on (NaN weights: no data).
+        for &j in &r.walks[..walks] {
+            let (j, k) = (j as usize, r.domain[j as usize] as usize);
+            (r.triangle[j], r.weights[j]) = loc
+                .walk(r.triangle[j], [r.rx[k], r.ry[k], r.rz[k]])
+                .unwrap_or((0, [f32::NAN; 3]));
+        }
+        for j in 0..n {
+            let k = r.domain[j] as usize;
+            let Some(v) = self.blend(r.triangle[j], r.weights[j]) else {
                 continue;
-            }
-            let i = r.cell[k] as usize;
-            let row = &values[i..i + size + 2];
-            let top = row[0] + (row[1] - row[0]) * r.fx[k];
-            let bottom = row[size] + (row[size + 1] - row[size]) * r.fx[k];
-            let v = top + (bottom - top) * r.fy[k];
-            // A node without data (NaN) poisons the value: no data there.
-            if v.x.is_nan() {
-                continue;
-            }
-            acc.add::<W>(s, v, r.wa[k], r.wb[k], r.diffuse[k]);
+            };
+            acc.add::<W>(samples[k], v, r.wa[k], r.wb[k], r.diffuse[k]);
         }
         acc.flush();
+    }
+
+    /// The slice at the unit vector `h`, walking from triangle `start`: `None` outside the
+    /// sampled region or where a corner sample is invalid.
+    #[inline]
+    fn interpolate(&self, start: u32, h: [f32; 3]) -> Option<Vec4> {
+        let (t, w) = self.locator.walk(start, h)?;
+        self.blend(t, w)
+    }
+
+    /// Spherical barycentric interpolation of triangle `t`'s corners with (unnormalised)
+    /// weights `w`; `None` where a corner sample is invalid.
+    #[inline(always)]
+    fn blend(&self, t: u32, w: [f32; 3]) -> Option<Vec4> {
+        let [a, b, c] = self.locator.triangles[t as usize]
+            .vertices
+            .map(|v| self.lanes[v as usize]);
+        let v = (a * w[0] + b * w[1] + c * w[2]) * (1.0 / (w[0] + w[1] + w[2]));
+        // An invalid corner (NaN) poisons the value: no data there.
+        (!v.x.is_nan()).then_some(v)
     }
 }
 
 /// The per-block geometry of one reflection ([`FastObjective::reflections`]).
 struct Reflections {
     cell: [u32; BLOCK],
-    fx: [f32; BLOCK],
-    fy: [f32; BLOCK],
+    coverage: [u32; BLOCK],
+    rx: [f32; BLOCK],
+    ry: [f32; BLOCK],
+    rz: [f32; BLOCK],
     wa: [f32; BLOCK],
     wb: [f32; BLOCK],
     diffuse: [f32; BLOCK],
     inside: [bool; BLOCK],
+    /// The lights of the block in the domain (indices into the block), then per such light its
+    /// starting triangle and weights there.
+    domain: [u8; BLOCK],
+    walks: [u8; BLOCK],
+    triangle: [u32; BLOCK],
+    weights: [[f32; 3]; BLOCK],
 }
 
 impl Default for Reflections {
     fn default() -> Self {
         Self {
             cell: [0; BLOCK],
-            fx: [0.0; BLOCK],
-            fy: [0.0; BLOCK],
+            coverage: [0; BLOCK],
+            rx: [0.0; BLOCK],
+            ry: [0.0; BLOCK],
+            rz: [0.0; BLOCK],
             wa: [0.0; BLOCK],
             wb: [0.0; BLOCK],
             diffuse: [0.0; BLOCK],
             inside: [false; BLOCK],
+            domain: [0; BLOCK],
+            walks: [0; BLOCK],
+            triangle: [0; BLOCK],
+            weights: [[0.0; 3]; BLOCK],
         }
     }
 }

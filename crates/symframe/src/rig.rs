@@ -60,15 +60,12 @@ struct LocateGrid {
 pub struct RigOptions {
     /// Lights with `theta_d = angle(l, h) >= theta_d_max` are dropped (degrees; default 65).
     pub theta_d_max_deg: f64,
-    /// Nodes per side of the per-pixel resampling grid ([`ResampleGrid`]).
-    pub resample_size: usize,
 }
 
 impl Default for RigOptions {
     fn default() -> Self {
         Self {
             theta_d_max_deg: 65.0,
-            resample_size: DEFAULT_RESAMPLE_SIZE,
         }
     }
 }
@@ -91,8 +88,10 @@ pub struct Rig {
     pub cos_theta_d_max: f64,
     triangles: Vec<Triangle>,
     grid: LocateGrid,
-    /// Precomputed locations of a regular grid of halfway vectors, for per-pixel resampling.
-    pub resample: ResampleGrid,
+    /// Point location in single precision for the fast path.
+    pub fast: FastLocator,
+    /// Which halfway vectors lie well inside the sampled region: the symmetry domains' edge.
+    pub coverage: Coverage,
     /// The order the fast objective visits the lights in (rig indices): the Morton order
     /// permuted by bit-reversed rank (a van der Corput sequence over the Morton curve), so that
     /// every prefix of it is a subset spread evenly over the cone, and a coarse evaluation over
@@ -108,32 +107,8 @@ fn bit_reversed_order(n: usize) -> Vec<u32> {
     order
 }
 
-/// A regular `size x size` grid over the stereographic projection of the halfway cone,
-/// `s = (h.x, h.y) / (1 + h.z)`, with each node's location in the triangulation precomputed
-/// once per rig. A pixel's slice resampled onto it ([`crate::slice::ResampledSlice`]) is looked
-/// up by bilinear interpolation: no triangle search in the per-pixel hot loop.
-///
-/// Stereographic rather than the disc projection: its scale varies only from 0.5 to 0.7 over a
-/// 65-degree cone, so the nodes are nearly evenly spaced in angle.
-#[derive(Debug, Clone)]
-pub struct ResampleGrid {
-    /// Nodes per side.
-    pub size: usize,
-    /// Stereographic coordinate of node 0 (both axes).
-    pub min: f64,
-    /// Nodes per stereographic unit.
-    pub inv_step: f64,
-    /// Per node: rig light indices of the triangle's corners (`u32::MAX` = no data).
-    pub vertices: Vec<[u32; 3]>,
-    /// Per node: interpolation weights of the corners.
-    pub weights: Vec<[f32; 3]>,
-}
-
-/// The grid resolution used by default: nodes about 0.5 degrees apart over a 65-degree cone,
-/// several per triangle even at the paper's 1,512 lights.
-pub const DEFAULT_RESAMPLE_SIZE: usize = 160;
-
-/// The stereographic projection of a unit halfway vector, `(h.x, h.y) / (1 + h.z)`.
+/// The stereographic projection of a unit halfway vector, `(h.x, h.y) / (1 + h.z)`: nearly
+/// even in angle over a 65-degree cone (its scale varies from 0.5 to 0.7).
 #[inline]
 pub fn stereographic(h: DVec3) -> DVec2 {
     let k = 1.0 / (1.0 + h.z);
@@ -147,38 +122,239 @@ pub fn from_stereographic(s: DVec2) -> DVec3 {
     DVec3::new(2.0 * s.x, 2.0 * s.y, 1.0 - r2) / (1.0 + r2)
 }
 
-impl ResampleGrid {
-    fn new(
-        rig_locate: impl Fn(DVec3) -> Option<Location>,
-        theta_d_max_deg: f64,
-        size: usize,
-    ) -> Self {
+/// The edge of the symmetry domains: a regular grid of cells over the stereographic projection
+/// of the cone, each marked covered when its four corners lie inside the sampled region.
+/// A reflected halfway vector counts only in a covered cell (both paths, [`Rig::covered`]):
+/// the domains stop about one cell (0.5 to 0.9 degrees) short of the region's edge, where
+/// the hull's long thin triangles interpolate worst, and a normal just beyond the rig's reach
+/// is not propped up by the last sliver of data.
+#[derive(Debug, Clone)]
+pub struct Coverage {
+    /// Cells per side.
+    pub(crate) size: usize,
+    /// Cells per stereographic unit.
+    pub(crate) scale: f32,
+    /// Stereographic coordinate of the grid's corner times `scale`, negated.
+    pub(crate) offset: f32,
+    /// Per cell (row-major): whether it is covered.
+    pub(crate) covered: Vec<bool>,
+}
+
+/// Cells per side of the [`Coverage`] grid.
+const COVERAGE_SIZE: usize = 159;
+
+impl Coverage {
+    fn new(inside: impl Fn(DVec3) -> bool, theta_d_max_deg: f64) -> Self {
+        let nodes = COVERAGE_SIZE + 1;
         let extent = (theta_d_max_deg.to_radians() / 2.0).tan() * 1.001;
-        let min = -extent;
-        let step = 2.0 * extent / (size - 1) as f64;
+        let step = 2.0 * extent / COVERAGE_SIZE as f64;
         let cos_max = theta_d_max_deg.to_radians().cos();
-        let mut vertices = vec![[u32::MAX; 3]; size * size];
-        let mut weights = vec![[0.0f32; 3]; size * size];
+        let node: Vec<bool> = (0..nodes * nodes)
+            .map(|k| {
+                let s = DVec2::new(
+                    -extent + (k % nodes) as f64 * step,
+                    -extent + (k / nodes) as f64 * step,
+                );
+                let h = from_stereographic(s);
+                h.z > cos_max && inside(h)
+            })
+            .collect();
+        let covered = (0..COVERAGE_SIZE * COVERAGE_SIZE)
+            .map(|c| {
+                let (i, j) = (c % COVERAGE_SIZE, c / COVERAGE_SIZE);
+                let k = j * nodes + i;
+                node[k] && node[k + 1] && node[k + nodes] && node[k + nodes + 1]
+            })
+            .collect();
+        Self {
+            size: COVERAGE_SIZE,
+            scale: (1.0 / step) as f32,
+            offset: (extent / step) as f32,
+            covered,
+        }
+    }
+}
+
+/// The triangulation in single precision with a walk for point location: the fast path's
+/// lookups ([`crate::objective::FastObjective`]). The same spherical triangles and barycentric
+/// weights as [`Rig::locate`], so the fast and reference paths read the same slice; only the
+/// precision and the search differ.
+///
+/// A query starts at the triangle stored for its cell of a regular grid over the stereographic
+/// projection of the cone, `s = (h.x, h.y) / (1 + h.z)`, and walks across the edge of its most
+/// negative weight until no weight is negative (a visibility walk; the cells are a few times
+/// smaller than the triangles, so most queries take one step). Hand-written: it is the method's
+/// hot loop, and one 64-byte triangle per step keeps it in cache.
+#[derive(Debug, Clone)]
+pub struct FastLocator {
+    /// Cells per side.
+    pub(crate) size: usize,
+    /// Cells per stereographic unit.
+    pub(crate) scale: f32,
+    /// Stereographic coordinate of the grid's corner times `scale`, negated.
+    pub(crate) offset: f32,
+    /// Per cell: the triangle holding its centre, or the nearest one, or the sentinel (the last
+    /// triangle, outside everything) where none is near.
+    pub(crate) start: Vec<u32>,
+    /// The triangles, then the sentinel: a triangle outside everything (all weights `-h.z`,
+    /// negative over the cone) whose neighbours are itself.
+    pub(crate) triangles: Vec<WalkTriangle>,
+    /// The sentinel's index (the last).
+    pub(crate) sentinel: u32,
+}
+
+/// One triangle as the walk reads it: a cache line.
+#[derive(Debug, Clone, Copy)]
+#[repr(C, align(64))]
+pub(crate) struct WalkTriangle {
+    /// Rows of the inverse corner matrix: weight `k` is `rows[k] . h` (unnormalised).
+    pub(crate) rows: [[f32; 3]; 3],
+    /// Rig light indices of the corners.
+    pub(crate) vertices: [u32; 3],
+    /// The triangle across the edge opposite each corner (the sentinel on the hull).
+    pub(crate) neighbours: [u32; 3],
+}
+
+/// A weight this far below zero still counts as inside (unnormalised weights are ~1): points
+/// on an edge belong to both triangles, and single-precision rounding must not bounce the walk.
+const WALK_EPS: f32 = 1e-6;
+
+/// Steps after which a walk gives up (no data): never reached on the rigs tested, where a walk
+/// takes at most a few steps.
+const MAX_WALK: usize = 64;
+
+/// Triangles per grid cell, about: the grid side is `sqrt(triangles) * CELLS_PER_TRIANGLE_SIDE`.
+const CELLS_PER_TRIANGLE_SIDE: f64 = 4.0;
+
+impl FastLocator {
+    fn new(rig_triangles: &[Triangle], grid: &LocateGrid, theta_d_max_deg: f64) -> Self {
+        let n = rig_triangles.len();
+        // Neighbours through shared edges.
+        let mut edges: std::collections::HashMap<(u32, u32), Vec<(u32, usize)>> =
+            std::collections::HashMap::with_capacity(3 * n);
+        for (t, tri) in rig_triangles.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (tri.vertices[(k + 1) % 3], tri.vertices[(k + 2) % 3]);
+                edges
+                    .entry((a.min(b), a.max(b)))
+                    .or_default()
+                    .push((t as u32, k));
+            }
+        }
+        let sentinel = n as u32;
+        let mut triangles: Vec<WalkTriangle> = rig_triangles
+            .iter()
+            .map(|tri| {
+                let m = tri.spherical_inverse.transpose();
+                WalkTriangle {
+                    rows: [m.x_axis, m.y_axis, m.z_axis].map(|r| r.as_vec3().to_array()),
+                    vertices: tri.vertices,
+                    neighbours: [sentinel; 3],
+                }
+            })
+            .collect();
+        for sharing in edges.values() {
+            if let [(t0, k0), (t1, k1)] = sharing[..] {
+                triangles[t0 as usize].neighbours[k0] = t1;
+                triangles[t1 as usize].neighbours[k1] = t0;
+            }
+        }
+        let size = (((n as f64).sqrt() * CELLS_PER_TRIANGLE_SIDE).ceil() as usize).clamp(8, 1024);
+        let extent = (theta_d_max_deg.to_radians() / 2.0).tan() * 1.001;
+        let step = 2.0 * extent / size as f64;
+        triangles.push(WalkTriangle {
+            rows: [[0.0, 0.0, -1.0]; 3],
+            vertices: [0; 3],
+            neighbours: [sentinel; 3],
+        });
+        let mut start = vec![sentinel; size * size];
         for j in 0..size {
             for i in 0..size {
-                let s = DVec2::new(min + i as f64 * step, min + j as f64 * step);
+                let s = DVec2::new(
+                    -extent + (i as f64 + 0.5) * step,
+                    -extent + (j as f64 + 0.5) * step,
+                );
                 let h = from_stereographic(s);
-                if h.z <= cos_max {
-                    continue;
-                }
-                if let Some(loc) = rig_locate(h) {
-                    vertices[j * size + i] = loc.vertices;
-                    weights[j * size + i] = loc.weights.map(|w| w as f32);
-                }
+                // The triangle holding the centre, else the candidate it is least outside of.
+                start[j * size + i] = grid
+                    .candidates(DVec2::new(h.x, h.y))
+                    .iter()
+                    .map(|&t| {
+                        let w = rig_triangles[t as usize].spherical_inverse * h;
+                        (t, w.min_element())
+                    })
+                    .max_by(|a, b| a.1.total_cmp(&b.1))
+                    .map_or(sentinel, |(t, _)| t);
             }
         }
         Self {
             size,
-            min,
-            inv_step: 1.0 / step,
-            vertices,
-            weights,
+            scale: (1.0 / step) as f32,
+            offset: (extent / step) as f32,
+            start,
+            triangles,
+            sentinel,
         }
+    }
+
+    /// The grid cell of a unit vector (clamped to the grid), as the kernel computes it.
+    #[inline(always)]
+    pub(crate) fn cell(&self, x: f32, y: f32, z: f32) -> usize {
+        let last = (self.size - 1) as f32;
+        let k = self.scale / (1.0 + z.max(0.0));
+        let gx = (x * k + self.offset).max(0.0).min(last);
+        let gy = (y * k + self.offset).max(0.0).min(last);
+        gy as usize * self.size + gx as usize
+    }
+
+    /// The unnormalised spherical barycentric weights of `h` in triangle `t`.
+    #[inline(always)]
+    pub(crate) fn weights(&self, t: u32, h: [f32; 3]) -> [f32; 3] {
+        self.triangles[t as usize]
+            .rows
+            .map(|r| r[0] * h[0] + r[1] * h[1] + r[2] * h[2])
+    }
+
+    /// Whether weights place a point inside their triangle.
+    #[inline(always)]
+    pub(crate) fn inside(w: [f32; 3]) -> bool {
+        w[0].min(w[1]).min(w[2]) >= -WALK_EPS
+    }
+
+    /// One step of the walk without branches: triangle `t` itself if its weights `w` place the
+    /// point inside, else the neighbour across the edge of the most negative weight.
+    #[inline(always)]
+    pub(crate) fn step(&self, t: u32, w: [f32; 3]) -> u32 {
+        let k = if w[0] <= w[1] && w[0] <= w[2] {
+            0
+        } else if w[1] <= w[2] {
+            1
+        } else {
+            2
+        };
+        let next = self.triangles[t as usize].neighbours[k];
+        if w[k] >= -WALK_EPS {
+            t
+        } else {
+            next
+        }
+    }
+
+    /// Walks from triangle `t` to the one holding the unit vector `h`: that triangle and its
+    /// weights, `None` outside the sampled region.
+    #[inline]
+    pub(crate) fn walk(&self, mut t: u32, h: [f32; 3]) -> Option<(u32, [f32; 3])> {
+        for _ in 0..MAX_WALK {
+            if t == self.sentinel {
+                return None;
+            }
+            let w = self.weights(t, h);
+            if Self::inside(w) {
+                return Some((t, w));
+            }
+            t = self.step(t, w);
+        }
+        None
     }
 }
 
@@ -246,16 +422,14 @@ impl Rig {
         }
         let triangles = triangulate(&halfway_in_camera)?;
         let grid = LocateGrid::new(&triangles, &halfway_in_camera);
-        let resample = ResampleGrid::new(
+        let fast = FastLocator::new(&triangles, &grid, theta);
+        let coverage = Coverage::new(
             |h| {
-                let cell = grid.cell_of(DVec2::new(h.x, h.y))?;
-                let (lo, hi) = (grid.start[cell] as usize, grid.start[cell + 1] as usize);
-                grid.triangles[lo..hi]
+                grid.candidates(DVec2::new(h.x, h.y))
                     .iter()
-                    .find_map(|&t| triangles[t as usize].weights(h))
+                    .any(|&t| triangles[t as usize].weights(h).is_some())
             },
             theta,
-            options.resample_size.max(2),
         );
         let query_order = bit_reversed_order(lights_in_camera.len());
         Ok(Self {
@@ -267,7 +441,8 @@ impl Rig {
             cos_theta_d_max,
             triangles,
             grid,
-            resample,
+            fast,
+            coverage,
             query_order,
         })
     }
@@ -287,30 +462,21 @@ impl Rig {
         self.triangles.len()
     }
 
-    /// Whether the resampling grid's cell around a halfway vector lies wholly inside the
-    /// sampled region (all four corner nodes have data). The symmetry domains of both the
-    /// reference and the fast path require it of every reflected halfway vector, so the two
-    /// sum over the same lights and differ only in how they interpolate (the region loses at
-    /// most one cell, ~0.5 degrees, at its edge).
+    /// Whether a halfway vector's [`Coverage`] cell lies wholly inside the sampled region. Both
+    /// paths' symmetry domains require it of every reflected halfway vector.
     #[inline]
     pub fn covered(&self, halfway: DVec3) -> bool {
-        let g = &self.resample;
-        let k = g.inv_step / (1.0 + halfway.z);
+        let c = &self.coverage;
+        let k = c.scale as f64 / (1.0 + halfway.z);
         let (gx, gy) = (
-            halfway.x * k - g.min * g.inv_step,
-            halfway.y * k - g.min * g.inv_step,
+            halfway.x * k + c.offset as f64,
+            halfway.y * k + c.offset as f64,
         );
         if !(gx >= 0.0 && gy >= 0.0) {
             return false;
         }
         let (ix, iy) = (gx as usize, gy as usize);
-        if ix + 1 >= g.size || iy + 1 >= g.size {
-            return false;
-        }
-        let i = iy * g.size + ix;
-        [i, i + 1, i + g.size, i + g.size + 1]
-            .iter()
-            .all(|&j| g.vertices[j][0] != u32::MAX)
+        ix < c.size && iy < c.size && c.covered[iy * c.size + ix]
     }
 
     /// Whether a halfway vector lies inside the measured cone.
@@ -323,10 +489,8 @@ impl Rig {
     /// weights; `None` outside the sampled region (the spherical triangles' union).
     #[inline]
     pub fn locate(&self, halfway: DVec3) -> Option<Location> {
-        let cell = self.grid.cell_of(DVec2::new(halfway.x, halfway.y))?;
-        let lo = self.grid.start[cell] as usize;
-        let hi = self.grid.start[cell + 1] as usize;
-        self.grid.triangles[lo..hi]
+        self.grid
+            .candidates(DVec2::new(halfway.x, halfway.y))
             .iter()
             .find_map(|&t| self.triangles[t as usize].weights(halfway))
     }
@@ -470,6 +634,15 @@ impl LocateGrid {
         }
     }
 
+    /// The triangles whose padded boxes overlap the cell of a disc point (none outside).
+    #[inline]
+    fn candidates(&self, p: DVec2) -> &[u32] {
+        match self.cell_of(p) {
+            Some(cell) => &self.triangles[self.start[cell] as usize..self.start[cell + 1] as usize],
+            None => &[],
+        }
+    }
+
     #[inline]
     fn cell_of(&self, p: DVec2) -> Option<usize> {
         let c = (p - self.min) * self.inv_cell;
@@ -531,6 +704,58 @@ mod tests {
         }
         assert_eq!(rig.n_dropped(), 2);
         assert!(rig.halfway_in_camera.iter().all(|h| rig.in_cone(*h)));
+    }
+
+    #[test]
+    fn the_fast_walk_finds_the_triangles_and_weights_of_the_reference_lookup() {
+        for n_lights in [20, 400, 1512] {
+            let rig =
+                Rig::new(&uniform_cone_lights(n_lights, 65.0), RigOptions::default()).unwrap();
+            let f = &rig.fast;
+            let (mut both, mut worst) = (0, 0.0f64);
+            let mut s = 99u64;
+            let mut rnd = || {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (s >> 11) as f64 / (1u64 << 53) as f64
+            };
+            for _ in 0..20000 {
+                let h = DVec3::new(rnd() * 2.0 - 1.0, rnd() * 2.0 - 1.0, rnd()).normalize();
+                let h32 = h.as_vec3();
+                let walked = f.walk(f.start[f.cell(h32.x, h32.y, h32.z)], h32.to_array());
+                match (rig.locate(h), walked) {
+                    (Some(a), Some((t, w))) => {
+                        both += 1;
+                        let sum = w[0] + w[1] + w[2];
+                        let b = f.triangles[t as usize].vertices;
+                        // The same point interpolated (on a shared edge either triangle is right).
+                        let pa: DVec3 = (0..3)
+                            .map(|k| rig.halfway_in_camera[a.vertices[k] as usize] * a.weights[k])
+                            .sum();
+                        let pb: DVec3 = (0..3)
+                            .map(|k| rig.halfway_in_camera[b[k] as usize] * (w[k] / sum) as f64)
+                            .sum();
+                        worst = worst.max((pa - pb).length());
+                    }
+                    (None, None) => {}
+                    // Only within rounding of the hull may the two disagree.
+                    (Some(a), None) => {
+                        let wmin = a.weights.iter().copied().fold(1.0, f64::min);
+                        assert!(wmin < 1e-5, "{n_lights} lights: {h} missed, {a:?}");
+                    }
+                    (None, Some((_, w))) => {
+                        let wmin = w.iter().copied().fold(1.0, f32::min);
+                        assert!(wmin > -1e-5, "{n_lights} lights: {h} found outside, {w:?}");
+                    }
+                }
+            }
+            assert!(both > 2000, "{both}");
+            assert!(
+                worst < 1e-5,
+                "{n_lights} lights: interpolated points {worst} apart"
+            );
+        }
     }
 
     #[test]

@@ -117,15 +117,12 @@ fn compensated_cosine_removes_the_tilt_bias_on_ward() {
 
 /// The 99th percentile of a per-pixel angle map over the evaluated pixels (mask, true normal
 /// within 60 degrees of the view, both maps defined).
-fn p99(errors: Vec<f32>, scene: &Scene) -> f32 {
-    let mut d: Vec<f32> = errors
-        .into_iter()
-        .enumerate()
-        .filter(|&(p, d)| scene.mask[p] && scene.normals_in_camera[p].z >= 0.5 && d.is_finite())
-        .map(|(_, d)| d)
-        .collect();
+/// Median and 99th percentile of the finite values.
+fn median_and_p99(values: impl Iterator<Item = f32>) -> (f32, f32, usize) {
+    let mut d: Vec<f32> = values.filter(|d| d.is_finite()).collect();
+    assert!(!d.is_empty(), "nothing to compare");
     d.sort_by(f32::total_cmp);
-    d[(d.len() - 1) * 99 / 100]
+    (d[d.len() / 2], d[(d.len() - 1) * 99 / 100], d.len())
 }
 
 /// The anisotropic Ward validation material rendered on `scene` under 1,512 lights, estimated
@@ -143,43 +140,56 @@ fn fast_and_exact(scene: &Scene) -> (symframe::EstimateMaps, symframe::EstimateM
         estimate_stack(&stack, &rig, Some(&scene.mask), params, &|_| {}).unwrap()
     };
     (
-        maps(symframe::Interpolation::Resampled),
+        maps(symframe::Interpolation::Fast),
         maps(symframe::Interpolation::Exact),
     )
 }
 
-/// The fast path (slice resampled on a grid, single precision) against the reference path
-/// (triangle lookups and spherical barycentric weights at every query, double precision), both
-/// running the same coarse-to-fine search: issue 5 asks for 0.1 degrees median and 0.5 at the
-/// 99th percentile, normals and tangents, on the anisotropic validation sphere (measured:
-/// normals 0.02 / 0.44 at 1,512 lights). Against ground truth the fast path must be as accurate.
+/// The fast path (single precision, walk-located triangles, subsets of the lights that can be
+/// in the domain) against the reference path (double precision, every light, triangle lookups
+/// at every query), both running the same search, over every estimated pixel of `scene`.
+///
+/// Issue 5 asks for 0.1 degrees median and 0.5 at the 99th percentile, normals and tangents.
+/// Both paths interpolate with the same spherical barycentric weights, so they differ by
+/// rounding only: measured 0.000 median and 0.002-0.005 degrees p99 on these scenes. The
+/// bound asserted is 0.05 (ten times the measured, a tenth of the issue's): a fast path that
+/// approximates the slice (the grid resampling this replaced: 0.44-1.5 degrees p99) fails it.
+fn assert_paths_agree(
+    scene: &Scene,
+    what: &str,
+) -> (symframe::EstimateMaps, symframe::EstimateMaps) {
+    let (fast, exact) = fast_and_exact(scene);
+    // The same pixels estimated, and the same pixels with a tangent, give or take a few.
+    let estimated = |m: &symframe::EstimateMaps| m.counts.estimated;
+    let with_tangent = |m: &symframe::EstimateMaps| m.counts.with_tangent;
+    assert!(estimated(&fast).abs_diff(estimated(&exact)) * 200 <= estimated(&exact));
+    assert!(with_tangent(&fast).abs_diff(with_tangent(&exact)) * 200 <= estimated(&exact));
+    let normals = symframe::eval::normal_error_map(&fast.normals, &exact.normals);
+    let tangents = symframe::eval::tangent_error_map(&fast.tangents, &exact.tangents);
+    let (n_median, n_p99, n) = median_and_p99(normals.into_iter());
+    let (t_median, t_p99, t) = median_and_p99(tangents.into_iter());
+    eprintln!(
+        "{what}: normals median {n_median} p99 {n_p99} over {n} pixels; \
+         tangents median {t_median} p99 {t_p99} over {t}"
+    );
+    assert!(n * 10 >= estimated(&exact) * 9, "{what}: {n} compared");
+    assert!(
+        n_median <= 0.1 && n_p99 <= 0.05,
+        "{what}: normals {n_median} / {n_p99}"
+    );
+    assert!(
+        t_median <= 0.1 && t_p99 <= 0.05,
+        "{what}: tangents {t_median} / {t_p99}"
+    );
+    (fast, exact)
+}
+
+/// The validation sphere with a circular tangent field: the paths agree, and against ground
+/// truth the fast path is as accurate.
 #[test]
 fn fast_path_agrees_with_the_reference_path() {
     let scene = Scene::sphere(32, TangentField::Circular);
-    let (fast, exact) = fast_and_exact(&scene);
-    // The fast maps against the exact ones as if those were ground truth; tangents are axes,
-    // compared without sign.
-    let e = evaluate(
-        &fast.normals,
-        &fast.tangents,
-        &exact.normals,
-        Some(&exact.tangents),
-        Some(&scene.mask),
-        60.0,
-    );
-    let normal_p99 = p99(
-        symframe::eval::normal_error_map(&fast.normals, &exact.normals),
-        &scene,
-    );
-    let tangent_p99 = p99(
-        symframe::eval::tangent_error_map(&fast.tangents, &exact.tangents),
-        &scene,
-    );
-    eprintln!("fast vs exact: {e:#?}, normal p99 {normal_p99}, tangent p99 {tangent_p99}");
-    assert!(e.normal_error.median <= 0.1, "{e:?}");
-    assert!(normal_p99 <= 0.5, "normal p99 {normal_p99}");
-    assert!(e.tangent_error.median <= 0.1, "{e:?}");
-    assert!(tangent_p99 <= 0.5, "tangent p99 {tangent_p99}");
+    let (fast, exact) = assert_paths_agree(&scene, "circular sphere");
     let truth = |m: &symframe::EstimateMaps| {
         evaluate(
             &m.normals,
@@ -192,12 +202,28 @@ fn fast_path_agrees_with_the_reference_path() {
     };
     let (fast_gt, exact_gt) = (truth(&fast), truth(&exact));
     assert!(
-        fast_gt.normal_error.mean <= exact_gt.normal_error.mean * 1.05,
+        fast_gt.normal_error.mean <= exact_gt.normal_error.mean * 1.01,
         "fast {:?} vs exact {:?}",
         fast_gt.normal_error,
         exact_gt.normal_error
     );
-    assert!(fast_gt.normal_error.p90 <= exact_gt.normal_error.p90 * 1.05);
+    assert!(fast_gt.tangent_error.mean <= exact_gt.tangent_error.mean * 1.01);
+}
+
+/// An axial tangent field in the paper's cosine form: flat valleys (the form's known 2-5 degree
+/// bias), where an approximate fast path drifts (the grid resampling: 0.76 degrees p99).
+#[test]
+fn fast_path_agrees_with_the_reference_path_on_flat_valleys() {
+    let scene = Scene::sphere(32, TangentField::Axial(DVec3::Y));
+    assert_paths_agree(&scene, "axial sphere");
+}
+
+/// Figure 10's bumps with cast shadows: shadowed pixels have several near-equal minima, where
+/// an approximate fast path settled in a different one (the grid resampling: 1.4 degrees p99).
+#[test]
+fn fast_path_agrees_with_the_reference_path_on_shadowed_bumps() {
+    let scene = Scene::bumps(48, &BumpParams::default(), TangentField::Axial(DVec3::X));
+    assert_paths_agree(&scene, "bumps");
 }
 
 /// A DiLiGenT-like rig (96 lights within 45 degrees of the view) has halfway vectors within
@@ -267,37 +293,6 @@ fn beyond_reach(params: EstimatorParams) {
         far_returned * 100 <= far,
         "{far_returned} of {far} beyond reach returned"
     );
-}
-
-/// On a scene with cast shadows (Figure 10's bumps) the two paths agree to the issue's targets
-/// wherever the estimate is confident; the 99th percentile over every pixel is larger
-/// (measured 1.5 degrees at 64 x 64) because shadowed pixels have several near-equal minima
-/// and the paths may settle in different ones: their confidence says so.
-#[test]
-fn fast_path_agrees_with_the_reference_path_where_confident_on_shadowed_bumps() {
-    let scene = Scene::bumps(48, &BumpParams::default(), TangentField::Axial(DVec3::X));
-    let (fast, exact) = fast_and_exact(&scene);
-    let d = symframe::eval::normal_error_map(&fast.normals, &exact.normals);
-    let mut all: Vec<f32> = d.iter().copied().filter(|v| v.is_finite()).collect();
-    all.sort_by(f32::total_cmp);
-    let confident: Vec<f32> = d
-        .iter()
-        .zip(&exact.confidence)
-        .filter(|(v, &c)| v.is_finite() && c >= 0.5)
-        .map(|(&v, _)| v)
-        .collect();
-    let mut sorted = confident.clone();
-    sorted.sort_by(f32::total_cmp);
-    let median = all[all.len() / 2];
-    let p99 = sorted[(sorted.len() - 1) * 99 / 100];
-    eprintln!(
-        "bumps: median {median}, confident p99 {p99} over {} of {} pixels",
-        sorted.len(),
-        all.len()
-    );
-    assert!(median <= 0.1, "median {median}");
-    assert!(sorted.len() * 2 >= all.len(), "most pixels are confident");
-    assert!(p99 <= 0.5, "confident p99 {p99}");
 }
 
 /// Figure 3's cell at theta_n = 80 under the 65-degree cone, anisotropic Ward: beyond the

@@ -113,7 +113,6 @@ pub fn run(ctx: &Ctx) -> Result<String> {
                 &lights,
                 RigOptions {
                     theta_d_max_deg: *cone,
-                    ..Default::default()
                 },
             )?;
             let stack = scene.render_stack(&brdf as &dyn Brdf, &lights);

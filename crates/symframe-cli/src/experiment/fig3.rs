@@ -78,15 +78,7 @@ pub fn run(ctx: &Ctx) -> Result<String> {
     let lights = uniform_cone_lights(n_lights, 90.0);
     let rigs: Vec<Rig> = cols
         .par_iter()
-        .map(|&c| {
-            Rig::new(
-                &lights,
-                RigOptions {
-                    theta_d_max_deg: c,
-                    ..Default::default()
-                },
-            )
-        })
+        .map(|&c| Rig::new(&lights, RigOptions { theta_d_max_deg: c }))
         .collect::<Result<_, _>>()?;
     let (nr, nc, nm) = (rows.len(), cols.len(), mats.len());
     // Per (material, row, column): both modes.
