@@ -296,8 +296,8 @@ impl Objective for FastObjective<'_> {
 
     fn value(&self, halfway: DVec3) -> Option<[f64; 3]> {
         let h = halfway.as_vec3();
-        let start = self.locator.start[self.locator.cell(h.x, h.y, h.z)];
-        let v = self.interpolate(start, h.to_array())?;
+        let h = h.to_array();
+        let v = self.interpolate(self.locator.start_of(h), h)?;
         Some([v.x as f64, v.y as f64, v.z as f64])
     }
 }
@@ -536,12 +536,9 @@ impl FastObjective<'_> {
         nz: f32,
         reflect: impl Fn(usize) -> (f32, f32, f32),
     ) {
-        let g = self.locator;
-        let last = (g.size - 1) as f32;
+        let (cells, coverage_cells) = (&self.locator.grid, &self.coverage.grid);
         // Slices of exactly `m` elements: no bounds checks in the loop, so it vectorises.
         let (hn, nl) = (&hn[..m], &nl[..m]);
-        let c = &self.coverage;
-        let c_last = (c.size - 1) as f32;
         let coverage = &mut out.coverage[..m];
         let (cell, rx_out, ry_out, rz_out) = (
             &mut out.cell[..m],
@@ -555,23 +552,9 @@ impl FastObjective<'_> {
             let (rx, ry, rz) = reflect(k);
             let nlr = 2.0 * rz * hn[k] - nz;
             let inside = (nl[k] > 0.0) & (rz > self.cos_max) & (nlr > 0.0);
-            // The locator's grid cell ([`FastLocator::cell`]), clamped so that it is always valid.
-            let s = g.scale / (1.0 + rz.max(0.0));
-            // `max` then `min` (not `clamp`): the result is never NaN.
-            let gx = (rx * s + g.offset).max(0.0).min(last);
-            let gy = (ry * s + g.offset).max(0.0).min(last);
-            // SAFETY: gx and gy are finite and in [0, size - 1], so they fit an i32. The
-            // unchecked conversion is what lets this loop vectorise (the saturating `as` does
-            // not).
-            let (ix, iy) = unsafe { (gx.to_int_unchecked::<i32>(), gy.to_int_unchecked::<i32>()) };
-            cell[k] = (iy * g.size as i32 + ix) as u32;
-            // The same for the coverage grid's cell.
-            let s = c.scale / (1.0 + rz.max(0.0));
-            let gx = (rx * s + c.offset).max(0.0).min(c_last);
-            let gy = (ry * s + c.offset).max(0.0).min(c_last);
-            // SAFETY: as above.
-            let (ix, iy) = unsafe { (gx.to_int_unchecked::<i32>(), gy.to_int_unchecked::<i32>()) };
-            coverage[k] = (iy * c.size as i32 + ix) as u32;
+            // The locator's and the coverage grid's cells, clamped so they are always valid.
+            cell[k] = cells.cell_clamped(rx, ry, rz);
+            coverage[k] = coverage_cells.cell_clamped(rx, ry, rz);
             rx_out[k] = rx;
             ry_out[k] = ry;
             rz_out[k] = rz;

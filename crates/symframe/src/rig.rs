@@ -122,6 +122,72 @@ pub fn from_stereographic(s: DVec2) -> DVec3 {
     DVec3::new(2.0 * s.x, 2.0 * s.y, 1.0 - r2) / (1.0 + r2)
 }
 
+/// A regular `size x size` grid of cells over the stereographic projection of the cone,
+/// `s = (h.x, h.y) / (1 + h.z)`, slightly wider than the cone: the cells of [`Coverage`] and
+/// [`FastLocator`].
+#[derive(Debug, Clone, Copy)]
+pub struct StereoGrid {
+    /// Cells per side.
+    pub(crate) size: usize,
+    /// Cells per stereographic unit.
+    pub(crate) scale: f32,
+    /// Stereographic coordinate of the grid's corner times `scale`, negated.
+    pub(crate) offset: f32,
+    /// Half the grid's side and a cell's side, stereographic units (double precision).
+    extent: f64,
+    step: f64,
+}
+
+impl StereoGrid {
+    fn new(theta_d_max_deg: f64, size: usize) -> Self {
+        let extent = (theta_d_max_deg.to_radians() / 2.0).tan() * 1.001;
+        let step = 2.0 * extent / size as f64;
+        Self {
+            size,
+            scale: (1.0 / step) as f32,
+            offset: (extent / step) as f32,
+            extent,
+            step,
+        }
+    }
+
+    /// The unit vector at grid coordinates `(x, y)` (in cells from the corner).
+    fn point(&self, x: f64, y: f64) -> DVec3 {
+        from_stereographic(DVec2::new(
+            -self.extent + x * self.step,
+            -self.extent + y * self.step,
+        ))
+    }
+
+    /// The cell of a unit vector, clamped to the grid: what the fast kernel computes for every
+    /// light, so it stays branch-free and vectorises.
+    #[inline(always)]
+    pub(crate) fn cell_clamped(&self, x: f32, y: f32, z: f32) -> u32 {
+        let last = (self.size - 1) as f32;
+        let k = self.scale / (1.0 + z.max(0.0));
+        // `max` then `min` (not `clamp`): the result is never NaN.
+        let gx = (x * k + self.offset).max(0.0).min(last);
+        let gy = (y * k + self.offset).max(0.0).min(last);
+        // SAFETY: gx and gy are finite and in [0, size - 1], so they fit an i32. The unchecked
+        // conversion is what lets the kernel's geometry loop vectorise (the saturating `as`
+        // does not).
+        let (ix, iy) = unsafe { (gx.to_int_unchecked::<i32>(), gy.to_int_unchecked::<i32>()) };
+        (iy * self.size as i32 + ix) as u32
+    }
+
+    /// The cell of a unit vector in double precision, `None` outside the grid.
+    #[inline]
+    fn cell_of(&self, h: DVec3) -> Option<usize> {
+        let k = self.scale as f64 / (1.0 + h.z);
+        let (gx, gy) = (h.x * k + self.offset as f64, h.y * k + self.offset as f64);
+        if !(gx >= 0.0 && gy >= 0.0) {
+            return None;
+        }
+        let (ix, iy) = (gx as usize, gy as usize);
+        (ix < self.size && iy < self.size).then_some(iy * self.size + ix)
+    }
+}
+
 /// The edge of the symmetry domains: a regular grid of cells over the stereographic projection
 /// of the cone, each marked covered when its four corners lie inside the sampled region.
 /// A reflected halfway vector counts only in a covered cell (both paths, [`Rig::covered`]):
@@ -130,12 +196,8 @@ pub fn from_stereographic(s: DVec2) -> DVec3 {
 /// is not propped up by the last sliver of data.
 #[derive(Debug, Clone)]
 pub struct Coverage {
-    /// Cells per side.
-    pub(crate) size: usize,
-    /// Cells per stereographic unit.
-    pub(crate) scale: f32,
-    /// Stereographic coordinate of the grid's corner times `scale`, negated.
-    pub(crate) offset: f32,
+    /// The cells.
+    pub(crate) grid: StereoGrid,
     /// Per cell (row-major): whether it is covered.
     pub(crate) covered: Vec<bool>,
 }
@@ -145,17 +207,12 @@ const COVERAGE_SIZE: usize = 159;
 
 impl Coverage {
     fn new(inside: impl Fn(DVec3) -> bool, theta_d_max_deg: f64) -> Self {
+        let grid = StereoGrid::new(theta_d_max_deg, COVERAGE_SIZE);
         let nodes = COVERAGE_SIZE + 1;
-        let extent = (theta_d_max_deg.to_radians() / 2.0).tan() * 1.001;
-        let step = 2.0 * extent / COVERAGE_SIZE as f64;
         let cos_max = theta_d_max_deg.to_radians().cos();
         let node: Vec<bool> = (0..nodes * nodes)
             .map(|k| {
-                let s = DVec2::new(
-                    -extent + (k % nodes) as f64 * step,
-                    -extent + (k / nodes) as f64 * step,
-                );
-                let h = from_stereographic(s);
+                let h = grid.point((k % nodes) as f64, (k / nodes) as f64);
                 h.z > cos_max && inside(h)
             })
             .collect();
@@ -166,12 +223,7 @@ impl Coverage {
                 node[k] && node[k + 1] && node[k + nodes] && node[k + nodes + 1]
             })
             .collect();
-        Self {
-            size: COVERAGE_SIZE,
-            scale: (1.0 / step) as f32,
-            offset: (extent / step) as f32,
-            covered,
-        }
+        Self { grid, covered }
     }
 }
 
@@ -187,12 +239,8 @@ impl Coverage {
 /// hot loop, and one 64-byte triangle per step keeps it in cache.
 #[derive(Debug, Clone)]
 pub struct FastLocator {
-    /// Cells per side.
-    pub(crate) size: usize,
-    /// Cells per stereographic unit.
-    pub(crate) scale: f32,
-    /// Stereographic coordinate of the grid's corner times `scale`, negated.
-    pub(crate) offset: f32,
+    /// The cells.
+    pub(crate) grid: StereoGrid,
     /// Per cell: the triangle holding its centre, or the nearest one, or the sentinel (the last
     /// triangle, outside everything) where none is near.
     pub(crate) start: Vec<u32>,
@@ -260,8 +308,7 @@ impl FastLocator {
             }
         }
         let size = (((n as f64).sqrt() * CELLS_PER_TRIANGLE_SIDE).ceil() as usize).clamp(8, 1024);
-        let extent = (theta_d_max_deg.to_radians() / 2.0).tan() * 1.001;
-        let step = 2.0 * extent / size as f64;
+        let cells = StereoGrid::new(theta_d_max_deg, size);
         triangles.push(WalkTriangle {
             rows: [[0.0, 0.0, -1.0]; 3],
             vertices: [0; 3],
@@ -270,11 +317,7 @@ impl FastLocator {
         let mut start = vec![sentinel; size * size];
         for j in 0..size {
             for i in 0..size {
-                let s = DVec2::new(
-                    -extent + (i as f64 + 0.5) * step,
-                    -extent + (j as f64 + 0.5) * step,
-                );
-                let h = from_stereographic(s);
+                let h = cells.point(i as f64 + 0.5, j as f64 + 0.5);
                 // The triangle holding the centre, else the candidate it is least outside of.
                 start[j * size + i] = grid
                     .candidates(DVec2::new(h.x, h.y))
@@ -288,23 +331,17 @@ impl FastLocator {
             }
         }
         Self {
-            size,
-            scale: (1.0 / step) as f32,
-            offset: (extent / step) as f32,
+            grid: cells,
             start,
             triangles,
             sentinel,
         }
     }
 
-    /// The grid cell of a unit vector (clamped to the grid), as the kernel computes it.
+    /// The walk's start for a unit vector: the triangle of its cell.
     #[inline(always)]
-    pub(crate) fn cell(&self, x: f32, y: f32, z: f32) -> usize {
-        let last = (self.size - 1) as f32;
-        let k = self.scale / (1.0 + z.max(0.0));
-        let gx = (x * k + self.offset).max(0.0).min(last);
-        let gy = (y * k + self.offset).max(0.0).min(last);
-        gy as usize * self.size + gx as usize
+    pub(crate) fn start_of(&self, h: [f32; 3]) -> u32 {
+        self.start[self.grid.cell_clamped(h[0], h[1], h[2]) as usize]
     }
 
     /// The unnormalised spherical barycentric weights of `h` in triangle `t`.
@@ -321,25 +358,6 @@ impl FastLocator {
         w[0].min(w[1]).min(w[2]) >= -WALK_EPS
     }
 
-    /// One step of the walk without branches: triangle `t` itself if its weights `w` place the
-    /// point inside, else the neighbour across the edge of the most negative weight.
-    #[inline(always)]
-    pub(crate) fn step(&self, t: u32, w: [f32; 3]) -> u32 {
-        let k = if w[0] <= w[1] && w[0] <= w[2] {
-            0
-        } else if w[1] <= w[2] {
-            1
-        } else {
-            2
-        };
-        let next = self.triangles[t as usize].neighbours[k];
-        if w[k] >= -WALK_EPS {
-            t
-        } else {
-            next
-        }
-    }
-
     /// Walks from triangle `t` to the one holding the unit vector `h`: that triangle and its
     /// weights, `None` outside the sampled region.
     #[inline]
@@ -349,10 +367,18 @@ impl FastLocator {
                 return None;
             }
             let w = self.weights(t, h);
-            if Self::inside(w) {
+            // Across the edge of the most negative weight, unless none is negative.
+            let k = if w[0] <= w[1] && w[0] <= w[2] {
+                0
+            } else if w[1] <= w[2] {
+                1
+            } else {
+                2
+            };
+            if w[k] >= -WALK_EPS {
                 return Some((t, w));
             }
-            t = self.step(t, w);
+            t = self.triangles[t as usize].neighbours[k];
         }
         None
     }
@@ -467,16 +493,7 @@ impl Rig {
     #[inline]
     pub fn covered(&self, halfway: DVec3) -> bool {
         let c = &self.coverage;
-        let k = c.scale as f64 / (1.0 + halfway.z);
-        let (gx, gy) = (
-            halfway.x * k + c.offset as f64,
-            halfway.y * k + c.offset as f64,
-        );
-        if !(gx >= 0.0 && gy >= 0.0) {
-            return false;
-        }
-        let (ix, iy) = (gx as usize, gy as usize);
-        ix < c.size && iy < c.size && c.covered[iy * c.size + ix]
+        c.grid.cell_of(halfway).is_some_and(|cell| c.covered[cell])
     }
 
     /// Whether a halfway vector lies inside the measured cone.
@@ -723,7 +740,7 @@ mod tests {
             for _ in 0..20000 {
                 let h = DVec3::new(rnd() * 2.0 - 1.0, rnd() * 2.0 - 1.0, rnd()).normalize();
                 let h32 = h.as_vec3();
-                let walked = f.walk(f.start[f.cell(h32.x, h32.y, h32.z)], h32.to_array());
+                let walked = f.walk(f.start_of(h32.to_array()), h32.to_array());
                 match (rig.locate(h), walked) {
                     (Some(a), Some((t, w))) => {
                         both += 1;
