@@ -39,16 +39,7 @@ pub fn load_stack(
         for (j, r) in decoded.into_iter().enumerate() {
             let (w, h, rgb) = r?;
             let s = stack.get_or_insert_with(|| Stack::zeros(w, h, n));
-            if (w, h) != (s.width, s.height) {
-                return Err(Error::SizeMismatch {
-                    path: ds.images[start + j].clone(),
-                    width: w,
-                    height: h,
-                    first: ds.images[0].clone(),
-                    first_width: s.width,
-                    first_height: s.height,
-                });
-            }
+            check_size(ds, start + j, (w, h), (s.width, s.height))?;
             images.push(rgb);
         }
         let s = stack.as_mut().expect("the first chunk created the stack");
@@ -90,6 +81,26 @@ pub(crate) fn check_dataset(ds: &Dataset) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Checks that image `i` of `ds`, `size` (width, height), is the size of the first image.
+pub(crate) fn check_size(
+    ds: &Dataset,
+    i: usize,
+    size: (usize, usize),
+    first: (usize, usize),
+) -> Result<()> {
+    if size == first {
+        return Ok(());
+    }
+    Err(Error::SizeMismatch {
+        path: ds.images[i].clone(),
+        width: size.0,
+        height: size.1,
+        first: ds.images[0].clone(),
+        first_width: first.0,
+        first_height: first.1,
+    })
 }
 
 /// Decodes image `i` of `ds` as a stack stores it: interleaved RGB (grey replicated), divided

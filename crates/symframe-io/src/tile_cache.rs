@@ -54,7 +54,7 @@ use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::fingerprint::Fingerprint;
 use crate::image::DecodeOptions;
-use crate::stack::{check_dataset, decode_stack_image};
+use crate::stack::{check_dataset, check_size, decode_stack_image};
 
 /// Format version of the cache file (bumped whenever the layout changes).
 pub const CACHE_VERSION: u32 = 1;
@@ -799,16 +799,7 @@ fn build(
         // The first error in image order, as the in-memory loader reports it.
         for (j, r) in results.into_iter().enumerate() {
             let (w, h, rgb) = r?;
-            if (w, h) != (header.width, header.height) {
-                return Err(Error::SizeMismatch {
-                    path: ds.images[from + j].clone(),
-                    width: w,
-                    height: h,
-                    first: ds.images[0].clone(),
-                    first_width: header.width,
-                    first_height: header.height,
-                });
-            }
+            check_size(ds, from + j, (w, h), (header.width, header.height))?;
             images.push(rgb);
         }
         decoded += end - from;
