@@ -315,15 +315,15 @@ fn shards_merge_into_the_single_run() {
         let tiles = names(&shard(k).join(".symframe-tiles"));
         assert_eq!(tiles.len(), m["tiles"].as_array().unwrap().len());
     }
+    // `symframe merge SHARDS... -o OUT`.
+    let merge = |shards: &[&Path], out: &Path| {
+        let mut args = vec!["merge"];
+        args.extend(shards.iter().map(|p| p.to_str().unwrap()));
+        args.extend(["-o", out.to_str().unwrap()]);
+        symframe(&args)
+    };
     let out = tmp.path().join("merged");
-    ok(&symframe(&[
-        "merge",
-        shard(1).to_str().unwrap(),
-        shard(2).to_str().unwrap(),
-        shard(3).to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-    ]));
+    ok(&merge(&[&shard(1), &shard(2), &shard(3)], &out));
     same_maps(&out, &whole);
     for f in [
         "normals.png",
@@ -337,13 +337,7 @@ fn shards_merge_into_the_single_run() {
 
     // Errors: a missing shard, a shard of another job, a folder that is no shard.
     let bad = tmp.path().join("bad");
-    let o = symframe(&[
-        "merge",
-        shard(1).to_str().unwrap(),
-        shard(3).to_str().unwrap(),
-        "-o",
-        bad.to_str().unwrap(),
-    ]);
+    let o = merge(&[&shard(1), &shard(3)], &bad);
     let e = stderr(&o);
     assert!(!o.status.success());
     assert!(
@@ -365,14 +359,7 @@ fn shards_merge_into_the_single_run() {
             "0.2",
         ],
     ));
-    let o = symframe(&[
-        "merge",
-        shard(1).to_str().unwrap(),
-        other.to_str().unwrap(),
-        shard(3).to_str().unwrap(),
-        "-o",
-        bad.to_str().unwrap(),
-    ]);
+    let o = merge(&[&shard(1), &other, &shard(3)], &bad);
     let e = stderr(&o);
     assert!(!o.status.success());
     assert!(
@@ -381,26 +368,13 @@ fn shards_merge_into_the_single_run() {
     );
     assert!(!bad.exists());
 
-    let o = symframe(&[
-        "merge",
-        shard(1).to_str().unwrap(),
-        whole.to_str().unwrap(),
-        "-o",
-        bad.to_str().unwrap(),
-    ]);
+    let o = merge(&[&shard(1), &whole], &bad);
     let e = stderr(&o);
     assert!(e.contains("whole: not a finished shard"), "{e}");
 
     // A shard whose tile file went missing: the file is named.
     fs::remove_file(shard(2).join(".symframe-tiles/tile-000004.bin")).unwrap();
-    let o = symframe(&[
-        "merge",
-        shard(1).to_str().unwrap(),
-        shard(2).to_str().unwrap(),
-        shard(3).to_str().unwrap(),
-        "-o",
-        bad.to_str().unwrap(),
-    ]);
+    let o = merge(&[&shard(1), &shard(2), &shard(3)], &bad);
     let e = stderr(&o);
     assert!(e.contains("tile-000004.bin: cannot read"), "{e}");
     assert!(!bad.exists());
