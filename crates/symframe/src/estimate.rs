@@ -8,6 +8,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::highlight::highlight_moments;
 use crate::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::optim::{nelder_mead, NelderMeadOptions};
 use crate::rig::Rig;
@@ -305,6 +306,37 @@ impl<'a> Estimator<'a> {
         (chart(best.1, best.2), 9)
     }
 
+    /// The search's answer `found`, unless one of `starts` has a lower `SD_n` on the full level:
+    /// then the coarse levels misled the search (a lobe narrower than their spacing is aliased
+    /// there), and a full-level search from the best start decides. The result never has a
+    /// higher full-level distance than the best start.
+    fn judge_at_full<'s, O: Objective>(
+        &self,
+        objective: &O,
+        found: DVec3,
+        starts: impl Iterator<Item = &'s DVec3>,
+        cosine: CosineMode,
+    ) -> (DVec3, u32) {
+        let full = |n: DVec3| self.normal_distance(objective, n, cosine, Level::Full);
+        let mut evals = 1;
+        let mut best = (full(found), found);
+        for &s in starts {
+            let v = full(s);
+            evals += 1;
+            if v < best.0 {
+                best = (v, s);
+            }
+        }
+        if best.1 == found {
+            return (found, evals);
+        }
+        let (m, e) = self.search_normal(objective, best.1, cosine, Level::Full, 0.02, 80);
+        let (m, e2) = self.quadratic_polish(objective, m, cosine, POLISH_RADIUS_DEG.to_radians());
+        let v = full(m);
+        evals += e + e2 + 1;
+        (if v < best.0 { m } else { best.1 }, evals)
+    }
+
     /// Estimates the frame at one pixel from its slice (rig order, `rig.n_used() * 3` values).
     pub fn estimate_pixel(&self, slice: &[f32]) -> PixelEstimate {
         let mut scratch = PixelScratch::new(self.rig);
@@ -343,7 +375,7 @@ impl<'a> Estimator<'a> {
         let mut evals = 0u32;
         // With a compensated measure, the search starts in the paper's form (p = 1).
         let mut cosine = match self.params.cosine {
-            CosineMode::Compensated(_) => CosineMode::CrossMultiplied,
+            CosineMode::Compensated(_) | CosineMode::Auto => CosineMode::CrossMultiplied,
             c => c,
         };
         // The two starts are compared on a quarter of the lights (all of them on small rigs);
@@ -368,7 +400,7 @@ impl<'a> Estimator<'a> {
         evals += 2;
         let coarse = coarse_level(objective, quarter, start_at.1, NORMAL_DOMAIN_TARGET);
 
-        let (mut n, e) = self.minimise_normal(
+        let (n, e) = self.minimise_normal(
             objective,
             start,
             cosine,
@@ -377,7 +409,17 @@ impl<'a> Estimator<'a> {
             self.params.max_normal_evals,
         );
         evals += e;
-        if let CosineMode::Compensated(_) = self.params.cosine {
+        let moments = highlight_moments(slice, &rig.halfway_in_camera);
+        let starts = [Some(rig.halfway_in_camera[j]), moments.map(|m| m.normal)];
+        let (mut n, e) = self.judge_at_full(objective, n, starts.iter().flatten(), cosine);
+        evals += e;
+        let refine = match self.params.cosine {
+            CosineMode::Compensated(p) => Some(CosineMode::Compensated(p)),
+            CosineMode::Auto => (unexplained_share(rig, slice, n) >= AUTO_SPECULAR_SHARE)
+                .then_some(CosineMode::Compensated(0.0)),
+            _ => None,
+        };
+        if let Some(refined) = refine {
             // A normal beyond the rig's reach in the paper's form stays discarded: the flatter
             // compensated measure could otherwise walk it back inside the sampled region to a
             // wrong but plausible-looking normal.
@@ -389,8 +431,10 @@ impl<'a> Estimator<'a> {
             }
             // The compensated measure is flatter far from the solution: refine the paper's
             // solution with it (where p = 1 the two coincide).
-            cosine = self.params.cosine;
+            cosine = refined;
             let (m, e) = self.minimise_normal(objective, n, cosine, coarse, 0.06, 150);
+            evals += e;
+            let (m, e) = self.judge_at_full(objective, m, [n].iter().chain(starts.iter().flatten()), cosine);
             evals += e;
             n = m;
         }
@@ -545,6 +589,35 @@ impl<'a> Estimator<'a> {
         let fit = 1.0 / (1.0 + residual / 0.02);
         (coverage * fit) as f32
     }
+}
+
+/// Under [`CosineMode::Auto`], pixels where a Lambertian term leaves at least this share of
+/// the signal's energy unexplained are refined with the compensated measure at `p = 0`; the
+/// others keep the paper's form (docs/method.md, "Default measure").
+pub const AUTO_SPECULAR_SHARE: f64 = 0.02;
+
+/// The share of a pixel's signal energy (over lights with `n.l > 0`) that the best Lambertian
+/// term `d (n.l)` with normal `n` (RGB `d >= 0`, least squares) leaves unexplained: 0 for a
+/// diffuse surface, the specular part's share otherwise.
+fn unexplained_share(rig: &Rig, slice: &[f32], n: DVec3) -> f64 {
+    let (mut il, mut ll, mut ii) = ([0.0f64; 3], 0.0f64, 0.0f64);
+    for (s, l) in slice.chunks_exact(3).zip(&rig.lights_in_camera) {
+        let nl = n.dot(*l);
+        if nl <= 0.0 || !s[0].is_finite() {
+            continue;
+        }
+        ll += nl * nl;
+        for c in 0..3 {
+            let v = s[c] as f64;
+            il[c] += v * nl;
+            ii += v * v;
+        }
+    }
+    if ii <= 0.0 || ll <= 0.0 {
+        return 0.0;
+    }
+    let explained: f64 = il.iter().map(|&x| x.max(0.0).powi(2) / ll).sum();
+    (1.0 - explained / ii).max(0.0)
 }
 
 /// The widest-highlight heuristic: is the slice, around `n` in halfway space, brighter along

@@ -52,6 +52,11 @@ pub enum CosineMode {
     /// Blinn-Phong (p = 1) or Cook-Torrance-like (p = 0) lobe. The estimator searches with
     /// the paper's form first and refines with this one.
     Compensated(f64),
+    /// Chosen per pixel by the estimator (docs/method.md, "Default measure"): the paper's form
+    /// where a Lambertian term explains nearly all of the signal, the compensated form at
+    /// `p = 0` (exact for microfacet lobes) elsewhere. Evaluated directly, it is the paper's
+    /// form.
+    Auto,
 }
 
 /// A candidate local frame in the camera frame: normal, tangent and binormal `b = n x t`.
@@ -159,7 +164,7 @@ pub fn symmetry_term_over<L: SliceLookup>(
             continue;
         };
         let (wa, wb) = match cosine {
-            CosineMode::CrossMultiplied => (n_dot_lr, n_dot_l),
+            CosineMode::CrossMultiplied | CosineMode::Auto => (n_dot_lr, n_dot_l),
             CosineMode::Raw => (1.0, 1.0),
             CosineMode::Power(p) | CosineMode::Compensated(p) => {
                 (n_dot_lr.powf(p), n_dot_l.powf(p))
