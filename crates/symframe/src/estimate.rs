@@ -7,6 +7,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::baseline::{woodham_robust_pixel, BaselineParams};
 use crate::error::{Error, Result};
 use crate::highlight::highlight_moments;
 use crate::objective::{ExactObjective, FastScratch, Level, Objective};
@@ -35,6 +36,8 @@ pub struct EstimatorParams {
     pub max_normal_evals: u32,
     /// How the slice is reconstructed between samples.
     pub interpolation: Interpolation,
+    /// What to do where the normal is beyond the rig's reach.
+    pub fallback: Fallback,
 }
 
 /// How the objective reads a pixel's slice between the measured samples.
@@ -54,15 +57,90 @@ pub enum Interpolation {
 impl Default for EstimatorParams {
     fn default() -> Self {
         Self {
-            cosine: CosineMode::CrossMultiplied,
+            cosine: CosineMode::Auto,
             min_domain: None,
             min_confidence: 0.0,
             min_anisotropy: 0.6,
             tangents: true,
             max_normal_evals: 300,
             interpolation: Interpolation::default(),
+            fallback: Fallback::default(),
         }
     }
+}
+
+/// Which method produced a pixel's normal (the `source` map; docs/method.md, "Fallbacks and
+/// the source map").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+#[repr(u8)]
+pub enum PixelSource {
+    /// No normal.
+    #[default]
+    None = 0,
+    /// The symmetry estimator.
+    Symmetry = 1,
+    /// A robust Lambertian fit (a fallback beyond the rig's reach, or the Woodham baselines).
+    Lambertian = 2,
+    /// The highlight's peak or centroid (a fallback beyond the rig's reach, or the
+    /// max-reflectance and highlight-centroid baselines).
+    Highlight = 3,
+}
+
+impl PixelSource {
+    /// Every source, in code order.
+    pub const ALL: [PixelSource; 4] = [
+        PixelSource::None,
+        PixelSource::Symmetry,
+        PixelSource::Lambertian,
+        PixelSource::Highlight,
+    ];
+
+    /// The code stored in the `source` map.
+    pub fn code(self) -> u8 {
+        self as u8
+    }
+
+    /// The source of a code, if valid.
+    pub fn from_code(code: u8) -> Option<Self> {
+        Self::ALL.get(code as usize).copied()
+    }
+
+    /// The name used in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            PixelSource::None => "none",
+            PixelSource::Symmetry => "symmetry",
+            PixelSource::Lambertian => "lambertian",
+            PixelSource::Highlight => "highlight",
+        }
+    }
+
+    /// One line on what the source means, for the report's legend.
+    pub fn description(self) -> &'static str {
+        match self {
+            PixelSource::None => "no normal",
+            PixelSource::Symmetry => "the symmetry estimator",
+            PixelSource::Lambertian => {
+                "robust Lambertian fit (normal beyond the rig's reach, or a Woodham baseline)"
+            }
+            PixelSource::Highlight => {
+                "highlight peak or centroid (normal beyond the rig's reach, or a highlight baseline)"
+            }
+        }
+    }
+}
+
+/// What the estimator does at a pixel whose symmetry centre is beyond the rig's reach.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Fallback {
+    /// A robust Lambertian fit where the pixel has a diffuse part, the highlight centroid
+    /// otherwise; recorded in the source map with a lowered confidence.
+    #[default]
+    Auto,
+    /// No estimate (the pixel is discarded).
+    None,
 }
 
 /// What happened at a pixel.
@@ -86,6 +164,8 @@ pub enum PixelStatus {
 pub struct PixelEstimate {
     /// What happened.
     pub status: PixelStatus,
+    /// Which method produced the normal.
+    pub source: PixelSource,
     /// Unit normal in the camera frame, when estimated.
     pub normal: Option<DVec3>,
     /// Unit tangent (an axis: sign arbitrary) in the camera frame, when the slice is anisotropic.
@@ -104,6 +184,7 @@ impl PixelEstimate {
     fn empty(status: PixelStatus) -> Self {
         Self {
             status,
+            source: PixelSource::None,
             normal: None,
             tangent: None,
             confidence: 0.0,
@@ -347,11 +428,62 @@ impl<'a> Estimator<'a> {
     /// per-pixel allocation; unused by the reference path).
     pub fn estimate_pixel_with(&self, slice: &[f32], scratch: &mut PixelScratch) -> PixelEstimate {
         match self.params.interpolation {
-            Interpolation::Exact => self.solve(slice, &ExactObjective::new(self.rig, slice)),
-            Interpolation::Fast => {
-                let objective = scratch.fast.prepare(self.rig, slice);
-                self.solve(slice, &objective)
+            Interpolation::Exact => {
+                let e = self.solve(slice, &ExactObjective::new(self.rig, slice));
+                self.or_fallback(e, slice, &mut scratch.fallback)
             }
+            Interpolation::Fast => {
+                let e = self.solve(slice, &scratch.fast.prepare(self.rig, slice));
+                self.or_fallback(e, slice, &mut scratch.fallback)
+            }
+        }
+    }
+
+    /// `e`, or where it was discarded (beyond the rig's reach) and fallbacks are on, the
+    /// fallback's estimate: a robust Lambertian fit where a diffuse term explains the pixel,
+    /// the highlight centroid otherwise, with a lowered confidence.
+    fn or_fallback(
+        &self,
+        e: PixelEstimate,
+        slice: &[f32],
+        scratch: &mut Vec<f64>,
+    ) -> PixelEstimate {
+        if e.status != PixelStatus::Discarded || self.params.fallback == Fallback::None {
+            return e;
+        }
+        let rig = self.rig;
+        let lambert = woodham_robust_pixel(
+            slice,
+            &rig.lights_in_camera,
+            &BaselineParams::default(),
+            scratch,
+        );
+        let (source, normal, confidence) = match lambert.normal {
+            Some(n) if lambert.confidence as f64 >= FALLBACK_DIFFUSE_FIT => (
+                PixelSource::Lambertian,
+                n,
+                FALLBACK_CONFIDENCE * lambert.confidence,
+            ),
+            _ => match highlight_moments(slice, &rig.halfway_in_camera) {
+                Some(m) if m.normal.z > 0.0 => (
+                    PixelSource::Highlight,
+                    m.normal,
+                    FALLBACK_CONFIDENCE * m.contrast as f32,
+                ),
+                _ => return e,
+            },
+        };
+        let status = if confidence < self.params.min_confidence {
+            PixelStatus::Culled
+        } else {
+            PixelStatus::Estimated
+        };
+        PixelEstimate {
+            status,
+            source,
+            normal: (status == PixelStatus::Estimated).then_some(normal),
+            confidence,
+            ..e
         }
     }
 
@@ -434,7 +566,12 @@ impl<'a> Estimator<'a> {
             cosine = refined;
             let (m, e) = self.minimise_normal(objective, n, cosine, coarse, 0.06, 150);
             evals += e;
-            let (m, e) = self.judge_at_full(objective, m, [n].iter().chain(starts.iter().flatten()), cosine);
+            let (m, e) = self.judge_at_full(
+                objective,
+                m,
+                [n].iter().chain(starts.iter().flatten()),
+                cosine,
+            );
             evals += e;
             n = m;
         }
@@ -540,14 +677,19 @@ impl<'a> Estimator<'a> {
         evals += 2;
         let anisotropy = ((f_max - f_min) / (f_max + f_min + ANISOTROPY_FLOOR)).clamp(0.0, 1.0);
 
-        let tangent = if self.params.tangents && anisotropy >= self.params.min_anisotropy as f64 {
-            if highlight_wider_along(objective, n, n.cross(t), t) {
-                t = n.cross(t);
-            }
-            Some(t)
-        } else {
-            None
-        };
+        // The symmetry anisotropy of an isotropic lobe sampled by few lights is interpolation
+        // noise: a tangent also needs an elongated highlight (docs/method.md, "Anisotropy").
+        let elongated = moments.is_some_and(|m| m.has_tangent(MIN_ELONGATION));
+        let tangent =
+            if self.params.tangents && anisotropy >= self.params.min_anisotropy as f64 && elongated
+            {
+                if highlight_wider_along(objective, n, n.cross(t), t) {
+                    t = n.cross(t);
+                }
+                Some(t)
+            } else {
+                None
+            };
 
         let confidence = self.confidence(slice, n, &term_n, sd_n + sd_nt + sd_nb);
         let status = if confidence < self.params.min_confidence {
@@ -558,6 +700,7 @@ impl<'a> Estimator<'a> {
         let keep = status == PixelStatus::Estimated;
         PixelEstimate {
             status,
+            source: PixelSource::Symmetry,
             normal: keep.then_some(n),
             tangent: if keep { tangent } else { None },
             confidence,
@@ -590,6 +733,18 @@ impl<'a> Estimator<'a> {
         (coverage * fit) as f32
     }
 }
+
+/// A pixel beyond the rig's reach falls back to a robust Lambertian fit when the fit's
+/// uncentred R^2 is at least this (a diffuse part explains the unshadowed samples).
+pub const FALLBACK_DIFFUSE_FIT: f64 = 0.95;
+
+/// A fallback's confidence is its own goodness of fit times this: never as trusted as a
+/// symmetry estimate.
+pub const FALLBACK_CONFIDENCE: f32 = 0.5;
+
+/// Smallest elongation of the highlight's second moment ([`crate::highlight::HighlightMoments::elongation`])
+/// for a tangent.
+pub const MIN_ELONGATION: f64 = 0.25;
 
 /// Under [`CosineMode::Auto`], pixels where a Lambertian term leaves at least this share of
 /// the signal's energy unexplained are refined with the compensated measure at `p = 0`; the
@@ -705,6 +860,7 @@ fn centre_observed<O: Objective>(rig: &Rig, objective: &O, n: DVec3) -> bool {
 #[derive(Debug, Clone)]
 pub struct PixelScratch {
     fast: FastScratch,
+    fallback: Vec<f64>,
 }
 
 impl PixelScratch {
@@ -712,6 +868,7 @@ impl PixelScratch {
     pub fn new(rig: &Rig) -> Self {
         Self {
             fast: FastScratch::new(rig),
+            fallback: Vec::with_capacity(rig.n_used()),
         }
     }
 }

@@ -419,7 +419,9 @@ impl FastObjective<'_> {
         level: Level,
     ) -> [SymmetryTerm; 2] {
         match cosine {
-            CosineMode::CrossMultiplied | CosineMode::Auto => self.dispatch::<TANGENTS, _>(frame, level, CrossWeights),
+            CosineMode::CrossMultiplied | CosineMode::Auto => {
+                self.dispatch::<TANGENTS, _>(frame, level, CrossWeights)
+            }
             CosineMode::Raw => {
                 self.dispatch::<TANGENTS, _>(frame, level, PowerWeights::<false>(0.0))
             }
