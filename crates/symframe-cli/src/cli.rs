@@ -119,18 +119,33 @@ pub enum MethodArg {
     /// Baseline: the halfway vector of the brightest sample, refined between samples
     /// (specular surfaces). Normals only; uses every light.
     MaxReflectance,
+    /// Baseline: normal and tangent axis from the intensity-weighted mean and second moment of
+    /// the halfway vectors of the brightest samples (glossy surfaces, dense rigs).
+    HighlightCentroid,
 }
 
 /// Cosine handling in the symmetry distance.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum CosineArg {
-    /// The paper's cross-multiplied cosines (exact for diffuse; default).
+    /// Per pixel (default): the paper's form where a Lambertian term explains nearly all of the
+    /// signal, the diffuse-compensated form at p = 0 (exact for microfacet lobes) elsewhere.
+    Auto,
+    /// The paper's cross-multiplied cosines (exact for diffuse).
     Cross,
     /// Raw radiances (exact for microfacet lobes, wrong for diffuse).
     Raw,
     /// Diffuse-compensated power form (see --cosine-power): exact for diffuse plus a lobe
     /// whose radiance goes as (n.l)^p; refines the paper's solution.
     Compensated,
+}
+
+/// What to do beyond the rig's reach.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FallbackArg {
+    /// Robust Lambertian fit or highlight centroid, flagged in the source map.
+    Auto,
+    /// No estimate.
+    None,
 }
 
 /// Flags of `symframe estimate`.
@@ -166,8 +181,13 @@ pub struct EstimateArgs {
     #[arg(long)]
     pub min_domain: Option<u32>,
     /// Cosine handling in the symmetry distance.
-    #[arg(long, value_enum, default_value_t = CosineArg::Cross)]
+    #[arg(long, value_enum, default_value_t = CosineArg::Auto)]
     pub cosine: CosineArg,
+    /// Where a normal is beyond the rig's reach: `auto` fills it from a robust Lambertian fit
+    /// (diffuse pixels) or the highlight centroid, marked in the source map with a lowered
+    /// confidence; `none` leaves it empty (NaN).
+    #[arg(long, value_enum, default_value_t = FallbackArg::Auto)]
+    pub fallback: FallbackArg,
     /// Cosine power p of `--cosine compensated` (0.5 is exact for Ward, 0 for Cook-Torrance-like
     /// lobes, 1 for Blinn-Phong).
     #[arg(long, default_value_t = 0.5)]

@@ -15,7 +15,7 @@ use symframe::render::{Scene, TangentField};
 use symframe::rig::uniform_cone_lights;
 use symframe_io::ImageFormat;
 
-use crate::cli::{CosineArg, DemoArgs, EstimateArgs, FitArgs, MethodArg, RelightArgs};
+use crate::cli::{CosineArg, DemoArgs, EstimateArgs, FallbackArg, FitArgs, MethodArg, RelightArgs};
 use crate::progress;
 
 /// Runs the demo.
@@ -71,7 +71,8 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         min_confidence: 0.0,
         min_anisotropy: 0.6,
         min_domain: None,
-        cosine: CosineArg::Cross,
+        cosine: CosineArg::Auto,
+        fallback: FallbackArg::Auto,
         cosine_power: 0.5,
         linear: false,
         saturation: 0.995,

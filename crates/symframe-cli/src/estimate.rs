@@ -11,12 +11,12 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 use symframe::baseline::{baseline_lights, Baseline, BaselineParams};
-use symframe::estimate::PixelCounts;
+use symframe::estimate::{Fallback, PixelCounts};
 use symframe::symmetry::CosineMode;
 use symframe::{EstimateMaps, EstimatorParams, Interpolation, Rig, RigOptions};
 use symframe_io::{CacheInfo, CacheOptions, Dataset, DecodeOptions, TileCache};
 
-use crate::cli::{CosineArg, EstimateArgs, MethodArg};
+use crate::cli::{CosineArg, EstimateArgs, FallbackArg, MethodArg};
 use crate::outdir::Staging;
 use crate::progress;
 use crate::tiled::{self, Interrupted};
@@ -223,9 +223,14 @@ pub fn run(args: &EstimateArgs) -> Result<Done> {
 fn estimator_params(args: &EstimateArgs) -> EstimatorParams {
     EstimatorParams {
         cosine: match args.cosine {
+            CosineArg::Auto => CosineMode::Auto,
             CosineArg::Cross => CosineMode::CrossMultiplied,
             CosineArg::Raw => CosineMode::Raw,
             CosineArg::Compensated => CosineMode::Compensated(args.cosine_power),
+        },
+        fallback: match args.fallback {
+            FallbackArg::Auto => Fallback::Auto,
+            FallbackArg::None => Fallback::None,
         },
         min_domain: args.min_domain,
         min_confidence: args.min_confidence,
@@ -260,6 +265,7 @@ fn run_tiled(args: &EstimateArgs) -> Result<Done> {
             match m {
                 MethodArg::Woodham => Baseline::Woodham,
                 MethodArg::WoodhamRobust => Baseline::WoodhamRobust,
+                MethodArg::HighlightCentroid => Baseline::HighlightCentroid,
                 _ => Baseline::MaxReflectance,
             },
             baseline_lights(&ds.lights).with_context(|| ds.source.display().to_string())?,

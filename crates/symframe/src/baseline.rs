@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::estimate::{EstimateMaps, PixelRecord, PixelStatus};
+use crate::highlight::highlight_moments_by;
 use crate::rig::halfway_from_light;
 use crate::stack::Stack;
 use crate::symmetry::tangent_basis;
@@ -33,14 +34,18 @@ pub enum Baseline {
     /// The halfway vector of the brightest sample, refined by a quadratic fit of the log grey
     /// value over its nearest neighbours in halfway space.
     MaxReflectance,
+    /// The intensity-weighted mean (normal) and second moment (tangent axis) of the halfway
+    /// vectors of the brightest samples ([`crate::highlight`]).
+    HighlightCentroid,
 }
 
 impl Baseline {
     /// Every baseline, in a fixed order.
-    pub const ALL: [Baseline; 3] = [
+    pub const ALL: [Baseline; 4] = [
         Baseline::Woodham,
         Baseline::WoodhamRobust,
         Baseline::MaxReflectance,
+        Baseline::HighlightCentroid,
     ];
 
     /// The baseline's name as on the command line and in reports (`woodham`, `woodham-robust`,
@@ -50,6 +55,7 @@ impl Baseline {
             Baseline::Woodham => "woodham",
             Baseline::WoodhamRobust => "woodham-robust",
             Baseline::MaxReflectance => "max-reflectance",
+            Baseline::HighlightCentroid => "highlight-centroid",
         }
     }
 }
@@ -126,6 +132,8 @@ pub struct BaselinePixel {
     pub status: PixelStatus,
     /// Unit normal in the camera frame, when estimated.
     pub normal: Option<DVec3>,
+    /// Unit tangent axis, for the baselines that estimate one (highlight centroid).
+    pub tangent: Option<DVec3>,
     /// Goodness of fit in [0, 1] (0 where nothing was estimated); see each baseline's function.
     pub confidence: f32,
     /// Samples the final fit used.
@@ -137,6 +145,7 @@ impl BaselinePixel {
         Self {
             status,
             normal: None,
+            tangent: None,
             confidence: 0.0,
             used: 0,
         }
@@ -150,7 +159,9 @@ impl BaselinePixel {
             normal: self
                 .normal
                 .map_or([f32::NAN; 3], |n| n.as_vec3().to_array()),
-            tangent: [f32::NAN; 3],
+            tangent: self
+                .tangent
+                .map_or([f32::NAN; 3], |t| t.as_vec3().to_array()),
             confidence: if self.normal.is_some() {
                 self.confidence
             } else {
@@ -301,6 +312,7 @@ fn finish(eq: &NormalEquations, g: Option<DVec3>) -> BaselinePixel {
         Some(n) if n.z > 0.0 => BaselinePixel {
             status: PixelStatus::Estimated,
             normal: Some(n),
+            tangent: None,
             confidence: eq.explained(g) as f32,
             used: eq.n,
         },
@@ -445,8 +457,35 @@ pub fn max_reflectance_pixel(samples: &[f32], lights: &[DVec3]) -> BaselinePixel
     BaselinePixel {
         status: PixelStatus::Estimated,
         normal: Some(normal),
+        tangent: None,
         confidence,
         used,
+    }
+}
+
+/// Smallest elongation of the highlight for the highlight-centroid baseline to report a
+/// tangent (the estimator's own rule, [`crate::estimate::MIN_ELONGATION`]).
+const CENTROID_MIN_ELONGATION: f64 = crate::estimate::MIN_ELONGATION;
+
+/// The highlight-centroid baseline at one pixel: the normal is the intensity-weighted mean of
+/// the halfway vectors of the samples at or above half the brightest grey value, the tangent
+/// the widest axis of their weighted second moment where the highlight is elongated
+/// ([`highlight_moments`]). Strong on glossy materials under dense rigs; on diffuse surfaces it
+/// shares max-reflectance's bias (half the normal's angle from the view). Confidence: the
+/// highlight's contrast. Allocation-free.
+pub fn highlight_centroid_pixel(samples: &[f32], lights: &[DVec3]) -> BaselinePixel {
+    let Some(m) = highlight_moments_by(samples, |i| halfway_from_light(lights[i])) else {
+        return BaselinePixel::empty(PixelStatus::NoData);
+    };
+    if m.normal.z <= 0.0 {
+        return BaselinePixel::empty(PixelStatus::Discarded);
+    }
+    BaselinePixel {
+        status: PixelStatus::Estimated,
+        normal: Some(m.normal),
+        tangent: m.has_tangent(CENTROID_MIN_ELONGATION).then_some(m.tangent),
+        confidence: m.contrast as f32,
+        used: m.count,
     }
 }
 
@@ -558,6 +597,7 @@ pub fn baseline_pixel(
         Baseline::Woodham => woodham_pixel(samples, lights, params, scratch),
         Baseline::WoodhamRobust => woodham_robust_pixel(samples, lights, params, scratch),
         Baseline::MaxReflectance => max_reflectance_pixel(samples, lights),
+        Baseline::HighlightCentroid => highlight_centroid_pixel(samples, lights),
     }
 }
 

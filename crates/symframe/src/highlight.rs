@@ -48,6 +48,15 @@ impl HighlightMoments {
 /// = invalid), `halfways` the unit halfway vector of each sample's light. `None` when no valid
 /// sample is brighter than zero. Allocation-free (two passes over the samples).
 pub fn highlight_moments(samples: &[f32], halfways: &[DVec3]) -> Option<HighlightMoments> {
+    highlight_moments_by(samples, |i| Some(halfways[i]))
+}
+
+/// [`highlight_moments`] with the halfway vector of sample `i` given by `halfway(i)` (`None`:
+/// the sample has none, e.g. a light behind the view, and is left out).
+pub fn highlight_moments_by(
+    samples: &[f32],
+    halfway: impl Fn(usize) -> Option<DVec3>,
+) -> Option<HighlightMoments> {
     let grey = |s: &[f32]| {
         let v = (s[0] as f64 + s[1] as f64 + s[2] as f64) / 3.0;
         v.is_finite().then_some(v)
@@ -66,8 +75,8 @@ pub fn highlight_moments(samples: &[f32], halfways: &[DVec3]) -> Option<Highligh
     let level = HIGHLIGHT_LEVEL * max;
     let mut mean = DVec3::ZERO;
     let mut n_samples = 0u32;
-    for (s, &h) in samples.chunks_exact(3).zip(halfways) {
-        if let Some(v) = grey(s).filter(|&v| v >= level) {
+    for (i, s) in samples.chunks_exact(3).enumerate() {
+        if let (Some(v), Some(h)) = (grey(s).filter(|&v| v >= level), halfway(i)) {
             // The brightest sample has weight 1 - HIGHLIGHT_LEVEL; one at the level, 0.
             mean += (v - level).max(1e-12 * max) * h;
             n_samples += 1;
@@ -76,8 +85,8 @@ pub fn highlight_moments(samples: &[f32], halfways: &[DVec3]) -> Option<Highligh
     let normal = mean.try_normalize()?;
     let (u, w) = tangent_basis(normal);
     let (mut cuu, mut cuw, mut cww, mut total) = (0.0, 0.0, 0.0, 0.0);
-    for (s, &h) in samples.chunks_exact(3).zip(halfways) {
-        if let Some(v) = grey(s).filter(|&v| v >= level) {
+    for (i, s) in samples.chunks_exact(3).enumerate() {
+        if let (Some(v), Some(h)) = (grey(s).filter(|&v| v >= level), halfway(i)) {
             let weight = (v - level).max(1e-12 * max);
             // Gnomonic chart of the tangent plane at the mean.
             let d = h.dot(normal).max(1e-6);
