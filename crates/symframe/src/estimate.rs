@@ -387,7 +387,8 @@ impl<'a> Estimator<'a> {
         (chart(best.1, best.2), 9)
     }
 
-    /// The search's answer `found`, unless one of `starts` has a lower `SD_n` on the full level:
+    /// The search's answer `found`, unless one of `starts` has a clearly lower `SD_n` on the full
+    /// level (below [`JUDGE_MARGIN`] times it):
     /// then the coarse levels misled the search (a lobe narrower than their spacing is aliased
     /// there), and a full-level search from the best start decides. The result never has a
     /// higher full-level distance than the best start.
@@ -400,7 +401,8 @@ impl<'a> Estimator<'a> {
     ) -> (DVec3, u32) {
         let full = |n: DVec3| self.normal_distance(objective, n, cosine, Level::Full);
         let mut evals = 1;
-        let mut best = (full(found), found);
+        let at_found = full(found);
+        let mut best = (at_found, found);
         for &s in starts {
             let v = full(s);
             evals += 1;
@@ -408,7 +410,10 @@ impl<'a> Estimator<'a> {
                 best = (v, s);
             }
         }
-        if best.1 == found {
+        // Only a clear win counts: near-ties would make the outcome hang on rounding (the fast
+        // and reference paths must take the same branch), and a misled search ends several
+        // times above its start.
+        if best.1 == found || best.0 >= JUDGE_MARGIN * at_found {
             return (found, evals);
         }
         let (m, e) = self.search_normal(objective, best.1, cosine, Level::Full, 0.02, 80);
@@ -427,16 +432,73 @@ impl<'a> Estimator<'a> {
     /// [`Estimator::estimate_pixel`] with the caller's buffers (the fast path without a
     /// per-pixel allocation; unused by the reference path).
     pub fn estimate_pixel_with(&self, slice: &[f32], scratch: &mut PixelScratch) -> PixelEstimate {
+        let PixelScratch {
+            fast,
+            fallback,
+            unshadowed,
+        } = scratch;
+        let slice = if self.mark_cast_shadows(slice, unshadowed, fallback) {
+            &unshadowed[..]
+        } else {
+            slice
+        };
         match self.params.interpolation {
             Interpolation::Exact => {
                 let e = self.solve(slice, &ExactObjective::new(self.rig, slice));
-                self.or_fallback(e, slice, &mut scratch.fallback)
+                self.or_fallback(e, slice, fallback)
             }
             Interpolation::Fast => {
-                let e = self.solve(slice, &scratch.fast.prepare(self.rig, slice));
-                self.or_fallback(e, slice, &mut scratch.fallback)
+                let e = self.solve(slice, &fast.prepare(self.rig, slice));
+                self.or_fallback(e, slice, fallback)
             }
         }
+    }
+
+    /// Copies `slice` into `out` with the samples in cast shadow marked invalid (NaN), when the
+    /// pixel has a diffuse part to tell them by; returns whether any was marked. A cast shadow
+    /// (a light the surface faces but something else blocks) is not symmetric: left in, its
+    /// zeros pull the normal away from the light (measured: 7 degrees mean on a Lambertian bumpy
+    /// scene). A robust Lambertian fit `g` over the unshadowed samples predicts the diffuse
+    /// part; a sample far below the prediction where it is clearly lit is in shadow. Pixels the
+    /// fit does not explain (metals) are left as they are: their dark samples are the lobe's
+    /// tails.
+    fn mark_cast_shadows(&self, slice: &[f32], out: &mut Vec<f32>, scratch: &mut Vec<f64>) -> bool {
+        let lights = &self.rig.lights_in_camera;
+        let fit = woodham_robust_pixel(slice, lights, &BaselineParams::default(), scratch);
+        let Some(n) = fit
+            .normal
+            .filter(|_| fit.confidence as f64 >= SHADOW_DIFFUSE_FIT)
+        else {
+            return false;
+        };
+        // The albedo along n: the mean of I / (n.l) over the well-lit samples the fit used is
+        // not at hand, so take the brightest diffuse-looking level, the 90th percentile of
+        // I / (n.l) over lights with n.l >= 0.3.
+        scratch.clear();
+        for (s, l) in slice.chunks_exact(3).zip(lights) {
+            let nl = n.dot(*l);
+            let v = (s[0] + s[1] + s[2]) as f64;
+            if nl >= 0.3 && v.is_finite() {
+                scratch.push(v / nl);
+            }
+        }
+        if scratch.len() < 8 {
+            return false;
+        }
+        let k = scratch.len() * 9 / 10;
+        let (_, &mut albedo, _) = scratch.select_nth_unstable_by(k, f64::total_cmp);
+        out.clear();
+        out.extend_from_slice(slice);
+        let mut marked = false;
+        for (s, l) in out.chunks_exact_mut(3).zip(lights) {
+            let nl = n.dot(*l);
+            let v = (s[0] + s[1] + s[2]) as f64;
+            if nl >= SHADOW_MIN_COSINE && v < SHADOW_FRACTION * albedo * nl {
+                s.fill(f32::NAN);
+                marked = true;
+            }
+        }
+        marked
     }
 
     /// `e`, or where it was discarded (beyond the rig's reach) and fallbacks are on, the
@@ -543,8 +605,14 @@ impl<'a> Estimator<'a> {
         evals += e;
         let moments = highlight_moments(slice, &rig.halfway_in_camera);
         let starts = [Some(rig.halfway_in_camera[j]), moments.map(|m| m.normal)];
-        let (mut n, e) = self.judge_at_full(objective, n, starts.iter().flatten(), cosine);
-        evals += e;
+        // A search that ended beyond the reach is left there (discarded or a fallback): the
+        // judge must not turn it into a clamped guess inside the sampled region.
+        let mut n = n;
+        if centre_observed(rig, objective, n) {
+            let (m, e) = self.judge_at_full(objective, n, starts.iter().flatten(), cosine);
+            evals += e;
+            n = m;
+        }
         let refine = match self.params.cosine {
             CosineMode::Compensated(p) => Some(CosineMode::Compensated(p)),
             CosineMode::Auto => (unexplained_share(rig, slice, n) >= AUTO_SPECULAR_SHARE)
@@ -566,12 +634,9 @@ impl<'a> Estimator<'a> {
             cosine = refined;
             let (m, e) = self.minimise_normal(objective, n, cosine, coarse, 0.06, 150);
             evals += e;
-            let (m, e) = self.judge_at_full(
-                objective,
-                m,
-                [n].iter().chain(starts.iter().flatten()),
-                cosine,
-            );
+            // Judged against the paper-form solution only: the other starts may lie inside the
+            // reach where that solution does not.
+            let (m, e) = self.judge_at_full(objective, m, [n].iter(), cosine);
             evals += e;
             n = m;
         }
@@ -734,6 +799,22 @@ impl<'a> Estimator<'a> {
     }
 }
 
+/// A start must have less than this share of the search answer's full-level `SD_n` to
+/// overrule it ([`Estimator::judge_at_full`]).
+const JUDGE_MARGIN: f64 = 0.5;
+
+/// Cast shadows are looked for only where a robust Lambertian fit explains the pixel this
+/// well (uncentred R^2).
+const SHADOW_DIFFUSE_FIT: f64 = 0.9;
+
+/// A sample is in cast shadow when it is below this fraction of the diffuse level the pixel's
+/// albedo predicts for it...
+const SHADOW_FRACTION: f64 = 0.25;
+
+/// ...and the light is at least this far above the tangent plane (`n.l`), so that a small
+/// error in the fitted normal cannot put a lit sample in shadow.
+const SHADOW_MIN_COSINE: f64 = 0.2;
+
 /// A pixel beyond the rig's reach falls back to a robust Lambertian fit when the fit's
 /// uncentred R^2 is at least this (a diffuse part explains the unshadowed samples).
 pub const FALLBACK_DIFFUSE_FIT: f64 = 0.95;
@@ -744,21 +825,23 @@ pub const FALLBACK_CONFIDENCE: f32 = 0.5;
 
 /// Smallest elongation of the highlight's second moment ([`crate::highlight::HighlightMoments::elongation`])
 /// for a tangent.
-pub const MIN_ELONGATION: f64 = 0.25;
+pub const MIN_ELONGATION: f64 = 0.4;
 
 /// Under [`CosineMode::Auto`], pixels where a Lambertian term leaves at least this share of
 /// the signal's energy unexplained are refined with the compensated measure at `p = 0`; the
 /// others keep the paper's form (docs/method.md, "Default measure").
-pub const AUTO_SPECULAR_SHARE: f64 = 0.02;
+pub const AUTO_SPECULAR_SHARE: f64 = 0.005;
 
-/// The share of a pixel's signal energy (over lights with `n.l > 0`) that the best Lambertian
+/// The share of a pixel's signal energy (over lights with `n.l` at least
+/// [`SHADOW_MIN_COSINE`]: near grazing, shadows the fitted normal cannot tell from light
+/// decide nothing) that the best Lambertian
 /// term `d (n.l)` with normal `n` (RGB `d >= 0`, least squares) leaves unexplained: 0 for a
 /// diffuse surface, the specular part's share otherwise.
 fn unexplained_share(rig: &Rig, slice: &[f32], n: DVec3) -> f64 {
     let (mut il, mut ll, mut ii) = ([0.0f64; 3], 0.0f64, 0.0f64);
     for (s, l) in slice.chunks_exact(3).zip(&rig.lights_in_camera) {
         let nl = n.dot(*l);
-        if nl <= 0.0 || !s[0].is_finite() {
+        if nl < SHADOW_MIN_COSINE || !s[0].is_finite() {
             continue;
         }
         ll += nl * nl;
@@ -861,6 +944,7 @@ fn centre_observed<O: Objective>(rig: &Rig, objective: &O, n: DVec3) -> bool {
 pub struct PixelScratch {
     fast: FastScratch,
     fallback: Vec<f64>,
+    unshadowed: Vec<f32>,
 }
 
 impl PixelScratch {
@@ -869,6 +953,7 @@ impl PixelScratch {
         Self {
             fast: FastScratch::new(rig),
             fallback: Vec::with_capacity(rig.n_used()),
+            unshadowed: Vec::with_capacity(rig.n_used() * 3),
         }
     }
 }

@@ -16,7 +16,7 @@ pub const HIGHLIGHT_LEVEL: f64 = 0.5;
 
 /// Fewest highlight samples for a tangent: the second moment of fewer points says more about
 /// where the lights happen to be than about the lobe.
-const MIN_SAMPLES_FOR_TANGENT: u32 = 3;
+const MIN_SAMPLES_FOR_TANGENT: u32 = 4;
 
 /// The moments of a pixel's highlight.
 #[derive(Debug, Clone, Copy, PartialEq)]
