@@ -15,6 +15,7 @@ pub mod synth_out;
 pub mod tile_cache;
 pub mod tile_results;
 
+pub use atomic::write_bytes;
 pub use dataset::{open_dataset, Dataset};
 pub use error::{Error, Result};
 pub use image::{
@@ -23,8 +24,8 @@ pub use image::{
 };
 pub use lights::read_light_directions;
 pub use output::{
-    gray_map_rgb8, normal_map_rgb8, read_npy_f32, tangent_map_rgb8, write_exr_map, write_npy_f32,
-    write_png_rgb8,
+    gray_map_rgb8, normal_map_rgb8, read_npy_f32, source_map_rgb8, tangent_map_rgb8, write_exr_map,
+    write_npy_f32, write_npy_u8, write_png_rgb8, SOURCE_PALETTE,
 };
 pub use stack::{load_stack, read_mask};
 pub use synth_out::{write_lp_dataset, ImageFormat};

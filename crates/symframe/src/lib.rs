@@ -18,6 +18,7 @@ pub mod error;
 pub mod estimate;
 pub mod eval;
 pub mod fit;
+pub mod method;
 pub mod objective;
 pub mod optim;
 pub mod relight;
@@ -27,13 +28,14 @@ pub mod slice;
 pub mod stack;
 pub mod symmetry;
 
-pub use baseline::{estimate_stack_baseline, Baseline};
+pub use baseline::{estimate_stack_baseline, Baseline, BaselineMethod};
 pub use error::{Error, Result};
 pub use estimate::{
-    estimate_block, estimate_pixels, estimate_stack, BlockScratch, EstimateMaps, Estimator,
-    EstimatorParams, Interpolation, PixelRecord, PixelScratch, PixelStatus,
+    estimate_stack, EstimateMaps, Estimator, EstimatorParams, Interpolation, PixelRecord,
+    PixelScratch, PixelSource, PixelStatus,
 };
-pub use fit::{fit_stack, FitMaps, FitParams, WardMaps};
+pub use fit::{fit_stack, FitMaps, FitMethod, FitParams, WardMaps};
+pub use method::{run_stack, PixelMethod};
 pub use relight::{Edits, Relighter};
 pub use rig::{Rig, RigOptions};
 pub use stack::Stack;
