@@ -12,7 +12,7 @@ use symframe::fit::{
     holdout_lights, FitMaps, FitMethod, FitParams, FitSummary, HoldoutError, PixelFit, PixelOutcome,
 };
 use symframe_io::fingerprint::Fingerprint;
-use symframe_io::{Dataset, DecodeOptions};
+use symframe_io::{CacheOptions, Dataset, DecodeOptions};
 
 use crate::estimate::{
     cache_dir, fingerprint_lights, fingerprint_mask, open_cache, read_mask, remove_cache,
@@ -41,8 +41,8 @@ pub struct FitConfig {
     /// How images are decoded.
     pub decode: DecodeOptions,
     /// The tile cache. Without a folder, the estimate's (`FRAMES/.symframe-cache`) is used
-    /// when it exists, so a fit after an estimate decodes nothing; else
-    /// `OUTPUT/.symframe-cache`.
+    /// when it exists, in the estimate's tile size (from its `report.json`), so a fit after an
+    /// estimate decodes nothing; else `OUTPUT/.symframe-cache`.
     pub cache: CacheConfig,
 }
 
@@ -65,13 +65,21 @@ impl FitConfig {
         }
     }
 
-    /// The cache folder in force.
-    pub fn cache_dir(&self) -> PathBuf {
+    /// The cache folder and options in force.
+    pub fn cache_in_force(&self) -> (PathBuf, CacheOptions) {
         let estimate_cache = self.frames.join(CACHE_DIR);
         if self.cache.dir.is_none() && estimate_cache.is_dir() {
-            return estimate_cache;
+            let tile = std::fs::read_to_string(self.frames.join("report.json"))
+                .ok()
+                .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+                .and_then(|r| r.pointer("/tiles/size")?.as_u64());
+            let options = CacheOptions {
+                tile: tile.map_or(self.cache.options.tile, |t| t as usize),
+                ..self.cache.options
+            };
+            return (estimate_cache, options);
         }
-        cache_dir(&self.cache, &self.output)
+        (cache_dir(&self.cache, &self.output), self.cache.options)
     }
 }
 
@@ -181,9 +189,8 @@ fn run(config: &FitConfig, ctl: &Control) -> Result<FitOutcome> {
             .with_context(|| format!("holding out {} lights", config.holdout))?,
         ..config.params.clone()
     };
-    let cache_dir = config.cache_dir();
-    let (cache, cache_info) =
-        open_cache(&ds, &config.decode, &cache_dir, config.cache.options, ctl)?;
+    let (cache_dir, options) = config.cache_in_force();
+    let (cache, cache_info) = open_cache(&ds, &config.decode, &cache_dir, options, ctl)?;
     let load_s = t0.elapsed().as_secs_f64();
     let grid = *cache.grid();
     let (w, h) = (grid.width, grid.height);

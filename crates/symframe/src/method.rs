@@ -108,3 +108,94 @@ pub fn gather(lights: &[usize], all: &[f32], out: &mut [f32]) {
         dst.copy_from_slice(&all[i * 3..i * 3 + 3]);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::estimate::{PixelRecord, PixelSource, PixelStatus};
+
+    /// Reports the pixel index and the samples it was given.
+    struct Echo(Option<Vec<usize>>);
+
+    impl PixelMethod for Echo {
+        type Scratch = usize;
+        type Output = Option<(usize, Vec<f32>)>;
+        const BAND_ROWS: usize = 3;
+
+        fn lights(&self) -> Option<&[usize]> {
+            self.0.as_deref()
+        }
+        fn scratch(&self) -> usize {
+            0
+        }
+        fn pixel(&self, p: usize, samples: &[f32], calls: &mut usize) -> Self::Output {
+            *calls += 1;
+            Some((p, samples.to_vec()))
+        }
+        fn masked(&self) -> Self::Output {
+            None
+        }
+    }
+
+    /// A 5 x 7 stack of 3 lights whose sample `(p, i, c)` is `100 p + 10 i + c`.
+    fn stack() -> Stack {
+        let mut s = Stack::zeros(5, 7, 3);
+        for (k, v) in s.data.iter_mut().enumerate() {
+            let (p, i, c) = (k / 9, k / 3 % 3, k % 3);
+            *v = (100 * p + 10 * i + c) as f32;
+        }
+        s
+    }
+
+    #[test]
+    fn every_pixel_in_order_with_its_lights_and_the_mask_respected() {
+        let stack = stack();
+        let mask: Vec<bool> = (0..35).map(|p| p % 4 != 0).collect();
+        let done = std::sync::atomic::AtomicUsize::new(0);
+        let progress = |n: usize| {
+            done.fetch_add(n, std::sync::atomic::Ordering::SeqCst);
+        };
+        let all = run_stack(&Echo(None), &stack, Some(&mask), &progress);
+        let some = run_stack(&Echo(Some(vec![2, 0])), &stack, None, &|_| {});
+        assert_eq!(done.into_inner(), 35);
+        assert_eq!((all.len(), some.len()), (35, 35));
+        for p in 0..35 {
+            assert_eq!(all[p].is_none(), p % 4 == 0);
+            if let Some((q, samples)) = &all[p] {
+                assert_eq!((*q, samples.as_slice()), (p, stack.pixel(p)));
+            }
+            let base = 100.0 * p as f32;
+            let want = [
+                base + 20.0,
+                base + 21.0,
+                base + 22.0,
+                base,
+                base + 1.0,
+                base + 2.0,
+            ];
+            assert_eq!(some[p], Some((p, want.to_vec())));
+        }
+    }
+
+    #[test]
+    fn sources_have_fixed_codes_names_and_a_legend() {
+        for (k, s) in PixelSource::ALL.iter().enumerate() {
+            assert_eq!(*s as u8 as usize, k);
+            assert_eq!(PixelSource::from_code(k as u8), Some(*s));
+            let name = serde_json::to_string(s).unwrap();
+            assert_eq!(name, format!("\"{}\"", s.name()));
+        }
+        assert_eq!(PixelSource::from_code(4), None);
+        let legend = PixelSource::legend();
+        assert_eq!(legend[0].1, "none");
+        assert_eq!(legend[3], (3, "highlight", legend[3].2));
+        assert!(legend.iter().all(|l| !l.2.is_empty()));
+        // A masked record has no source; a baseline's record carries its method's.
+        assert_eq!(PixelRecord::MASKED.source, PixelSource::None);
+        assert_eq!(PixelRecord::MASKED.status, PixelStatus::Masked);
+        use crate::baseline::Baseline;
+        assert_eq!(Baseline::Woodham.source(), PixelSource::Lambertian);
+        assert_eq!(Baseline::WoodhamRobust.source(), PixelSource::Lambertian);
+        assert_eq!(Baseline::MaxReflectance.source(), PixelSource::Highlight);
+    }
+}
