@@ -381,8 +381,8 @@ impl<'a> Estimator<'a> {
     /// The estimate of one pixel with a given objective of its slice.
     fn solve<O: Objective>(&self, slice: &[f32], objective: &O) -> PixelEstimate {
         let rig = self.rig;
-        // Start: the halfway vector of the brightest sample (docs/method.md, "The search"). The brightest light
-        // itself is also tried: for diffuse surfaces it is the better guess.
+        // Start: the halfway vector of the brightest sample (docs/method.md, "The search"). The
+        // brightest light itself is also tried: for diffuse surfaces it is the better guess.
         let mut brightest = None;
         let mut best = 0.0f32;
         for (j, s) in slice.chunks_exact(3).enumerate() {
@@ -673,9 +673,10 @@ const CENTRE_RADIUS_DEG: f64 = 2.0;
 
 /// Whether the slice has data at `h = n` and around it in four directions: the centre of the
 /// symmetries must be observed. A normal beyond the rig's reach (a rig within 45 degrees of the
-/// view has halfway vectors within ~22) otherwise settles at the edge of the sampled region with
-/// a small but meaningless distance: a clamped guess, which docs/method.md ("Beyond-reach discard") says never to return.
-/// The points must lie in [covered](Rig::covered) cells, as the domains' lights do.
+/// view has halfway vectors within ~22) otherwise settles at the edge of the sampled region with a
+/// small but meaningless distance: a clamped guess, which docs/method.md ("Beyond-reach discard")
+/// says never to return. The points must lie in [covered](Rig::covered) cells, as the domains'
+/// lights do.
 fn centre_observed<O: Objective>(rig: &Rig, objective: &O, n: DVec3) -> bool {
     let (u, w) = tangent_basis(n);
     let (s, c) = CENTRE_RADIUS_DEG.to_radians().sin_cos();

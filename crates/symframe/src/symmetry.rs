@@ -1,6 +1,6 @@
-//! The symmetry objective (Equation 2 of Holroyd et al. 2008, ratio form as in
-//! docs/method.md, "Symmetry distances and the domain rule"): how far a pixel's measured slice is from being symmetric under a reflection of
-//! the halfway vector in a candidate frame (n, t, b).
+//! The symmetry objective (Equation 2 of Holroyd et al. 2008, ratio form as in docs/method.md,
+//! "Symmetry distances and the domain rule"): how far a pixel's measured slice is from being
+//! symmetric under a reflection of the halfway vector in a candidate frame (n, t, b).
 
 use glam::DVec3;
 use serde::{Deserialize, Serialize};

@@ -226,11 +226,11 @@ fn fast_path_agrees_with_the_reference_path_on_shadowed_bumps() {
     assert_paths_agree(&scene, "bumps");
 }
 
-/// A DiLiGenT-like rig (96 lights within 45 degrees of the view) has halfway vectors within
-/// ~22.5 degrees: normals beyond that cannot be recovered and must be discarded, not returned
-/// as clamped guesses (docs/method.md, "Beyond-reach discard"); those within reach are estimated. Without the check that
-/// the centre `h = n` is observed, every pixel beyond reach came back as a guess (up to 43
-/// degrees off).
+/// A DiLiGenT-like rig (96 lights within 45 degrees of the view) has halfway vectors within ~22.5
+/// degrees: normals beyond that cannot be recovered and must be discarded, not returned as clamped
+/// guesses (docs/method.md, "Beyond-reach discard"); those within reach are estimated. Without the
+/// check that the centre `h = n` is observed, every pixel beyond reach came back as a guess (up to
+/// 43 degrees off).
 #[test]
 fn normals_beyond_the_rigs_reach_are_discarded() {
     beyond_reach(EstimatorParams::default());
