@@ -45,8 +45,6 @@
 //! # }
 //! ```
 
-#![deny(missing_docs)]
-
 mod estimate;
 mod fit;
 mod merge;
