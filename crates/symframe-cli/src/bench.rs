@@ -1,10 +1,10 @@
 //! `symframe bench-paper` (hidden): the paper-scale benchmark. Generates a synthetic stack once
 //! (a brushed-metal sphere, anisotropic Ward, under lights uniform over the 65-degree cone; RGB
-//! float EXR images and an `.lp` file, reused by later runs), then runs `symframe estimate` on it
-//! as a child process (so its peak memory is its own) and prints wall time, decoding and
-//! estimation time, pixels per second and peak resident memory, read from the run's
-//! `report.json`. When the binary has `estimate --method woodham`, that baseline runs too on the
-//! same cache and the time ratio is printed.
+//! float EXR images and an `.lp` file, reused by later runs), then runs the estimation job on it
+//! ([`symframe_job::estimate`], as `symframe estimate` does) and prints wall time, decoding and
+//! estimation time, pixels per second and peak resident memory, read from the run's report.
+//! The baseline `woodham` then runs on the same cache and the time ratio is printed. The
+//! process's peak-memory mark is reset before each run, so each run's peak is its own.
 //!
 //! The paper's captures are 1,512 lights at 1024x1024 (the defaults): about 10 GB of images,
 //! an 18 GB cache, and hours of estimation on two cores. `--size 256 --lights 380` is a quick
@@ -13,14 +13,15 @@
 use std::fmt::Write as _;
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
+use symframe::baseline::{Baseline, BaselineParams};
 use symframe::brdf::ward::Ward;
 use symframe::render::{Scene, TangentField};
 use symframe::rig::uniform_cone_lights;
+use symframe_job::{EstimateConfig, EstimateOutcome, MethodConfig};
 
 use crate::cli::BenchArgs;
 use crate::progress;
@@ -79,44 +80,35 @@ fn dataset(dir: &Path, size: usize, n: usize) -> Result<PathBuf> {
     Ok(lp)
 }
 
-/// One timed `symframe estimate` run.
+/// One timed estimation run.
 struct RunFigures {
     wall_s: f64,
     report: serde_json::Value,
 }
 
-fn run_estimate(lp: &Path, out: &Path, cache: &Path, extra: &[&str]) -> Result<RunFigures> {
-    // A fresh output: finished tiles of an earlier bench run would be reused, not timed.
+/// Resets the process's peak resident memory mark (`VmHWM`) to the current use (Linux: writing
+/// 5 to `/proc/self/clear_refs`), so that a run's report records its own peak.
+fn reset_peak_rss() {
+    let _ = fs::write("/proc/self/clear_refs", "5");
+}
+
+/// Runs the estimation job of `config` from a fresh output folder (finished tiles of an earlier
+/// bench run would be reused, not timed).
+fn run_estimate(config: &EstimateConfig) -> Result<RunFigures> {
+    let out = &config.output;
     if out.exists() {
         fs::remove_dir_all(out).with_context(|| format!("{}: cannot remove", out.display()))?;
     }
-    let exe = std::env::current_exe().context("cannot find the symframe binary")?;
-    let mut cmd = Command::new(exe);
-    cmd.arg("--threads")
-        .arg(rayon::current_num_threads().to_string())
-        .arg("estimate")
-        .arg(lp)
-        .arg("-o")
-        .arg(out)
-        .arg("--cache")
-        .arg(cache);
-    cmd.args(extra);
+    reset_peak_rss();
+    let bars = progress::Bars::default();
+    let show = |p| bars.update(p);
     let t = Instant::now();
-    let status = cmd.status().context("cannot run symframe estimate")?;
+    let outcome = symframe_job::estimate(config, &crate::control(&show, None))?;
     let wall_s = t.elapsed().as_secs_f64();
-    if !status.success() {
-        bail!("symframe estimate {} failed ({status})", extra.join(" "));
-    }
-    // A shard's report is inside its manifest.
-    let shard = extra.contains(&"--tiles");
-    let path = out.join(if shard { "shard.json" } else { "report.json" });
-    let mut report: serde_json::Value = serde_json::from_str(
-        &fs::read_to_string(&path).with_context(|| format!("{}: cannot read", path.display()))?,
-    )
-    .with_context(|| format!("{}: bad report", path.display()))?;
-    if shard {
-        report = report["report"].take();
-    }
+    let report = match outcome {
+        EstimateOutcome::Maps(done) => serde_json::to_value(&done.report)?,
+        EstimateOutcome::Shard(report) => serde_json::to_value(&report)?,
+    };
     Ok(RunFigures { wall_s, report })
 }
 
@@ -165,45 +157,29 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         fs::remove_dir_all(&cache)
             .with_context(|| format!("{}: cannot remove", cache.display()))?;
     }
-    let mem = args.decode_memory.to_string();
-    let mut extra = vec!["--decode-memory", &mem];
-    let shard = args.tiles.map(|s| s.to_string());
-    if let Some(s) = &shard {
-        extra.extend(["--tiles", s]);
-    }
-    let sym = run_estimate(
-        &lp,
-        &args.dir.join(format!("out-{tag}-symmetry")),
-        &cache,
-        &extra,
-    )?;
+    let mut config = EstimateConfig::new(&lp, args.dir.join(format!("out-{tag}-symmetry")));
+    config.cache.dir = Some(cache);
+    config.cache.options.batch_bytes = args.decode_memory << 20;
+    config.shard = args.tiles;
+    let sym = run_estimate(&config)?;
     println!(
         "bench: {0}x{0} pixels, {1} lights, {2} threads{3}",
         args.size,
         args.lights,
         rayon::current_num_threads(),
-        shard
-            .as_ref()
+        args.tiles
             .map_or(String::new(), |s| format!(", tiles of shard {s} only"))
     );
     print_figures("symmetry", &sym);
     if args.no_baseline {
         return Ok(());
     }
-    // The baseline only where this binary has it (`estimate --method woodham`).
-    let exe = std::env::current_exe()?;
-    let help = Command::new(exe).args(["estimate", "--help"]).output()?;
-    let help = String::from_utf8_lossy(&help.stdout);
-    if !(help.contains("--method") && help.contains("woodham")) {
-        println!("  woodham: not available in this build (no `estimate --method woodham`)");
-        return Ok(());
-    }
-    let base = run_estimate(
-        &lp,
-        &args.dir.join(format!("out-{tag}-woodham")),
-        &cache,
-        &[&["--method", "woodham"], &extra[..]].concat(),
-    )?;
+    config.output = args.dir.join(format!("out-{tag}-woodham"));
+    config.method = MethodConfig::Baseline {
+        method: Baseline::Woodham,
+        params: BaselineParams::default(),
+    };
+    let base = run_estimate(&config)?;
     print_figures("woodham", &base);
     let est = |f: &RunFigures| {
         f.report

@@ -3,6 +3,13 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use symframe::estimate::Fallback;
+use symframe::fit::FitParams;
+use symframe::relight::Edits;
+use symframe::symmetry::CosineMode;
+use symframe::{EstimatorParams, RigOptions};
+use symframe_io::{CacheOptions, DecodeOptions};
+use symframe_job::Shard;
 
 /// Surface normals and tangents from photographs under many lights, by BRDF symmetry
 /// (Holroyd et al. 2008).
@@ -40,37 +47,6 @@ pub enum Command {
     /// Paper-scale benchmark: generate a synthetic stack once, time `estimate` on it.
     #[command(hide = true)]
     BenchPaper(BenchArgs),
-}
-
-/// One shard of a sharded run: the K-th (1-based) of N disjoint sets of tiles.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ShardSpec {
-    /// 1-based shard number.
-    pub k: usize,
-    /// Number of shards.
-    pub n: usize,
-}
-
-impl std::str::FromStr for ShardSpec {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        let bad = || format!("expected K/N with 1 <= K <= N (e.g. 3/32), got '{s}'");
-        let (k, n) = s.split_once('/').ok_or_else(bad)?;
-        let (k, n): (usize, usize) = (
-            k.trim().parse().map_err(|_| bad())?,
-            n.trim().parse().map_err(|_| bad())?,
-        );
-        if k == 0 || k > n {
-            return Err(bad());
-        }
-        Ok(Self { k, n })
-    }
-}
-
-impl std::fmt::Display for ShardSpec {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}/{}", self.k, self.n)
-    }
 }
 
 /// The experiments of `symframe experiment`.
@@ -124,6 +100,15 @@ pub enum MethodArg {
     HighlightCentroid,
 }
 
+/// The power of `--cosine compensated` when the default measure has none: 0.5, exact for
+/// Ward's lobe.
+fn default_cosine_power() -> f64 {
+    match EstimatorParams::default().cosine {
+        CosineMode::Compensated(p) | CosineMode::Power(p) => p,
+        CosineMode::CrossMultiplied | CosineMode::Raw | CosineMode::Auto => 0.5,
+    }
+}
+
 /// Cosine handling in the symmetry distance.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum CosineArg {
@@ -139,6 +124,28 @@ pub enum CosineArg {
     Compensated,
 }
 
+impl CosineArg {
+    /// The flag value of a measure (the pure power form has no flag: shown as `cross`).
+    fn of(mode: CosineMode) -> Self {
+        match mode {
+            CosineMode::Auto => CosineArg::Auto,
+            CosineMode::CrossMultiplied | CosineMode::Power(_) => CosineArg::Cross,
+            CosineMode::Raw => CosineArg::Raw,
+            CosineMode::Compensated(_) => CosineArg::Compensated,
+        }
+    }
+
+    /// The measure this flag value asks for, with the power of `--cosine-power`.
+    pub fn mode(self, power: f64) -> CosineMode {
+        match self {
+            CosineArg::Auto => CosineMode::Auto,
+            CosineArg::Cross => CosineMode::CrossMultiplied,
+            CosineArg::Raw => CosineMode::Raw,
+            CosineArg::Compensated => CosineMode::Compensated(power),
+        }
+    }
+}
+
 /// What to do beyond the rig's reach.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum FallbackArg {
@@ -146,6 +153,24 @@ pub enum FallbackArg {
     Auto,
     /// No estimate.
     None,
+}
+
+impl FallbackArg {
+    /// The flag value of a fallback rule.
+    fn of(f: Fallback) -> Self {
+        match f {
+            Fallback::Auto => FallbackArg::Auto,
+            Fallback::None => FallbackArg::None,
+        }
+    }
+
+    /// The rule this flag value asks for.
+    pub fn rule(self) -> Fallback {
+        match self {
+            FallbackArg::Auto => Fallback::Auto,
+            FallbackArg::None => Fallback::None,
+        }
+    }
 }
 
 /// Flags of `symframe estimate`.
@@ -168,36 +193,36 @@ pub struct EstimateArgs {
     pub mask: Option<PathBuf>,
     /// Light cone: lights whose halfway vector is more than this many degrees from the view are
     /// dropped.
-    #[arg(long, default_value_t = 65.0)]
+    #[arg(long, default_value_t = RigOptions::default().theta_d_max_deg)]
     pub theta_d_max: f64,
     /// Pixels with confidence below this are culled (NaN in the maps).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = EstimatorParams::default().min_confidence)]
     pub min_confidence: f32,
     /// Pixels with anisotropy below this get no tangent (NaN): the slice is isotropic.
-    #[arg(long, default_value_t = 0.6)]
+    #[arg(long, default_value_t = EstimatorParams::default().min_anisotropy)]
     pub min_anisotropy: f32,
     /// Smallest symmetry domain, in lights, that counts as non-empty (default: 1.5% of the
     /// lights used, at least 6).
     #[arg(long)]
     pub min_domain: Option<u32>,
     /// Cosine handling in the symmetry distance.
-    #[arg(long, value_enum, default_value_t = CosineArg::Auto)]
+    #[arg(long, value_enum, default_value_t = CosineArg::of(EstimatorParams::default().cosine))]
     pub cosine: CosineArg,
     /// Where a normal is beyond the rig's reach: `auto` fills it from a robust Lambertian fit
     /// (diffuse pixels) or the highlight centroid, marked in the source map with a lowered
     /// confidence; `none` leaves it empty (NaN).
-    #[arg(long, value_enum, default_value_t = FallbackArg::Auto)]
+    #[arg(long, value_enum, default_value_t = FallbackArg::of(EstimatorParams::default().fallback))]
     pub fallback: FallbackArg,
     /// Cosine power p of `--cosine compensated` (0.5 is exact for Ward, 0 for Cook-Torrance-like
     /// lobes, 1 for Blinn-Phong).
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = default_cosine_power())]
     pub cosine_power: f64,
     /// Treat 8-bit images as linear (default: sRGB-decode them).
     #[arg(long)]
     pub linear: bool,
     /// Integer samples at or above this fraction of the format's maximum are saturated and
     /// excluded.
-    #[arg(long, default_value_t = 0.995)]
+    #[arg(long, default_value_t = DecodeOptions::default().saturation)]
     pub saturation: f32,
     /// Skip tangents (normals only; faster).
     #[arg(long)]
@@ -218,12 +243,12 @@ pub struct EstimateArgs {
     /// Estimate only the K-th of N disjoint sets of tiles (tiles t with t % N == K-1) into
     /// OUTPUT (tile results and shard.json); combine the shards with `symframe merge`.
     #[arg(long, value_name = "K/N")]
-    pub tiles: Option<ShardSpec>,
+    pub tiles: Option<Shard>,
     /// Tile side in pixels (the unit of work, of resumption and of the cache layout).
-    #[arg(long, default_value_t = 32)]
+    #[arg(long, default_value_t = CacheOptions::default().tile)]
     pub tile_size: usize,
     /// Memory for one batch of decoded images while the cache is built, in MiB.
-    #[arg(long, default_value_t = 1024, value_name = "MIB")]
+    #[arg(long, default_value_t = CacheOptions::default().batch_bytes >> 20, value_name = "MIB")]
     pub decode_memory: usize,
     /// Testing aid: behave as if interrupted once this many tiles are finished.
     #[arg(long, hide = true)]
@@ -253,19 +278,19 @@ pub struct BenchArgs {
     /// Number of lights (the paper's captures: 1512).
     #[arg(long, default_value_t = 1512)]
     pub lights: usize,
-    /// Skip the baseline run even when `estimate --method woodham` exists.
+    /// Skip the baseline run (`woodham` on the same cache).
     #[arg(long)]
     pub no_baseline: bool,
     /// Delete the tile cache first, so the run decodes every image (default: reuse it).
     #[arg(long)]
     pub cold: bool,
     /// Passed to `estimate --decode-memory` (MiB per batch of decoded images).
-    #[arg(long, default_value_t = 1024, value_name = "MIB")]
+    #[arg(long, default_value_t = CacheOptions::default().batch_bytes >> 20, value_name = "MIB")]
     pub decode_memory: usize,
     /// Estimate only this shard of the tiles (`estimate --tiles K/N`): the whole cache is
     /// still built, so decoding and memory are measured at full size in a fraction of the time.
     #[arg(long, value_name = "K/N")]
-    pub tiles: Option<ShardSpec>,
+    pub tiles: Option<Shard>,
 }
 
 /// Flags of `symframe demo`.
@@ -407,14 +432,22 @@ pub struct FitArgs {
     pub linear: bool,
     /// Integer samples at or above this fraction of the format's maximum are saturated and
     /// excluded.
-    #[arg(long, default_value_t = 0.995)]
+    #[arg(long, default_value_t = DecodeOptions::default().saturation)]
     pub saturation: f32,
     /// Levenberg-Marquardt iterations per pixel at most.
-    #[arg(long, default_value_t = 60)]
+    #[arg(long, default_value_t = FitParams::default().max_iterations)]
     pub max_iterations: u32,
     /// The fitted highlight's peak may be at most this many times the pixel's brightest sample.
-    #[arg(long, default_value_t = 8.0)]
+    #[arg(long, default_value_t = FitParams::default().max_peak_ratio)]
     pub max_peak_ratio: f64,
+    /// Folder of the on-disk tile cache of the decoded images (default: the estimate's,
+    /// FRAMES/.symframe-cache, when it exists, so nothing is decoded again; else
+    /// OUTPUT/.symframe-cache).
+    #[arg(long, value_name = "DIR")]
+    pub cache: Option<PathBuf>,
+    /// Delete the tile cache once the fit has finished.
+    #[arg(long)]
+    pub no_keep_cache: bool,
 }
 
 /// Parses a light direction written `x,y,z`.
@@ -451,13 +484,13 @@ pub struct RelightArgs {
     #[arg(long)]
     pub lights: Option<PathBuf>,
     /// Factor on the specular albedo.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = Edits::default().specular_scale)]
     pub specular_scale: f64,
     /// Factor on the diffuse albedo.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = Edits::default().diffuse_scale)]
     pub diffuse_scale: f64,
     /// Factor on both roughnesses (below 1 = glossier).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = Edits::default().roughness_scale)]
     pub roughness_scale: f64,
     /// Rotate the tangents about the normal by this many degrees (inside --region if given).
     #[arg(long, allow_hyphen_values = true)]

@@ -1,8 +1,8 @@
 //! `symframe demo`: renders a built-in anisotropic sphere, writes it as an `.lp` dataset, runs
-//! the same pipeline as `symframe estimate` on it, and reports the error against ground truth;
-//! then fits a Ward BRDF per pixel in the estimated frames (`symframe fit`) and relights it under
-//! a new light, plain and with the tangents turned by 90 degrees inside a letter-shaped region
-//! (`symframe relight`), as in the paper's Section 5.1.
+//! the estimation job on it with every default (as `symframe estimate` does), and reports the
+//! error against ground truth; then fits a Ward BRDF per pixel in the estimated frames (the fit
+//! job, on the estimate's tile cache) and relights it under a new light, plain and with the
+//! tangents turned by 90 degrees inside a letter-shaped region, as in the paper's Section 5.1.
 
 use std::time::Instant;
 
@@ -15,7 +15,10 @@ use symframe::render::{Scene, TangentField};
 use symframe::rig::uniform_cone_lights;
 use symframe_io::ImageFormat;
 
-use crate::cli::{CosineArg, DemoArgs, EstimateArgs, FallbackArg, FitArgs, MethodArg, RelightArgs};
+use glam::DVec3;
+use symframe_job::{EstimateConfig, EstimateOutcome, FitConfig, RelightConfig};
+
+use crate::cli::DemoArgs;
 use crate::progress;
 
 /// Runs the demo.
@@ -62,37 +65,19 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     drop(images);
 
     let estimate_dir = args.output.join("estimate");
-    let est_args = EstimateArgs {
-        input: lp.clone(),
-        output: estimate_dir.clone(),
-        method: MethodArg::Symmetry,
-        mask: None,
-        theta_d_max: 65.0,
-        min_confidence: 0.0,
-        min_anisotropy: 0.6,
-        min_domain: None,
-        cosine: CosineArg::Auto,
-        fallback: FallbackArg::Auto,
-        cosine_power: 0.5,
-        linear: false,
-        saturation: 0.995,
-        no_tangents: false,
-        reference: false,
-        cache: None,
-        no_keep_cache: true,
-        tiles: None,
-        tile_size: 32,
-        decode_memory: 1024,
-        stop_after_tiles: None,
-    };
     eprintln!(
         "symframe demo: estimating normals and tangents from {}",
         lp.display()
     );
-    let crate::estimate::Done::Maps(done) = crate::estimate::run(&est_args)? else {
+    let bars = progress::Bars::default();
+    let show = |p| bars.update(p);
+    let ctl = crate::control(&show, None);
+    let EstimateOutcome::Maps(done) =
+        symframe_job::estimate(&EstimateConfig::new(&lp, &estimate_dir), &ctl)?
+    else {
         unreachable!("the demo does not run shards");
     };
-    let (maps, _report) = *done;
+    let maps = done.maps;
     let e = evaluate(
         &maps.normals,
         &maps.tangents,
@@ -127,19 +112,13 @@ pub fn run(args: &DemoArgs) -> Result<()> {
 
     // Section 5.1: per-pixel Ward fit in the estimated frames, relit and edited.
     let fit_dir = args.output.join("fit");
-    let fit_args = FitArgs {
-        input: lp.clone(),
-        frames: estimate_dir.clone(),
-        output: fit_dir.clone(),
-        holdout: (args.lights / 50).max(1),
-        mask: None,
-        linear: false,
-        saturation: 0.995,
-        max_iterations: 60,
-        max_peak_ratio: 8.0,
-    };
+    let mut fit_config = FitConfig::new(&lp, &estimate_dir, &fit_dir);
+    fit_config.holdout = (args.lights / 50).max(1);
+    // The estimate's tile cache is read again here, then removed.
+    fit_config.cache.remove_after = true;
     eprintln!("symframe demo: fitting a Ward BRDF per pixel in the estimated frames");
-    let (fit, _) = crate::fit_cmd::run(&fit_args)?;
+    let fit = symframe_job::fit(&fit_config, &ctl)?.maps;
+    drop(bars);
     let errs = fit_errors(&fit.ward, &scene, &brdf);
     println!(
         "Ward fit vs truth (median relative error within 60 deg): kd {:.1}%, ks {:.1}%, wide roughness {:.1}%, narrow {:.1}%",
@@ -148,7 +127,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     if let (Some(rms), Some(psnr)) = (fit.summary.holdout_rms, fit.summary.holdout_psnr_db) {
         println!(
             "Ward fit on {} held-out lights: RMS {rms:.4}, PSNR {psnr:.1} dB",
-            fit_args.holdout
+            fit_config.holdout
         );
     }
     let region_path = args.output.join("region.png");
@@ -156,23 +135,13 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let region_rgb: Vec<f32> = region.iter().flat_map(|&m| [m as u8 as f32; 3]).collect();
     symframe_io::write_png8_rgb(&region_path, scene.width, scene.height, &region_rgb, false)?;
     let new_light = [-0.25, 0.3, 0.92];
-    let mut relight_args = RelightArgs {
-        fit_dir: fit_dir.clone(),
-        output: args.output.join("relit"),
-        light: vec![new_light],
-        lights: None,
-        specular_scale: 1.0,
-        diffuse_scale: 1.0,
-        roughness_scale: 1.0,
-        rotate_tangents: None,
-        region: None,
-        exposure: 0.0,
-    };
-    let relit = crate::relight_cmd::run(&relight_args)?;
-    relight_args.output = args.output.join("relit-edited");
-    relight_args.rotate_tangents = Some(90.0);
-    relight_args.region = Some(region_path.clone());
-    let edited = crate::relight_cmd::run(&relight_args)?;
+    let mut relight = RelightConfig::new(&fit_dir, args.output.join("relit"));
+    relight.lights = vec![DVec3::from_array(new_light)];
+    let relit = symframe_job::relight(&relight)?.pictures;
+    relight.output = args.output.join("relit-edited");
+    relight.rotate_tangents = Some(90.0);
+    relight.region = Some(region_path.clone());
+    let edited = symframe_job::relight(&relight)?.pictures;
     println!(
         "relit under a new light ({}, {}, {}): {}",
         new_light[0],

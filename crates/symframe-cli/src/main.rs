@@ -10,13 +10,48 @@ mod estimate;
 mod eval_cmd;
 mod experiment;
 mod fit_cmd;
-mod outdir;
 mod progress;
-mod relight_cmd;
 mod synth;
-mod tiled;
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::OnceLock;
 
 use clap::Parser;
+use symframe_job::{Control, Interrupted, Progress};
+
+/// Set by Ctrl-C: the running job starts no new image or tile.
+static STOP: AtomicBool = AtomicBool::new(false);
+
+/// Installs the Ctrl-C handler (once): the first Ctrl-C sets [`STOP`] so that the running tiles
+/// finish and nothing new starts; a second one exits at once (tile files are written atomically,
+/// so even that leaves no corrupt output).
+fn install_interrupt_handler() {
+    static INSTALLED: OnceLock<()> = OnceLock::new();
+    INSTALLED.get_or_init(|| {
+        let _ = ctrlc::set_handler(|| {
+            if STOP.swap(true, Ordering::SeqCst) {
+                eprintln!("\nsymframe: interrupted; run the same command again to resume");
+                std::process::exit(130);
+            }
+            eprintln!(
+                "\nsymframe: stopping after the images or tiles in progress (Ctrl-C again to quit now)"
+            );
+        });
+    });
+}
+
+/// The job control of a command: Ctrl-C stops it, `progress` shows how far it is.
+fn control<'a>(
+    progress: &'a (dyn Fn(Progress) + Sync),
+    stop_after_tiles: Option<usize>,
+) -> Control<'a> {
+    install_interrupt_handler();
+    Control {
+        stop: &STOP,
+        progress,
+        stop_after_tiles,
+    }
+}
 
 fn main() {
     let cli = cli::Cli::parse();
@@ -32,16 +67,16 @@ fn main() {
     let result = match cli.command {
         cli::Command::Estimate(args) => estimate::run(&args).map(|_| ()),
         cli::Command::Fit(args) => fit_cmd::run(&args).map(|_| ()),
-        cli::Command::Relight(args) => relight_cmd::run(&args).map(|_| ()),
+        cli::Command::Relight(args) => fit_cmd::relight(&args).map(|_| ()),
         cli::Command::Demo(args) => demo::run(&args),
-        cli::Command::Merge(args) => tiled::merge(&args),
+        cli::Command::Merge(args) => estimate::merge(&args),
         cli::Command::BenchPaper(args) => bench::run(&args),
         cli::Command::Eval(args) => eval_cmd::run(&args).map(|_| ()),
         cli::Command::Synth(args) => synth::run(&args).map(|_| ()),
         cli::Command::Experiment(args) => experiment::run(&args),
     };
     if let Err(e) = result {
-        if e.is::<tiled::Interrupted>() {
+        if e.is::<Interrupted>() {
             eprintln!("symframe: {e}");
             std::process::exit(130);
         }

@@ -15,8 +15,8 @@ use symframe::render::{BumpParams, Degradation, Noise, Scene, TangentField};
 use symframe_io::ImageFormat;
 
 use crate::cli::{FormatArg, ShapeArg, SynthArgs};
-use crate::outdir::Staging;
 use crate::progress;
+use symframe_job::Staging;
 
 /// Largest image stack `synth` holds in memory, in bytes.
 const MAX_STACK_BYTES: f64 = 16.0 * (1u64 << 30) as f64;

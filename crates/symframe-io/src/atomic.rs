@@ -49,7 +49,7 @@ where
 }
 
 /// Writes `bytes` to `path` atomically.
-pub(crate) fn write_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
+pub fn write_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomic(path, |w| {
         w.write_all(bytes).map_err(|e| Error::write(path, e))
     })

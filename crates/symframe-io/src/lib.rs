@@ -1,7 +1,29 @@
 //! Dataset I/O for symframe: light files (`.lp`, DiLiGenT folders), image decoding into a
-//! pixel-major [`symframe::Stack`] or an on-disk tile cache, per-tile results, result-map writers and synthetic-dataset output.
-
-#![warn(missing_docs)]
+//! pixel-major [`symframe::Stack`] or an on-disk tile cache, per-tile results, result-map
+//! writers and synthetic-dataset output.
+//!
+//! A capture written as an `.lp` dataset and read back as a stack:
+//!
+//! ```
+//! use glam::DVec3;
+//! use symframe_io::{load_stack, open_dataset, write_lp_dataset, DecodeOptions, ImageFormat};
+//!
+//! # fn main() -> symframe_io::Result<()> {
+//! let dir = tempfile::tempdir().unwrap();
+//! // Two 2 x 1 images, one per light: light 0 brighter on the left pixel.
+//! let lights = [DVec3::new(0.0, 0.0, 1.0), DVec3::new(0.5, 0.0, 0.866)];
+//! let images = vec![vec![0.5, 0.5, 0.5, 0.25, 0.25, 0.25], vec![0.125; 6]];
+//! let lp = write_lp_dataset(
+//!     dir.path(), &lights, &images, 2, 1, ImageFormat::Exr, None, None, None,
+//! )?;
+//! let ds = open_dataset(&lp)?;
+//! let stack = load_stack(&ds, &DecodeOptions::default(), &|| {})?;
+//! assert_eq!((stack.width, stack.height, stack.n_lights), (2, 1, 2));
+//! // Pixel-major: the left pixel under both lights, then the right one.
+//! assert_eq!(stack.pixel(0), &[0.5, 0.5, 0.5, 0.125, 0.125, 0.125]);
+//! # Ok(())
+//! # }
+//! ```
 
 mod atomic;
 pub mod dataset;
@@ -15,6 +37,7 @@ pub mod synth_out;
 pub mod tile_cache;
 pub mod tile_results;
 
+pub use atomic::write_bytes;
 pub use dataset::{open_dataset, Dataset};
 pub use error::{Error, Result};
 pub use image::{
@@ -23,8 +46,8 @@ pub use image::{
 };
 pub use lights::read_light_directions;
 pub use output::{
-    gray_map_rgb8, normal_map_rgb8, read_npy_f32, tangent_map_rgb8, write_exr_map, write_npy_f32,
-    write_png_rgb8,
+    gray_map_rgb8, normal_map_rgb8, read_npy_f32, source_map_rgb8, tangent_map_rgb8, write_exr_map,
+    write_npy_f32, write_npy_u8, write_png_rgb8, SOURCE_PALETTE,
 };
 pub use stack::{load_stack, read_mask};
 pub use synth_out::{write_lp_dataset, ImageFormat};

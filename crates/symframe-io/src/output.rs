@@ -185,6 +185,38 @@ pub fn gray_map_rgb8(values: &[f32], lo: f32, hi: f32) -> Vec<u8> {
         .collect()
 }
 
+/// Colours of the source map's codes (`symframe::PixelSource`): none black, symmetry blue,
+/// Lambertian orange, highlight green; unknown codes magenta. Fixed, so pictures of different
+/// runs compare.
+pub const SOURCE_PALETTE: [[u8; 3]; 4] = [[0, 0, 0], [31, 119, 180], [255, 127, 14], [44, 160, 44]];
+
+/// Colours a per-pixel source-code map with [`SOURCE_PALETTE`].
+pub fn source_map_rgb8(codes: &[u8]) -> Vec<u8> {
+    codes
+        .iter()
+        .flat_map(|&c| {
+            SOURCE_PALETTE
+                .get(c as usize)
+                .copied()
+                .unwrap_or([255, 0, 255])
+        })
+        .collect()
+}
+
+/// Writes `data` (row-major) as a `uint8` `.npy` array of `shape`, e.g. `[H, W]` for the
+/// source map.
+pub fn write_npy_u8(path: &Path, shape: &[usize], data: &[u8]) -> Result<()> {
+    let view = ArrayViewD::from_shape(IxDyn(shape), data).map_err(|_| {
+        Error::invalid(
+            path,
+            format!("cannot write shape {shape:?} from {} values", data.len()),
+        )
+    })?;
+    write_atomic(path, |w| {
+        view.write_npy(w).map_err(|e| Error::encode(path, e))
+    })
+}
+
 /// Writes 8-bit RGB bytes (`width * height * 3`, e.g. from the colour maps above) as a PNG.
 pub fn write_png_rgb8(path: &Path, width: usize, height: usize, rgb: &[u8]) -> Result<()> {
     if width.checked_mul(height).and_then(|n| n.checked_mul(3)) != Some(rgb.len()) {

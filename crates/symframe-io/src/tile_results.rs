@@ -4,20 +4,20 @@
 //!
 //! File `tile-NNNNNN.bin`: a 40-byte header (magic `SYMFTILE`, format version, the job's
 //! fingerprint, the tile index, the pixel count), then 40 bytes per pixel in tile order
-//! (little-endian): status (1 byte, 3 padding), normal (3 x f32), tangent (3 x f32), confidence,
+//! (little-endian): status (1 byte), source (1 byte, a [`PixelSource`] code), 2 padding, normal (3 x f32), tangent (3 x f32), confidence,
 //! anisotropy (f32), objective evaluations (u32). The job fingerprint covers everything the
 //! results depend on (inputs, mask, parameters, tile size): a file of another job is stale.
 
 use std::path::{Path, PathBuf};
 
-use symframe::{PixelRecord, PixelStatus};
+use symframe::{PixelRecord, PixelSource, PixelStatus};
 
 use crate::atomic::write_bytes;
 use crate::error::{Error, Result};
 
 const MAGIC: &[u8; 8] = b"SYMFTILE";
 /// Format version of tile result files.
-pub const TILE_RESULT_VERSION: u32 = 1;
+pub const TILE_RESULT_VERSION: u32 = 2;
 const HEADER: usize = 40;
 const RECORD: usize = 40;
 
@@ -62,7 +62,7 @@ pub fn write_tile_result(path: &Path, job: u64, t: usize, records: &[PixelRecord
     let mut b = Vec::with_capacity(HEADER + RECORD * records.len());
     b.extend_from_slice(&header(job, t, records.len()));
     for r in records {
-        b.extend_from_slice(&[status_code(r.status), 0, 0, 0]);
+        b.extend_from_slice(&[status_code(r.status), r.source as u8, 0, 0]);
         for v in r
             .normal
             .iter()
@@ -129,6 +129,8 @@ pub fn read_tile_result(path: &Path, job: u64, t: usize, n: usize) -> Result<Vec
             Ok(PixelRecord {
                 status: status_from(r[0])
                     .ok_or_else(|| Error::invalid(path, "bad pixel status"))?,
+                source: PixelSource::from_code(r[1])
+                    .ok_or_else(|| Error::invalid(path, "bad pixel source"))?,
                 normal: [f(0), f(1), f(2)],
                 tangent: [f(3), f(4), f(5)],
                 confidence: f(6),
@@ -150,6 +152,7 @@ mod tests {
             PixelRecord::MASKED,
             PixelRecord {
                 status: PixelStatus::Estimated,
+                source: PixelSource::Symmetry,
                 normal: [0.0, 0.6, 0.8],
                 tangent: [1.0, 0.0, -0.0],
                 confidence: 0.5,
@@ -167,6 +170,7 @@ mod tests {
         let back = read_tile_result(&p, 9, 7, 2).unwrap();
         assert_eq!(back[1], recs[1]);
         assert_eq!(back[0].status, PixelStatus::Masked);
+        assert_eq!(back[0].source, PixelSource::None);
         assert!(back[0].normal[0].is_nan());
         let e = read_tile_result(&p, 8, 7, 2).unwrap_err().to_string();
         assert!(

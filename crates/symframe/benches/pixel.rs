@@ -1,6 +1,10 @@
 //! Per-pixel estimation cost at the paper's light counts (172, 380, 743, 1512 lights over the
 //! 65-degree cone), anisotropic Ward, a normal 30 degrees from the view.
 //! `cargo bench -p symframe --bench pixel`.
+#![allow(
+    missing_docs,
+    reason = "criterion_group! defines a public function without documentation"
+)]
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use glam::DVec3;

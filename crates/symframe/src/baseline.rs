@@ -11,12 +11,12 @@
 //! Unlike the symmetry method, the baselines use every light given: there is no light cone.
 
 use glam::{DMat3, DVec3};
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::estimate::{EstimateMaps, PixelRecord, PixelStatus};
+use crate::estimate::{EstimateMaps, PixelRecord, PixelSource, PixelStatus};
 use crate::highlight::highlight_moments_by;
+use crate::method::{run_stack, PixelMethod};
 use crate::rig::halfway_from_light;
 use crate::stack::Stack;
 use crate::symmetry::tangent_basis;
@@ -56,6 +56,14 @@ impl Baseline {
             Baseline::WoodhamRobust => "woodham-robust",
             Baseline::MaxReflectance => "max-reflectance",
             Baseline::HighlightCentroid => "highlight-centroid",
+        }
+    }
+
+    /// The measure its normals come from: a Lambertian fit or the brightest highlight.
+    pub fn source(self) -> PixelSource {
+        match self {
+            Baseline::Woodham | Baseline::WoodhamRobust => PixelSource::Lambertian,
+            Baseline::MaxReflectance | Baseline::HighlightCentroid => PixelSource::Highlight,
         }
     }
 }
@@ -151,11 +159,17 @@ impl BaselinePixel {
         }
     }
 
-    /// What the maps hold at this pixel: the normal and, where there is one, the confidence;
-    /// no tangent or anisotropy (`NaN`), no objective evaluations.
-    pub fn record(&self) -> PixelRecord {
+    /// What the maps hold at this pixel, whose normal comes from `source`: the normal and,
+    /// where there is one, the confidence; no tangent or anisotropy (`NaN`), no objective
+    /// evaluations.
+    pub fn record(&self, source: PixelSource) -> PixelRecord {
         PixelRecord {
             status: self.status,
+            source: if self.normal.is_some() {
+                source
+            } else {
+                PixelSource::None
+            },
             normal: self
                 .normal
                 .map_or([f32::NAN; 3], |n| n.as_vec3().to_array()),
@@ -601,9 +615,65 @@ pub fn baseline_pixel(
     }
 }
 
-/// Rows per parallel task: the baselines are cheap per pixel, so bands are wider than the
-/// symmetry estimator's.
-const ROWS_PER_TASK: usize = 8;
+/// A baseline ready to run per pixel: the method, its unit lights (one per input light) and
+/// its parameters, checked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BaselineMethod {
+    method: Baseline,
+    lights: Vec<DVec3>,
+    params: BaselineParams,
+}
+
+impl BaselineMethod {
+    /// Checks `params` and normalises `lights` (camera frame, one per stack image).
+    pub fn new(method: Baseline, lights: &[DVec3], params: BaselineParams) -> Result<Self> {
+        params.validate()?;
+        Ok(Self {
+            method,
+            lights: baseline_lights(lights)?,
+            params,
+        })
+    }
+
+    /// Which baseline.
+    pub fn method(&self) -> Baseline {
+        self.method
+    }
+
+    /// The unit light directions, one per input light.
+    pub fn unit_lights(&self) -> &[DVec3] {
+        &self.lights
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &BaselineParams {
+        &self.params
+    }
+}
+
+impl PixelMethod for BaselineMethod {
+    type Scratch = Vec<f64>;
+    type Output = PixelRecord;
+    /// The baselines are cheap per pixel: wider bands than the symmetry estimator's.
+    const BAND_ROWS: usize = 8;
+
+    fn lights(&self) -> Option<&[usize]> {
+        None
+    }
+
+    fn scratch(&self) -> Vec<f64> {
+        Vec::with_capacity(self.lights.len())
+    }
+
+    fn pixel(&self, _p: usize, samples: &[f32], scratch: &mut Vec<f64>) -> PixelRecord {
+        baseline_pixel(self.method, samples, &self.lights, &self.params, scratch)
+            .record(self.method.source())
+    }
+
+    fn masked(&self) -> PixelRecord {
+        PixelRecord::MASKED
+    }
+}
 
 /// Runs a baseline on every pixel of a stack (inside `mask` when given) with the default
 /// [`BaselineParams`], in parallel over row bands; see [`estimate_stack_baseline_with`].
@@ -637,42 +707,20 @@ pub fn estimate_stack_baseline_with(
     params: BaselineParams,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<EstimateMaps> {
-    params.validate()?;
-    let lights = baseline_lights(lights)?;
+    let method = BaselineMethod::new(method, lights, params)?;
     crate::estimate::check_inputs(
         stack.width,
         stack.height,
         stack.n_lights,
-        lights.len(),
+        method.lights.len(),
         mask,
     )?;
-    let (w, h) = (stack.width, stack.height);
-    let bands: Vec<Vec<BaselinePixel>> = (0..h.div_ceil(ROWS_PER_TASK))
-        .into_par_iter()
-        .map_init(
-            || Vec::with_capacity(lights.len()),
-            |scratch, band| {
-                let rows = band * ROWS_PER_TASK..((band + 1) * ROWS_PER_TASK).min(h);
-                let out: Vec<BaselinePixel> = rows
-                    .flat_map(|y| (0..w).map(move |x| y * w + x))
-                    .map(|p| {
-                        if mask.is_some_and(|m| !m[p]) {
-                            return BaselinePixel::empty(PixelStatus::Masked);
-                        }
-                        baseline_pixel(method, stack.pixel(p), &lights, &params, scratch)
-                    })
-                    .collect();
-                progress(out.len());
-                out
-            },
-        )
-        .collect();
-
-    let mut maps = EstimateMaps::empty(w, h);
-    for (p, e) in bands.iter().flatten().enumerate() {
-        maps.put(p, &e.record());
-    }
-    Ok(maps)
+    let records = run_stack(&method, stack, mask, progress);
+    Ok(EstimateMaps::from_records(
+        stack.width,
+        stack.height,
+        &records,
+    ))
 }
 
 /// The unit light directions a baseline runs with: `lights` normalised; an error if there are

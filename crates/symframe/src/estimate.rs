@@ -4,16 +4,15 @@
 //! stack, in parallel over row bands.
 
 use glam::DVec3;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::baseline::{woodham_robust_pixel, BaselineParams};
 use crate::error::{Error, Result};
 use crate::highlight::highlight_moments;
+use crate::method::{run_stack, PixelMethod};
 use crate::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::optim::{nelder_mead, NelderMeadOptions};
 use crate::rig::Rig;
-use crate::slice::gather_pixel;
 use crate::stack::Stack;
 use crate::symmetry::{
     default_min_domain, tangent_basis, CosineMode, Frame, SymmetryTerm, EMPTY_DISTANCE,
@@ -69,68 +68,6 @@ impl Default for EstimatorParams {
     }
 }
 
-/// Which method produced a pixel's normal (the `source` map; docs/method.md, "Fallbacks and
-/// the source map").
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-#[repr(u8)]
-pub enum PixelSource {
-    /// No normal.
-    #[default]
-    None = 0,
-    /// The symmetry estimator.
-    Symmetry = 1,
-    /// A robust Lambertian fit (a fallback beyond the rig's reach, or the Woodham baselines).
-    Lambertian = 2,
-    /// The highlight's peak or centroid (a fallback beyond the rig's reach, or the
-    /// max-reflectance and highlight-centroid baselines).
-    Highlight = 3,
-}
-
-impl PixelSource {
-    /// Every source, in code order.
-    pub const ALL: [PixelSource; 4] = [
-        PixelSource::None,
-        PixelSource::Symmetry,
-        PixelSource::Lambertian,
-        PixelSource::Highlight,
-    ];
-
-    /// The code stored in the `source` map.
-    pub fn code(self) -> u8 {
-        self as u8
-    }
-
-    /// The source of a code, if valid.
-    pub fn from_code(code: u8) -> Option<Self> {
-        Self::ALL.get(code as usize).copied()
-    }
-
-    /// The name used in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            PixelSource::None => "none",
-            PixelSource::Symmetry => "symmetry",
-            PixelSource::Lambertian => "lambertian",
-            PixelSource::Highlight => "highlight",
-        }
-    }
-
-    /// One line on what the source means, for the report's legend.
-    pub fn description(self) -> &'static str {
-        match self {
-            PixelSource::None => "no normal",
-            PixelSource::Symmetry => "the symmetry estimator",
-            PixelSource::Lambertian => {
-                "robust Lambertian fit (normal beyond the rig's reach, or a Woodham baseline)"
-            }
-            PixelSource::Highlight => {
-                "highlight peak or centroid (normal beyond the rig's reach, or a highlight baseline)"
-            }
-        }
-    }
-}
-
 /// What the estimator does at a pixel whose symmetry centre is beyond the rig's reach.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -157,6 +94,66 @@ pub enum PixelStatus {
     Discarded,
     /// Confidence below the user's threshold.
     Culled,
+}
+
+/// Which measure gave a pixel's normal: the map `source.npy` holds these codes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+#[repr(u8)]
+pub enum PixelSource {
+    /// No normal (masked, no data, discarded).
+    #[default]
+    None = 0,
+    /// The symmetry of the BRDF slice.
+    Symmetry = 1,
+    /// A Lambertian fit: the symmetry estimator's fallback for diffuse pixels beyond the rig's
+    /// reach, or Woodham's photometric stereo.
+    Lambertian = 2,
+    /// The highlight: the estimator's fallback for other pixels beyond the reach (centroid),
+    /// or the max-reflectance and highlight-centroid baselines.
+    Highlight = 3,
+}
+
+impl PixelSource {
+    /// Every source, in code order.
+    pub const ALL: [PixelSource; 4] = [
+        PixelSource::None,
+        PixelSource::Symmetry,
+        PixelSource::Lambertian,
+        PixelSource::Highlight,
+    ];
+
+    /// The source of a code of `source.npy`; `None` for an unknown code.
+    pub fn from_code(code: u8) -> Option<Self> {
+        Self::ALL.get(code as usize).copied()
+    }
+
+    /// The source's name as in reports (`none`, `symmetry`, `lambertian`, `highlight`).
+    pub fn name(self) -> &'static str {
+        match self {
+            PixelSource::None => "none",
+            PixelSource::Symmetry => "symmetry",
+            PixelSource::Lambertian => "lambertian",
+            PixelSource::Highlight => "highlight",
+        }
+    }
+
+    /// `(code, name, description)` of every source, for the report's legend.
+    pub fn legend() -> [(u8, &'static str, &'static str); 4] {
+        Self::ALL.map(|s| {
+            let what = match s {
+                PixelSource::None => "no normal (masked, no data or discarded)",
+                PixelSource::Symmetry => "the symmetry of the pixel's BRDF slice",
+                PixelSource::Lambertian => {
+                    "a robust Lambertian fit (fallback beyond the rig's reach, or Woodham)"
+                }
+                PixelSource::Highlight => {
+                    "the highlight's centroid or peak (fallback beyond the rig's reach, or a highlight baseline)"
+                }
+            };
+            (s as u8, s.name(), what)
+        })
+    }
 }
 
 /// The estimate at one pixel.
@@ -552,8 +549,8 @@ impl<'a> Estimator<'a> {
     /// The estimate of one pixel with a given objective of its slice.
     fn solve<O: Objective>(&self, slice: &[f32], objective: &O) -> PixelEstimate {
         let rig = self.rig;
-        // Start: the halfway vector of the brightest sample (method.md). The brightest light
-        // itself is also tried: for diffuse surfaces it is the better guess.
+        // Start: the halfway vector of the brightest sample (docs/method.md, "The search"). The
+        // brightest light itself is also tried: for diffuse surfaces it is the better guess.
         let mut brightest = None;
         let mut best = 0.0f32;
         for (j, s) in slice.chunks_exact(3).enumerate() {
@@ -776,7 +773,7 @@ impl<'a> Estimator<'a> {
     }
 
     /// Confidence from the residual and the share of the pixel's signal inside the normal's
-    /// symmetry domain (method.md, Optimisation 3): low where the domain covers little of the
+    /// symmetry domain (docs/method.md, "Confidence"): low where the domain covers little of the
     /// measured slice (normals near the rig's reach), and where the slice is not symmetric
     /// (shadows, interreflections, noise).
     fn confidence(&self, slice: &[f32], n: DVec3, term_n: &SymmetryTerm, residual: f64) -> f32 {
@@ -928,9 +925,10 @@ const CENTRE_RADIUS_DEG: f64 = 2.0;
 
 /// Whether the slice has data at `h = n` and around it in four directions: the centre of the
 /// symmetries must be observed. A normal beyond the rig's reach (a rig within 45 degrees of the
-/// view has halfway vectors within ~22) otherwise settles at the edge of the sampled region with
-/// a small but meaningless distance: a clamped guess, which method.md says never to return.
-/// The points must lie in [covered](Rig::covered) cells, as the domains' lights do.
+/// view has halfway vectors within ~22) otherwise settles at the edge of the sampled region with a
+/// small but meaningless distance: a clamped guess, which docs/method.md ("Beyond-reach discard")
+/// says never to return. The points must lie in [covered](Rig::covered) cells, as the domains'
+/// lights do.
 fn centre_observed<O: Objective>(rig: &Rig, objective: &O, n: DVec3) -> bool {
     let (u, w) = tangent_basis(n);
     let (s, c) = CENTRE_RADIUS_DEG.to_radians().sin_cos();
@@ -992,6 +990,8 @@ pub struct EstimateMaps {
     pub anisotropy: Vec<f32>,
     /// Per-pixel status.
     pub status: Vec<PixelStatus>,
+    /// Per-pixel [`PixelSource`] code, `H x W`.
+    pub source: Vec<u8>,
     /// Status counts.
     pub counts: PixelCounts,
     /// Total symmetry-objective evaluations.
@@ -1020,6 +1020,8 @@ impl PixelCounts {
 pub struct PixelRecord {
     /// What happened.
     pub status: PixelStatus,
+    /// Which measure the values come from.
+    pub source: PixelSource,
     /// Unit normal (`NaN` where none).
     pub normal: [f32; 3],
     /// Unit tangent (`NaN` where none).
@@ -1036,6 +1038,7 @@ impl PixelRecord {
     /// A pixel outside the mask.
     pub const MASKED: PixelRecord = PixelRecord {
         status: PixelStatus::Masked,
+        source: PixelSource::None,
         normal: [f32::NAN; 3],
         tangent: [f32::NAN; 3],
         confidence: f32::NAN,
@@ -1048,6 +1051,7 @@ impl PixelRecord {
         let scored = matches!(e.status, PixelStatus::Estimated | PixelStatus::Culled);
         Self {
             status: e.status,
+            source: if scored { e.source } else { PixelSource::None },
             normal: e.normal.map_or([f32::NAN; 3], |n| n.as_vec3().to_array()),
             tangent: e.tangent.map_or([f32::NAN; 3], |t| t.as_vec3().to_array()),
             confidence: if scored { e.confidence } else { f32::NAN },
@@ -1075,6 +1079,7 @@ impl EstimateMaps {
             confidence: vec![f32::NAN; n],
             anisotropy: vec![f32::NAN; n],
             status: vec![PixelStatus::Masked; n],
+            source: vec![PixelSource::None as u8; n],
             counts: PixelCounts::default(),
             evals: 0,
         }
@@ -1084,6 +1089,7 @@ impl EstimateMaps {
     pub fn put(&mut self, p: usize, r: &PixelRecord) {
         self.evals += r.evals as u64;
         self.status[p] = r.status;
+        self.source[p] = r.source as u8;
         self.counts.add(r.status, r.has_tangent());
         self.confidence[p] = r.confidence;
         self.anisotropy[p] = r.anisotropy;
@@ -1092,71 +1098,37 @@ impl EstimateMaps {
     }
 }
 
-/// Per-thread buffers of [`estimate_block`].
-#[derive(Debug, Clone)]
-pub struct BlockScratch {
-    slice: Vec<f32>,
-    pixel: PixelScratch,
-}
+impl PixelMethod for Estimator<'_> {
+    type Scratch = PixelScratch;
+    type Output = PixelRecord;
 
-impl BlockScratch {
-    /// Buffers sized for `rig`.
-    pub fn new(rig: &Rig) -> Self {
-        Self {
-            slice: vec![0.0; rig.n_used() * 3],
-            pixel: PixelScratch::new(rig),
-        }
+    fn lights(&self) -> Option<&[usize]> {
+        Some(&self.rig.input_index)
+    }
+
+    fn scratch(&self) -> PixelScratch {
+        PixelScratch::new(self.rig)
+    }
+
+    fn pixel(&self, _p: usize, samples: &[f32], scratch: &mut PixelScratch) -> PixelRecord {
+        PixelRecord::from_estimate(&self.estimate_pixel_with(samples, scratch))
+    }
+
+    fn masked(&self) -> PixelRecord {
+        PixelRecord::MASKED
     }
 }
 
-/// Estimates a block of pixels stored pixel-major with every input light
-/// (`samples.len() / (rig.n_input * 3)` pixels, each `rig.n_input * 3` values in input order):
-/// a band of a [`Stack`]. Pixel `k` of the block is estimated when `inside(k)`, else recorded as
-/// masked.
-pub fn estimate_block(
-    estimator: &Estimator,
-    samples: &[f32],
-    inside: impl Fn(usize) -> bool,
-    scratch: &mut BlockScratch,
-) -> Vec<PixelRecord> {
-    let rig = estimator.rig();
-    let stride = rig.n_input * 3;
-    debug_assert_eq!(samples.len() % stride.max(1), 0);
-    estimate_pixels(
-        estimator,
-        samples.len() / stride.max(1),
-        inside,
-        |k, out| gather_pixel(rig, &samples[k * stride..(k + 1) * stride], out),
-        scratch,
-    )
+impl EstimateMaps {
+    /// The maps of `width x height` pixels from their records in row-major order.
+    pub fn from_records(width: usize, height: usize, records: &[PixelRecord]) -> Self {
+        let mut maps = Self::empty(width, height);
+        for (p, r) in records.iter().enumerate() {
+            maps.put(p, r);
+        }
+        maps
+    }
 }
-
-/// Estimates `n` pixels whose samples `gather(k, out)` writes in rig order
-/// (`rig.n_used() * 3` values, as [`gather_pixel`] does): pixel `k` is estimated when
-/// `inside(k)`, else recorded as masked. Both the in-memory pipeline ([`estimate_block`]) and
-/// the tiled one (gathering from an on-disk tile) go through this function, so given the same
-/// samples they give identical results.
-pub fn estimate_pixels(
-    estimator: &Estimator,
-    n: usize,
-    inside: impl Fn(usize) -> bool,
-    gather: impl Fn(usize, &mut [f32]),
-    scratch: &mut BlockScratch,
-) -> Vec<PixelRecord> {
-    (0..n)
-        .map(|k| {
-            if !inside(k) {
-                return PixelRecord::MASKED;
-            }
-            gather(k, &mut scratch.slice);
-            let e = estimator.estimate_pixel_with(&scratch.slice, &mut scratch.pixel);
-            PixelRecord::from_estimate(&e)
-        })
-        .collect()
-}
-
-/// Rows per parallel task: enough work per task to amortise scheduling, small enough to balance.
-const ROWS_PER_TASK: usize = 2;
 
 /// Estimates every pixel of a stack (inside `mask` when given), in parallel over row bands.
 /// `progress` is called with the number of pixels finished by each band.
@@ -1168,36 +1140,12 @@ pub fn estimate_stack(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<EstimateMaps> {
     check_inputs(stack.width, stack.height, stack.n_lights, rig.n_input, mask)?;
-    let estimator = Estimator::new(rig, params);
-    let (w, h) = (stack.width, stack.height);
-    let band_len = ROWS_PER_TASK * w * stack.n_lights * 3;
-    let bands: Vec<Vec<PixelRecord>> = stack
-        .data
-        .par_chunks(band_len.max(1))
-        .enumerate()
-        .map_init(
-            || BlockScratch::new(rig),
-            |scratch, (band, samples)| {
-                let p0 = band * ROWS_PER_TASK * w;
-                let out = estimate_block(
-                    &estimator,
-                    samples,
-                    |k| match mask {
-                        Some(m) => m[p0 + k],
-                        None => true,
-                    },
-                    scratch,
-                );
-                progress(out.len());
-                out
-            },
-        )
-        .collect();
-    let mut maps = EstimateMaps::empty(w, h);
-    for (p, r) in bands.iter().flatten().enumerate() {
-        maps.put(p, r);
-    }
-    Ok(maps)
+    let records = run_stack(&Estimator::new(rig, params), stack, mask, progress);
+    Ok(EstimateMaps::from_records(
+        stack.width,
+        stack.height,
+        &records,
+    ))
 }
 
 /// Checks that a stack of `width x height` pixels and `n_lights` lights fits an estimator

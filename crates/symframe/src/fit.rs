@@ -49,12 +49,12 @@
 //! `20 log10(peak / RMS)` with `peak` the largest held-out measurement used.
 
 use glam::DVec3;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
 use crate::error::{Error, Result};
 use crate::eval::vec_at;
+use crate::method::{run_stack, PixelMethod};
 use crate::stack::Stack;
 use crate::symmetry::tangent_basis;
 
@@ -586,17 +586,22 @@ impl<'a> PixelFitter<'a> {
     /// A fitter for a stack lit by `lights` (unit, camera frame, surface toward light).
     pub fn new(lights: &'a [DVec3], params: &'a FitParams) -> Result<Self> {
         params.validate(lights.len())?;
+        Ok(Self::checked(lights, params))
+    }
+
+    /// [`PixelFitter::new`] for parameters already validated against `lights`.
+    fn checked(lights: &'a [DVec3], params: &'a FitParams) -> Self {
         let mut held_out = vec![false; lights.len()];
         for &i in &params.holdout {
             held_out[i] = true;
         }
-        Ok(Self {
+        Self {
             lights,
             params,
             held_out,
             train: Vec::with_capacity(lights.len()),
             test: Vec::with_capacity(params.holdout.len()),
-        })
+        }
     }
 
     /// Fits one pixel: `normal` and `tangent` (camera frame; `tangent = None` fits one
@@ -656,8 +661,68 @@ impl<'a> PixelFitter<'a> {
     }
 }
 
-/// Rows per parallel task.
-const ROWS_PER_TASK: usize = 2;
+/// The Ward fit as a [`PixelMethod`]: every pixel fitted in its frame of the `normals` and
+/// `tangents` maps (`H x W x 3`, NaN tangent = isotropic); `None` outside the mask.
+#[derive(Debug, Clone, Copy)]
+pub struct FitMethod<'a> {
+    lights: &'a [DVec3],
+    params: &'a FitParams,
+    normals: &'a [f32],
+    tangents: &'a [f32],
+}
+
+impl<'a> FitMethod<'a> {
+    /// Checks `params` against the `lights` (unit, camera frame, one per input light) and the
+    /// frame maps against the image size `n_pixels`.
+    pub fn new(
+        lights: &'a [DVec3],
+        params: &'a FitParams,
+        normals: &'a [f32],
+        tangents: &'a [f32],
+        n_pixels: usize,
+    ) -> Result<Self> {
+        for (name, len) in [("normal", normals.len()), ("tangent", tangents.len())] {
+            if len != n_pixels * 3 {
+                return Err(Error::BadParameter(format!(
+                    "the {name} map has {len} values but the images have {n_pixels} pixels \
+                     ({} values expected)",
+                    n_pixels * 3
+                )));
+            }
+        }
+        params.validate(lights.len())?;
+        Ok(Self {
+            lights,
+            params,
+            normals,
+            tangents,
+        })
+    }
+}
+
+impl<'a> PixelMethod for FitMethod<'a> {
+    type Scratch = PixelFitter<'a>;
+    type Output = Option<PixelOutcome>;
+
+    fn lights(&self) -> Option<&[usize]> {
+        None
+    }
+
+    fn scratch(&self) -> PixelFitter<'a> {
+        PixelFitter::checked(self.lights, self.params)
+    }
+
+    fn pixel(&self, p: usize, samples: &[f32], fitter: &mut PixelFitter<'a>) -> Self::Output {
+        let Some(normal) = vec_at(self.normals, p) else {
+            return Some(PixelOutcome::NoFrame);
+        };
+        Some(fitter.fit(normal, vec_at(self.tangents, p), samples))
+    }
+
+    fn masked(&self) -> Self::Output {
+        None
+    }
+}
 
 /// Fits every pixel of a stack (inside `mask` when given) in its frame: `normals` and `tangents`
 /// are `H x W x 3` maps as [`crate::estimate_stack`] returns them (NaN tangent = isotropic),
@@ -673,132 +738,102 @@ pub fn fit_stack(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<FitMaps> {
     let (w, h) = (stack.width, stack.height);
-    let n = w * h;
-    if stack.n_lights != lights.len() {
-        return Err(Error::LightCountMismatch {
-            stack: stack.n_lights,
-            rig: lights.len(),
-        });
-    }
-    for (name, len) in [("normal", normals.len()), ("tangent", tangents.len())] {
-        if len != n * 3 {
-            return Err(Error::BadParameter(format!(
-                "the {name} map has {len} values but {w}x{h} images need {}",
-                n * 3
-            )));
-        }
-    }
-    if let Some(m) = mask {
-        if m.len() != n {
-            return Err(Error::BadMask(format!(
-                "mask has {} pixels but the images have {n}",
-                m.len()
-            )));
-        }
-    }
-    // Validates the parameters once, before the parallel part.
-    PixelFitter::new(lights, params)?;
+    crate::estimate::check_inputs(w, h, stack.n_lights, lights.len(), mask)?;
+    let method = FitMethod::new(lights, params, normals, tangents, w * h)?;
+    let outcomes = run_stack(&method, stack, mask, progress);
+    Ok(FitMaps::from_outcomes(w, h, normals, tangents, outcomes))
+}
 
-    let bands: Vec<Vec<Option<PixelOutcome>>> = (0..h.div_ceil(ROWS_PER_TASK))
-        .into_par_iter()
-        .map_init(
-            || PixelFitter::new(lights, params).expect("parameters were validated"),
-            |fitter, band| {
-                let rows = band * ROWS_PER_TASK..((band + 1) * ROWS_PER_TASK).min(h);
-                let out: Vec<Option<PixelOutcome>> = rows
-                    .flat_map(|y| (0..w).map(move |x| y * w + x))
-                    .map(|p| {
-                        if mask.is_some_and(|m| !m[p]) {
-                            return None;
-                        }
-                        let Some(normal) = vec_at(normals, p) else {
-                            return Some(PixelOutcome::NoFrame);
-                        };
-                        Some(fitter.fit(normal, vec_at(tangents, p), stack.pixel(p)))
-                    })
-                    .collect();
-                progress(out.len());
-                out
+impl FitMaps {
+    /// The maps and summary of `width x height` pixels fitted in the frames `normals` and
+    /// `tangents`, from their outcomes in row-major order (`None`: outside the mask).
+    pub fn from_outcomes(
+        width: usize,
+        height: usize,
+        normals: &[f32],
+        tangents: &[f32],
+        outcomes: impl IntoIterator<Item = Option<PixelOutcome>>,
+    ) -> Self {
+        let (w, h) = (width, height);
+        let n = w * h;
+        let mut maps = FitMaps {
+            ward: WardMaps {
+                width: w,
+                height: h,
+                normals: normals.to_vec(),
+                tangents: tangents.to_vec(),
+                kd: vec![f32::NAN; n * 3],
+                ks: vec![f32::NAN; n * 3],
+                alpha_t: vec![f32::NAN; n],
+                alpha_b: vec![f32::NAN; n],
             },
-        )
-        .collect();
-
-    let mut maps = FitMaps {
-        ward: WardMaps {
-            width: w,
-            height: h,
-            normals: normals.to_vec(),
-            tangents: tangents.to_vec(),
-            kd: vec![f32::NAN; n * 3],
-            ks: vec![f32::NAN; n * 3],
-            alpha_t: vec![f32::NAN; n],
-            alpha_b: vec![f32::NAN; n],
-        },
-        residual: vec![f32::NAN; n],
-        holdout_residual: vec![f32::NAN; n],
-        status: Vec::with_capacity(n),
-        summary: FitSummary::default(),
-    };
-    let (mut train_sse, mut hold_sse, mut hold_peak, mut iters) = (0.0, 0.0, 0.0f64, 0u64);
-    for (p, outcome) in bands.into_iter().flatten().enumerate() {
-        let s = &mut maps.summary;
-        let status = match outcome {
-            None => {
-                s.masked += 1;
-                FitStatus::Masked
-            }
-            Some(PixelOutcome::NoFrame) => {
-                s.no_frame += 1;
-                FitStatus::NoFrame
-            }
-            Some(PixelOutcome::TooFewSamples) => {
-                s.too_few_samples += 1;
-                FitStatus::TooFewSamples
-            }
-            Some(PixelOutcome::Fitted(fit, hold)) => {
-                let wm = &mut maps.ward;
-                for c in 0..3 {
-                    wm.kd[p * 3 + c] = fit.kd[c] as f32;
-                    wm.ks[p * 3 + c] = fit.ks[c] as f32;
-                }
-                wm.alpha_t[p] = fit.alpha_t as f32;
-                wm.alpha_b[p] = fit.alpha_b as f32;
-                if fit.isotropic {
-                    // The frame used has no tangent: keep the map saying so.
-                    wm.tangents[p * 3..p * 3 + 3].fill(f32::NAN);
-                }
-                maps.residual[p] = fit.rms() as f32;
-                train_sse += fit.sse;
-                s.train_samples += fit.samples;
-                iters += fit.iterations as u64;
-                if hold.samples > 0 {
-                    maps.holdout_residual[p] = (hold.sse / (3 * hold.samples) as f64).sqrt() as f32;
-                    hold_sse += hold.sse;
-                    hold_peak = hold_peak.max(hold.peak);
-                    s.holdout_samples += hold.samples;
-                }
-                if fit.isotropic {
-                    s.isotropic += 1;
-                    FitStatus::Isotropic
-                } else {
-                    s.anisotropic += 1;
-                    FitStatus::Anisotropic
-                }
-            }
+            residual: vec![f32::NAN; n],
+            holdout_residual: vec![f32::NAN; n],
+            status: Vec::with_capacity(n),
+            summary: FitSummary::default(),
         };
-        maps.status.push(status);
+        let (mut train_sse, mut hold_sse, mut hold_peak, mut iters) = (0.0, 0.0, 0.0f64, 0u64);
+        for (p, outcome) in outcomes.into_iter().enumerate() {
+            let s = &mut maps.summary;
+            let status = match outcome {
+                None => {
+                    s.masked += 1;
+                    FitStatus::Masked
+                }
+                Some(PixelOutcome::NoFrame) => {
+                    s.no_frame += 1;
+                    FitStatus::NoFrame
+                }
+                Some(PixelOutcome::TooFewSamples) => {
+                    s.too_few_samples += 1;
+                    FitStatus::TooFewSamples
+                }
+                Some(PixelOutcome::Fitted(fit, hold)) => {
+                    let wm = &mut maps.ward;
+                    for c in 0..3 {
+                        wm.kd[p * 3 + c] = fit.kd[c] as f32;
+                        wm.ks[p * 3 + c] = fit.ks[c] as f32;
+                    }
+                    wm.alpha_t[p] = fit.alpha_t as f32;
+                    wm.alpha_b[p] = fit.alpha_b as f32;
+                    if fit.isotropic {
+                        // The frame used has no tangent: keep the map saying so.
+                        wm.tangents[p * 3..p * 3 + 3].fill(f32::NAN);
+                    }
+                    maps.residual[p] = fit.rms() as f32;
+                    train_sse += fit.sse;
+                    s.train_samples += fit.samples;
+                    iters += fit.iterations as u64;
+                    if hold.samples > 0 {
+                        maps.holdout_residual[p] =
+                            (hold.sse / (3 * hold.samples) as f64).sqrt() as f32;
+                        hold_sse += hold.sse;
+                        hold_peak = hold_peak.max(hold.peak);
+                        s.holdout_samples += hold.samples;
+                    }
+                    if fit.isotropic {
+                        s.isotropic += 1;
+                        FitStatus::Isotropic
+                    } else {
+                        s.anisotropic += 1;
+                        FitStatus::Anisotropic
+                    }
+                }
+            };
+            maps.status.push(status);
+        }
+        let s = &mut maps.summary;
+        let fitted = s.anisotropic + s.isotropic;
+        s.train_rms = (train_sse / (3 * s.train_samples.max(1)) as f64).sqrt();
+        s.mean_iterations = iters as f64 / fitted.max(1) as f64;
+        if s.holdout_samples > 0 {
+            let rms = (hold_sse / (3 * s.holdout_samples) as f64).sqrt();
+            s.holdout_rms = Some(rms);
+            s.holdout_peak = Some(hold_peak);
+            s.holdout_psnr_db = Some(psnr_db(hold_peak, rms));
+        }
+        maps
     }
-    let s = &mut maps.summary;
-    let fitted = s.anisotropic + s.isotropic;
-    s.train_rms = (train_sse / (3 * s.train_samples.max(1)) as f64).sqrt();
-    s.mean_iterations = iters as f64 / fitted.max(1) as f64;
-    if s.holdout_samples > 0 {
-        let rms = (hold_sse / (3 * s.holdout_samples) as f64).sqrt();
-        s.holdout_rms = Some(rms);
-        s.holdout_peak = Some(hold_peak);
-        s.holdout_psnr_db = Some(psnr_db(hold_peak, rms));
-    }
-    Ok(maps)
 }
 
 /// `20 log10(peak / rms)`, infinite for a zero error.

@@ -673,8 +673,9 @@ impl LocateGrid {
     }
 }
 
-/// `n` lights spread uniformly (Fibonacci spiral) over the directions within `2 * theta_d_max`
-/// of the view, i.e. uniformly over the rig's light cone (method.md).
+/// `n` lights spread uniformly (Fibonacci spiral) over the directions within `2 * theta_d_max` of
+/// the view, i.e. uniformly over the rig's light cone (docs/method.md, "Halfway vectors and the
+/// light cone").
 pub fn uniform_cone_lights(n: usize, theta_d_max_deg: f64) -> Vec<DVec3> {
     // A hair inside the cone so that no light sits exactly on its boundary.
     let max_angle = (2.0 * theta_d_max_deg).min(179.0).to_radians() * 0.999;

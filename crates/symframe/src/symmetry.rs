@@ -1,6 +1,6 @@
-//! The symmetry objective (Equation 2 of Holroyd et al. 2008, ratio form reconstructed in
-//! method.md): how far a pixel's measured slice is from being symmetric under a reflection of
-//! the halfway vector in a candidate frame (n, t, b).
+//! The symmetry objective (Equation 2 of Holroyd et al. 2008, ratio form as in docs/method.md,
+//! "Symmetry distances and the domain rule"): how far a pixel's measured slice is from being
+//! symmetric under a reflection of the halfway vector in a candidate frame (n, t, b).
 
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
@@ -32,7 +32,7 @@ impl Symmetry {
 }
 
 /// How the cosine factor of the measured radiance is handled when comparing a light with its
-/// reflection (method.md, Optimisation 4).
+/// reflection (docs/method.md, "Cosine forms").
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum CosineMode {
@@ -201,7 +201,7 @@ pub fn symmetry_term_over<L: SliceLookup>(
 
 /// The smallest domain (in lights) that counts as non-empty for a rig: a share of the rig's
 /// lights, so sparse rigs are not all discarded while degenerate one- or two-light domains never
-/// produce spurious zero distances (method.md).
+/// produce spurious zero distances (docs/method.md, "Symmetry distances and the domain rule").
 pub fn default_min_domain(n_used: usize) -> u32 {
     ((n_used as f64 * 0.015).ceil() as u32).clamp(6, 30)
 }

@@ -1,7 +1,7 @@
 //! End-to-end accuracy of the symmetry estimator on synthetic renders with known frames.
-//! Thresholds come from the issue and method.md (the paper's Figure 3: about 1 degree at
-//! theta_d_max = 65 for anisotropic Ward), over pixels whose normal is within 60 degrees of the
-//! view.
+//! Thresholds come from the paper's Figure 3 (about 1 degree at theta_d_max = 65 for
+//! anisotropic Ward; docs/method.md, "Conventions"), over pixels whose normal is within 60
+//! degrees of the view.
 
 use glam::DVec3;
 use symframe::brdf::lambertian::Lambertian;
@@ -96,8 +96,8 @@ fn isotropic_ward_sphere_has_normals_but_no_tangents() {
 }
 
 /// With the wide highlight axis in the plane of tilt (an axial tangent field), the paper's
-/// cross-multiplied cosines bias Ward normals by ~2.5 degrees on average (method.md,
-/// Optimisation 4); the diffuse-compensated p = 0.5 measure removes it.
+/// cross-multiplied cosines bias Ward normals by ~2.5 degrees on average (docs/method.md,
+/// "Cosine forms"); the diffuse-compensated p = 0.5 measure removes it.
 #[test]
 fn compensated_cosine_removes_the_tilt_bias_on_ward() {
     let scene = Scene::sphere(32, TangentField::Axial(DVec3::Y));
@@ -157,7 +157,7 @@ fn fast_and_exact(scene: &Scene) -> (symframe::EstimateMaps, symframe::EstimateM
 /// The target is 0.1 degrees median and 0.5 at the 99th percentile, normals and tangents.
 /// Both paths interpolate with the same spherical barycentric weights, so they differ by
 /// rounding only: measured ~1e-6 median and 0.003-0.013 degrees p99 on these scenes. The
-/// bound asserted is 0.05 (4 to 15 times the measured, a tenth of the issue's): a fast path that
+/// bound asserted is 0.05 (4 to 15 times the measured, a tenth of the target's): a fast path that
 /// approximates the slice (the grid resampling this replaced: 0.44-1.5 degrees p99) fails it.
 fn assert_paths_agree(
     scene: &Scene,
@@ -231,12 +231,12 @@ fn fast_path_agrees_with_the_reference_path_on_shadowed_bumps() {
     assert_paths_agree(&scene, "bumps");
 }
 
-/// A DiLiGenT-like rig (96 lights within 45 degrees of the view) has halfway vectors within
-/// ~22.5 degrees: normals beyond that cannot be recovered and must be discarded, not returned
-/// as clamped guesses when fallbacks are off (docs/method.md); those within reach are
-/// estimated. (With the default fallbacks they are filled and flagged: tests/materials.rs.) Without the check that
-/// the centre `h = n` is observed, every pixel beyond reach came back as a guess (up to 43
-/// degrees off).
+/// A DiLiGenT-like rig (96 lights within 45 degrees of the view) has halfway vectors within ~22.5
+/// degrees: normals beyond that cannot be recovered and, with fallbacks off, must be discarded,
+/// not returned as clamped guesses (docs/method.md, "Beyond-reach discard"); those within reach
+/// are estimated. (With the default fallbacks they are filled and flagged: tests/materials.rs.)
+/// Without the check that the centre `h = n` is observed, every pixel beyond reach came back as
+/// a guess (up to 43 degrees off).
 #[test]
 fn normals_beyond_the_rigs_reach_are_discarded() {
     beyond_reach(EstimatorParams {

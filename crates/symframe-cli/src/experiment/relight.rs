@@ -1,4 +1,4 @@
-//! Relighting evidence (issue 4, the paper's Figures 8 and 9): per-pixel Ward fits in the
+//! Relighting evidence (the paper's Figures 8 and 9): per-pixel Ward fits in the
 //! estimated frames, judged on lights left out of both the estimate and the fit, for Ward and
 //! for models the fit cannot represent exactly; and a side-by-side picture (true render, relit
 //! fit, edited fit) under a held-out light.

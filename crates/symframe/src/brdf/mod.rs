@@ -1,9 +1,9 @@
 //! Analytic and measured BRDF models, each evaluated in a local frame.
 //!
-//! Local frame convention (shared by every model): `x` = the model's first anisotropy axis,
-//! `y` = its second, `z` = the surface normal. Directions point away from the surface and are
-//! unit length. Which of x or y is "the tangent" follows method.md: the axis of the larger
-//! roughness (see [`Brdf::tangent_axis`]).
+//! Local frame convention (shared by every model): `x` = the model's first anisotropy axis, `y` =
+//! its second, `z` = the surface normal. Directions point away from the surface and are unit
+//! length. Which of x or y is "the tangent" follows docs/method.md ("The widest-highlight tangent
+//! rule"): the axis of the larger roughness (see [`Brdf::tangent_axis`]).
 
 /// Which local axis of a model is the tangent (the axis of the wider highlight).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -17,8 +17,9 @@ pub enum TangentAxis {
 }
 
 impl TangentAxis {
-    /// The tangent of a model with roughness `alpha_x` along x and `alpha_y` along y: the axis
-    /// of the larger roughness (method.md), none when they are equal.
+    /// The tangent of a model with roughness `alpha_x` along x and `alpha_y` along y: the axis of
+    /// the larger roughness (docs/method.md, "The widest-highlight tangent rule"), none when they
+    /// are equal.
     pub fn of_roughness(alpha_x: f64, alpha_y: f64) -> Self {
         if alpha_x > alpha_y {
             TangentAxis::X

@@ -196,8 +196,8 @@ pub fn assert_nonneg_finite(b: &dyn Brdf) {
     }
 }
 
-/// Asserts invariance under reflection across the x-z plane (y → -y) and the y-z plane
-/// (x → -x) of both directions, i.e. the `G_nt` / `G_nb` symmetries of method.md.
+/// Asserts invariance under reflection across the x-z plane (y → -y) and the y-z plane (x → -x) of
+/// both directions, i.e. the `G_nt` / `G_nb` symmetries of docs/method.md ("The three symmetries").
 pub fn assert_mirror_symmetric(b: &dyn Brdf, rel: f64) {
     let ry = DVec3::new(1.0, -1.0, 1.0);
     let rx = DVec3::new(-1.0, 1.0, 1.0);

@@ -56,7 +56,8 @@ impl Scene {
         self.masked_vectors(&self.normals_in_camera)
     }
 
-    /// Ground-truth tangents (the wide-highlight axis, method.md), `H x W x 3`, NaN outside.
+    /// Ground-truth tangents (the wide-highlight axis: docs/method.md, "The widest-highlight
+    /// tangent rule"), `H x W x 3`, NaN outside.
     pub fn gt_tangents(&self) -> Vec<f32> {
         self.masked_vectors(&self.tangents_in_camera)
     }

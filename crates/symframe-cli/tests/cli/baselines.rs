@@ -2,12 +2,10 @@
 //! written as `.lp` files, the same outputs as the symmetry method, accuracy checked against
 //! ground truth (directly and through `symframe eval`).
 
-mod common;
-
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use common::{sphere_dataset, stderr, symframe, Truth};
+use crate::common::{sphere_dataset, stderr, symframe, Truth};
 
 use symframe::brdf::lambertian::Lambertian;
 use symframe::brdf::spec::parse_model;
@@ -72,6 +70,18 @@ fn estimate(lp: &Path, out: &Path, method: &str, scene: &Scene, n_lights: u64) -
             .iter()
             .all(|c| c.is_nan() || (0.0..=1.0).contains(c)));
     }
+    // Every pixel with a normal carries the method's source code, every other one none.
+    let code = match method {
+        "symmetry" => 1,
+        "max-reflectance" => 3,
+        _ => 2,
+    };
+    let source: ndarray::Array2<u8> = ndarray_npy::read_npy(out.join("source.npy")).unwrap();
+    for (&c, n) in source.iter().zip(normals.chunks_exact(3)) {
+        assert_eq!(c, if n[0].is_nan() { 0 } else { code }, "{method}");
+    }
+    let counted = report["sources"][code as usize]["pixels"].as_u64();
+    assert_eq!(counted, report["pixels"]["estimated"].as_u64(), "{report}");
     let e = evaluate(
         &normals,
         &tangents,

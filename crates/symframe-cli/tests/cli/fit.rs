@@ -2,12 +2,10 @@
 //! and relit pictures out, and bad input refused with a one-line error naming the file, leaving
 //! no output folder behind.
 
-mod common;
-
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use common::{assert_fails_naming, s, sphere_dataset, stderr, symframe, Truth};
+use crate::common::{assert_fails_naming, s, sphere_dataset, stderr, symframe, Truth};
 
 use glam::DVec3;
 use symframe::brdf::ward::Ward;

@@ -1,12 +1,10 @@
 //! End-to-end tests of `symframe estimate` and `symframe demo`: real files in, maps out, and
 //! bad input refused with a one-line error naming the file, leaving no output folder behind.
 
-mod common;
-
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use common::{assert_fails_naming, sphere_dataset, stderr, symframe, Truth};
+use crate::common::{assert_fails_naming, estimate, sphere_dataset, stderr, symframe, Truth};
 
 use glam::DVec3;
 use symframe::brdf::ward::Ward;
@@ -36,12 +34,7 @@ fn estimate_on_an_lp_dataset_writes_every_output_and_is_accurate() {
     let tmp = tempfile::tempdir().unwrap();
     let (scene, lp) = small_dataset(&tmp.path().join("data"), 28, 600, ImageFormat::Png16);
     let out = tmp.path().join("out");
-    let o = symframe(&[
-        "estimate",
-        lp.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let o = estimate(&lp, &out, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     for f in [
         "normals.npy",
@@ -79,18 +72,22 @@ fn estimate_on_an_lp_dataset_writes_every_output_and_is_accurate() {
     assert!(estimated > 400, "{report}");
     // Outside the sphere (mask.png beside the .lp): NaN.
     assert!(normals[0].is_nan());
+    // The source map: the symmetry wherever a normal was estimated, none elsewhere; the
+    // report's legend counts the same pixels.
+    let source: ndarray::Array2<u8> = ndarray_npy::read_npy(out.join("source.npy")).unwrap();
+    assert_eq!(source.dim(), (28, 28));
+    for (&code, n) in source.iter().zip(normals.chunks_exact(3)) {
+        assert_eq!(code, if n[0].is_nan() { 0 } else { 1 });
+    }
+    assert_eq!(report["sources"][1]["name"], "symmetry");
+    assert_eq!(report["sources"][1]["pixels"].as_u64(), Some(estimated));
+    assert!(out.join("source.png").is_file());
     assert_eq!(report["parameters"]["interpolation"], "fast");
 
     // The reference path on the same data: recorded in the report, and the default fast path
     // agrees with it.
     let reference = tmp.path().join("reference");
-    let o = symframe(&[
-        "estimate",
-        lp.to_str().unwrap(),
-        "-o",
-        reference.to_str().unwrap(),
-        "--reference",
-    ]);
+    let o = estimate(&lp, &reference, &["--reference"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let report: serde_json::Value =
         serde_json::from_str(&fs::read_to_string(reference.join("report.json")).unwrap()).unwrap();
@@ -136,14 +133,7 @@ fn estimate_on_a_diligent_folder_divides_by_light_intensities() {
     let out = tmp.path().join("out");
     // An axial field puts the wide highlight in the plane of tilt: the compensated measure
     // avoids the paper form's bias there (see the accuracy tests).
-    let o = symframe(&[
-        "estimate",
-        dir.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--cosine",
-        "compensated",
-    ]);
+    let o = estimate(&dir, &out, &["--cosine", "compensated"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let (_, normals) = read_npy_f32(&out.join("normals.npy")).unwrap();
     let (_, tangents) = read_npy_f32(&out.join("tangents.npy")).unwrap();
@@ -171,12 +161,7 @@ fn mismatched_image_sizes_are_refused() {
     let img = lp.parent().unwrap().join("images/img_0007.exr");
     symframe_io::write_exr_rgb(&img, 10, 12, &vec![0.1; 10 * 12 * 3]).unwrap();
     let out = tmp.path().join("out");
-    let o = symframe(&[
-        "estimate",
-        lp.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let o = estimate(&lp, &out, &[]);
     assert_fails_naming(&o, "img_0007.exr", &out);
 }
 
@@ -187,20 +172,10 @@ fn missing_and_unreadable_images_are_refused() {
     let images = lp.parent().unwrap().join("images");
     fs::write(images.join("img_0003.exr"), b"this is not an exr file").unwrap();
     let out = tmp.path().join("out");
-    let o = symframe(&[
-        "estimate",
-        lp.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let o = estimate(&lp, &out, &[]);
     assert_fails_naming(&o, "img_0003.exr", &out);
     fs::remove_file(images.join("img_0003.exr")).unwrap();
-    let o = symframe(&[
-        "estimate",
-        lp.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let o = estimate(&lp, &out, &[]);
     assert_fails_naming(&o, "img_0003.exr", &out);
 }
 
@@ -213,24 +188,14 @@ fn bad_light_files_are_refused_with_file_and_line() {
     // Wrong count.
     let wrong_count = text.replacen("60\n", "61\n", 1);
     fs::write(&lp, &wrong_count).unwrap();
-    let o = symframe(&[
-        "estimate",
-        lp.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let o = estimate(&lp, &out, &[]);
     assert_fails_naming(&o, "lights.lp", &out);
     // A non-finite light on the third entry (line 4).
     let mut lines: Vec<String> = text.lines().map(String::from).collect();
     let first = lines[3].split_whitespace().next().unwrap().to_string();
     lines[3] = format!("{first} nan 0 1");
     fs::write(&lp, lines.join("\n") + "\n").unwrap();
-    let o = symframe(&[
-        "estimate",
-        lp.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let o = estimate(&lp, &out, &[]);
     assert_fails_naming(&o, "lights.lp:4", &out);
 }
 
@@ -255,12 +220,7 @@ fn all_lights_outside_the_cone_is_refused() {
         })
         .collect();
     fs::write(&lp, flipped.join("\n") + "\n").unwrap();
-    let o = symframe(&[
-        "estimate",
-        lp.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let o = estimate(&lp, &out, &[]);
     assert_fails_naming(&o, "lights.lp", &out);
     assert!(
         stderr(&o).contains("outside the light cone"),
@@ -276,26 +236,12 @@ fn empty_and_wrong_size_masks_are_refused() {
     let out = tmp.path().join("out");
     let empty = tmp.path().join("empty.png");
     symframe_io::write_png8_rgb(&empty, 12, 12, &vec![0.0; 12 * 12 * 3], false).unwrap();
-    let o = symframe(&[
-        "estimate",
-        lp.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--mask",
-        empty.to_str().unwrap(),
-    ]);
+    let o = estimate(&lp, &out, &["--mask", empty.to_str().unwrap()]);
     assert_fails_naming(&o, "empty.png", &out);
     assert!(stderr(&o).contains("empty"), "{}", stderr(&o));
     let small = tmp.path().join("small.png");
     symframe_io::write_png8_rgb(&small, 5, 5, &vec![1.0; 5 * 5 * 3], false).unwrap();
-    let o = symframe(&[
-        "estimate",
-        lp.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--mask",
-        small.to_str().unwrap(),
-    ]);
+    let o = estimate(&lp, &out, &["--mask", small.to_str().unwrap()]);
     assert_fails_naming(&o, "small.png", &out);
 }
 
@@ -304,21 +250,9 @@ fn bad_flags_are_refused() {
     let tmp = tempfile::tempdir().unwrap();
     let lp = breakable(tmp.path());
     let out = tmp.path().join("out");
-    let o = symframe(&[
-        "estimate",
-        lp.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--theta-d-max",
-        "120",
-    ]);
+    let o = estimate(&lp, &out, &["--theta-d-max", "120"]);
     assert_fails_naming(&o, "--theta-d-max", &out);
-    let o = symframe(&[
-        "estimate",
-        "/no/such/dataset.lp",
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let o = estimate(Path::new("/no/such/dataset.lp"), &out, &[]);
     assert_fails_naming(&o, "/no/such/dataset.lp", &out);
 }
 

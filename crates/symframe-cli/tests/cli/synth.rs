@@ -2,12 +2,10 @@
 //! description, read back by `symframe estimate`, deterministic in the seed, and bad flags
 //! refused with a one-line error and no output folder.
 
-mod common;
-
 use std::fs;
 use std::path::Path;
 
-use common::{s, symframe};
+use crate::common::{s, symframe};
 
 use glam::DVec3;
 use symframe::eval::evaluate;

@@ -2,13 +2,11 @@
 //! the ground truth rotated by known angles, so every figure of eval.json is known; and bad
 //! input refused with a one-line error naming the file.
 
-mod common;
-
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-use common::{assert_one_line_error, stderr, symframe};
+use crate::common::{assert_one_line_error, stderr, symframe};
 
 use glam::{DQuat, DVec3};
 use symframe_io::{read_image, write_npy_f32, write_png8_rgb, DecodeOptions};

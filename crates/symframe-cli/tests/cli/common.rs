@@ -1,9 +1,6 @@
 //! Helpers shared by the CLI integration tests: running the binary, checking its failures, and
 //! writing a small rendered sphere dataset.
 
-// Each test binary uses a different subset.
-#![allow(dead_code)]
-
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -19,6 +16,11 @@ pub fn symframe(args: &[&str]) -> Output {
         .args(args)
         .output()
         .expect("run symframe")
+}
+
+/// Runs `symframe estimate INPUT -o OUT` with `extra` flags.
+pub fn estimate(input: &Path, out: &Path, extra: &[&str]) -> Output {
+    symframe(&[&["estimate", s(input), "-o", s(out)], extra].concat())
 }
 
 /// The run's standard error as text.

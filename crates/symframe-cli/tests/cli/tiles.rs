@@ -2,13 +2,11 @@
 //! bit; an interrupted run resumes to the same maps; the tile cache is reused and invalidated;
 //! shards merge into the single run's maps; merge refuses incomplete or mismatched shards.
 
-mod common;
-
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-use common::{sphere_dataset, stderr, symframe, Truth};
+use crate::common::{sphere_dataset, stderr, symframe, Truth};
 
 use symframe::baseline::{estimate_stack_baseline, Baseline};
 use symframe::brdf::ward::Ward;

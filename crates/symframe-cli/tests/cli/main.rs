@@ -1,0 +1,11 @@
+//! End-to-end tests of the `symframe` binary: real files in, maps and pictures out, bad input
+//! refused with a one-line error naming the file.
+
+mod baselines;
+mod common;
+mod estimate;
+mod eval;
+mod experiment;
+mod fit;
+mod synth;
+mod tiles;

@@ -1,0 +1,737 @@
+//! The estimation job: a capture in, normal/tangent maps, pictures and a report out (or, for a
+//! shard, its tile results and manifest).
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use glam::DVec3;
+use serde::Serialize;
+use symframe::baseline::{Baseline, BaselineMethod, BaselineParams};
+use symframe::estimate::{check_inputs, PixelCounts};
+use symframe::{EstimateMaps, Estimator, EstimatorParams, PixelRecord, PixelSource};
+use symframe::{Rig, RigOptions};
+use symframe_io::fingerprint::Fingerprint;
+use symframe_io::{CacheInfo, CacheOptions, Dataset, DecodeOptions, TileCache, TileGrid};
+
+use crate::merge::{write_manifest, ShardManifest, MANIFEST, MANIFEST_FORMAT, MANIFEST_VERSION};
+use crate::outdir::Staging;
+use crate::tiles::{peak_rss_bytes, read_tiles, run_tiles, shard_tiles, tile_path};
+use crate::{Control, Interrupted, Progress, Stage};
+
+/// Folder of the per-tile result files inside an output folder.
+pub const TILES_DIR: &str = ".symframe-tiles";
+/// Default folder of the tile cache inside an output folder.
+pub const CACHE_DIR: &str = ".symframe-cache";
+
+/// Which method estimates the frames, with its parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MethodConfig {
+    /// The symmetry method: normals and tangents, any material.
+    Symmetry {
+        /// The light cone.
+        rig: RigOptions,
+        /// The estimator's parameters.
+        params: EstimatorParams,
+    },
+    /// A baseline the paper compares against: normals only, every light.
+    Baseline {
+        /// Which.
+        method: Baseline,
+        /// Its parameters.
+        params: BaselineParams,
+    },
+}
+
+impl Default for MethodConfig {
+    /// The symmetry method with the default cone and parameters.
+    fn default() -> Self {
+        MethodConfig::Symmetry {
+            rig: RigOptions::default(),
+            params: EstimatorParams::default(),
+        }
+    }
+}
+
+impl MethodConfig {
+    /// The method's name as in reports (`symmetry`, `woodham`, ...).
+    pub fn name(&self) -> &'static str {
+        match self {
+            MethodConfig::Symmetry { .. } => "symmetry",
+            MethodConfig::Baseline { method, .. } => method.name(),
+        }
+    }
+}
+
+/// Where the decoded images are cached and how.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct CacheConfig {
+    /// Cache folder (`None`: `.symframe-cache` inside the output folder). A cache of the same
+    /// inputs there is reused; several jobs (shards) may share one folder.
+    pub dir: Option<PathBuf>,
+    /// Remove the cache once the job has finished (default: keep it for reruns).
+    pub remove_after: bool,
+    /// Tile size and decoding memory.
+    pub options: CacheOptions,
+}
+
+/// One shard of a sharded job: the K-th (1-based) of N disjoint sets of tiles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Shard {
+    /// 1-based shard number.
+    pub k: usize,
+    /// Number of shards.
+    pub n: usize,
+}
+
+impl std::str::FromStr for Shard {
+    type Err = String;
+    /// Parses `K/N` with `1 <= K <= N`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let bad = || format!("expected K/N with 1 <= K <= N (e.g. 3/32), got '{s}'");
+        let (k, n) = s.split_once('/').ok_or_else(bad)?;
+        let (k, n): (usize, usize) = (
+            k.trim().parse().map_err(|_| bad())?,
+            n.trim().parse().map_err(|_| bad())?,
+        );
+        if k == 0 || k > n {
+            return Err(bad());
+        }
+        Ok(Self { k, n })
+    }
+}
+
+impl std::fmt::Display for Shard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}/{}", self.k, self.n)
+    }
+}
+
+/// Everything an estimation job needs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EstimateConfig {
+    /// A `.lp` light file, a folder holding one, or a DiLiGenT-style folder.
+    pub input: PathBuf,
+    /// Output folder (created; same-named files in it are replaced).
+    pub output: PathBuf,
+    /// The method.
+    pub method: MethodConfig,
+    /// Mask image (`None`: the dataset's `mask.png`, if any).
+    pub mask: Option<PathBuf>,
+    /// How images are decoded.
+    pub decode: DecodeOptions,
+    /// The tile cache.
+    pub cache: CacheConfig,
+    /// Only this shard's tiles (tile results and a manifest, no maps).
+    pub shard: Option<Shard>,
+}
+
+impl EstimateConfig {
+    /// The symmetry method with every default, from `input` into `output`.
+    pub fn new(input: impl Into<PathBuf>, output: impl Into<PathBuf>) -> Self {
+        Self {
+            input: input.into(),
+            output: output.into(),
+            method: MethodConfig::default(),
+            mask: None,
+            decode: DecodeOptions::default(),
+            cache: CacheConfig::default(),
+            shard: None,
+        }
+    }
+
+    /// The cache folder in force.
+    pub fn cache_dir(&self) -> PathBuf {
+        cache_dir(&self.cache, &self.output)
+    }
+}
+
+/// The cache folder of `cache` for a job writing into `output`.
+pub(crate) fn cache_dir(cache: &CacheConfig, output: &Path) -> PathBuf {
+    cache.dir.clone().unwrap_or_else(|| output.join(CACHE_DIR))
+}
+
+/// What `report.json` records about a run.
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    /// symframe version.
+    pub version: &'static str,
+    /// The input as given.
+    pub input: PathBuf,
+    /// The mask used, if any.
+    pub mask: Option<PathBuf>,
+    /// The estimation method: `symmetry`, `woodham`, `woodham-robust` or `max-reflectance`.
+    pub method: &'static str,
+    /// Parameters in force (the method's own).
+    pub parameters: MethodParameters,
+    /// Light counts.
+    pub lights: LightCounts,
+    /// Image size.
+    pub width: usize,
+    /// Image size.
+    pub height: usize,
+    /// What happened to the pixels.
+    pub pixels: PixelCounts,
+    /// Which measure each pixel's normal comes from (`source.npy`): the legend and counts.
+    pub sources: Sources,
+    /// Mean symmetry-objective evaluations per estimated pixel.
+    pub evals_per_pixel: f64,
+    /// How the image was split into tiles and what this run did with them.
+    pub tiles: TileReport,
+    /// The on-disk tile cache of the decoded images.
+    pub cache: CacheReport,
+    /// Wall-clock seconds per stage, and peak memory.
+    pub timings: Timings,
+}
+
+/// One code of the source map, as recorded in the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct SourceCount {
+    /// The code in `source.npy`.
+    pub code: u8,
+    /// Its name.
+    pub name: &'static str,
+    /// What it means.
+    pub description: &'static str,
+    /// Pixels with this code.
+    pub pixels: usize,
+}
+
+/// The source map's legend with per-source pixel counts.
+#[derive(Debug, Clone, Serialize)]
+pub struct Sources(pub Vec<SourceCount>);
+
+impl Sources {
+    /// The legend and counts of a source map (codes of [`PixelSource`]).
+    pub fn of(source: &[u8]) -> Self {
+        let mut counts = [0usize; 4];
+        for &c in source {
+            if let Some(n) = counts.get_mut(c as usize) {
+                *n += 1;
+            }
+        }
+        Sources(
+            PixelSource::legend()
+                .iter()
+                .map(|&(code, name, description)| SourceCount {
+                    code,
+                    name,
+                    description,
+                    pixels: counts[code as usize],
+                })
+                .collect(),
+        )
+    }
+}
+
+/// Tiles as recorded in the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct TileReport {
+    /// Tile side in pixels.
+    pub size: usize,
+    /// Tiles of the whole image.
+    pub count: usize,
+    /// `K/N` for a shard, else absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shard: Option<String>,
+    /// Tiles this run was asked for (all, or the shard's).
+    pub this_run: usize,
+    /// Tiles estimated by this run.
+    pub computed: usize,
+    /// Tiles found finished by an interrupted earlier run of the same job and reused.
+    pub reused: usize,
+}
+
+/// The tile cache as recorded in the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct CacheReport {
+    /// Where it is, its size, whether it was reused (`hit`), what was decoded.
+    #[serde(flatten)]
+    pub info: CacheInfo,
+    /// Whether it is kept after the run.
+    pub kept: bool,
+}
+
+/// The parameters of whichever method ran, as recorded in the report.
+#[derive(Debug, Clone, Serialize)]
+#[serde(untagged)]
+pub enum MethodParameters {
+    /// The symmetry method's.
+    Symmetry(SymmetryParameters),
+    /// A baseline's.
+    Baseline(BaselineParameters),
+}
+
+/// Baseline parameters as recorded in the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct BaselineParameters {
+    /// Shadow threshold, outlier rule.
+    #[serde(flatten)]
+    pub baseline: BaselineParams,
+    /// 8-bit inputs read as linear.
+    pub linear_8bit: bool,
+    /// Saturation threshold (fraction of the integer maximum).
+    pub saturation: f32,
+}
+
+/// Symmetry-method parameters as recorded in the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct SymmetryParameters {
+    /// Light cone half-angle in halfway space, degrees.
+    pub theta_d_max_deg: f64,
+    /// Estimator parameters.
+    #[serde(flatten)]
+    pub estimator: EstimatorParams,
+    /// The domain threshold actually used.
+    pub min_domain_used: u32,
+    /// 8-bit inputs read as linear.
+    pub linear_8bit: bool,
+    /// Saturation threshold (fraction of the integer maximum).
+    pub saturation: f32,
+}
+
+/// Light counts.
+#[derive(Debug, Clone, Serialize)]
+pub struct LightCounts {
+    /// Lights in the input.
+    pub input: usize,
+    /// Lights used: inside the cone for the symmetry method, all of them for a baseline.
+    pub used: usize,
+    /// Lights outside the cone, dropped (0 for a baseline).
+    pub dropped: usize,
+}
+
+/// Seconds per stage.
+#[derive(Debug, Clone, Serialize)]
+pub struct Timings {
+    /// Decoding the images into the tile cache, or opening it.
+    pub load_s: f64,
+    /// Building the rig (0 for a baseline: it has none).
+    pub rig_s: f64,
+    /// Estimating.
+    pub estimate_s: f64,
+    /// Writing the outputs.
+    pub write_s: f64,
+    /// Everything.
+    pub total_s: f64,
+    /// Peak resident memory of the process in bytes (`VmHWM`; Linux only).
+    pub peak_rss_bytes: Option<u64>,
+}
+
+/// A finished job's maps and report.
+#[derive(Debug, Clone)]
+pub struct Done {
+    /// The maps written.
+    pub maps: EstimateMaps,
+    /// The report written.
+    pub report: Report,
+}
+
+/// What an estimation job produced.
+#[derive(Debug, Clone)]
+pub enum EstimateOutcome {
+    /// A full run: the maps and the report, written.
+    Maps(Box<Done>),
+    /// A shard: its tile results and manifest written, no maps; the shard's own report.
+    Shard(Box<Report>),
+}
+
+/// The method built for a dataset: the estimator's rig, or a baseline with its lights.
+enum Plan {
+    Symmetry(Box<Rig>, EstimatorParams),
+    Baseline(BaselineMethod),
+}
+
+impl Plan {
+    /// Builds the rig (or the baseline's unit lights) before decoding, so a bad light file
+    /// fails fast.
+    fn new(method: &MethodConfig, ds: &Dataset) -> Result<Self> {
+        let blame = || ds.source.display().to_string();
+        Ok(match *method {
+            MethodConfig::Symmetry { rig, params } => Plan::Symmetry(
+                Box::new(Rig::new(&ds.lights, rig).with_context(blame)?),
+                params,
+            ),
+            MethodConfig::Baseline { method, params } => {
+                Plan::Baseline(BaselineMethod::new(method, &ds.lights, params).with_context(blame)?)
+            }
+        })
+    }
+
+    fn n_input(&self) -> usize {
+        match self {
+            Plan::Symmetry(rig, _) => rig.n_input,
+            Plan::Baseline(b) => b.unit_lights().len(),
+        }
+    }
+}
+
+/// Runs `method` over `tiles`: the one place the plan's two kinds meet the generic driver.
+fn run_plan(
+    plan: &Plan,
+    cache: &TileCache,
+    mask: Option<&[bool]>,
+    job: u64,
+    tiles: &[usize],
+    dir: &Path,
+    ctl: &Control,
+) -> Result<crate::TileCounts> {
+    match plan {
+        Plan::Symmetry(rig, params) => run_tiles(
+            cache,
+            &Estimator::new(rig, *params),
+            mask,
+            job,
+            tiles,
+            dir,
+            ctl,
+        ),
+        Plan::Baseline(b) => run_tiles(cache, b, mask, job, tiles, dir, ctl),
+    }
+}
+
+/// Feeds a mask (or its absence) into a fingerprint.
+pub(crate) fn fingerprint_mask(f: &mut Fingerprint, mask: Option<&[bool]>) {
+    match mask {
+        None => {
+            f.u64(0);
+        }
+        Some(m) => {
+            f.u64(1);
+            for chunk in m.chunks(64) {
+                let bits = chunk
+                    .iter()
+                    .enumerate()
+                    .fold(0u64, |a, (k, &b)| a | ((b as u64) << k));
+                f.u64(bits);
+            }
+        }
+    }
+}
+
+/// Feeds light directions into a fingerprint.
+pub(crate) fn fingerprint_lights<'a>(
+    f: &mut Fingerprint,
+    lights: impl IntoIterator<Item = &'a DVec3>,
+) {
+    for l in lights {
+        f.f64(l.x).f64(l.y).f64(l.z);
+    }
+}
+
+/// The fingerprint of everything a tile's results depend on: the cached inputs, the image and
+/// tile sizes, the method with its lights and parameters, the mask and the versions.
+fn job_fingerprint(cache: &TileCache, plan: &Plan, mask: Option<&[bool]>) -> Result<u64> {
+    let g = cache.grid();
+    let mut f = Fingerprint::new();
+    f.str("symframe job")
+        .str(env!("CARGO_PKG_VERSION"))
+        .u64(symframe_io::tile_results::TILE_RESULT_VERSION as u64)
+        .u64(cache.fingerprint())
+        .u64(g.width as u64)
+        .u64(g.height as u64)
+        .u64(g.tile as u64);
+    match plan {
+        Plan::Symmetry(rig, params) => {
+            let min_domain = Estimator::new(rig, *params).min_domain();
+            f.str("symmetry")
+                .f64(rig.theta_d_max_deg)
+                // How the fast path reads the slice (results from an older lookup do not mix).
+                .str("spherical-walk")
+                .u64(rig.n_input as u64)
+                .str(&serde_json::to_string(params)?)
+                .u64(min_domain as u64);
+            for &i in &rig.input_index {
+                f.u64(i as u64);
+            }
+            fingerprint_lights(&mut f, &rig.lights_in_camera);
+        }
+        Plan::Baseline(b) => {
+            f.str(b.method().name())
+                .str(&serde_json::to_string(b.params())?);
+            fingerprint_lights(&mut f, b.unit_lights());
+        }
+    }
+    fingerprint_mask(&mut f, mask);
+    Ok(f.finish())
+}
+
+/// Opens (or builds) the tile cache of `ds` in `dir`, reporting decoding progress.
+pub(crate) fn open_cache(
+    ds: &Dataset,
+    decode: &DecodeOptions,
+    dir: &Path,
+    options: CacheOptions,
+    ctl: &Control,
+) -> Result<(TileCache, CacheInfo)> {
+    let decoded = AtomicU64::new(0);
+    let total = ds.images.len() as u64;
+    TileCache::open_or_build(ds, decode, dir, options, ctl.stop, &|| {
+        let n = decoded.fetch_add(1, Ordering::SeqCst) + 1;
+        ctl.report(Progress::new(Stage::Decoding, n, total));
+    })
+    .map_err(|e| match e {
+        symframe_io::Error::Interrupted => Interrupted.into(),
+        e => e.into(),
+    })
+}
+
+/// Reads the mask of a job (`mask`, else the dataset's) at the cache's image size.
+pub(crate) fn read_mask(
+    mask: &Option<PathBuf>,
+    ds: &Dataset,
+    grid: &TileGrid,
+) -> Result<(Option<PathBuf>, Option<Vec<bool>>)> {
+    let path = mask.clone().or_else(|| ds.mask.clone());
+    let mask = match &path {
+        Some(p) => Some(symframe_io::read_mask(p, grid.width, grid.height)?),
+        None => None,
+    };
+    Ok((path, mask))
+}
+
+/// Removes the cache file of a finished job (and its folder, when nothing else is left in it).
+pub(crate) fn remove_cache(cache_path: &Path, dir: &Path) -> Result<()> {
+    std::fs::remove_file(cache_path)
+        .with_context(|| format!("{}: cannot remove", cache_path.display()))?;
+    let _ = std::fs::remove_file(cache_path.with_extension("lock"));
+    let _ = std::fs::remove_dir(dir);
+    Ok(())
+}
+
+/// Runs an estimation job: decodes the images once into the tile cache (or reuses it),
+/// estimates tile by tile into result files, then assembles and writes the maps (or, for a
+/// shard, its manifest). On an error (not an interruption) an output folder this job created
+/// is removed again; an interrupted job keeps its cache and finished tiles for the rerun.
+pub fn estimate(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcome> {
+    let created = !config.output.exists();
+    let result = run(config, ctl);
+    if let Err(e) = &result {
+        if created && !e.is::<Interrupted>() {
+            let _ = std::fs::remove_dir_all(&config.output);
+        }
+    }
+    result
+}
+
+fn run(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcome> {
+    let t0 = Instant::now();
+    let ds: Dataset = symframe_io::open_dataset(&config.input)?;
+    let plan = Plan::new(&config.method, &ds)?;
+    let rig_s = t0.elapsed().as_secs_f64();
+
+    let t_load = Instant::now();
+    let cache_dir = config.cache_dir();
+    let (cache, cache_info) =
+        open_cache(&ds, &config.decode, &cache_dir, config.cache.options, ctl)?;
+    let load_s = t_load.elapsed().as_secs_f64();
+    let grid = *cache.grid();
+    let (mask_path, mask) = read_mask(&config.mask, &ds, &grid)?;
+    let blame = || match &mask_path {
+        Some(p) => p.display().to_string(),
+        None => ds.source.display().to_string(),
+    };
+    check_inputs(
+        grid.width,
+        grid.height,
+        cache.n_lights(),
+        plan.n_input(),
+        mask.as_deref(),
+    )
+    .with_context(blame)?;
+    let job = job_fingerprint(&cache, &plan, mask.as_deref())?;
+    let tiles_dir = config.output.join(TILES_DIR);
+    let my_tiles = match config.shard {
+        Some(s) => shard_tiles(grid.n_tiles(), s.k, s.n),
+        None => (0..grid.n_tiles()).collect(),
+    };
+    if config.shard.is_some() {
+        // The manifest says "complete": an earlier one goes until this shard is.
+        let m = config.output.join(MANIFEST);
+        if m.exists() {
+            std::fs::remove_file(&m).with_context(|| format!("{}: cannot remove", m.display()))?;
+        }
+    }
+    let t_est = Instant::now();
+    let counts = run_plan(
+        &plan,
+        &cache,
+        mask.as_deref(),
+        job,
+        &my_tiles,
+        &tiles_dir,
+        ctl,
+    )?;
+    let estimate_s = t_est.elapsed().as_secs_f64();
+    let cache_path = cache.path().to_path_buf();
+    drop(cache);
+
+    let (decode, method) = (&config.decode, &config.method);
+    let (parameters, lights) = match &plan {
+        Plan::Symmetry(rig, params) => (
+            MethodParameters::Symmetry(SymmetryParameters {
+                theta_d_max_deg: rig.theta_d_max_deg,
+                estimator: *params,
+                min_domain_used: Estimator::new(rig, *params).min_domain(),
+                linear_8bit: decode.linear_8bit,
+                saturation: decode.saturation,
+            }),
+            LightCounts {
+                input: rig.n_input,
+                used: rig.n_used(),
+                dropped: rig.n_dropped(),
+            },
+        ),
+        Plan::Baseline(b) => (
+            MethodParameters::Baseline(BaselineParameters {
+                baseline: *b.params(),
+                linear_8bit: decode.linear_8bit,
+                saturation: decode.saturation,
+            }),
+            LightCounts {
+                input: b.unit_lights().len(),
+                used: b.unit_lights().len(),
+                dropped: 0,
+            },
+        ),
+    };
+    let mut report = Report {
+        version: env!("CARGO_PKG_VERSION"),
+        input: config.input.clone(),
+        mask: mask_path,
+        method: method.name(),
+        parameters,
+        lights,
+        width: grid.width,
+        height: grid.height,
+        pixels: PixelCounts::default(),
+        sources: Sources(Vec::new()),
+        evals_per_pixel: 0.0,
+        tiles: TileReport {
+            size: grid.tile,
+            count: grid.n_tiles(),
+            shard: config.shard.map(|s| s.to_string()),
+            this_run: my_tiles.len(),
+            computed: counts.computed,
+            reused: counts.reused,
+        },
+        cache: CacheReport {
+            info: cache_info,
+            kept: !config.cache.remove_after,
+        },
+        timings: Timings {
+            load_s,
+            rig_s,
+            estimate_s,
+            write_s: 0.0,
+            total_s: 0.0,
+            peak_rss_bytes: None,
+        },
+    };
+
+    if let Some(shard) = config.shard {
+        // Shard: the tile results stay; a manifest says they are complete. Its report counts
+        // the shard's pixels.
+        let mut pixels = PixelCounts::default();
+        let mut evals = 0u64;
+        let mut source = Vec::new();
+        for &t in &my_tiles {
+            let path = tile_path(&tiles_dir, t);
+            for r in symframe_io::read_tile_result(&path, job, t, grid.tile_pixels(t))? {
+                pixels.add(r.status, r.has_tangent());
+                evals += r.evals as u64;
+                source.push(r.source as u8);
+            }
+        }
+        report.pixels = pixels;
+        report.sources = Sources::of(&source);
+        report.evals_per_pixel = evals as f64 / pixels.estimated.max(1) as f64;
+        report.timings.total_s = t0.elapsed().as_secs_f64();
+        report.timings.peak_rss_bytes = peak_rss_bytes();
+        let manifest = ShardManifest {
+            format: MANIFEST_FORMAT.into(),
+            version: MANIFEST_VERSION,
+            job: format!("{job:016x}"),
+            shard: shard.k,
+            of: shard.n,
+            width: grid.width,
+            height: grid.height,
+            tile_size: grid.tile,
+            n_tiles: grid.n_tiles(),
+            tiles: my_tiles,
+            report: serde_json::to_value(&report)?,
+        };
+        write_manifest(&config.output, &manifest)?;
+        if config.cache.remove_after {
+            remove_cache(&cache_path, &cache_dir)?;
+        }
+        return Ok(EstimateOutcome::Shard(Box::new(report)));
+    }
+
+    let maps = assemble(&grid, job, |t| tile_path(&tiles_dir, t))?;
+    report.pixels = maps.counts;
+    report.sources = Sources::of(&maps.source);
+    report.evals_per_pixel = maps.evals as f64 / maps.counts.estimated.max(1) as f64;
+    write_estimate_outputs(&config.output, &maps, |write_s| {
+        report.timings.write_s = write_s;
+        report.timings.total_s = t0.elapsed().as_secs_f64();
+        report.timings.peak_rss_bytes = peak_rss_bytes();
+        Ok(serde_json::to_string_pretty(&report)?)
+    })?;
+    std::fs::remove_dir_all(&tiles_dir)
+        .with_context(|| format!("{}: cannot remove", tiles_dir.display()))?;
+    if config.cache.remove_after {
+        remove_cache(&cache_path, &cache_dir)?;
+    }
+    Ok(EstimateOutcome::Maps(Box::new(Done { maps, report })))
+}
+
+/// Assembles full maps from the result files of every tile (`path_of(t)` gives tile `t`'s file).
+pub(crate) fn assemble(
+    grid: &TileGrid,
+    job: u64,
+    path_of: impl Fn(usize) -> PathBuf + Sync,
+) -> Result<EstimateMaps> {
+    let mut maps = EstimateMaps::empty(grid.width, grid.height);
+    read_tiles(grid, job, path_of, |p, r: PixelRecord| maps.put(p, &r))?;
+    Ok(maps)
+}
+
+/// Writes the maps (`.npy`, `.exr`), pictures, the source map and `report.json` (the text
+/// `report` returns, given the seconds spent writing the rest) into a staging folder, then
+/// moves them into `out` together.
+pub fn write_estimate_outputs(
+    out: &Path,
+    maps: &EstimateMaps,
+    report: impl FnOnce(f64) -> Result<String>,
+) -> Result<()> {
+    let t_write = Instant::now();
+    let (w, h) = (maps.width, maps.height);
+    let staging = Staging::new(out)?;
+    symframe_io::write_npy_f32(&staging.path("normals.npy"), &[h, w, 3], &maps.normals)?;
+    symframe_io::write_npy_f32(&staging.path("tangents.npy"), &[h, w, 3], &maps.tangents)?;
+    symframe_io::write_npy_f32(&staging.path("confidence.npy"), &[h, w], &maps.confidence)?;
+    symframe_io::write_npy_f32(&staging.path("anisotropy.npy"), &[h, w], &maps.anisotropy)?;
+    symframe_io::write_npy_u8(&staging.path("source.npy"), &[h, w], &maps.source)?;
+    symframe_io::write_exr_map(&staging.path("normals.exr"), w, h, 3, &maps.normals)?;
+    symframe_io::write_exr_map(&staging.path("tangents.exr"), w, h, 3, &maps.tangents)?;
+    let pictures = [
+        ("normals.png", symframe_io::normal_map_rgb8(&maps.normals)),
+        (
+            "tangents.png",
+            symframe_io::tangent_map_rgb8(&maps.tangents),
+        ),
+        (
+            "confidence.png",
+            symframe_io::gray_map_rgb8(&maps.confidence, 0.0, 1.0),
+        ),
+        ("source.png", symframe_io::source_map_rgb8(&maps.source)),
+    ];
+    for (name, rgb) in pictures {
+        symframe_io::write_png_rgb8(&staging.path(name), w, h, &rgb)?;
+    }
+    let json = report(t_write.elapsed().as_secs_f64())?;
+    std::fs::write(staging.path("report.json"), json + "\n").context("cannot write report.json")?;
+    staging.commit()
+}

@@ -1,0 +1,474 @@
+//! The fit job: a capture and its estimated frames in, per-pixel anisotropic Ward parameters
+//! out (paper Section 5.1), in a folder that [`crate::relight`] reads on its own. The samples
+//! come from the tile cache tile by tile, as in [`crate::estimate`]: memory stays bounded, and
+//! an interrupted fit resumes.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+use symframe::fit::{
+    holdout_lights, FitMaps, FitMethod, FitParams, FitSummary, HoldoutError, PixelFit, PixelOutcome,
+};
+use symframe_io::fingerprint::Fingerprint;
+use symframe_io::{CacheOptions, Dataset, DecodeOptions};
+
+use crate::estimate::{
+    cache_dir, fingerprint_lights, fingerprint_mask, open_cache, read_mask, remove_cache,
+    CacheConfig, CacheReport, CACHE_DIR, TILES_DIR,
+};
+use crate::outdir::Staging;
+use crate::tiles::{read_tiles, run_tiles, tile_path, TileCounts, TileRecord};
+use crate::{Control, Interrupted};
+
+/// Everything a fit job needs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitConfig {
+    /// The capture, as for [`crate::estimate`].
+    pub input: PathBuf,
+    /// Output folder of an estimate of the same capture (`normals.npy`, `tangents.npy`).
+    pub frames: PathBuf,
+    /// Output folder (created; same-named files in it are replaced).
+    pub output: PathBuf,
+    /// Lights left out of the fit (evenly spaced in input order) to judge it on; they replace
+    /// `params.holdout`.
+    pub holdout: usize,
+    /// The fit's parameters.
+    pub params: FitParams,
+    /// Mask image (`None`: the dataset's `mask.png`, if any).
+    pub mask: Option<PathBuf>,
+    /// How images are decoded.
+    pub decode: DecodeOptions,
+    /// The tile cache. Without a folder, the estimate's (`FRAMES/.symframe-cache`) is used
+    /// when it exists, in the estimate's tile size (from its `report.json`), so a fit after an
+    /// estimate decodes nothing; else `OUTPUT/.symframe-cache`.
+    pub cache: CacheConfig,
+}
+
+impl FitConfig {
+    /// Every default: no held-out lights, the default [`FitParams`] and cache.
+    pub fn new(
+        input: impl Into<PathBuf>,
+        frames: impl Into<PathBuf>,
+        output: impl Into<PathBuf>,
+    ) -> Self {
+        Self {
+            input: input.into(),
+            frames: frames.into(),
+            output: output.into(),
+            holdout: 0,
+            params: FitParams::default(),
+            mask: None,
+            decode: DecodeOptions::default(),
+            cache: CacheConfig::default(),
+        }
+    }
+
+    /// The cache folder and options in force.
+    pub fn cache_in_force(&self) -> (PathBuf, CacheOptions) {
+        let estimate_cache = self.frames.join(CACHE_DIR);
+        if self.cache.dir.is_none() && estimate_cache.is_dir() {
+            let tile = std::fs::read_to_string(self.frames.join("report.json"))
+                .ok()
+                .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+                .and_then(|r| r.pointer("/tiles/size")?.as_u64());
+            let options = CacheOptions {
+                tile: tile.map_or(self.cache.options.tile, |t| t as usize),
+                ..self.cache.options
+            };
+            return (estimate_cache, options);
+        }
+        (cache_dir(&self.cache, &self.output), self.cache.options)
+    }
+}
+
+/// What `fit.json` records about a run.
+#[derive(Debug, Clone, Serialize)]
+pub struct FitReport {
+    /// symframe version.
+    pub version: &'static str,
+    /// The input as given.
+    pub input: PathBuf,
+    /// The frames folder as given.
+    pub frames: PathBuf,
+    /// The mask used, if any.
+    pub mask: Option<PathBuf>,
+    /// The reflectance model fitted.
+    pub model: &'static str,
+    /// Fit parameters, including the held-out light indices.
+    pub parameters: FitParams,
+    /// Light counts.
+    pub lights: FitLights,
+    /// Image size.
+    pub width: usize,
+    /// Image size.
+    pub height: usize,
+    /// Pixel counts and error figures (RMS of the radiance over channels; PSNR in dB).
+    pub fit: FitSummary,
+    /// Tiles computed by this run and reused from an interrupted one.
+    pub tiles: TileCounts,
+    /// The on-disk tile cache of the decoded images.
+    pub cache: CacheReport,
+    /// Wall-clock seconds per stage.
+    pub timings: FitTimings,
+}
+
+/// Light counts of a fit.
+#[derive(Debug, Clone, Serialize)]
+pub struct FitLights {
+    /// Lights in the input.
+    pub input: usize,
+    /// Lights the fit used.
+    pub fitted: usize,
+    /// Lights held out to judge the fit.
+    pub held_out: usize,
+}
+
+/// Seconds per stage.
+#[derive(Debug, Clone, Serialize)]
+pub struct FitTimings {
+    /// Decoding the images into the tile cache, or opening it.
+    pub load_s: f64,
+    /// Fitting.
+    pub fit_s: f64,
+    /// Writing the outputs.
+    pub write_s: f64,
+    /// Everything.
+    pub total_s: f64,
+}
+
+/// What a fit job produced: the maps and the report written.
+#[derive(Debug, Clone)]
+pub struct FitOutcome {
+    /// The fitted maps.
+    pub maps: FitMaps,
+    /// The report.
+    pub report: FitReport,
+}
+
+/// Reads an `H x W x 3` map of the frames folder and checks it against the images' size.
+fn read_frame_map(path: &Path, width: usize, height: usize) -> Result<Vec<f32>> {
+    let (shape, data) = symframe_io::read_npy_f32(path)?;
+    if shape != [height, width, 3] {
+        bail!(
+            "{}: shape {shape:?} does not match the images ({height} x {width} x 3 expected)",
+            path.display()
+        );
+    }
+    Ok(data)
+}
+
+/// Runs a fit job. On an error (not an interruption) an output folder this job created is
+/// removed again.
+pub fn fit(config: &FitConfig, ctl: &Control) -> Result<FitOutcome> {
+    for name in ["normals.npy", "tangents.npy"] {
+        let p = config.frames.join(name);
+        if !p.is_file() {
+            bail!(
+                "{}: missing (the frames folder must be an output folder of symframe estimate)",
+                p.display()
+            );
+        }
+    }
+    let created = !config.output.exists();
+    let result = run(config, ctl);
+    if let Err(e) = &result {
+        if created && !e.is::<Interrupted>() {
+            let _ = std::fs::remove_dir_all(&config.output);
+        }
+    }
+    result
+}
+
+fn run(config: &FitConfig, ctl: &Control) -> Result<FitOutcome> {
+    let t0 = Instant::now();
+    let ds: Dataset = symframe_io::open_dataset(&config.input)?;
+    let params = FitParams {
+        holdout: holdout_lights(ds.lights.len(), config.holdout)
+            .with_context(|| format!("holding out {} lights", config.holdout))?,
+        ..config.params.clone()
+    };
+    let (cache_dir, options) = config.cache_in_force();
+    let (cache, cache_info) = open_cache(&ds, &config.decode, &cache_dir, options, ctl)?;
+    let load_s = t0.elapsed().as_secs_f64();
+    let grid = *cache.grid();
+    let (w, h) = (grid.width, grid.height);
+    let normals = read_frame_map(&config.frames.join("normals.npy"), w, h)?;
+    let tangents = read_frame_map(&config.frames.join("tangents.npy"), w, h)?;
+    let (mask_path, mask) = read_mask(&config.mask, &ds, &grid)?;
+    symframe::estimate::check_inputs(w, h, cache.n_lights(), ds.lights.len(), mask.as_deref())
+        .with_context(|| ds.source.display().to_string())?;
+    let method = FitMethod::new(&ds.lights, &params, &normals, &tangents, w * h)
+        .with_context(|| ds.source.display().to_string())?;
+
+    let mut f = Fingerprint::new();
+    f.str("symframe fit")
+        .str(env!("CARGO_PKG_VERSION"))
+        .u64(FIT_TILE_VERSION as u64)
+        .u64(cache.fingerprint())
+        .u64(w as u64)
+        .u64(h as u64)
+        .u64(grid.tile as u64)
+        .str(&serde_json::to_string(&params)?);
+    fingerprint_lights(&mut f, &ds.lights);
+    for v in normals.iter().chain(&tangents) {
+        f.u64(v.to_bits() as u64);
+    }
+    fingerprint_mask(&mut f, mask.as_deref());
+    let job = f.finish();
+
+    let t_fit = Instant::now();
+    let tiles_dir = config.output.join(TILES_DIR);
+    let all: Vec<usize> = (0..grid.n_tiles()).collect();
+    let counts = run_tiles(&cache, &method, mask.as_deref(), job, &all, &tiles_dir, ctl)?;
+    let cache_path = cache.path().to_path_buf();
+    drop(cache);
+    let mut outcomes: Vec<Option<PixelOutcome>> = vec![None; w * h];
+    read_tiles(
+        &grid,
+        job,
+        |t| tile_path(&tiles_dir, t),
+        |p, r: Option<PixelOutcome>| outcomes[p] = r,
+    )?;
+    let maps = FitMaps::from_outcomes(w, h, &normals, &tangents, outcomes);
+    let fit_s = t_fit.elapsed().as_secs_f64();
+
+    let mut report = FitReport {
+        version: env!("CARGO_PKG_VERSION"),
+        input: config.input.clone(),
+        frames: config.frames.clone(),
+        mask: mask_path,
+        model: "anisotropic Ward (Ward 1992, normalised form), frame x = t, y = n x t, z = n",
+        lights: FitLights {
+            input: ds.lights.len(),
+            fitted: ds.lights.len() - params.holdout.len(),
+            held_out: params.holdout.len(),
+        },
+        parameters: params,
+        width: w,
+        height: h,
+        fit: maps.summary,
+        tiles: counts,
+        cache: CacheReport {
+            info: cache_info,
+            kept: !config.cache.remove_after,
+        },
+        timings: FitTimings {
+            load_s,
+            fit_s,
+            write_s: 0.0,
+            total_s: 0.0,
+        },
+    };
+    write_outputs(&config.output, &maps, &mut report, t0)?;
+    std::fs::remove_dir_all(&tiles_dir)
+        .with_context(|| format!("{}: cannot remove", tiles_dir.display()))?;
+    if config.cache.remove_after {
+        remove_cache(&cache_path, &cache_dir)?;
+    }
+    Ok(FitOutcome { maps, report })
+}
+
+/// Writes every output file into a staging folder, then moves them into `out` together.
+fn write_outputs(out: &Path, maps: &FitMaps, report: &mut FitReport, t0: Instant) -> Result<()> {
+    let t_write = Instant::now();
+    let m = &maps.ward;
+    let (w, h) = (m.width, m.height);
+    let staging = Staging::new(out)?;
+    let maps3: [(&str, &[f32]); 4] = [
+        ("kd", &m.kd),
+        ("ks", &m.ks),
+        ("normals", &m.normals),
+        ("tangents", &m.tangents),
+    ];
+    for (name, data) in maps3 {
+        symframe_io::write_npy_f32(&staging.path(&format!("{name}.npy")), &[h, w, 3], data)?;
+        symframe_io::write_exr_map(&staging.path(&format!("{name}.exr")), w, h, 3, data)?;
+    }
+    let maps1: [(&str, &[f32]); 4] = [
+        ("alpha_t", &m.alpha_t),
+        ("alpha_b", &m.alpha_b),
+        ("residual", &maps.residual),
+        ("holdout_residual", &maps.holdout_residual),
+    ];
+    for (name, data) in maps1 {
+        if name == "holdout_residual" && report.parameters.holdout.is_empty() {
+            continue;
+        }
+        symframe_io::write_npy_f32(&staging.path(&format!("{name}.npy")), &[h, w], data)?;
+        symframe_io::write_exr_map(&staging.path(&format!("{name}.exr")), w, h, 1, data)?;
+    }
+    // Albedo pictures: clamped and sRGB-encoded, black where nothing was fitted.
+    symframe_io::write_png8_rgb(&staging.path("kd.png"), w, h, &m.kd, true)?;
+    symframe_io::write_png8_rgb(&staging.path("ks.png"), w, h, &m.ks, true)?;
+    report.timings.write_s = t_write.elapsed().as_secs_f64();
+    report.timings.total_s = t0.elapsed().as_secs_f64();
+    let json = serde_json::to_string_pretty(report)?;
+    std::fs::write(staging.path("fit.json"), json + "\n").context("cannot write fit.json")?;
+    staging.commit()
+}
+
+/// Per-tile fit results: a 40-byte header (magic `SYMFFITR`, format version, the job's
+/// fingerprint, the tile index, the pixel count), then [`FIT_RECORD`] bytes per pixel
+/// (little-endian): outcome (1 byte: 0 masked, 1 no frame, 2 too few samples, 3 fitted),
+/// isotropic (1 byte), 6 padding, `kd` and `ks` (6 x f64), `alpha_t`, `alpha_b`, training SSE
+/// (f64), training samples (u64), iterations (u32, 4 padding), held-out SSE (f64), held-out
+/// samples (u64), held-out peak (f64). Doubles, so the summary sums are those of an in-memory
+/// fit bit for bit.
+const FIT_MAGIC: &[u8; 8] = b"SYMFFITR";
+/// Format version of fit tile files.
+const FIT_TILE_VERSION: u32 = 1;
+const FIT_HEADER: usize = 40;
+const FIT_RECORD: usize = 120;
+
+fn fit_header(job: u64, t: usize, n: usize) -> [u8; FIT_HEADER] {
+    let mut b = [0u8; FIT_HEADER];
+    b[..8].copy_from_slice(FIT_MAGIC);
+    b[8..12].copy_from_slice(&FIT_TILE_VERSION.to_le_bytes());
+    b[16..24].copy_from_slice(&job.to_le_bytes());
+    b[24..32].copy_from_slice(&(t as u64).to_le_bytes());
+    b[32..40].copy_from_slice(&(n as u64).to_le_bytes());
+    b
+}
+
+fn encode(r: &Option<PixelOutcome>, b: &mut Vec<u8>) {
+    let start = b.len();
+    let (tag, fitted) = match r {
+        None => (0u8, None),
+        Some(PixelOutcome::NoFrame) => (1, None),
+        Some(PixelOutcome::TooFewSamples) => (2, None),
+        Some(PixelOutcome::Fitted(f, h)) => (3, Some((f, h))),
+    };
+    b.extend_from_slice(&[tag, fitted.is_some_and(|(f, _)| f.isotropic) as u8]);
+    b.resize(start + 8, 0);
+    if let Some((f, h)) = fitted {
+        for v in
+            f.kd.iter()
+                .chain(&f.ks)
+                .chain(&[f.alpha_t, f.alpha_b, f.sse])
+        {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        b.extend_from_slice(&(f.samples as u64).to_le_bytes());
+        b.extend_from_slice(&f.iterations.to_le_bytes());
+        b.extend_from_slice(&[0; 4]);
+        b.extend_from_slice(&h.sse.to_le_bytes());
+        b.extend_from_slice(&(h.samples as u64).to_le_bytes());
+        b.extend_from_slice(&h.peak.to_le_bytes());
+    }
+    b.resize(start + FIT_RECORD, 0);
+}
+
+fn decode(r: &[u8]) -> Option<Option<PixelOutcome>> {
+    let f64_at = |o: usize| f64::from_le_bytes(r[o..o + 8].try_into().unwrap_or_default());
+    let u64_at = |o: usize| u64::from_le_bytes(r[o..o + 8].try_into().unwrap_or_default());
+    Some(match r[0] {
+        0 => None,
+        1 => Some(PixelOutcome::NoFrame),
+        2 => Some(PixelOutcome::TooFewSamples),
+        3 => {
+            let fit = PixelFit {
+                kd: [f64_at(8), f64_at(16), f64_at(24)],
+                ks: [f64_at(32), f64_at(40), f64_at(48)],
+                alpha_t: f64_at(56),
+                alpha_b: f64_at(64),
+                isotropic: r[1] != 0,
+                sse: f64_at(72),
+                samples: u64_at(80) as usize,
+                iterations: u32::from_le_bytes(r[88..92].try_into().unwrap_or_default()),
+            };
+            let hold = HoldoutError {
+                sse: f64_at(96),
+                samples: u64_at(104) as usize,
+                peak: f64_at(112),
+            };
+            Some(PixelOutcome::Fitted(fit, hold))
+        }
+        _ => return None,
+    })
+}
+
+impl TileRecord for Option<PixelOutcome> {
+    fn write(path: &Path, job: u64, t: usize, records: &[Self]) -> symframe_io::Result<()> {
+        let mut b = Vec::with_capacity(FIT_HEADER + FIT_RECORD * records.len());
+        b.extend_from_slice(&fit_header(job, t, records.len()));
+        for r in records {
+            encode(r, &mut b);
+        }
+        symframe_io::write_bytes(path, &b)
+    }
+
+    fn done(path: &Path, job: u64, t: usize, n: usize) -> bool {
+        use std::io::Read;
+        let Ok(mut f) = std::fs::File::open(path) else {
+            return false;
+        };
+        let mut b = [0u8; FIT_HEADER];
+        f.metadata()
+            .is_ok_and(|m| m.len() == (FIT_HEADER + FIT_RECORD * n) as u64)
+            && f.read_exact(&mut b).is_ok()
+            && b == fit_header(job, t, n)
+    }
+
+    fn read(path: &Path, job: u64, t: usize, n: usize) -> symframe_io::Result<Vec<Self>> {
+        let invalid = |msg: String| symframe_io::Error::Invalid {
+            path: path.to_path_buf(),
+            msg,
+        };
+        let b = std::fs::read(path).map_err(|source| symframe_io::Error::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        if b.len() != FIT_HEADER + FIT_RECORD * n || b[..FIT_HEADER] != fit_header(job, t, n) {
+            return Err(invalid(format!(
+                "not the fit result of tile {t} ({n} pixels) of this job"
+            )));
+        }
+        b[FIT_HEADER..]
+            .chunks_exact(FIT_RECORD)
+            .map(|r| decode(r).ok_or_else(|| invalid("bad fit record".into())))
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fit_records_round_trip_bit_for_bit() {
+        let d = tempfile::tempdir().unwrap();
+        let fit = PixelFit {
+            kd: [0.1, 0.2, 0.3],
+            ks: [1.0 / 3.0, 2.5, f64::MIN_POSITIVE],
+            alpha_t: 0.07,
+            alpha_b: 0.5,
+            isotropic: true,
+            samples: 321,
+            sse: 1e-9,
+            iterations: 17,
+        };
+        let hold = HoldoutError {
+            sse: 0.25,
+            samples: 12,
+            peak: 3.5,
+        };
+        let recs = vec![
+            None,
+            Some(PixelOutcome::NoFrame),
+            Some(PixelOutcome::TooFewSamples),
+            Some(PixelOutcome::Fitted(fit, hold)),
+        ];
+        let p = tile_path(d.path(), 3);
+        assert!(!<Option<PixelOutcome>>::done(&p, 5, 3, 4));
+        <Option<PixelOutcome>>::write(&p, 5, 3, &recs).unwrap();
+        assert!(<Option<PixelOutcome>>::done(&p, 5, 3, 4));
+        assert!(!<Option<PixelOutcome>>::done(&p, 6, 3, 4));
+        assert_eq!(<Option<PixelOutcome>>::read(&p, 5, 3, 4).unwrap(), recs);
+        let e = <Option<PixelOutcome>>::read(&p, 6, 3, 4)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not the fit result of tile 3"), "{e}");
+    }
+}

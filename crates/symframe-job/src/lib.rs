@@ -1,0 +1,149 @@
+//! The symframe pipeline as a library: what `symframe estimate`, `merge`, `fit` and `relight`
+//! do, callable from any program.
+//!
+//! A job decodes the images of a capture once into an on-disk tile cache
+//! ([`symframe_io::TileCache`]), runs a per-pixel method ([`symframe::PixelMethod`]: the
+//! symmetry estimator, a baseline or the Ward fitter) tile by tile into result files (so memory
+//! stays bounded, an interrupted run resumes, and a shard does a share of the tiles), then
+//! assembles the tiles into maps and writes them with a JSON report, all at once into the
+//! output folder. The caller owns interruption (a stop flag, polled between images and tiles)
+//! and progress display (a callback).
+//!
+//! - [`estimate`] with an [`EstimateConfig`]: normals, tangents, confidence, anisotropy and the
+//!   source map of a capture, or one shard's tiles; [`merge`] joins shards.
+//! - [`fit`] with a [`FitConfig`]: per-pixel anisotropic Ward parameters in estimated frames.
+//! - [`relight`] with a [`RelightConfig`]: the fitted maps rendered under new lights, edited.
+//!
+//! ```
+//! use symframe::brdf::ward::Ward;
+//! use symframe::render::{Scene, TangentField};
+//! use symframe::rig::uniform_cone_lights;
+//! use symframe_job::{estimate, Control, EstimateConfig, EstimateOutcome};
+//!
+//! # fn main() -> anyhow::Result<()> {
+//! // A small synthetic capture: a brushed-metal sphere under 200 lights, written as an .lp
+//! // dataset into a temporary folder.
+//! let dir = tempfile::tempdir()?;
+//! let scene = Scene::sphere(12, TangentField::Circular);
+//! let lights = uniform_cone_lights(200, 65.0);
+//! let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
+//! let images: Vec<Vec<f32>> = lights.iter().map(|&l| scene.render(&brdf, l)).collect();
+//! let lp = symframe_io::write_lp_dataset(
+//!     &dir.path().join("capture"), &lights, &images, 12, 12,
+//!     symframe_io::ImageFormat::Exr, None, None, Some(&scene.mask),
+//! )?;
+//!
+//! // Estimate: the maps come back and are written to `out` with report.json.
+//! let out = dir.path().join("out");
+//! let config = EstimateConfig::new(&lp, &out);
+//! let EstimateOutcome::Maps(done) = estimate(&config, &Control::default())? else {
+//!     unreachable!("no shard was asked for");
+//! };
+//! assert!(done.maps.counts.estimated > 50);
+//! assert!(out.join("normals.npy").is_file() && out.join("source.npy").is_file());
+//! # Ok(())
+//! # }
+//! ```
+
+mod estimate;
+mod fit;
+mod merge;
+mod outdir;
+mod relight;
+mod tiles;
+
+use std::sync::atomic::AtomicBool;
+
+pub use estimate::{
+    estimate, write_estimate_outputs, BaselineParameters, CacheConfig, CacheReport, Done,
+    EstimateConfig, EstimateOutcome, LightCounts, MethodConfig, MethodParameters, Report, Shard,
+    SourceCount, Sources, SymmetryParameters, TileReport, Timings, CACHE_DIR, TILES_DIR,
+};
+pub use fit::{fit, FitConfig, FitLights, FitOutcome, FitReport, FitTimings};
+pub use merge::{merge, MergeOutcome, ShardManifest, MANIFEST};
+pub use outdir::Staging;
+pub use relight::{read_ward_maps, relight, RelightConfig, RelightOutcome};
+pub use tiles::{peak_rss_bytes, shard_tiles, TileCounts};
+
+/// The run stopped early on request; what was done (cache images, finished tiles) is kept,
+/// and the same call again resumes.
+#[derive(Debug)]
+pub struct Interrupted;
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("interrupted; run the same command again to resume")
+    }
+}
+
+impl std::error::Error for Interrupted {}
+
+/// A stage of a job, as reported to the progress callback.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stage {
+    /// Decoding images into the tile cache (steps: images).
+    Decoding,
+    /// Running the per-pixel method (steps: tiles, counting those reused).
+    Tiles,
+    /// Reading the shards' tiles (steps: tiles).
+    Merging,
+}
+
+impl Stage {
+    /// A short name for display.
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Decoding => "decoding",
+            Stage::Tiles => "tiles",
+            Stage::Merging => "merging",
+        }
+    }
+}
+
+/// Where a stage stands: `done` of `total` steps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Progress {
+    /// The stage.
+    pub stage: Stage,
+    /// Steps finished (calls may arrive from several threads, not in order).
+    pub done: u64,
+    /// Steps of the stage.
+    pub total: u64,
+}
+
+impl Progress {
+    fn new(stage: Stage, done: u64, total: u64) -> Self {
+        Self { stage, done, total }
+    }
+}
+
+/// How the caller steers a job: a stop flag and a progress callback.
+pub struct Control<'a> {
+    /// Once set (e.g. by a Ctrl-C handler), no new image or tile is started; the job returns
+    /// [`Interrupted`] and the same call later resumes.
+    pub stop: &'a AtomicBool,
+    /// Called as images are decoded and tiles finished (from worker threads).
+    pub progress: &'a (dyn Fn(Progress) + Sync),
+    /// Testing aid: behave as if stopped once this many tiles are finished.
+    pub stop_after_tiles: Option<usize>,
+}
+
+/// A flag that nothing sets.
+static NEVER: AtomicBool = AtomicBool::new(false);
+
+impl Default for Control<'_> {
+    /// Never stopped, no progress display.
+    fn default() -> Self {
+        Self {
+            stop: &NEVER,
+            progress: &|_| {},
+            stop_after_tiles: None,
+        }
+    }
+}
+
+impl Control<'_> {
+    fn report(&self, p: Progress) {
+        (self.progress)(p)
+    }
+}

@@ -1,0 +1,241 @@
+//! Shards: the manifest a finished shard writes, and the merge of the shards of one job into
+//! the full maps.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use serde::{Deserialize, Serialize};
+use symframe::EstimateMaps;
+use symframe_io::TileGrid;
+
+use crate::estimate::{assemble, write_estimate_outputs, Sources, TILES_DIR};
+use crate::tiles::{peak_rss_bytes, tile_path};
+use crate::{Control, Progress, Stage};
+
+/// A shard's manifest, written once all its tiles are done.
+pub const MANIFEST: &str = "shard.json";
+pub(crate) const MANIFEST_FORMAT: &str = "symframe-shard";
+pub(crate) const MANIFEST_VERSION: u32 = 1;
+
+/// What a merge produced.
+#[derive(Debug, Clone)]
+pub struct MergeOutcome {
+    /// The maps written.
+    pub maps: EstimateMaps,
+    /// How many shards were merged.
+    pub shards: usize,
+}
+
+/// A finished shard's manifest (`shard.json`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ShardManifest {
+    /// Always `symframe-shard`.
+    pub format: String,
+    /// Manifest format version.
+    pub version: u32,
+    /// The job's fingerprint (hex): shards of one job have the same.
+    pub job: String,
+    /// This shard's number, 1-based.
+    pub shard: usize,
+    /// Number of shards.
+    pub of: usize,
+    /// Image width.
+    pub width: usize,
+    /// Image height.
+    pub height: usize,
+    /// Tile side.
+    pub tile_size: usize,
+    /// Number of tiles of the whole image.
+    pub n_tiles: usize,
+    /// The tiles this shard holds.
+    pub tiles: Vec<usize>,
+    /// The shard's own report (what `report.json` of a full run would say, for its tiles).
+    pub report: serde_json::Value,
+}
+
+impl ShardManifest {
+    /// The job fingerprint as a number.
+    fn job_u64(&self, path: &Path) -> Result<u64> {
+        u64::from_str_radix(&self.job, 16)
+            .with_context(|| format!("{}: bad job fingerprint '{}'", path.display(), self.job))
+    }
+}
+
+/// Writes a shard manifest atomically.
+pub(crate) fn write_manifest(out: &Path, m: &ShardManifest) -> Result<()> {
+    let path = out.join(MANIFEST);
+    let tmp = out.join(format!(".{MANIFEST}.{}.tmp", std::process::id()));
+    fs::write(&tmp, serde_json::to_string_pretty(m)? + "\n")
+        .with_context(|| format!("{}: cannot write", tmp.display()))?;
+    fs::rename(&tmp, &path).with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// A short list of tile numbers: the first few and how many more.
+fn list_tiles(tiles: &[usize]) -> String {
+    let shown: Vec<String> = tiles.iter().take(12).map(|t| t.to_string()).collect();
+    if tiles.len() > shown.len() {
+        format!(
+            "{} and {} more",
+            shown.join(", "),
+            tiles.len() - shown.len()
+        )
+    } else {
+        shown.join(", ")
+    }
+}
+
+/// `symframe merge`: checks the shards belong to one job and cover every tile, assembles the
+/// maps and writes the usual outputs.
+pub fn merge(shards: &[PathBuf], output: &Path, ctl: &Control) -> Result<MergeOutcome> {
+    let t0 = Instant::now();
+    if shards.is_empty() {
+        bail!("no shard folders given");
+    }
+    let mut manifests: Vec<(PathBuf, ShardManifest)> = Vec::new();
+    for dir in shards {
+        let path = dir.join(MANIFEST);
+        if !dir.is_dir() {
+            bail!("{}: no such shard folder", dir.display());
+        }
+        let text = match fs::read_to_string(&path) {
+            Ok(t) => t,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
+                "{}: not a finished shard (no {MANIFEST}); run its `symframe estimate ... --tiles K/N` \
+                 command again to finish it",
+                dir.display()
+            ),
+            Err(e) => return Err(e).with_context(|| format!("{}: cannot read", path.display())),
+        };
+        let m: ShardManifest = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a shard manifest", path.display()))?;
+        if m.format != MANIFEST_FORMAT || m.version != MANIFEST_VERSION {
+            bail!(
+                "{}: not a shard manifest of this version (format {} {})",
+                path.display(),
+                m.format,
+                m.version
+            );
+        }
+        manifests.push((dir.clone(), m));
+    }
+    let (first_dir, first) = &manifests[0];
+    for (dir, m) in &manifests[1..] {
+        if (m.width, m.height, m.tile_size, m.of)
+            != (first.width, first.height, first.tile_size, first.of)
+        {
+            bail!(
+                "{}: shard {}/{} of {}x{} pixels in {}-pixel tiles does not belong with {} \
+                 (shard {}/{} of {}x{} in {}-pixel tiles)",
+                dir.display(),
+                m.shard,
+                m.of,
+                m.width,
+                m.height,
+                m.tile_size,
+                first_dir.display(),
+                first.shard,
+                first.of,
+                first.width,
+                first.height,
+                first.tile_size
+            );
+        }
+        if m.job != first.job {
+            bail!(
+                "{}: belongs to another job than {} (different inputs or parameters: job {} vs {})",
+                dir.display(),
+                first_dir.display(),
+                m.job,
+                first.job
+            );
+        }
+    }
+    let job = first.job_u64(&first_dir.join(MANIFEST))?;
+    let grid = TileGrid::new(first.width, first.height, first.tile_size);
+    if grid.n_tiles() != first.n_tiles {
+        bail!(
+            "{}: {} tiles recorded, {} expected",
+            first_dir.join(MANIFEST).display(),
+            first.n_tiles,
+            grid.n_tiles()
+        );
+    }
+    // Which shard folder holds each tile.
+    let mut owner: Vec<Option<usize>> = vec![None; grid.n_tiles()];
+    for (i, (dir, m)) in manifests.iter().enumerate() {
+        for &t in &m.tiles {
+            if t >= owner.len() {
+                bail!("{}: tile {t} does not exist", dir.join(MANIFEST).display());
+            }
+            owner[t].get_or_insert(i);
+        }
+    }
+    let missing: Vec<usize> = (0..owner.len()).filter(|&t| owner[t].is_none()).collect();
+    if !missing.is_empty() {
+        let mut absent: Vec<usize> = missing.iter().map(|t| t % first.of + 1).collect();
+        absent.sort_unstable();
+        absent.dedup();
+        let shards: Vec<String> = absent.iter().map(|k| format!("{k}/{}", first.of)).collect();
+        bail!(
+            "missing tiles {} of {}: shard{} {} not given",
+            list_tiles(&missing),
+            grid.n_tiles(),
+            if shards.len() > 1 { "s" } else { "" },
+            shards.join(", ")
+        );
+    }
+    // Every tile has an owner now (the missing ones were reported above).
+    let owner: Vec<usize> = owner.into_iter().flatten().collect();
+    let read = AtomicU64::new(0);
+    let total = grid.n_tiles() as u64;
+    let maps = assemble(&grid, job, |t| {
+        let n = read.fetch_add(1, Ordering::SeqCst) + 1;
+        ctl.report(Progress::new(Stage::Merging, n, total));
+        tile_path(&manifests[owner[t]].0.join(TILES_DIR), t)
+    })?;
+
+    // The report: the first shard's, with the whole image's counts and the shards' timings.
+    let mut report = first.report.clone();
+    let shard_timings: Vec<serde_json::Value> = manifests
+        .iter()
+        .map(|(dir, m)| {
+            serde_json::json!({
+                "folder": dir,
+                "shard": format!("{}/{}", m.shard, m.of),
+                "tiles": m.report.get("tiles").cloned().unwrap_or_default(),
+                "timings": m.report.get("timings").cloned().unwrap_or_default(),
+            })
+        })
+        .collect();
+    let estimate_s: f64 = manifests
+        .iter()
+        .filter_map(|(_, m)| m.report.pointer("/timings/estimate_s")?.as_f64())
+        .sum();
+    report["pixels"] = serde_json::to_value(maps.counts)?;
+    report["sources"] = serde_json::to_value(Sources::of(&maps.source))?;
+    report["evals_per_pixel"] =
+        serde_json::json!(maps.evals as f64 / maps.counts.estimated.max(1) as f64);
+    report["tiles"] = serde_json::json!({
+        "size": grid.tile,
+        "count": grid.n_tiles(),
+        "shards": first.of,
+    });
+    report["shards"] = serde_json::Value::Array(shard_timings);
+    write_estimate_outputs(output, &maps, |write_s| {
+        report["timings"] = serde_json::json!({
+            "estimate_s_all_shards": estimate_s,
+            "merge_s": t0.elapsed().as_secs_f64() - write_s,
+            "write_s": write_s,
+            "total_s": t0.elapsed().as_secs_f64(),
+            "peak_rss_bytes": peak_rss_bytes(),
+        });
+        Ok(serde_json::to_string_pretty(&report)?)
+    })?;
+    Ok(MergeOutcome {
+        maps,
+        shards: manifests.len(),
+    })
+}

@@ -1,0 +1,191 @@
+//! The relight job: the folder of [`crate::fit`] in, images under new lights out (linear EXR
+//! and a tone-mapped PNG per light), with optional appearance edits. The fitted maps are whole
+//! images (about 100 bytes per pixel), so they are read at once.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use glam::DVec3;
+use serde::Serialize;
+use symframe::relight::{tone_map, Edits, Relighter};
+use symframe::WardMaps;
+
+use crate::outdir::Staging;
+
+/// Everything a relight job needs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RelightConfig {
+    /// Output folder of [`crate::fit`].
+    pub fit_dir: PathBuf,
+    /// Output folder: `relit_NNN.exr` and `relit_NNN.png` per light.
+    pub output: PathBuf,
+    /// Light directions (camera frame, surface toward light; normalised here), one image each.
+    pub lights: Vec<DVec3>,
+    /// Factor on the diffuse albedo (>= 0).
+    pub diffuse_scale: f64,
+    /// Factor on the specular albedo (>= 0).
+    pub specular_scale: f64,
+    /// Factor on both roughnesses (> 0; below 1 = glossier).
+    pub roughness_scale: f64,
+    /// Rotation of the tangents about the normal, degrees (inside `region` if given); with
+    /// one, the edited tangent map is written too (`tangents_edited.png`).
+    pub rotate_tangents: Option<f64>,
+    /// Mask image limiting the tangent rotation to its non-zero pixels.
+    pub region: Option<PathBuf>,
+    /// Exposure of the PNG pictures in stops (the EXR files are not affected).
+    pub exposure: f64,
+}
+
+/// What a relight job wrote.
+#[derive(Debug, Clone)]
+pub struct RelightOutcome {
+    /// The PNG pictures, in light order.
+    pub pictures: Vec<PathBuf>,
+}
+
+/// What `relight.json` records about a run.
+#[derive(Debug, Serialize)]
+struct RelightReport<'a> {
+    version: &'static str,
+    fit_dir: &'a Path,
+    /// Unit light directions, one per image, in file order.
+    lights: Vec<[f64; 3]>,
+    /// Image file names (without extension), one per light.
+    images: Vec<String>,
+    diffuse_scale: f64,
+    specular_scale: f64,
+    roughness_scale: f64,
+    rotate_tangents_deg: Option<f64>,
+    region: Option<&'a Path>,
+    exposure_stops: f64,
+}
+
+/// Reads one map of the fit folder, which must have the shape `expect`.
+fn read_map(dir: &Path, name: &str, expect: &[usize]) -> Result<Vec<f32>> {
+    let path = dir.join(format!("{name}.npy"));
+    if !path.is_file() {
+        bail!(
+            "{}: missing (the folder must be an output folder of symframe fit)",
+            path.display()
+        );
+    }
+    let (shape, data) = symframe_io::read_npy_f32(&path)?;
+    if shape != expect {
+        bail!(
+            "{}: shape {shape:?} does not match kd.npy ({expect:?} expected)",
+            path.display()
+        );
+    }
+    Ok(data)
+}
+
+/// Reads the fitted maps of `dir`, checking that every map has kd.npy's size.
+pub fn read_ward_maps(dir: &Path) -> Result<WardMaps> {
+    let kd_path = dir.join("kd.npy");
+    if !kd_path.is_file() {
+        bail!(
+            "{}: missing (the folder must be an output folder of symframe fit)",
+            kd_path.display()
+        );
+    }
+    let (shape, kd) = symframe_io::read_npy_f32(&kd_path)?;
+    let [h, w, 3] = shape[..] else {
+        bail!(
+            "{}: shape {shape:?} is not an H x W x 3 map",
+            kd_path.display()
+        );
+    };
+    Ok(WardMaps {
+        width: w,
+        height: h,
+        ks: read_map(dir, "ks", &[h, w, 3])?,
+        alpha_t: read_map(dir, "alpha_t", &[h, w])?,
+        alpha_b: read_map(dir, "alpha_b", &[h, w])?,
+        normals: read_map(dir, "normals", &[h, w, 3])?,
+        tangents: read_map(dir, "tangents", &[h, w, 3])?,
+        kd,
+    })
+}
+
+impl RelightConfig {
+    /// No edits, exposure 0, no lights yet.
+    pub fn new(fit_dir: impl Into<PathBuf>, output: impl Into<PathBuf>) -> Self {
+        let e = Edits::default();
+        Self {
+            fit_dir: fit_dir.into(),
+            output: output.into(),
+            lights: Vec::new(),
+            diffuse_scale: e.diffuse_scale,
+            specular_scale: e.specular_scale,
+            roughness_scale: e.roughness_scale,
+            rotate_tangents: None,
+            region: None,
+            exposure: 0.0,
+        }
+    }
+}
+
+/// Runs a relight job: renders the fitted maps under every light, edited, into `output`.
+pub fn relight(config: &RelightConfig) -> Result<RelightOutcome> {
+    let maps = read_ward_maps(&config.fit_dir)?;
+    let (w, h) = (maps.width, maps.height);
+    let lights: Vec<DVec3> = config.lights.iter().map(|l| l.normalize()).collect();
+    let edits = Edits {
+        diffuse_scale: config.diffuse_scale,
+        specular_scale: config.specular_scale,
+        roughness_scale: config.roughness_scale,
+        tangent_rotation_deg: config.rotate_tangents.unwrap_or(0.0),
+        region: match &config.region {
+            Some(p) => Some(symframe_io::read_mask(p, w, h)?),
+            None => None,
+        },
+    };
+    let relighter =
+        Relighter::new(&maps, &edits).with_context(|| config.fit_dir.display().to_string())?;
+
+    let staging = Staging::new(&config.output)?;
+    let mut names = Vec::with_capacity(lights.len());
+    for (i, &l) in lights.iter().enumerate() {
+        let name = format!("relit_{i:03}");
+        let img = relighter.render(l);
+        symframe_io::write_exr_rgb(&staging.path(&format!("{name}.exr")), w, h, &img)?;
+        symframe_io::write_png8_rgb(
+            &staging.path(&format!("{name}.png")),
+            w,
+            h,
+            &tone_map(&img, config.exposure),
+            true,
+        )?;
+        names.push(name);
+    }
+    if config.rotate_tangents.is_some() {
+        symframe_io::write_png_rgb8(
+            &staging.path("tangents_edited.png"),
+            w,
+            h,
+            &symframe_io::tangent_map_rgb8(&relighter.tangents()),
+        )?;
+    }
+    let report = RelightReport {
+        version: env!("CARGO_PKG_VERSION"),
+        fit_dir: &config.fit_dir,
+        lights: lights.iter().map(|l| l.to_array()).collect(),
+        images: names.clone(),
+        diffuse_scale: edits.diffuse_scale,
+        specular_scale: edits.specular_scale,
+        roughness_scale: edits.roughness_scale,
+        rotate_tangents_deg: config.rotate_tangents,
+        region: config.region.as_deref(),
+        exposure_stops: config.exposure,
+    };
+    let json = serde_json::to_string_pretty(&report)?;
+    std::fs::write(staging.path("relight.json"), json + "\n")
+        .context("cannot write relight.json")?;
+    staging.commit()?;
+    Ok(RelightOutcome {
+        pictures: names
+            .iter()
+            .map(|n| config.output.join(format!("{n}.png")))
+            .collect(),
+    })
+}

@@ -1,0 +1,125 @@
+//! The job API on small rendered captures: the tiled fit equals the in-memory fit bit for bit,
+//! an interrupted fit resumes to the same maps, and an estimate's progress and stop flag work.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+use symframe::brdf::ward::Ward;
+use symframe::fit::{fit_stack, holdout_lights, FitParams};
+use symframe::render::{Scene, TangentField};
+use symframe::rig::uniform_cone_lights;
+use symframe_io::{DecodeOptions, ImageFormat};
+use symframe_job::{
+    estimate, fit, Control, EstimateConfig, EstimateOutcome, FitConfig, Interrupted, Stage,
+};
+
+/// A 20 x 20 brushed-metal sphere under 300 lights as an `.lp` dataset in `dir`.
+fn capture(dir: &Path) -> (Scene, PathBuf) {
+    let scene = Scene::sphere(20, TangentField::Circular);
+    let lights = uniform_cone_lights(300, 65.0);
+    let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
+    let images: Vec<Vec<f32>> = lights.iter().map(|&l| scene.render(&brdf, l)).collect();
+    let lp = symframe_io::write_lp_dataset(
+        dir,
+        &lights,
+        &images,
+        20,
+        20,
+        ImageFormat::Exr,
+        None,
+        None,
+        Some(&scene.mask),
+    )
+    .unwrap();
+    (scene, lp)
+}
+
+#[test]
+fn the_tiled_fit_equals_the_in_memory_fit_and_resumes_after_a_stop() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (scene, lp) = capture(&tmp.path().join("data"));
+    let frames = tmp.path().join("frames");
+    let mut est = EstimateConfig::new(&lp, &frames);
+    est.cache.options.tile = 8;
+    let EstimateOutcome::Maps(done) = estimate(&est, &Control::default()).unwrap() else {
+        panic!("a full run gives maps");
+    };
+
+    let mut config = FitConfig::new(&lp, &frames, tmp.path().join("fit"));
+    config.holdout = 6;
+    // Stopped after one tile: interrupted, the finished tile kept.
+    let stopped = Control {
+        stop_after_tiles: Some(1),
+        ..Control::default()
+    };
+    let e = fit(&config, &stopped).unwrap_err();
+    assert!(e.is::<Interrupted>(), "{e}");
+    let resumed = fit(&config, &Control::default()).unwrap();
+    // At least the one tile was kept (the other workers may have finished theirs too).
+    let tiles = resumed.report.tiles;
+    assert!(tiles.reused >= 1 && tiles.computed >= 1, "{tiles:?}");
+    assert_eq!(tiles.reused + tiles.computed, 9);
+    // The estimate's cache was read again, not rebuilt.
+    assert!(resumed.report.cache.info.hit);
+
+    let ds = symframe_io::open_dataset(&lp).unwrap();
+    let stack = symframe_io::load_stack(&ds, &DecodeOptions::default(), &|| {}).unwrap();
+    let params = FitParams {
+        holdout: holdout_lights(300, 6).unwrap(),
+        ..FitParams::default()
+    };
+    let maps = &done.maps;
+    let memory = fit_stack(
+        &stack,
+        &ds.lights,
+        &maps.normals,
+        &maps.tangents,
+        Some(&scene.mask),
+        &params,
+        &|_| {},
+    )
+    .unwrap();
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&resumed.maps.ward.kd), bits(&memory.ward.kd));
+    assert_eq!(bits(&resumed.maps.ward.alpha_t), bits(&memory.ward.alpha_t));
+    assert_eq!(bits(&resumed.maps.residual), bits(&memory.residual));
+    assert_eq!(resumed.maps.summary, memory.summary);
+    assert!(memory.summary.anisotropic > 100, "{:?}", memory.summary);
+}
+
+#[test]
+fn progress_is_reported_and_a_set_stop_flag_interrupts_before_any_work() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (_, lp) = capture(&tmp.path().join("data"));
+    let out = tmp.path().join("out");
+    let stop = AtomicBool::new(true);
+    let ctl = Control {
+        stop: &stop,
+        ..Control::default()
+    };
+    let e = estimate(&EstimateConfig::new(&lp, &out), &ctl).unwrap_err();
+    assert!(e.is::<Interrupted>(), "{e}");
+    assert!(!out.join("normals.npy").exists());
+
+    stop.store(false, Ordering::SeqCst);
+    let (images, tiles) = (AtomicU64::new(0), AtomicU64::new(0));
+    let progress = |p: symframe_job::Progress| {
+        let counter = match p.stage {
+            Stage::Decoding => &images,
+            Stage::Tiles => &tiles,
+            Stage::Merging => unreachable!("no merge here"),
+        };
+        counter.fetch_max(p.done, Ordering::SeqCst);
+        assert!(p.done <= p.total);
+    };
+    let ctl = Control {
+        stop: &stop,
+        progress: &progress,
+        stop_after_tiles: None,
+    };
+    estimate(&EstimateConfig::new(&lp, &out), &ctl).unwrap();
+    // The interrupted run decoded nothing; this one decoded every image and did the one tile.
+    assert_eq!(images.into_inner(), 300);
+    assert_eq!(tiles.into_inner(), 1);
+    assert!(out.join("normals.npy").is_file());
+}
