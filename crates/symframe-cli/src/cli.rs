@@ -62,6 +62,9 @@ pub enum ExperimentArg {
     Noise,
     /// Relighting from per-pixel Ward fits: held-out PSNR per model, side-by-side picture.
     Relight,
+    /// Every BRDF family over roughness and diffuse fraction, spheres and shadowed bumps, dense,
+    /// sparse and narrow rigs: the estimator against every baseline.
+    Materials,
     /// Every experiment, then the report `<output>.md` (e.g. docs/validation.md).
     All,
 }

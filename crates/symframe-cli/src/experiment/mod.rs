@@ -8,6 +8,7 @@
 mod fig10;
 mod fig3;
 mod fig4;
+pub mod materials;
 mod noise;
 pub mod plot;
 mod relight;
@@ -68,12 +69,13 @@ pub fn estimate_and_evaluate(
 }
 
 fn experiments(which: ExperimentArg) -> Vec<(&'static str, RunFn)> {
-    let all: [(&str, RunFn); 5] = [
+    let all: [(&str, RunFn); 6] = [
         ("fig3", fig3::run),
         ("fig4", fig4::run),
         ("fig10", fig10::run),
         ("noise", noise::run),
         ("relight", relight::run),
+        ("materials", materials::run),
     ];
     let name = match which {
         ExperimentArg::Fig3 => "fig3",
@@ -81,6 +83,7 @@ fn experiments(which: ExperimentArg) -> Vec<(&'static str, RunFn)> {
         ExperimentArg::Fig10 => "fig10",
         ExperimentArg::Noise => "noise",
         ExperimentArg::Relight => "relight",
+        ExperimentArg::Materials => "materials",
         ExperimentArg::All => return all.to_vec(),
     };
     all.into_iter().filter(|(n, _)| *n == name).collect()
