@@ -107,7 +107,8 @@ pub fn run(args: &EstimateArgs) -> Result<EstimateOutcome> {
     let config = config(args)?;
     let bars = progress::Bars::default();
     let show = |p| bars.update(p);
-    let outcome = symframe_job::estimate(&config, &crate::control(&show, args.stop_after_tiles))?;
+    let outcome = symframe_job::estimate(&config, &crate::control(&show, args.stop_after_tiles))
+        .map_err(flag_hint)?;
     drop(bars);
     if progress::interactive() {
         match &outcome {
@@ -138,6 +139,16 @@ pub fn run(args: &EstimateArgs) -> Result<EstimateOutcome> {
         }
     }
     Ok(outcome)
+}
+
+/// Names the flag that fixes an error, where one does.
+fn flag_hint(e: anyhow::Error) -> anyhow::Error {
+    match e.downcast_ref::<symframe::Error>() {
+        Some(symframe::Error::AllLightsOutsideCone { .. }) => {
+            anyhow::anyhow!("{e:#} (--theta-d-max sets the cone)")
+        }
+        _ => e,
+    }
 }
 
 /// Runs `symframe merge`.

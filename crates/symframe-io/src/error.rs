@@ -1,5 +1,7 @@
 //! The crate's error type: every variant names the file it is about, so a message alone tells
-//! the user what to fix.
+//! the user what to fix. Where an underlying error (I/O, a codec's) is the cause, it is the
+//! error's [`source`](std::error::Error::source), not part of its message: print the chain
+//! (as the `symframe` command does) to see both, each once.
 
 use std::path::PathBuf;
 
@@ -7,10 +9,17 @@ use std::path::PathBuf;
 ///
 /// Each variant carries the offending file's path (and the line for text-file parse errors) and
 /// formats as a single line.
+///
+/// ```
+/// use std::error::Error as _;
+/// let e = symframe_io::read_npy_f32("/no/such/map.npy".as_ref()).unwrap_err();
+/// assert_eq!(e.to_string(), "/no/such/map.npy: cannot read");
+/// assert!(e.source().is_some()); // the I/O error: not found
+/// ```
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// The file could not be opened or read (missing, permissions, I/O failure).
-    #[error("{}: cannot read: {source}", path.display())]
+    #[error("{}: cannot read", path.display())]
     Read {
         /// The file.
         path: PathBuf,
@@ -19,7 +28,7 @@ pub enum Error {
     },
 
     /// The file (or its temporary sibling) could not be created, written or renamed.
-    #[error("{}: cannot write: {source}", path.display())]
+    #[error("{}: cannot write", path.display())]
     Write {
         /// The file.
         path: PathBuf,
@@ -48,12 +57,12 @@ pub enum Error {
     },
 
     /// An image (or array) file is truncated or corrupt.
-    #[error("{}: cannot decode: {msg}", path.display())]
+    #[error("{}: cannot decode", path.display())]
     Decode {
         /// The file.
         path: PathBuf,
-        /// The decoder's complaint.
-        msg: String,
+        /// The decoder's error (or complaint).
+        source: BoxError,
     },
 
     /// A file uses a format or layout this crate does not read.
@@ -92,14 +101,17 @@ pub enum Error {
     Interrupted,
 
     /// An encoder failed while writing an output file.
-    #[error("{}: cannot encode: {msg}", path.display())]
+    #[error("{}: cannot encode", path.display())]
     Encode {
         /// The file.
         path: PathBuf,
-        /// The encoder's complaint.
-        msg: String,
+        /// The encoder's error.
+        source: BoxError,
     },
 }
+
+/// A codec's error, kept whole (with its own sources).
+pub type BoxError = Box<dyn std::error::Error + Send + Sync + 'static>;
 
 /// Result with this crate's [`Error`].
 pub type Result<T> = std::result::Result<T, Error>;
@@ -138,11 +150,11 @@ impl Error {
         }
     }
 
-    /// A decode (corrupt/truncated) error.
-    pub(crate) fn decode(path: impl Into<PathBuf>, msg: impl ToString) -> Self {
+    /// A decode (corrupt/truncated) error caused by `source` (a codec's error or a message).
+    pub(crate) fn decode(path: impl Into<PathBuf>, source: impl Into<BoxError>) -> Self {
         Error::Decode {
             path: path.into(),
-            msg: one_line(&msg.to_string()),
+            source: source.into(),
         }
     }
 
@@ -154,16 +166,11 @@ impl Error {
         }
     }
 
-    /// An encoder error.
-    pub(crate) fn encode(path: impl Into<PathBuf>, msg: impl ToString) -> Self {
+    /// An encoder error caused by `source`.
+    pub(crate) fn encode(path: impl Into<PathBuf>, source: impl Into<BoxError>) -> Self {
         Error::Encode {
             path: path.into(),
-            msg: one_line(&msg.to_string()),
+            source: source.into(),
         }
     }
-}
-
-/// Collapses a possibly multi-line library message onto one line.
-fn one_line(s: &str) -> String {
-    s.split_whitespace().collect::<Vec<_>>().join(" ")
 }

@@ -15,7 +15,7 @@ pub enum Error {
     /// Every light is outside the measured cone `theta_d < theta_d_max`.
     #[error(
         "all {n_lights} lights are outside the light cone (theta_d < {theta_d_max_deg} degrees, \
-         i.e. within {} degrees of the view); raise --theta-d-max or check the light file's frame",
+         i.e. within {} degrees of the view): widen the cone or check the light file's frame",
         2.0 * theta_d_max_deg
     )]
     AllLightsOutsideCone {

@@ -1165,13 +1165,7 @@ pub fn check_inputs(
         });
     }
     if let Some(m) = mask {
-        if m.len() != width * height {
-            return Err(Error::BadMask(format!(
-                "mask has {} pixels but the images have {}",
-                m.len(),
-                width * height
-            )));
-        }
+        crate::stack::check_mask_size(m, width, height, "mask")?;
         if !m.iter().any(|&v| v) {
             return Err(Error::BadMask("mask is empty: no pixel inside".into()));
         }

@@ -14,7 +14,9 @@ use rayon::prelude::*;
 use crate::brdf::ward::Ward;
 use crate::brdf::Brdf;
 use crate::error::{Error, Result};
+use crate::eval::vec_at;
 use crate::fit::WardMaps;
+use crate::stack::check_mask_size;
 use crate::symmetry::tangent_basis;
 
 /// Appearance edits applied when relighting.
@@ -70,15 +72,7 @@ impl Edits {
             ));
         }
         if let Some(r) = &self.region {
-            if r.len() != width * height {
-                return Err(Error::BadMask(format!(
-                    "region has {} pixels but the maps have {}x{} = {}",
-                    r.len(),
-                    width,
-                    height,
-                    width * height
-                )));
-            }
+            check_mask_size(r, width, height, "region")?;
         }
         Ok(())
     }
@@ -115,14 +109,6 @@ pub struct Relighter {
     pixels: Vec<Option<PixelModel>>,
 }
 
-fn vec3(v: &[f32], p: usize) -> Option<DVec3> {
-    let s = &v[p * 3..p * 3 + 3];
-    s.iter()
-        .all(|x| x.is_finite())
-        .then(|| DVec3::new(s[0] as f64, s[1] as f64, s[2] as f64))
-        .and_then(|d| d.try_normalize())
-}
-
 fn rgb(v: &[f32], p: usize) -> Option<[f64; 3]> {
     let s = &v[p * 3..p * 3 + 3];
     s.iter()
@@ -140,13 +126,13 @@ impl Relighter {
         let (sin, cos) = edits.tangent_rotation_deg.to_radians().sin_cos();
         let pixels = (0..maps.width * maps.height)
             .map(|p| {
-                let n = vec3(&maps.normals, p).filter(|n| n.z > 0.0)?;
+                let n = vec_at(&maps.normals, p).filter(|n| n.z > 0.0)?;
                 let (kd, ks) = (rgb(&maps.kd, p)?, rgb(&maps.ks, p)?);
                 let (at, ab) = (maps.alpha_t[p] as f64, maps.alpha_b[p] as f64);
                 if !(at > 0.0 && ab > 0.0 && at.is_finite() && ab.is_finite()) {
                     return None;
                 }
-                let tangent = vec3(&maps.tangents, p)
+                let tangent = vec_at(&maps.tangents, p)
                     .map(|t| t - t.dot(n) * n)
                     .and_then(|t| t.try_normalize());
                 let anisotropic = tangent.is_some();

@@ -1,5 +1,7 @@
 //! The measurement stack: every pixel's radiance under every light, pixel-major.
 
+use crate::error::{Error, Result};
+
 /// Radiance samples of an image stack, stored pixel-major so that one pixel's slice is contiguous.
 ///
 /// `data[((y * width + x) * n_lights + i) * 3 + c]` is channel `c` of pixel `(x, y)` (row 0 at
@@ -15,6 +17,19 @@ pub struct Stack {
     pub n_lights: usize,
     /// Pixel-major RGB samples, `width * height * n_lights * 3` values.
     pub data: Vec<f32>,
+}
+
+/// Checks that `mask` (a mask, or an edit region: `what` names it in the error) covers
+/// `width x height` pixels.
+pub fn check_mask_size(mask: &[bool], width: usize, height: usize, what: &str) -> Result<()> {
+    if mask.len() != width * height {
+        return Err(Error::BadMask(format!(
+            "{what} has {} pixels but the images have {width}x{height} = {}",
+            mask.len(),
+            width * height
+        )));
+    }
+    Ok(())
 }
 
 impl Stack {

@@ -10,7 +10,7 @@ use symframe::rig::uniform_cone_lights;
 use symframe::{Rig, RigOptions};
 
 use super::plot::{self, md_table};
-use super::Ctx;
+use super::{Ctx, Section};
 
 /// Per light count: (lights, mean normal error, facet measure).
 type Facets = Vec<(usize, f64, f64)>;
@@ -49,8 +49,21 @@ fn facet_excess(normals: &[f32], gt: &[f32], mask: &[bool], w: usize, h: usize) 
     }
 }
 
-/// Runs the experiment; returns the markdown section.
-pub fn run(ctx: &Ctx) -> Result<String> {
+/// One shape at one light count.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Row {
+    /// Shape (`sphere`, `bumps`).
+    pub shape: String,
+    /// Lights.
+    pub lights: usize,
+    /// Normal error against ground truth over pixels within 60 degrees of the view.
+    pub evaluation: symframe::eval::Evaluation,
+    /// The facet measure, degrees.
+    pub facet: f64,
+}
+
+/// Runs the experiment: the plots into `ctx.out`, the section and every row back.
+pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
     let (size, counts): (usize, Vec<usize>) = if ctx.quick {
         (20, vec![380, 172])
     } else {
@@ -102,6 +115,7 @@ pub fn run(ctx: &Ctx) -> Result<String> {
     .to_vec();
     let mut table = Vec::new();
     let mut facets: Vec<(String, Facets)> = Vec::new();
+    let mut figures = Vec::new();
     for (name, scene, cone, _) in &shapes {
         let gt_n = scene.gt_normals();
         let gt_t = scene.gt_tangents();
@@ -130,6 +144,12 @@ pub fn run(ctx: &Ctx) -> Result<String> {
                 format!("{:.1}%", 100.0 * e.coverage),
                 format!("{facet:.2}"),
             ]);
+            figures.push(Row {
+                shape: name.to_string(),
+                lights: n,
+                evaluation: e,
+                facet,
+            });
             let err = normal_error_map(&maps.normals, &gt_n);
             tiles.push(plot::normal_tile(&maps.normals, &scene.mask));
             tiles.push(plot::error_tile(&err, &scene.mask, ERROR_MAX));
@@ -176,5 +196,8 @@ pub fn run(ctx: &Ctx) -> Result<String> {
             }
         );
     }
-    Ok(md)
+    Ok(Section {
+        markdown: md,
+        figures,
+    })
 }

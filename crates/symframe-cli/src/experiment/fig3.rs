@@ -11,7 +11,7 @@ use symframe::symmetry::CosineMode;
 use symframe::{Rig, RigOptions};
 
 use super::plot::{self, fmt_opt, md_table};
-use super::{angle_deg, axis_angle_deg, max, mean, Ctx};
+use super::{angle_deg, axis_angle_deg, max, mean, Ctx, Section};
 use crate::colorbar::Scale;
 
 /// Tangent angle off the x-z plane (the paper's 25 degrees).
@@ -58,7 +58,25 @@ struct Grid {
 }
 
 /// Runs the experiment; returns the markdown section.
-pub fn run(ctx: &Ctx) -> Result<String> {
+/// One cell of Figure 3: a material and cosine form at one normal angle and light cone.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct Cell {
+    /// Material name (see [`materials`]).
+    pub material: &'static str,
+    /// Cosine form: `paper` or `compensated`.
+    pub mode: &'static str,
+    /// Angle of the normal from the view, degrees.
+    pub theta_n: f64,
+    /// Light cone, degrees.
+    pub theta_d_max: f64,
+    /// Normal error, degrees (`None`: no normal).
+    pub normal: Option<f64>,
+    /// Tangent axis error, degrees (`None`: no tangent).
+    pub tangent: Option<f64>,
+}
+
+/// Runs the experiment: the plots into `ctx.out`, the section and every cell back.
+pub fn run(ctx: &Ctx) -> Result<Section<Vec<Cell>>> {
     let (rows, cols, n_lights): (Vec<f64>, Vec<f64>, usize) = if ctx.quick {
         (vec![0.0, 40.0, 80.0], vec![20.0, 65.0, 90.0], 800)
     } else {
@@ -110,6 +128,21 @@ pub fn run(ctx: &Ctx) -> Result<String> {
                 };
             }
             out
+        })
+        .collect();
+    let figures: Vec<Cell> = (0..nm * nr * nc)
+        .flat_map(|k| {
+            let (m, r, c) = (k / (nr * nc), (k / nc) % nr, k % nc);
+            let (material, theta_n, theta_d_max) = (mats[m].0, rows[r], cols[c]);
+            let res = results[k];
+            modes.iter().enumerate().map(move |(i, mode)| Cell {
+                material,
+                mode: mode.1,
+                theta_n,
+                theta_d_max,
+                normal: res[i].normal,
+                tangent: res[i].tangent,
+            })
         })
         .collect();
     let grid = |m: usize, i: usize| Grid {
@@ -288,5 +321,8 @@ pub fn run(ctx: &Ctx) -> Result<String> {
            axis heuristic picked the binormal). Large theta_n with small theta_d_max leave the symmetry domain empty (the \
            reflected lights fall outside the cone), hence the discarded cells in the \
            bottom-left of the maps.\n";
-    Ok(md)
+    Ok(Section {
+        markdown: md,
+        figures,
+    })
 }

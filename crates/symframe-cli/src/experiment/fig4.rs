@@ -12,7 +12,7 @@ use symframe::symmetry::CosineMode;
 use symframe::{Rig, RigOptions};
 
 use super::plot::{self, fmt_opt, md_table};
-use super::{angle_deg, mean, Ctx};
+use super::{angle_deg, mean, Ctx, Section};
 
 /// Materials per family.
 const N_MATERIALS: usize = 8;
@@ -70,7 +70,23 @@ const METHODS: [&str; 4] = [
 ];
 
 /// Runs the experiment; returns the markdown section.
-pub fn run(ctx: &Ctx) -> Result<String> {
+/// One cell of Figure 4: a method's mean normal error on one material of a family.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct Cell {
+    /// Family name (`torrance-sparrow`, ...).
+    pub family: &'static str,
+    /// Material index in the family (0 = perfectly diffuse).
+    pub material: usize,
+    /// Method (see `METHODS`).
+    pub method: &'static str,
+    /// Mean normal error over the orientations with an estimate, degrees.
+    pub mean: Option<f64>,
+    /// Orientations without an estimate.
+    pub failed: usize,
+}
+
+/// Runs the experiment: the plots into `ctx.out`, the section and every cell back.
+pub fn run(ctx: &Ctx) -> Result<Section<Vec<Cell>>> {
     let (thetas, azimuths, n_lights): (Vec<f64>, Vec<f64>, usize) = if ctx.quick {
         (vec![0.0, 30.0, 60.0], vec![0.0, 180.0], 600)
     } else {
@@ -162,6 +178,7 @@ pub fn run(ctx: &Ctx) -> Result<String> {
         N_MATERIALS - 1,
     );
     let mut readings = String::new();
+    let mut figures = Vec::new();
     for (f, (fname, fdesc, _)) in fams.iter().enumerate() {
         let cell = |m: usize, j: usize| -> (Option<f64>, usize) {
             let es: Vec<Option<f64>> = (0..no)
@@ -178,9 +195,16 @@ pub fn run(ctx: &Ctx) -> Result<String> {
         for (m, &i) in mats.iter().enumerate() {
             let (kd, ks, r) = family_params(i);
             let mut row = vec![i.to_string(), format!("{kd:.2} / {ks:.2} / {r:.3}")];
-            for j in 0..METHODS.len() {
+            for (j, method) in METHODS.iter().enumerate() {
                 let (e, fail) = cell(m, j);
                 row.push(format!("{} ({fail})", fmt_opt(e, 2)));
+                figures.push(Cell {
+                    family: fname,
+                    material: i,
+                    method,
+                    mean: e,
+                    failed: fail,
+                });
             }
             table.push(row);
         }
@@ -249,5 +273,8 @@ pub fn run(ctx: &Ctx) -> Result<String> {
            baseline is good only at its own end (Woodham on diffuse, max-reflectance on \
            shiny).\n\n";
     md += &readings;
-    Ok(md)
+    Ok(Section {
+        markdown: md,
+        figures,
+    })
 }

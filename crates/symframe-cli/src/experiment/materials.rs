@@ -5,6 +5,7 @@
 use anyhow::Result;
 use glam::DVec3;
 use rayon::prelude::*;
+use serde::Serialize;
 use symframe::baseline::{estimate_stack_baseline, Baseline};
 use symframe::brdf::{AshikhminShirley, BlinnPhong, Brdf, CookTorrance, Ggx, Lambertian, Ward};
 use symframe::eval::{evaluate, normal_error_map, Evaluation};
@@ -13,7 +14,7 @@ use symframe::rig::uniform_cone_lights;
 use symframe::{estimate_stack, EstimateMaps, EstimatorParams, Rig, RigOptions};
 
 use super::plot::{self, md_table};
-use super::Ctx;
+use super::{Ctx, Section};
 
 /// One material of the table: a name, its BRDF and the scene it is rendered on.
 struct Material {
@@ -155,7 +156,7 @@ fn materials(size: usize, quick: bool) -> Vec<Material> {
 }
 
 /// The figures of one method on one material under one rig.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Serialize)]
 pub struct Cell {
     /// Error figures against ground truth (pixels within 60 degrees of the view).
     pub eval: Evaluation,
@@ -164,7 +165,7 @@ pub struct Cell {
 }
 
 /// One row of the table: a material under a rig, every method.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize)]
 pub struct Row {
     /// The material's name.
     pub material: String,
@@ -266,7 +267,7 @@ pub fn compute(quick: bool, size: usize) -> Result<(Table, Vec<Shown>)> {
 }
 
 /// Runs the experiment; returns the markdown section.
-pub fn run(ctx: &Ctx) -> Result<String> {
+pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
     let size = if ctx.quick { 24 } else { 48 };
     let (table, maps) = compute(ctx.quick, size)?;
     let mut md = String::from("## Materials and rigs: the estimator against every baseline\n\n");
@@ -380,5 +381,8 @@ pub fn run(ctx: &Ctx) -> Result<String> {
         "error: viridis 0 to 5° (yellow ≥ 5°), magenta: no estimate",
     )?;
     md += &ctx.save(&pic, "materials_errors.png", "error maps")?;
-    Ok(md)
+    Ok(Section {
+        markdown: md,
+        figures: table.rows,
+    })
 }

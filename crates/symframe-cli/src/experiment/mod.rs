@@ -1,9 +1,10 @@
 //! `symframe experiment`: the paper's validation experiments (Holroyd et al. 2008, Figures 3, 4
 //! and 10) plus a noise and quantisation study, computed in memory on synthetic renders.
 //!
-//! Each experiment prints its tables to stdout, writes PNG plots into the output folder and
-//! returns a markdown section; `all` runs every one and writes the report `<output>.md` (by
-//! default `docs/validation.md`) with the plots linked by relative path.
+//! Each experiment prints its tables to stdout, writes PNG plots and its figures as JSON
+//! (`<name>.json`) into the output folder and returns a markdown section with the figures;
+//! `all` runs every one and writes the report `<output>.md` (by default `docs/validation.md`)
+//! with the plots linked by relative path.
 
 mod fig10;
 mod fig3;
@@ -39,7 +40,22 @@ impl Ctx {
     }
 }
 
-type RunFn = fn(&Ctx) -> Result<String>;
+/// What an experiment produced: its markdown section (tables, readings, plot links) and the
+/// numbers behind it.
+pub struct Section<F> {
+    /// The report's section.
+    pub markdown: String,
+    /// The figures the tables show.
+    pub figures: F,
+}
+
+/// An experiment as run by the command: its markdown and its figures as JSON.
+type RunFn = fn(&Ctx) -> Result<(String, serde_json::Value)>;
+
+/// The markdown and JSON figures of a section.
+fn parts<F: serde::Serialize>(s: Section<F>) -> Result<(String, serde_json::Value)> {
+    Ok((s.markdown, serde_json::to_value(&s.figures)?))
+}
 
 /// Estimates a rendered stack of `scene` with the default symmetry estimator and compares the
 /// maps with the scene's ground truth over pixels within 60 degrees of the view.
@@ -70,12 +86,12 @@ pub fn estimate_and_evaluate(
 
 fn experiments(which: ExperimentArg) -> Vec<(&'static str, RunFn)> {
     let all: [(&str, RunFn); 6] = [
-        ("fig3", fig3::run),
-        ("fig4", fig4::run),
-        ("fig10", fig10::run),
-        ("noise", noise::run),
-        ("relight", relight::run),
-        ("materials", materials::run),
+        ("fig3", |c| parts(fig3::run(c)?)),
+        ("fig4", |c| parts(fig4::run(c)?)),
+        ("fig10", |c| parts(fig10::run(c)?)),
+        ("noise", |c| parts(noise::run(c)?)),
+        ("relight", |c| parts(relight::run(c)?)),
+        ("materials", |c| parts(materials::run(c)?)),
     ];
     let name = match which {
         ExperimentArg::Fig3 => "fig3",
@@ -134,7 +150,11 @@ pub fn run(args: &ExperimentArgs) -> Result<()> {
     for (name, f) in experiments(args.which) {
         println!("== experiment {name} ==");
         let t = Instant::now();
-        let body = f(&ctx).with_context(|| format!("experiment {name}"))?;
+        let (body, figures) = f(&ctx).with_context(|| format!("experiment {name}"))?;
+        write(
+            &args.output.join(format!("{name}.json")),
+            &(serde_json::to_string_pretty(&figures)? + "\n"),
+        )?;
         let secs = t.elapsed().as_secs_f64();
         println!("experiment {name}: {secs:.1} s\n");
         let body = format!("{body}\n_Run time of this experiment: {secs:.1} s._\n");
@@ -203,4 +223,104 @@ pub fn max(v: impl IntoIterator<Item = f64>) -> Option<f64> {
     v.into_iter()
         .filter(|x| x.is_finite())
         .fold(None, |m: Option<f64>, x| Some(m.map_or(x, |m| m.max(x))))
+}
+
+#[cfg(test)]
+mod tests {
+    //! Each experiment at reduced size: its plots are written and a sanity property of its
+    //! figures holds.
+
+    use super::*;
+
+    fn quick(dir: &Path) -> Ctx {
+        Ctx {
+            out: dir.to_path_buf(),
+            link: String::new(),
+            quick: true,
+        }
+    }
+
+    /// Pictures (non-trivial PNG files) in `dir` whose name starts with `prefix`.
+    fn pngs(dir: &Path, prefix: &str) -> usize {
+        std::fs::read_dir(dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .filter(|e| {
+                let n = e.file_name().to_string_lossy().into_owned();
+                n.starts_with(prefix) && n.ends_with(".png") && e.metadata().unwrap().len() > 1000
+            })
+            .count()
+    }
+
+    #[test]
+    fn fig3_ward_is_within_a_degree_at_the_papers_operating_point() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = fig3::run(&quick(dir.path())).unwrap();
+        assert_eq!(pngs(dir.path(), "fig3_"), 12);
+        let cell = s
+            .figures
+            .iter()
+            .find(|c| {
+                (c.material, c.mode, c.theta_n, c.theta_d_max) == ("ward", "paper", 0.0, 65.0)
+            })
+            .unwrap();
+        assert!(
+            cell.normal.unwrap() < 1.0 && cell.tangent.unwrap() < 1.0,
+            "{cell:?}"
+        );
+        assert!(s.markdown.contains("Figure 3"));
+    }
+
+    #[test]
+    fn fig4_each_method_is_good_at_the_diffuse_end() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = fig4::run(&quick(dir.path())).unwrap();
+        assert_eq!(pngs(dir.path(), "fig4_"), 3);
+        let mean = |method: &str| {
+            let c = s
+                .figures
+                .iter()
+                .find(|c| (c.family, c.material, c.method) == ("torrance-sparrow", 0, method));
+            c.and_then(|c| c.mean).unwrap()
+        };
+        assert!(mean("woodham-robust") < 0.1);
+        assert!(mean("symmetry (paper form)") < 1.0);
+    }
+
+    #[test]
+    fn fig10_the_sphere_is_estimated_over_most_pixels() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = fig10::run(&quick(dir.path())).unwrap();
+        assert_eq!(pngs(dir.path(), "fig10_"), 2);
+        let sphere = s.figures.iter().find(|r| r.shape == "sphere").unwrap();
+        let e = &sphere.evaluation;
+        assert!(e.normal_error.mean < 5.0 && e.coverage > 0.9, "{e:?}");
+    }
+
+    #[test]
+    fn noise_clean_and_16_bit_data_are_estimated_well() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = noise::run(&quick(dir.path())).unwrap();
+        assert_eq!(pngs(dir.path(), "noise_"), 2);
+        let c = &s.figures;
+        assert_eq!(c.noise[0].0, "0");
+        let q16 = c.quantisation.iter().find(|(l, _)| l == "16-bit").unwrap();
+        assert!(c.noise[0].1[0] < 5.0 && q16.1[0] < 5.0, "{c:?}");
+    }
+
+    #[test]
+    fn relight_predicts_held_out_lights_for_every_model() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = relight::run(&quick(dir.path())).unwrap();
+        assert!(dir.path().join("relight_side_by_side.png").is_file());
+        assert_eq!(s.figures.len(), 4);
+        for r in &s.figures {
+            // Bounds that catch a broken fit; the report states the figures.
+            assert!(
+                r.holdout_psnr > 20.0 && r.holdout_psnr_true_frames > 20.0,
+                "{r:?}"
+            );
+            assert!(r.relit_psnr > 20.0, "{r:?}");
+        }
+    }
 }

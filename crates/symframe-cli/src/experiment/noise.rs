@@ -7,13 +7,22 @@ use symframe::rig::uniform_cone_lights;
 use symframe::{Rig, RigOptions};
 
 use super::plot::{self, md_table};
-use super::Ctx;
+use super::{Ctx, Section};
 
 /// One condition's figures: normal mean, median, p90, tangent mean, coverage.
-type Figures = [f64; 5];
+pub type Figures = [f64; 5];
 
-/// Runs the experiment; returns the markdown section.
-pub fn run(ctx: &Ctx) -> Result<String> {
+/// Every condition's figures, labelled as in the tables.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Conditions {
+    /// Per Gaussian noise sigma (`0` = clean).
+    pub noise: Vec<(String, Figures)>,
+    /// Per quantisation (`float`, `16-bit`, ...).
+    pub quantisation: Vec<(String, Figures)>,
+}
+
+/// Runs the experiment: the plots into `ctx.out`, the section and the figures back.
+pub fn run(ctx: &Ctx) -> Result<Section<Conditions>> {
     let (size, n_lights, sigmas, bits): (usize, usize, Vec<f64>, Vec<Option<u32>>) = if ctx.quick {
         (16, 300, vec![0.0, 0.01], vec![Some(16), Some(8)])
     } else {
@@ -167,5 +176,11 @@ pub fn run(ctx: &Ctx) -> Result<String> {
             }
         );
     }
-    Ok(md)
+    Ok(Section {
+        markdown: md,
+        figures: Conditions {
+            noise: noise_rows,
+            quantisation: quant_rows,
+        },
+    })
 }

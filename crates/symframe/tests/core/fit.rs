@@ -200,13 +200,12 @@ fn estimated_frames_give_close_parameters_and_relighting() {
     // picture exposed for the highlight; what is left comes from the frames' errors (about half
     // a degree) and the t/b choice at the few pixels near the pole.
     let psnr = relit_psnr(&scene, &fit, &w, &lights, &holdout);
-    eprintln!("estimated frames: relit held-out PSNR {psnr:.1} dB");
-    assert!(psnr > 40.0);
+    assert!(psnr > 40.0, "relit held-out PSNR {psnr:.1} dB");
 }
 
 /// Fits data of other reflectance models (model error: the fit is a Ward lobe) and judges it on
-/// held-out lights, with the true frames and with estimated ones. Prints the table quoted in the
-/// documentation; the bounds only catch a broken fit.
+/// held-out lights, with the true frames and with estimated ones. The bounds only catch a broken
+/// fit; `symframe experiment relight` reports the figures.
 #[test]
 fn other_models_held_out_psnr() {
     let scene = Scene::sphere(32, TangentField::Circular);
@@ -221,7 +220,6 @@ fn other_models_held_out_psnr() {
         holdout: holdout.clone(),
         ..FitParams::default()
     };
-    eprintln!("| model | frames | held-out PSNR, all fitted pixels | relit PSNR, within 60 deg |");
     for spec in [
         "ward:kd=0.4/0.3/0.2,ks=0.3/0.45/0.6,ax=0.08,ay=0.3",
         "ct:kd=0.3,ks=0.5,m=0.2,ior=1.5",
@@ -255,7 +253,6 @@ fn other_models_held_out_psnr() {
             .unwrap();
             let all = fit.summary.holdout_psnr_db.unwrap();
             let relit = relit_psnr(&scene, &fit, brdf.as_ref(), &lights, &holdout);
-            eprintln!("| `{spec}` | {name} | {all:.1} dB | {relit:.1} dB |");
             assert!(all > 20.0 && relit > 25.0, "{spec} {name}: {all} {relit}");
         }
     }
