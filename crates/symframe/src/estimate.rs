@@ -441,11 +441,11 @@ impl<'a> Estimator<'a> {
         };
         match self.params.interpolation {
             Interpolation::Exact => {
-                let e = self.solve(slice, &ExactObjective::new(self.rig, slice));
+                let e = self.solve(slice, &ExactObjective::new(self.rig, slice), fallback);
                 self.or_fallback(e, slice, fallback)
             }
             Interpolation::Fast => {
-                let e = self.solve(slice, &fast.prepare(self.rig, slice));
+                let e = self.solve(slice, &fast.prepare(self.rig, slice), fallback);
                 self.or_fallback(e, slice, fallback)
             }
         }
@@ -547,7 +547,12 @@ impl<'a> Estimator<'a> {
     }
 
     /// The estimate of one pixel with a given objective of its slice.
-    fn solve<O: Objective>(&self, slice: &[f32], objective: &O) -> PixelEstimate {
+    fn solve<O: Objective>(
+        &self,
+        slice: &[f32],
+        objective: &O,
+        scratch: &mut Vec<f64>,
+    ) -> PixelEstimate {
         let rig = self.rig;
         // Start: the halfway vector of the brightest sample (docs/method.md, "The search"). The
         // brightest light itself is also tried: for diffuse surfaces it is the better guess.
@@ -610,12 +615,33 @@ impl<'a> Estimator<'a> {
             evals += e;
             n = m;
         }
+        let diffuse = self.params.cosine == CosineMode::Auto
+            && unexplained_share(rig, slice, n) < AUTO_SPECULAR_SHARE;
         let refine = match self.params.cosine {
             CosineMode::Compensated(p) => Some(CosineMode::Compensated(p)),
-            CosineMode::Auto => (unexplained_share(rig, slice, n) >= AUTO_SPECULAR_SHARE)
-                .then_some(CosineMode::Compensated(0.0)),
+            CosineMode::Auto => (!diffuse).then_some(CosineMode::Compensated(0.0)),
             _ => None,
         };
+        let mut source = PixelSource::Symmetry;
+        if diffuse && n.z > 0.0 && centre_observed(rig, objective, n) {
+            // A diffuse slice is symmetric about the normal of its Lambertian term, and a robust
+            // Lambertian fit finds that centre in closed form from every lit sample, where the
+            // search reads it through the interpolated slice (docs/method.md, "Default
+            // measure"). Within the reach only: beyond it the fallback rule decides.
+            let fit = woodham_robust_pixel(
+                slice,
+                &rig.lights_in_camera,
+                &BaselineParams::default(),
+                scratch,
+            );
+            if let Some(m) = fit
+                .normal
+                .filter(|_| fit.confidence as f64 >= DIFFUSE_CENTRE_FIT)
+            {
+                n = m;
+                source = PixelSource::Lambertian;
+            }
+        }
         if let Some(refined) = refine {
             // A normal beyond the rig's reach in the paper's form stays discarded: the flatter
             // compensated measure could otherwise walk it back inside the sampled region to a
@@ -762,7 +788,7 @@ impl<'a> Estimator<'a> {
         let keep = status == PixelStatus::Estimated;
         PixelEstimate {
             status,
-            source: PixelSource::Symmetry,
+            source,
             normal: keep.then_some(n),
             tangent: if keep { tangent } else { None },
             confidence,
@@ -799,6 +825,10 @@ impl<'a> Estimator<'a> {
 /// A start must have less than this share of the search answer's full-level `SD_n` to
 /// overrule it ([`Estimator::judge_at_full`]).
 const JUDGE_MARGIN: f64 = 0.5;
+
+/// A diffuse pixel's normal comes from its robust Lambertian fit when the fit explains its
+/// samples this well (uncentred R^2).
+const DIFFUSE_CENTRE_FIT: f64 = 0.99;
 
 /// Cast shadows are looked for only where a robust Lambertian fit explains the pixel this
 /// well (uncentred R^2).

@@ -72,15 +72,25 @@ fn estimate_on_an_lp_dataset_writes_every_output_and_is_accurate() {
     assert!(estimated > 400, "{report}");
     // Outside the sphere (mask.png beside the .lp): NaN.
     assert!(normals[0].is_nan());
-    // The source map: the symmetry wherever a normal was estimated, none elsewhere; the
-    // report's legend counts the same pixels.
+    // The source map: a source wherever a normal was estimated (the symmetry on most pixels,
+    // fallbacks at the rim beyond the reach), none elsewhere; the report's legend counts the
+    // same pixels.
     let source: ndarray::Array2<u8> = ndarray_npy::read_npy(out.join("source.npy")).unwrap();
     assert_eq!(source.dim(), (28, 28));
     for (&code, n) in source.iter().zip(normals.chunks_exact(3)) {
-        assert_eq!(code, if n[0].is_nan() { 0 } else { 1 });
+        if n[0].is_nan() {
+            assert_eq!(code, 0);
+        } else {
+            assert!((1..=3).contains(&code), "source {code}");
+        }
     }
     assert_eq!(report["sources"][1]["name"], "symmetry");
-    assert_eq!(report["sources"][1]["pixels"].as_u64(), Some(estimated));
+    let symmetry = report["sources"][1]["pixels"].as_u64().unwrap();
+    let counted: u64 = (1..=3)
+        .map(|c| report["sources"][c]["pixels"].as_u64().unwrap())
+        .sum();
+    assert_eq!(counted, estimated);
+    assert!(symmetry * 10 >= estimated * 9, "{report}");
     assert!(out.join("source.png").is_file());
     assert_eq!(report["parameters"]["interpolation"], "fast");
 

@@ -176,7 +176,9 @@ fn narrow_rigs_fill_every_pixel_and_say_where_from() {
 
     // Per pixel: inside the reach the symmetry estimator answers, beyond it the fallback, with
     // a lower confidence.
-    let stack = scene.render_stack(&brdf, &lights);
+    // A glossy plastic, whose centre is not diffuse (a Lambertian sphere's is the fit's).
+    let plastic = ggx(0.5, 0.04, 0.1, 0.1);
+    let stack = scene.render_stack(&plastic, &lights);
     let rig = Rig::new(&lights, RigOptions::default()).unwrap();
     let estimator = Estimator::new(&rig, EstimatorParams::default());
     let mut slice = vec![0.0; rig.n_used() * 3];
