@@ -384,6 +384,22 @@ impl<'a> Estimator<'a> {
         (chart(best.1, best.2), 9)
     }
 
+    /// The normal of a diffuse pixel's robust Lambertian fit, when the fit explains the samples
+    /// (uncentred R^2 at least [`DIFFUSE_CENTRE_FIT`]) and leaves less than
+    /// [`AUTO_SPECULAR_SHARE`] of the well-lit signal's energy unexplained.
+    fn diffuse_centre(&self, slice: &[f32], scratch: &mut Vec<f64>) -> Option<DVec3> {
+        let rig = self.rig;
+        let fit = woodham_robust_pixel(
+            slice,
+            &rig.lights_in_camera,
+            &BaselineParams::default(),
+            scratch,
+        );
+        fit.normal
+            .filter(|_| fit.confidence as f64 >= DIFFUSE_CENTRE_FIT)
+            .filter(|&n| unexplained_share(rig, slice, n) < AUTO_SPECULAR_SHARE)
+    }
+
     /// The search's answer `found`, unless one of `starts` has a clearly lower `SD_n` on the full
     /// level (below [`JUDGE_MARGIN`] times it):
     /// then the coarse levels misled the search (a lobe narrower than their spacing is aliased
@@ -584,85 +600,81 @@ impl<'a> Estimator<'a> {
                 term.count,
             )
         };
-        let mut start = rig.halfway_in_camera[j];
-        let mut start_at = at(start);
-        let light = rig.lights_in_camera[j];
-        if light.z > 0.0 {
-            let light_at = at(light);
-            if light_at.0 < start_at.0 {
-                (start, start_at) = (light, light_at);
-            }
-        }
-        evals += 2;
-        let coarse = coarse_level(objective, quarter, start_at.1, NORMAL_DOMAIN_TARGET);
-
-        let (n, e) = self.minimise_normal(
-            objective,
-            start,
-            cosine,
-            coarse,
-            0.12,
-            self.params.max_normal_evals,
-        );
-        evals += e;
         let moments = highlight_moments(slice, &rig.halfway_in_camera);
-        let starts = [Some(rig.halfway_in_camera[j]), moments.map(|m| m.normal)];
-        // A search that ended beyond the reach is left there (discarded or a fallback): the
-        // judge must not turn it into a clamped guess inside the sampled region.
-        let mut n = n;
-        if centre_observed(rig, objective, n) {
-            let (m, e) = self.judge_at_full(objective, n, starts.iter().flatten(), cosine);
-            evals += e;
-            n = m;
-        }
-        let diffuse = self.params.cosine == CosineMode::Auto
-            && unexplained_share(rig, slice, n) < AUTO_SPECULAR_SHARE;
-        let refine = match self.params.cosine {
-            CosineMode::Compensated(p) => Some(CosineMode::Compensated(p)),
-            CosineMode::Auto => (!diffuse).then_some(CosineMode::Compensated(0.0)),
-            _ => None,
-        };
         let mut source = PixelSource::Symmetry;
-        if diffuse && n.z > 0.0 && centre_observed(rig, objective, n) {
+        let diffuse_centre = if self.params.cosine == CosineMode::Auto {
+            self.diffuse_centre(slice, scratch)
+        } else {
+            None
+        };
+        let n = if let Some(m) = diffuse_centre {
             // A diffuse slice is symmetric about the normal of its Lambertian term, and a robust
             // Lambertian fit finds that centre in closed form from every lit sample, where the
             // search reads it through the interpolated slice (docs/method.md, "Default
-            // measure"). Within the reach only: beyond it the fallback rule decides.
-            let fit = woodham_robust_pixel(
-                slice,
-                &rig.lights_in_camera,
-                &BaselineParams::default(),
-                scratch,
+            // measure"). The reach is checked below as for any normal.
+            source = PixelSource::Lambertian;
+            m
+        } else {
+            let mut start = rig.halfway_in_camera[j];
+            let mut start_at = at(start);
+            let light = rig.lights_in_camera[j];
+            if light.z > 0.0 {
+                let light_at = at(light);
+                if light_at.0 < start_at.0 {
+                    (start, start_at) = (light, light_at);
+                }
+            }
+            evals += 2;
+            let coarse = coarse_level(objective, quarter, start_at.1, NORMAL_DOMAIN_TARGET);
+
+            let (n, e) = self.minimise_normal(
+                objective,
+                start,
+                cosine,
+                coarse,
+                0.12,
+                self.params.max_normal_evals,
             );
-            if let Some(m) = fit
-                .normal
-                .filter(|_| fit.confidence as f64 >= DIFFUSE_CENTRE_FIT)
-            {
+            evals += e;
+            let starts = [Some(rig.halfway_in_camera[j]), moments.map(|m| m.normal)];
+            // A search that ended beyond the reach is left there (discarded or a fallback): the
+            // judge must not turn it into a clamped guess inside the sampled region.
+            let mut n = n;
+            if centre_observed(rig, objective, n) {
+                let (m, e) = self.judge_at_full(objective, n, starts.iter().flatten(), cosine);
+                evals += e;
                 n = m;
-                source = PixelSource::Lambertian;
             }
-        }
-        if let Some(refined) = refine {
-            // A normal beyond the rig's reach in the paper's form stays discarded: the flatter
-            // compensated measure could otherwise walk it back inside the sampled region to a
-            // wrong but plausible-looking normal.
-            if n.z <= 0.0 || !centre_observed(rig, objective, n) {
-                return PixelEstimate {
-                    evals,
-                    ..PixelEstimate::empty(PixelStatus::Discarded)
-                };
+            let diffuse = self.params.cosine == CosineMode::Auto
+                && unexplained_share(rig, slice, n) < AUTO_SPECULAR_SHARE;
+            let refine = match self.params.cosine {
+                CosineMode::Compensated(p) => Some(CosineMode::Compensated(p)),
+                CosineMode::Auto => (!diffuse).then_some(CosineMode::Compensated(0.0)),
+                _ => None,
+            };
+            if let Some(refined) = refine {
+                // A normal beyond the rig's reach in the paper's form stays discarded: the flatter
+                // compensated measure could otherwise walk it back inside the sampled region to a
+                // wrong but plausible-looking normal.
+                if n.z <= 0.0 || !centre_observed(rig, objective, n) {
+                    return PixelEstimate {
+                        evals,
+                        ..PixelEstimate::empty(PixelStatus::Discarded)
+                    };
+                }
+                // The compensated measure is flatter far from the solution: refine the paper's
+                // solution with it (where p = 1 the two coincide).
+                cosine = refined;
+                let (m, e) = self.minimise_normal(objective, n, cosine, coarse, 0.06, 150);
+                evals += e;
+                // Judged against the paper-form solution only: the other starts may lie inside the
+                // reach where that solution does not.
+                let (m, e) = self.judge_at_full(objective, m, [n].iter(), cosine);
+                evals += e;
+                n = m;
             }
-            // The compensated measure is flatter far from the solution: refine the paper's
-            // solution with it (where p = 1 the two coincide).
-            cosine = refined;
-            let (m, e) = self.minimise_normal(objective, n, cosine, coarse, 0.06, 150);
-            evals += e;
-            // Judged against the paper-form solution only: the other starts may lie inside the
-            // reach where that solution does not.
-            let (m, e) = self.judge_at_full(objective, m, [n].iter(), cosine);
-            evals += e;
-            n = m;
-        }
+            n
+        };
         let term_n = objective.normal_term(n, cosine, Level::Full);
         if term_n.count < self.min_domain
             || term_n.denominator <= 0.0
