@@ -195,6 +195,10 @@ pub struct EstimateArgs {
     /// parameters does not decode the images again).
     #[arg(long)]
     pub no_keep_cache: bool,
+    /// Recognise unchanged images by path, size and modification time only, without reading
+    /// them (default: by content, which reads every image once on a rerun; see the README).
+    #[arg(long)]
+    pub trust_mtime: bool,
     /// Estimate only the K-th of N disjoint sets of tiles (tiles t with t % N == K-1) into
     /// OUTPUT (tile results and shard.json); combine the shards with `symframe merge`.
     #[arg(long, value_name = "K/N")]

@@ -79,6 +79,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         reference: false,
         cache: None,
         no_keep_cache: true,
+        trust_mtime: false,
         tiles: None,
         tile_size: 32,
         decode_memory: 1024,

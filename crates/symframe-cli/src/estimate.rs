@@ -285,6 +285,7 @@ fn run_tiled(args: &EstimateArgs) -> Result<Done> {
         CacheOptions {
             tile: args.tile_size,
             batch_bytes: args.decode_memory << 20,
+            trust_mtime: args.trust_mtime,
         },
         &tiled::STOP,
         &|| bar.inc(1),

@@ -24,7 +24,9 @@ use symframe::{
     estimate_pixels, BlockScratch, EstimateMaps, Estimator, EstimatorParams, PixelRecord, Rig,
 };
 use symframe_io::fingerprint::Fingerprint;
-use symframe_io::{read_tile_result, tile_result_done, tile_result_path, write_tile_result};
+use symframe_io::{
+    check_tile_result, read_tile_result, tile_result_path, write_tile_result, TileFile,
+};
 use symframe_io::{TileCache, TileGrid, TileView};
 
 use crate::cli::MergeArgs;
@@ -269,11 +271,17 @@ pub fn estimate_tiles(
     fs::create_dir_all(dir).with_context(|| format!("{}: cannot create folder", dir.display()))?;
     clean_temporaries(dir);
     let grid = *cache.grid();
-    let todo: Vec<usize> = tiles
-        .iter()
-        .copied()
-        .filter(|&t| !tile_result_done(&tile_result_path(dir, t), job, t, grid.tile_pixels(t)))
-        .collect();
+    let mut todo = Vec::new();
+    for &t in tiles {
+        match check_tile_result(&tile_result_path(dir, t), job, t, grid.tile_pixels(t)) {
+            TileFile::Done => {}
+            TileFile::Corrupt(e) => {
+                eprintln!("warning: {e}; recomputing the tile");
+                todo.push(t);
+            }
+            TileFile::Missing | TileFile::Stale => todo.push(t),
+        }
+    }
     let reused = tiles.len() - todo.len();
     if stop_after == Some(0) {
         STOP.store(true, Ordering::SeqCst);

@@ -29,4 +29,7 @@ pub use output::{
 pub use stack::{load_stack, read_mask};
 pub use synth_out::{write_lp_dataset, ImageFormat};
 pub use tile_cache::{CacheInfo, CacheOptions, TileCache, TileGather, TileGrid, TileView};
-pub use tile_results::{read_tile_result, tile_result_done, tile_result_path, write_tile_result};
+pub use tile_results::{
+    check_tile_result, read_tile_result, tile_result_done, tile_result_path, write_tile_result,
+    TileFile,
+};
