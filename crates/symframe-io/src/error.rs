@@ -65,6 +65,16 @@ pub enum Error {
         msg: String,
     },
 
+    /// A file declares more than this crate decodes (see [`crate::limits`]): refused before
+    /// anything of that size is allocated.
+    #[error("{}: exceeds limits: {msg}", path.display())]
+    Limits {
+        /// The file.
+        path: PathBuf,
+        /// What was declared and which limit it exceeds.
+        msg: String,
+    },
+
     /// An image of a stack has a different size from the stack's first image.
     #[error(
         "{}: image is {width}x{height} but the first image ({}) is {first_width}x{first_height}",
@@ -149,6 +159,14 @@ impl Error {
     /// An unsupported-format error.
     pub(crate) fn unsupported(path: impl Into<PathBuf>, msg: impl Into<String>) -> Self {
         Error::Unsupported {
+            path: path.into(),
+            msg: msg.into(),
+        }
+    }
+
+    /// A limits error.
+    pub(crate) fn limits(path: impl Into<PathBuf>, msg: impl Into<String>) -> Self {
+        Error::Limits {
             path: path.into(),
             msg: msg.into(),
         }

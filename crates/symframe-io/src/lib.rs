@@ -9,6 +9,7 @@ pub mod error;
 pub mod fingerprint;
 pub mod image;
 mod lights;
+pub mod limits;
 pub mod output;
 pub mod stack;
 pub mod synth_out;
