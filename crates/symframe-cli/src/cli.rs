@@ -312,9 +312,14 @@ pub enum FormatArg {
 #[derive(Debug, Clone, Args)]
 pub struct SynthArgs {
     /// Output dataset folder (created; images/, lights.lp, gt_normals.npy, gt_tangents.npy,
-    /// mask.png and scene.json in it are replaced).
+    /// mask.png and scene.json in it are replaced). A folder that is not empty must hold the
+    /// `.symframe-synth` marker of an earlier synth run, else it is refused (see --force).
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Write into a non-empty folder that synth did not write, replacing its images/ folder
+    /// and the dataset's files.
+    #[arg(long)]
+    pub force: bool,
     /// The rendered surface.
     #[arg(long, value_enum, default_value_t = ShapeArg::Sphere)]
     pub shape: ShapeArg,

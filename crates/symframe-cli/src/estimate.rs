@@ -292,6 +292,9 @@ fn run_tiled(args: &EstimateArgs) -> Result<Done> {
     )
     .map_err(tiled::io_err)?;
     bar.finish_and_clear();
+    for w in &cache_info.warnings {
+        eprintln!("warning: {w}");
+    }
     let load_s = t_load.elapsed().as_secs_f64();
     let grid = *cache.grid();
 

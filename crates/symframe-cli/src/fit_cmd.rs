@@ -115,8 +115,11 @@ pub fn run(args: &FitArgs) -> Result<(FitMaps, FitReport)> {
         saturation: args.saturation,
     };
     let bar = progress::bar(ds.images.len() as u64, "loading");
-    let stack = symframe_io::load_stack(&ds, &opts, &|| bar.inc(1))?;
+    let (stack, warnings) = symframe_io::load_stack_with_warnings(&ds, &opts, &|| bar.inc(1))?;
     bar.finish_and_clear();
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
     let load_s = t0.elapsed().as_secs_f64();
     let (w, h) = (stack.width, stack.height);
     let normals = read_frame_map(&args.frames.join("normals.npy"), w, h)?;

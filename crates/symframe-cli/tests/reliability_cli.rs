@@ -237,3 +237,61 @@ fn an_image_replaced_with_the_same_size_and_time_is_noticed() {
     ok(&estimate(&pfm_lp, &fresh, &[]));
     assert!(same_normals(&out, &fresh));
 }
+
+#[test]
+fn synth_never_replaces_a_folder_it_did_not_write() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("photos");
+    fs::create_dir_all(dir.join("images")).unwrap();
+    let raw = dir.join("images/IMG_0001.CR2");
+    fs::write(&raw, b"a user's raw file").unwrap();
+    let synth = |extra: &[&str]| {
+        let mut args = vec![
+            "synth",
+            "-o",
+            dir.to_str().unwrap(),
+            "--size",
+            "8",
+            "--rig",
+            "cone:10",
+        ];
+        args.extend_from_slice(extra);
+        symframe(&args)
+    };
+    let o = synth(&[]);
+    common::assert_one_line_error(&o, "photos: not written by symframe synth");
+    assert!(stderr(&o).contains("--force"), "{}", stderr(&o));
+    assert_eq!(fs::read(&raw).unwrap(), b"a user's raw file");
+    assert!(!dir.join("lights.lp").exists());
+    // --force replaces it; then the folder is synth's own and is rewritten without it.
+    ok(&synth(&["--force"]));
+    assert!(dir.join("lights.lp").is_file() && dir.join(".symframe-synth").is_file());
+    ok(&synth(&[]));
+}
+
+/// An EXR whose header claims 100000 x 100000 pixels (a 1 KB file) aborted `estimate` with
+/// "memory allocation of 40000000000 bytes failed".
+#[test]
+fn a_forged_image_header_is_a_one_line_error() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = dataset(&tmp.path().join("data"));
+    let img = tmp.path().join("data/images/img_0007.exr");
+    let mut b = fs::read(&img).unwrap();
+    let at = b
+        .windows(17)
+        .position(|w| w == b"dataWindow\0box2i\0")
+        .unwrap()
+        + 21;
+    for (k, v) in [0i32, 0, 99_999, 99_999].iter().enumerate() {
+        b[at + 4 * k..at + 4 * k + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    b.truncate(1024);
+    fs::write(&img, &b).unwrap();
+    let out = tmp.path().join("out");
+    let o = estimate(&lp, &out, &[]);
+    common::assert_one_line_error(
+        &o,
+        "img_0007.exr: exceeds limits: EXR header declares 100000x100000 pixels",
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+}

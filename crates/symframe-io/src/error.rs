@@ -111,6 +111,22 @@ pub enum Error {
     },
 }
 
+/// Something the user should know about the input that does not stop the work (mixed image
+/// formats, grey among RGB, negative samples); loaders return these for the caller to print.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Warning {
+    /// The file it is about (the first one, when it is about several).
+    pub path: PathBuf,
+    /// What is wrong, one line.
+    pub message: String,
+}
+
+impl std::fmt::Display for Warning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}", self.path.display(), self.message)
+    }
+}
+
 /// Result with this crate's [`Error`].
 pub type Result<T> = std::result::Result<T, Error>;
 

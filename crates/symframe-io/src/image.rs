@@ -41,6 +41,33 @@ pub struct Image {
     pub channels: usize,
     /// `width * height * channels` linear samples; `NaN` marks saturated or non-finite pixels.
     pub data: Vec<f32>,
+    /// What the file stored and how it was made linear.
+    pub kind: SampleKind,
+}
+
+/// The sample type of an image file, and so how its values were made linear.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
+pub enum SampleKind {
+    /// 8-bit, sRGB-decoded.
+    Srgb8,
+    /// 8-bit taken as linear (`value / 255`).
+    Linear8,
+    /// 16-bit, linear (`value / 65535`).
+    U16,
+    /// Floating point, linear as stored.
+    Float,
+}
+
+impl SampleKind {
+    /// How a message names it.
+    pub fn describe(self) -> &'static str {
+        match self {
+            SampleKind::Srgb8 => "8-bit (sRGB-decoded)",
+            SampleKind::Linear8 => "8-bit (linear)",
+            SampleKind::U16 => "16-bit (linear)",
+            SampleKind::Float => "float (linear)",
+        }
+    }
 }
 
 impl Image {
@@ -194,6 +221,12 @@ fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, srgb8: bool) -> Resu
     }
     let mut data = Vec::with_capacity(width * height * take);
     let nan = [f32::NAN; 3];
+    let kind = match &raw {
+        Raw::U8(_) if srgb8 && !opts.linear_8bit => SampleKind::Srgb8,
+        Raw::U8(_) => SampleKind::Linear8,
+        Raw::U16(_) => SampleKind::U16,
+        Raw::F32(_) => SampleKind::Float,
+    };
     match raw {
         Raw::U8(v) => {
             let lut: Vec<f32> = (0..256)
@@ -243,6 +276,7 @@ fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, srgb8: bool) -> Resu
         height,
         channels: take,
         data,
+        kind,
     })
 }
 

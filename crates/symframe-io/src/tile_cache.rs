@@ -60,10 +60,11 @@ use memmap2::Mmap;
 use rayon::prelude::*;
 
 use crate::dataset::Dataset;
+use crate::error::Warning;
 use crate::error::{Error, Result};
 use crate::fingerprint::Fingerprint;
 use crate::image::DecodeOptions;
-use crate::stack::{check_dataset, check_size, decode_stack_image};
+use crate::stack::{check_dataset, check_size, decode_stack_image, Notes};
 
 /// Format version of the cache file (bumped whenever the layout changes).
 pub const CACHE_VERSION: u32 = 2;
@@ -216,6 +217,10 @@ pub struct CacheInfo {
     pub blocks_corrupt: usize,
     /// Light blocks decoded again and rewritten because some tile's block failed its checksum.
     pub blocks_repaired: usize,
+    /// Warnings about the inputs (mixed sample types, grey among RGB, negative samples), for
+    /// the caller to print; found when the images were decoded and kept in the cache's header,
+    /// so a reuse reports them again.
+    pub warnings: Vec<Warning>,
 }
 
 /// A complete tile cache, memory-mapped read-only.
@@ -341,6 +346,39 @@ impl Header {
             complete: f(6) == 1,
             light_block: f(7) as usize,
         })
+    }
+}
+
+/// Where the input warnings are kept in the header: length (`u32`), XXH3-64, JSON.
+const WARNINGS_AT: usize = 256;
+
+/// Encodes warnings for the header (as many as fit in it).
+fn encode_warnings(warnings: &[Warning]) -> Vec<u8> {
+    let mut kept = warnings.to_vec();
+    loop {
+        let json = serde_json::to_vec(&kept).unwrap_or_default();
+        if WARNINGS_AT + 12 + json.len() <= HEADER_BYTES || kept.is_empty() {
+            let mut b = (json.len() as u32).to_le_bytes().to_vec();
+            b.extend_from_slice(&xxhash_rust::xxh3::xxh3_64(&json).to_le_bytes());
+            b.extend_from_slice(&json);
+            return b;
+        }
+        kept.pop();
+    }
+}
+
+/// The warnings kept in a cache's header (none if absent or damaged).
+fn read_warnings(file: &[u8]) -> Vec<Warning> {
+    let Some(b) = file.get(WARNINGS_AT..HEADER_BYTES) else {
+        return Vec::new();
+    };
+    let len = u32::from_le_bytes(b[..4].try_into().unwrap()) as usize;
+    let sum = u64::from_le_bytes(b[4..12].try_into().unwrap());
+    match b.get(12..12 + len) {
+        Some(json) if len > 0 && xxhash_rust::xxh3::xxh3_64(json) == sum => {
+            serde_json::from_slice(json).unwrap_or_default()
+        }
+        _ => Vec::new(),
     }
 }
 
@@ -629,6 +667,7 @@ impl TileCache {
             verify_s: 0.0,
             blocks_corrupt: 0,
             blocks_repaired: 0,
+            warnings: Vec::new(),
         };
 
         // A complete cache is read under a shared lock (taking it waits while another process
@@ -643,6 +682,7 @@ impl TileCache {
                 info.verify_s += found.verify_s;
                 if found.bad.is_empty() {
                     info.hit = true;
+                    info.warnings = read_warnings(&found.map);
                     return Ok(Self::from_found(found, path, lock, fingerprint, info));
                 }
             }
@@ -664,11 +704,13 @@ impl TileCache {
             if found.bad.is_empty() {
                 lock.set(false)?;
                 info.hit = true;
+                info.warnings = read_warnings(&found.map);
                 return Ok(Self::from_found(found, path, lock, fingerprint, info));
             }
             let Found {
                 map, header, bad, ..
             } = found;
+            info.warnings = read_warnings(&map);
             drop(map);
             repair(ds, opts, &path, &header, &bad, stop, on_image, &mut info)?;
         } else {
@@ -682,6 +724,7 @@ impl TileCache {
             info.batch_images = built.batch;
             info.decode_s = built.decode_s;
             info.scatter_s = built.scatter_s;
+            info.warnings = built.warnings;
             // What an earlier, interrupted build wrote is verified like a reused cache.
             if built.resumed > 0 {
                 if let Some(found) = open_complete(&path, fingerprint, copts.tile, n)? {
@@ -858,6 +901,8 @@ impl TileGather<'_> {
 
 /// What a build did.
 struct Built {
+    /// About the images decoded by this build.
+    warnings: Vec<Warning>,
     decoded: usize,
     resumed: usize,
     batch: usize,
@@ -902,11 +947,12 @@ fn build(
     on_image: &(dyn Fn() + Sync),
 ) -> Result<Built> {
     let n = ds.images.len();
+    let notes = Notes::new(n);
     let decode_one = |i: usize| -> Result<(usize, usize, Vec<f32>)> {
         if stop.load(Ordering::Relaxed) {
             return Err(Error::Interrupted);
         }
-        let r = decode_stack_image(ds, i, opts)?;
+        let r = decode_stack_image(ds, i, opts, &notes)?;
         on_image();
         Ok(r)
     };
@@ -993,9 +1039,13 @@ fn build(
         write_header(&header)?;
         start = end;
     }
+    let warnings = notes.warnings(ds);
+    write_all_at(&file, &encode_warnings(&warnings), WARNINGS_AT as u64)
+        .map_err(|e| Error::write(partial, e))?;
     header.complete = true;
     write_header(&header)?;
     Ok(Built {
+        warnings,
         decoded,
         resumed,
         batch,
@@ -1104,7 +1154,7 @@ fn repair(
                 if stop.load(Ordering::Relaxed) {
                     return Err(Error::Interrupted);
                 }
-                let r = decode_stack_image(ds, i, opts)?;
+                let r = decode_stack_image(ds, i, opts, &Notes::new(0))?;
                 on_image();
                 Ok(r)
             })
