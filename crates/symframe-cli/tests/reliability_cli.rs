@@ -295,3 +295,46 @@ fn a_forged_image_header_is_a_one_line_error() {
     );
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
 }
+
+/// `eval ... | head` panicked with "failed printing to stdout: Broken pipe".
+#[cfg(unix)]
+#[test]
+fn eval_into_a_closed_pipe_ends_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::{Command, Stdio};
+    let tmp = tempfile::tempdir().unwrap();
+    let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
+    let truth = Truth {
+        normals: true,
+        tangents: true,
+    };
+    let data = tmp.path().join("data");
+    let lp = sphere_dataset(&data, 16, 40, &brdf, ImageFormat::Exr, 1.0, truth).1;
+    let out = tmp.path().join("out");
+    ok(&estimate(&lp, &out, &[]));
+    let mut child = Command::new(env!("CARGO_BIN_EXE_symframe"))
+        .args(["eval", data.to_str().unwrap(), out.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let o = child.wait_with_output().unwrap();
+    let e = stderr(&o);
+    assert!(!e.contains("panicked") && !e.contains("Broken pipe"), "{e}");
+    assert!(
+        o.status.success() || o.status.signal() == Some(13),
+        "{:?} {e}",
+        o.status
+    );
+}
+
+/// `--threads 100000` spawned threads for minutes on a 16x16 input.
+#[test]
+fn absurd_thread_counts_are_refused() {
+    for n in ["100000", "0"] {
+        let o = symframe(&["--threads", n, "eval", "nowhere", "nowhere"]);
+        common::assert_one_line_error(&o, &format!("--threads {n}: give 1 to"));
+        assert_eq!(o.status.code(), Some(2));
+    }
+}

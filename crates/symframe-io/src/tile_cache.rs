@@ -349,6 +349,24 @@ impl Header {
     }
 }
 
+/// Checks a whole cache file's bytes as a reuse would, for fuzzing the header, table and
+/// warnings parsers: `None` if the header is refused, else the number of failing blocks.
+#[doc(hidden)]
+pub fn check_cache_bytes(b: &[u8]) -> Option<usize> {
+    let h = Header::decode(b)?;
+    if !(h.complete
+        && h.width > 0
+        && h.height > 0
+        && h.tile > 0
+        && (1..=h.n_lights).contains(&h.light_block)
+        && b.len() as u64 == h.file_len())
+    {
+        return None;
+    }
+    let _ = read_warnings(b);
+    Some(verify(b, &h).len())
+}
+
 /// Where the input warnings are kept in the header: length (`u32`), XXH3-64, JSON.
 const WARNINGS_AT: usize = 256;
 
