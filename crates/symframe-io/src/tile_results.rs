@@ -125,7 +125,7 @@ fn parse(b: &[u8], job: u64, t: usize, n: usize) -> std::result::Result<Vec<Pixe
             "tile result of another format version ({version}, expected {TILE_RESULT_VERSION})"
         )));
     }
-    if b.len() < HEADER || (b.len() - HEADER) % RECORD != 0 {
+    if b.len() < HEADER || (b.len() - HEADER).checked_rem(RECORD) != Some(0) {
         return Err(Corrupt(format!(
             "corrupt tile result (truncated or extended: {} bytes)",
             b.len()
