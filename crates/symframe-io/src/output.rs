@@ -69,7 +69,10 @@ fn check_npy_header(path: &Path, b: &[u8]) -> Result<()> {
     let header = String::from_utf8_lossy(header);
     let after = |key: &str| header.find(key).map(|i| &header[i + key.len()..]);
     let shape_text = after("'shape'")
-        .and_then(|r| Some(&r[r.find('(')? + 1..r.find(')')?]))
+        .and_then(|r| {
+            let open = r.find('(')? + 1;
+            Some(&r[open..open + r[open..].find(')')?])
+        })
         .ok_or_else(|| Error::decode(path, "no shape in the .npy header"))?;
     let mut values: u128 = 1;
     for t in shape_text
