@@ -147,7 +147,7 @@ fn a_corrupt_cache_is_rebuilt_or_repaired_never_trusted() {
     let whole = tmp.path().join("whole");
     ok(&estimate(&lp, &whole, &[]));
 
-    // Batches of 10 images: 6 light blocks per tile.
+    // Batches of 54 images (1 MiB of 40x40 RGB floats): 2 light blocks per tile.
     let out = tmp.path().join("out");
     let small = ["--decode-memory", "1"];
     ok(&estimate(&lp, &out, &small));
@@ -177,7 +177,7 @@ fn a_corrupt_cache_is_rebuilt_or_repaired_never_trusted() {
     let r = report(&out);
     assert_eq!(r["cache"]["hit"], false, "{r}");
     let repaired = r["cache"]["blocks_repaired"].as_u64().unwrap();
-    assert!((1..6).contains(&repaired), "{r}");
+    assert!((1..=2).contains(&repaired), "{r}");
     assert!(same_normals(&out, &whole));
     // Repaired for good.
     ok(&estimate(&lp, &out, &small));
