@@ -243,6 +243,10 @@ pub struct EstimateArgs {
     /// parameters does not decode the images again).
     #[arg(long)]
     pub no_keep_cache: bool,
+    /// Recognise unchanged images by path, size and modification time only, without reading
+    /// them (default: by content, which reads every image once on a rerun; see the README).
+    #[arg(long)]
+    pub trust_mtime: bool,
     /// Estimate only the K-th of N disjoint sets of tiles (tiles t with t % N == K-1) into
     /// OUTPUT (tile results and shard.json); combine the shards with `symframe merge`.
     #[arg(long, value_name = "K/N")]
@@ -356,9 +360,14 @@ pub enum FormatArg {
 #[derive(Debug, Clone, Args)]
 pub struct SynthArgs {
     /// Output dataset folder (created; images/, lights.lp, gt_normals.npy, gt_tangents.npy,
-    /// mask.png and scene.json in it are replaced).
+    /// mask.png and scene.json in it are replaced). A folder that is not empty must hold the
+    /// `.symframe-synth` marker of an earlier synth run, else it is refused (see --force).
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Write into a non-empty folder that synth did not write, replacing its images/ folder
+    /// and the dataset's files.
+    #[arg(long)]
+    pub force: bool,
     /// The rendered surface.
     #[arg(long, value_enum, default_value_t = ShapeArg::Sphere)]
     pub shape: ShapeArg,

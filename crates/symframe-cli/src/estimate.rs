@@ -96,6 +96,7 @@ pub fn config(args: &EstimateArgs) -> Result<EstimateConfig> {
             options: CacheOptions {
                 tile: args.tile_size,
                 batch_bytes: args.decode_memory << 20,
+                trust_mtime: args.trust_mtime,
             },
         },
         shard: args.tiles,

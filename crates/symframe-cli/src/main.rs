@@ -50,12 +50,29 @@ fn control<'a>(
         stop: &STOP,
         progress,
         stop_after_tiles,
+        warning: &|line| eprintln!("warning: {line}"),
     }
 }
 
 fn main() {
+    // Output piped into a reader that stops early (`symframe eval ... | head`): end quietly
+    // on SIGPIPE as other Unix tools do, instead of panicking on the failed write.
+    #[cfg(unix)]
+    // SAFETY: restoring the default action of one signal before any thread is started.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = cli::Cli::parse();
     if let Some(n) = cli.threads {
+        let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+        let most = (4 * cores).min(1024);
+        if n == 0 || n > most {
+            eprintln!(
+                "symframe: error: --threads {n}: give 1 to {most} (4 per available core, at \
+                 most 1024; {cores} cores here)"
+            );
+            std::process::exit(2);
+        }
         if let Err(e) = rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global()

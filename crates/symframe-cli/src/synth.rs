@@ -225,6 +225,7 @@ fn image_format(f: FormatArg) -> (ImageFormat, &'static str) {
 /// Runs the command; returns the path of the written `lights.lp`.
 pub fn run(args: &SynthArgs) -> Result<PathBuf> {
     validate(args)?;
+    symframe_io::check_synth_target(&args.output, args.force)?;
     let t0 = Instant::now();
     let brdf: Box<dyn Brdf> = parse_model(&args.model).map_err(anyhow::Error::msg)?;
     let field = args

@@ -42,6 +42,12 @@ pub fn open_dataset(input: &Path) -> Result<Dataset> {
         return open_folder(input);
     }
     if !input.exists() {
+        if input.symlink_metadata().is_ok() {
+            return Err(Error::invalid(
+                input,
+                "is a broken symbolic link (its target does not exist)",
+            ));
+        }
         return Err(Error::read(
             input,
             std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or folder"),
@@ -74,10 +80,22 @@ fn parent_dir(p: &Path) -> PathBuf {
     p.parent().map(Path::to_path_buf).unwrap_or_default()
 }
 
-/// `dir/mask.png` if it is a file.
-fn mask_in(dir: &Path) -> Option<PathBuf> {
+/// `dir/mask.png` if there is one; an error if that name is taken by something that is not a
+/// file (a folder, a broken link, a FIFO), which would otherwise be silently ignored.
+fn mask_in(dir: &Path) -> Result<Option<PathBuf>> {
     let m = dir.join(MASK);
-    m.is_file().then_some(m)
+    if m.symlink_metadata().is_err() {
+        return Ok(None);
+    }
+    match lights::not_a_file(&m) {
+        None => Ok(Some(m)),
+        Some(why) => Err(Error::invalid(
+            &m,
+            why.strip_prefix(&format!("{} ", m.display()))
+                .unwrap_or(&why)
+                .replace("an image file", "a mask image"),
+        )),
+    }
 }
 
 /// Opens a dataset folder: one `.lp` file, else the DiLiGenT tables.
@@ -126,7 +144,7 @@ fn open_lp(lp: &Path) -> Result<Dataset> {
         lights,
         images,
         intensities: None,
-        mask: mask_in(&parent_dir(lp)),
+        mask: mask_in(&parent_dir(lp))?,
     })
 }
 
@@ -182,7 +200,7 @@ fn open_diligent(dir: &Path, source: &Path) -> Result<Dataset> {
         lights,
         images,
         intensities,
-        mask: mask_in(dir),
+        mask: mask_in(dir)?,
     })
 }
 
@@ -411,5 +429,90 @@ mod tests {
 
         let e = err_string(open_dataset(&d.path().join("nope.lp")));
         assert!(e.contains("nope.lp: cannot read"), "{e}");
+    }
+
+    /// A byte-order mark gave "expected the number of lights, found '2'".
+    #[test]
+    fn a_bom_before_the_light_count_is_ignored() {
+        let d = tempfile::tempdir().unwrap();
+        touch(d.path(), &["a.png", "b.png"]);
+        let lp = d.path().join("bom.lp");
+        fs::write(&lp, "\u{feff}2\r\na.png 0 0 1\r\nb.png 0 1 1\r\n").unwrap();
+        assert_eq!(open_dataset(&lp).unwrap().images.len(), 2);
+        fs::write(d.path().join(FILENAMES), "\u{feff}a.png\nb.png\n").unwrap();
+        fs::write(d.path().join(DIRECTIONS), "\u{feff}0 0 1\n0 1 1\n").unwrap();
+        fs::write(d.path().join(INTENSITIES), "\u{feff}1 1 1\n2 2 2\n").unwrap();
+        fs::remove_file(&lp).unwrap();
+        let ds = open_dataset(d.path()).unwrap();
+        assert_eq!(ds.intensities.unwrap().len(), 2);
+    }
+
+    /// `#` in a file name was blamed on spaces (or the cut name reported missing).
+    #[test]
+    fn a_hash_in_a_file_name_is_explained() {
+        let d = tempfile::tempdir().unwrap();
+        touch(d.path(), &["img#1.png", "img"]);
+        let lp = d.path().join("h.lp");
+        fs::write(&lp, "1\nimg#1.png 0 0 1\n").unwrap();
+        let e = err_string(open_dataset(&lp));
+        assert!(e.contains("h.lp:2: expected '<image> <lx> <ly> <lz>' ('#' starts a comment, so image paths may not contain '#'), found 1 fields"), "{e}");
+        assert!(!e.contains("spaces"), "{e}");
+        fs::write(&lp, "1\nimg one.png 0 0 1\n").unwrap();
+        assert!(err_string(open_dataset(&lp)).contains("may not contain spaces"));
+        fs::remove_file(&lp).unwrap();
+        fs::write(d.path().join(FILENAMES), "x#1.png\n").unwrap();
+        fs::write(d.path().join(DIRECTIONS), "0 0 1\n").unwrap();
+        let e = err_string(open_dataset(d.path()));
+        assert!(
+            e.contains("filenames.txt:1: image")
+                && e.contains(
+                    "x does not exist ('#' starts a comment: image paths may not contain '#')"
+                ),
+            "{e}"
+        );
+    }
+
+    /// A folder, FIFO or broken link among the images was "does not exist"; a mask.png that is
+    /// a folder was silently ignored.
+    #[cfg(unix)]
+    #[test]
+    fn folders_fifos_and_broken_links_are_named_as_such() {
+        let d = tempfile::tempdir().unwrap();
+        touch(d.path(), &["a.png"]);
+        fs::create_dir(d.path().join("dir.png")).unwrap();
+        std::os::unix::fs::symlink(d.path().join("gone.png"), d.path().join("link.png")).unwrap();
+        let fifo = std::ffi::CString::new(d.path().join("fifo.png").to_str().unwrap()).unwrap();
+        // SAFETY: mkfifo on a NUL-terminated path we own.
+        assert_eq!(unsafe { libc::mkfifo(fifo.as_ptr(), 0o600) }, 0);
+        let lp = d.path().join("k.lp");
+        for (name, want) in [
+            ("dir.png", "dir.png is a folder, not an image file"),
+            (
+                "link.png",
+                "link.png is a broken symbolic link (its target does not exist)",
+            ),
+            (
+                "fifo.png",
+                "fifo.png is not a regular file (a FIFO, socket or device)",
+            ),
+            ("none.png", "none.png does not exist"),
+        ] {
+            fs::write(&lp, format!("1\n{name} 0 0 1\n")).unwrap();
+            let e = err_string(open_dataset(&lp));
+            assert!(e.contains("k.lp:2: image ") && e.ends_with(want), "{e}");
+        }
+        fs::write(&lp, "1\na.png 0 0 1\n").unwrap();
+        assert_eq!(open_dataset(&lp).unwrap().mask, None);
+        fs::create_dir(d.path().join(MASK)).unwrap();
+        let e = err_string(open_dataset(&lp));
+        assert!(
+            e.ends_with("mask.png: is a folder, not a mask image"),
+            "{e}"
+        );
+        // The dataset argument itself as a broken link.
+        let broken = d.path().join("broken.lp");
+        std::os::unix::fs::symlink(d.path().join("nothing.lp"), &broken).unwrap();
+        let e = err_string(open_dataset(&broken));
+        assert!(e.contains("broken.lp: is a broken symbolic link"), "{e}");
     }
 }

@@ -74,6 +74,16 @@ pub enum Error {
         msg: String,
     },
 
+    /// A file declares more than this crate decodes (see [`crate::limits`]): refused before
+    /// anything of that size is allocated.
+    #[error("{}: exceeds limits: {msg}", path.display())]
+    Limits {
+        /// The file.
+        path: PathBuf,
+        /// What was declared and which limit it exceeds.
+        msg: String,
+    },
+
     /// An image of a stack has a different size from the stack's first image.
     #[error(
         "{}: image is {width}x{height} but the first image ({}) is {first_width}x{first_height}",
@@ -112,6 +122,21 @@ pub enum Error {
 
 /// A codec's error, kept whole (with its own sources).
 pub type BoxError = Box<dyn std::error::Error + Send + Sync + 'static>;
+/// Something the user should know about the input that does not stop the work (mixed image
+/// formats, grey among RGB, negative samples); loaders return these for the caller to print.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Warning {
+    /// The file it is about (the first one, when it is about several).
+    pub path: PathBuf,
+    /// What is wrong, one line.
+    pub message: String,
+}
+
+impl std::fmt::Display for Warning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}", self.path.display(), self.message)
+    }
+}
 
 /// Result with this crate's [`Error`].
 pub type Result<T> = std::result::Result<T, Error>;
@@ -161,6 +186,14 @@ impl Error {
     /// An unsupported-format error.
     pub(crate) fn unsupported(path: impl Into<PathBuf>, msg: impl Into<String>) -> Self {
         Error::Unsupported {
+            path: path.into(),
+            msg: msg.into(),
+        }
+    }
+
+    /// A limits error.
+    pub(crate) fn limits(path: impl Into<PathBuf>, msg: impl Into<String>) -> Self {
+        Error::Limits {
             path: path.into(),
             msg: msg.into(),
         }

@@ -12,14 +12,23 @@
 //!   linear. Grey or RGB, alpha dropped.
 //! - `.hdr`: Radiance RGBE, linear.
 //! - `.pfm`: portable float map (`PF` RGB, `Pf` grey), linear.
+//!
+//! Limits (see [`crate::limits`]): every decoder reads the size a file declares first and
+//! refuses more than 65,536 pixels per side or 134 million pixels, or more pixels than the
+//! file's length can encode, before allocating; the decoder libraries run with allocation
+//! limits of their own (2 GiB per image). Not supported: deep or multi-part-only EXR data
+//! beyond the first valid layer, subsampled EXR channels, palette or 1/2/4-bit images other
+//! than what the PNG decoder expands to 8 bits, signed-integer or 32/64-bit integer TIFF,
+//! CMYK or other colour spaces, more than 4 channels. A file is read into memory whole, then
+//! decoded; a decoder that panics on a hostile file is caught and reported as a decode error.
 
-use std::fs::File;
-use std::io::{BufReader, Read, Write};
+use std::io::Write;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
 
 use crate::atomic::write_atomic;
 use crate::error::{Error, Result};
+use crate::limits;
 
 /// A decoded image: linear samples, row-major (row 0 at the top), channels interleaved.
 #[derive(Debug, Clone, PartialEq)]
@@ -32,6 +41,33 @@ pub struct Image {
     pub channels: usize,
     /// `width * height * channels` linear samples; `NaN` marks saturated or non-finite pixels.
     pub data: Vec<f32>,
+    /// What the file stored and how it was made linear.
+    pub kind: SampleKind,
+}
+
+/// The sample type of an image file, and so how its values were made linear.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
+pub enum SampleKind {
+    /// 8-bit, sRGB-decoded.
+    Srgb8,
+    /// 8-bit taken as linear (`value / 255`).
+    Linear8,
+    /// 16-bit, linear (`value / 65535`).
+    U16,
+    /// Floating point, linear as stored.
+    Float,
+}
+
+impl SampleKind {
+    /// How a message names it.
+    pub fn describe(self) -> &'static str {
+        match self {
+            SampleKind::Srgb8 => "8-bit (sRGB-decoded)",
+            SampleKind::Linear8 => "8-bit (linear)",
+            SampleKind::U16 => "16-bit (linear)",
+            SampleKind::Float => "float (linear)",
+        }
+    }
 }
 
 impl Image {
@@ -86,34 +122,58 @@ pub fn linear_to_srgb(v: f32) -> f32 {
 /// non-finite pixels set to `NaN`. Corrupt or truncated files give an error naming the file,
 /// never a panic.
 pub fn read_image(path: &Path, opts: &DecodeOptions) -> Result<Image> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
+    // An unknown extension is named without reading the file.
+    extension(path)?;
+    let bytes = std::fs::read(path).map_err(|e| Error::read(path, e))?;
+    decode_image(path, &bytes, opts)
+}
+
+/// Decodes `bytes`, the content of the image file `path` (its extension picks the format; the
+/// path names the file in errors), as [`read_image`] does.
+pub fn decode_image(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Image> {
+    let ext = extension(path)?;
     let run = || -> Result<Image> {
         let (raw, srgb8) = match ext.as_str() {
-            "exr" => (read_exr(path)?, false),
-            "tif" | "tiff" => (read_tiff(path)?, true),
-            "pfm" => (read_pfm_raw(path)?, false),
-            "png" => (read_with_image(path, ::image::ImageFormat::Png)?, true),
-            "jpg" | "jpeg" => (read_with_image(path, ::image::ImageFormat::Jpeg)?, true),
-            "hdr" => (read_with_image(path, ::image::ImageFormat::Hdr)?, false),
-            _ => {
-                return Err(Error::unsupported(
-                    path,
-                    format!(
-                        "unknown image extension '{ext}' (expected exr, png, tif, tiff, pfm, \
-                         hdr, jpg or jpeg)"
-                    ),
-                ))
-            }
+            "exr" => (read_exr(path, bytes)?, false),
+            "tif" | "tiff" => (read_tiff(path, bytes)?, true),
+            "pfm" => (pfm_raw(path, bytes)?, false),
+            "png" => (
+                read_with_image(path, bytes, ::image::ImageFormat::Png)?,
+                true,
+            ),
+            "jpg" | "jpeg" => (
+                read_with_image(path, bytes, ::image::ImageFormat::Jpeg)?,
+                true,
+            ),
+            _ => (
+                read_with_image(path, bytes, ::image::ImageFormat::Hdr)?,
+                false,
+            ),
         };
         finish(path, raw, opts, srgb8)
     };
     // Belt and braces: a decoder bug on a hostile file must not take down a whole stack load.
     catch_unwind(AssertUnwindSafe(run))
         .unwrap_or_else(|_| Err(Error::decode(path, "decoder panicked (corrupt file?)")))
+}
+
+/// The lower-case extension of `path` if it is an image format this module reads.
+fn extension(path: &Path) -> Result<String> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    match ext.as_str() {
+        "exr" | "tif" | "tiff" | "pfm" | "png" | "jpg" | "jpeg" | "hdr" => Ok(ext),
+        _ => Err(Error::unsupported(
+            path,
+            format!(
+                "unknown image extension '{ext}' (expected exr, png, tif, tiff, pfm, hdr, jpg \
+                 or jpeg)"
+            ),
+        )),
+    }
 }
 
 /// Raw decoded samples before conversion to linear `f32`.
@@ -161,6 +221,12 @@ fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, srgb8: bool) -> Resu
     }
     let mut data = Vec::with_capacity(width * height * take);
     let nan = [f32::NAN; 3];
+    let kind = match &raw {
+        Raw::U8(_) if srgb8 && !opts.linear_8bit => SampleKind::Srgb8,
+        Raw::U8(_) => SampleKind::Linear8,
+        Raw::U16(_) => SampleKind::U16,
+        Raw::F32(_) => SampleKind::Float,
+    };
     match raw {
         Raw::U8(v) => {
             let lut: Vec<f32> = (0..256)
@@ -210,14 +276,8 @@ fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, srgb8: bool) -> Resu
         height,
         channels: take,
         data,
+        kind,
     })
-}
-
-/// Opens `path` for buffered reading.
-fn open(path: &Path) -> Result<BufReader<File>> {
-    File::open(path)
-        .map(BufReader::new)
-        .map_err(|e| Error::read(path, e))
 }
 
 /// Maps an I/O error met while decoding: end-of-file means a truncated file.
@@ -229,16 +289,33 @@ fn io_err(path: &Path, e: std::io::Error) -> Error {
     }
 }
 
-/// Decodes PNG, JPEG or Radiance HDR with the `image` crate (default allocation limits).
-fn read_with_image(path: &Path, fmt: ::image::ImageFormat) -> Result<RawImage> {
+/// Decodes PNG, JPEG or Radiance HDR with the `image` crate: the declared size is checked
+/// first ([`crate::limits`]), then the image decoded under the same limits.
+fn read_with_image(path: &Path, bytes: &[u8], fmt: ::image::ImageFormat) -> Result<RawImage> {
     use ::image::{DynamicImage as D, ImageError};
-    let reader = ::image::ImageReader::with_format(open(path)?, fmt);
-    let img = reader.decode().map_err(|e| match e {
+    use std::io::Cursor;
+    let ierr = |e: ImageError| match e {
         ImageError::IoError(io) => io_err(path, io),
         ImageError::Unsupported(u) => Error::unsupported(path, u.to_string()),
-        ImageError::Limits(l) => Error::unsupported(path, l.to_string()),
+        ImageError::Limits(l) => Error::limits(path, l.to_string()),
         other => Error::decode(path, other),
-    })?;
+    };
+    let what = match fmt {
+        ::image::ImageFormat::Png => "PNG header",
+        ::image::ImageFormat::Jpeg => "JPEG header",
+        _ => "HDR header",
+    };
+    let (w, h) = ::image::ImageReader::with_format(Cursor::new(bytes), fmt)
+        .into_dimensions()
+        .map_err(ierr)?;
+    limits::check_image_size(path, what, w as u64, h as u64, bytes.len() as u64)?;
+    let mut reader = ::image::ImageReader::with_format(Cursor::new(bytes), fmt);
+    let mut lim = ::image::Limits::default();
+    lim.max_image_width = Some(limits::MAX_SIDE as u32);
+    lim.max_image_height = Some(limits::MAX_SIDE as u32);
+    lim.max_alloc = Some(limits::MAX_DECODED_BYTES);
+    reader.limits(lim);
+    let img = reader.decode().map_err(ierr)?;
     let (width, height) = (img.width() as usize, img.height() as usize);
     let (channels, raw) = match img {
         D::ImageLuma8(b) => (1, Raw::U8(b.into_raw())),
@@ -271,10 +348,28 @@ fn base_name(name: &str) -> &str {
     name.rsplit('.').next().unwrap_or(name)
 }
 
-/// Decodes an OpenEXR file's first valid layer at full resolution (single-threaded).
-fn read_exr(path: &Path) -> Result<RawImage> {
+/// Decodes an OpenEXR file's first valid layer at full resolution (single-threaded), after
+/// checking every part's declared size ([`crate::limits`]).
+fn read_exr(path: &Path, bytes: &[u8]) -> Result<RawImage> {
     use exr::prelude::traits::*;
     use exr::prelude::{read, FlatSamples};
+    use std::io::Cursor;
+    let eerr = |e: exr::error::Error| match e {
+        exr::error::Error::Io(io) => io_err(path, io),
+        exr::error::Error::NotSupported(m) => Error::unsupported(path, format!("EXR {m}")),
+        other => Error::decode(path, other),
+    };
+    let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(eerr)?;
+    for h in meta.headers.iter() {
+        let size = h.layer_size;
+        limits::check_image_size(
+            path,
+            "EXR header",
+            size.width() as u64,
+            size.height() as u64,
+            bytes.len() as u64,
+        )?;
+    }
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
@@ -282,12 +377,8 @@ fn read_exr(path: &Path) -> Result<RawImage> {
         .first_valid_layer()
         .all_attributes()
         .non_parallel()
-        .from_buffered(open(path)?)
-        .map_err(|e| match e {
-            exr::error::Error::Io(io) => io_err(path, io),
-            exr::error::Error::NotSupported(m) => Error::unsupported(path, format!("EXR {m}")),
-            other => Error::decode(path, other),
-        })?;
+        .from_buffered(Cursor::new(bytes))
+        .map_err(eerr)?;
     let layer = image.layer_data;
     let (width, height) = (layer.size.width(), layer.size.height());
     let list = &layer.channel_data.list;
@@ -365,18 +456,23 @@ fn interleave<T: Copy>(v: Vec<T>, ch: usize) -> Vec<T> {
 }
 
 /// Decodes a TIFF (8/16-bit unsigned or 16/32/64-bit float; grey, grey+alpha, RGB or RGBA).
-fn read_tiff(path: &Path) -> Result<RawImage> {
+fn read_tiff(path: &Path, bytes: &[u8]) -> Result<RawImage> {
     use tiff::decoder::{Decoder, DecodingResult};
     use tiff::tags::Tag;
     use tiff::{ColorType, TiffError};
     let terr = |e: TiffError| match e {
         TiffError::IoError(io) => io_err(path, io),
         TiffError::UnsupportedError(u) => Error::unsupported(path, format!("TIFF {u}")),
-        TiffError::LimitsExceeded => Error::unsupported(path, "TIFF exceeds decoder limits"),
+        TiffError::LimitsExceeded => Error::limits(path, "TIFF exceeds the decoder's limits"),
         other => Error::decode(path, other),
     };
-    let mut dec = Decoder::new(open(path)?).map_err(terr)?;
+    let mut lim = tiff::decoder::Limits::default();
+    lim.decoding_buffer_size = limits::MAX_DECODED_BYTES as usize;
+    let mut dec = Decoder::new(std::io::Cursor::new(bytes))
+        .map_err(terr)?
+        .with_limits(lim);
     let (w, h) = dec.dimensions().map_err(terr)?;
+    limits::check_image_size(path, "TIFF header", w as u64, h as u64, bytes.len() as u64)?;
     let ct = dec.colortype().map_err(terr)?;
     let (channels, bits) = match ct {
         ColorType::Gray(b) => (1, b),
@@ -491,6 +587,15 @@ fn parse_pfm(bytes: &[u8]) -> std::result::Result<Pfm, String> {
     };
     let width = dim(&mut pos, "width")?;
     let height = dim(&mut pos, "height")?;
+    if width > limits::MAX_SIDE || height > limits::MAX_SIDE || width * height > limits::MAX_PIXELS
+    {
+        return Err(format!(
+            "exceeds limits: PFM header declares {width}x{height} pixels (at most {} per \
+             side, {} in all)",
+            limits::MAX_SIDE,
+            limits::MAX_PIXELS
+        ));
+    }
     let t = pfm_token(bytes, &mut pos)?;
     let scale: f32 = t
         .parse()
@@ -536,11 +641,17 @@ fn parse_pfm(bytes: &[u8]) -> std::result::Result<Pfm, String> {
 
 /// Reads a PFM as a raw float image.
 fn read_pfm_raw(path: &Path) -> Result<RawImage> {
-    let mut bytes = Vec::new();
-    open(path)?
-        .read_to_end(&mut bytes)
-        .map_err(|e| Error::read(path, e))?;
-    let (width, height, channels, data) = parse_pfm(&bytes).map_err(|m| Error::decode(path, m))?;
+    let bytes = std::fs::read(path).map_err(|e| Error::read(path, e))?;
+    pfm_raw(path, &bytes)
+}
+
+/// Decodes a PFM file's bytes as a raw float image.
+fn pfm_raw(path: &Path, bytes: &[u8]) -> Result<RawImage> {
+    let (width, height, channels, data) =
+        parse_pfm(bytes).map_err(|m| match m.strip_prefix("exceeds limits: ") {
+            Some(m) => Error::limits(path, m),
+            None => Error::decode(path, m),
+        })?;
     Ok(RawImage {
         width,
         height,
@@ -735,6 +846,7 @@ pub fn write_png8_rgb(
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+    use std::fs::File;
     use std::path::PathBuf;
 
     fn tmp(d: &tempfile::TempDir, name: &str) -> PathBuf {

@@ -31,6 +31,7 @@ pub mod error;
 pub mod fingerprint;
 pub mod image;
 mod lights;
+pub mod limits;
 pub mod output;
 pub mod stack;
 pub mod synth_out;
@@ -39,17 +40,20 @@ pub mod tile_results;
 
 pub use atomic::write_bytes;
 pub use dataset::{open_dataset, Dataset};
-pub use error::{Error, Result};
+pub use error::{Error, Result, Warning};
 pub use image::{
-    linear_to_srgb, read_image, read_pfm, srgb_to_linear, write_exr_rgb, write_pfm,
-    write_png16_rgb, write_png8_rgb, DecodeOptions, Image,
+    decode_image, linear_to_srgb, read_image, read_pfm, srgb_to_linear, write_exr_rgb, write_pfm,
+    write_png16_rgb, write_png8_rgb, DecodeOptions, Image, SampleKind,
 };
 pub use lights::read_light_directions;
 pub use output::{
     gray_map_rgb8, normal_map_rgb8, read_npy_f32, source_map_rgb8, tangent_map_rgb8, write_exr_map,
     write_npy_f32, write_npy_u8, write_png_rgb8, SOURCE_PALETTE,
 };
-pub use stack::{load_stack, read_mask};
-pub use synth_out::{write_lp_dataset, ImageFormat};
+pub use stack::{load_stack, load_stack_with_warnings, read_mask};
+pub use synth_out::{check_synth_target, write_lp_dataset, ImageFormat};
 pub use tile_cache::{CacheInfo, CacheOptions, TileCache, TileGather, TileGrid, TileView};
-pub use tile_results::{read_tile_result, tile_result_done, tile_result_path, write_tile_result};
+pub use tile_results::{
+    check_tile_result, read_tile_result, tile_result_done, tile_result_path, write_tile_result,
+    TileFile,
+};

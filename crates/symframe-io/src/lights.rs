@@ -1,7 +1,8 @@
 //! Parsers of light files: RTI light-position files (`.lp`) and DiLiGenT-style text tables.
 //!
 //! All text files accept blank lines and `#` comments (whole-line or trailing), so a `#` can not
-//! be part of an image path.
+//! be part of an image path. A UTF-8 byte-order mark at the start (as Windows editors write) is
+//! ignored.
 
 use std::path::{Path, PathBuf};
 
@@ -13,8 +14,14 @@ use crate::error::{Error, Result};
 /// comments stripped and surrounding whitespace trimmed; blank lines are dropped.
 pub(crate) fn content_lines(path: &Path) -> Result<Vec<(usize, String)>> {
     let bytes = std::fs::read(path).map_err(|e| Error::read(path, e))?;
+    parse_content_lines(path, &bytes)
+}
+
+/// [`content_lines`] of a file's bytes.
+pub(crate) fn parse_content_lines(path: &Path, bytes: &[u8]) -> Result<Vec<(usize, String)>> {
     let text =
-        String::from_utf8(bytes).map_err(|_| Error::decode(path, "not a UTF-8 text file"))?;
+        std::str::from_utf8(bytes).map_err(|_| Error::decode(path, "not a UTF-8 text file"))?;
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     Ok(text
         .lines()
         .enumerate()
@@ -23,6 +30,64 @@ pub(crate) fn content_lines(path: &Path) -> Result<Vec<(usize, String)>> {
             (!l.is_empty()).then(|| (i + 1, l.to_string()))
         })
         .collect())
+}
+
+/// Whether line `line` (1-based) of the text file `path` has a `#` after some content (a
+/// trailing comment: then a file name cut at it is the likely mistake).
+fn has_trailing_comment(path: &Path, line: usize) -> bool {
+    std::fs::read(path).ok().is_some_and(|b| {
+        String::from_utf8_lossy(&b)
+            .lines()
+            .nth(line - 1)
+            .and_then(|l| l.split_once('#'))
+            .is_some_and(|(before, _)| !before.trim().is_empty())
+    })
+}
+
+/// Why `p`, listed as an image, is not a readable image file: missing, a broken symbolic link,
+/// a folder, or not a regular file (FIFO, socket, device); `None` if it is a regular file.
+pub(crate) fn not_a_file(p: &Path) -> Option<String> {
+    let shown = p.display();
+    match std::fs::symlink_metadata(p) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            Some(format!("{shown} does not exist"))
+        }
+        Err(e) => Some(format!("{shown} cannot be accessed ({e})")),
+        Ok(m) => {
+            let target = if m.file_type().is_symlink() {
+                match std::fs::metadata(p) {
+                    Ok(t) => t,
+                    Err(_) => {
+                        return Some(format!(
+                            "{shown} is a broken symbolic link (its target does not exist)"
+                        ))
+                    }
+                }
+            } else {
+                m
+            };
+            if target.is_file() {
+                None
+            } else if target.is_dir() {
+                Some(format!("{shown} is a folder, not an image file"))
+            } else {
+                Some(format!(
+                    "{shown} is not a regular file (a FIFO, socket or device)"
+                ))
+            }
+        }
+    }
+}
+
+/// The message for a listed image that is not a file, with the `#` hint when the line had a
+/// trailing comment.
+fn image_problem(list: &Path, line: usize, why: String) -> Error {
+    let hint = if has_trailing_comment(list, line) {
+        " ('#' starts a comment: image paths may not contain '#')"
+    } else {
+        ""
+    };
+    Error::parse(list, line, format!("image {why}{hint}"))
 }
 
 /// Parses three whitespace-separated numbers of `what` at `line` of `path`.
@@ -116,12 +181,16 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
     for (line, text) in entries {
         let tokens: Vec<&str> = text.split_whitespace().collect();
         if tokens.len() != 4 {
+            let why = if has_trailing_comment(path, *line) {
+                "'#' starts a comment, so image paths may not contain '#'"
+            } else {
+                "image paths may not contain spaces"
+            };
             return Err(Error::parse(
                 path,
                 *line,
                 format!(
-                    "expected '<image> <lx> <ly> <lz>' (image paths may not contain spaces), \
-                     found {} fields",
+                    "expected '<image> <lx> <ly> <lz>' ({why}), found {} fields",
                     tokens.len()
                 ),
             ));
@@ -129,12 +198,8 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
         let v = parse_triple(path, *line, &tokens[1..], "light direction")?;
         lights.push(unit_direction(path, *line, v)?);
         let img = dir.join(tokens[0]);
-        if !img.is_file() {
-            return Err(Error::parse(
-                path,
-                *line,
-                format!("image {} does not exist", img.display()),
-            ));
+        if let Some(why) = not_a_file(&img) {
+            return Err(image_problem(path, *line, why));
         }
         images.push(img);
     }
@@ -202,14 +267,9 @@ pub(crate) fn parse_filenames(path: &Path, dir: &Path) -> Result<Vec<PathBuf>> {
         .into_iter()
         .map(|(line, text)| {
             let img = dir.join(&text);
-            if img.is_file() {
-                Ok(img)
-            } else {
-                Err(Error::parse(
-                    path,
-                    line,
-                    format!("image {} does not exist", img.display()),
-                ))
+            match not_a_file(&img) {
+                None => Ok(img),
+                Some(why) => Err(image_problem(path, line, why)),
             }
         })
         .collect()
@@ -272,5 +332,24 @@ mod tests {
         assert!(e.contains("new.lp:2"), "{e}");
         std::fs::write(&lp, "1\nnone.png 0 0 0\n").unwrap();
         assert!(read_light_directions(&lp).is_err());
+    }
+
+    /// A byte-order mark gave "expected the number of lights, found '2'".
+    #[test]
+    fn a_utf8_bom_is_ignored() {
+        let d = tempfile::tempdir().unwrap();
+        let lp = d.path().join("bom.lp");
+        std::fs::write(&lp, "\u{feff}2\nnone.png 0 0 2\nx 1 0 1\n").unwrap();
+        assert_eq!(read_light_directions(&lp).unwrap().len(), 2);
+        let table = d.path().join("dirs.txt");
+        std::fs::write(&table, "\u{feff}0 0 1\n0 1 1\n").unwrap();
+        assert_eq!(parse_directions(&table).unwrap().len(), 2);
+        let int = d.path().join("int.txt");
+        std::fs::write(&int, "\u{feff}1 1 1\n").unwrap();
+        assert_eq!(parse_intensities(&int).unwrap(), vec![[1.0; 3]]);
+        // Only at the start: elsewhere it is content.
+        std::fs::write(&table, "0 0 1\n\u{feff}0 1 1\n").unwrap();
+        let e = parse_directions(&table).unwrap_err().to_string();
+        assert!(e.contains("dirs.txt:2"), "{e}");
     }
 }

@@ -33,12 +33,87 @@ pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
     })
 }
 
-/// Reads a `float32` `.npy` array: its shape and its values in row-major (C) order.
+/// Reads a `float32` `.npy` array: its shape and its values in row-major (C) order. The
+/// header's shape is checked against [`crate::limits::MAX_NPY_VALUES`] and the file's length
+/// before the array is allocated.
 pub fn read_npy_f32(path: &Path) -> Result<(Vec<usize>, Vec<f32>)> {
-    let file = std::fs::File::open(path).map_err(|e| Error::read(path, e))?;
-    let arr = ArrayD::<f32>::read_npy(std::io::BufReader::new(file))
-        .map_err(|e| Error::decode(path, e))?;
+    let bytes = std::fs::read(path).map_err(|e| Error::read(path, e))?;
+    decode_npy_f32(path, &bytes)
+}
+
+/// [`read_npy_f32`] of a file's content `bytes` (`path` names it in errors).
+pub fn decode_npy_f32(path: &Path, bytes: &[u8]) -> Result<(Vec<usize>, Vec<f32>)> {
+    check_npy_header(path, bytes)?;
+    let arr =
+        ArrayD::<f32>::read_npy(std::io::Cursor::new(bytes)).map_err(|e| Error::decode(path, e))?;
     Ok((arr.shape().to_vec(), arr.iter().copied().collect()))
+}
+
+/// Checks an `.npy` header: magic, header length, and that the declared shape times the item
+/// size is within the limits and fits in the file.
+fn check_npy_header(path: &Path, b: &[u8]) -> Result<()> {
+    if b.len() < 10 || &b[..6] != b"\x93NUMPY" {
+        return Err(Error::decode(path, "not a .npy file (bad magic)"));
+    }
+    let (start, hlen): (usize, usize) = match b[6] {
+        1 => (10, u16::from_le_bytes([b[8], b[9]]) as usize),
+        2 | 3 if b.len() >= 12 => (
+            12,
+            u32::from_le_bytes(b[8..12].try_into().unwrap()) as usize,
+        ),
+        v => return Err(Error::decode(path, format!("unsupported .npy version {v}"))),
+    };
+    let Some(header) = b.get(start..start.saturating_add(hlen)) else {
+        return Err(Error::decode(path, "truncated .npy header"));
+    };
+    let header = String::from_utf8_lossy(header);
+    let after = |key: &str| header.find(key).map(|i| &header[i + key.len()..]);
+    let shape_text = after("'shape'")
+        .and_then(|r| {
+            let open = r.find('(')? + 1;
+            Some(&r[open..open + r[open..].find(')')?])
+        })
+        .ok_or_else(|| Error::decode(path, "no shape in the .npy header"))?;
+    let mut values: u128 = 1;
+    for t in shape_text
+        .split(',')
+        .map(str::trim)
+        .filter(|t| !t.is_empty())
+    {
+        let d: u128 = t
+            .parse()
+            .map_err(|_| Error::decode(path, format!("bad .npy shape ({shape_text})")))?;
+        values = values.saturating_mul(d);
+    }
+    if values > crate::limits::MAX_NPY_VALUES as u128 {
+        return Err(Error::limits(
+            path,
+            format!(
+                ".npy header declares shape ({shape_text}), more than {} values",
+                crate::limits::MAX_NPY_VALUES
+            ),
+        ));
+    }
+    // The item size: the digits closing the descr ('<f4': 4); 1 if unreadable (the reader
+    // refuses a wrong type itself).
+    let item: u128 = after("'descr'")
+        .and_then(|r| r.split('\'').nth(1))
+        .and_then(|d| {
+            let digits: String = d.chars().rev().take_while(|c| c.is_ascii_digit()).collect();
+            digits.chars().rev().collect::<String>().parse().ok()
+        })
+        .unwrap_or(1);
+    let have = (b.len() - (start + hlen)) as u128;
+    if values.saturating_mul(item) > have {
+        return Err(Error::decode(
+            path,
+            format!(
+                "truncated: shape ({shape_text}) needs {} bytes of data, the file has {have}",
+                values * item
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Writes a float32 OpenEXR map of `channels` interleaved values per pixel: 3 channels are

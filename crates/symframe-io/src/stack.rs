@@ -1,13 +1,14 @@
 //! Loading a dataset's images into a pixel-major [`Stack`], and reading masks.
 
 use std::path::Path;
+use std::sync::Mutex;
 
 use rayon::prelude::*;
 use symframe::Stack;
 
 use crate::dataset::Dataset;
-use crate::error::{Error, Result};
-use crate::image::{read_image, DecodeOptions};
+use crate::error::{Error, Result, Warning};
+use crate::image::{read_image, DecodeOptions, SampleKind};
 
 /// Decodes every image of `ds` (in parallel) into a pixel-major stack, divided by the lights'
 /// intensities when the dataset has them; saturated or non-finite pixels are `NaN`.
@@ -21,8 +22,19 @@ pub fn load_stack(
     opts: &DecodeOptions,
     on_image: &(dyn Fn() + Sync),
 ) -> Result<Stack> {
+    load_stack_with_warnings(ds, opts, on_image).map(|(s, _)| s)
+}
+
+/// [`load_stack`], and the warnings about mixed inputs (see [`Notes::warnings`]) for the caller
+/// to print.
+pub fn load_stack_with_warnings(
+    ds: &Dataset,
+    opts: &DecodeOptions,
+    on_image: &(dyn Fn() + Sync),
+) -> Result<(Stack, Vec<Warning>)> {
     check_dataset(ds)?;
     let n = ds.images.len();
+    let notes = Notes::new(n);
     let chunk = 32.max(2 * rayon::current_num_threads());
     let mut stack: Option<Stack> = None;
     for start in (0..n).step_by(chunk) {
@@ -30,7 +42,7 @@ pub fn load_stack(
         let decoded: Vec<Result<(usize, usize, Vec<f32>)>> = (start..end)
             .into_par_iter()
             .map(|i| {
-                let r = decode_stack_image(ds, i, opts)?;
+                let r = decode_stack_image(ds, i, opts, &notes)?;
                 on_image();
                 Ok(r)
             })
@@ -57,7 +69,105 @@ pub fn load_stack(
                 }
             });
     }
-    Ok(stack.expect("at least one image"))
+    Ok((stack.expect("at least one image"), notes.warnings(ds)))
+}
+
+/// What was noticed of one decoded image.
+#[derive(Debug, Clone, Copy)]
+struct ImageNote {
+    kind: SampleKind,
+    grey: bool,
+    negative: usize,
+}
+
+/// Notes of every decoded image of a dataset (filled from worker threads), turned into the
+/// mixed-input warnings once all are decoded.
+#[derive(Debug)]
+pub(crate) struct Notes(Mutex<Vec<Option<ImageNote>>>);
+
+impl Notes {
+    /// Room for `n` images, none noted yet.
+    pub(crate) fn new(n: usize) -> Self {
+        Self(Mutex::new(vec![None; n]))
+    }
+
+    fn set(&self, i: usize, note: ImageNote) {
+        if let Ok(mut v) = self.0.lock() {
+            if let Some(slot) = v.get_mut(i) {
+                *slot = Some(note);
+            }
+        }
+    }
+
+    /// Warnings about the noted images (images not decoded, e.g. by an earlier interrupted
+    /// build, are not considered): sample types that are converted differently (8-bit images
+    /// are sRGB-decoded, 16-bit and float ones are not) mixed in one stack; grey images among
+    /// RGB ones (their one channel is used for all three); negative samples (kept as they are,
+    /// though no radiance is negative). Each names the first image concerned.
+    pub(crate) fn warnings(&self, ds: &Dataset) -> Vec<Warning> {
+        let notes: Vec<(usize, ImageNote)> = match self.0.lock() {
+            Ok(v) => v
+                .iter()
+                .enumerate()
+                .filter_map(|(i, n)| Some((i, (*n)?)))
+                .collect(),
+            Err(_) => return Vec::new(),
+        };
+        let mut out = Vec::new();
+        let mut kinds = std::collections::BTreeMap::<SampleKind, (usize, usize)>::new();
+        for &(i, n) in &notes {
+            kinds.entry(n.kind).or_insert((0, i)).0 += 1;
+        }
+        if let Some((&major, _)) = kinds
+            .iter()
+            .max_by_key(|(_, &(c, first))| (c, usize::MAX - first))
+        {
+            for (&k, &(count, first)) in kinds.iter().filter(|(&k, _)| k != major) {
+                out.push(Warning {
+                    path: ds.images[first].clone(),
+                    message: format!(
+                        "{} image among {} ones ({count} such, this is the first): the two \
+                         are made linear differently, so their brightness may not compare; \
+                         convert the stack to one format",
+                        k.describe(),
+                        major.describe()
+                    ),
+                });
+            }
+        }
+        let grey: Vec<usize> = notes
+            .iter()
+            .filter(|(_, n)| n.grey)
+            .map(|&(i, _)| i)
+            .collect();
+        if !grey.is_empty() && grey.len() < notes.len() {
+            out.push(Warning {
+                path: ds.images[grey[0]].clone(),
+                message: format!(
+                    "grey image among RGB ones ({} such, this is the first): its one channel \
+                     is used for red, green and blue",
+                    grey.len()
+                ),
+            });
+        }
+        let neg: Vec<(usize, usize)> = notes
+            .iter()
+            .filter(|(_, n)| n.negative > 0)
+            .map(|&(i, n)| (i, n.negative))
+            .collect();
+        if let Some(&(first, _)) = neg.first() {
+            out.push(Warning {
+                path: ds.images[first].clone(),
+                message: format!(
+                    "{} negative samples in {} images (this is the first): no radiance is \
+                     negative (a dark frame subtracted?); they are used as they are",
+                    neg.iter().map(|&(_, c)| c).sum::<usize>(),
+                    neg.len()
+                ),
+            });
+        }
+        out
+    }
 }
 
 /// Checks that a dataset has images, and one light (and intensity, if any) per image.
@@ -109,9 +219,18 @@ pub(crate) fn decode_stack_image(
     ds: &Dataset,
     i: usize,
     opts: &DecodeOptions,
+    notes: &Notes,
 ) -> Result<(usize, usize, Vec<f32>)> {
     let img = read_image(&ds.images[i], opts)?;
     let (w, h) = (img.width, img.height);
+    notes.set(
+        i,
+        ImageNote {
+            kind: img.kind,
+            grey: img.channels == 1,
+            negative: img.data.iter().filter(|&&v| v < 0.0).count(),
+        },
+    );
     let mut rgb = img.into_rgb();
     if let Some(int) = &ds.intensities {
         let k = int[i];
@@ -273,5 +392,76 @@ mod tests {
         write_png(&p, 2, 1, &[0, 0], ::image::ExtendedColorType::L8).unwrap();
         let e = read_mask(&p, 2, 1).unwrap_err().to_string();
         assert!(e.contains("mask.png: mask is empty"), "{e}");
+    }
+
+    /// Mixed inputs passed silently: 8-bit among 16-bit, grey among RGB, negative samples.
+    #[test]
+    fn mixed_inputs_are_warned_about() {
+        use crate::image::write_png16_rgb;
+        let d = tempfile::tempdir().unwrap();
+        let p = |n: &str| d.path().join(n);
+        for n in ["a.png", "b.png", "d.png"] {
+            write_png16_rgb(&p(n), 2, 1, &[0.25; 6]).unwrap();
+        }
+        write_png(&p("c.png"), 2, 1, &[10, 20], ::image::ExtendedColorType::L8).unwrap();
+        let set = ds(["a.png", "b.png", "c.png", "d.png"].map(p).to_vec());
+        let (_, w) = load_stack_with_warnings(&set, &DecodeOptions::default(), &|| {}).unwrap();
+        let w: Vec<String> = w.iter().map(|w| w.to_string()).collect();
+        assert_eq!(w.len(), 2, "{w:?}");
+        assert!(
+            w[0].contains("c.png: 8-bit (sRGB-decoded) image among 16-bit (linear) ones (1 such"),
+            "{w:?}"
+        );
+        assert!(
+            w[1].contains("c.png: grey image among RGB ones (1 such"),
+            "{w:?}"
+        );
+
+        // The cache reports the same, when built and when reused.
+        let dir = p("cache");
+        let go = std::sync::atomic::AtomicBool::new(false);
+        let open = || {
+            crate::TileCache::open_or_build(
+                &set,
+                &DecodeOptions::default(),
+                &dir,
+                Default::default(),
+                &go,
+                &|| {},
+            )
+            .unwrap()
+            .1
+        };
+        let built = open();
+        assert!(!built.hit);
+        let reused = open();
+        assert!(reused.hit);
+        for info in [built, reused] {
+            let v: Vec<String> = info.warnings.iter().map(|w| w.to_string()).collect();
+            assert_eq!(v, w);
+        }
+
+        // Uniform inputs: no warning; negative float samples: one.
+        let (_, w) = load_stack_with_warnings(
+            &ds(["a.png", "b.png"].map(p).to_vec()),
+            &DecodeOptions::default(),
+            &|| {},
+        )
+        .unwrap();
+        assert!(w.is_empty(), "{w:?}");
+        crate::image::write_pfm(&p("e.pfm"), 2, 1, 1, &[0.5, 0.5]).unwrap();
+        crate::image::write_pfm(&p("f.pfm"), 2, 1, 1, &[-0.01, 0.5]).unwrap();
+        let (_, w) = load_stack_with_warnings(
+            &ds(["e.pfm", "f.pfm"].map(p).to_vec()),
+            &DecodeOptions::default(),
+            &|| {},
+        )
+        .unwrap();
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].to_string()
+                .contains("f.pfm: 1 negative samples in 1 images"),
+            "{w:?}"
+        );
     }
 }

@@ -99,7 +99,40 @@ pub fn write_lp_dataset(
         let _ = writeln!(text, "{name} {:?} {:?} {:?}", l.x, l.y, l.z);
     }
     write_bytes(&lp, text.as_bytes())?;
+    write_bytes(
+        &dir.join(SYNTH_MARKER),
+        b"Written by symframe: a later `symframe synth -o` may replace this folder's dataset.\n",
+    )?;
     Ok(lp)
+}
+
+/// The file that marks a folder as written by [`write_lp_dataset`] (`symframe synth`).
+pub const SYNTH_MARKER: &str = ".symframe-synth";
+
+/// Whether a synthetic dataset may be written into `dir`, replacing what is there: yes if it
+/// does not exist, is empty, or holds the [`SYNTH_MARKER`] of an earlier dataset; else an error
+/// naming the folder (a user's folder, whose files must not be replaced), unless `force`.
+pub fn check_synth_target(dir: &Path, force: bool) -> Result<()> {
+    if force || dir.join(SYNTH_MARKER).is_file() {
+        return Ok(());
+    }
+    match std::fs::read_dir(dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(_) if !dir.is_dir() => Err(Error::invalid(dir, "exists and is not a folder")),
+        Err(e) => Err(Error::read(dir, e)),
+        Ok(mut entries) => {
+            if entries.next().is_none() {
+                return Ok(());
+            }
+            Err(Error::invalid(
+                dir,
+                format!(
+                    "not written by symframe synth (no {SYNTH_MARKER} in it) and not empty: \
+                     refusing to replace its files; give a new or empty folder, or --force"
+                ),
+            ))
+        }
+    }
 }
 
 #[cfg(test)]
@@ -171,6 +204,7 @@ mod tests {
             let dir = d.path().join(format!("{fmt:?}"));
             write_lp_dataset(&dir, &lights, &images, w, h, fmt, None, None, None).unwrap();
             assert!(!dir.join("mask.png").exists() && !dir.join("gt_normals.npy").exists());
+            assert!(dir.join(SYNTH_MARKER).is_file());
             let ds = open_dataset(&dir.join("lights.lp")).unwrap();
             assert_eq!(ds.mask, None);
             let s = load_stack(&ds, &DecodeOptions::default(), &|| {}).unwrap();
@@ -199,5 +233,39 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("2 lights, 1 images"), "{e}");
+    }
+
+    /// `synth -o DIR` deleted a user's `DIR/images/IMG_0001.CR2`.
+    #[test]
+    fn only_new_empty_or_marked_folders_are_replaced() {
+        let d = tempfile::tempdir().unwrap();
+        let user = d.path().join("user");
+        std::fs::create_dir_all(user.join("images")).unwrap();
+        std::fs::write(user.join("images/IMG_0001.CR2"), b"raw").unwrap();
+        let e = check_synth_target(&user, false).unwrap_err().to_string();
+        assert!(e.contains("user: not written by symframe synth"), "{e}");
+        assert!(check_synth_target(&user, true).is_ok());
+        assert!(check_synth_target(&d.path().join("new"), false).is_ok());
+        let empty = d.path().join("empty");
+        std::fs::create_dir(&empty).unwrap();
+        assert!(check_synth_target(&empty, false).is_ok());
+        let (lights, images) = data(2, 2, 2);
+        write_lp_dataset(
+            &empty,
+            &lights,
+            &images,
+            2,
+            2,
+            ImageFormat::Exr,
+            None,
+            None,
+            None,
+        )
+        .unwrap();
+        assert!(check_synth_target(&empty, false).is_ok());
+        let file = d.path().join("file");
+        std::fs::write(&file, b"x").unwrap();
+        let e = check_synth_target(&file, false).unwrap_err().to_string();
+        assert!(e.contains("exists and is not a folder"), "{e}");
     }
 }

@@ -21,10 +21,19 @@
 //!
 //! File: a 4,096-byte header (magic, format version, an endianness mark, width, height, lights,
 //! tile size, the inputs' fingerprint, the number of images already scattered, a completion
-//! flag, the light block), then the samples in native byte order (`f32`, so the tiled estimate
-//! equals the in-memory one bit for bit). The fingerprint covers every image's path, size and
-//! modification time, the light intensities, the decode options and the crate version: the
-//! cache is reused when they match and rebuilt when they do not.
+//! flag, the light block, and an XXH3-64 checksum of these fields), then the samples in native
+//! byte order (`f32`, so the tiled estimate equals the in-memory one bit for bit), then a table
+//! of one XXH3-64 checksum per block of each tile (block-major: block 0 of every tile, then
+//! block 1, ...; little-endian `u64`). The fingerprint covers every image's path, size and
+//! content (XXH3-64 of the file's bytes; modification time instead of content with
+//! [`CacheOptions::trust_mtime`]), the light intensities, the decode options and the crate
+//! version: the cache is reused when they match and rebuilt when they do not.
+//!
+//! Integrity: a header whose checksum fails is not a cache (the whole file is rebuilt). A
+//! complete cache is verified before every reuse, every block of every tile against the table
+//! (one pass over the file at memory or disk speed, next to decoding every image); the lights of
+//! the blocks that fail are decoded again and rewritten in place (one decoding batch per bad
+//! block), and [`CacheInfo::blocks_repaired`] says how many.
 //!
 //! Memory: images are decoded in parallel in batches of `batch_bytes / (width * height * 12)`
 //! images (at least one), and each batch is written into the file tile by tile with positioned
@@ -51,13 +60,14 @@ use memmap2::Mmap;
 use rayon::prelude::*;
 
 use crate::dataset::Dataset;
+use crate::error::Warning;
 use crate::error::{Error, Result};
 use crate::fingerprint::Fingerprint;
 use crate::image::DecodeOptions;
-use crate::stack::{check_dataset, check_size, decode_stack_image};
+use crate::stack::{check_dataset, check_size, decode_stack_image, Notes};
 
 /// Format version of the cache file (bumped whenever the layout changes).
-pub const CACHE_VERSION: u32 = 1;
+pub const CACHE_VERSION: u32 = 2;
 const MAGIC: &[u8; 8] = b"SYMFCACH";
 const HEADER_BYTES: usize = 4096;
 const ENDIAN_MARK: u32 = 0x0102_0304;
@@ -160,6 +170,10 @@ pub struct CacheOptions {
     pub tile: usize,
     /// Memory budget of one batch of decoded images, in bytes (at least one image per batch).
     pub batch_bytes: usize,
+    /// Fingerprint the images by path, size and modification time only, not by content
+    /// (skips reading every image on a rerun; an image changed with its size and time kept,
+    /// as `cp -p`, `rsync -a` or `tar x` do, then goes unnoticed).
+    pub trust_mtime: bool,
 }
 
 impl Default for CacheOptions {
@@ -168,6 +182,7 @@ impl Default for CacheOptions {
         Self {
             tile: 32,
             batch_bytes: 1 << 30,
+            trust_mtime: false,
         }
     }
 }
@@ -193,6 +208,19 @@ pub struct CacheInfo {
     pub scatter_s: f64,
     /// The inputs' fingerprint (hex).
     pub fingerprint: String,
+    /// Seconds spent fingerprinting the images (reading and hashing every file unless
+    /// [`CacheOptions::trust_mtime`]).
+    pub fingerprint_s: f64,
+    /// Seconds spent verifying the checksums of a reused (or resumed) cache.
+    pub verify_s: f64,
+    /// Blocks of tiles (tile, light block) of a reused cache that failed their checksum.
+    pub blocks_corrupt: usize,
+    /// Light blocks decoded again and rewritten because some tile's block failed its checksum.
+    pub blocks_repaired: usize,
+    /// Warnings about the inputs (mixed sample types, grey among RGB, negative samples), for
+    /// the caller to print; found when the images were decoded and kept in the cache's header,
+    /// so a reuse reports them again.
+    pub warnings: Vec<Warning>,
 }
 
 /// A complete tile cache, memory-mapped read-only.
@@ -222,12 +250,50 @@ struct Header {
     light_block: usize,
 }
 
-/// Bytes of the encoded header fields.
-const FIELDS: usize = 80;
+/// Bytes of the encoded header fields, checksum included.
+const FIELDS: usize = 88;
+/// Bytes of the header fields that the header checksum covers.
+const SUMMED: usize = 80;
 
 impl Header {
     fn data_bytes(&self) -> u64 {
-        (self.width as u64) * (self.height as u64) * (self.n_lights as u64) * 12
+        (self.width as u64)
+            .saturating_mul(self.height as u64)
+            .saturating_mul(self.n_lights as u64)
+            .saturating_mul(12)
+    }
+
+    /// Light blocks per tile.
+    fn n_blocks(&self) -> usize {
+        self.n_lights.div_ceil(self.light_block.max(1))
+    }
+
+    /// Where the block checksum table starts.
+    fn table_offset(&self) -> u64 {
+        (HEADER_BYTES as u64).saturating_add(self.data_bytes())
+    }
+
+    /// The whole file's length: header, samples, checksum table.
+    fn file_len(&self) -> u64 {
+        let tiles = (self.width.div_ceil(self.tile.max(1)) as u64)
+            .saturating_mul(self.height.div_ceil(self.tile.max(1)) as u64);
+        self.table_offset().saturating_add(
+            tiles
+                .saturating_mul(self.n_blocks() as u64)
+                .saturating_mul(8),
+        )
+    }
+
+    /// Byte range (from the file's start) of light block `b` of tile `t`.
+    fn block_range(&self, grid: &TileGrid, t: usize, b: usize) -> (usize, usize) {
+        let np = grid.tile_pixels(t);
+        let lights = self.light_block.min(self.n_lights - b * self.light_block);
+        (
+            HEADER_BYTES
+                + grid.first_pixel(t) * self.n_lights * 12
+                + b * self.light_block * np * 12,
+            np * lights * 12,
+        )
     }
 
     fn encode(&self) -> [u8; FIELDS] {
@@ -248,12 +314,19 @@ impl Header {
         for (k, v) in fields.iter().enumerate() {
             b[16 + 8 * k..24 + 8 * k].copy_from_slice(&v.to_le_bytes());
         }
+        let sum = xxhash_rust::xxh3::xxh3_64(&b[..SUMMED]);
+        b[SUMMED..FIELDS].copy_from_slice(&sum.to_le_bytes());
         b
     }
 
-    /// Decodes a header; `None` when it is not a cache of this version and byte order.
+    /// Decodes a header; `None` when it is not a cache of this version and byte order, or
+    /// when its checksum fails.
     fn decode(b: &[u8]) -> Option<Self> {
         if b.len() < FIELDS || &b[..8] != MAGIC {
+            return None;
+        }
+        let sum = u64::from_le_bytes(b[SUMMED..FIELDS].try_into().unwrap());
+        if xxhash_rust::xxh3::xxh3_64(&b[..SUMMED]) != sum {
             return None;
         }
         let u32_at = |o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap());
@@ -276,27 +349,106 @@ impl Header {
     }
 }
 
+/// Checks a whole cache file's bytes as a reuse would, for fuzzing the header, table and
+/// warnings parsers: `None` if the header is refused, else the number of failing blocks.
+#[doc(hidden)]
+pub fn check_cache_bytes(b: &[u8]) -> Option<usize> {
+    let h = Header::decode(b)?;
+    if !(h.complete
+        && h.width > 0
+        && h.height > 0
+        && h.tile > 0
+        && (1..=h.n_lights).contains(&h.light_block)
+        && b.len() as u64 == h.file_len())
+    {
+        return None;
+    }
+    let _ = read_warnings(b);
+    Some(verify(b, &h).len())
+}
+
+/// Where the input warnings are kept in the header: length (`u32`), XXH3-64, JSON.
+const WARNINGS_AT: usize = 256;
+
+/// Encodes warnings for the header (as many as fit in it).
+fn encode_warnings(warnings: &[Warning]) -> Vec<u8> {
+    let mut kept = warnings.to_vec();
+    loop {
+        let json = serde_json::to_vec(&kept).unwrap_or_default();
+        if WARNINGS_AT + 12 + json.len() <= HEADER_BYTES || kept.is_empty() {
+            let mut b = (json.len() as u32).to_le_bytes().to_vec();
+            b.extend_from_slice(&xxhash_rust::xxh3::xxh3_64(&json).to_le_bytes());
+            b.extend_from_slice(&json);
+            return b;
+        }
+        kept.pop();
+    }
+}
+
+/// The warnings kept in a cache's header (none if absent or damaged).
+fn read_warnings(file: &[u8]) -> Vec<Warning> {
+    let Some(b) = file.get(WARNINGS_AT..HEADER_BYTES) else {
+        return Vec::new();
+    };
+    let len = u32::from_le_bytes(b[..4].try_into().unwrap()) as usize;
+    let sum = u64::from_le_bytes(b[4..12].try_into().unwrap());
+    match b.get(12..12 + len) {
+        Some(json) if len > 0 && xxhash_rust::xxh3::xxh3_64(json) == sum => {
+            serde_json::from_slice(json).unwrap_or_default()
+        }
+        _ => Vec::new(),
+    }
+}
+
+/// XXH3-64 of a file's bytes, read in 1 MiB pieces.
+pub fn file_content_hash(path: &Path) -> Result<u64> {
+    use std::io::Read;
+    let mut f = File::open(path).map_err(|e| Error::read(path, e))?;
+    let mut h = xxhash_rust::xxh3::Xxh3::new();
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        match f.read(&mut buf) {
+            Ok(0) => return Ok(h.digest()),
+            Ok(k) => h.update(&buf[..k]),
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(Error::read(path, e)),
+        }
+    }
+}
+
 /// The fingerprint of a dataset's decoded samples: every image's path (canonical when
-/// possible), size and modification time, the light intensities, the decode options, the cache
-/// format and the crate version.
-pub fn inputs_fingerprint(ds: &Dataset, opts: &DecodeOptions) -> Result<u64> {
+/// possible), size and content hash ([`file_content_hash`], the files read in parallel) or,
+/// with `trust_mtime`, modification time instead of content; the light intensities, the
+/// decode options, the cache format and the crate version.
+pub fn inputs_fingerprint(ds: &Dataset, opts: &DecodeOptions, trust_mtime: bool) -> Result<u64> {
     let mut f = Fingerprint::new();
     f.str("symframe tile cache")
         .u64(CACHE_VERSION as u64)
         .str(env!("CARGO_PKG_VERSION"))
         .u64(ds.images.len() as u64)
         .u64(opts.linear_8bit as u64)
-        .f64(opts.saturation as f64);
-    for p in &ds.images {
-        let meta = fs::metadata(p).map_err(|e| Error::read(p, e))?;
-        let mtime = meta
-            .modified()
-            .ok()
-            .and_then(|t| t.duration_since(UNIX_EPOCH).ok())
-            .map_or(0, |d| d.as_nanos() as u64);
-        f.path(&fs::canonicalize(p).unwrap_or_else(|_| p.clone()))
-            .u64(meta.len())
-            .u64(mtime);
+        .f64(opts.saturation as f64)
+        .u64(trust_mtime as u64);
+    let per_image: Vec<Result<(PathBuf, u64, u64)>> = ds
+        .images
+        .par_iter()
+        .map(|p| {
+            let meta = fs::metadata(p).map_err(|e| Error::read(p, e))?;
+            let stamp = if trust_mtime {
+                meta.modified()
+                    .ok()
+                    .and_then(|t| t.duration_since(UNIX_EPOCH).ok())
+                    .map_or(0, |d| d.as_nanos() as u64)
+            } else {
+                file_content_hash(p)?
+            };
+            let canonical = fs::canonicalize(p).unwrap_or_else(|_| p.clone());
+            Ok((canonical, meta.len(), stamp))
+        })
+        .collect();
+    for r in per_image {
+        let (p, len, stamp) = r?;
+        f.path(&p).u64(len).u64(stamp);
     }
     match &ds.intensities {
         None => f.u64(0),
@@ -431,13 +583,72 @@ fn matches(h: &Header, len: u64, fingerprint: u64, tile: usize, n_lights: usize)
         && h.width > 0
         && h.height > 0
         && (1..=n_lights).contains(&h.light_block)
-        && len == HEADER_BYTES as u64 + h.data_bytes()
+        && len == h.file_len()
+}
+
+/// The blocks of a complete cache whose checksum fails: `(tile, block)` pairs.
+fn verify(map: &[u8], h: &Header) -> Vec<(usize, usize)> {
+    let grid = TileGrid::new(h.width, h.height, h.tile);
+    let nb = h.n_blocks();
+    let table = h.table_offset() as usize;
+    (0..grid.n_tiles() * nb)
+        .into_par_iter()
+        .filter_map(|k| {
+            let (b, t) = (k / grid.n_tiles(), k % grid.n_tiles());
+            let (o, len) = h.block_range(&grid, t, b);
+            let want =
+                u64::from_le_bytes(map[table + 8 * k..table + 8 * k + 8].try_into().unwrap());
+            (xxhash_rust::xxh3::xxh3_64(&map[o..o + len]) != want).then_some((t, b))
+        })
+        .collect()
+}
+
+/// A complete cache of the wanted inputs, mapped and verified.
+struct Found {
+    map: Mmap,
+    header: Header,
+    /// `(tile, block)` pairs whose checksum failed.
+    bad: Vec<(usize, usize)>,
+    verify_s: f64,
+}
+
+/// Maps the file at `path` read-only, checking it is `len` bytes long.
+fn map_file(path: &Path, len: u64) -> Result<Mmap> {
+    let file = File::open(path).map_err(|e| Error::read(path, e))?;
+    // SAFETY: the cache is only written by this module under the exclusive lock, which no
+    // one can take while we hold the shared one (see the module docs).
+    let map = unsafe { Mmap::map(&file) }.map_err(|e| Error::read(path, e))?;
+    if map.len() as u64 != len {
+        return Err(Error::invalid(path, "cache changed size while opening"));
+    }
+    Ok(map)
+}
+
+/// The complete cache of these inputs at `path`, mapped and verified; `None` if there is none
+/// (missing, incomplete, stale or with a bad header).
+fn open_complete(path: &Path, fingerprint: u64, tile: usize, n: usize) -> Result<Option<Found>> {
+    let Some((header, len)) = read_header(path)? else {
+        return Ok(None);
+    };
+    if !(header.complete && matches(&header, len, fingerprint, tile, n)) {
+        return Ok(None);
+    }
+    let map = map_file(path, len)?;
+    let t = Instant::now();
+    let bad = verify(&map, &header);
+    Ok(Some(Found {
+        map,
+        header,
+        bad,
+        verify_s: t.elapsed().as_secs_f64(),
+    }))
 }
 
 impl TileCache {
     /// Opens the cache of `ds` in `dir` (created if needed), building it first when it is
-    /// missing, incomplete or stale. `stop` is polled between images: when it is set the build
-    /// stops with [`Error::Interrupted`], keeping the images done for the next call.
+    /// missing, incomplete or stale, and repairing the blocks of a complete one that fail their
+    /// checksum. `stop` is polled between images: when it is set the build stops with
+    /// [`Error::Interrupted`], keeping the images done for the next call.
     /// `on_image` is called once per decoded image (from worker threads).
     pub fn open_or_build(
         ds: &Dataset,
@@ -452,24 +663,45 @@ impl TileCache {
             return Err(Error::invalid(dir, "tile size must be positive"));
         }
         fs::create_dir_all(dir).map_err(|e| Error::write(dir, e))?;
-        let fingerprint = inputs_fingerprint(ds, opts)?;
+        let t = Instant::now();
+        let fingerprint = inputs_fingerprint(ds, opts, copts.trust_mtime)?;
+        let fingerprint_s = t.elapsed().as_secs_f64();
         let stem = cache_stem(ds);
         let path = dir.join(format!("{stem}.stack"));
         let partial = dir.join(format!("{stem}.stack.partial"));
         let lock = CacheLock::open(&dir.join(format!("{stem}.lock")))?;
         let n = ds.images.len();
+        let mut info = CacheInfo {
+            path: path.clone(),
+            bytes: 0,
+            hit: false,
+            images_decoded: 0,
+            images_resumed: 0,
+            batch_images: 0,
+            decode_s: 0.0,
+            scatter_s: 0.0,
+            fingerprint: format!("{fingerprint:016x}"),
+            fingerprint_s,
+            verify_s: 0.0,
+            blocks_corrupt: 0,
+            blocks_repaired: 0,
+            warnings: Vec::new(),
+        };
 
         // A complete cache is read under a shared lock (taking it waits while another process
-        // builds). Otherwise build it under an exclusive lock, taken without waiting: while
-        // others hold the shared lock (readers of a stale cache, or processes here for the same
-        // reason), release and retry, so that exactly one process builds and the others wait
-        // for it.
+        // builds). Otherwise build (or repair) it under an exclusive lock, taken without
+        // waiting: while others hold the shared lock (readers of a stale cache, or processes
+        // here for the same reason), release and retry, so that exactly one process builds and
+        // the others wait for it.
         let mut tries = 0u64;
         loop {
             lock.set(false)?;
-            if let Some((h, len)) = read_header(&path)? {
-                if h.complete && matches(&h, len, fingerprint, copts.tile, n) {
-                    return Self::map(path, h, lock, fingerprint, len, true);
+            if let Some(found) = open_complete(&path, fingerprint, copts.tile, n)? {
+                info.verify_s += found.verify_s;
+                if found.bad.is_empty() {
+                    info.hit = true;
+                    info.warnings = read_warnings(&found.map);
+                    return Ok(Self::from_found(found, path, lock, fingerprint, info));
                 }
             }
             if lock.try_exclusive()? {
@@ -483,59 +715,70 @@ impl TileCache {
             let jitter = (std::process::id() as u64 + tries * 7919) % 300;
             std::thread::sleep(std::time::Duration::from_millis(100 + jitter));
         }
-        // Someone may have finished building between our check and the exclusive lock.
-        if let Some((h, len)) = read_header(&path)? {
-            if h.complete && matches(&h, len, fingerprint, copts.tile, n) {
+        // Someone may have finished building (or repairing) between our check and the
+        // exclusive lock.
+        if let Some(found) = open_complete(&path, fingerprint, copts.tile, n)? {
+            info.verify_s += found.verify_s;
+            if found.bad.is_empty() {
                 lock.set(false)?;
-                return Self::map(path, h, lock, fingerprint, len, true);
+                info.hit = true;
+                info.warnings = read_warnings(&found.map);
+                return Ok(Self::from_found(found, path, lock, fingerprint, info));
+            }
+            let Found {
+                map, header, bad, ..
+            } = found;
+            info.warnings = read_warnings(&map);
+            drop(map);
+            repair(ds, opts, &path, &header, &bad, stop, on_image, &mut info)?;
+        } else {
+            if path.exists() {
+                fs::remove_file(&path).map_err(|e| Error::write(&path, e))?;
+            }
+            let built = build(ds, opts, &partial, fingerprint, copts, stop, on_image)?;
+            fs::rename(&partial, &path).map_err(|e| Error::write(&path, e))?;
+            info.images_decoded = built.decoded;
+            info.images_resumed = built.resumed;
+            info.batch_images = built.batch;
+            info.decode_s = built.decode_s;
+            info.scatter_s = built.scatter_s;
+            info.warnings = built.warnings;
+            // What an earlier, interrupted build wrote is verified like a reused cache.
+            if built.resumed > 0 {
+                if let Some(found) = open_complete(&path, fingerprint, copts.tile, n)? {
+                    info.verify_s += found.verify_s;
+                    let Found {
+                        map, header, bad, ..
+                    } = found;
+                    drop(map);
+                    repair(ds, opts, &path, &header, &bad, stop, on_image, &mut info)?;
+                }
             }
         }
-        if path.exists() {
-            fs::remove_file(&path).map_err(|e| Error::write(&path, e))?;
-        }
-        let built = build(ds, opts, &partial, fingerprint, copts, stop, on_image)?;
-        fs::rename(&partial, &path).map_err(|e| Error::write(&path, e))?;
         lock.set(false)?;
-        let (h, len) = read_header(&path)?
+        let (header, len) = read_header(&path)?
             .ok_or_else(|| Error::invalid(&path, "cache vanished after it was built"))?;
-        let (cache, mut info) = Self::map(path, h, lock, fingerprint, len, false)?;
-        info.images_decoded = built.decoded;
-        info.images_resumed = built.resumed;
-        info.batch_images = built.batch;
-        info.decode_s = built.decode_s;
-        info.scatter_s = built.scatter_s;
-        Ok((cache, info))
+        let found = Found {
+            map: map_file(&path, len)?,
+            header,
+            bad: Vec::new(),
+            verify_s: 0.0,
+        };
+        Ok(Self::from_found(found, path, lock, fingerprint, info))
     }
 
-    fn map(
+    fn from_found(
+        found: Found,
         path: PathBuf,
-        h: Header,
         lock: CacheLock,
         fingerprint: u64,
-        len: u64,
-        hit: bool,
-    ) -> Result<(TileCache, CacheInfo)> {
-        let file = File::open(&path).map_err(|e| Error::read(&path, e))?;
-        // SAFETY: the cache is only written by this module under the exclusive lock, which no
-        // one can take while we hold the shared one (see the module docs).
-        let map = unsafe { Mmap::map(&file) }.map_err(|e| Error::read(&path, e))?;
-        if map.len() as u64 != len {
-            return Err(Error::invalid(&path, "cache changed size while opening"));
-        }
-        let info = CacheInfo {
-            path: path.clone(),
-            bytes: len,
-            hit,
-            images_decoded: 0,
-            images_resumed: 0,
-            batch_images: 0,
-            decode_s: 0.0,
-            scatter_s: 0.0,
-            fingerprint: format!("{fingerprint:016x}"),
-        };
-        Ok((
+        mut info: CacheInfo,
+    ) -> (TileCache, CacheInfo) {
+        let h = found.header;
+        info.bytes = found.map.len() as u64;
+        (
             TileCache {
-                map,
+                map: found.map,
                 grid: TileGrid::new(h.width, h.height, h.tile),
                 n_lights: h.n_lights,
                 light_block: h.light_block,
@@ -544,7 +787,7 @@ impl TileCache {
                 _lock: lock,
             },
             info,
-        ))
+        )
     }
 
     /// The tile grid (image size and tile size).
@@ -676,6 +919,8 @@ impl TileGather<'_> {
 
 /// What a build did.
 struct Built {
+    /// About the images decoded by this build.
+    warnings: Vec<Warning>,
     decoded: usize,
     resumed: usize,
     batch: usize,
@@ -720,11 +965,12 @@ fn build(
     on_image: &(dyn Fn() + Sync),
 ) -> Result<Built> {
     let n = ds.images.len();
+    let notes = Notes::new(n);
     let decode_one = |i: usize| -> Result<(usize, usize, Vec<f32>)> {
         if stop.load(Ordering::Relaxed) {
             return Err(Error::Interrupted);
         }
-        let r = decode_stack_image(ds, i, opts)?;
+        let r = decode_stack_image(ds, i, opts, &notes)?;
         on_image();
         Ok(r)
     };
@@ -763,7 +1009,7 @@ fn build(
                 complete: false,
                 light_block: (copts.batch_bytes / (w * h * 12)).clamp(1, n),
             };
-            let file = create_sized(partial, HEADER_BYTES as u64 + header.data_bytes())?;
+            let file = create_sized(partial, header.file_len())?;
             (header, file)
         }
     };
@@ -804,16 +1050,20 @@ fn build(
         }
         decoded += end - from;
         let t = Instant::now();
-        scatter(&file, partial, &grid, n, start, &images)?;
+        scatter(&file, partial, &grid, &header, start, &images)?;
         drop(images);
         scatter_s += t.elapsed().as_secs_f64();
         header.images_done = end;
         write_header(&header)?;
         start = end;
     }
+    let warnings = notes.warnings(ds);
+    write_all_at(&file, &encode_warnings(&warnings), WARNINGS_AT as u64)
+        .map_err(|e| Error::write(partial, e))?;
     header.complete = true;
     write_header(&header)?;
     Ok(Built {
+        warnings,
         decoded,
         resumed,
         batch,
@@ -851,23 +1101,24 @@ fn write_all_at(file: &File, buf: &[u8], offset: u64) -> std::io::Result<()> {
 }
 
 /// Writes images `start..start + images.len()` (interleaved RGB, row-major; one block of
-/// lights, every block before it full) into every tile of the cache file: per tile, the block
-/// is assembled in a per-thread buffer (`pixels * images * 12` bytes, 1 MB for a 32-pixel tile
-/// and 85 images) and written with one positioned write, so every page of the file is written
-/// once, by one batch, and nothing of the file is mapped while building.
+/// lights, every block before it full) into every tile of the cache file, and the block's
+/// checksums into the table: per tile, the block is assembled in a per-thread buffer
+/// (`pixels * images * 12` bytes, 1 MB for a 32-pixel tile and 85 images) and written with one
+/// positioned write, so every page of the file is written once, by one batch, and nothing of
+/// the file is mapped while building.
 fn scatter(
     file: &File,
     path: &Path,
     grid: &TileGrid,
-    n_lights: usize,
+    h: &Header,
     start: usize,
     images: &[Vec<f32>],
 ) -> Result<()> {
-    let stride = n_lights * 3;
+    let stride = h.n_lights * 3;
     let b = images.len();
-    (0..grid.n_tiles())
+    let sums: Vec<u64> = (0..grid.n_tiles())
         .into_par_iter()
-        .try_for_each_init(Vec::new, |buf: &mut Vec<f32>, t| {
+        .map_init(Vec::new, |buf: &mut Vec<f32>, t| {
             let np = grid.tile_pixels(t);
             buf.clear();
             buf.reserve(np * b * 3);
@@ -876,10 +1127,70 @@ fn scatter(
                     buf.extend_from_slice(&img[p * 3..p * 3 + 3]);
                 }
             }
+            let bytes: &[u8] = bytemuck::cast_slice(buf);
             let at = HEADER_BYTES + (grid.first_pixel(t) * stride + start * np * 3) * 4;
-            write_all_at(file, bytemuck::cast_slice(buf), at as u64)
-                .map_err(|e| Error::write(path, e))
+            write_all_at(file, bytes, at as u64).map_err(|e| Error::write(path, e))?;
+            Ok(xxhash_rust::xxh3::xxh3_64(bytes))
         })
+        .collect::<Result<_>>()?;
+    let table: Vec<u8> = sums.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let block = start / h.light_block;
+    let at = h.table_offset() + (block * grid.n_tiles() * 8) as u64;
+    write_all_at(file, &table, at).map_err(|e| Error::write(path, e))
+}
+
+/// Decodes the lights of the light blocks that hold a failed `(tile, block)` of the complete
+/// cache at `path` again and rewrites those blocks (in every tile) with their checksums, in
+/// place. Called under the exclusive lock. An interruption leaves the cache complete with some
+/// blocks still failing, which the next open repairs.
+#[allow(clippy::too_many_arguments)]
+fn repair(
+    ds: &Dataset,
+    opts: &DecodeOptions,
+    path: &Path,
+    h: &Header,
+    bad: &[(usize, usize)],
+    stop: &AtomicBool,
+    on_image: &(dyn Fn() + Sync),
+    info: &mut CacheInfo,
+) -> Result<()> {
+    let blocks: std::collections::BTreeSet<usize> = bad.iter().map(|&(_, b)| b).collect();
+    info.blocks_corrupt += bad.len();
+    let file = OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(path)
+        .map_err(|e| Error::write(path, e))?;
+    let grid = TileGrid::new(h.width, h.height, h.tile);
+    let n = h.n_lights;
+    for b in blocks {
+        let (start, end) = (b * h.light_block, n.min((b + 1) * h.light_block));
+        let t = Instant::now();
+        let results: Vec<Result<(usize, usize, Vec<f32>)>> = (start..end)
+            .into_par_iter()
+            .map(|i| {
+                if stop.load(Ordering::Relaxed) {
+                    return Err(Error::Interrupted);
+                }
+                let r = decode_stack_image(ds, i, opts, &Notes::new(0))?;
+                on_image();
+                Ok(r)
+            })
+            .collect();
+        info.decode_s += t.elapsed().as_secs_f64();
+        let mut images = Vec::with_capacity(end - start);
+        for (j, r) in results.into_iter().enumerate() {
+            let (w, hh, rgb) = r?;
+            check_size(ds, start + j, (w, hh), (h.width, h.height))?;
+            images.push(rgb);
+        }
+        let t = Instant::now();
+        scatter(&file, path, &grid, h, start, &images)?;
+        info.scatter_s += t.elapsed().as_secs_f64();
+        info.images_decoded += end - start;
+        info.blocks_repaired += 1;
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -980,16 +1291,17 @@ mod tests {
         let dir = d.path().join("cache");
         let opts = DecodeOptions::default();
         // Batches of 2 images: 5 batches.
-        let copts = CacheOptions {
-            tile: 4,
-            batch_bytes: 2 * w * h * 12 + 5,
-        };
+        let copts = copts_batches_of_2(w, h);
         let go = AtomicBool::new(false);
         let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
         assert!(!info.hit);
         assert_eq!((info.images_decoded, info.batch_images), (n, 2));
         assert_eq!(cache.light_block(), 2);
-        assert_eq!(info.bytes, (HEADER_BYTES + w * h * n * 12) as u64);
+        // Header, samples, one checksum per block (5) of each tile (3 x 2).
+        assert_eq!(
+            info.bytes,
+            (HEADER_BYTES + w * h * n * 12 + 5 * 6 * 8) as u64
+        );
         same_as_stack(&cache, &ds);
         drop(cache);
 
@@ -1045,6 +1357,160 @@ mod tests {
         );
     }
 
+    /// The cache file of `dir` (the one `.stack`).
+    fn stack_file(dir: &Path) -> PathBuf {
+        fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .find(|p| p.extension().is_some_and(|e| e == "stack"))
+            .unwrap()
+    }
+
+    fn copts_batches_of_2(w: usize, h: usize) -> CacheOptions {
+        CacheOptions {
+            tile: 4,
+            batch_bytes: 2 * w * h * 12 + 5,
+            ..CacheOptions::default()
+        }
+    }
+
+    /// A changed light-block field in the header was trusted (wrong samples, `hit: true`).
+    #[test]
+    fn a_changed_header_field_rebuilds_the_cache() {
+        let d = tempfile::tempdir().unwrap();
+        let (w, h, n) = (11, 6, 9);
+        let ds = dataset(d.path(), w, h, n);
+        let dir = d.path().join("cache");
+        let (opts, copts, go) = (
+            DecodeOptions::default(),
+            copts_batches_of_2(w, h),
+            AtomicBool::new(false),
+        );
+        drop(TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap());
+        let file = stack_file(&dir);
+        let mut b = fs::read(&file).unwrap();
+        // light_block (field 7) from 2 to 3.
+        assert_eq!(b[16 + 8 * 7], 2);
+        b[16 + 8 * 7] = 3;
+        fs::write(&file, &b).unwrap();
+        let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
+        assert!(!info.hit && info.images_decoded == n, "{info:?}");
+        assert_eq!(cache.light_block(), 2);
+        same_as_stack(&cache, &ds);
+    }
+
+    /// 3,000 changed floats of pixel data were trusted; now the failing blocks are decoded
+    /// again and rewritten, the rest kept.
+    #[test]
+    fn changed_pixel_data_is_repaired() {
+        let d = tempfile::tempdir().unwrap();
+        let (w, h, n) = (40, 30, 9);
+        let ds = dataset(d.path(), w, h, n);
+        let dir = d.path().join("cache");
+        let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
+        let copts = CacheOptions {
+            tile: 8,
+            ..copts_batches_of_2(w, h)
+        };
+        drop(TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap());
+        let file = stack_file(&dir);
+        let mut b = fs::read(&file).unwrap();
+        // 3,000 floats of tile 0 (8 x 8 pixels): its first 2-light block is 384 floats, so
+        // these span the whole tile (9 lights x 64 pixels x 3 = 1,728 floats) and the next.
+        let o = HEADER_BYTES;
+        for k in 0..3000 {
+            b[o + 4 * k..o + 4 * k + 4].copy_from_slice(&(k as f32 + 0.5).to_ne_bytes());
+        }
+        fs::write(&file, &b).unwrap();
+        let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
+        assert!(!info.hit, "{info:?}");
+        assert_eq!(info.blocks_repaired, 5, "{info:?}");
+        assert!(info.blocks_corrupt >= 6, "{info:?}");
+        assert_eq!(info.images_decoded, n, "{info:?}");
+        same_as_stack(&cache, &ds);
+        drop(cache);
+        // Repaired: the next open is a hit.
+        let (_, info) = TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
+        assert!(info.hit && info.blocks_corrupt == 0, "{info:?}");
+
+        // One float in one block of one tile: only that block's 2 images are decoded.
+        let mut b = fs::read(&file).unwrap();
+        let g = TileGrid::new(w, h, 8);
+        let at = HEADER_BYTES + g.first_pixel(7) * n * 12 + 2 * 64 * 12 + 20;
+        b[at] ^= 1;
+        fs::write(&file, &b).unwrap();
+        let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
+        assert_eq!(
+            (
+                info.hit,
+                info.blocks_corrupt,
+                info.blocks_repaired,
+                info.images_decoded
+            ),
+            (false, 1, 1, 2),
+            "{info:?}"
+        );
+        same_as_stack(&cache, &ds);
+    }
+
+    /// An image replaced with the same size and modification time (`cp -p`) reused the stale
+    /// cache; the content fingerprint notices it (`trust_mtime` does not, by design).
+    #[test]
+    fn same_size_and_mtime_but_new_content_rebuilds() {
+        let d = tempfile::tempdir().unwrap();
+        let (w, h, n) = (6, 5, 4);
+        // Uncompressed PFM images, so a changed sample keeps the file's size.
+        let mut ds = dataset(d.path(), 1, 1, n);
+        for (i, p) in ds.images.iter_mut().enumerate() {
+            *p = d.path().join(format!("{i}.pfm"));
+            let v: Vec<f32> = (0..w * h * 3).map(|k| (i * 100 + k) as f32).collect();
+            crate::image::write_pfm(p, w, h, 3, &v).unwrap();
+        }
+        let dir = d.path().join("cache");
+        let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
+        let copts = copts_batches_of_2(w, h);
+        drop(TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap());
+        let img = &ds.images[2];
+        let (len, mtime) = {
+            let m = fs::metadata(img).unwrap();
+            (m.len(), m.modified().unwrap())
+        };
+        let mut rgb: Vec<f32> = (0..w * h * 3).map(|k| (200 + k) as f32).collect();
+        rgb[7] += 1.0;
+        crate::image::write_pfm(img, w, h, 3, &rgb).unwrap();
+        File::options()
+            .write(true)
+            .open(img)
+            .unwrap()
+            .set_modified(mtime)
+            .unwrap();
+        let m = fs::metadata(img).unwrap();
+        assert_eq!((m.len(), m.modified().unwrap()), (len, mtime));
+
+        let trusting = CacheOptions {
+            trust_mtime: true,
+            ..copts
+        };
+        let (_, info) = TileCache::open_or_build(&ds, &opts, &dir, trusting, &go, &|| {}).unwrap();
+        assert!(!info.hit, "another fingerprint kind: rebuilt once");
+        let (_, info) = TileCache::open_or_build(&ds, &opts, &dir, trusting, &go, &|| {}).unwrap();
+        assert!(info.hit, "trust_mtime: the documented blind spot");
+        let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
+        assert!(!info.hit && info.images_decoded == n, "{info:?}");
+        same_as_stack(&cache, &ds);
+        drop(cache);
+        // Rewritten with the same bytes and time: still a hit.
+        crate::image::write_pfm(img, w, h, 3, &rgb).unwrap();
+        File::options()
+            .write(true)
+            .open(img)
+            .unwrap()
+            .set_modified(mtime)
+            .unwrap();
+        let (_, info) = TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
+        assert!(info.hit, "{info:?}");
+    }
+
     #[test]
     fn concurrent_openers_build_once() {
         let d = tempfile::tempdir().unwrap();
@@ -1054,6 +1520,7 @@ mod tests {
         let copts = CacheOptions {
             tile: 4,
             batch_bytes: 3 * 9 * 7 * 12,
+            ..CacheOptions::default()
         };
         let go = AtomicBool::new(false);
         let infos: Vec<CacheInfo> = std::thread::scope(|s| {

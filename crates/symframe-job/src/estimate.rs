@@ -457,7 +457,8 @@ fn job_fingerprint(cache: &TileCache, plan: &Plan, mask: Option<&[bool]>) -> Res
     Ok(f.finish())
 }
 
-/// Opens (or builds) the tile cache of `ds` in `dir`, reporting decoding progress.
+/// Opens (or builds) the tile cache of `ds` in `dir`, reporting decoding progress and the
+/// loader's warnings about the inputs.
 pub(crate) fn open_cache(
     ds: &Dataset,
     decode: &DecodeOptions,
@@ -467,14 +468,18 @@ pub(crate) fn open_cache(
 ) -> Result<(TileCache, CacheInfo)> {
     let decoded = AtomicU64::new(0);
     let total = ds.images.len() as u64;
-    TileCache::open_or_build(ds, decode, dir, options, ctl.stop, &|| {
+    let (cache, info) = TileCache::open_or_build(ds, decode, dir, options, ctl.stop, &|| {
         let n = decoded.fetch_add(1, Ordering::SeqCst) + 1;
         ctl.report(Progress::new(Stage::Decoding, n, total));
     })
     .map_err(|e| match e {
-        symframe_io::Error::Interrupted => Interrupted.into(),
+        symframe_io::Error::Interrupted => anyhow::Error::from(Interrupted),
         e => e.into(),
-    })
+    })?;
+    for w in &info.warnings {
+        ctl.warn(&w.to_string());
+    }
+    Ok((cache, info))
 }
 
 /// Reads the mask of a job (`mask`, else the dataset's) at the cache's image size.

@@ -12,7 +12,7 @@ use symframe::fit::{
     holdout_lights, FitMaps, FitMethod, FitParams, FitSummary, HoldoutError, PixelFit, PixelOutcome,
 };
 use symframe_io::fingerprint::Fingerprint;
-use symframe_io::{CacheOptions, Dataset, DecodeOptions};
+use symframe_io::{CacheOptions, Dataset, DecodeOptions, TileFile};
 
 use crate::estimate::{
     cache_dir, fingerprint_lights, fingerprint_mask, open_cache, read_mask, remove_cache,
@@ -399,18 +399,16 @@ impl TileRecord for Option<PixelOutcome> {
         symframe_io::write_bytes(path, &b)
     }
 
-    fn done(path: &Path, job: u64, t: usize, n: usize) -> bool {
-        use std::io::Read;
-        let Ok(mut f) = std::fs::File::open(path) else {
-            return false;
-        };
-        let mut b = [0u8; FIT_HEADER];
-        f.metadata()
-            .is_ok_and(|m| m.len() == (FIT_HEADER + FIT_RECORD * n) as u64)
-            && f.read_exact(&mut b).is_ok()
-            && b == fit_header(job, t, n)
+    fn check(path: &Path, job: u64, t: usize, n: usize) -> TileFile {
+        if !path.exists() {
+            return TileFile::Missing;
+        }
+        if fit_tile_done(path, job, t, n) {
+            TileFile::Done
+        } else {
+            TileFile::Stale
+        }
     }
-
     fn read(path: &Path, job: u64, t: usize, n: usize) -> symframe_io::Result<Vec<Self>> {
         let invalid = |msg: String| symframe_io::Error::Invalid {
             path: path.to_path_buf(),
@@ -430,6 +428,19 @@ impl TileRecord for Option<PixelOutcome> {
             .map(|r| decode(r).ok_or_else(|| invalid("bad fit record".into())))
             .collect()
     }
+}
+
+/// Whether `path` holds tile `t`'s `n` fit records of job `job` (length and header).
+fn fit_tile_done(path: &Path, job: u64, t: usize, n: usize) -> bool {
+    use std::io::Read;
+    let Ok(mut f) = std::fs::File::open(path) else {
+        return false;
+    };
+    let mut b = [0u8; FIT_HEADER];
+    f.metadata()
+        .is_ok_and(|m| m.len() == (FIT_HEADER + FIT_RECORD * n) as u64)
+        && f.read_exact(&mut b).is_ok()
+        && b == fit_header(job, t, n)
 }
 
 #[cfg(test)]
@@ -461,10 +472,10 @@ mod tests {
             Some(PixelOutcome::Fitted(fit, hold)),
         ];
         let p = tile_path(d.path(), 3);
-        assert!(!<Option<PixelOutcome>>::done(&p, 5, 3, 4));
+        assert!(!fit_tile_done(&p, 5, 3, 4));
         <Option<PixelOutcome>>::write(&p, 5, 3, &recs).unwrap();
-        assert!(<Option<PixelOutcome>>::done(&p, 5, 3, 4));
-        assert!(!<Option<PixelOutcome>>::done(&p, 6, 3, 4));
+        assert!(fit_tile_done(&p, 5, 3, 4));
+        assert!(!fit_tile_done(&p, 6, 3, 4));
         assert_eq!(<Option<PixelOutcome>>::read(&p, 5, 3, 4).unwrap(), recs);
         let e = <Option<PixelOutcome>>::read(&p, 6, 3, 4)
             .unwrap_err()

@@ -126,6 +126,9 @@ pub struct Control<'a> {
     pub progress: &'a (dyn Fn(Progress) + Sync),
     /// Testing aid: behave as if stopped once this many tiles are finished.
     pub stop_after_tiles: Option<usize>,
+    /// Called with one line for each thing the user should know that does not stop the job
+    /// (mixed inputs, a corrupt tile result being recomputed).
+    pub warning: &'a (dyn Fn(&str) + Sync),
 }
 
 /// A flag that nothing sets.
@@ -138,6 +141,7 @@ impl Default for Control<'_> {
             stop: &NEVER,
             progress: &|_| {},
             stop_after_tiles: None,
+            warning: &|_| {},
         }
     }
 }
@@ -145,5 +149,9 @@ impl Default for Control<'_> {
 impl Control<'_> {
     fn report(&self, p: Progress) {
         (self.progress)(p)
+    }
+
+    fn warn(&self, line: &str) {
+        (self.warning)(line)
     }
 }

@@ -18,14 +18,17 @@ use symframe::method::{PixelMethod, Worker};
 use symframe::PixelRecord;
 use symframe_io::{TileCache, TileGrid};
 
+use symframe_io::TileFile;
+
 use crate::{Control, Interrupted, Progress, Stage};
 
 /// A per-pixel result that can be stored in a tile result file.
 pub(crate) trait TileRecord: Sized + Send {
     /// Writes tile `t`'s records atomically to `path`, tagged with the job's fingerprint.
     fn write(path: &Path, job: u64, t: usize, records: &[Self]) -> symframe_io::Result<()>;
-    /// Whether `path` holds tile `t`'s `n` records of job `job`.
-    fn done(path: &Path, job: u64, t: usize, n: usize) -> bool;
+    /// Whether `path` holds tile `t`'s `n` records of job `job` (or is missing, stale or
+    /// corrupt).
+    fn check(path: &Path, job: u64, t: usize, n: usize) -> TileFile;
     /// Reads tile `t`'s `n` records of job `job`.
     fn read(path: &Path, job: u64, t: usize, n: usize) -> symframe_io::Result<Vec<Self>>;
 }
@@ -34,8 +37,8 @@ impl TileRecord for PixelRecord {
     fn write(path: &Path, job: u64, t: usize, records: &[Self]) -> symframe_io::Result<()> {
         symframe_io::write_tile_result(path, job, t, records)
     }
-    fn done(path: &Path, job: u64, t: usize, n: usize) -> bool {
-        symframe_io::tile_result_done(path, job, t, n)
+    fn check(path: &Path, job: u64, t: usize, n: usize) -> TileFile {
+        symframe_io::check_tile_result(path, job, t, n)
     }
     fn read(path: &Path, job: u64, t: usize, n: usize) -> symframe_io::Result<Vec<Self>> {
         symframe_io::read_tile_result(path, job, t, n)
@@ -92,11 +95,17 @@ where
     fs::create_dir_all(dir).with_context(|| format!("{}: cannot create folder", dir.display()))?;
     clean_temporaries(dir);
     let grid = *cache.grid();
-    let todo: Vec<usize> = tiles
-        .iter()
-        .copied()
-        .filter(|&t| !M::Output::done(&tile_path(dir, t), job, t, grid.tile_pixels(t)))
-        .collect();
+    let mut todo = Vec::new();
+    for &t in tiles {
+        match M::Output::check(&tile_path(dir, t), job, t, grid.tile_pixels(t)) {
+            TileFile::Done => {}
+            TileFile::Corrupt(e) => {
+                ctl.warn(&format!("{e}; recomputing the tile"));
+                todo.push(t);
+            }
+            TileFile::Missing | TileFile::Stale => todo.push(t),
+        }
+    }
     let reused = tiles.len() - todo.len();
     // Set by the testing aid `stop_after_tiles` (the caller's flag stays the caller's).
     let stopped = AtomicBool::new(ctl.stop_after_tiles == Some(0));

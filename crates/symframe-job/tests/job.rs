@@ -115,7 +115,7 @@ fn progress_is_reported_and_a_set_stop_flag_interrupts_before_any_work() {
     let ctl = Control {
         stop: &stop,
         progress: &progress,
-        stop_after_tiles: None,
+        ..Control::default()
     };
     estimate(&EstimateConfig::new(&lp, &out), &ctl).unwrap();
     // The interrupted run decoded nothing; this one decoded every image and did the one tile.

@@ -7,5 +7,6 @@ mod estimate;
 mod eval;
 mod experiment;
 mod fit;
+mod reliability;
 mod synth;
 mod tiles;

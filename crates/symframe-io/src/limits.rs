@@ -1,0 +1,67 @@
+//! What the decoders accept: every image and array reader checks the sizes a file declares
+//! against these limits, and against the file's own length, before it allocates anything of
+//! that size. A header that claims more (a forged or corrupt file, e.g. an EXR of 100000 x
+//! 100000 pixels in 1 KB) gives an [`Error::Limits`](crate::Error::Limits) naming the file.
+//!
+//! - At most [`MAX_SIDE`] pixels per side and [`MAX_PIXELS`] pixels per image (134 million:
+//!   a 16,384 x 8,192 image). Larger images are not supported; crop or downsample them.
+//! - At most [`MAX_PIXELS_PER_BYTE`] declared pixels per byte of the file (beyond a first
+//!   [`PIXEL_ALLOWANCE`] pixels that any file may declare). Deflate, the strongest compression
+//!   of these formats for constant images, stays near 1,000 bytes per byte, so no real image
+//!   comes near this; a file that declares more is corrupt or truncated.
+//! - Uncompressed formats (PFM, `.npy`) must hold every value they declare: the pixel data's
+//!   length is checked against the file before the buffer is allocated.
+//! - An `.npy` array has at most [`MAX_NPY_VALUES`] values.
+
+use std::path::Path;
+
+use crate::error::{Error, Result};
+
+/// Largest image side accepted, in pixels.
+pub const MAX_SIDE: usize = 1 << 16;
+/// Largest image accepted, in pixels.
+pub const MAX_PIXELS: usize = 1 << 27;
+/// Pixels any file may declare whatever its length.
+pub const PIXEL_ALLOWANCE: u64 = 1 << 20;
+/// Most pixels a file may declare per byte of its length beyond [`PIXEL_ALLOWANCE`].
+pub const MAX_PIXELS_PER_BYTE: u64 = 1 << 14;
+/// Largest `.npy` array accepted, in values (a `MAX_PIXELS` image of 3 channels).
+pub const MAX_NPY_VALUES: usize = 3 * MAX_PIXELS;
+/// Largest decoded buffer a decoder library may allocate for one image, in bytes (a
+/// `MAX_PIXELS` image of four 32-bit channels).
+pub const MAX_DECODED_BYTES: u64 = 16 * MAX_PIXELS as u64;
+
+/// Checks an image's declared `width x height` (`what` names the format, e.g. "EXR header")
+/// against the limits and the file's length `file_len` in bytes.
+pub(crate) fn check_image_size(
+    path: &Path,
+    what: &str,
+    width: u64,
+    height: u64,
+    file_len: u64,
+) -> Result<()> {
+    if width > MAX_SIDE as u64 || height > MAX_SIDE as u64 {
+        return Err(Error::limits(
+            path,
+            format!("{what} declares {width}x{height} pixels, more than {MAX_SIDE} per side"),
+        ));
+    }
+    let pixels = width * height;
+    if pixels > MAX_PIXELS as u64 {
+        return Err(Error::limits(
+            path,
+            format!("{what} declares {width}x{height} pixels, more than {MAX_PIXELS} in all"),
+        ));
+    }
+    let allowed = PIXEL_ALLOWANCE.saturating_add(file_len.saturating_mul(MAX_PIXELS_PER_BYTE));
+    if pixels > allowed {
+        return Err(Error::limits(
+            path,
+            format!(
+                "{what} declares {width}x{height} pixels in a file of {file_len} bytes \
+                 (corrupt or truncated)"
+            ),
+        ));
+    }
+    Ok(())
+}
