@@ -438,31 +438,8 @@ pub fn max_reflectance_pixel(samples: &[f32], lights: &[DVec3]) -> BaselinePixel
     let Some(hj) = halfway_from_light(lights[j]) else {
         return BaselinePixel::empty(PixelStatus::Discarded);
     };
-    const K: usize = MAX_REFLECTANCE_NEIGHBOURS;
-    // The K nearest by cosine to h_j, sorted descending; (cos, index).
-    let mut near = [(f64::NEG_INFINITY, usize::MAX); K];
-    let (mut sum, mut count) = (0.0, 0usize);
-    for (i, (s, &l)) in samples.chunks_exact(3).zip(lights).enumerate() {
-        let Some(v) = grey(s) else { continue };
-        sum += v;
-        count += 1;
-        if i == j || v <= 0.0 {
-            continue;
-        }
-        let Some(h) = halfway_from_light(l) else {
-            continue;
-        };
-        let c = h.dot(hj);
-        if c > near[K - 1].0 {
-            let mut k = K - 1;
-            while k > 0 && near[k - 1].0 < c {
-                near[k] = near[k - 1];
-                k -= 1;
-            }
-            near[k] = (c, i);
-        }
-    }
-    let confidence = (1.0 - sum / count as f64 / max).clamp(0.0, 1.0) as f32;
+    let (near, mean) = peak_neighbours(samples, lights, j, hj);
+    let confidence = (1.0 - mean / max).clamp(0.0, 1.0) as f32;
     let normal = refine_peak(samples, lights, hj, max, &near).unwrap_or(hj);
     if normal.z <= 0.0 {
         return BaselinePixel::empty(PixelStatus::Discarded);
@@ -501,6 +478,52 @@ pub fn highlight_centroid_pixel(samples: &[f32], lights: &[DVec3]) -> BaselinePi
         confidence: m.contrast as f32,
         used: m.count,
     }
+}
+
+/// The [`MAX_REFLECTANCE_NEIGHBOURS`] valid, positive samples whose halfway vectors are nearest
+/// to `hj` (the brightest sample `j`'s), as `(cos to hj, index)` sorted nearest first (index
+/// `usize::MAX` where there are fewer), and the mean grey value of the valid samples.
+fn peak_neighbours(
+    samples: &[f32],
+    lights: &[DVec3],
+    j: usize,
+    hj: DVec3,
+) -> ([(f64, usize); MAX_REFLECTANCE_NEIGHBOURS], f64) {
+    const K: usize = MAX_REFLECTANCE_NEIGHBOURS;
+    let mut near = [(f64::NEG_INFINITY, usize::MAX); K];
+    let (mut sum, mut count) = (0.0, 0usize);
+    for (i, (s, &l)) in samples.chunks_exact(3).zip(lights).enumerate() {
+        let Some(v) = grey(s) else { continue };
+        sum += v;
+        count += 1;
+        if i == j || v <= 0.0 {
+            continue;
+        }
+        let Some(h) = halfway_from_light(l) else {
+            continue;
+        };
+        let c = h.dot(hj);
+        if c > near[K - 1].0 {
+            let mut k = K - 1;
+            while k > 0 && near[k - 1].0 < c {
+                near[k] = near[k - 1];
+                k -= 1;
+            }
+            near[k] = (c, i);
+        }
+    }
+    (near, sum / count.max(1) as f64)
+}
+
+/// The log-quadratic peak of a pixel's slice ([`max_reflectance_pixel`]'s refinement): the
+/// centre of a Gaussian reconstruction of the lobe around the brightest sample; `None` where
+/// there is no valid sample, or the fit is degenerate or not a maximum near the brightest
+/// sample. Allocation-free.
+pub fn highlight_peak(samples: &[f32], lights: &[DVec3]) -> Option<DVec3> {
+    let (j, max) = brightest(samples)?;
+    let hj = halfway_from_light(lights[j])?;
+    let (near, _) = peak_neighbours(samples, lights, j, hj);
+    refine_peak(samples, lights, hj, max, &near)
 }
 
 /// Step 2-3 of [`max_reflectance_pixel`]: the log-quadratic peak near `hj`, if well defined.

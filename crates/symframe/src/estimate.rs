@@ -6,7 +6,7 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::baseline::{woodham_robust_pixel, BaselineParams};
+use crate::baseline::{highlight_peak, woodham_robust_pixel, BaselineParams};
 use crate::error::{Error, Result};
 use crate::highlight::highlight_moments;
 use crate::method::{run_stack, PixelMethod};
@@ -607,7 +607,35 @@ impl<'a> Estimator<'a> {
         } else {
             None
         };
-        let n = if let Some(m) = diffuse_centre {
+        // A lobe much narrower than the spacing of the lights is read through one or two
+        // samples: the piecewise-linear slice cannot be symmetric about its centre, while a
+        // log-quadratic reconstruction of the lobe is, about its peak (docs/method.md, "Sharp
+        // lobes").
+        let sharp = moments.is_some_and(|m| m.count <= SHARP_LOBE_SAMPLES);
+        let sharp_peak =
+            if self.params.cosine == CosineMode::Auto && diffuse_centre.is_none() && sharp {
+                // Where a diffuse part explains the samples once the spike is left out (a plastic),
+                // it locates the normal from every lit light; otherwise (a metal) the peak does.
+                let fit = woodham_robust_pixel(
+                    slice,
+                    &rig.lights_in_camera,
+                    &BaselineParams::default(),
+                    scratch,
+                );
+                match fit.normal {
+                    Some(m) if fit.confidence as f64 >= DIFFUSE_CENTRE_FIT => {
+                        Some((m, PixelSource::Lambertian))
+                    }
+                    _ => highlight_peak(slice, &rig.lights_in_camera)
+                        .map(|m| (m, PixelSource::Highlight)),
+                }
+            } else {
+                None
+            };
+        let n = if let Some((m, from)) = sharp_peak {
+            source = from;
+            m
+        } else if let Some(m) = diffuse_centre {
             // A diffuse slice is symmetric about the normal of its Lambertian term, and a robust
             // Lambertian fit finds that centre in closed form from every lit sample, where the
             // search reads it through the interpolated slice (docs/method.md, "Default
@@ -837,6 +865,11 @@ impl<'a> Estimator<'a> {
 /// A start must have less than this share of the search answer's full-level `SD_n` to
 /// overrule it ([`Estimator::judge_at_full`]).
 const JUDGE_MARGIN: f64 = 0.5;
+
+/// A lobe whose half-maximum region holds at most this many lights
+/// ([`crate::highlight::HighlightMoments::count`]) is narrower than the rig's spacing and is
+/// located by its log-quadratic peak.
+const SHARP_LOBE_SAMPLES: u32 = 2;
 
 /// A diffuse pixel's normal comes from its robust Lambertian fit when the fit explains its
 /// samples this well (uncentred R^2).
