@@ -12,9 +12,20 @@ fn opts() -> DecodeOptions {
 }
 
 /// The error of decoding `p`: one line, naming the file.
+/// The error and its causes on one line, as the command line prints them.
+fn chain(e: &Error) -> String {
+    let mut s = e.to_string();
+    let mut cause = std::error::Error::source(e);
+    while let Some(c) = cause {
+        s = format!("{s}: {c}");
+        cause = c.source();
+    }
+    s
+}
+
 fn refusal(p: &Path) -> (Error, String) {
     let e = read_image(p, &opts()).unwrap_err();
-    let s = e.to_string();
+    let s = chain(&e);
     assert!(s.starts_with(p.to_str().unwrap()), "{s}");
     assert_eq!(s.lines().count(), 1, "{s}");
     (e, s)
@@ -188,7 +199,7 @@ fn npy_header_claiming_100000_squared_by_3() {
         b.extend_from_slice(&good[good.len() - 48..]);
         fs::write(&p, &b).unwrap();
         let e = read_npy_f32(&p).unwrap_err();
-        let s = e.to_string();
+        let s = chain(&e);
         assert!(s.starts_with(p.to_str().unwrap()), "{s}");
         (e, s)
     };
