@@ -10,6 +10,7 @@ mod estimate;
 mod eval_cmd;
 mod experiment;
 mod fit_cmd;
+mod integrate_cmd;
 mod outdir;
 mod progress;
 mod relight_cmd;
@@ -39,6 +40,7 @@ fn main() {
         cli::Command::Eval(args) => eval_cmd::run(&args).map(|_| ()),
         cli::Command::Synth(args) => synth::run(&args).map(|_| ()),
         cli::Command::Experiment(args) => experiment::run(&args),
+        cli::Command::Integrate(args) => integrate_cmd::run(&args).map(|_| ()),
     };
     if let Err(e) = result {
         if e.is::<tiled::Interrupted>() {

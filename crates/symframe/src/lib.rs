@@ -18,6 +18,7 @@ pub mod error;
 pub mod estimate;
 pub mod eval;
 pub mod fit;
+pub mod integrate;
 pub mod objective;
 pub mod optim;
 pub mod relight;
