@@ -37,6 +37,9 @@ pub enum Command {
     /// Re-run the paper's validation experiments in memory (Figures 3, 4, 10 and a noise
     /// study): tables on stdout, PNG plots and a markdown report in the output folder.
     Experiment(ExperimentArgs),
+    /// Light directions from a mirror (chrome) sphere in the images: writes an .lp file, a
+    /// picture of the detected highlights and a JSON record beside it.
+    Calibrate(CalibrateArgs),
     /// Integrate an estimate's normal map into a height map and a mesh (depth.npy, depth.exr,
     /// depth.png, mesh.ply).
     Integrate(IntegrateArgs),
@@ -364,6 +367,12 @@ pub struct SynthArgs {
     /// Seed of the noise and of the bump layout.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Put a mirror (chrome) sphere beside the object, for `symframe calibrate`: the images
+    /// become twice as wide, the sphere in the right half, 1/16 of it from its edges (near-mirror GGX, roughness
+    /// 0.05, with a faint diffuse term so its outline shows). Its circle is recorded in
+    /// scene.json; the mask and ground truth cover the object only.
+    #[arg(long)]
+    pub chrome_sphere: bool,
 }
 
 /// Flags of `symframe fit`.
@@ -493,4 +502,37 @@ pub struct IntegrateArgs {
     /// prediction by more than this many pixels times (1 + the predicted step).
     #[arg(long, default_value_t = 2.0)]
     pub max_jump: f64,
+}
+
+/// Flags of `symframe calibrate`.
+#[derive(Debug, Clone, Args)]
+pub struct CalibrateArgs {
+    /// A folder of images (every image file in it, sorted by name; `mask.*` left out), an
+    /// `.lp` file (its images), or a list file of image paths (one per line, relative to it).
+    pub images: PathBuf,
+    /// The mirror sphere's circle in pixels: CX,CY,R with x right from the left edge, y down
+    /// from the top edge, the centre of the top-left pixel at (0.5, 0.5). Without it the sphere
+    /// is looked for (and what was found is printed).
+    #[arg(long, value_parser = parse_circle, allow_hyphen_values = true)]
+    pub sphere: Option<symframe::calibrate::Circle>,
+    /// The `.lp` file to write (image paths relative to its folder); `<stem>-highlights.png`
+    /// and `<stem>-calibration.json` are written beside it.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// A highlight is the pixels above this fraction of its peak (above the sphere's median).
+    #[arg(long, default_value_t = 0.3)]
+    pub threshold: f64,
+    /// Fail on the first image without a single clear highlight (default: drop it, warn).
+    #[arg(long)]
+    pub strict: bool,
+    /// Treat 8-bit images as linear (default: sRGB-decode them).
+    #[arg(long)]
+    pub linear: bool,
+    /// Integer samples at or above this fraction of the format's maximum are saturated.
+    #[arg(long, default_value_t = 0.995)]
+    pub saturation: f32,
+}
+
+fn parse_circle(s: &str) -> Result<symframe::calibrate::Circle, String> {
+    symframe::calibrate::Circle::parse(s)
 }

@@ -245,6 +245,13 @@ fn estimator_params(args: &EstimateArgs) -> EstimatorParams {
 fn run_tiled(args: &EstimateArgs) -> Result<Done> {
     let t0 = Instant::now();
     let ds: Dataset = symframe_io::open_dataset(&args.input)?;
+    if let Ok(symframe_io::LpPaths::Windows) = symframe_io::lp_path_convention(&ds.source) {
+        eprintln!(
+            "symframe estimate: {}: {}",
+            ds.source.display(),
+            symframe_io::LpPaths::Windows
+        );
+    }
     // The rig (or the baseline's unit lights) before decoding, so a bad light file fails fast.
     let plan = match args.method {
         MethodArg::Symmetry => Plan::Symmetry(Box::new(

@@ -3,6 +3,7 @@
 //! interrupted: the same command resumes).
 
 mod bench;
+mod calibrate_cmd;
 mod cli;
 mod colorbar;
 mod demo;
@@ -40,6 +41,7 @@ fn main() {
         cli::Command::Eval(args) => eval_cmd::run(&args).map(|_| ()),
         cli::Command::Synth(args) => synth::run(&args).map(|_| ()),
         cli::Command::Experiment(args) => experiment::run(&args),
+        cli::Command::Calibrate(args) => calibrate_cmd::run(&args).map(|_| ()),
         cli::Command::Integrate(args) => integrate_cmd::run(&args).map(|_| ()),
     };
     if let Err(e) = result {

@@ -21,7 +21,7 @@ pub use image::{
     linear_to_srgb, read_image, read_pfm, srgb_to_linear, write_exr_rgb, write_pfm,
     write_png16_rgb, write_png8_rgb, DecodeOptions, Image,
 };
-pub use lights::read_light_directions;
+pub use lights::{lp_path_convention, read_light_directions, LpPaths};
 pub use output::{
     gray_map_rgb8, normal_map_rgb8, read_npy_f32, tangent_map_rgb8, write_exr_map, write_npy_f32,
     write_png_rgb8,

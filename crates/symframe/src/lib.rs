@@ -14,6 +14,7 @@
 
 pub mod baseline;
 pub mod brdf;
+pub mod calibrate;
 pub mod error;
 pub mod estimate;
 pub mod eval;
