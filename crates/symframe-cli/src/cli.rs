@@ -43,6 +43,9 @@ pub enum Command {
     /// Integrate an estimate's normal map into a height map and a mesh (depth.npy, depth.exr,
     /// depth.png, mesh.ply).
     Integrate(IntegrateArgs),
+    /// Export a fit's (or an estimate's) maps as an asset for renderers: `export gltf DIR -o
+    /// FILE.gltf|.glb`.
+    Export(ExportArgs),
     /// Paper-scale benchmark: generate a synthetic stack once, time `estimate` on it.
     #[command(hide = true)]
     BenchPaper(BenchArgs),
@@ -535,4 +538,35 @@ pub struct CalibrateArgs {
 
 fn parse_circle(s: &str) -> Result<symframe::calibrate::Circle, String> {
     symframe::calibrate::Circle::parse(s)
+}
+
+/// Formats of `symframe export`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ExportFormat {
+    /// glTF 2.0 (.gltf with .bin and PNG textures beside it, or a single .glb): metallic-
+    /// roughness material, tangent-space normal texture, KHR_materials_anisotropy.
+    Gltf,
+}
+
+/// Flags of `symframe export`.
+#[derive(Debug, Clone, Args)]
+pub struct ExportArgs {
+    /// The asset format.
+    #[arg(value_enum)]
+    pub format: ExportFormat,
+    /// Output folder of `symframe fit` (kd, ks, alpha_t, alpha_b, normals, tangents .npy) or of
+    /// `symframe estimate` (normals, tangents, anisotropy .npy).
+    pub input: PathBuf,
+    /// The file to write: `.gltf` (textures and `.bin` beside it) or `.glb` (all in one).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Export the integrated mesh (one vertex per pixel) instead of a flat quad.
+    #[arg(long)]
+    pub mesh: bool,
+    /// With --mesh: the height map of `symframe integrate` (default: INPUT/depth.npy).
+    #[arg(long, requires = "mesh")]
+    pub depth: Option<PathBuf>,
+    /// With --mesh: leave out triangles across depth jumps (as `integrate --max-jump`).
+    #[arg(long, default_value_t = 2.0)]
+    pub max_jump: f64,
 }

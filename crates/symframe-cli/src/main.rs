@@ -10,6 +10,7 @@ mod demo;
 mod estimate;
 mod eval_cmd;
 mod experiment;
+mod export_cmd;
 mod fit_cmd;
 mod integrate_cmd;
 mod outdir;
@@ -42,6 +43,7 @@ fn main() {
         cli::Command::Synth(args) => synth::run(&args).map(|_| ()),
         cli::Command::Experiment(args) => experiment::run(&args),
         cli::Command::Calibrate(args) => calibrate_cmd::run(&args).map(|_| ()),
+        cli::Command::Export(args) => export_cmd::run(&args).map(|_| ()),
         cli::Command::Integrate(args) => integrate_cmd::run(&args).map(|_| ()),
     };
     if let Err(e) = result {
