@@ -214,6 +214,10 @@ pub struct EstimateArgs {
     /// Memory for one batch of decoded images while the cache is built, in MiB.
     #[arg(long, default_value_t = 1024, value_name = "MIB")]
     pub decode_memory: usize,
+    /// The y convention of normals.png (16-bit, `(n + 1) / 2` per channel): opengl (green =
+    /// up: glTF, Blender) or directx (green = down: Unreal).
+    #[arg(long, value_enum, default_value_t = NormalPngArg::Opengl)]
+    pub normal_png: NormalPngArg,
     /// Testing aid: behave as if interrupted once this many tiles are finished.
     #[arg(long, hide = true)]
     pub stop_after_tiles: Option<usize>,
@@ -569,4 +573,22 @@ pub struct ExportArgs {
     /// With --mesh: leave out triangles across depth jumps (as `integrate --max-jump`).
     #[arg(long, default_value_t = 2.0)]
     pub max_jump: f64,
+}
+
+/// The y convention of `normals.png`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum NormalPngArg {
+    /// Green = +y (up): OpenGL, glTF, Blender.
+    Opengl,
+    /// Green = -y (down): DirectX, Unreal.
+    Directx,
+}
+
+impl From<NormalPngArg> for symframe_io::NormalPng {
+    fn from(a: NormalPngArg) -> Self {
+        match a {
+            NormalPngArg::Opengl => symframe_io::NormalPng::OpenGl,
+            NormalPngArg::Directx => symframe_io::NormalPng::DirectX,
+        }
+    }
 }

@@ -82,6 +82,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         tiles: None,
         tile_size: 32,
         decode_memory: 1024,
+        normal_png: crate::cli::NormalPngArg::Opengl,
         stop_after_tiles: None,
     };
     eprintln!(

@@ -475,7 +475,7 @@ fn run_tiled(args: &EstimateArgs) -> Result<Done> {
     let maps = tiled::assemble(&grid, job, |t| symframe_io::tile_result_path(&tiles_dir, t))?;
     report.pixels = maps.counts;
     report.evals_per_pixel = maps.evals as f64 / maps.counts.estimated.max(1) as f64;
-    write_outputs(&args.output, &maps, &mut report, t0)?;
+    write_outputs(&args.output, &maps, &mut report, t0, args.normal_png.into())?;
     std::fs::remove_dir_all(&tiles_dir)
         .with_context(|| format!("{}: cannot remove", tiles_dir.display()))?;
     remove_cache()?;
@@ -506,8 +506,9 @@ pub fn write_outputs(
     maps: &EstimateMaps,
     report: &mut Report,
     t0: Instant,
+    normal_png: symframe_io::NormalPng,
 ) -> Result<()> {
-    write_maps(out, maps, |write_s| {
+    write_maps_with(out, maps, normal_png, |write_s| {
         report.timings.write_s = write_s;
         report.timings.total_s = t0.elapsed().as_secs_f64();
         report.timings.peak_rss_bytes = tiled::peak_rss_bytes();
@@ -522,6 +523,16 @@ pub fn write_maps(
     maps: &EstimateMaps,
     report: impl FnOnce(f64) -> Result<String>,
 ) -> Result<()> {
+    write_maps_with(out, maps, symframe_io::NormalPng::OpenGl, report)
+}
+
+/// [`write_maps`] with the y convention of `normals.png`.
+pub fn write_maps_with(
+    out: &Path,
+    maps: &EstimateMaps,
+    normal_png: symframe_io::NormalPng,
+    report: impl FnOnce(f64) -> Result<String>,
+) -> Result<()> {
     let t_write = Instant::now();
     let (w, h) = (maps.width, maps.height);
     let staging = Staging::new(out)?;
@@ -531,11 +542,12 @@ pub fn write_maps(
     symframe_io::write_npy_f32(&staging.path("anisotropy.npy"), &[h, w], &maps.anisotropy)?;
     symframe_io::write_exr_map(&staging.path("normals.exr"), w, h, 3, &maps.normals)?;
     symframe_io::write_exr_map(&staging.path("tangents.exr"), w, h, 3, &maps.tangents)?;
-    symframe_io::write_png_rgb8(
+    symframe_io::write_normal_png16(
         &staging.path("normals.png"),
         w,
         h,
-        &symframe_io::normal_map_rgb8(&maps.normals),
+        &maps.normals,
+        normal_png,
     )?;
     symframe_io::write_png_rgb8(
         &staging.path("tangents.png"),

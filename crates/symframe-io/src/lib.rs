@@ -23,8 +23,8 @@ pub use image::{
 };
 pub use lights::{lp_path_convention, read_light_directions, LpPaths};
 pub use output::{
-    gray_map_rgb8, normal_map_rgb8, read_npy_f32, tangent_map_rgb8, write_exr_map, write_npy_f32,
-    write_png_rgb8,
+    gray_map_rgb8, normal_map_rgb8, normal_map_values, read_npy_f32, tangent_map_rgb8,
+    write_exr_map, write_normal_png16, write_npy_f32, write_png_rgb8, NormalPng,
 };
 pub use stack::{load_stack, read_mask};
 pub use synth_out::{write_lp_dataset, ImageFormat};
