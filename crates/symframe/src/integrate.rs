@@ -712,19 +712,26 @@ pub fn integrate(
                 "the bilateral sharpness k must be positive, got {k}"
             )));
         }
+        // The reweighting steps solve loosely (each is only a step toward the fixed point);
+        // the last system is solved to the full tolerance.
+        let inner = params.cg_tolerance.max(1e-4);
         let mut energy = level.energy(&weights, &z);
+        let mut sys = None;
         for _ in 0..max_iterations {
             weights = level.bilateral_weights(&z, k);
-            let sys = Hierarchy::new(level.system(&weights));
-            cg_iterations += sys.solve(&mut z, params.cg_tolerance, params.cg_max_iterations);
+            let h = Hierarchy::new(level.system(&weights));
+            cg_iterations += h.solve(&mut z, inner, params.cg_max_iterations);
+            sys = Some(h);
             reweight_iterations += 1;
             let e = level.energy(&weights, &z);
-
             let change = (e - energy).abs() / energy.max(1e-300);
             energy = e;
             if change < tolerance {
                 break;
             }
+        }
+        if let Some(h) = sys {
+            cg_iterations += h.solve(&mut z, params.cg_tolerance, params.cg_max_iterations);
         }
     }
     let energy = level.energy(&weights, &z);
