@@ -44,6 +44,15 @@ pub enum Command {
     /// Re-run the paper's validation experiments in memory (Figures 3, 4, 10 and a noise
     /// study): tables on stdout, PNG plots and a markdown report in the output folder.
     Experiment(ExperimentArgs),
+    /// Light directions from a mirror (chrome) sphere in the images: writes an .lp file, a
+    /// picture of the detected highlights and a JSON record beside it.
+    Calibrate(CalibrateArgs),
+    /// Integrate an estimate's normal map into a height map and a mesh (depth.npy, depth.exr,
+    /// depth.png, mesh.ply).
+    Integrate(IntegrateArgs),
+    /// Export a fit's (or an estimate's) maps as an asset for renderers: `export gltf DIR -o
+    /// FILE.gltf|.glb`.
+    Export(ExportArgs),
     /// Paper-scale benchmark: generate a synthetic stack once, time `estimate` on it.
     #[command(hide = true)]
     BenchPaper(BenchArgs),
@@ -257,6 +266,10 @@ pub struct EstimateArgs {
     /// Memory for one batch of decoded images while the cache is built, in MiB.
     #[arg(long, default_value_t = CacheOptions::default().batch_bytes >> 20, value_name = "MIB")]
     pub decode_memory: usize,
+    /// The y convention of normals.png (16-bit, `(n + 1) / 2` per channel): opengl (green =
+    /// up: glTF, Blender) or directx (green = down: Unreal).
+    #[arg(long, value_enum, default_value_t = NormalPngArg::Opengl)]
+    pub normal_png: NormalPngArg,
     /// Testing aid: behave as if interrupted once this many tiles are finished.
     #[arg(long, hide = true)]
     pub stop_after_tiles: Option<usize>,
@@ -418,6 +431,12 @@ pub struct SynthArgs {
     /// Seed of the noise and of the bump layout.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Put a mirror (chrome) sphere beside the object, for `symframe calibrate`: the images
+    /// become twice as wide, the sphere in the right half, 1/16 of it from its edges (near-mirror GGX, roughness
+    /// 0.05, with a faint diffuse term so its outline shows). Its circle is recorded in
+    /// scene.json; the mask and ground truth cover the object only.
+    #[arg(long)]
+    pub chrome_sphere: bool,
 }
 
 /// Flags of `symframe fit`.
@@ -514,4 +533,127 @@ pub struct RelightArgs {
     /// sRGB-encoded); the EXR files are not affected.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub exposure: f64,
+}
+
+/// Solvers of `symframe integrate`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum IntegrateSolverArg {
+    /// Least squares on the mask (Poisson), conjugate gradients coarse to fine: fast, smooth
+    /// everywhere (a depth jump becomes a slope).
+    Poisson,
+    /// Bilateral normal integration (Cao et al. 2022): keeps depth discontinuities; about 10 to
+    /// 50 times the time of Poisson.
+    Bilateral,
+}
+
+/// Flags of `symframe integrate`.
+#[derive(Debug, Clone, Args)]
+pub struct IntegrateArgs {
+    /// Output folder of `symframe estimate` (normals.npy; confidence.npy weights the fit).
+    pub estimate: PathBuf,
+    /// Output folder (created; depth.npy, depth.exr, depth.png, mesh.ply, integrate.json in it
+    /// are replaced).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// The solver.
+    #[arg(long, value_enum, default_value_t = IntegrateSolverArg::Bilateral)]
+    pub solver: IntegrateSolverArg,
+    /// Bilateral only: sharpness of the side weights (larger breaks the surface more readily).
+    #[arg(long, default_value_t = 10.0)]
+    pub k: f64,
+    /// Bilateral only: reweighting iterations at most.
+    #[arg(long, default_value_t = 100)]
+    pub max_iterations: usize,
+    /// Relative residual at which each conjugate-gradient solve stops.
+    #[arg(long, default_value_t = 1e-7)]
+    pub tolerance: f64,
+    /// Ignore confidence.npy (weight every pixel alike).
+    #[arg(long)]
+    pub no_confidence: bool,
+    /// Mesh: leave out triangles with an edge whose height step departs from the normals'
+    /// prediction by more than this many pixels times (1 + the predicted step).
+    #[arg(long, default_value_t = 2.0)]
+    pub max_jump: f64,
+}
+
+/// Flags of `symframe calibrate`.
+#[derive(Debug, Clone, Args)]
+pub struct CalibrateArgs {
+    /// A folder of images (every image file in it, sorted by name; `mask.*` left out), an
+    /// `.lp` file (its images), or a list file of image paths (one per line, relative to it).
+    pub images: PathBuf,
+    /// The mirror sphere's circle in pixels: CX,CY,R with x right from the left edge, y down
+    /// from the top edge, the centre of the top-left pixel at (0.5, 0.5). Without it the sphere
+    /// is looked for (and what was found is printed).
+    #[arg(long, value_parser = parse_circle, allow_hyphen_values = true)]
+    pub sphere: Option<symframe::calibrate::Circle>,
+    /// The `.lp` file to write (image paths relative to its folder); `<stem>-highlights.png`
+    /// and `<stem>-calibration.json` are written beside it.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// A highlight is the pixels above this fraction of its peak (above the sphere's median).
+    #[arg(long, default_value_t = 0.3)]
+    pub threshold: f64,
+    /// Fail on the first image without a single clear highlight (default: drop it, warn).
+    #[arg(long)]
+    pub strict: bool,
+    /// Treat 8-bit images as linear (default: sRGB-decode them).
+    #[arg(long)]
+    pub linear: bool,
+    /// Integer samples at or above this fraction of the format's maximum are saturated.
+    #[arg(long, default_value_t = 0.995)]
+    pub saturation: f32,
+}
+
+fn parse_circle(s: &str) -> Result<symframe::calibrate::Circle, String> {
+    symframe::calibrate::Circle::parse(s)
+}
+
+/// Formats of `symframe export`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ExportFormat {
+    /// glTF 2.0 (.gltf with .bin and PNG textures beside it, or a single .glb): metallic-
+    /// roughness material, tangent-space normal texture, KHR_materials_anisotropy.
+    Gltf,
+}
+
+/// Flags of `symframe export`.
+#[derive(Debug, Clone, Args)]
+pub struct ExportArgs {
+    /// The asset format.
+    #[arg(value_enum)]
+    pub format: ExportFormat,
+    /// Output folder of `symframe fit` (kd, ks, alpha_t, alpha_b, normals, tangents .npy) or of
+    /// `symframe estimate` (normals, tangents, anisotropy .npy).
+    pub input: PathBuf,
+    /// The file to write: `.gltf` (textures and `.bin` beside it) or `.glb` (all in one).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Export the integrated mesh (one vertex per pixel) instead of a flat quad.
+    #[arg(long)]
+    pub mesh: bool,
+    /// With --mesh: the height map of `symframe integrate` (default: INPUT/depth.npy).
+    #[arg(long, requires = "mesh")]
+    pub depth: Option<PathBuf>,
+    /// With --mesh: leave out triangles across depth jumps (as `integrate --max-jump`).
+    #[arg(long, default_value_t = 2.0)]
+    pub max_jump: f64,
+}
+
+/// The y convention of `normals.png`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum NormalPngArg {
+    /// Green = +y (up): OpenGL, glTF, Blender.
+    Opengl,
+    /// Green = -y (down): DirectX, Unreal.
+    Directx,
+}
+
+impl From<NormalPngArg> for symframe_io::NormalPng {
+    fn from(a: NormalPngArg) -> Self {
+        match a {
+            NormalPngArg::Opengl => symframe_io::NormalPng::OpenGl,
+            NormalPngArg::Directx => symframe_io::NormalPng::DirectX,
+        }
+    }
 }

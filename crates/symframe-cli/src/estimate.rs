@@ -100,12 +100,22 @@ pub fn config(args: &EstimateArgs) -> Result<EstimateConfig> {
             },
         },
         shard: args.tiles,
+        normal_png: args.normal_png.into(),
     })
 }
 
 /// Runs `symframe estimate`.
 pub fn run(args: &EstimateArgs) -> Result<EstimateOutcome> {
     let config = config(args)?;
+    if let Ok(ds) = symframe_io::open_dataset(&args.input) {
+        if let Ok(symframe_io::LpPaths::Windows) = symframe_io::lp_path_convention(&ds.source) {
+            eprintln!(
+                "symframe estimate: {}: {}",
+                ds.source.display(),
+                symframe_io::LpPaths::Windows
+            );
+        }
+    }
     let bars = progress::Bars::default();
     let show = |p| bars.update(p);
     let outcome = symframe_job::estimate(&config, &crate::control(&show, args.stop_after_tiles))

@@ -3,13 +3,16 @@
 //! interrupted: the same command resumes).
 
 mod bench;
+mod calibrate_cmd;
 mod cli;
 mod colorbar;
 mod demo;
 mod estimate;
 mod eval_cmd;
 mod experiment;
+mod export_cmd;
 mod fit_cmd;
+mod integrate_cmd;
 mod progress;
 mod synth;
 
@@ -91,6 +94,9 @@ fn main() {
         cli::Command::Eval(args) => eval_cmd::run(&args).map(|_| ()),
         cli::Command::Synth(args) => synth::run(&args).map(|_| ()),
         cli::Command::Experiment(args) => experiment::run(&args),
+        cli::Command::Calibrate(args) => calibrate_cmd::run(&args).map(|_| ()),
+        cli::Command::Export(args) => export_cmd::run(&args).map(|_| ()),
+        cli::Command::Integrate(args) => integrate_cmd::run(&args).map(|_| ()),
     };
     if let Err(e) = result {
         if e.is::<Interrupted>() {

@@ -237,7 +237,7 @@ pub fn run(args: &SynthArgs) -> Result<PathBuf> {
     let noise = Noise::parse(&args.noise).map_err(anyhow::Error::msg)?;
     let rig = RigSpec::parse(&args.rig)?;
     let lights = rig.lights()?;
-    let n = args.size * args.size;
+    let n = args.size * args.size * if args.chrome_sphere { 2 } else { 1 };
     let bytes = (lights.len() * n * 3 * 4) as f64;
     if bytes > MAX_STACK_BYTES {
         bail!(
@@ -264,11 +264,20 @@ pub fn run(args: &SynthArgs) -> Result<PathBuf> {
         );
     }
     let bar = progress::bar(lights.len() as u64, "rendering");
+    let chrome = args.chrome_sphere.then(|| ChromeSphere::new(args.size));
     let images: Vec<Vec<f32>> = lights
         .par_iter()
         .enumerate()
         .map(|(i, &l)| {
-            let img = scene.render_degraded(brdf.as_ref(), l, i, &degradation);
+            let img = match &chrome {
+                None => scene.render_degraded(brdf.as_ref(), l, i, &degradation),
+                Some(c) => {
+                    let img = c.beside(&scene.render(brdf.as_ref(), l), l);
+                    let mut img = img;
+                    degradation.apply(&mut img, i);
+                    img
+                }
+            };
             bar.inc(1);
             img
         })
@@ -289,16 +298,25 @@ pub fn run(args: &SynthArgs) -> Result<PathBuf> {
 
     let (format, format_name) = image_format(args.format);
     let staging = Staging::new(&args.output)?;
+    let widen = |v: Vec<f32>, fill: f32| match &chrome {
+        None => v,
+        Some(c) => c.widen(&v, 3, fill),
+    };
+    let mask = match &chrome {
+        None => scene.mask.clone(),
+        Some(c) => c.widen_mask(&scene.mask),
+    };
+    let width = scene.width * if chrome.is_some() { 2 } else { 1 };
     symframe_io::write_lp_dataset(
         staging.dir(),
         &lights,
         &images,
-        scene.width,
+        width,
         scene.height,
         format,
-        Some(&scene.gt_normals()),
-        Some(&scene.gt_tangents()),
-        Some(&scene.mask),
+        Some(&widen(scene.gt_normals(), f32::NAN)),
+        Some(&widen(scene.gt_tangents(), f32::NAN)),
+        Some(&mask),
     )
     .with_context(|| format!("{}: cannot write the dataset", args.output.display()))?;
     drop(images);
@@ -325,7 +343,8 @@ pub fn run(args: &SynthArgs) -> Result<PathBuf> {
         "format": format_name,
         "seed": args.seed,
         "cast_shadows": scene.heights.is_some(),
-        "width": scene.width,
+        "chrome_sphere": chrome.as_ref().map(|c| c.describe()),
+        "width": width,
         "height": scene.height,
         "mask_pixels": scene.mask.iter().filter(|&&m| m).count(),
         "clipped_share": clipped as f64 / in_mask_samples.max(1) as f64,
@@ -344,6 +363,74 @@ pub fn run(args: &SynthArgs) -> Result<PathBuf> {
         );
     }
     Ok(lp)
+}
+
+/// A mirror sphere rendered beside the object (`--chrome-sphere`): in a square as large as the
+/// object's frame, to its right, with a black margin of `size / 16` (at least 2) pixels.
+struct ChromeSphere {
+    size: usize,
+    margin: usize,
+    scene: Scene,
+    brdf: symframe::brdf::Ggx,
+}
+
+impl ChromeSphere {
+    fn new(size: usize) -> Self {
+        let margin = (size / 16).max(2);
+        Self {
+            size,
+            margin,
+            scene: Scene::sphere(size - 2 * margin, TangentField::Circular),
+            brdf: symframe::brdf::Ggx::new([0.02; 3], [0.9; 3], 0.05, 0.05),
+        }
+    }
+
+    /// The object's image (`size x size x 3`) with the sphere under light `l` to its right.
+    fn beside(&self, object: &[f32], l: DVec3) -> Vec<f32> {
+        let sphere = self.scene.render(&self.brdf, l);
+        let (m, d) = (self.margin, self.scene.width);
+        let row = 3 * self.size;
+        let mut out = Vec::with_capacity(2 * object.len());
+        for (r, a) in object.chunks_exact(row).enumerate() {
+            out.extend_from_slice(a);
+            let start = out.len();
+            out.resize(start + row, 0.0);
+            if (m..m + d).contains(&r) {
+                let src = &sphere[3 * (r - m) * d..3 * (r - m + 1) * d];
+                out[start + 3 * m..start + 3 * (m + d)].copy_from_slice(src);
+            }
+        }
+        out
+    }
+
+    /// A map of `channels` per pixel widened with `fill` on the sphere's side.
+    fn widen(&self, v: &[f32], channels: usize, fill: f32) -> Vec<f32> {
+        let row = channels * self.size;
+        v.chunks_exact(row)
+            .flat_map(|a| a.iter().copied().chain(std::iter::repeat_n(fill, row)))
+            .collect()
+    }
+
+    fn widen_mask(&self, m: &[bool]) -> Vec<bool> {
+        m.chunks_exact(self.size)
+            .flat_map(|a| {
+                a.iter()
+                    .copied()
+                    .chain(std::iter::repeat_n(false, self.size))
+            })
+            .collect()
+    }
+
+    fn describe(&self) -> Value {
+        let r = self.scene.width as f64 / 2.0;
+        let (cx, cy) = ((self.size + self.margin) as f64 + r, self.margin as f64 + r);
+        json!({
+            "cx": cx, "cy": cy, "r": r,
+            "circle_convention": "pixels, x right, y down, centre of the top-left pixel (0.5, 0.5)",
+            "model": self.brdf.name(),
+            "sphere_arg": format!("{cx},{cy},{r}"),
+        })
+    }
 }
 
 fn write_json(path: &Path, v: &Value) -> Result<()> {

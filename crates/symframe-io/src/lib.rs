@@ -45,10 +45,11 @@ pub use image::{
     decode_image, linear_to_srgb, read_image, read_pfm, srgb_to_linear, write_exr_rgb, write_pfm,
     write_png16_rgb, write_png8_rgb, DecodeOptions, Image, SampleKind,
 };
-pub use lights::read_light_directions;
+pub use lights::{lp_path_convention, read_light_directions, LpPaths};
 pub use output::{
-    gray_map_rgb8, normal_map_rgb8, read_npy_f32, source_map_rgb8, tangent_map_rgb8, write_exr_map,
-    write_npy_f32, write_npy_u8, write_png_rgb8, SOURCE_PALETTE,
+    gray_map_rgb8, normal_map_rgb8, normal_map_values, read_npy_f32, source_map_rgb8,
+    tangent_map_rgb8, write_exr_map, write_normal_png16, write_npy_f32, write_npy_u8,
+    write_png_rgb8, NormalPng, SOURCE_PALETTE,
 };
 pub use stack::{load_stack, load_stack_with_warnings, read_mask};
 pub use synth_out::{check_synth_target, write_lp_dataset, ImageFormat};

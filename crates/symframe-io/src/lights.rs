@@ -197,13 +197,103 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
         }
         let v = parse_triple(path, *line, &tokens[1..], "light direction")?;
         lights.push(unit_direction(path, *line, v)?);
-        let img = dir.join(tokens[0]);
-        if let Some(why) = not_a_file(&img) {
+        let Some((img, _)) = resolve_lp_image(dir, tokens[0]) else {
+            if is_windows_path(tokens[0]) {
+                return Err(Error::parse(
+                    path,
+                    *line,
+                    format!(
+                        "image {} does not exist (a Windows path: looked for {} next to the .lp)",
+                        tokens[0],
+                        dir.join(windows_file_name(tokens[0])).display()
+                    ),
+                ));
+            }
+            let tried = dir.join(tokens[0]);
+            let why = not_a_file(&tried)
+                .unwrap_or_else(|| format!("{} is not a readable file", tried.display()));
             return Err(image_problem(path, *line, why));
-        }
+        };
         images.push(img);
     }
     Ok((images, lights))
+}
+
+/// How the image paths of an `.lp` file were read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LpPaths {
+    /// Relative to the `.lp` file's folder (or absolute), as written.
+    AsWritten,
+    /// Windows paths (`C:\capture\img_0000.jpg`, or relative with backslashes), matched by
+    /// their path below the `.lp` file's folder or, failing that, by file name next to it.
+    Windows,
+}
+
+impl std::fmt::Display for LpPaths {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            LpPaths::AsWritten => "image paths relative to the .lp file",
+            LpPaths::Windows => {
+                "Windows image paths, matched by file name (or relative path) next to the .lp file"
+            }
+        })
+    }
+}
+
+/// Whether an `.lp` image entry is written the Windows way: a drive (`C:`) or backslashes.
+fn is_windows_path(token: &str) -> bool {
+    let b = token.as_bytes();
+    token.contains('\\') || (b.len() >= 2 && b[0].is_ascii_alphabetic() && b[1] == b':')
+}
+
+/// The file name of a Windows path (after the last `\` or `/`, and any drive).
+fn windows_file_name(token: &str) -> &str {
+    let tail = token.rsplit(['\\', '/']).next().unwrap_or(token);
+    match tail.as_bytes() {
+        [d, b':', ..] if d.is_ascii_alphabetic() => &tail[2..],
+        _ => tail,
+    }
+}
+
+/// The image an `.lp` entry names: as written relative to `dir`; else, for a Windows path, its
+/// relative form with `/` separators below `dir`, else its file name in `dir`.
+fn resolve_lp_image(dir: &Path, token: &str) -> Option<(PathBuf, LpPaths)> {
+    let direct = dir.join(token);
+    if direct.is_file() {
+        return Some((direct, LpPaths::AsWritten));
+    }
+    if !is_windows_path(token) {
+        return None;
+    }
+    let b = token.as_bytes();
+    let has_drive = b.len() >= 2 && b[0].is_ascii_alphabetic() && b[1] == b':';
+    if !has_drive && !token.starts_with('\\') {
+        let rel = dir.join(token.replace('\\', "/"));
+        if rel.is_file() {
+            return Some((rel, LpPaths::Windows));
+        }
+    }
+    let by_name = dir.join(windows_file_name(token));
+    by_name.is_file().then_some((by_name, LpPaths::Windows))
+}
+
+/// How an `.lp` file's image paths are read (see [`LpPaths`]): `Windows` when any entry needed
+/// the Windows reading. Errors as opening the dataset would give them.
+pub fn lp_path_convention(path: &Path) -> Result<LpPaths> {
+    parse_lp(path)?;
+    let dir = path.parent().unwrap_or(Path::new(""));
+    let lines = content_lines(path)?;
+    let windows = lines.iter().skip(1).any(|(_, text)| {
+        text.split_whitespace()
+            .next()
+            .and_then(|t| resolve_lp_image(dir, t))
+            .is_some_and(|(_, c)| c == LpPaths::Windows)
+    });
+    Ok(if windows {
+        LpPaths::Windows
+    } else {
+        LpPaths::AsWritten
+    })
 }
 
 /// Reads light directions alone (e.g. the lights to relight under), from either an `.lp`-style
@@ -351,5 +441,37 @@ mod tests {
         std::fs::write(&table, "0 0 1\n\u{feff}0 1 1\n").unwrap();
         let e = parse_directions(&table).unwrap_err().to_string();
         assert!(e.contains("dirs.txt:2"), "{e}");
+    }
+
+    #[test]
+    fn windows_paths_are_matched_next_to_the_lp() {
+        let d = tempfile::tempdir().unwrap();
+        std::fs::create_dir(d.path().join("jpeg-exports")).unwrap();
+        std::fs::write(d.path().join("img_0000.jpg"), b"x").unwrap();
+        std::fs::write(d.path().join("jpeg-exports/img_0001.jpg"), b"x").unwrap();
+        let lp = d.path().join("capture.lp");
+        std::fs::write(
+            &lp,
+            "2\nC:\\capture\\jpeg-exports\\img_0000.jpg 0 0 1\njpeg-exports\\img_0001.jpg 0 1 1\n",
+        )
+        .unwrap();
+        let (images, lights) = parse_lp(&lp).unwrap();
+        assert_eq!(images[0], d.path().join("img_0000.jpg"));
+        assert_eq!(images[1], d.path().join("jpeg-exports/img_0001.jpg"));
+        assert_eq!(lights.len(), 2);
+        assert_eq!(lp_path_convention(&lp).unwrap(), LpPaths::Windows);
+        assert!(LpPaths::Windows.to_string().contains("Windows"));
+        // Written the usual way: as written.
+        std::fs::write(&lp, "1\nimg_0000.jpg 0 0 1\n").unwrap();
+        assert_eq!(lp_path_convention(&lp).unwrap(), LpPaths::AsWritten);
+        // A Windows path to a missing file names what was looked for.
+        std::fs::write(&lp, "1\nD:\\x\\gone.jpg 0 0 1\n").unwrap();
+        let e = parse_lp(&lp).unwrap_err().to_string();
+        assert!(
+            e.contains("capture.lp:2") && e.contains("gone.jpg") && e.contains("Windows"),
+            "{e}"
+        );
+        assert_eq!(windows_file_name("C:img.png"), "img.png");
+        assert!(!is_windows_path("a/b.png"));
     }
 }

@@ -145,19 +145,58 @@ fn byte(v: f64) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0).round() as u8
 }
 
-/// Colours unit normals (`H x W x 3`, `NaN` = no result) as `(r, g, b) = ((nx+1)/2, (ny+1)/2,
-/// nz)`, written as bytes directly (a data colour map, not sRGB-encoded); `NaN` pixels black.
+/// Colours unit normals (`H x W x 3`, `NaN` = no result) the way normal maps are stored:
+/// `(r, g, b) = ((nx+1)/2, (ny+1)/2, (nz+1)/2)` (OpenGL convention, y up), written as bytes
+/// directly (a data map, not sRGB-encoded); `NaN` pixels black. See [`normal_map_rgb16`] for
+/// the 16-bit map and the DirectX (y down) convention.
 pub fn normal_map_rgb8(normals: &[f32]) -> Vec<u8> {
+    normal_map_values(normals, NormalPng::OpenGl)
+        .into_iter()
+        .map(|v| byte(v as f64))
+        .collect()
+}
+
+/// The y convention of a normal-map picture.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NormalPng {
+    /// Green = up (`+y`): OpenGL, glTF, Blender.
+    OpenGl,
+    /// Green = down (`-y`): DirectX, Unreal.
+    DirectX,
+}
+
+/// Normal-map values in `[0, 1]`: `(n + 1) / 2` per channel, y negated for
+/// [`NormalPng::DirectX`]; `NaN` pixels 0 (black).
+pub fn normal_map_values(normals: &[f32], convention: NormalPng) -> Vec<f32> {
+    let sy = match convention {
+        NormalPng::OpenGl => 1.0,
+        NormalPng::DirectX => -1.0,
+    };
     normals
         .chunks_exact(3)
         .flat_map(|n| {
             if n.iter().any(|v| v.is_nan()) {
-                return [0, 0, 0];
+                return [0.0; 3];
             }
-            let [x, y, z] = [n[0] as f64, n[1] as f64, n[2] as f64];
-            [byte((x + 1.0) / 2.0), byte((y + 1.0) / 2.0), byte(z)]
+            [
+                (n[0] + 1.0) / 2.0,
+                (sy * n[1] + 1.0) / 2.0,
+                (n[2] + 1.0) / 2.0,
+            ]
         })
         .collect()
+}
+
+/// Writes a normal map as a 16-bit PNG: `(n + 1) / 2` in each channel (see
+/// [`normal_map_values`]), black where there is no normal.
+pub fn write_normal_png16(
+    path: &Path,
+    width: usize,
+    height: usize,
+    normals: &[f32],
+    convention: NormalPng,
+) -> Result<()> {
+    crate::image::write_png16_rgb(path, width, height, &normal_map_values(normals, convention))
 }
 
 /// HSV with saturation and value 1 to RGB bytes; `hue` in turns (`[0, 1)`, wrapped).
@@ -391,8 +430,24 @@ mod tests {
         ];
         assert_eq!(
             normal_map_rgb8(&n),
-            vec![128, 128, 255, 255, 128, 0, 37, 218, 0, 0, 0, 0]
+            vec![128, 128, 255, 255, 128, 128, 37, 218, 128, 0, 0, 0]
         );
+        // 16-bit, both conventions: y flips, x and z do not.
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("n.png");
+        let opts = crate::image::DecodeOptions {
+            saturation: 2.0,
+            ..Default::default()
+        };
+        for (conv, g) in [(NormalPng::OpenGl, s), (NormalPng::DirectX, -s)] {
+            write_normal_png16(&p, 4, 1, &n, conv).unwrap();
+            let img = read_image(&p, &opts).unwrap();
+            let want = [(1.0 - s) / 2.0, (1.0 + g) / 2.0, 0.5];
+            for (got, w) in img.data[6..9].iter().zip(want) {
+                assert!((got - w).abs() < 1e-4, "{conv:?}: {:?}", &img.data[6..9]);
+            }
+            assert!(img.data[9..12].iter().all(|&v| v == 0.0));
+        }
     }
 
     #[test]

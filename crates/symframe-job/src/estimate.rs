@@ -13,7 +13,9 @@ use symframe::estimate::{check_inputs, PixelCounts};
 use symframe::{EstimateMaps, Estimator, EstimatorParams, PixelRecord, PixelSource};
 use symframe::{Rig, RigOptions};
 use symframe_io::fingerprint::Fingerprint;
-use symframe_io::{CacheInfo, CacheOptions, Dataset, DecodeOptions, TileCache, TileGrid};
+use symframe_io::{
+    CacheInfo, CacheOptions, Dataset, DecodeOptions, NormalPng, TileCache, TileGrid,
+};
 
 use crate::merge::{write_manifest, ShardManifest, MANIFEST, MANIFEST_FORMAT, MANIFEST_VERSION};
 use crate::outdir::Staging;
@@ -125,6 +127,8 @@ pub struct EstimateConfig {
     pub cache: CacheConfig,
     /// Only this shard's tiles (tile results and a manifest, no maps).
     pub shard: Option<Shard>,
+    /// The y convention of `normals.png` (16-bit, `(n + 1) / 2` per channel).
+    pub normal_png: NormalPng,
 }
 
 impl EstimateConfig {
@@ -138,6 +142,7 @@ impl EstimateConfig {
             decode: DecodeOptions::default(),
             cache: CacheConfig::default(),
             shard: None,
+            normal_png: NormalPng::OpenGl,
         }
     }
 
@@ -678,7 +683,7 @@ fn run(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcome> {
     report.pixels = maps.counts;
     report.sources = Sources::of(&maps.source);
     report.evals_per_pixel = maps.evals as f64 / maps.counts.estimated.max(1) as f64;
-    write_estimate_outputs(&config.output, &maps, |write_s| {
+    write_estimate_outputs(&config.output, &maps, config.normal_png, |write_s| {
         report.timings.write_s = write_s;
         report.timings.total_s = t0.elapsed().as_secs_f64();
         report.timings.peak_rss_bytes = peak_rss_bytes();
@@ -709,6 +714,7 @@ pub(crate) fn assemble(
 pub fn write_estimate_outputs(
     out: &Path,
     maps: &EstimateMaps,
+    normal_png: NormalPng,
     report: impl FnOnce(f64) -> Result<String>,
 ) -> Result<()> {
     let t_write = Instant::now();
@@ -721,8 +727,14 @@ pub fn write_estimate_outputs(
     symframe_io::write_npy_u8(&staging.path("source.npy"), &[h, w], &maps.source)?;
     symframe_io::write_exr_map(&staging.path("normals.exr"), w, h, 3, &maps.normals)?;
     symframe_io::write_exr_map(&staging.path("tangents.exr"), w, h, 3, &maps.tangents)?;
+    symframe_io::write_normal_png16(
+        &staging.path("normals.png"),
+        w,
+        h,
+        &maps.normals,
+        normal_png,
+    )?;
     let pictures = [
-        ("normals.png", symframe_io::normal_map_rgb8(&maps.normals)),
         (
             "tangents.png",
             symframe_io::tangent_map_rgb8(&maps.tangents),

@@ -224,7 +224,7 @@ pub fn merge(shards: &[PathBuf], output: &Path, ctl: &Control) -> Result<MergeOu
         "shards": first.of,
     });
     report["shards"] = serde_json::Value::Array(shard_timings);
-    write_estimate_outputs(output, &maps, |write_s| {
+    write_estimate_outputs(output, &maps, symframe_io::NormalPng::OpenGl, |write_s| {
         report["timings"] = serde_json::json!({
             "estimate_s_all_shards": estimate_s,
             "merge_s": t0.elapsed().as_secs_f64() - write_s,

@@ -55,11 +55,13 @@
 
 pub mod baseline;
 pub mod brdf;
+pub mod calibrate;
 pub mod error;
 pub mod estimate;
 pub mod eval;
 pub mod fit;
 pub mod highlight;
+pub mod integrate;
 pub mod method;
 pub mod objective;
 pub mod optim;

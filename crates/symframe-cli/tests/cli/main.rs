@@ -2,11 +2,15 @@
 //! refused with a one-line error naming the file.
 
 mod baselines;
+mod calibrate;
 mod common;
 mod estimate;
 mod eval;
 mod experiment;
+mod export;
 mod fit;
+mod integrate;
+mod normal_png;
 mod reliability;
 mod synth;
 mod tiles;

@@ -1,0 +1,596 @@
+//! Light directions from a mirror (chrome) sphere in the frame, as RTI captures do.
+//!
+//! Pixel convention of the sphere's circle ([`Circle`]): x right from the image's left edge, y
+//! down from its top edge, in pixels; the centre of the top-left pixel is `(0.5, 0.5)`. (Half a
+//! pixel off moves a highlight's normal by `0.5 / r` radians and the light by twice that: about
+//! 2 degrees on a sphere 30 pixels across.)
+//!
+//! Per image ([`find_highlight`]): the brightest connected spot on the sphere (saturated pixels,
+//! `NaN` in a decoded image, count as the brightest), thresholded at a fraction of its peak
+//! above the sphere's median; its centre is the intensity-weighted mean of the sphere normals
+//! under it (in normal space rather than pixel space, so spots near the rim, stretched by the
+//! sphere's foreshortening, are not pulled inward); the light is the view `(0, 0, 1)` mirrored
+//! about that normal. No spot bright enough, or a second spot carrying a large share of the
+//! first one's weight, is an error for that image (the command drops it with a warning).
+//!
+//! [`detect_sphere`] finds the sphere when its circle is not given: the connected region
+//! brighter than the image border (its median), in the mean over all images, that holds the
+//! brightest spot of most images; its circle has the region's centroid and the radius of a disc
+//! of the same area. It needs a background darker than the sphere all around it (the sphere
+//! not touching the object); otherwise give the circle.
+
+use glam::DVec3;
+
+/// A circle in image pixels: centre `(cx, cy)` (x right, y down, top-left pixel centre at
+/// `(0.5, 0.5)`) and radius `r`.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Circle {
+    /// Centre, x (right), pixels.
+    pub cx: f64,
+    /// Centre, y (down), pixels.
+    pub cy: f64,
+    /// Radius, pixels.
+    pub r: f64,
+}
+
+impl Circle {
+    /// Parses `CX,CY,R`.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        let v: Vec<f64> = s
+            .split(',')
+            .map(|t| t.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| format!("expected CX,CY,R (three numbers), got '{s}'"))?;
+        match v[..] {
+            [cx, cy, r] if v.iter().all(|x| x.is_finite()) && r > 0.0 => Ok(Self { cx, cy, r }),
+            _ => Err(format!(
+                "expected CX,CY,R: three finite numbers with R > 0, got '{s}'"
+            )),
+        }
+    }
+
+    /// The sphere's unit normal (camera frame: x right, y up, z toward the camera) seen at
+    /// image point `(x, y)`, `None` outside the circle.
+    pub fn normal_at(&self, x: f64, y: f64) -> Option<DVec3> {
+        let nx = (x - self.cx) / self.r;
+        let ny = -(y - self.cy) / self.r;
+        let rr = nx * nx + ny * ny;
+        (rr < 1.0).then(|| DVec3::new(nx, ny, (1.0 - rr).sqrt()))
+    }
+
+    /// The image point where the sphere's normal is `n` (its projection).
+    pub fn point_of(&self, n: DVec3) -> (f64, f64) {
+        (self.cx + n.x * self.r, self.cy - n.y * self.r)
+    }
+
+    /// Whether pixel `(col, row)`'s centre is inside the circle.
+    fn covers(&self, col: usize, row: usize) -> bool {
+        let (x, y) = (col as f64 + 0.5 - self.cx, row as f64 + 0.5 - self.cy);
+        x * x + y * y < self.r * self.r
+    }
+
+    /// The pixel range `(col0..col1, row0..row1)` the circle touches, clipped to the image.
+    fn bounds(&self, width: usize, height: usize) -> (usize, usize, usize, usize) {
+        let clip = |v: f64, n: usize| (v.max(0.0) as usize).min(n);
+        (
+            clip((self.cx - self.r).floor(), width),
+            clip((self.cx + self.r).ceil(), width),
+            clip((self.cy - self.r).floor(), height),
+            clip((self.cy + self.r).ceil(), height),
+        )
+    }
+}
+
+/// The light direction (surface toward light) whose mirror reflection about `n` is the view
+/// `(0, 0, 1)`: `l = 2 (n . v) n - v`.
+pub fn light_from_normal(n: DVec3) -> DVec3 {
+    (2.0 * n.z * n - DVec3::Z).normalize()
+}
+
+/// Thresholds of [`find_highlight`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HighlightParams {
+    /// The spot is the pixels above `median + fraction * (peak - median)`.
+    pub fraction: f64,
+    /// The peak must be at least this many times the sphere's median (plus a small floor),
+    /// or be saturated.
+    pub min_contrast: f64,
+    /// A second spot with at least this share of the main spot's weight makes the image
+    /// ambiguous.
+    pub several_ratio: f64,
+}
+
+impl Default for HighlightParams {
+    fn default() -> Self {
+        Self {
+            fraction: 0.3,
+            min_contrast: 5.0,
+            several_ratio: 0.2,
+        }
+    }
+}
+
+/// A located highlight.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Highlight {
+    /// Centre in image pixels (x right, y down; the [`Circle`] convention).
+    pub x: f64,
+    /// Centre, y (down).
+    pub y: f64,
+    /// Sphere normal at the centre.
+    pub normal: DVec3,
+    /// Light direction (surface toward light).
+    pub light: DVec3,
+    /// Pixels in the spot.
+    pub pixels: usize,
+    /// Saturated pixels in the spot.
+    pub saturated: usize,
+    /// Peak value over the sphere's median.
+    pub contrast: f64,
+}
+
+/// Why no highlight was taken from an image.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum HighlightError {
+    /// No sphere pixel in the image.
+    #[error("the sphere's circle holds no pixel of the image")]
+    OffImage,
+    /// Nothing on the sphere stands out.
+    #[error(
+        "no highlight on the sphere (peak {contrast:.1}x the sphere's median, {min:.0}x needed)"
+    )]
+    None {
+        /// Peak over median.
+        contrast: f64,
+        /// The contrast asked for.
+        min: f64,
+    },
+    /// Two or more comparable spots.
+    #[error(
+        "{count} highlights on the sphere (the second has {share:.0}% of the first's weight); \
+         near ({x1:.1}, {y1:.1}) and ({x2:.1}, {y2:.1})"
+    )]
+    Several {
+        /// Spots above the threshold.
+        count: usize,
+        /// Weight of the second spot over the first's, percent.
+        share: f64,
+        /// Centre of the first, x.
+        x1: f64,
+        /// Centre of the first, y.
+        y1: f64,
+        /// Centre of the second, x.
+        x2: f64,
+        /// Centre of the second, y.
+        y2: f64,
+    },
+}
+
+/// Locates the highlight of a mirror sphere in one image of `width x height` grey values
+/// (linear; `NaN` = saturated). See the module documentation.
+pub fn find_highlight(
+    width: usize,
+    height: usize,
+    grey: &[f32],
+    circle: &Circle,
+    params: &HighlightParams,
+) -> Result<Highlight, HighlightError> {
+    let (c0, c1, r0, r1) = circle.bounds(width, height);
+    let mut inside = Vec::new();
+    for row in r0..r1 {
+        for col in c0..c1 {
+            if circle.covers(col, row) {
+                inside.push(row * width + col);
+            }
+        }
+    }
+    if inside.is_empty() {
+        return Err(HighlightError::OffImage);
+    }
+    let mut finite: Vec<f32> = inside
+        .iter()
+        .map(|&i| grey[i])
+        .filter(|v| v.is_finite())
+        .collect();
+    let saturated_any = finite.len() < inside.len();
+    finite.sort_by(f32::total_cmp);
+    let median = finite
+        .get(finite.len() / 2)
+        .copied()
+        .unwrap_or(0.0)
+        .max(0.0) as f64;
+    let peak = finite.last().copied().unwrap_or(0.0) as f64;
+    // Saturated pixels are at least as bright as anything measured, and stand out.
+    let top = if saturated_any {
+        peak.max(median * params.min_contrast).max(1e-6)
+    } else {
+        peak.max(median)
+    };
+    let floor = 1e-6 * top.max(1e-12);
+    let contrast = top / (median + floor);
+    let stands_out = contrast >= params.min_contrast && top > 0.0;
+    if !(saturated_any || stands_out) {
+        return Err(HighlightError::None {
+            contrast,
+            min: params.min_contrast,
+        });
+    }
+    let threshold = median + params.fraction * (top - median);
+    let value = |i: usize| -> f64 {
+        let v = grey[i];
+        if v.is_finite() {
+            v as f64
+        } else {
+            top
+        }
+    };
+    let bright = |i: usize| !grey[i].is_finite() || grey[i] as f64 > threshold;
+    // Connected spots (8-neighbours) among the bright sphere pixels.
+    let mut seen = std::collections::HashSet::new();
+    let mut spots: Vec<(f64, Vec<usize>)> = Vec::new();
+    for &start in &inside {
+        if !bright(start) || !seen.insert(start) {
+            continue;
+        }
+        let mut members = vec![start];
+        let mut k = 0;
+        while k < members.len() {
+            let i = members[k];
+            k += 1;
+            let (row, col) = ((i / width) as isize, (i % width) as isize);
+            for dr in -1..=1 {
+                for dc in -1..=1 {
+                    let (rr, cc) = (row + dr, col + dc);
+                    if rr < 0 || cc < 0 || rr as usize >= height || cc as usize >= width {
+                        continue;
+                    }
+                    let j = rr as usize * width + cc as usize;
+                    if circle.covers(cc as usize, rr as usize) && bright(j) && seen.insert(j) {
+                        members.push(j);
+                    }
+                }
+            }
+        }
+        let weight: f64 = members.iter().map(|&i| value(i) - threshold).sum();
+        spots.push((weight, members));
+    }
+    spots.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let centre = |members: &[usize]| -> (DVec3, usize) {
+        let mut sum = DVec3::ZERO;
+        let mut sat = 0;
+        for &i in members {
+            let (x, y) = ((i % width) as f64 + 0.5, (i / width) as f64 + 0.5);
+            if let Some(n) = circle.normal_at(x, y) {
+                sum += (value(i) - threshold).max(0.0) * n;
+            }
+            sat += usize::from(!grey[i].is_finite());
+        }
+        (sum.normalize_or(DVec3::Z), sat)
+    };
+    let (main_w, main) = &spots[0];
+    let (normal, saturated) = centre(main);
+    if let Some((second_w, second)) = spots.get(1) {
+        if *second_w > params.several_ratio * main_w {
+            let (n2, _) = centre(second);
+            let ((x1, y1), (x2, y2)) = (circle.point_of(normal), circle.point_of(n2));
+            return Err(HighlightError::Several {
+                count: spots.len(),
+                share: 100.0 * second_w / main_w,
+                x1,
+                y1,
+                x2,
+                y2,
+            });
+        }
+    }
+    let (x, y) = circle.point_of(normal);
+    Ok(Highlight {
+        x,
+        y,
+        normal,
+        light: light_from_normal(normal),
+        pixels: main.len(),
+        saturated,
+        contrast,
+    })
+}
+
+/// What [`detect_sphere`] found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Detection {
+    /// The circle.
+    pub circle: Circle,
+    /// Share of the images whose brightest spot lies in the region.
+    pub highlight_share: f64,
+    /// Intersection over union of the region and its circle (1 = perfectly round).
+    pub roundness: f64,
+}
+
+/// Finds a mirror sphere from the mean of all images (`width x height` grey values, `NaN` =
+/// saturated somewhere) and the brightest point of each image (pixel indices). See the module
+/// documentation. `Err` says why none was found.
+pub fn detect_sphere(
+    width: usize,
+    height: usize,
+    mean: &[f32],
+    brightest: &[usize],
+) -> Result<Detection, String> {
+    if width < 3 || height < 3 || mean.len() != width * height {
+        return Err("the images are too small to find a sphere in".into());
+    }
+    let top = mean
+        .iter()
+        .filter(|v| v.is_finite())
+        .cloned()
+        .fold(0.0f32, f32::max) as f64;
+    let value = |i: usize| -> f64 {
+        if mean[i].is_finite() {
+            mean[i] as f64
+        } else {
+            top
+        }
+    };
+    // The background's level: the median of the image border.
+    let mut border: Vec<f64> = (0..width * height)
+        .filter(|&i| {
+            let (r, c) = (i / width, i % width);
+            r < 2 || c < 2 || r + 2 >= height || c + 2 >= width
+        })
+        .map(value)
+        .collect();
+    border.sort_by(f64::total_cmp);
+    let level = border[border.len() / 2];
+    let threshold = level + 1e-3 * (top - level).max(0.0) + 1e-9 * top;
+    let on = |i: usize| value(i) > threshold;
+    // Label the regions (4-neighbours).
+    let mut label = vec![usize::MAX; width * height];
+    let mut sizes = Vec::new();
+    for start in 0..width * height {
+        if !on(start) || label[start] != usize::MAX {
+            continue;
+        }
+        let id = sizes.len();
+        label[start] = id;
+        let mut stack = vec![start];
+        let mut n = 0usize;
+        while let Some(i) = stack.pop() {
+            n += 1;
+            let (r, c) = (i / width, i % width);
+            let mut push = |j: usize| {
+                if on(j) && label[j] == usize::MAX {
+                    label[j] = id;
+                    stack.push(j);
+                }
+            };
+            if c + 1 < width {
+                push(i + 1);
+            }
+            if c > 0 {
+                push(i - 1);
+            }
+            if r + 1 < height {
+                push(i + width);
+            }
+            if r > 0 {
+                push(i - width);
+            }
+        }
+        sizes.push(n);
+    }
+    if sizes.is_empty() {
+        return Err("nothing in the images is brighter than their border".into());
+    }
+    let mut votes = vec![0usize; sizes.len()];
+    for &b in brightest {
+        if let Some(&l) = label.get(b) {
+            if l != usize::MAX {
+                votes[l] += 1;
+            }
+        }
+    }
+    let (best, &count) = votes
+        .iter()
+        .enumerate()
+        .max_by_key(|(_, v)| **v)
+        .ok_or("no region")?;
+    let share = count as f64 / brightest.len().max(1) as f64;
+    if count == 0 {
+        return Err("no bright region holds the images' brightest spots".into());
+    }
+    let (mut sx, mut sy, mut n) = (0.0, 0.0, 0usize);
+    for (i, &l) in label.iter().enumerate() {
+        if l == best {
+            sx += (i % width) as f64 + 0.5;
+            sy += (i / width) as f64 + 0.5;
+            n += 1;
+        }
+    }
+    let circle = Circle {
+        cx: sx / n as f64,
+        cy: sy / n as f64,
+        r: (n as f64 / std::f64::consts::PI).sqrt(),
+    };
+    let (c0, c1, r0, r1) = circle.bounds(width, height);
+    let mut in_circle = 0usize;
+    let mut both = 0usize;
+    for row in r0..r1 {
+        for col in c0..c1 {
+            if circle.covers(col, row) {
+                in_circle += 1;
+                both += usize::from(label[row * width + col] == best);
+            }
+        }
+    }
+    let union = n + in_circle - both;
+    let roundness = both as f64 / union.max(1) as f64;
+    if roundness < 0.9 {
+        return Err(format!(
+            "the region holding the brightest spots (centre {:.1}, {:.1}, {} pixels) is not \
+             round (overlap with its circle {:.2})",
+            circle.cx, circle.cy, n, roundness
+        ));
+    }
+    Ok(Detection {
+        circle,
+        highlight_share: share,
+        roundness,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::brdf::{Brdf, Ggx};
+    use crate::render::{Scene, TangentField};
+
+    fn grey(rgb: &[f32]) -> Vec<f32> {
+        rgb.chunks_exact(3)
+            .map(|p| (p[0] + p[1] + p[2]) / 3.0)
+            .collect()
+    }
+
+    fn angle_deg(a: DVec3, b: DVec3) -> f64 {
+        a.normalize()
+            .dot(b.normalize())
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees()
+    }
+
+    #[test]
+    fn circle_parsing_and_geometry() {
+        let c = Circle::parse("10.5, 20, 8").unwrap();
+        assert_eq!((c.cx, c.cy, c.r), (10.5, 20.0, 8.0));
+        for bad in ["1,2", "1,2,0", "a,b,c", "1,2,3,4", "1,nan,3"] {
+            assert!(Circle::parse(bad).is_err(), "{bad}");
+        }
+        // Up in the image (smaller y) is +y in the camera frame.
+        let n = c.normal_at(10.5, 16.0).unwrap();
+        assert!((n - DVec3::new(0.0, 0.5, 0.75f64.sqrt())).length() < 1e-12);
+        let (x, y) = c.point_of(n);
+        assert!((x - 10.5).abs() < 1e-12 && (y - 16.0).abs() < 1e-12);
+        assert!(c.normal_at(0.0, 0.0).is_none());
+        // Head-on normal: light along the view; 45 degrees: light in the image plane.
+        assert!((light_from_normal(DVec3::Z) - DVec3::Z).length() < 1e-12);
+        let l = light_from_normal(DVec3::new(0.5f64.sqrt(), 0.0, 0.5f64.sqrt()));
+        assert!((l - DVec3::X).length() < 1e-12);
+    }
+
+    #[test]
+    fn highlights_on_a_rendered_chrome_sphere_give_the_lights() {
+        let size = 96;
+        let scene = Scene::sphere(size, TangentField::Circular);
+        let chrome = Ggx::new([0.02; 3], [0.9; 3], 0.05, 0.05);
+        let circle = Circle {
+            cx: size as f64 / 2.0,
+            cy: size as f64 / 2.0,
+            r: size as f64 / 2.0,
+        };
+        let mut worst: f64 = 0.0;
+        // Up to 62 degrees of normal: lights up to 124 degrees from the view (behind it).
+        for (k, theta) in [0.0f64, 10.0, 25.0, 40.0, 50.0, 62.0].iter().enumerate() {
+            let phi = (k as f64 * 67.0).to_radians();
+            let n = DVec3::new(
+                theta.to_radians().sin() * phi.cos(),
+                theta.to_radians().sin() * phi.sin(),
+                theta.to_radians().cos(),
+            );
+            let l = light_from_normal(n);
+            let img = grey(&scene.render(&chrome as &dyn Brdf, l));
+            let h = find_highlight(size, size, &img, &circle, &HighlightParams::default())
+                .unwrap_or_else(|e| panic!("theta {theta}: {e}"));
+            worst = worst.max(angle_deg(h.light, l));
+        }
+        assert!(worst < 1.0, "worst light error {worst} degrees");
+    }
+
+    #[test]
+    fn saturated_cores_none_and_several() {
+        let size = 64;
+        let circle = Circle {
+            cx: 32.0,
+            cy: 32.0,
+            r: 32.0,
+        };
+        let p = HighlightParams::default();
+        // A flat, dim sphere: no highlight.
+        let mut img = vec![0.0f32; size * size];
+        for (i, v) in img.iter_mut().enumerate() {
+            if circle.covers(i % size, i / size) {
+                *v = 0.1;
+            }
+        }
+        assert!(matches!(
+            find_highlight(size, size, &img, &circle, &p),
+            Err(HighlightError::None { .. })
+        ));
+        // A saturated 3 x 3 core (NaN) at pixel (40, 20): its centre.
+        let mut sat = img.clone();
+        for r in 19..22 {
+            for c in 39..42 {
+                sat[r * size + c] = f32::NAN;
+            }
+        }
+        let h = find_highlight(size, size, &sat, &circle, &p).unwrap();
+        assert!(
+            (h.x - 40.5).abs() < 0.2 && (h.y - 20.5).abs() < 0.2,
+            "{h:?}"
+        );
+        assert_eq!(h.saturated, 9);
+        // A second, equally bright spot: ambiguous.
+        let mut two = sat.clone();
+        for r in 40..43 {
+            for c in 20..23 {
+                two[r * size + c] = f32::NAN;
+            }
+        }
+        let e = find_highlight(size, size, &two, &circle, &p).unwrap_err();
+        assert!(matches!(e, HighlightError::Several { count: 2, .. }), "{e}");
+        assert!(e.to_string().contains("2 highlights"));
+        // A faint second spot (a tenth of the weight) does not matter.
+        let mut faint = sat;
+        faint[45 * size + 20] = 1.0;
+        assert!(find_highlight(size, size, &faint, &circle, &p).is_ok());
+        // Off the image.
+        let off = Circle {
+            cx: -100.0,
+            cy: 5.0,
+            r: 10.0,
+        };
+        assert_eq!(
+            find_highlight(size, size, &img, &off, &p),
+            Err(HighlightError::OffImage)
+        );
+    }
+
+    #[test]
+    fn a_round_region_with_the_brightest_spots_is_found() {
+        let (w, h) = (120, 80);
+        let truth = Circle {
+            cx: 80.3,
+            cy: 38.7,
+            r: 25.4,
+        };
+        let mut mean = vec![0.0f32; w * h];
+        for (i, v) in mean.iter_mut().enumerate() {
+            if truth.covers(i % w, i / w) {
+                *v = 0.05;
+            }
+            // A brighter square object on the left.
+            let (r, c) = (i / w, i % w);
+            if (10..50).contains(&c) && (20..60).contains(&r) {
+                *v = 0.4;
+            }
+        }
+        let brightest = vec![38 * w + 80, 30 * w + 75, 45 * w + 90, 30 * w + 30];
+        let d = detect_sphere(w, h, &mean, &brightest).unwrap();
+        assert!((d.circle.cx - truth.cx).abs() < 0.1, "{d:?}");
+        assert!((d.circle.cy - truth.cy).abs() < 0.1, "{d:?}");
+        assert!((d.circle.r - truth.r).abs() < 0.15, "{d:?}");
+        assert!((d.highlight_share - 0.75).abs() < 1e-9);
+        // Only the square holds bright spots: not round.
+        let e = detect_sphere(w, h, &mean, &[30 * w + 30]).unwrap_err();
+        assert!(e.contains("not round"), "{e}");
+        assert!(detect_sphere(w, h, &vec![0.0; w * h], &brightest).is_err());
+    }
+}
