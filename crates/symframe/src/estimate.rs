@@ -106,11 +106,12 @@ pub enum PixelSource {
     None = 0,
     /// The symmetry of the BRDF slice.
     Symmetry = 1,
-    /// A Lambertian fit: the symmetry estimator's fallback for diffuse pixels beyond the rig's
-    /// reach, or Woodham's photometric stereo.
+    /// A robust Lambertian fit: the estimator's answer for diffuse pixels (the centre of a
+    /// diffuse slice) and its fallback beyond the rig's reach, or Woodham's photometric stereo.
     Lambertian = 2,
-    /// The highlight: the estimator's fallback for other pixels beyond the reach (centroid),
-    /// or the max-reflectance and highlight-centroid baselines.
+    /// The highlight: the estimator's answer for lobes sharper than the light spacing (the
+    /// peak) and its fallback beyond the reach (centroid), or the max-reflectance and
+    /// highlight-centroid baselines.
     Highlight = 3,
 }
 
@@ -145,10 +146,10 @@ impl PixelSource {
                 PixelSource::None => "no normal (masked, no data or discarded)",
                 PixelSource::Symmetry => "the symmetry of the pixel's BRDF slice",
                 PixelSource::Lambertian => {
-                    "a robust Lambertian fit (fallback beyond the rig's reach, or Woodham)"
+                    "a robust Lambertian fit (diffuse pixels, beyond the rig's reach, or Woodham)"
                 }
                 PixelSource::Highlight => {
-                    "the highlight's centroid or peak (fallback beyond the rig's reach, or a highlight baseline)"
+                    "the highlight's peak or centroid (lobes sharper than the light spacing, beyond the rig's reach, or a highlight baseline)"
                 }
             };
             (s as u8, s.name(), what)

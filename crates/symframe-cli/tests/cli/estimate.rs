@@ -72,9 +72,8 @@ fn estimate_on_an_lp_dataset_writes_every_output_and_is_accurate() {
     assert!(estimated > 400, "{report}");
     // Outside the sphere (mask.png beside the .lp): NaN.
     assert!(normals[0].is_nan());
-    // The source map: a source wherever a normal was estimated (the symmetry on most pixels,
-    // fallbacks at the rim beyond the reach), none elsewhere; the report's legend counts the
-    // same pixels.
+    // The source map: a source wherever a normal was estimated (the symmetry on most pixels),
+    // none elsewhere; the report's legend counts the same pixels.
     let source: ndarray::Array2<u8> = ndarray_npy::read_npy(out.join("source.npy")).unwrap();
     assert_eq!(source.dim(), (28, 28));
     for (&code, n) in source.iter().zip(normals.chunks_exact(3)) {
@@ -90,7 +89,9 @@ fn estimate_on_an_lp_dataset_writes_every_output_and_is_accurate() {
         .map(|c| report["sources"][c]["pixels"].as_u64().unwrap())
         .sum();
     assert_eq!(counted, estimated);
-    assert!(symmetry * 10 >= estimated * 9, "{report}");
+    // Measured: 531 of 616 (the rest: diffuse-dominated pixels located by their Lambertian
+    // term, sharp highlights by their peak, fallbacks at the rim).
+    assert!(symmetry * 4 >= estimated * 3, "{report}");
     assert!(out.join("source.png").is_file());
     assert_eq!(report["parameters"]["interpolation"], "fast");
 
