@@ -171,6 +171,8 @@ def evaluate(
     ``normal_error`` (``count``, ``mean``, ``median``, ``p90``, ``max``, degrees),
     ``tangent_coverage``, ``tangent_error``, ``tangent_error_swap_free``, ``swapped_share``.
     """
+    if not 0 < max_angle <= 90:
+        raise ValueError(f"max_angle must be in (0, 90] degrees, got {max_angle}")
     normals = _float_array("normals", normals, 3, 3, np.float32)
     shape = normals.shape
     gt_normals = _float_array("gt_normals", gt_normals, 3, 3, np.float32)
