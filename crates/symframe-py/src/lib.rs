@@ -15,9 +15,7 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
 use symframe::estimate::check_inputs;
-use symframe::{
-    BaselineMethod, EstimateMaps, Estimator, PixelMethod, PixelRecord, Rig, Stack,
-};
+use symframe::{BaselineMethod, EstimateMaps, Estimator, PixelMethod, PixelRecord, Rig, Stack};
 use symframe_io::DecodeOptions;
 use symframe_job::{EstimateConfig, EstimateOutcome, MethodConfig, Progress, Sources, Stage};
 
@@ -78,7 +76,9 @@ fn lights_of(lights: &PyReadonlyArray2<f64>) -> PyResult<Vec<DVec3>> {
             s[0], s[1]
         )));
     }
-    let v = lights.as_slice().map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let v = lights
+        .as_slice()
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok(v.chunks_exact(3)
         .map(|c| DVec3::new(c[0], c[1], c[2]))
         .collect())
@@ -162,7 +162,11 @@ fn estimate_arrays<'py>(
                     m.shape()[1]
                 )));
             }
-            Some(m.as_slice().map_err(|e| PyValueError::new_err(e.to_string()))?.to_vec())
+            Some(
+                m.as_slice()
+                    .map_err(|e| PyValueError::new_err(e.to_string()))?
+                    .to_vec(),
+            )
         }
     };
     let images = images
@@ -337,7 +341,9 @@ impl Dataset {
             }
             Ok(out)
         })?;
-        Ok(PyArray1::from_vec(py, stack).reshape([n, h, w, 3])?.into_any())
+        Ok(PyArray1::from_vec(py, stack)
+            .reshape([n, h, w, 3])?
+            .into_any())
     }
 
     fn __len__(&self) -> usize {
@@ -426,9 +432,8 @@ fn evaluate<'py>(
                 .map_err(|e| PyValueError::new_err(e.to_string()))
         })
         .transpose()?;
-    let e = py.detach(|| {
-        symframe::eval::evaluate(&n, &t, &g, gt.as_deref(), m.as_deref(), max_angle)
-    });
+    let e =
+        py.detach(|| symframe::eval::evaluate(&n, &t, &g, gt.as_deref(), m.as_deref(), max_angle));
     to_python(py, &e)
 }
 
@@ -524,7 +529,10 @@ fn synth(
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("SymframeError", m.py().get_type::<SymframeError>())?;
-    m.add("__version__", PyString::new(m.py(), env!("CARGO_PKG_VERSION")))?;
+    m.add(
+        "__version__",
+        PyString::new(m.py(), env!("CARGO_PKG_VERSION")),
+    )?;
     m.add_class::<Dataset>()?;
     m.add_function(wrap_pyfunction!(load, m)?)?;
     m.add_function(wrap_pyfunction!(estimate_arrays, m)?)?;

@@ -4,8 +4,8 @@
 use std::collections::BTreeSet;
 use std::path::PathBuf;
 
-use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::conversion::FromPyObjectOwned;
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use symframe::baseline::{Baseline, BaselineParams};
@@ -57,11 +57,7 @@ impl<'py> Options<'py> {
     }
 
     /// The value of `key`, or `default`.
-    pub fn or<T: FromPyObjectOwned<'py>>(
-        &mut self,
-        key: &'static str,
-        default: T,
-    ) -> PyResult<T> {
+    pub fn or<T: FromPyObjectOwned<'py>>(&mut self, key: &'static str, default: T) -> PyResult<T> {
         Ok(self.get(key)?.unwrap_or(default))
     }
 
@@ -151,11 +147,7 @@ pub fn method(o: &mut Options) -> PyResult<MethodConfig> {
     let fallback = match fallback.as_str() {
         "auto" => Fallback::Auto,
         "none" => Fallback::None,
-        other => {
-            return Err(bad(format!(
-                "fallback must be auto or none, got '{other}'"
-            )))
-        }
+        other => return Err(bad(format!("fallback must be auto or none, got '{other}'"))),
     };
     let baseline = match method.as_str() {
         "symmetry" => None,

@@ -152,7 +152,9 @@ pub fn run_job<T: Send>(
                 }
                 Err(RecvTimeoutError::Disconnected) => {
                     break (
-                        Err(anyhow::anyhow!("internal error: the job ended without a result")),
+                        Err(anyhow::anyhow!(
+                            "internal error: the job ended without a result"
+                        )),
                         interrupt,
                     )
                 }

@@ -251,3 +251,30 @@ def test_synth_refuses_a_foreign_folder(tmp_path):
         symframe.synth(tmp_path / "mine", size=16, lights=20)
     with pytest.raises(ValueError, match="shape must be sphere or cylinder"):
         symframe.synth(tmp_path / "x", shape="torus")
+
+
+def stub_options(function):
+    """The keyword-only options and defaults that the type stub declares for `function`."""
+    import ast
+
+    stub = Path(symframe.__file__).with_suffix(".pyi")
+    tree = ast.parse(stub.read_text())
+    (fn,) = [n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name == function]
+    options = {}
+    for arg, default in zip(fn.args.kwonlyargs, fn.args.kw_defaults):
+        if arg.arg in ("progress", "threads") or isinstance(default.value, type(Ellipsis)):
+            continue
+        options[arg.arg] = ast.literal_eval(default)
+    return options
+
+
+def test_the_stub_declares_the_options_and_defaults_in_force(capture, tmp_path):
+    ds = symframe.load(capture)
+    images = ds.images()[:, :12, :12]
+    options = stub_options("estimate")
+    assert {"theta_d_max", "min_anisotropy", "cosine", "method"} <= set(options)
+    assert_same_maps(symframe.estimate(images, ds.lights, **options),
+                     symframe.estimate(images, ds.lights))
+    options = stub_options("estimate_path")
+    assert {"tile_size", "decode_memory", "cache", "tiles"} <= set(options)
+    assert_same_maps(symframe.estimate_path(capture, **options), symframe.estimate_path(capture))
