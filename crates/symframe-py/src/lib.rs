@@ -257,6 +257,156 @@ fn estimate_path<'py>(
     Ok(dict)
 }
 
+/// An `H x W x C` (or `H x W` for `C = 1`) float32 array of a flat map.
+fn map_array<'py>(
+    py: Python<'py>,
+    v: Vec<f32>,
+    h: usize,
+    w: usize,
+    c: usize,
+) -> PyResult<Bound<'py, PyAny>> {
+    let a = PyArray1::from_vec(py, v);
+    Ok(if c == 1 {
+        a.reshape([h, w])?.into_any()
+    } else {
+        a.reshape([h, w, c])?.into_any()
+    })
+}
+
+/// The `symframe fit` job: per-pixel Ward parameters in the frames of an estimate.
+#[pyfunction]
+#[pyo3(signature = (path, frames, out, progress=None, threads=None, options=None))]
+fn fit<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    frames: PathBuf,
+    out: PathBuf,
+    progress: Option<Py<PyAny>>,
+    threads: Option<usize>,
+    options: Option<Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let mut o = Options::new("fit", options);
+    let d = symframe::FitParams::default();
+    let holdout: usize = o.or("holdout", 0)?;
+    let max_iterations: u32 = o.or("max_iterations", d.max_iterations)?;
+    let max_peak_ratio: f64 = o.or("max_peak_ratio", d.max_peak_ratio)?;
+    let mask: Option<PathBuf> = o.get("mask")?;
+    let decode = options::decode(&mut o)?;
+    let cache = options::cache(&mut o)?;
+    o.finish()?;
+    if max_iterations == 0 {
+        return Err(PyValueError::new_err("max_iterations must be at least 1"));
+    }
+    if !(max_peak_ratio >= 1.0 && max_peak_ratio.is_finite()) {
+        return Err(PyValueError::new_err(format!(
+            "max_peak_ratio must be finite and at least 1, got {max_peak_ratio}"
+        )));
+    }
+    let config = symframe_job::FitConfig {
+        input: path,
+        frames,
+        output: out,
+        holdout,
+        params: symframe::FitParams {
+            max_iterations,
+            max_peak_ratio,
+            ..d
+        },
+        mask,
+        decode,
+        cache,
+    };
+    let done = run_job(py, progress, threads, |ctl| symframe_job::fit(&config, ctl))?;
+    let dict = PyDict::new(py);
+    dict.set_item("report", to_python(py, &done.report)?)?;
+    let m = done.maps;
+    let (h, w) = (m.ward.height, m.ward.width);
+    dict.set_item("kd", map_array(py, m.ward.kd, h, w, 3)?)?;
+    dict.set_item("ks", map_array(py, m.ward.ks, h, w, 3)?)?;
+    dict.set_item("alpha_t", map_array(py, m.ward.alpha_t, h, w, 1)?)?;
+    dict.set_item("alpha_b", map_array(py, m.ward.alpha_b, h, w, 1)?)?;
+    dict.set_item("normals", map_array(py, m.ward.normals, h, w, 3)?)?;
+    dict.set_item("tangents", map_array(py, m.ward.tangents, h, w, 3)?)?;
+    dict.set_item("residual", map_array(py, m.residual, h, w, 1)?)?;
+    dict.set_item(
+        "holdout_residual",
+        map_array(py, m.holdout_residual, h, w, 1)?,
+    )?;
+    Ok(dict)
+}
+
+/// The `symframe relight` job: fitted maps rendered under `lights` (`N x 3`), edited; returns
+/// the linear images (`N x H x W x 3` float32) written as `relit_NNN.exr`.
+#[pyfunction]
+#[pyo3(signature = (fit_dir, out, lights, options=None))]
+fn relight<'py>(
+    py: Python<'py>,
+    fit_dir: PathBuf,
+    out: PathBuf,
+    lights: PyReadonlyArray2<'py, f64>,
+    options: Option<Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let mut o = Options::new("relight", options);
+    let mut config = symframe_job::RelightConfig::new(fit_dir, out);
+    config.diffuse_scale = o.or("diffuse_scale", config.diffuse_scale)?;
+    config.specular_scale = o.or("specular_scale", config.specular_scale)?;
+    config.roughness_scale = o.or("roughness_scale", config.roughness_scale)?;
+    config.rotate_tangents = o.get("rotate_tangents")?;
+    config.region = o.get("region")?;
+    config.exposure = o.or("exposure", config.exposure)?;
+    o.finish()?;
+    for (name, v) in [
+        ("specular_scale", config.specular_scale),
+        ("diffuse_scale", config.diffuse_scale),
+    ] {
+        if !(v >= 0.0 && v.is_finite()) {
+            return Err(PyValueError::new_err(format!(
+                "{name} must be finite and >= 0, got {v}"
+            )));
+        }
+    }
+    if !(config.roughness_scale > 0.0 && config.roughness_scale.is_finite()) {
+        return Err(PyValueError::new_err(format!(
+            "roughness_scale must be finite and > 0, got {}",
+            config.roughness_scale
+        )));
+    }
+    if !config.exposure.is_finite() || config.rotate_tangents.is_some_and(|d| !d.is_finite()) {
+        return Err(PyValueError::new_err(
+            "exposure and rotate_tangents must be finite",
+        ));
+    }
+    config.lights = lights_of(&lights)?;
+    if config.lights.is_empty()
+        || config
+            .lights
+            .iter()
+            .any(|l| !l.is_finite() || *l == DVec3::ZERO)
+    {
+        return Err(PyValueError::new_err(
+            "lights must be N x 3 finite directions, none zero, N >= 1",
+        ));
+    }
+    let (n, (w, h, data)) = run_job(py, None, None, |_| {
+        let done = symframe_job::relight(&config)?;
+        let mut data = Vec::new();
+        let mut size = (0, 0);
+        let exr = DecodeOptions {
+            linear_8bit: true,
+            saturation: f32::INFINITY,
+        };
+        for png in &done.pictures {
+            let img = symframe_io::read_image(&png.with_extension("exr"), &exr)?;
+            size = (img.width, img.height);
+            data.extend(img.into_rgb());
+        }
+        Ok((done.pictures.len(), (size.0, size.1, data)))
+    })?;
+    Ok(PyArray1::from_vec(py, data)
+        .reshape([n, h, w, 3])?
+        .into_any())
+}
+
 /// A dataset's lights, image paths, mask and image size, read without decoding the stack.
 #[pyclass(module = "symframe", name = "Dataset", frozen)]
 struct Dataset {
@@ -538,6 +688,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(estimate_arrays, m)?)?;
     m.add_function(wrap_pyfunction!(estimate_path, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(fit, m)?)?;
+    m.add_function(wrap_pyfunction!(relight, m)?)?;
     m.add_function(wrap_pyfunction!(synth, m)?)?;
     Ok(())
 }

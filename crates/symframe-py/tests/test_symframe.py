@@ -278,3 +278,24 @@ def test_the_stub_declares_the_options_and_defaults_in_force(capture, tmp_path):
     options = stub_options("estimate_path")
     assert {"tile_size", "decode_memory", "cache", "tiles"} <= set(options)
     assert_same_maps(symframe.estimate_path(capture, **options), symframe.estimate_path(capture))
+
+
+def test_fit_and_relight_equal_the_command_line(capture, cli, tmp_path):
+    frames = tmp_path / "est"
+    symframe.estimate_path(capture, frames)
+    cli("fit", capture, "--frames", frames, "-o", tmp_path / "fit_cli", "--holdout", "10")
+    got = symframe.fit(capture, frames, tmp_path / "fit_py", holdout=10)
+    for name in ["kd", "ks", "alpha_t", "alpha_b", "normals", "tangents"]:
+        want = np.load(tmp_path / "fit_cli" / f"{name}.npy")
+        assert np.array_equal(bits(got[name]), bits(want)), name
+    assert np.isfinite(got["residual"]).any()
+    light = [0.3, 0.2, 0.9]
+    cli("relight", tmp_path / "fit_cli", "-o", tmp_path / "relit_cli", "--light", "0.3,0.2,0.9",
+        "--roughness-scale", "0.5")
+    images = symframe.relight(tmp_path / "fit_py", tmp_path / "relit_py", light, roughness_scale=0.5)
+    assert images.shape == (1, 40, 40, 3) and images.dtype == np.float32
+    assert images.max() > 0
+    cli_png = (tmp_path / "relit_cli" / "relit_000.png").read_bytes()
+    assert (tmp_path / "relit_py" / "relit_000.png").read_bytes() == cli_png
+    with pytest.raises(ValueError, match="roughness_scale must be finite and > 0"):
+        symframe.relight(tmp_path / "fit_py", tmp_path / "r2", light, roughness_scale=0)

@@ -38,6 +38,8 @@ __all__ = [
     "estimate",
     "estimate_path",
     "evaluate",
+    "fit",
+    "relight",
     "synth",
     "__version__",
 ]
@@ -186,6 +188,45 @@ def evaluate(
             raise ValueError(f"{name} has shape {a.shape} but normals have {shape}")
     mask = _mask_array(mask, shape[:2])
     return _native.evaluate(normals, gt_normals, tangents, gt_tangents, mask, float(max_angle))
+
+
+def fit(
+    path: PathLike,
+    frames: PathLike,
+    out: PathLike,
+    *,
+    progress: Optional[Progress] = None,
+    threads: Optional[int] = None,
+    **options: Any,
+) -> Dict[str, Any]:
+    """Runs the ``symframe fit`` job: an anisotropic Ward BRDF per pixel in estimated frames.
+
+    ``path``: the capture; ``frames``: the output folder of :func:`estimate_path` for it (its
+    tile cache is reused, so nothing is decoded again); ``out``: the output folder (maps as
+    ``.npy``, ``fit.json``). Options: ``holdout`` (lights left out of the fit to judge it),
+    ``max_iterations``, ``max_peak_ratio``, ``mask``, ``linear``, ``saturation``, ``cache``,
+    ``no_keep_cache``.
+
+    Returns ``kd``, ``ks`` (``H x W x 3``), ``alpha_t``, ``alpha_b`` (``H x W``), ``normals``,
+    ``tangents``, ``residual``, ``holdout_residual`` and ``report``.
+    """
+    return _native.fit(os.fspath(path), os.fspath(frames), os.fspath(out), progress, threads, options)
+
+
+def relight(fit_dir: PathLike, out: PathLike, lights: Any, **options: Any) -> np.ndarray:
+    """Runs the ``symframe relight`` job: the fitted maps of :func:`fit` under new lights.
+
+    ``lights``: ``N x 3`` directions (or one ``(x, y, z)``). Options: ``diffuse_scale``,
+    ``specular_scale``, ``roughness_scale``, ``rotate_tangents`` (degrees), ``region`` (mask
+    image limiting the rotation), ``exposure`` (stops, pictures only). Writes
+    ``relit_NNN.exr``/``.png`` into ``out`` and returns the linear images, ``N x H x W x 3``
+    float32.
+    """
+    lights = np.asarray(lights, dtype=np.float64)
+    if lights.ndim == 1:
+        lights = lights[None, :]
+    lights = _float_array("lights", lights, 2, 3, np.float64)
+    return _native.relight(os.fspath(fit_dir), os.fspath(out), lights, options)
 
 
 def synth(

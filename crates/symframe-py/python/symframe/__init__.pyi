@@ -122,3 +122,35 @@ def synth(
     format: str = "exr",
 ) -> str:
     """Renders a synthetic capture into a dataset folder; returns its .lp path."""
+
+def fit(
+    path: PathLike,
+    frames: PathLike,
+    out: PathLike,
+    *,
+    progress: Optional[Progress] = None,
+    threads: Optional[int] = None,
+    holdout: int = 0,
+    max_iterations: int = 60,
+    max_peak_ratio: float = 8.0,
+    mask: Optional[PathLike] = None,
+    linear: bool = False,
+    saturation: float = 0.995,
+    cache: Optional[PathLike] = None,
+    no_keep_cache: bool = False,
+) -> Dict[str, Any]:
+    """The `symframe fit` job: Ward maps (kd, ks, alpha_t, alpha_b, ...) and its report."""
+
+def relight(
+    fit_dir: PathLike,
+    out: PathLike,
+    lights: npt.ArrayLike,
+    *,
+    diffuse_scale: float = 1.0,
+    specular_scale: float = 1.0,
+    roughness_scale: float = 1.0,
+    rotate_tangents: Optional[float] = None,
+    region: Optional[PathLike] = None,
+    exposure: float = 0.0,
+) -> npt.NDArray[np.float32]:
+    """The `symframe relight` job: N x H x W x 3 linear images, also written to `out`."""
