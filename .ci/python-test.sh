@@ -16,8 +16,9 @@ python3 -m venv "$venv"
 # The binary the tests compare with (already built by `cargo test`).
 cargo build --locked --quiet -p symframe-cli
 export SYMFRAME_BIN="$PWD/target/debug/symframe"
-# --no-build-isolation: maturin from the venv above, no second download.
-"$venv/bin/pip" install --quiet --no-build-isolation ./crates/symframe-py
+# --no-build-isolation: maturin from the venv above, no second download. The dev profile (optimised
+# in this workspace) reuses what `cargo test` built instead of a second, release build.
+MATURIN_PEP517_ARGS="--profile dev" "$venv/bin/pip" install --quiet --no-build-isolation ./crates/symframe-py
 # Run from the tests' folder so that the installed package, not the source tree, is imported.
 cd crates/symframe-py/tests
 "../../../$venv/bin/python" -m pytest -q -p no:cacheprovider .
