@@ -11,6 +11,8 @@ fi
 venv="${SYMFRAME_PY_VENV:-target/py-venv}"
 rm -rf "$venv"
 python3 -m venv "$venv"
+# The build backend runs the `maturin` command of this environment.
+export PATH="$PWD/$venv/bin:$PATH"
 "$venv/bin/pip" install --quiet --upgrade pip
 "$venv/bin/pip" install --quiet "maturin>=1,<2" numpy pytest
 # The binary the tests compare with (already built by `cargo test`).
