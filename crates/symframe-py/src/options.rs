@@ -1,0 +1,240 @@
+//! Keyword options, named like the command line's flags (`theta_d_max` for `--theta-d-max`),
+//! checked as the command line checks them.
+
+use std::collections::BTreeSet;
+use std::path::PathBuf;
+
+use pyo3::conversion::FromPyObjectOwned;
+use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use symframe::baseline::{Baseline, BaselineParams};
+use symframe::estimate::Fallback;
+use symframe::symmetry::CosineMode;
+use symframe::{EstimatorParams, Interpolation, RigOptions};
+use symframe_io::{CacheOptions, DecodeOptions};
+use symframe_job::{CacheConfig, MethodConfig, Shard};
+
+/// The keyword options of one call; every key must be read by the end ([`Options::finish`]).
+pub struct Options<'py> {
+    func: &'static str,
+    dict: Option<Bound<'py, PyDict>>,
+    known: BTreeSet<&'static str>,
+}
+
+impl<'py> Options<'py> {
+    /// The options of `func` (for messages).
+    pub fn new(func: &'static str, dict: Option<Bound<'py, PyDict>>) -> Self {
+        Self {
+            func,
+            dict,
+            known: BTreeSet::new(),
+        }
+    }
+
+    /// The value of `key` (`None` when absent or `None`).
+    pub fn get<T: FromPyObjectOwned<'py>>(&mut self, key: &'static str) -> PyResult<Option<T>> {
+        self.known.insert(key);
+        let Some(d) = &self.dict else {
+            return Ok(None);
+        };
+        match d.get_item(key)? {
+            None => Ok(None),
+            Some(v) if v.is_none() => Ok(None),
+            Some(v) => v.extract::<T>().map(Some).map_err(|_| {
+                let ty = v
+                    .get_type()
+                    .name()
+                    .map(|n| n.to_string())
+                    .unwrap_or_else(|_| "?".into());
+                PyTypeError::new_err(format!(
+                    "{}(): {key} must be {}, got {ty}",
+                    self.func,
+                    describe(std::any::type_name::<T>())
+                ))
+            }),
+        }
+    }
+
+    /// The value of `key`, or `default`.
+    pub fn or<T: FromPyObjectOwned<'py>>(&mut self, key: &'static str, default: T) -> PyResult<T> {
+        Ok(self.get(key)?.unwrap_or(default))
+    }
+
+    /// Rejects keys that were not read.
+    pub fn finish(self) -> PyResult<()> {
+        let Some(d) = &self.dict else {
+            return Ok(());
+        };
+        for k in d.keys() {
+            let k: String = k.extract()?;
+            if !self.known.contains(k.as_str()) {
+                let known: Vec<&str> = self.known.iter().copied().collect();
+                return Err(PyTypeError::new_err(format!(
+                    "{}() got an unexpected keyword argument '{k}' (options: {})",
+                    self.func,
+                    known.join(", ")
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What a Rust type is, in Python words.
+fn describe(type_name: &str) -> &'static str {
+    match type_name.rsplit("::").next().unwrap_or("") {
+        "f64" | "f32" => "a number",
+        "u32" | "u64" | "usize" => "a non-negative integer",
+        "bool" => "True or False",
+        "String" => "a string",
+        "PathBuf" => "a path (str or os.PathLike)",
+        _ => "of another type",
+    }
+}
+
+fn bad(msg: String) -> PyErr {
+    PyValueError::new_err(msg)
+}
+
+/// The method and its parameters (`method`, `theta_d_max`, `min_confidence`, `min_anisotropy`,
+/// `min_domain`, `cosine`, `cosine_power`, `fallback`, `no_tangents`, `reference`).
+pub fn method(o: &mut Options) -> PyResult<MethodConfig> {
+    let d = EstimatorParams::default();
+    let theta_d_max = o.or("theta_d_max", RigOptions::default().theta_d_max_deg)?;
+    let min_confidence: f32 = o.or("min_confidence", d.min_confidence)?;
+    let min_anisotropy: f32 = o.or("min_anisotropy", d.min_anisotropy)?;
+    let min_domain: Option<u32> = o.get("min_domain")?;
+    let cosine: String = o.or("cosine", "auto".to_string())?;
+    let cosine_power: f64 = o.or("cosine_power", 0.5)?;
+    let fallback: String = o.or("fallback", "auto".to_string())?;
+    let no_tangents: bool = o.or("no_tangents", false)?;
+    let reference: bool = o.or("reference", false)?;
+    let method: String = o.or("method", "symmetry".to_string())?;
+
+    if !(theta_d_max > 0.0 && theta_d_max <= 90.0) {
+        return Err(bad(format!(
+            "theta_d_max must be in (0, 90] degrees, got {theta_d_max}"
+        )));
+    }
+    for (name, v) in [
+        ("min_confidence", min_confidence),
+        ("min_anisotropy", min_anisotropy),
+    ] {
+        if !(0.0..=1.0).contains(&v) {
+            return Err(bad(format!("{name} must be in [0, 1], got {v}")));
+        }
+    }
+    if !(0.0..=1.0).contains(&cosine_power) {
+        return Err(bad(format!(
+            "cosine_power must be in [0, 1], got {cosine_power}"
+        )));
+    }
+    if min_domain == Some(0) {
+        return Err(bad("min_domain must be at least 1".into()));
+    }
+    let cosine = match cosine.as_str() {
+        "auto" => CosineMode::Auto,
+        "cross" => CosineMode::CrossMultiplied,
+        "raw" => CosineMode::Raw,
+        "compensated" => CosineMode::Compensated(cosine_power),
+        other => {
+            return Err(bad(format!(
+                "cosine must be one of auto, cross, raw, compensated, got '{other}'"
+            )))
+        }
+    };
+    let fallback = match fallback.as_str() {
+        "auto" => Fallback::Auto,
+        "none" => Fallback::None,
+        other => return Err(bad(format!("fallback must be auto or none, got '{other}'"))),
+    };
+    let baseline = match method.as_str() {
+        "symmetry" => None,
+        "woodham" => Some(Baseline::Woodham),
+        "woodham-robust" => Some(Baseline::WoodhamRobust),
+        "max-reflectance" => Some(Baseline::MaxReflectance),
+        "highlight-centroid" => Some(Baseline::HighlightCentroid),
+        other => {
+            return Err(bad(format!(
+                "method must be one of symmetry, woodham, woodham-robust, max-reflectance, \
+                 highlight-centroid, got '{other}'"
+            )))
+        }
+    };
+    Ok(match baseline {
+        None => MethodConfig::Symmetry {
+            rig: RigOptions {
+                theta_d_max_deg: theta_d_max,
+            },
+            params: EstimatorParams {
+                cosine,
+                fallback,
+                min_domain,
+                min_confidence,
+                min_anisotropy,
+                tangents: !no_tangents,
+                interpolation: if reference {
+                    Interpolation::Exact
+                } else {
+                    Interpolation::Fast
+                },
+                ..d
+            },
+        },
+        Some(method) => MethodConfig::Baseline {
+            method,
+            params: BaselineParams::default(),
+        },
+    })
+}
+
+/// How images are decoded (`linear`, `saturation`).
+pub fn decode(o: &mut Options) -> PyResult<DecodeOptions> {
+    let d = DecodeOptions::default();
+    let linear_8bit: bool = o.or("linear", d.linear_8bit)?;
+    let saturation: f32 = o.or("saturation", d.saturation)?;
+    if !(saturation > 0.0 && saturation <= 1.0) {
+        return Err(bad(format!(
+            "saturation must be in (0, 1], got {saturation}"
+        )));
+    }
+    Ok(DecodeOptions {
+        linear_8bit,
+        saturation,
+    })
+}
+
+/// The tile cache (`cache`, `no_keep_cache`, `trust_mtime`, `tile_size`, `decode_memory`).
+pub fn cache(o: &mut Options) -> PyResult<CacheConfig> {
+    let d = CacheOptions::default();
+    let dir: Option<PathBuf> = o.get("cache")?;
+    let remove_after: bool = o.or("no_keep_cache", false)?;
+    let trust_mtime: bool = o.or("trust_mtime", d.trust_mtime)?;
+    let tile: usize = o.or("tile_size", d.tile)?;
+    let decode_memory: usize = o.or("decode_memory", d.batch_bytes >> 20)?;
+    if !(1..=4096).contains(&tile) {
+        return Err(bad(format!("tile_size must be in [1, 4096], got {tile}")));
+    }
+    if decode_memory == 0 || decode_memory > (1 << 30) {
+        return Err(bad(format!(
+            "decode_memory must be at least 1 MiB, got {decode_memory}"
+        )));
+    }
+    Ok(CacheConfig {
+        dir,
+        remove_after,
+        options: CacheOptions {
+            tile,
+            batch_bytes: decode_memory << 20,
+            trust_mtime,
+        },
+    })
+}
+
+/// `tiles="K/N"`: one shard.
+pub fn shard(o: &mut Options) -> PyResult<Option<Shard>> {
+    let s: Option<String> = o.get("tiles")?;
+    s.map(|s| s.parse::<Shard>().map_err(|e| bad(format!("tiles: {e}"))))
+        .transpose()
+}
