@@ -339,7 +339,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
     md += &format!(
         "\n### Reading\n\nThe estimator has the best normal mean in {wins} of the {cells} \
          non-Lambertian cells. Where it loses, the reasons are documented in \
-         [docs/method.md](../docs/method.md) (\"Default measure\", \"Fallbacks and the source \
+         [docs/method.md](method.md) (\"Default measure\", \"Fallbacks and the source \
          map\"): sharp lobes read through few lights (max-reflectance fits the peak directly), \
          sparse rigs (no smooth reconstruction of the slice yet), cast shadows on diffuse \
          bumps, and normals beyond a narrow rig's reach (filled by fallbacks, marked in the \

@@ -181,7 +181,7 @@ pub fn run(args: &ExperimentArgs) -> Result<()> {
         md += "Everything is rendered in memory (noise-free unless stated) and estimated with \
                the library's defaults unless stated. Angles are in degrees. \"Paper form\" is the \
                paper's cross-multiplied cosine form of the symmetry distance \
-               (`CosineMode::CrossMultiplied`, the default); \"compensated\" is our refinement \
+               (`CosineMode::CrossMultiplied`; the default is the per-pixel `CosineMode::Auto`, docs/method.md \"Default measure\"); \"compensated\" is our refinement \
                `CosineMode::Compensated(0.5)`. The readings below each table are generated \
                from the numbers of this run.\n\n";
         for (_, body, _) in &sections {
