@@ -559,6 +559,22 @@ impl CacheLock {
     }
 }
 
+/// Whether the cache folder `dir` holds work worth keeping after a failed run: a complete
+/// cache, or a partial build that holds at least one batch of images (a rerun resumes it).
+pub fn cache_holds_work(dir: &Path) -> bool {
+    let Ok(rd) = fs::read_dir(dir) else {
+        return false;
+    };
+    rd.flatten().any(|e| {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name.ends_with(".stack") {
+            return true;
+        }
+        name.ends_with(".stack.partial")
+            && read_header(&e.path()).is_ok_and(|h| h.is_some_and(|(h, _)| h.images_done > 0))
+    })
+}
+
 /// Reads a file's header, `None` if the file is missing or too short.
 fn read_header(path: &Path) -> Result<Option<(Header, u64)>> {
     use std::io::Read;

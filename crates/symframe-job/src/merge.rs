@@ -12,8 +12,9 @@ use symframe::EstimateMaps;
 use symframe_io::TileGrid;
 
 use crate::estimate::{assemble, write_estimate_outputs, Sources, TILES_DIR};
+use crate::outdir::OutputDir;
 use crate::tiles::{peak_rss_bytes, tile_path};
-use crate::{Control, Progress, Stage};
+use crate::{Checkpoint, Control, Interrupted, Progress, Stage};
 
 /// A shard's manifest, written once all its tiles are done.
 pub const MANIFEST: &str = "shard.json";
@@ -90,6 +91,18 @@ fn list_tiles(tiles: &[usize]) -> String {
 /// `symframe merge`: checks the shards belong to one job and cover every tile, assembles the
 /// maps and writes the usual outputs.
 pub fn merge(shards: &[PathBuf], output: &Path, ctl: &Control) -> Result<MergeOutcome> {
+    let out = OutputDir::lock(output)?;
+    (ctl.checkpoint)(Checkpoint::OutputLocked);
+    let result = run(shards, &out, ctl);
+    if let Err(e) = &result {
+        if !e.is::<Interrupted>() {
+            out.discard_unfinished();
+        }
+    }
+    result
+}
+
+fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcome> {
     let t0 = Instant::now();
     if shards.is_empty() {
         bail!("no shard folders given");
@@ -224,7 +237,7 @@ pub fn merge(shards: &[PathBuf], output: &Path, ctl: &Control) -> Result<MergeOu
         "shards": first.of,
     });
     report["shards"] = serde_json::Value::Array(shard_timings);
-    write_estimate_outputs(output, &maps, |write_s| {
+    write_estimate_outputs(out, &maps, ctl, |write_s| {
         report["timings"] = serde_json::json!({
             "estimate_s_all_shards": estimate_s,
             "merge_s": t0.elapsed().as_secs_f64() - write_s,
@@ -232,7 +245,7 @@ pub fn merge(shards: &[PathBuf], output: &Path, ctl: &Control) -> Result<MergeOu
             "total_s": t0.elapsed().as_secs_f64(),
             "peak_rss_bytes": peak_rss_bytes(),
         });
-        Ok(serde_json::to_string_pretty(&report)?)
+        Ok(report)
     })?;
     Ok(MergeOutcome {
         maps,

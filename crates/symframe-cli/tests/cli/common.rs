@@ -101,3 +101,19 @@ pub fn sphere_dataset(
     .unwrap();
     (scene, lp)
 }
+
+/// A failure after the images were decoded: [`assert_one_line_error`], and the output folder
+/// `out` holds at most the tile cache (kept so the rerun decodes nothing), no outputs and no
+/// staging folder.
+pub fn assert_fails_keeping_cache(o: &Output, needle: &str, out: &Path) {
+    assert_one_line_error(o, needle);
+    if out.exists() {
+        for e in fs::read_dir(out).unwrap() {
+            let name = e.unwrap().file_name().to_string_lossy().into_owned();
+            assert_eq!(
+                name, ".symframe-cache",
+                "only the cache may be left in {out:?}"
+            );
+        }
+    }
+}

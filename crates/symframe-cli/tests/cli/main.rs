@@ -7,6 +7,7 @@ mod estimate;
 mod eval;
 mod experiment;
 mod fit;
+mod outdir;
 mod reliability;
 mod synth;
 mod tiles;
