@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -183,6 +184,8 @@ pub struct Report {
     pub cache: CacheReport,
     /// Wall-clock seconds per stage, and peak memory.
     pub timings: Timings,
+    /// Every warning of the run, as printed (inputs, recomputed tiles, suspicious results).
+    pub warnings: Vec<String>,
 }
 
 /// One code of the source map, as recorded in the report.
@@ -513,7 +516,19 @@ pub(crate) fn remove_cache(cache_path: &Path, dir: &Path) -> Result<()> {
 pub fn estimate(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcome> {
     let out = OutputDir::lock(&config.output)?;
     (ctl.checkpoint)(Checkpoint::OutputLocked);
-    let result = run(config, ctl, &out);
+    let warnings = Mutex::new(Vec::new());
+    let warn = |line: &str| {
+        lock_warnings(&warnings).push(line.to_string());
+        ctl.warn(line);
+    };
+    let counted = Control {
+        stop: ctl.stop,
+        progress: ctl.progress,
+        stop_after_tiles: ctl.stop_after_tiles,
+        warning: &warn,
+        checkpoint: ctl.checkpoint,
+    };
+    let result = run(config, &counted, &out, &warnings);
     if let Err(e) = &result {
         if !e.is::<Interrupted>() {
             out.discard_unfinished();
@@ -522,7 +537,49 @@ pub fn estimate(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcom
     result
 }
 
-fn run(config: &EstimateConfig, ctl: &Control, out: &OutputDir) -> Result<EstimateOutcome> {
+/// The warnings collected so far (a poisoned lock still holds them).
+pub(crate) fn lock_warnings(w: &Mutex<Vec<String>>) -> std::sync::MutexGuard<'_, Vec<String>> {
+    w.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Warnings about a finished map: nothing estimated, or most estimated pixels from the
+/// fallbacks beyond the rig's reach (symmetry method only: a baseline's normals all come from
+/// its own measure).
+pub(crate) fn result_warnings(
+    method: &'static str,
+    counts: &PixelCounts,
+    sources: &Sources,
+) -> Vec<String> {
+    let mut w = Vec::new();
+    if counts.estimated == 0 {
+        w.push(format!(
+            "0 pixels estimated ({} discarded, {} culled, {} without data): the maps are empty",
+            counts.discarded, counts.culled, counts.no_data
+        ));
+    } else if method == "symmetry" {
+        let fallback: usize = sources
+            .0
+            .iter()
+            .filter(|s| s.code >= 2)
+            .map(|s| s.pixels)
+            .sum();
+        if fallback * 2 > counts.estimated {
+            w.push(format!(
+                "most pixels beyond the rig's reach: {fallback} of {} estimated normals come \
+                 from the fallbacks, not the symmetry (see source.npy)",
+                counts.estimated
+            ));
+        }
+    }
+    w
+}
+
+fn run(
+    config: &EstimateConfig,
+    ctl: &Control,
+    out: &OutputDir,
+    warnings: &Mutex<Vec<String>>,
+) -> Result<EstimateOutcome> {
     let t0 = Instant::now();
     let ds: Dataset = symframe_io::open_dataset(&config.input)?;
     let plan = Plan::new(&config.method, &ds)?;
@@ -635,6 +692,7 @@ fn run(config: &EstimateConfig, ctl: &Control, out: &OutputDir) -> Result<Estima
             total_s: 0.0,
             peak_rss_bytes: None,
         },
+        warnings: Vec::new(),
     };
 
     if let Some(shard) = config.shard {
@@ -656,6 +714,7 @@ fn run(config: &EstimateConfig, ctl: &Control, out: &OutputDir) -> Result<Estima
         report.evals_per_pixel = evals as f64 / pixels.estimated.max(1) as f64;
         report.timings.total_s = t0.elapsed().as_secs_f64();
         report.timings.peak_rss_bytes = peak_rss_bytes();
+        report.warnings = lock_warnings(warnings).clone();
         let manifest = ShardManifest {
             format: MANIFEST_FORMAT.into(),
             version: MANIFEST_VERSION,
@@ -680,6 +739,10 @@ fn run(config: &EstimateConfig, ctl: &Control, out: &OutputDir) -> Result<Estima
     report.pixels = maps.counts;
     report.sources = Sources::of(&maps.source);
     report.evals_per_pixel = maps.evals as f64 / maps.counts.estimated.max(1) as f64;
+    for w in result_warnings(report.method, &report.pixels, &report.sources) {
+        ctl.warn(&w);
+    }
+    report.warnings = lock_warnings(warnings).clone();
     write_estimate_outputs(out, &maps, ctl, |write_s| {
         report.timings.write_s = write_s;
         report.timings.total_s = t0.elapsed().as_secs_f64();

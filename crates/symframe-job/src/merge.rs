@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use symframe::EstimateMaps;
 use symframe_io::TileGrid;
 
-use crate::estimate::{assemble, write_estimate_outputs, Sources, TILES_DIR};
+use crate::estimate::{assemble, result_warnings, write_estimate_outputs, Sources, TILES_DIR};
 use crate::outdir::OutputDir;
 use crate::tiles::{peak_rss_bytes, tile_path};
 use crate::{Checkpoint, Control, Interrupted, Progress, Stage};
@@ -237,6 +237,26 @@ fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcom
         "shards": first.of,
     });
     report["shards"] = serde_json::Value::Array(shard_timings);
+    let method = match report["method"].as_str() {
+        Some("symmetry") => "symmetry",
+        _ => "baseline",
+    };
+    let mut warnings: Vec<String> = Vec::new();
+    for (_, m) in &manifests {
+        for w in m.report["warnings"].as_array().into_iter().flatten() {
+            warnings.push(format!(
+                "shard {}/{}: {}",
+                m.shard,
+                m.of,
+                w.as_str().unwrap_or_default()
+            ));
+        }
+    }
+    for w in result_warnings(method, &maps.counts, &Sources::of(&maps.source)) {
+        ctl.warn(&w);
+        warnings.push(w);
+    }
+    report["warnings"] = serde_json::json!(warnings);
     write_estimate_outputs(out, &maps, ctl, |write_s| {
         report["timings"] = serde_json::json!({
             "estimate_s_all_shards": estimate_s,

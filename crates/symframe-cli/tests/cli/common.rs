@@ -33,12 +33,29 @@ pub fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-/// The run failed with a one-line error (no panic) that names `needle`.
+/// Whether `line` is a plain progress line (`decoding 3/60 images`, `tiles 4/16`), as printed
+/// when stderr is not a terminal.
+pub fn is_progress_line(line: &str) -> bool {
+    let mut w = line.split_whitespace();
+    matches!(w.next(), Some("decoding" | "tiles" | "merging"))
+        && w.next().is_some_and(|c| {
+            c.split_once('/')
+                .is_some_and(|(a, b)| a.parse::<u64>().is_ok() && b.parse::<u64>().is_ok())
+        })
+}
+
+/// The run failed with a one-line error (no panic) that names `needle` (progress lines
+/// before it aside).
 pub fn assert_one_line_error(o: &Output, needle: &str) {
-    let err = stderr(o);
-    assert!(!o.status.success(), "expected failure, stderr: {err}");
-    assert!(err.contains(needle), "error should name {needle:?}: {err}");
-    assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
+    let all = stderr(o);
+    let err: String = all
+        .lines()
+        .filter(|l| !is_progress_line(l))
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert!(!o.status.success(), "expected failure, stderr: {all}");
+    assert!(err.contains(needle), "error should name {needle:?}: {all}");
+    assert_eq!(err.trim().lines().count(), 1, "one-line error: {all}");
     assert!(!err.contains("panicked"), "{err}");
 }
 

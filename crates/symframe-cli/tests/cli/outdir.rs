@@ -200,3 +200,70 @@ fn a_job_killed_between_moves_is_finished_by_the_next_job_into_the_folder() {
     ok(&estimate(&lp, &clean, &[]));
     assert_eq!(normals(&out), normals(&clean));
 }
+
+#[test]
+fn progress_summary_and_warnings_reach_a_log_and_quiet_silences_them() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = dataset(&tmp.path().join("data"));
+    // stderr captured: not a terminal, as under Slurm, cron, CI or `2>log`.
+    let out = tmp.path().join("out");
+    let o = estimate(&lp, &out, &[]);
+    ok(&o);
+    let e = stderr(&o);
+    assert!(e.lines().any(|l| l == "decoding 60/60 images"), "{e}");
+    assert!(
+        e.lines().any(|l| l == format!("tiles {TILES}/{TILES}")),
+        "{e}"
+    );
+    assert!(
+        e.lines().filter(|l| l.starts_with("tiles ")).count() <= 12,
+        "{e}"
+    );
+    assert!(
+        e.lines().any(|l| l.starts_with("symframe (symmetry): ")),
+        "{e}"
+    );
+    assert_eq!(report(&out)["warnings"], serde_json::json!([]));
+
+    let o = estimate(&lp, &tmp.path().join("quiet"), &["--quiet"]);
+    ok(&o);
+    assert_eq!(stderr(&o), "");
+
+    // A light cone too narrow for the rig: most normals from the fallbacks, a loud warning
+    // (also with --quiet) counted in report.json.
+    let narrow = tmp.path().join("narrow");
+    let o = estimate(&lp, &narrow, &["--quiet", "--theta-d-max", "20"]);
+    ok(&o);
+    let e = stderr(&o);
+    assert!(
+        e.lines()
+            .any(|l| l.starts_with("warning: most pixels beyond the rig's reach")),
+        "{e}"
+    );
+    let w = report(&narrow)["warnings"].clone();
+    assert_eq!(w.as_array().unwrap().len(), 1, "{w}");
+
+    // Nothing estimated (black images): a loud warning.
+    let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
+    let truth = Truth {
+        normals: false,
+        tangents: false,
+    };
+    let black = sphere_dataset(
+        &tmp.path().join("black"),
+        16,
+        60,
+        &brdf,
+        ImageFormat::Exr,
+        0.0,
+        truth,
+    )
+    .1;
+    let o = estimate(&black, &tmp.path().join("dark"), &["--quiet"]);
+    let e = stderr(&o);
+    assert!(
+        e.lines()
+            .any(|l| l.starts_with("warning: 0 pixels estimated")),
+        "{e}"
+    );
+}
