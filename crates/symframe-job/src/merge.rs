@@ -58,6 +58,48 @@ pub struct ShardManifest {
 }
 
 impl ShardManifest {
+    /// Checks the numbers a manifest declares before any of them sizes or divides anything:
+    /// shard `1..=of`, sizes within the image limits, a positive tile size, the tile count of
+    /// the grid, tiles that exist.
+    fn validate(&self, path: &Path) -> Result<()> {
+        use symframe_io::limits::{MAX_PIXELS, MAX_SIDE};
+        let bad = |what: String| {
+            anyhow::anyhow!("{}: not a valid shard manifest: {what}", path.display())
+        };
+        if self.of == 0 || self.shard == 0 || self.shard > self.of {
+            return Err(bad(format!(
+                "shard {} of {} (expected 1 <= shard <= of)",
+                self.shard, self.of
+            )));
+        }
+        let (w, h) = (self.width, self.height);
+        if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE || w * h > MAX_PIXELS {
+            return Err(bad(format!(
+                "image of {w}x{h} pixels (1 to {MAX_SIDE} per side, at most {MAX_PIXELS} pixels)"
+            )));
+        }
+        if self.tile_size == 0 || self.tile_size > MAX_SIDE {
+            return Err(bad(format!("tile size {}", self.tile_size)));
+        }
+        let n = TileGrid::new(w, h, self.tile_size).n_tiles();
+        if self.n_tiles != n {
+            return Err(bad(format!(
+                "{} tiles recorded, {n} expected",
+                self.n_tiles
+            )));
+        }
+        if self.tiles.len() > n {
+            return Err(bad(format!(
+                "{} tiles listed, the image has {n}",
+                self.tiles.len()
+            )));
+        }
+        if let Some(t) = self.tiles.iter().find(|&&t| t >= n) {
+            return Err(bad(format!("tile {t} does not exist")));
+        }
+        Ok(())
+    }
+
     /// The job fingerprint as a number.
     fn job_u64(&self, path: &Path) -> Result<u64> {
         u64::from_str_radix(&self.job, 16)
@@ -132,6 +174,7 @@ fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcom
                 m.version
             );
         }
+        m.validate(&path)?;
         manifests.push((dir.clone(), m));
     }
     let (first_dir, first) = &manifests[0];

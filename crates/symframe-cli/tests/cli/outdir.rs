@@ -267,3 +267,52 @@ fn progress_summary_and_warnings_reach_a_log_and_quiet_silences_them() {
         "{e}"
     );
 }
+
+#[test]
+fn forged_shard_manifests_are_one_line_errors_naming_the_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = dataset(&tmp.path().join("data"));
+    let shard = |k: usize| tmp.path().join(format!("shard_{k}"));
+    for k in 1..=2 {
+        ok(&estimate(
+            &lp,
+            &shard(k),
+            &["--quiet", "--tiles", &format!("{k}/2")],
+        ));
+    }
+    let manifest = shard(2).join("shard.json");
+    let good = fs::read_to_string(&manifest).unwrap();
+    let merged = tmp.path().join("merged");
+    let merge = || {
+        common::symframe(&[
+            "merge",
+            "--quiet",
+            common::s(&shard(1)),
+            common::s(&shard(2)),
+            "-o",
+            common::s(&merged),
+        ])
+    };
+    let forged: [(&str, serde_json::Value); 8] = [
+        ("of", 0.into()),
+        ("shard", 0.into()),
+        ("shard", 3.into()),
+        ("tile_size", 0.into()),
+        ("width", 100_000_000_000u64.into()),
+        ("height", 0.into()),
+        ("n_tiles", 1_000_000_000_000u64.into()),
+        ("tiles", serde_json::json!([0, 1, 99999999999u64])),
+    ];
+    for (field, value) in forged {
+        let mut m: serde_json::Value = serde_json::from_str(&good).unwrap();
+        m[field] = value;
+        fs::write(&manifest, m.to_string()).unwrap();
+        let o = merge();
+        common::assert_one_line_error(&o, "shard_2/shard.json: not a valid shard manifest");
+        assert_eq!(o.status.code(), Some(1), "{field}: {}", stderr(&o));
+        assert!(!merged.exists(), "{field}");
+    }
+    fs::write(&manifest, good).unwrap();
+    ok(&merge());
+    check_output_set(&merged, "report.json").unwrap();
+}
