@@ -316,3 +316,41 @@ fn forged_shard_manifests_are_one_line_errors_naming_the_file() {
     ok(&merge());
     check_output_set(&merged, "report.json").unwrap();
 }
+
+#[test]
+fn a_rerun_removes_the_files_of_the_earlier_set_it_does_not_write() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = dataset(&tmp.path().join("data"));
+    let frames = tmp.path().join("frames");
+    ok(&estimate(&lp, &frames, &["--quiet"]));
+    let fit = tmp.path().join("fit");
+    let run_fit = |extra: &[&str]| {
+        let mut a = vec!["fit", "--quiet", common::s(&lp), "--frames", common::s(&frames)];
+        a.extend_from_slice(&["-o", common::s(&fit)]);
+        a.extend_from_slice(extra);
+        common::symframe(&a)
+    };
+    ok(&run_fit(&["--holdout", "6"]));
+    assert!(fit.join("holdout_residual.npy").is_file());
+    ok(&run_fit(&[]));
+    assert!(!fit.join("holdout_residual.npy").exists());
+    assert!(!fit.join("holdout_residual.exr").exists());
+    check_output_set(&fit, "fit.json").unwrap();
+
+    let relit = tmp.path().join("relit");
+    let relight = |lights: &[&str], extra: &[&str]| {
+        let mut a = vec!["relight", "--quiet", common::s(&fit), "-o", common::s(&relit)];
+        for l in lights {
+            a.extend_from_slice(&["--light", l]);
+        }
+        a.extend_from_slice(extra);
+        common::symframe(&a)
+    };
+    ok(&relight(&["0,0,1", "0.3,0,1", "0,0.3,1"], &["--rotate-tangents", "30"]));
+    assert!(relit.join("relit_002.png").is_file() && relit.join("tangents_edited.png").is_file());
+    ok(&relight(&["0,0,1"], &[]));
+    let left = entries(&relit, "relit_");
+    assert_eq!(left.len(), 2, "{left:?}");
+    assert!(!relit.join("tangents_edited.png").exists());
+    check_output_set(&relit, "relight.json").unwrap();
+}
