@@ -325,7 +325,13 @@ fn a_rerun_removes_the_files_of_the_earlier_set_it_does_not_write() {
     ok(&estimate(&lp, &frames, &["--quiet"]));
     let fit = tmp.path().join("fit");
     let run_fit = |extra: &[&str]| {
-        let mut a = vec!["fit", "--quiet", common::s(&lp), "--frames", common::s(&frames)];
+        let mut a = vec![
+            "fit",
+            "--quiet",
+            common::s(&lp),
+            "--frames",
+            common::s(&frames),
+        ];
         a.extend_from_slice(&["-o", common::s(&fit)]);
         a.extend_from_slice(extra);
         common::symframe(&a)
@@ -339,18 +345,75 @@ fn a_rerun_removes_the_files_of_the_earlier_set_it_does_not_write() {
 
     let relit = tmp.path().join("relit");
     let relight = |lights: &[&str], extra: &[&str]| {
-        let mut a = vec!["relight", "--quiet", common::s(&fit), "-o", common::s(&relit)];
+        let mut a = vec![
+            "relight",
+            "--quiet",
+            common::s(&fit),
+            "-o",
+            common::s(&relit),
+        ];
         for l in lights {
             a.extend_from_slice(&["--light", l]);
         }
         a.extend_from_slice(extra);
         common::symframe(&a)
     };
-    ok(&relight(&["0,0,1", "0.3,0,1", "0,0.3,1"], &["--rotate-tangents", "30"]));
+    ok(&relight(
+        &["0,0,1", "0.3,0,1", "0,0.3,1"],
+        &["--rotate-tangents", "30"],
+    ));
     assert!(relit.join("relit_002.png").is_file() && relit.join("tangents_edited.png").is_file());
     ok(&relight(&["0,0,1"], &[]));
     let left = entries(&relit, "relit_");
     assert_eq!(left.len(), 2, "{left:?}");
     assert!(!relit.join("tangents_edited.png").exists());
     check_output_set(&relit, "relight.json").unwrap();
+}
+
+#[test]
+fn the_first_ctrl_c_ends_a_wait_on_another_process_cache_lock() {
+    use std::os::unix::io::AsRawFd;
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = dataset(&tmp.path().join("data"));
+    let cache = tmp.path().join("cache");
+    ok(&estimate(
+        &lp,
+        &tmp.path().join("a"),
+        &["--quiet", "--cache", common::s(&cache)],
+    ));
+    // Another process (this test) holds the cache's lock as a builder would.
+    let lock = cache.join(
+        entries(&cache, "")
+            .into_iter()
+            .find(|n| n.ends_with(".lock"))
+            .unwrap(),
+    );
+    let f = fs::File::open(&lock).unwrap();
+    // SAFETY: flock on a file descriptor we own.
+    assert_eq!(unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX) }, 0);
+    let mut waiting = estimate_cmd(
+        &lp,
+        &tmp.path().join("b"),
+        &["--cache", common::s(&cache)],
+        &[],
+    )
+    .stderr(Stdio::piped())
+    .spawn()
+    .unwrap();
+    std::thread::sleep(Duration::from_millis(1500));
+    // SAFETY: signalling the child we started.
+    unsafe { libc::kill(waiting.id() as i32, libc::SIGINT) };
+    let t = Instant::now();
+    let status = loop {
+        if let Some(s) = waiting.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            t.elapsed() < Duration::from_secs(10),
+            "Ctrl-C was ignored while waiting"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert_eq!(status.code(), Some(130));
+    drop(f);
 }
