@@ -19,6 +19,9 @@ pub struct Cli {
     /// Worker threads (default: all cores).
     #[arg(long, global = true, value_parser = clap::value_parser!(usize))]
     pub threads: Option<usize>,
+    /// No progress lines and no summary (warnings and errors are still printed).
+    #[arg(long, short = 'q', global = true)]
+    pub quiet: bool,
     #[command(subcommand)]
     pub command: Command,
 }

@@ -121,7 +121,7 @@ pub fn run(args: &EstimateArgs) -> Result<EstimateOutcome> {
     let outcome = symframe_job::estimate(&config, &crate::control(&show, args.stop_after_tiles))
         .map_err(flag_hint)?;
     drop(bars);
-    if progress::interactive() {
+    if progress::chatty() {
         match &outcome {
             EstimateOutcome::Maps(done) => {
                 let (c, r) = (&done.maps.counts, &done.report);
@@ -168,7 +168,7 @@ pub fn merge(args: &MergeArgs) -> Result<()> {
     let show = |p| bars.update(p);
     let done = symframe_job::merge(&args.shards, &args.output, &crate::control(&show, None))?;
     drop(bars);
-    if progress::interactive() {
+    if progress::chatty() {
         let c = &done.maps.counts;
         eprintln!(
             "symframe: merged {} shards into {}: {} pixels estimated ({} with a tangent)",

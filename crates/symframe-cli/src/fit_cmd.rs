@@ -60,7 +60,7 @@ pub fn run(args: &FitArgs) -> Result<FitOutcome> {
     let show = |p| bars.update(p);
     let done = symframe_job::fit(&config, &crate::control(&show, None))?;
     drop(bars);
-    if progress::interactive() {
+    if progress::chatty() {
         let s = &done.maps.summary;
         let held = match (s.holdout_rms, s.holdout_psnr_db) {
             (Some(r), Some(p)) => format!("; held-out RMS {r:.4}, PSNR {p:.1} dB"),
@@ -121,5 +121,13 @@ pub fn relight_config(args: &RelightArgs) -> Result<RelightConfig> {
 
 /// Runs `symframe relight`.
 pub fn relight(args: &RelightArgs) -> Result<RelightOutcome> {
-    symframe_job::relight(&relight_config(args)?)
+    let done = symframe_job::relight(&relight_config(args)?)?;
+    if progress::chatty() {
+        eprintln!(
+            "symframe: {} pictures written into {}",
+            done.pictures.len(),
+            args.output.display()
+        );
+    }
+    Ok(done)
 }

@@ -20,7 +20,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::OnceLock;
 
 use clap::Parser;
-use symframe_job::{Control, Interrupted, Progress};
+use symframe_job::{Checkpoint, Control, Interrupted, Progress};
 
 /// Set by Ctrl-C: the running job starts no new image or tile.
 static STOP: AtomicBool = AtomicBool::new(false);
@@ -54,6 +54,32 @@ fn control<'a>(
         progress,
         stop_after_tiles,
         warning: &|line| eprintln!("warning: {line}"),
+        checkpoint: &test_checkpoint,
+    }
+}
+
+/// Testing aids for the regression tests of the output folder's guarantees (environment
+/// variables, not documented flags): `SYMFRAME_TEST_HOLD_LOCK_S=S` sleeps S seconds once the
+/// output folder is locked; `SYMFRAME_TEST_KILL_AFTER_MOVES=N` kills the process (SIGKILL, as
+/// `kill -9` does) once N files of the new output set are in place.
+fn test_checkpoint(c: Checkpoint) {
+    let var = |name: &str| std::env::var(name).ok()?.parse::<u64>().ok();
+    match c {
+        Checkpoint::OutputLocked => {
+            if let Some(s) = var("SYMFRAME_TEST_HOLD_LOCK_S") {
+                std::thread::sleep(std::time::Duration::from_secs(s));
+            }
+        }
+        Checkpoint::Moved(n) => {
+            if var("SYMFRAME_TEST_KILL_AFTER_MOVES") == Some(n as u64) {
+                #[cfg(unix)]
+                // SAFETY: sending a signal to this process.
+                unsafe {
+                    libc::kill(libc::getpid(), libc::SIGKILL);
+                }
+                std::process::exit(137);
+            }
+        }
     }
 }
 
@@ -66,6 +92,7 @@ fn main() {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
     let cli = cli::Cli::parse();
+    progress::set_quiet(cli.quiet);
     if let Some(n) = cli.threads {
         let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
         let most = (4 * cores).min(1024);

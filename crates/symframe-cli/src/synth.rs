@@ -254,7 +254,7 @@ pub fn run(args: &SynthArgs) -> Result<PathBuf> {
         quantise_bits: None,
         seed: args.seed,
     };
-    if progress::interactive() {
+    if progress::chatty() {
         eprintln!(
             "symframe synth: rendering a {0}x{0} {1:?} of {2} under {3} lights",
             args.size,
@@ -354,7 +354,7 @@ pub fn run(args: &SynthArgs) -> Result<PathBuf> {
     write_json(&staging.path("scene.json"), &description)?;
     staging.commit()?;
     let lp = args.output.join("lights.lp");
-    if progress::interactive() {
+    if progress::chatty() {
         eprintln!(
             "symframe synth: wrote {} images to {} in {:.1} s",
             lights.len(),

@@ -534,6 +534,35 @@ impl CacheLock {
         Ok(())
     }
 
+    /// Takes the shared lock, waiting while another process holds the exclusive one, polling
+    /// `stop` every 100 ms: `false` (no lock taken) once it is set.
+    #[cfg(unix)]
+    fn shared_unless_stopped(&self, stop: &AtomicBool) -> Result<bool> {
+        use std::os::unix::io::AsRawFd;
+        loop {
+            // SAFETY: flock on a file descriptor we own.
+            if unsafe { libc::flock(self.file.as_raw_fd(), libc::LOCK_SH | libc::LOCK_NB) } == 0 {
+                return Ok(true);
+            }
+            let e = std::io::Error::last_os_error();
+            match e.kind() {
+                std::io::ErrorKind::Interrupted => {}
+                std::io::ErrorKind::WouldBlock => {
+                    if stop.load(Ordering::Relaxed) {
+                        return Ok(false);
+                    }
+                    std::thread::sleep(std::time::Duration::from_millis(100));
+                }
+                _ => return Err(Error::write(&self.path, e)),
+            }
+        }
+    }
+
+    #[cfg(not(unix))]
+    fn shared_unless_stopped(&self, _stop: &AtomicBool) -> Result<bool> {
+        Ok(true)
+    }
+
     /// Takes the exclusive lock if no one else holds the lock; `false` if someone does (then
     /// this process holds no lock: a failed conversion gives up the shared one).
     #[cfg(unix)]
@@ -557,6 +586,22 @@ impl CacheLock {
     fn try_exclusive(&self) -> Result<bool> {
         Ok(true)
     }
+}
+
+/// Whether the cache folder `dir` holds work worth keeping after a failed run: a complete
+/// cache, or a partial build that holds at least one batch of images (a rerun resumes it).
+pub fn cache_holds_work(dir: &Path) -> bool {
+    let Ok(rd) = fs::read_dir(dir) else {
+        return false;
+    };
+    rd.flatten().any(|e| {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name.ends_with(".stack") {
+            return true;
+        }
+        name.ends_with(".stack.partial")
+            && read_header(&e.path()).is_ok_and(|h| h.is_some_and(|(h, _)| h.images_done > 0))
+    })
 }
 
 /// Reads a file's header, `None` if the file is missing or too short.
@@ -695,7 +740,10 @@ impl TileCache {
         // the others wait for it.
         let mut tries = 0u64;
         loop {
-            lock.set(false)?;
+            // Waiting here while another process builds: Ctrl-C (`stop`) ends the wait.
+            if !lock.shared_unless_stopped(stop)? {
+                return Err(Error::Interrupted);
+            }
             if let Some(found) = open_complete(&path, fingerprint, copts.tile, n)? {
                 info.verify_s += found.verify_s;
                 if found.bad.is_empty() {

@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -18,9 +19,9 @@ use symframe_io::{
 };
 
 use crate::merge::{write_manifest, ShardManifest, MANIFEST, MANIFEST_FORMAT, MANIFEST_VERSION};
-use crate::outdir::Staging;
+use crate::outdir::{OutputDir, OutputSet};
 use crate::tiles::{peak_rss_bytes, read_tiles, run_tiles, shard_tiles, tile_path};
-use crate::{Control, Interrupted, Progress, Stage};
+use crate::{Checkpoint, Control, Interrupted, Progress, Stage};
 
 /// Folder of the per-tile result files inside an output folder.
 pub const TILES_DIR: &str = ".symframe-tiles";
@@ -188,6 +189,8 @@ pub struct Report {
     pub cache: CacheReport,
     /// Wall-clock seconds per stage, and peak memory.
     pub timings: Timings,
+    /// Every warning of the run, as printed (inputs, recomputed tiles, suspicious results).
+    pub warnings: Vec<String>,
 }
 
 /// One code of the source map, as recorded in the report.
@@ -512,20 +515,76 @@ pub(crate) fn remove_cache(cache_path: &Path, dir: &Path) -> Result<()> {
 
 /// Runs an estimation job: decodes the images once into the tile cache (or reuses it),
 /// estimates tile by tile into result files, then assembles and writes the maps (or, for a
-/// shard, its manifest). On an error (not an interruption) an output folder this job created
-/// is removed again; an interrupted job keeps its cache and finished tiles for the rerun.
+/// shard, its manifest). The output folder is locked for the whole job (a second job into it
+/// is refused). On an error the finished tiles and the cache are kept, so the same call
+/// resumes; only what this job created and holds nothing to resume from is removed again.
 pub fn estimate(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcome> {
-    let created = !config.output.exists();
-    let result = run(config, ctl);
+    let out = OutputDir::lock(&config.output)?;
+    (ctl.checkpoint)(Checkpoint::OutputLocked);
+    let warnings = Mutex::new(Vec::new());
+    let warn = |line: &str| {
+        lock_warnings(&warnings).push(line.to_string());
+        ctl.warn(line);
+    };
+    let counted = Control {
+        stop: ctl.stop,
+        progress: ctl.progress,
+        stop_after_tiles: ctl.stop_after_tiles,
+        warning: &warn,
+        checkpoint: ctl.checkpoint,
+    };
+    let result = run(config, &counted, &out, &warnings);
     if let Err(e) = &result {
-        if created && !e.is::<Interrupted>() {
-            let _ = std::fs::remove_dir_all(&config.output);
+        if !e.is::<Interrupted>() {
+            out.discard_unfinished();
         }
     }
     result
 }
 
-fn run(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcome> {
+/// The warnings collected so far (a poisoned lock still holds them).
+pub(crate) fn lock_warnings(w: &Mutex<Vec<String>>) -> std::sync::MutexGuard<'_, Vec<String>> {
+    w.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Warnings about a finished map: nothing estimated, or most estimated pixels from the
+/// fallbacks beyond the rig's reach (symmetry method only: a baseline's normals all come from
+/// its own measure).
+pub(crate) fn result_warnings(
+    method: &'static str,
+    counts: &PixelCounts,
+    sources: &Sources,
+) -> Vec<String> {
+    let mut w = Vec::new();
+    if counts.estimated == 0 {
+        w.push(format!(
+            "0 pixels estimated ({} discarded, {} culled, {} without data): the maps are empty",
+            counts.discarded, counts.culled, counts.no_data
+        ));
+    } else if method == "symmetry" {
+        let fallback: usize = sources
+            .0
+            .iter()
+            .filter(|s| s.code >= 2)
+            .map(|s| s.pixels)
+            .sum();
+        if fallback * 2 > counts.estimated {
+            w.push(format!(
+                "most pixels beyond the rig's reach: {fallback} of {} estimated normals come \
+                 from the fallbacks, not the symmetry (see source.npy)",
+                counts.estimated
+            ));
+        }
+    }
+    w
+}
+
+fn run(
+    config: &EstimateConfig,
+    ctl: &Control,
+    out: &OutputDir,
+    warnings: &Mutex<Vec<String>>,
+) -> Result<EstimateOutcome> {
     let t0 = Instant::now();
     let ds: Dataset = symframe_io::open_dataset(&config.input)?;
     let plan = Plan::new(&config.method, &ds)?;
@@ -638,6 +697,7 @@ fn run(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcome> {
             total_s: 0.0,
             peak_rss_bytes: None,
         },
+        warnings: Vec::new(),
     };
 
     if let Some(shard) = config.shard {
@@ -659,6 +719,7 @@ fn run(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcome> {
         report.evals_per_pixel = evals as f64 / pixels.estimated.max(1) as f64;
         report.timings.total_s = t0.elapsed().as_secs_f64();
         report.timings.peak_rss_bytes = peak_rss_bytes();
+        report.warnings = lock_warnings(warnings).clone();
         let manifest = ShardManifest {
             format: MANIFEST_FORMAT.into(),
             version: MANIFEST_VERSION,
@@ -683,11 +744,15 @@ fn run(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcome> {
     report.pixels = maps.counts;
     report.sources = Sources::of(&maps.source);
     report.evals_per_pixel = maps.evals as f64 / maps.counts.estimated.max(1) as f64;
-    write_estimate_outputs(&config.output, &maps, config.normal_png, |write_s| {
+    for w in result_warnings(report.method, &report.pixels, &report.sources) {
+        ctl.warn(&w);
+    }
+    report.warnings = lock_warnings(warnings).clone();
+    write_estimate_outputs(out, &maps, config.normal_png, ctl, |write_s| {
         report.timings.write_s = write_s;
         report.timings.total_s = t0.elapsed().as_secs_f64();
         report.timings.peak_rss_bytes = peak_rss_bytes();
-        Ok(serde_json::to_string_pretty(&report)?)
+        Ok(serde_json::to_value(&report)?)
     })?;
     std::fs::remove_dir_all(&tiles_dir)
         .with_context(|| format!("{}: cannot remove", tiles_dir.display()))?;
@@ -708,18 +773,19 @@ pub(crate) fn assemble(
     Ok(maps)
 }
 
-/// Writes the maps (`.npy`, `.exr`), pictures, the source map and `report.json` (the text
-/// `report` returns, given the seconds spent writing the rest) into a staging folder, then
-/// moves them into `out` together.
+/// Writes the maps (`.npy`, `.exr`), pictures, the source map and `report.json` (the value
+/// `report` returns, given the seconds spent writing the rest) as one output set: staged inside
+/// the locked folder `out`, then switched in with the report last (see [`OutputSet`]).
 pub fn write_estimate_outputs(
-    out: &Path,
+    out: &OutputDir,
     maps: &EstimateMaps,
     normal_png: NormalPng,
-    report: impl FnOnce(f64) -> Result<String>,
+    ctl: &Control,
+    report: impl FnOnce(f64) -> Result<serde_json::Value>,
 ) -> Result<()> {
     let t_write = Instant::now();
     let (w, h) = (maps.width, maps.height);
-    let staging = Staging::new(out)?;
+    let staging = OutputSet::new(out, |_| false)?;
     symframe_io::write_npy_f32(&staging.path("normals.npy"), &[h, w, 3], &maps.normals)?;
     symframe_io::write_npy_f32(&staging.path("tangents.npy"), &[h, w, 3], &maps.tangents)?;
     symframe_io::write_npy_f32(&staging.path("confidence.npy"), &[h, w], &maps.confidence)?;
@@ -749,6 +815,7 @@ pub fn write_estimate_outputs(
         symframe_io::write_png_rgb8(&staging.path(name), w, h, &rgb)?;
     }
     let json = report(t_write.elapsed().as_secs_f64())?;
-    std::fs::write(staging.path("report.json"), json + "\n").context("cannot write report.json")?;
-    staging.commit()
+    staging.commit("report.json", json, &|n| {
+        (ctl.checkpoint)(Checkpoint::Moved(n))
+    })
 }

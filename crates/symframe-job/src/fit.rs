@@ -18,9 +18,9 @@ use crate::estimate::{
     cache_dir, fingerprint_lights, fingerprint_mask, open_cache, read_mask, remove_cache,
     CacheConfig, CacheReport, CACHE_DIR, TILES_DIR,
 };
-use crate::outdir::Staging;
+use crate::outdir::{OutputDir, OutputSet};
 use crate::tiles::{read_tiles, run_tiles, tile_path, TileCounts, TileRecord};
-use crate::{Control, Interrupted};
+use crate::{Checkpoint, Control, Interrupted};
 
 /// Everything a fit job needs.
 #[derive(Debug, Clone, PartialEq)]
@@ -159,8 +159,9 @@ fn read_frame_map(path: &Path, width: usize, height: usize) -> Result<Vec<f32>> 
     Ok(data)
 }
 
-/// Runs a fit job. On an error (not an interruption) an output folder this job created is
-/// removed again.
+/// Runs a fit job. The output folder is locked for the whole job; on an error the finished
+/// tiles and the cache are kept (the same call resumes), and only what this job created and
+/// holds nothing to resume from is removed again.
 pub fn fit(config: &FitConfig, ctl: &Control) -> Result<FitOutcome> {
     for name in ["normals.npy", "tangents.npy"] {
         let p = config.frames.join(name);
@@ -171,17 +172,18 @@ pub fn fit(config: &FitConfig, ctl: &Control) -> Result<FitOutcome> {
             );
         }
     }
-    let created = !config.output.exists();
-    let result = run(config, ctl);
+    let out = OutputDir::lock(&config.output)?;
+    (ctl.checkpoint)(Checkpoint::OutputLocked);
+    let result = run(config, ctl, &out);
     if let Err(e) = &result {
-        if created && !e.is::<Interrupted>() {
-            let _ = std::fs::remove_dir_all(&config.output);
+        if !e.is::<Interrupted>() {
+            out.discard_unfinished();
         }
     }
     result
 }
 
-fn run(config: &FitConfig, ctl: &Control) -> Result<FitOutcome> {
+fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome> {
     let t0 = Instant::now();
     let ds: Dataset = symframe_io::open_dataset(&config.input)?;
     let params = FitParams {
@@ -261,7 +263,7 @@ fn run(config: &FitConfig, ctl: &Control) -> Result<FitOutcome> {
             total_s: 0.0,
         },
     };
-    write_outputs(&config.output, &maps, &mut report, t0)?;
+    write_outputs(out, &maps, &mut report, t0, ctl)?;
     std::fs::remove_dir_all(&tiles_dir)
         .with_context(|| format!("{}: cannot remove", tiles_dir.display()))?;
     if config.cache.remove_after {
@@ -270,12 +272,24 @@ fn run(config: &FitConfig, ctl: &Control) -> Result<FitOutcome> {
     Ok(FitOutcome { maps, report })
 }
 
-/// Writes every output file into a staging folder, then moves them into `out` together.
-fn write_outputs(out: &Path, maps: &FitMaps, report: &mut FitReport, t0: Instant) -> Result<()> {
+/// Files a fit writes that an earlier fit into the same folder may have left and this one
+/// may not write (the held-out residual maps of a fit with held-out lights).
+fn fit_owned(name: &str) -> bool {
+    name.starts_with("holdout_residual.")
+}
+
+/// Writes every output file as one output set (staged, then switched in, `fit.json` last).
+fn write_outputs(
+    out: &OutputDir,
+    maps: &FitMaps,
+    report: &mut FitReport,
+    t0: Instant,
+    ctl: &Control,
+) -> Result<()> {
     let t_write = Instant::now();
     let m = &maps.ward;
     let (w, h) = (m.width, m.height);
-    let staging = Staging::new(out)?;
+    let staging = OutputSet::new(out, fit_owned)?;
     let maps3: [(&str, &[f32]); 4] = [
         ("kd", &m.kd),
         ("ks", &m.ks),
@@ -304,9 +318,10 @@ fn write_outputs(out: &Path, maps: &FitMaps, report: &mut FitReport, t0: Instant
     symframe_io::write_png8_rgb(&staging.path("ks.png"), w, h, &m.ks, true)?;
     report.timings.write_s = t_write.elapsed().as_secs_f64();
     report.timings.total_s = t0.elapsed().as_secs_f64();
-    let json = serde_json::to_string_pretty(report)?;
-    std::fs::write(staging.path("fit.json"), json + "\n").context("cannot write fit.json")?;
-    staging.commit()
+    let json = serde_json::to_value(&*report)?;
+    staging.commit("fit.json", json, &|n| {
+        (ctl.checkpoint)(Checkpoint::Moved(n))
+    })
 }
 
 /// Per-tile fit results: a 40-byte header (magic `SYMFFITR`, format version, the job's

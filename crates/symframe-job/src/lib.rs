@@ -61,7 +61,7 @@ pub use estimate::{
 };
 pub use fit::{fit, FitConfig, FitLights, FitOutcome, FitReport, FitTimings};
 pub use merge::{merge, MergeOutcome, ShardManifest, MANIFEST};
-pub use outdir::Staging;
+pub use outdir::{check_output_set, OutputDir, OutputSet, Staging, LOCK_FILE};
 pub use relight::{read_ward_maps, relight, RelightConfig, RelightOutcome};
 pub use tiles::{peak_rss_bytes, shard_tiles, TileCounts};
 
@@ -129,6 +129,19 @@ pub struct Control<'a> {
     /// Called with one line for each thing the user should know that does not stop the job
     /// (mixed inputs, a corrupt tile result being recomputed).
     pub warning: &'a (dyn Fn(&str) + Sync),
+    /// Testing aid: called at points where a killed or slow job must leave the output folder
+    /// consistent (after the output lock is taken, after each file of the new output set is
+    /// moved into place).
+    pub checkpoint: &'a (dyn Fn(Checkpoint) + Sync),
+}
+
+/// A point of a job that [`Control::checkpoint`] is told about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Checkpoint {
+    /// The output folder's lock is held (the job proper starts).
+    OutputLocked,
+    /// The n-th file (from 1) of the new output set is in place.
+    Moved(usize),
 }
 
 /// A flag that nothing sets.
@@ -142,6 +155,7 @@ impl Default for Control<'_> {
             progress: &|_| {},
             stop_after_tiles: None,
             warning: &|_| {},
+            checkpoint: &|_| {},
         }
     }
 }

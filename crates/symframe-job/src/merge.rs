@@ -11,9 +11,10 @@ use serde::{Deserialize, Serialize};
 use symframe::EstimateMaps;
 use symframe_io::TileGrid;
 
-use crate::estimate::{assemble, write_estimate_outputs, Sources, TILES_DIR};
+use crate::estimate::{assemble, result_warnings, write_estimate_outputs, Sources, TILES_DIR};
+use crate::outdir::OutputDir;
 use crate::tiles::{peak_rss_bytes, tile_path};
-use crate::{Control, Progress, Stage};
+use crate::{Checkpoint, Control, Interrupted, Progress, Stage};
 
 /// A shard's manifest, written once all its tiles are done.
 pub const MANIFEST: &str = "shard.json";
@@ -57,6 +58,48 @@ pub struct ShardManifest {
 }
 
 impl ShardManifest {
+    /// Checks the numbers a manifest declares before any of them sizes or divides anything:
+    /// shard `1..=of`, sizes within the image limits, a positive tile size, the tile count of
+    /// the grid, tiles that exist.
+    fn validate(&self, path: &Path) -> Result<()> {
+        use symframe_io::limits::{MAX_PIXELS, MAX_SIDE};
+        let bad = |what: String| {
+            anyhow::anyhow!("{}: not a valid shard manifest: {what}", path.display())
+        };
+        if self.of == 0 || self.shard == 0 || self.shard > self.of {
+            return Err(bad(format!(
+                "shard {} of {} (expected 1 <= shard <= of)",
+                self.shard, self.of
+            )));
+        }
+        let (w, h) = (self.width, self.height);
+        if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE || w * h > MAX_PIXELS {
+            return Err(bad(format!(
+                "image of {w}x{h} pixels (1 to {MAX_SIDE} per side, at most {MAX_PIXELS} pixels)"
+            )));
+        }
+        if self.tile_size == 0 || self.tile_size > MAX_SIDE {
+            return Err(bad(format!("tile size {}", self.tile_size)));
+        }
+        let n = TileGrid::new(w, h, self.tile_size).n_tiles();
+        if self.n_tiles != n {
+            return Err(bad(format!(
+                "{} tiles recorded, {n} expected",
+                self.n_tiles
+            )));
+        }
+        if self.tiles.len() > n {
+            return Err(bad(format!(
+                "{} tiles listed, the image has {n}",
+                self.tiles.len()
+            )));
+        }
+        if let Some(t) = self.tiles.iter().find(|&&t| t >= n) {
+            return Err(bad(format!("tile {t} does not exist")));
+        }
+        Ok(())
+    }
+
     /// The job fingerprint as a number.
     fn job_u64(&self, path: &Path) -> Result<u64> {
         u64::from_str_radix(&self.job, 16)
@@ -90,6 +133,18 @@ fn list_tiles(tiles: &[usize]) -> String {
 /// `symframe merge`: checks the shards belong to one job and cover every tile, assembles the
 /// maps and writes the usual outputs.
 pub fn merge(shards: &[PathBuf], output: &Path, ctl: &Control) -> Result<MergeOutcome> {
+    let out = OutputDir::lock(output)?;
+    (ctl.checkpoint)(Checkpoint::OutputLocked);
+    let result = run(shards, &out, ctl);
+    if let Err(e) = &result {
+        if !e.is::<Interrupted>() {
+            out.discard_unfinished();
+        }
+    }
+    result
+}
+
+fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcome> {
     let t0 = Instant::now();
     if shards.is_empty() {
         bail!("no shard folders given");
@@ -119,6 +174,7 @@ pub fn merge(shards: &[PathBuf], output: &Path, ctl: &Control) -> Result<MergeOu
                 m.version
             );
         }
+        m.validate(&path)?;
         manifests.push((dir.clone(), m));
     }
     let (first_dir, first) = &manifests[0];
@@ -224,7 +280,27 @@ pub fn merge(shards: &[PathBuf], output: &Path, ctl: &Control) -> Result<MergeOu
         "shards": first.of,
     });
     report["shards"] = serde_json::Value::Array(shard_timings);
-    write_estimate_outputs(output, &maps, symframe_io::NormalPng::OpenGl, |write_s| {
+    let method = match report["method"].as_str() {
+        Some("symmetry") => "symmetry",
+        _ => "baseline",
+    };
+    let mut warnings: Vec<String> = Vec::new();
+    for (_, m) in &manifests {
+        for w in m.report["warnings"].as_array().into_iter().flatten() {
+            warnings.push(format!(
+                "shard {}/{}: {}",
+                m.shard,
+                m.of,
+                w.as_str().unwrap_or_default()
+            ));
+        }
+    }
+    for w in result_warnings(method, &maps.counts, &Sources::of(&maps.source)) {
+        ctl.warn(&w);
+        warnings.push(w);
+    }
+    report["warnings"] = serde_json::json!(warnings);
+    write_estimate_outputs(out, &maps, symframe_io::NormalPng::OpenGl, ctl, |write_s| {
         report["timings"] = serde_json::json!({
             "estimate_s_all_shards": estimate_s,
             "merge_s": t0.elapsed().as_secs_f64() - write_s,
@@ -232,7 +308,7 @@ pub fn merge(shards: &[PathBuf], output: &Path, ctl: &Control) -> Result<MergeOu
             "total_s": t0.elapsed().as_secs_f64(),
             "peak_rss_bytes": peak_rss_bytes(),
         });
-        Ok(serde_json::to_string_pretty(&report)?)
+        Ok(report)
     })?;
     Ok(MergeOutcome {
         maps,

@@ -10,7 +10,7 @@ use serde::Serialize;
 use symframe::relight::{tone_map, Edits, Relighter};
 use symframe::WardMaps;
 
-use crate::outdir::Staging;
+use crate::outdir::{OutputDir, OutputSet};
 
 /// Everything a relight job needs.
 #[derive(Debug, Clone, PartialEq)]
@@ -143,7 +143,35 @@ pub fn relight(config: &RelightConfig) -> Result<RelightOutcome> {
     let relighter =
         Relighter::new(&maps, &edits).with_context(|| config.fit_dir.display().to_string())?;
 
-    let staging = Staging::new(&config.output)?;
+    let out = OutputDir::lock(&config.output)?;
+    let result = write_relit(config, &out, &maps, &relighter, &lights, &edits);
+    if result.is_err() {
+        out.discard_unfinished();
+    }
+    result
+}
+
+/// Files an earlier relight into the same folder may have left that this one may not write:
+/// more pictures, the edited tangent map.
+fn relight_owned(name: &str) -> bool {
+    let numbered = name
+        .strip_prefix("relit_")
+        .and_then(|r| r.strip_suffix(".exr").or_else(|| r.strip_suffix(".png")))
+        .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()));
+    numbered || name == "tangents_edited.png"
+}
+
+/// Renders every light and writes the pictures as one output set (`relight.json` last).
+fn write_relit(
+    config: &RelightConfig,
+    out: &OutputDir,
+    maps: &WardMaps,
+    relighter: &Relighter,
+    lights: &[DVec3],
+    edits: &Edits,
+) -> Result<RelightOutcome> {
+    let (w, h) = (maps.width, maps.height);
+    let staging = OutputSet::new(out, relight_owned)?;
     let mut names = Vec::with_capacity(lights.len());
     for (i, &l) in lights.iter().enumerate() {
         let name = format!("relit_{i:03}");
@@ -178,10 +206,7 @@ pub fn relight(config: &RelightConfig) -> Result<RelightOutcome> {
         region: config.region.as_deref(),
         exposure_stops: config.exposure,
     };
-    let json = serde_json::to_string_pretty(&report)?;
-    std::fs::write(staging.path("relight.json"), json + "\n")
-        .context("cannot write relight.json")?;
-    staging.commit()?;
+    staging.commit("relight.json", serde_json::to_value(&report)?, &|_| {})?;
     Ok(RelightOutcome {
         pictures: names
             .iter()

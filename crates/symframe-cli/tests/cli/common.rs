@@ -33,12 +33,29 @@ pub fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-/// The run failed with a one-line error (no panic) that names `needle`.
+/// Whether `line` is a plain progress line (`decoding 3/60 images`, `tiles 4/16`), as printed
+/// when stderr is not a terminal.
+pub fn is_progress_line(line: &str) -> bool {
+    let mut w = line.split_whitespace();
+    matches!(w.next(), Some("decoding" | "tiles" | "merging"))
+        && w.next().is_some_and(|c| {
+            c.split_once('/')
+                .is_some_and(|(a, b)| a.parse::<u64>().is_ok() && b.parse::<u64>().is_ok())
+        })
+}
+
+/// The run failed with a one-line error (no panic) that names `needle` (progress lines
+/// before it aside).
 pub fn assert_one_line_error(o: &Output, needle: &str) {
-    let err = stderr(o);
-    assert!(!o.status.success(), "expected failure, stderr: {err}");
-    assert!(err.contains(needle), "error should name {needle:?}: {err}");
-    assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
+    let all = stderr(o);
+    let err: String = all
+        .lines()
+        .filter(|l| !is_progress_line(l))
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert!(!o.status.success(), "expected failure, stderr: {all}");
+    assert!(err.contains(needle), "error should name {needle:?}: {all}");
+    assert_eq!(err.trim().lines().count(), 1, "one-line error: {all}");
     assert!(!err.contains("panicked"), "{err}");
 }
 
@@ -100,4 +117,20 @@ pub fn sphere_dataset(
     )
     .unwrap();
     (scene, lp)
+}
+
+/// A failure after the images were decoded: [`assert_one_line_error`], and the output folder
+/// `out` holds at most the tile cache (kept so the rerun decodes nothing), no outputs and no
+/// staging folder.
+pub fn assert_fails_keeping_cache(o: &Output, needle: &str, out: &Path) {
+    assert_one_line_error(o, needle);
+    if out.exists() {
+        for e in fs::read_dir(out).unwrap() {
+            let name = e.unwrap().file_name().to_string_lossy().into_owned();
+            assert_eq!(
+                name, ".symframe-cache",
+                "only the cache may be left in {out:?}"
+            );
+        }
+    }
 }

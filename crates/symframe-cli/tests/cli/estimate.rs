@@ -4,7 +4,10 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use crate::common::{assert_fails_naming, estimate, sphere_dataset, stderr, symframe, Truth};
+use crate::common::{
+    assert_fails_keeping_cache, assert_fails_naming, estimate, sphere_dataset, stderr, symframe,
+    Truth,
+};
 
 use glam::DVec3;
 use symframe::brdf::ward::Ward;
@@ -247,12 +250,12 @@ fn empty_and_wrong_size_masks_are_refused() {
     let empty = tmp.path().join("empty.png");
     symframe_io::write_png8_rgb(&empty, 12, 12, &vec![0.0; 12 * 12 * 3], false).unwrap();
     let o = estimate(&lp, &out, &["--mask", empty.to_str().unwrap()]);
-    assert_fails_naming(&o, "empty.png", &out);
+    assert_fails_keeping_cache(&o, "empty.png", &out);
     assert!(stderr(&o).contains("empty"), "{}", stderr(&o));
     let small = tmp.path().join("small.png");
     symframe_io::write_png8_rgb(&small, 5, 5, &vec![1.0; 5 * 5 * 3], false).unwrap();
     let o = estimate(&lp, &out, &["--mask", small.to_str().unwrap()]);
-    assert_fails_naming(&o, "small.png", &out);
+    assert_fails_keeping_cache(&o, "small.png", &out);
 }
 
 #[test]

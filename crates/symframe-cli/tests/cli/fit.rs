@@ -5,7 +5,9 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use crate::common::{assert_fails_naming, s, sphere_dataset, stderr, symframe, Truth};
+use crate::common::{
+    assert_fails_keeping_cache, assert_fails_naming, s, sphere_dataset, stderr, symframe, Truth,
+};
 
 use glam::DVec3;
 use symframe::brdf::ward::Ward;
@@ -200,16 +202,16 @@ fn fit_refuses_mismatched_or_missing_frames() {
     // Normals of another size.
     write_npy_f32(&frames.join("normals.npy"), &[10, 12, 3], &vec![0.0; 360]).unwrap();
     let o = symframe(&["fit", s(&lp), "--frames", s(&frames), "-o", s(&out)]);
-    assert_fails_naming(&o, "normals.npy", &out);
+    assert_fails_keeping_cache(&o, "normals.npy", &out);
     // Tangents missing.
     true_frames(&frames, &scene);
     fs::remove_file(frames.join("tangents.npy")).unwrap();
     let o = symframe(&["fit", s(&lp), "--frames", s(&frames), "-o", s(&out)]);
-    assert_fails_naming(&o, "tangents.npy", &out);
+    assert_fails_keeping_cache(&o, "tangents.npy", &out);
     // Tangents not an array file.
     fs::write(frames.join("tangents.npy"), b"not npy").unwrap();
     let o = symframe(&["fit", s(&lp), "--frames", s(&frames), "-o", s(&out)]);
-    assert_fails_naming(&o, "tangents.npy", &out);
+    assert_fails_keeping_cache(&o, "tangents.npy", &out);
     // Too many lights held out; a missing dataset.
     true_frames(&frames, &scene);
     let o = symframe(&[
@@ -222,7 +224,7 @@ fn fit_refuses_mismatched_or_missing_frames() {
         "--holdout",
         "40",
     ]);
-    assert_fails_naming(&o, "--holdout", &out);
+    assert_fails_keeping_cache(&o, "--holdout", &out);
     let o = symframe(&[
         "fit",
         "/no/such/data.lp",
@@ -231,7 +233,7 @@ fn fit_refuses_mismatched_or_missing_frames() {
         "-o",
         s(&out),
     ]);
-    assert_fails_naming(&o, "/no/such/data.lp", &out);
+    assert_fails_keeping_cache(&o, "/no/such/data.lp", &out);
     // A wrong-size mask.
     let small = tmp.path().join("small.png");
     symframe_io::write_png8_rgb(&small, 5, 5, &[1.0; 75], false).unwrap();
@@ -245,7 +247,7 @@ fn fit_refuses_mismatched_or_missing_frames() {
         "--mask",
         s(&small),
     ]);
-    assert_fails_naming(&o, "small.png", &out);
+    assert_fails_keeping_cache(&o, "small.png", &out);
     // And the good case works with true frames.
     let o = symframe(&["fit", s(&lp), "--frames", s(&frames), "-o", s(&out)]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -296,7 +298,7 @@ fn relight_refuses_bad_fit_folders_regions_and_light_files() {
     write_npy_f32(&fit.join("alpha_t.npy"), &[12, 12], &[0.1; 144]).unwrap();
     write_npy_f32(&fit.join("normals.npy"), &[12, 13, 3], &[0.0; 468]).unwrap();
     let o = relight(&["--light", "0,0,1"]);
-    assert_fails_naming(&o, "normals.npy", &out);
+    assert_fails_keeping_cache(&o, "normals.npy", &out);
     // A missing map, and a folder that is not a fit.
     fs::remove_file(fit.join("kd.npy")).unwrap();
     let o = relight(&["--light", "0,0,1"]);

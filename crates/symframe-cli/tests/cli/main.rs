@@ -11,6 +11,7 @@ mod export;
 mod fit;
 mod integrate;
 mod normal_png;
+mod outdir;
 mod reliability;
 mod synth;
 mod tiles;
