@@ -4,10 +4,10 @@
 use anyhow::Result;
 use rayon::prelude::*;
 use symframe::brdf::{AshikhminShirley, Brdf, Ward};
-use symframe::estimate::{Estimator, EstimatorParams};
+use symframe::frames::estimator::{Estimator, EstimatorParams};
+use symframe::frames::rig::uniform_cone_lights;
+use symframe::frames::symmetry::CosineMode;
 use symframe::render::{plane_frame, Scene};
-use symframe::rig::uniform_cone_lights;
-use symframe::symmetry::CosineMode;
 use symframe::{Rig, RigOptions};
 
 use super::plot::{self, fmt_opt, md_table};

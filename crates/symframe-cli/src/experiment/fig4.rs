@@ -3,12 +3,12 @@
 
 use anyhow::Result;
 use rayon::prelude::*;
-use symframe::baseline::{baseline_pixel, Baseline, BaselineParams};
+use symframe::baselines::{baseline_pixel, Baseline, BaselineParams};
 use symframe::brdf::{Brdf, CookTorrance, TorranceSparrow, Ward};
-use symframe::estimate::{Estimator, EstimatorParams};
+use symframe::frames::estimator::{Estimator, EstimatorParams};
+use symframe::frames::rig::uniform_cone_lights;
+use symframe::frames::symmetry::CosineMode;
 use symframe::render::{plane_frame, Scene};
-use symframe::rig::uniform_cone_lights;
-use symframe::symmetry::CosineMode;
 use symframe::{Rig, RigOptions};
 
 use super::plot::{self, fmt_opt, md_table};

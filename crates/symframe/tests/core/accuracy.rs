@@ -7,11 +7,11 @@ use glam::DVec3;
 use symframe::brdf::lambertian::Lambertian;
 use symframe::brdf::ward::Ward;
 use symframe::brdf::Brdf;
-use symframe::estimate::Fallback;
 use symframe::eval::{evaluate, Evaluation};
+use symframe::frames::estimator::Fallback;
+use symframe::frames::rig::uniform_cone_lights;
+use symframe::frames::symmetry::CosineMode;
 use symframe::render::{BumpParams, Scene, TangentField};
-use symframe::rig::uniform_cone_lights;
-use symframe::symmetry::CosineMode;
 use symframe::{estimate_stack, EstimatorParams, Rig, RigOptions};
 
 fn run(scene: &Scene, brdf: &dyn Brdf, n_lights: usize) -> Evaluation {

@@ -14,12 +14,12 @@ use glam::{DMat3, DVec3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::estimate::{EstimateMaps, PixelRecord, PixelSource, PixelStatus};
-use crate::highlight::highlight_moments_by;
+use crate::frames::estimator::{EstimateMaps, PixelRecord, PixelSource, PixelStatus};
+use crate::frames::highlight::highlight_moments_by;
+use crate::geometry::halfway_from_light;
+use crate::geometry::tangent_basis;
 use crate::method::{run_stack, PixelMethod};
-use crate::rig::halfway_from_light;
 use crate::stack::Stack;
-use crate::symmetry::tangent_basis;
 
 /// Which baseline to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -35,7 +35,7 @@ pub enum Baseline {
     /// value over its nearest neighbours in halfway space.
     MaxReflectance,
     /// The intensity-weighted mean (normal) and second moment (tangent axis) of the halfway
-    /// vectors of the brightest samples ([`crate::highlight`]).
+    /// vectors of the brightest samples ([`crate::frames::highlight`]).
     HighlightCentroid,
 }
 
@@ -478,8 +478,8 @@ pub fn max_reflectance_pixel(samples: &[f32], lights: &[DVec3]) -> BaselinePixel
 }
 
 /// Smallest elongation of the highlight for the highlight-centroid baseline to report a
-/// tangent (the estimator's own rule, [`crate::estimate::MIN_ELONGATION`]).
-const CENTROID_MIN_ELONGATION: f64 = crate::estimate::MIN_ELONGATION;
+/// tangent (the estimator's own rule, [`crate::frames::estimator::MIN_ELONGATION`]).
+const CENTROID_MIN_ELONGATION: f64 = crate::frames::estimator::MIN_ELONGATION;
 
 /// The highlight-centroid baseline at one pixel: the normal is the intensity-weighted mean of
 /// the halfway vectors of the samples at or above half the brightest grey value, the tangent
@@ -708,7 +708,7 @@ pub fn estimate_stack_baseline_with(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<EstimateMaps> {
     let method = BaselineMethod::new(method, lights, params)?;
-    crate::estimate::check_inputs(
+    crate::frames::estimator::check_inputs(
         stack.width,
         stack.height,
         stack.n_lights,
@@ -743,7 +743,7 @@ pub fn baseline_lights(lights: &[DVec3]) -> Result<Vec<DVec3>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rig::uniform_cone_lights;
+    use crate::frames::rig::uniform_cone_lights;
 
     /// One Lambertian pixel: `albedo * max(n.l, 0)` per channel.
     fn lambert(n: DVec3, lights: &[DVec3], albedo: [f32; 3]) -> Vec<f32> {

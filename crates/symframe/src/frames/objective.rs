@@ -18,9 +18,9 @@ use std::cell::RefCell;
 
 use glam::{DVec3, Vec3, Vec4};
 
-use crate::rig::{Coverage, FastLocator, Rig};
-use crate::slice::{ExactSlice, SliceLookup};
-use crate::symmetry::{
+use crate::frames::rig::{Coverage, FastLocator, Rig};
+use crate::frames::slice::{ExactSlice, SliceLookup};
+use crate::frames::symmetry::{
     symmetry_term, symmetry_term_over, CosineMode, Frame, Symmetry, SymmetryTerm,
 };
 
@@ -97,7 +97,7 @@ impl Objective for ExactObjective<'_> {
     }
 
     fn normal_term(&self, n: DVec3, cosine: CosineMode, level: Level) -> SymmetryTerm {
-        let frame = Frame::new(n, crate::symmetry::tangent_basis(n).0);
+        let frame = Frame::new(n, crate::geometry::tangent_basis(n).0);
         self.term(Symmetry::N, frame, cosine, level)
     }
 
@@ -678,9 +678,9 @@ impl Default for Reflections {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rig::{uniform_cone_lights, RigOptions};
-    use crate::symmetry::tangent_basis;
-    use crate::symmetry::tests::render_slice;
+    use crate::frames::rig::{uniform_cone_lights, RigOptions};
+    use crate::frames::symmetry::tests::render_slice;
+    use crate::geometry::tangent_basis;
 
     #[test]
     fn fast_terms_agree_with_the_reference_terms() {

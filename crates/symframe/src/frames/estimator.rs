@@ -6,17 +6,18 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::baseline::{woodham_robust_pixel, BaselineParams};
+use crate::baselines::{woodham_robust_pixel, BaselineParams};
 use crate::error::{Error, Result};
-use crate::highlight::highlight_moments;
-use crate::method::{run_stack, PixelMethod};
-use crate::objective::{ExactObjective, FastScratch, Level, Objective};
-use crate::optim::{nelder_mead, NelderMeadOptions};
-use crate::rig::Rig;
-use crate::stack::Stack;
-use crate::symmetry::{
-    default_min_domain, tangent_basis, CosineMode, Frame, SymmetryTerm, EMPTY_DISTANCE,
+use crate::frames::highlight::highlight_moments;
+use crate::frames::objective::{ExactObjective, FastScratch, Level, Objective};
+use crate::frames::optim::{nelder_mead, NelderMeadOptions};
+use crate::frames::rig::Rig;
+use crate::frames::symmetry::{
+    default_min_domain, CosineMode, Frame, SymmetryTerm, EMPTY_DISTANCE,
 };
+use crate::geometry::tangent_basis;
+use crate::method::{run_stack, PixelMethod};
+use crate::stack::Stack;
 
 /// Parameters of the symmetry estimator.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -862,7 +863,7 @@ pub const FALLBACK_DIFFUSE_FIT: f64 = 0.95;
 /// symmetry estimate.
 pub const FALLBACK_CONFIDENCE: f32 = 0.5;
 
-/// Smallest elongation of the highlight's second moment ([`crate::highlight::HighlightMoments::elongation`])
+/// Smallest elongation of the highlight's second moment ([`crate::frames::highlight::HighlightMoments::elongation`])
 /// for a tangent.
 pub const MIN_ELONGATION: f64 = 0.4;
 

@@ -4,7 +4,7 @@
 
 use glam::DVec3;
 
-use crate::rig::Rig;
+use crate::frames::rig::Rig;
 use crate::stack::Stack;
 
 /// Gathers one pixel's samples into rig order (`rig.n_used() * 3` values) in the caller's buffer.
@@ -67,7 +67,7 @@ impl SliceLookup for ExactSlice<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rig::{uniform_cone_lights, RigOptions};
+    use crate::frames::rig::{uniform_cone_lights, RigOptions};
 
     fn linear_field(h: DVec3) -> [f32; 3] {
         [

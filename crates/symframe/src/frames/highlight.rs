@@ -7,7 +7,7 @@
 
 use glam::DVec3;
 
-use crate::symmetry::tangent_basis;
+use crate::geometry::tangent_basis;
 
 /// Samples at or above this fraction of the pixel's brightest grey value are "the highlight";
 /// each weighs by how far it rises above that level, so the mean follows the lobe's peak and
@@ -121,8 +121,8 @@ pub fn highlight_moments_by(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rig::uniform_cone_lights;
-    use crate::rig::{Rig, RigOptions};
+    use crate::frames::rig::uniform_cone_lights;
+    use crate::frames::rig::{Rig, RigOptions};
 
     /// An anisotropic Gaussian lobe about `n` with widths `at` along `t`, `ab` along `n x t`.
     fn lobe(rig: &Rig, n: DVec3, t: DVec3, at: f64, ab: f64) -> Vec<f32> {

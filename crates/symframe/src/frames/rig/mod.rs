@@ -6,21 +6,7 @@ use glam::{DMat3, DVec2, DVec3};
 use spade::{DelaunayTriangulation, HasPosition, Point2, Triangulation};
 
 use crate::error::{Error, Result};
-
-/// The view vector of every pixel (orthographic camera looking down -z).
-pub const VIEW: DVec3 = DVec3::Z;
-
-/// The light that a halfway vector corresponds to for the fixed view: `l(h) = 2 (v.h) h - v`.
-#[inline]
-pub fn light_from_halfway(halfway: DVec3) -> DVec3 {
-    2.0 * halfway.z * halfway - VIEW
-}
-
-/// The halfway vector of a light for the fixed view, `normalize(l + v)`; `None` for `l = -v`.
-#[inline]
-pub fn halfway_from_light(light: DVec3) -> Option<DVec3> {
-    (light + VIEW).try_normalize()
-}
+use crate::geometry::{from_stereographic, halfway_from_light};
 
 /// One triangle of the halfway-vector triangulation with what a lookup needs, precomputed.
 #[derive(Debug, Clone, Copy)]
@@ -105,21 +91,6 @@ fn bit_reversed_order(n: usize) -> Vec<u32> {
     let mut order: Vec<u32> = (0..n as u32).collect();
     order.sort_by_key(|i| i.reverse_bits());
     order
-}
-
-/// The stereographic projection of a unit halfway vector, `(h.x, h.y) / (1 + h.z)`: nearly
-/// even in angle over a 65-degree cone (its scale varies from 0.5 to 0.7).
-#[inline]
-pub fn stereographic(h: DVec3) -> DVec2 {
-    let k = 1.0 / (1.0 + h.z);
-    DVec2::new(h.x * k, h.y * k)
-}
-
-/// The unit vector whose stereographic projection is `s`.
-#[inline]
-pub fn from_stereographic(s: DVec2) -> DVec3 {
-    let r2 = s.length_squared();
-    DVec3::new(2.0 * s.x, 2.0 * s.y, 1.0 - r2) / (1.0 + r2)
 }
 
 /// A regular `size x size` grid of cells over the stereographic projection of the cone,
@@ -228,7 +199,7 @@ impl Coverage {
 }
 
 /// The triangulation in single precision with a walk for point location: the fast path's
-/// lookups ([`crate::objective::FastObjective`]). The same spherical triangles and barycentric
+/// lookups ([`crate::frames::objective::FastObjective`]). The same spherical triangles and barycentric
 /// weights as [`Rig::locate`], so the fast and reference paths read the same slice; only the
 /// precision and the search differ.
 ///
@@ -694,14 +665,6 @@ pub fn uniform_cone_lights(n: usize, theta_d_max_deg: f64) -> Vec<DVec3> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn light_and_halfway_are_inverse() {
-        for l in uniform_cone_lights(50, 65.0) {
-            let h = halfway_from_light(l).unwrap();
-            assert!((light_from_halfway(h) - l).length() < 1e-12);
-        }
-    }
 
     #[test]
     fn lights_outside_the_cone_are_dropped_and_counted() {
