@@ -1,8 +1,8 @@
 //! One per-pixel interface for everything that turns a pixel's samples into a result: the
 //! symmetry [`Estimator`](crate::Estimator), every [baseline](crate::baselines::BaselineMethod)
-//! and the [Ward fitter](crate::appearance::fit::FitMethod). The whole-stack drivers here and the tiled job
-//! of `symframe-job` run any of them the same way, so given the same samples they give the same
-//! results.
+//! and the [Ward fitter](crate::appearance::fit::FitMethod). The whole-stack drivers here and
+//! the tiled job of `symframe-job` run any of them the same way, so given the same samples they
+//! give the same results.
 
 use rayon::prelude::*;
 

@@ -863,8 +863,8 @@ pub const FALLBACK_DIFFUSE_FIT: f64 = 0.95;
 /// symmetry estimate.
 pub const FALLBACK_CONFIDENCE: f32 = 0.5;
 
-/// Smallest elongation of the highlight's second moment ([`crate::frames::highlight::HighlightMoments::elongation`])
-/// for a tangent.
+/// Smallest elongation of the highlight's second moment
+/// ([`crate::frames::highlight::HighlightMoments::elongation`]) for a tangent.
 pub const MIN_ELONGATION: f64 = 0.4;
 
 /// Under [`CosineMode::Auto`], pixels where a Lambertian term leaves at least this share of

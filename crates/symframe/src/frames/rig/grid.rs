@@ -7,7 +7,7 @@ use crate::geometry::from_stereographic;
 
 /// A regular `size x size` grid of cells over the stereographic projection of the cone,
 /// `s = (h.x, h.y) / (1 + h.z)`, slightly wider than the cone: the cells of [`Coverage`] and
-/// [`FastLocator`].
+/// [`FastLocator`](super::FastLocator).
 #[derive(Debug, Clone, Copy)]
 pub struct StereoGrid {
     /// Cells per side.
@@ -73,10 +73,10 @@ impl StereoGrid {
 
 /// The edge of the symmetry domains: a regular grid of cells over the stereographic projection
 /// of the cone, each marked covered when its four corners lie inside the sampled region.
-/// A reflected halfway vector counts only in a covered cell (both paths, [`Rig::covered`]):
-/// the domains stop about one cell (0.5 to 0.9 degrees) short of the region's edge, where
-/// the hull's long thin triangles interpolate worst, and a normal just beyond the rig's reach
-/// is not propped up by the last sliver of data.
+/// A reflected halfway vector counts only in a covered cell (both paths,
+/// [`Rig::covered`](super::Rig::covered)): the domains stop about one cell (0.5 to 0.9 degrees)
+/// short of the region's edge, where the hull's long thin triangles interpolate worst, and a
+/// normal just beyond the rig's reach is not propped up by the last sliver of data.
 #[derive(Debug, Clone)]
 pub struct Coverage {
     /// The cells.

@@ -7,9 +7,9 @@ use super::grid::StereoGrid;
 use super::locate::{LocateGrid, Triangle};
 
 /// The triangulation in single precision with a walk for point location: the fast path's
-/// lookups ([`crate::frames::objective::FastObjective`]). The same spherical triangles and barycentric
-/// weights as [`Rig::locate`], so the fast and reference paths read the same slice; only the
-/// precision and the search differ.
+/// lookups ([`crate::frames::objective::FastObjective`]). The same spherical triangles and
+/// barycentric weights as [`Rig::locate`](super::Rig::locate), so the fast and reference paths
+/// read the same slice; only the precision and the search differ.
 ///
 /// A query starts at the triangle stored for its cell of a regular grid over the stereographic
 /// projection of the cone, `s = (h.x, h.y) / (1 + h.z)`, and walks across the edge of its most
