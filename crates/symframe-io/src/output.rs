@@ -9,8 +9,8 @@ use ndarray::{ArrayD, ArrayViewD, IxDyn};
 use ndarray_npy::{ReadNpyExt, WriteNpyExt};
 
 use crate::atomic::write_atomic;
+use crate::codecs::{check_len, planes, write_exr_channels, write_png};
 use crate::error::{Error, Result};
-use crate::image::{check_len, planes, write_exr_channels, write_png};
 
 /// Writes `data` (row-major, C order) as a little-endian `float32` `.npy` array of `shape`,
 /// e.g. `[H, W, 3]` for normals or `[H, W]` for a confidence map.
@@ -309,7 +309,7 @@ pub fn write_png_rgb8(path: &Path, width: usize, height: usize, rgb: &[u8]) -> R
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::image::{read_image, DecodeOptions};
+    use crate::codecs::{read_image, DecodeOptions};
 
     #[test]
     fn npy_round_trip_and_shape_check() {

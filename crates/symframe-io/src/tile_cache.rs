@@ -59,11 +59,11 @@ use std::time::{Instant, UNIX_EPOCH};
 use memmap2::Mmap;
 use rayon::prelude::*;
 
+use crate::codecs::DecodeOptions;
 use crate::dataset::Dataset;
 use crate::error::Warning;
 use crate::error::{Error, Result};
 use crate::fingerprint::Fingerprint;
-use crate::image::DecodeOptions;
 use crate::stack::{check_dataset, check_size, decode_stack_image, Notes};
 
 /// Format version of the cache file (bumped whenever the layout changes).
@@ -1196,7 +1196,7 @@ fn repair(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::image::write_exr_rgb;
+    use crate::codecs::write_exr_rgb;
     use crate::stack::load_stack;
     use glam::DVec3;
 
@@ -1464,7 +1464,7 @@ mod tests {
         for (i, p) in ds.images.iter_mut().enumerate() {
             *p = d.path().join(format!("{i}.pfm"));
             let v: Vec<f32> = (0..w * h * 3).map(|k| (i * 100 + k) as f32).collect();
-            crate::image::write_pfm(p, w, h, 3, &v).unwrap();
+            crate::codecs::write_pfm(p, w, h, 3, &v).unwrap();
         }
         let dir = d.path().join("cache");
         let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
@@ -1477,7 +1477,7 @@ mod tests {
         };
         let mut rgb: Vec<f32> = (0..w * h * 3).map(|k| (200 + k) as f32).collect();
         rgb[7] += 1.0;
-        crate::image::write_pfm(img, w, h, 3, &rgb).unwrap();
+        crate::codecs::write_pfm(img, w, h, 3, &rgb).unwrap();
         File::options()
             .write(true)
             .open(img)
@@ -1500,7 +1500,7 @@ mod tests {
         same_as_stack(&cache, &ds);
         drop(cache);
         // Rewritten with the same bytes and time: still a hit.
-        crate::image::write_pfm(img, w, h, 3, &rgb).unwrap();
+        crate::codecs::write_pfm(img, w, h, 3, &rgb).unwrap();
         File::options()
             .write(true)
             .open(img)
