@@ -39,6 +39,7 @@ pub(super) struct LocateGrid {
     triangles: Vec<u32>,
 }
 
+#[derive(Debug, Clone, Copy)]
 struct DiscVertex {
     position: Point2<f64>,
     index: u32,
