@@ -45,7 +45,7 @@
 //! let patch = Scene::plane(1, 1, n, t);
 //! let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
 //! let samples: Vec<f32> = rig
-//!     .input_index
+//!     .input_index()
 //!     .iter()
 //!     .flat_map(|&i| patch.render(&brdf, lights[i]))
 //!     .collect();

@@ -108,7 +108,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Cell>>> {
             let scene = Scene::tilted_plane(1, 1, rows[r], 0.0, TANGENT_ANGLE);
             let rig = &rigs[c];
             let slice: Vec<f32> = rig
-                .lights_in_camera
+                .lights_in_camera()
                 .iter()
                 .flat_map(|&l| scene.render(mats[m].2.as_ref(), l))
                 .collect();

@@ -130,7 +130,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Cell>>> {
                 .flat_map(|&l| scene.render(brdf.as_ref(), l))
                 .collect();
             let slice: Vec<f32> = rig
-                .input_index
+                .input_index()
                 .iter()
                 .flat_map(|&i| all[i * 3..i * 3 + 3].to_vec())
                 .collect();

@@ -62,7 +62,7 @@ impl<'a> ExactObjective<'a> {
     /// The objective of one pixel's slice (rig order, `rig.n_used() * 3` values, NaN = invalid).
     pub fn new(rig: &'a Rig, samples: &'a [f32]) -> Self {
         let order = rig
-            .query_order
+            .query_order()
             .iter()
             .copied()
             .filter(|&j| samples[j as usize * 3].is_finite())
@@ -155,13 +155,13 @@ impl FastScratch {
         self.hy.clear();
         self.hz.clear();
         self.samples.clear();
-        for &j in &rig.query_order {
+        for &j in rig.query_order() {
             let j = j as usize;
             let s = &samples[j * 3..j * 3 + 3];
             if !s[0].is_finite() {
                 continue;
             }
-            let h = rig.halfway_in_camera[j];
+            let h = rig.halfway_in_camera()[j];
             self.hx.push(h.x as f32);
             self.hy.push(h.y as f32);
             self.hz.push(h.z as f32);
@@ -169,14 +169,14 @@ impl FastScratch {
         }
         self.focus.get_mut().built = false;
         FastObjective {
-            locator: &rig.fast,
-            coverage: &rig.coverage,
+            locator: rig.fast(),
+            coverage: rig.coverage(),
             lanes: &self.lanes,
             hx: &self.hx,
             hy: &self.hy,
             hz: &self.hz,
             samples: &self.samples,
-            cos_max: rig.cos_theta_d_max as f32,
+            cos_max: rig.cos_theta_d_max() as f32,
             focus: &self.focus,
         }
     }

@@ -144,7 +144,7 @@ pub fn symmetry_term_over<L: SliceLookup>(
     let mut diffuse_dot = [0.0f64; 3];
     let mut diffuse_sq = 0.0f64;
     for j in lights {
-        let (l, h) = (rig.lights_in_camera[j], rig.halfway_in_camera[j]);
+        let (l, h) = (rig.lights_in_camera()[j], rig.halfway_in_camera()[j]);
         let s = &slice[j * 3..j * 3 + 3];
         if !s[0].is_finite() {
             continue;
@@ -218,9 +218,9 @@ pub(crate) mod tests {
     /// radiance `I = f (n.l)` with `f` a function of (h.t, h.b, h.n) even in h.t and h.b.
     pub(crate) fn render_slice(rig: &Rig, n: DVec3, t: DVec3) -> Vec<f32> {
         let b = n.cross(t);
-        rig.lights_in_camera
+        rig.lights_in_camera()
             .iter()
-            .zip(&rig.halfway_in_camera)
+            .zip(rig.halfway_in_camera())
             .flat_map(|(&l, &h)| {
                 let nl = n.dot(l).max(0.0);
                 let (ht, hb, hn) = (h.dot(t), h.dot(b), h.dot(n).max(1e-6));

@@ -315,7 +315,7 @@ fn compensated_refinement_keeps_a_normal_beyond_reach_discarded() {
     let scene = Scene::tilted_plane(1, 1, 80.0, 0.0, 25.0);
     let ward = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
     let slice: Vec<f32> = rig
-        .lights_in_camera
+        .lights_in_camera()
         .iter()
         .flat_map(|&l| scene.render(&ward, l))
         .collect();

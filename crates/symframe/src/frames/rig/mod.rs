@@ -32,32 +32,32 @@ impl Default for RigOptions {
 }
 
 /// The light rig as the estimator uses it: the lights inside the cone and everything derived
-/// from their halfway vectors.
+/// from their halfway vectors, built once by [`Rig::new`] and read through its accessors.
 #[derive(Debug, Clone)]
 pub struct Rig {
     /// Used lights (inside the cone), camera frame, unit length.
-    pub lights_in_camera: Vec<DVec3>,
+    lights_in_camera: Vec<DVec3>,
     /// Halfway vector of each used light, camera frame.
-    pub halfway_in_camera: Vec<DVec3>,
+    halfway_in_camera: Vec<DVec3>,
     /// For each used light, its index in the input light list (and so in the stack).
-    pub input_index: Vec<usize>,
+    input_index: Vec<usize>,
     /// Number of lights given.
-    pub n_input: usize,
+    n_input: usize,
     /// The cone half-angle in halfway space, degrees.
-    pub theta_d_max_deg: f64,
+    theta_d_max_deg: f64,
     /// `cos(theta_d_max)`: a halfway vector is inside the cone when `h.z > cos_theta_d_max`.
-    pub cos_theta_d_max: f64,
+    cos_theta_d_max: f64,
     triangles: Vec<Triangle>,
     grid: LocateGrid,
     /// Point location in single precision for the fast path.
-    pub fast: FastLocator,
+    fast: FastLocator,
     /// Which halfway vectors lie well inside the sampled region: the symmetry domains' edge.
-    pub coverage: Coverage,
+    coverage: Coverage,
     /// The order the fast objective visits the lights in (rig indices): the Morton order
     /// permuted by bit-reversed rank (a van der Corput sequence over the Morton curve), so that
     /// every prefix of it is a subset spread evenly over the cone, and a coarse evaluation over
     /// any number of lights is a prefix of the full one.
-    pub query_order: Vec<u32>,
+    query_order: Vec<u32>,
 }
 
 /// Indices `0..n` ordered by their bit-reversed value: every prefix spreads evenly over
@@ -142,6 +142,62 @@ impl Rig {
             coverage,
             query_order,
         })
+    }
+
+    /// Used lights (inside the cone), camera frame, unit length, in rig order.
+    #[inline]
+    pub fn lights_in_camera(&self) -> &[DVec3] {
+        &self.lights_in_camera
+    }
+
+    /// Halfway vector of each used light, camera frame, in rig order.
+    #[inline]
+    pub fn halfway_in_camera(&self) -> &[DVec3] {
+        &self.halfway_in_camera
+    }
+
+    /// For each used light, its index in the input light list (and so in the stack).
+    #[inline]
+    pub fn input_index(&self) -> &[usize] {
+        &self.input_index
+    }
+
+    /// Number of lights given.
+    #[inline]
+    pub fn n_input(&self) -> usize {
+        self.n_input
+    }
+
+    /// The cone half-angle in halfway space, degrees.
+    #[inline]
+    pub fn theta_d_max_deg(&self) -> f64 {
+        self.theta_d_max_deg
+    }
+
+    /// `cos(theta_d_max)`: a halfway vector is inside the cone when `h.z > cos_theta_d_max`.
+    #[inline]
+    pub fn cos_theta_d_max(&self) -> f64 {
+        self.cos_theta_d_max
+    }
+
+    /// Point location in single precision for the fast path.
+    #[inline]
+    pub fn fast(&self) -> &FastLocator {
+        &self.fast
+    }
+
+    /// Which halfway vectors lie well inside the sampled region: the symmetry domains' edge.
+    #[inline]
+    pub fn coverage(&self) -> &Coverage {
+        &self.coverage
+    }
+
+    /// The order the fast objective visits the lights in (rig indices): the Morton order
+    /// permuted by bit-reversed rank, so that every prefix of it is a subset spread evenly over
+    /// the cone, and a coarse evaluation over any number of lights is a prefix of the full one.
+    #[inline]
+    pub fn query_order(&self) -> &[u32] {
+        &self.query_order
     }
 
     /// Number of lights used (inside the cone).
