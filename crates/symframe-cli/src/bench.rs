@@ -17,10 +17,10 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
-use symframe::baseline::{Baseline, BaselineParams};
+use symframe::baselines::{Baseline, BaselineParams};
 use symframe::brdf::ward::Ward;
+use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{Scene, TangentField};
-use symframe::rig::uniform_cone_lights;
 use symframe_job::{EstimateConfig, EstimateOutcome, MethodConfig};
 
 use crate::cli::BenchArgs;

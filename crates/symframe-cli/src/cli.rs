@@ -3,10 +3,10 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
-use symframe::estimate::Fallback;
-use symframe::fit::FitParams;
-use symframe::relight::Edits;
-use symframe::symmetry::CosineMode;
+use symframe::appearance::fit::FitParams;
+use symframe::appearance::relight::Edits;
+use symframe::frames::estimator::Fallback;
+use symframe::frames::symmetry::CosineMode;
 use symframe::{EstimatorParams, RigOptions};
 use symframe_io::{CacheOptions, DecodeOptions};
 use symframe_job::Shard;

@@ -11,8 +11,8 @@ use rayon::prelude::*;
 use symframe::brdf::ward::Ward;
 use symframe::brdf::Brdf;
 use symframe::eval::evaluate;
+use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{Scene, TangentField};
-use symframe::rig::uniform_cone_lights;
 use symframe_io::ImageFormat;
 
 use glam::DVec3;

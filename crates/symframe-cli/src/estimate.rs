@@ -2,7 +2,7 @@
 //! one library call ([`symframe_job::estimate`], [`symframe_job::merge`]), a summary line.
 
 use anyhow::{bail, Result};
-use symframe::baseline::{Baseline, BaselineParams};
+use symframe::baselines::{Baseline, BaselineParams};
 use symframe::{EstimatorParams, Interpolation, RigOptions};
 use symframe_io::{CacheOptions, DecodeOptions};
 use symframe_job::{CacheConfig, EstimateConfig, EstimateOutcome, MethodConfig};

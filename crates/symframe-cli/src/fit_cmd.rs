@@ -3,7 +3,7 @@
 
 use anyhow::{bail, Result};
 use glam::DVec3;
-use symframe::fit::{holdout_lights, FitParams};
+use symframe::appearance::fit::{holdout_lights, FitParams};
 use symframe_io::{CacheOptions, DecodeOptions};
 use symframe_job::{CacheConfig, FitConfig, FitOutcome, RelightConfig, RelightOutcome};
 

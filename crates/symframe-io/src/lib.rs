@@ -26,10 +26,10 @@
 //! ```
 
 mod atomic;
+pub mod codecs;
 pub mod dataset;
 pub mod error;
 pub mod fingerprint;
-pub mod image;
 mod lights;
 pub mod limits;
 pub mod output;
@@ -39,12 +39,12 @@ pub mod tile_cache;
 pub mod tile_results;
 
 pub use atomic::write_bytes;
-pub use dataset::{open_dataset, Dataset};
-pub use error::{Error, Result, Warning};
-pub use image::{
+pub use codecs::{
     decode_image, linear_to_srgb, read_image, read_pfm, srgb_to_linear, write_exr_rgb, write_pfm,
     write_png16_rgb, write_png8_rgb, DecodeOptions, Image, SampleKind,
 };
+pub use dataset::{open_dataset, Dataset};
+pub use error::{Error, Result, Warning};
 pub use lights::{lp_path_convention, read_light_directions, LpPaths};
 pub use output::{
     gray_map_rgb8, normal_map_rgb8, normal_map_values, read_npy_f32, source_map_rgb8,

@@ -9,8 +9,8 @@ use ndarray::{ArrayD, ArrayViewD, IxDyn};
 use ndarray_npy::{ReadNpyExt, WriteNpyExt};
 
 use crate::atomic::write_atomic;
+use crate::codecs::{check_len, planes, write_exr_channels, write_png};
 use crate::error::{Error, Result};
-use crate::image::{check_len, planes, write_exr_channels, write_png};
 
 /// Writes `data` (row-major, C order) as a little-endian `float32` `.npy` array of `shape`,
 /// e.g. `[H, W, 3]` for normals or `[H, W]` for a confidence map.
@@ -196,7 +196,7 @@ pub fn write_normal_png16(
     normals: &[f32],
     convention: NormalPng,
 ) -> Result<()> {
-    crate::image::write_png16_rgb(path, width, height, &normal_map_values(normals, convention))
+    crate::codecs::write_png16_rgb(path, width, height, &normal_map_values(normals, convention))
 }
 
 /// HSV with saturation and value 1 to RGB bytes; `hue` in turns (`[0, 1)`, wrapped).
@@ -348,7 +348,7 @@ pub fn write_png_rgb8(path: &Path, width: usize, height: usize, rgb: &[u8]) -> R
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::image::{read_image, DecodeOptions};
+    use crate::codecs::{read_image, DecodeOptions};
 
     #[test]
     fn npy_round_trip_and_shape_check() {
@@ -435,7 +435,7 @@ mod tests {
         // 16-bit, both conventions: y flips, x and z do not.
         let d = tempfile::tempdir().unwrap();
         let p = d.path().join("n.png");
-        let opts = crate::image::DecodeOptions {
+        let opts = crate::codecs::DecodeOptions {
             saturation: 2.0,
             ..Default::default()
         };

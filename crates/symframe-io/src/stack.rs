@@ -6,9 +6,9 @@ use std::sync::Mutex;
 use rayon::prelude::*;
 use symframe::Stack;
 
+use crate::codecs::{read_image, DecodeOptions, SampleKind};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result, Warning};
-use crate::image::{read_image, DecodeOptions, SampleKind};
 
 /// Decodes every image of `ds` (in parallel) into a pixel-major stack, divided by the lights'
 /// intensities when the dataset has them; saturated or non-finite pixels are `NaN`.
@@ -275,7 +275,7 @@ pub fn read_mask(path: &Path, width: usize, height: usize) -> Result<Vec<bool>> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::image::{write_exr_rgb, write_png};
+    use crate::codecs::{write_exr_rgb, write_png};
     use glam::DVec3;
     use std::path::PathBuf;
     use std::sync::atomic::{AtomicUsize, Ordering};
@@ -325,7 +325,7 @@ mod tests {
         let a = d.path().join("a.exr");
         write_exr_rgb(&a, 1, 2, &[1.0, 2.0, 3.0, 4.0, 5.0, f32::NAN]).unwrap();
         let b = d.path().join("b.pfm");
-        crate::image::write_pfm(&b, 1, 2, 1, &[8.0, 16.0]).unwrap();
+        crate::codecs::write_pfm(&b, 1, 2, 1, &[8.0, 16.0]).unwrap();
         let mut dset = ds(vec![a, b]);
         dset.intensities = Some(vec![[1.0, 2.0, 4.0], [2.0, 4.0, 8.0]]);
         let s = load_stack(&dset, &DecodeOptions::default(), &|| {}).unwrap();
@@ -397,7 +397,7 @@ mod tests {
     /// Mixed inputs passed silently: 8-bit among 16-bit, grey among RGB, negative samples.
     #[test]
     fn mixed_inputs_are_warned_about() {
-        use crate::image::write_png16_rgb;
+        use crate::codecs::write_png16_rgb;
         let d = tempfile::tempdir().unwrap();
         let p = |n: &str| d.path().join(n);
         for n in ["a.png", "b.png", "d.png"] {
@@ -449,8 +449,8 @@ mod tests {
         )
         .unwrap();
         assert!(w.is_empty(), "{w:?}");
-        crate::image::write_pfm(&p("e.pfm"), 2, 1, 1, &[0.5, 0.5]).unwrap();
-        crate::image::write_pfm(&p("f.pfm"), 2, 1, 1, &[-0.01, 0.5]).unwrap();
+        crate::codecs::write_pfm(&p("e.pfm"), 2, 1, 1, &[0.5, 0.5]).unwrap();
+        crate::codecs::write_pfm(&p("f.pfm"), 2, 1, 1, &[-0.01, 0.5]).unwrap();
         let (_, w) = load_stack_with_warnings(
             &ds(["e.pfm", "f.pfm"].map(p).to_vec()),
             &DecodeOptions::default(),

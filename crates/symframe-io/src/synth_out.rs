@@ -8,8 +8,8 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::atomic::write_bytes;
+use crate::codecs::{write_exr_rgb, write_png, write_png16_rgb, write_png8_rgb};
 use crate::error::{Error, Result};
-use crate::image::{write_exr_rgb, write_png, write_png16_rgb, write_png8_rgb};
 use crate::output::write_npy_f32;
 
 /// The file format of a synthetic dataset's images.
@@ -138,7 +138,7 @@ pub fn check_synth_target(dir: &Path, force: bool) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::image::DecodeOptions;
+    use crate::codecs::DecodeOptions;
     use crate::{load_stack, open_dataset, read_mask, read_npy_f32};
 
     fn data(w: usize, h: usize, n: usize) -> (Vec<DVec3>, Vec<Vec<f32>>) {

@@ -9,8 +9,8 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use glam::DVec3;
 use serde::Serialize;
-use symframe::baseline::{Baseline, BaselineMethod, BaselineParams};
-use symframe::estimate::{check_inputs, PixelCounts};
+use symframe::baselines::{Baseline, BaselineMethod, BaselineParams};
+use symframe::frames::estimator::{check_inputs, PixelCounts};
 use symframe::{EstimateMaps, Estimator, EstimatorParams, PixelRecord, PixelSource};
 use symframe::{Rig, RigOptions};
 use symframe_io::fingerprint::Fingerprint;
@@ -369,7 +369,7 @@ impl Plan {
 
     fn n_input(&self) -> usize {
         match self {
-            Plan::Symmetry(rig, _) => rig.n_input,
+            Plan::Symmetry(rig, _) => rig.n_input(),
             Plan::Baseline(b) => b.unit_lights().len(),
         }
     }
@@ -444,16 +444,16 @@ fn job_fingerprint(cache: &TileCache, plan: &Plan, mask: Option<&[bool]>) -> Res
         Plan::Symmetry(rig, params) => {
             let min_domain = Estimator::new(rig, *params).min_domain();
             f.str("symmetry")
-                .f64(rig.theta_d_max_deg)
+                .f64(rig.theta_d_max_deg())
                 // How the fast path reads the slice (results from an older lookup do not mix).
                 .str("spherical-walk")
-                .u64(rig.n_input as u64)
+                .u64(rig.n_input() as u64)
                 .str(&serde_json::to_string(params)?)
                 .u64(min_domain as u64);
-            for &i in &rig.input_index {
+            for &i in rig.input_index() {
                 f.u64(i as u64);
             }
-            fingerprint_lights(&mut f, &rig.lights_in_camera);
+            fingerprint_lights(&mut f, rig.lights_in_camera());
         }
         Plan::Baseline(b) => {
             f.str(b.method().name())
@@ -640,14 +640,14 @@ fn run(
     let (parameters, lights) = match &plan {
         Plan::Symmetry(rig, params) => (
             MethodParameters::Symmetry(SymmetryParameters {
-                theta_d_max_deg: rig.theta_d_max_deg,
+                theta_d_max_deg: rig.theta_d_max_deg(),
                 estimator: *params,
                 min_domain_used: Estimator::new(rig, *params).min_domain(),
                 linear_8bit: decode.linear_8bit,
                 saturation: decode.saturation,
             }),
             LightCounts {
-                input: rig.n_input,
+                input: rig.n_input(),
                 used: rig.n_used(),
                 dropped: rig.n_dropped(),
             },

@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
-use symframe::fit::{
+use symframe::appearance::fit::{
     holdout_lights, FitMaps, FitMethod, FitParams, FitSummary, HoldoutError, PixelFit, PixelOutcome,
 };
 use symframe_io::fingerprint::Fingerprint;
@@ -199,8 +199,14 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
     let normals = read_frame_map(&config.frames.join("normals.npy"), w, h)?;
     let tangents = read_frame_map(&config.frames.join("tangents.npy"), w, h)?;
     let (mask_path, mask) = read_mask(&config.mask, &ds, &grid)?;
-    symframe::estimate::check_inputs(w, h, cache.n_lights(), ds.lights.len(), mask.as_deref())
-        .with_context(|| ds.source.display().to_string())?;
+    symframe::frames::estimator::check_inputs(
+        w,
+        h,
+        cache.n_lights(),
+        ds.lights.len(),
+        mask.as_deref(),
+    )
+    .with_context(|| ds.source.display().to_string())?;
     let method = FitMethod::new(&ds.lights, &params, &normals, &tangents, w * h)
         .with_context(|| ds.source.display().to_string())?;
 

@@ -17,7 +17,7 @@
 //! ```
 //! use symframe::brdf::ward::Ward;
 //! use symframe::render::{Scene, TangentField};
-//! use symframe::rig::uniform_cone_lights;
+//! use symframe::frames::rig::uniform_cone_lights;
 //! use symframe_job::{estimate, Control, EstimateConfig, EstimateOutcome};
 //!
 //! # fn main() -> anyhow::Result<()> {

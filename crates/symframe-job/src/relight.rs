@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use serde::Serialize;
-use symframe::relight::{tone_map, Edits, Relighter};
+use symframe::appearance::relight::{tone_map, Edits, Relighter};
 use symframe::WardMaps;
 
 use crate::outdir::{OutputDir, OutputSet};

@@ -4,10 +4,10 @@
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
+use symframe::appearance::fit::{fit_stack, holdout_lights, FitParams};
 use symframe::brdf::ward::Ward;
-use symframe::fit::{fit_stack, holdout_lights, FitParams};
+use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{Scene, TangentField};
-use symframe::rig::uniform_cone_lights;
 use symframe_io::{DecodeOptions, ImageFormat};
 use symframe_job::{
     estimate, fit, Control, EstimateConfig, EstimateOutcome, FitConfig, Interrupted, Stage,

@@ -9,9 +9,9 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use glam::DVec3;
 use symframe::brdf::ward::Ward;
+use symframe::frames::rig::uniform_cone_lights;
+use symframe::frames::slice::gather_slice;
 use symframe::render::Scene;
-use symframe::rig::uniform_cone_lights;
-use symframe::slice::gather_slice;
 use symframe::{Estimator, EstimatorParams, Interpolation, PixelScratch, Rig, RigOptions};
 
 fn bench(c: &mut Criterion) {

@@ -4,13 +4,24 @@
 //! Frames: the camera frame has x = image right, y = image up, z = toward the camera; the view
 //! vector is `(0, 0, 1)` for every pixel (orthographic). Each pixel's local frame is (n, t, b).
 //!
-//! Where things live: [`rig`] (lights, halfway vectors, triangulation, point location),
-//! [`slice`](mod@slice) (per-pixel interpolation), [`symmetry`] (the objective), [`objective`] (its reference and fast
-//! implementations), [`optim`] (Nelder-Mead),
-//! [`estimate`] (the per-pixel estimator and the whole-stack pipeline), [`brdf`] (models),
-//! [`render`] (the synthetic renderer), [`stack`] (the measurement stack), [`baseline`] (the
-//! photometric-stereo and max-reflectance baselines the paper compares against), [`fit`]
-//! (per-pixel Ward fits in the estimated frames) and [`relight`] (rendering and editing them).
+//! Where things live:
+//!
+//! - [`frames`]: the method, a pixel's frame from its samples: [`frames::rig`] (lights,
+//!   halfway vectors, triangulation, point location), [`frames::slice`] (per-pixel
+//!   interpolation), [`frames::symmetry`] (the symmetry distances), [`frames::objective`] (their
+//!   reference and fast implementations), [`frames::highlight`] (the highlight's moments),
+//!   [`frames::optim`] (Nelder-Mead) and [`frames::estimator`] (the per-pixel estimator and the
+//!   whole-stack pipeline).
+//! - [`geometry`]: halfway vectors for the fixed view, the stereographic projection, a
+//!   tangent-plane basis.
+//! - [`baselines`]: the photometric-stereo, max-reflectance and highlight-centroid baselines the
+//!   paper compares against.
+//! - [`appearance`]: per-pixel Ward fits in the estimated frames ([`appearance::fit`]) and
+//!   rendering and editing them ([`appearance::relight`]).
+//! - [`method`]: the [`PixelMethod`] interface and the in-memory driver [`run_stack`];
+//!   [`stack`] (the measurement stack); [`eval`] (error figures against ground truth);
+//!   [`error`].
+//! - [`brdf`] (reflectance models) and [`render`] (the synthetic renderer).
 //!
 //! Every per-pixel method (the estimator, each baseline, the Ward fitter) implements
 //! [`PixelMethod`]; [`run_stack`] runs one over an in-memory [`Stack`], and the `symframe-job`
@@ -22,8 +33,8 @@
 //! ```
 //! use symframe::brdf::ward::Ward;
 //! use symframe::render::{plane_frame, Scene};
-//! use symframe::rig::uniform_cone_lights;
-//! use symframe::symmetry::CosineMode;
+//! use symframe::frames::rig::uniform_cone_lights;
+//! use symframe::frames::symmetry::CosineMode;
 //! use symframe::{Estimator, EstimatorParams, PixelStatus, Rig, RigOptions};
 //!
 //! // 600 lights over the default 65-degree cone; a brushed-metal patch whose normal is 30
@@ -34,7 +45,7 @@
 //! let patch = Scene::plane(1, 1, n, t);
 //! let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
 //! let samples: Vec<f32> = rig
-//!     .input_index
+//!     .input_index()
 //!     .iter()
 //!     .flat_map(|&i| patch.render(&brdf, lights[i]))
 //!     .collect();
@@ -53,33 +64,38 @@
 //! # Ok::<(), symframe::Error>(())
 //! ```
 
-pub mod baseline;
+pub mod appearance;
+pub mod baselines;
 pub mod brdf;
 pub mod calibrate;
 pub mod error;
-pub mod estimate;
 pub mod eval;
-pub mod fit;
-pub mod highlight;
+pub mod frames;
+pub mod geometry;
 pub mod integrate;
 pub mod method;
-pub mod objective;
-pub mod optim;
-pub mod relight;
 pub mod render;
-pub mod rig;
-pub mod slice;
 pub mod stack;
-pub mod symmetry;
 
-pub use baseline::{estimate_stack_baseline, Baseline, BaselineMethod};
+// The module paths of the flat layout before `frames/`, `baselines/` and `appearance/`, kept so
+// that code written against them still compiles. New code uses the paths above.
+#[doc(hidden)]
+pub use appearance::{fit, relight};
+#[doc(hidden)]
+pub use baselines as baseline;
+#[doc(hidden)]
+pub use frames::estimator as estimate;
+#[doc(hidden)]
+pub use frames::{highlight, objective, optim, rig, slice, symmetry};
+
+pub use appearance::fit::{fit_stack, FitMaps, FitMethod, FitParams, WardMaps};
+pub use appearance::relight::{Edits, Relighter};
+pub use baselines::{estimate_stack_baseline, Baseline, BaselineMethod};
 pub use error::{Error, Result};
-pub use estimate::{
+pub use frames::estimator::{
     estimate_stack, EstimateMaps, Estimator, EstimatorParams, Interpolation, PixelRecord,
     PixelScratch, PixelSource, PixelStatus,
 };
-pub use fit::{fit_stack, FitMaps, FitMethod, FitParams, WardMaps};
+pub use frames::rig::{Rig, RigOptions};
 pub use method::{run_stack, PixelMethod};
-pub use relight::{Edits, Relighter};
-pub use rig::{Rig, RigOptions};
 pub use stack::Stack;

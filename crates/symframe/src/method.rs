@@ -1,8 +1,8 @@
 //! One per-pixel interface for everything that turns a pixel's samples into a result: the
-//! symmetry [`Estimator`](crate::Estimator), every [baseline](crate::baseline::BaselineMethod)
-//! and the [Ward fitter](crate::fit::FitMethod). The whole-stack drivers here and the tiled job
-//! of `symframe-job` run any of them the same way, so given the same samples they give the same
-//! results.
+//! symmetry [`Estimator`](crate::Estimator), every [baseline](crate::baselines::BaselineMethod)
+//! and the [Ward fitter](crate::appearance::fit::FitMethod). The whole-stack drivers here and
+//! the tiled job of `symframe-job` run any of them the same way, so given the same samples they
+//! give the same results.
 
 use rayon::prelude::*;
 
@@ -112,7 +112,7 @@ pub fn gather(lights: &[usize], all: &[f32], out: &mut [f32]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::estimate::{PixelRecord, PixelSource, PixelStatus};
+    use crate::frames::estimator::{PixelRecord, PixelSource, PixelStatus};
 
     /// Reports the pixel index and the samples it was given.
     struct Echo(Option<Vec<usize>>);
@@ -193,7 +193,7 @@ mod tests {
         // A masked record has no source; a baseline's record carries its method's.
         assert_eq!(PixelRecord::MASKED.source, PixelSource::None);
         assert_eq!(PixelRecord::MASKED.status, PixelStatus::Masked);
-        use crate::baseline::Baseline;
+        use crate::baselines::Baseline;
         assert_eq!(Baseline::Woodham.source(), PixelSource::Lambertian);
         assert_eq!(Baseline::WoodhamRobust.source(), PixelSource::Lambertian);
         assert_eq!(Baseline::MaxReflectance.source(), PixelSource::Highlight);

@@ -5,8 +5,8 @@ use anyhow::Result;
 use glam::DVec3;
 use symframe::brdf::{Brdf, Ward};
 use symframe::eval::normal_error_map;
+use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{BumpParams, Scene, TangentField};
-use symframe::rig::uniform_cone_lights;
 use symframe::{Rig, RigOptions};
 
 use super::plot::{self, md_table};

@@ -4,10 +4,10 @@
 use anyhow::Result;
 use rayon::prelude::*;
 use symframe::brdf::{AshikhminShirley, Brdf, Ward};
-use symframe::estimate::{Estimator, EstimatorParams};
+use symframe::frames::estimator::{Estimator, EstimatorParams};
+use symframe::frames::rig::uniform_cone_lights;
+use symframe::frames::symmetry::CosineMode;
 use symframe::render::{plane_frame, Scene};
-use symframe::rig::uniform_cone_lights;
-use symframe::symmetry::CosineMode;
 use symframe::{Rig, RigOptions};
 
 use super::plot::{self, fmt_opt, md_table};
@@ -108,7 +108,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Cell>>> {
             let scene = Scene::tilted_plane(1, 1, rows[r], 0.0, TANGENT_ANGLE);
             let rig = &rigs[c];
             let slice: Vec<f32> = rig
-                .lights_in_camera
+                .lights_in_camera()
                 .iter()
                 .flat_map(|&l| scene.render(mats[m].2.as_ref(), l))
                 .collect();

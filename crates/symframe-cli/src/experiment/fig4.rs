@@ -3,12 +3,12 @@
 
 use anyhow::Result;
 use rayon::prelude::*;
-use symframe::baseline::{baseline_pixel, Baseline, BaselineParams};
+use symframe::baselines::{baseline_pixel, Baseline, BaselineParams};
 use symframe::brdf::{Brdf, CookTorrance, TorranceSparrow, Ward};
-use symframe::estimate::{Estimator, EstimatorParams};
+use symframe::frames::estimator::{Estimator, EstimatorParams};
+use symframe::frames::rig::uniform_cone_lights;
+use symframe::frames::symmetry::CosineMode;
 use symframe::render::{plane_frame, Scene};
-use symframe::rig::uniform_cone_lights;
-use symframe::symmetry::CosineMode;
 use symframe::{Rig, RigOptions};
 
 use super::plot::{self, fmt_opt, md_table};
@@ -130,7 +130,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Cell>>> {
                 .flat_map(|&l| scene.render(brdf.as_ref(), l))
                 .collect();
             let slice: Vec<f32> = rig
-                .input_index
+                .input_index()
                 .iter()
                 .flat_map(|&i| all[i * 3..i * 3 + 3].to_vec())
                 .collect();

@@ -6,11 +6,11 @@ use anyhow::Result;
 use glam::DVec3;
 use rayon::prelude::*;
 use serde::Serialize;
-use symframe::baseline::{estimate_stack_baseline, Baseline};
+use symframe::baselines::{estimate_stack_baseline, Baseline};
 use symframe::brdf::{AshikhminShirley, BlinnPhong, Brdf, CookTorrance, Ggx, Lambertian, Ward};
 use symframe::eval::{evaluate, normal_error_map, Evaluation};
+use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{rigs, BumpParams, Scene, TangentField};
-use symframe::rig::uniform_cone_lights;
 use symframe::{estimate_stack, EstimateMaps, EstimatorParams, Rig, RigOptions};
 
 use super::plot::{self, md_table};

@@ -2,8 +2,8 @@
 
 use anyhow::Result;
 use symframe::brdf::{Brdf, Ward};
+use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{Degradation, Noise, Scene, TangentField};
-use symframe::rig::uniform_cone_lights;
 use symframe::{Rig, RigOptions};
 
 use super::plot::{self, md_table};

@@ -10,11 +10,11 @@ use super::{Ctx, Section};
 
 use anyhow::Result;
 use glam::DVec3;
+use symframe::appearance::fit::{fit_stack, holdout_lights, FitParams};
+use symframe::appearance::relight::{image_psnr, tone_map, Edits, Relighter};
 use symframe::brdf::spec::parse_model;
-use symframe::fit::{fit_stack, holdout_lights, FitParams};
-use symframe::relight::{image_psnr, tone_map, Edits, Relighter};
+use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{Scene, TangentField};
-use symframe::rig::uniform_cone_lights;
 use symframe::{estimate_stack, EstimatorParams, Rig, RigOptions, Stack};
 
 /// Models compared: the fit's own family, then three it can only approximate.

@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use symframe::brdf::Brdf;
+use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{Scene, TangentField};
-use symframe::rig::uniform_cone_lights;
 use symframe_io::{write_lp_dataset, ImageFormat};
 
 /// Runs the `symframe` binary with `args`.

@@ -10,10 +10,10 @@ use crate::common::{
 };
 
 use glam::DVec3;
+use symframe::appearance::relight::image_psnr;
 use symframe::brdf::ward::Ward;
-use symframe::relight::image_psnr;
+use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::Scene;
-use symframe::rig::uniform_cone_lights;
 use symframe_io::{read_npy_f32, write_npy_f32, DecodeOptions, ImageFormat};
 
 fn material() -> Ward {

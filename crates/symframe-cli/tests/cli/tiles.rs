@@ -8,9 +8,9 @@ use std::process::Output;
 
 use crate::common::{sphere_dataset, stderr, symframe, Truth};
 
-use symframe::baseline::{estimate_stack_baseline, Baseline};
+use symframe::baselines::{estimate_stack_baseline, Baseline};
 use symframe::brdf::ward::Ward;
-use symframe::symmetry::CosineMode;
+use symframe::frames::symmetry::CosineMode;
 use symframe::{estimate_stack, EstimatorParams, Rig, RigOptions};
 use symframe_io::{read_npy_f32, DecodeOptions, ImageFormat};
 

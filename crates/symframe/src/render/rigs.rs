@@ -3,7 +3,7 @@
 
 use glam::DVec3;
 
-pub use crate::rig::uniform_cone_lights;
+pub use crate::frames::rig::uniform_cone_lights;
 
 /// Number of columns of the DiLiGenT-like grid ([`diligent_lights`]).
 pub const DILIGENT_COLS: usize = 12;

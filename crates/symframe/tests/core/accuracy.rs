@@ -7,11 +7,11 @@ use glam::DVec3;
 use symframe::brdf::lambertian::Lambertian;
 use symframe::brdf::ward::Ward;
 use symframe::brdf::Brdf;
-use symframe::estimate::Fallback;
 use symframe::eval::{evaluate, Evaluation};
+use symframe::frames::estimator::Fallback;
+use symframe::frames::rig::uniform_cone_lights;
+use symframe::frames::symmetry::CosineMode;
 use symframe::render::{BumpParams, Scene, TangentField};
-use symframe::rig::uniform_cone_lights;
-use symframe::symmetry::CosineMode;
 use symframe::{estimate_stack, EstimatorParams, Rig, RigOptions};
 
 fn run(scene: &Scene, brdf: &dyn Brdf, n_lights: usize) -> Evaluation {
@@ -315,7 +315,7 @@ fn compensated_refinement_keeps_a_normal_beyond_reach_discarded() {
     let scene = Scene::tilted_plane(1, 1, 80.0, 0.0, 25.0);
     let ward = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
     let slice: Vec<f32> = rig
-        .lights_in_camera
+        .lights_in_camera()
         .iter()
         .flat_map(|&l| scene.render(&ward, l))
         .collect();

@@ -4,13 +4,13 @@
 //! off at the other (the paper's Figure 4).
 
 use glam::DVec3;
-use symframe::baseline::{estimate_stack_baseline_with, Baseline, BaselineParams};
+use symframe::baselines::{estimate_stack_baseline_with, Baseline, BaselineParams};
 use symframe::brdf::lambertian::Lambertian;
 use symframe::brdf::spec::parse_model;
 use symframe::brdf::Brdf;
 use symframe::eval::{evaluate, Evaluation};
+use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{Scene, TangentField};
-use symframe::rig::uniform_cone_lights;
 use symframe::{estimate_stack_baseline, PixelStatus};
 
 /// Lights spread uniformly over the paper's cone: up to 130 degrees from the view.

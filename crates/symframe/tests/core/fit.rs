@@ -3,12 +3,12 @@
 //! data from other reflectance models (the fit's model error).
 
 use glam::DVec3;
+use symframe::appearance::fit::{fit_stack, holdout_lights, FitMaps, FitParams};
+use symframe::appearance::relight::{image_psnr, Edits, Relighter};
 use symframe::brdf::ward::Ward;
 use symframe::brdf::Brdf;
-use symframe::fit::{fit_stack, holdout_lights, FitMaps, FitParams};
-use symframe::relight::{image_psnr, Edits, Relighter};
+use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{Scene, TangentField};
-use symframe::rig::uniform_cone_lights;
 use symframe::{estimate_stack, EstimatorParams, Rig, RigOptions};
 
 /// Pixels inside the sphere whose normal is within 60 degrees of the view.

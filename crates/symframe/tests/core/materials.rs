@@ -5,12 +5,12 @@
 //! estimator measures on these scenes (figures in the comments, `-- --nocapture` prints them).
 
 use glam::DVec3;
-use symframe::baseline::{estimate_stack_baseline, Baseline};
+use symframe::baselines::{estimate_stack_baseline, Baseline};
 use symframe::brdf::{Brdf, Ggx, Lambertian};
-use symframe::estimate::{Fallback, PixelSource};
+use symframe::frames::estimator::{Fallback, PixelSource};
+use symframe::frames::rig::uniform_cone_lights;
+use symframe::frames::slice::gather_pixel;
 use symframe::render::{rigs, Scene, TangentField};
-use symframe::rig::uniform_cone_lights;
-use symframe::slice::gather_pixel;
 use symframe::{estimate_stack, EstimateMaps, Estimator, EstimatorParams, Rig, RigOptions};
 
 /// Normal error figures over the pixels within 60 degrees of the view.

@@ -7,7 +7,7 @@
 
 use glam::DVec3;
 
-use crate::symmetry::tangent_basis;
+use crate::geometry::tangent_basis;
 
 /// Samples at or above this fraction of the pixel's brightest grey value are "the highlight";
 /// each weighs by how far it rises above that level, so the mean follows the lobe's peak and
@@ -121,13 +121,13 @@ pub fn highlight_moments_by(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rig::uniform_cone_lights;
-    use crate::rig::{Rig, RigOptions};
+    use crate::frames::rig::uniform_cone_lights;
+    use crate::frames::rig::{Rig, RigOptions};
 
     /// An anisotropic Gaussian lobe about `n` with widths `at` along `t`, `ab` along `n x t`.
     fn lobe(rig: &Rig, n: DVec3, t: DVec3, at: f64, ab: f64) -> Vec<f32> {
         let b = n.cross(t);
-        rig.halfway_in_camera
+        rig.halfway_in_camera()
             .iter()
             .flat_map(|&h| {
                 let hn = h.dot(n).max(1e-6);
@@ -143,12 +143,13 @@ mod tests {
         let n = DVec3::new(0.3, -0.2, 1.0).normalize();
         let (u, w) = tangent_basis(n);
         let t = (u + 0.5 * w).normalize();
-        let m = highlight_moments(&lobe(&rig, n, t, 0.3, 0.1), &rig.halfway_in_camera).unwrap();
+        let m = highlight_moments(&lobe(&rig, n, t, 0.3, 0.1), rig.halfway_in_camera()).unwrap();
         assert!(m.normal.angle_between(n).to_degrees() < 1.0, "{m:?}");
         assert!(m.tangent.dot(t).abs() > 0.99, "{m:?}");
         assert!(m.has_tangent(0.3), "{m:?}");
-        let round = highlight_moments(&lobe(&rig, n, t, 0.2, 0.2), &rig.halfway_in_camera).unwrap();
+        let round =
+            highlight_moments(&lobe(&rig, n, t, 0.2, 0.2), rig.halfway_in_camera()).unwrap();
         assert!(round.elongation < 0.15, "{round:?}");
-        assert!(highlight_moments(&vec![0.0; rig.n_used() * 3], &rig.halfway_in_camera).is_none());
+        assert!(highlight_moments(&vec![0.0; rig.n_used() * 3], rig.halfway_in_camera()).is_none());
     }
 }

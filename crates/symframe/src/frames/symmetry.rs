@@ -5,8 +5,9 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::rig::{light_from_halfway, Rig};
-use crate::slice::SliceLookup;
+use crate::frames::rig::Rig;
+use crate::frames::slice::SliceLookup;
+use crate::geometry::light_from_halfway;
 
 /// The three reflections of the halfway vector in a frame (n, t, b = n x t).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -143,7 +144,7 @@ pub fn symmetry_term_over<L: SliceLookup>(
     let mut diffuse_dot = [0.0f64; 3];
     let mut diffuse_sq = 0.0f64;
     for j in lights {
-        let (l, h) = (rig.lights_in_camera[j], rig.halfway_in_camera[j]);
+        let (l, h) = (rig.lights_in_camera()[j], rig.halfway_in_camera()[j]);
         let s = &slice[j * 3..j * 3 + 3];
         if !s[0].is_finite() {
             continue;
@@ -206,29 +207,20 @@ pub fn default_min_domain(n_used: usize) -> u32 {
     ((n_used as f64 * 0.015).ceil() as u32).clamp(6, 30)
 }
 
-/// An orthonormal tangent-plane basis (u, w) for a unit normal, continuous away from `n = -z`.
-#[inline]
-pub fn tangent_basis(n: DVec3) -> (DVec3, DVec3) {
-    // Rotate the camera x and y axes along the great circle from z to n.
-    let k = 1.0 / (1.0 + n.z);
-    let u = DVec3::new(1.0 - n.x * n.x * k, -n.x * n.y * k, -n.x);
-    let w = DVec3::new(-n.x * n.y * k, 1.0 - n.y * n.y * k, -n.y);
-    (u, w)
-}
-
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::rig::{uniform_cone_lights, RigOptions};
-    use crate::slice::ExactSlice;
+    use crate::frames::rig::{uniform_cone_lights, RigOptions};
+    use crate::frames::slice::ExactSlice;
+    use crate::geometry::tangent_basis;
 
     /// A symmetric "BRDF" slice: diffuse plus an anisotropic lobe around n in halfway space,
     /// radiance `I = f (n.l)` with `f` a function of (h.t, h.b, h.n) even in h.t and h.b.
     pub(crate) fn render_slice(rig: &Rig, n: DVec3, t: DVec3) -> Vec<f32> {
         let b = n.cross(t);
-        rig.lights_in_camera
+        rig.lights_in_camera()
             .iter()
-            .zip(&rig.halfway_in_camera)
+            .zip(rig.halfway_in_camera())
             .flat_map(|(&l, &h)| {
                 let nl = n.dot(l).max(0.0);
                 let (ht, hb, hn) = (h.dot(t), h.dot(b), h.dot(n).max(1e-6));

@@ -54,9 +54,9 @@ use std::f64::consts::PI;
 
 use crate::error::{Error, Result};
 use crate::eval::vec_at;
+use crate::geometry::tangent_basis;
 use crate::method::{run_stack, PixelMethod};
 use crate::stack::Stack;
-use crate::symmetry::tangent_basis;
 
 /// Parameters of the per-pixel Ward fit.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -738,7 +738,7 @@ pub fn fit_stack(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<FitMaps> {
     let (w, h) = (stack.width, stack.height);
-    crate::estimate::check_inputs(w, h, stack.n_lights, lights.len(), mask)?;
+    crate::frames::estimator::check_inputs(w, h, stack.n_lights, lights.len(), mask)?;
     let method = FitMethod::new(lights, params, normals, tangents, w * h)?;
     let outcomes = run_stack(&method, stack, mask, progress);
     Ok(FitMaps::from_outcomes(w, h, normals, tangents, outcomes))
@@ -846,7 +846,7 @@ mod tests {
     use super::*;
     use crate::brdf::ward::Ward;
     use crate::brdf::Brdf;
-    use crate::rig::uniform_cone_lights;
+    use crate::frames::rig::uniform_cone_lights;
 
     /// Renders one pixel's samples with a Ward BRDF in the frame (n, t, b = n x t), x = t.
     fn render_pixel(w: &Ward, n: DVec3, t: DVec3, lights: &[DVec3]) -> Vec<f32> {

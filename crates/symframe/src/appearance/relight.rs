@@ -11,13 +11,13 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
+use crate::appearance::fit::WardMaps;
 use crate::brdf::ward::Ward;
 use crate::brdf::Brdf;
 use crate::error::{Error, Result};
 use crate::eval::vec_at;
-use crate::fit::WardMaps;
+use crate::geometry::tangent_basis;
 use crate::stack::check_mask_size;
-use crate::symmetry::tangent_basis;
 
 /// Appearance edits applied when relighting.
 #[derive(Debug, Clone, PartialEq)]
@@ -244,7 +244,7 @@ pub fn image_psnr(image: &[f32], reference: &[f32], mask: Option<&[bool]>) -> f6
     if count == 0 {
         return f64::NAN;
     }
-    crate::fit::psnr_db(peak, (sse / count as f64).sqrt())
+    crate::appearance::fit::psnr_db(peak, (sse / count as f64).sqrt())
 }
 
 #[cfg(test)]

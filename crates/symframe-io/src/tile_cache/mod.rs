@@ -51,117 +51,34 @@
 //! interrupted build resumes where it stopped), and is renamed to `<name>.stack` when complete.
 //! The cache must not be modified by other programs while it is mapped.
 
-use std::fs::{self, File, OpenOptions};
+use std::fs::{self, File};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Instant, UNIX_EPOCH};
+use std::time::Instant;
 
 use memmap2::Mmap;
 use rayon::prelude::*;
 
+use crate::codecs::DecodeOptions;
 use crate::dataset::Dataset;
 use crate::error::Warning;
 use crate::error::{Error, Result};
-use crate::fingerprint::Fingerprint;
-use crate::image::DecodeOptions;
-use crate::stack::{check_dataset, check_size, decode_stack_image, Notes};
+use crate::stack::check_dataset;
 
-/// Format version of the cache file (bumped whenever the layout changes).
-pub const CACHE_VERSION: u32 = 2;
-const MAGIC: &[u8; 8] = b"SYMFCACH";
-const HEADER_BYTES: usize = 4096;
-const ENDIAN_MARK: u32 = 0x0102_0304;
+mod build;
+mod grid;
+mod header;
+mod lock;
+mod view;
 
-/// The tiles of a `width x height` image, `tile x tile` pixels each (the last column and row of
-/// tiles cropped), numbered row-major over the tile grid.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct TileGrid {
-    /// Image width in pixels.
-    pub width: usize,
-    /// Image height in pixels.
-    pub height: usize,
-    /// Tile side in pixels.
-    pub tile: usize,
-}
-
-/// A tile's pixel rectangle.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct TileRect {
-    /// Left column.
-    pub x0: usize,
-    /// Top row.
-    pub y0: usize,
-    /// Width in pixels.
-    pub width: usize,
-    /// Height in pixels.
-    pub height: usize,
-}
-
-impl TileGrid {
-    /// The grid of `tile`-pixel tiles over a `width x height` image.
-    ///
-    /// # Panics
-    /// If `tile` is zero.
-    pub fn new(width: usize, height: usize, tile: usize) -> Self {
-        assert!(tile > 0, "tile size must be positive");
-        Self {
-            width,
-            height,
-            tile,
-        }
-    }
-
-    /// Tiles per row of tiles.
-    pub fn tiles_x(&self) -> usize {
-        self.width.div_ceil(self.tile)
-    }
-
-    /// Rows of tiles.
-    pub fn tiles_y(&self) -> usize {
-        self.height.div_ceil(self.tile)
-    }
-
-    /// Number of tiles.
-    pub fn n_tiles(&self) -> usize {
-        self.tiles_x() * self.tiles_y()
-    }
-
-    /// The pixels of tile `t`.
-    pub fn rect(&self, t: usize) -> TileRect {
-        let (tx, ty) = (t % self.tiles_x(), t / self.tiles_x());
-        let (x0, y0) = (tx * self.tile, ty * self.tile);
-        TileRect {
-            x0,
-            y0,
-            width: self.tile.min(self.width - x0),
-            height: self.tile.min(self.height - y0),
-        }
-    }
-
-    /// Number of pixels of tile `t`.
-    pub fn tile_pixels(&self, t: usize) -> usize {
-        let r = self.rect(t);
-        r.width * r.height
-    }
-
-    /// Position of tile `t`'s first pixel in tile order (all pixels of the tiles before it).
-    pub fn first_pixel(&self, t: usize) -> usize {
-        if t >= self.n_tiles() {
-            return self.width * self.height;
-        }
-        let r = self.rect(t);
-        // Every row of tiles above is full height; the tiles to the left share this row's height.
-        r.y0 * self.width + r.x0 * r.height
-    }
-
-    /// Image pixel indices (`y * width + x`) of tile `t`'s pixels, in tile order (row-major
-    /// inside the tile).
-    pub fn pixels(&self, t: usize) -> impl Iterator<Item = usize> {
-        let r = self.rect(t);
-        let w = self.width;
-        (r.y0..r.y0 + r.height).flat_map(move |y| (r.x0..r.x0 + r.width).map(move |x| y * w + x))
-    }
-}
+use build::{build, repair};
+pub use grid::{TileGrid, TileRect};
+#[doc(hidden)]
+pub use header::check_cache_bytes;
+use header::{cache_stem, matches, read_header, read_warnings, Header, HEADER_BYTES};
+pub use header::{file_content_hash, inputs_fingerprint, CACHE_VERSION};
+use lock::CacheLock;
+pub use view::{TileGather, TileView};
 
 /// How the cache is built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -234,401 +151,6 @@ pub struct TileCache {
     path: PathBuf,
     /// Held (shared) while the cache is mapped, so no other process rebuilds it meanwhile.
     _lock: CacheLock,
-}
-
-/// The fixed header fields.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Header {
-    width: usize,
-    height: usize,
-    n_lights: usize,
-    tile: usize,
-    fingerprint: u64,
-    images_done: usize,
-    complete: bool,
-    /// Lights per block inside a tile (the decoding batch).
-    light_block: usize,
-}
-
-/// Bytes of the encoded header fields, checksum included.
-const FIELDS: usize = 88;
-/// Bytes of the header fields that the header checksum covers.
-const SUMMED: usize = 80;
-
-impl Header {
-    fn data_bytes(&self) -> u64 {
-        (self.width as u64)
-            .saturating_mul(self.height as u64)
-            .saturating_mul(self.n_lights as u64)
-            .saturating_mul(12)
-    }
-
-    /// Light blocks per tile.
-    fn n_blocks(&self) -> usize {
-        self.n_lights.div_ceil(self.light_block.max(1))
-    }
-
-    /// Where the block checksum table starts.
-    fn table_offset(&self) -> u64 {
-        (HEADER_BYTES as u64).saturating_add(self.data_bytes())
-    }
-
-    /// The whole file's length: header, samples, checksum table.
-    fn file_len(&self) -> u64 {
-        let tiles = (self.width.div_ceil(self.tile.max(1)) as u64)
-            .saturating_mul(self.height.div_ceil(self.tile.max(1)) as u64);
-        self.table_offset().saturating_add(
-            tiles
-                .saturating_mul(self.n_blocks() as u64)
-                .saturating_mul(8),
-        )
-    }
-
-    /// Byte range (from the file's start) of light block `b` of tile `t`.
-    fn block_range(&self, grid: &TileGrid, t: usize, b: usize) -> (usize, usize) {
-        let np = grid.tile_pixels(t);
-        let lights = self.light_block.min(self.n_lights - b * self.light_block);
-        (
-            HEADER_BYTES
-                + grid.first_pixel(t) * self.n_lights * 12
-                + b * self.light_block * np * 12,
-            np * lights * 12,
-        )
-    }
-
-    fn encode(&self) -> [u8; FIELDS] {
-        let mut b = [0u8; FIELDS];
-        b[..8].copy_from_slice(MAGIC);
-        b[8..12].copy_from_slice(&CACHE_VERSION.to_le_bytes());
-        b[12..16].copy_from_slice(&ENDIAN_MARK.to_ne_bytes());
-        let fields = [
-            self.width as u64,
-            self.height as u64,
-            self.n_lights as u64,
-            self.tile as u64,
-            self.fingerprint,
-            self.images_done as u64,
-            self.complete as u64,
-            self.light_block as u64,
-        ];
-        for (k, v) in fields.iter().enumerate() {
-            b[16 + 8 * k..24 + 8 * k].copy_from_slice(&v.to_le_bytes());
-        }
-        let sum = xxhash_rust::xxh3::xxh3_64(&b[..SUMMED]);
-        b[SUMMED..FIELDS].copy_from_slice(&sum.to_le_bytes());
-        b
-    }
-
-    /// Decodes a header; `None` when it is not a cache of this version and byte order, or
-    /// when its checksum fails.
-    fn decode(b: &[u8]) -> Option<Self> {
-        if b.len() < FIELDS || &b[..8] != MAGIC {
-            return None;
-        }
-        let sum = u64::from_le_bytes(b[SUMMED..FIELDS].try_into().unwrap());
-        if xxhash_rust::xxh3::xxh3_64(&b[..SUMMED]) != sum {
-            return None;
-        }
-        let u32_at = |o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap());
-        if u32_at(8) != CACHE_VERSION
-            || u32::from_ne_bytes(b[12..16].try_into().unwrap()) != ENDIAN_MARK
-        {
-            return None;
-        }
-        let f = |k: usize| u64::from_le_bytes(b[16 + 8 * k..24 + 8 * k].try_into().unwrap());
-        Some(Self {
-            width: f(0) as usize,
-            height: f(1) as usize,
-            n_lights: f(2) as usize,
-            tile: f(3) as usize,
-            fingerprint: f(4),
-            images_done: f(5) as usize,
-            complete: f(6) == 1,
-            light_block: f(7) as usize,
-        })
-    }
-}
-
-/// Checks a whole cache file's bytes as a reuse would, for fuzzing the header, table and
-/// warnings parsers: `None` if the header is refused, else the number of failing blocks.
-#[doc(hidden)]
-pub fn check_cache_bytes(b: &[u8]) -> Option<usize> {
-    let h = Header::decode(b)?;
-    if !(h.complete
-        && h.width > 0
-        && h.height > 0
-        && h.tile > 0
-        && (1..=h.n_lights).contains(&h.light_block)
-        && b.len() as u64 == h.file_len())
-    {
-        return None;
-    }
-    let _ = read_warnings(b);
-    Some(verify(b, &h).len())
-}
-
-/// Where the input warnings are kept in the header: length (`u32`), XXH3-64, JSON.
-const WARNINGS_AT: usize = 256;
-
-/// Encodes warnings for the header (as many as fit in it).
-fn encode_warnings(warnings: &[Warning]) -> Vec<u8> {
-    let mut kept = warnings.to_vec();
-    loop {
-        let json = serde_json::to_vec(&kept).unwrap_or_default();
-        if WARNINGS_AT + 12 + json.len() <= HEADER_BYTES || kept.is_empty() {
-            let mut b = (json.len() as u32).to_le_bytes().to_vec();
-            b.extend_from_slice(&xxhash_rust::xxh3::xxh3_64(&json).to_le_bytes());
-            b.extend_from_slice(&json);
-            return b;
-        }
-        kept.pop();
-    }
-}
-
-/// The warnings kept in a cache's header (none if absent or damaged).
-fn read_warnings(file: &[u8]) -> Vec<Warning> {
-    let Some(b) = file.get(WARNINGS_AT..HEADER_BYTES) else {
-        return Vec::new();
-    };
-    let len = u32::from_le_bytes(b[..4].try_into().unwrap()) as usize;
-    let sum = u64::from_le_bytes(b[4..12].try_into().unwrap());
-    match b.get(12..12 + len) {
-        Some(json) if len > 0 && xxhash_rust::xxh3::xxh3_64(json) == sum => {
-            serde_json::from_slice(json).unwrap_or_default()
-        }
-        _ => Vec::new(),
-    }
-}
-
-/// XXH3-64 of a file's bytes, read in 1 MiB pieces.
-pub fn file_content_hash(path: &Path) -> Result<u64> {
-    use std::io::Read;
-    let mut f = File::open(path).map_err(|e| Error::read(path, e))?;
-    let mut h = xxhash_rust::xxh3::Xxh3::new();
-    let mut buf = vec![0u8; 1 << 20];
-    loop {
-        match f.read(&mut buf) {
-            Ok(0) => return Ok(h.digest()),
-            Ok(k) => h.update(&buf[..k]),
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(Error::read(path, e)),
-        }
-    }
-}
-
-/// The fingerprint of a dataset's decoded samples: every image's path (canonical when
-/// possible), size and content hash ([`file_content_hash`], the files read in parallel) or,
-/// with `trust_mtime`, modification time instead of content; the light intensities, the
-/// decode options, the cache format and the crate version.
-pub fn inputs_fingerprint(ds: &Dataset, opts: &DecodeOptions, trust_mtime: bool) -> Result<u64> {
-    let mut f = Fingerprint::new();
-    f.str("symframe tile cache")
-        .u64(CACHE_VERSION as u64)
-        .str(env!("CARGO_PKG_VERSION"))
-        .u64(ds.images.len() as u64)
-        .u64(opts.linear_8bit as u64)
-        .f64(opts.saturation as f64)
-        .u64(trust_mtime as u64);
-    let per_image: Vec<Result<(PathBuf, u64, u64)>> = ds
-        .images
-        .par_iter()
-        .map(|p| {
-            let meta = fs::metadata(p).map_err(|e| Error::read(p, e))?;
-            let stamp = if trust_mtime {
-                meta.modified()
-                    .ok()
-                    .and_then(|t| t.duration_since(UNIX_EPOCH).ok())
-                    .map_or(0, |d| d.as_nanos() as u64)
-            } else {
-                file_content_hash(p)?
-            };
-            let canonical = fs::canonicalize(p).unwrap_or_else(|_| p.clone());
-            Ok((canonical, meta.len(), stamp))
-        })
-        .collect();
-    for r in per_image {
-        let (p, len, stamp) = r?;
-        f.path(&p).u64(len).u64(stamp);
-    }
-    match &ds.intensities {
-        None => f.u64(0),
-        Some(v) => {
-            f.u64(1);
-            for k in v.iter().flatten() {
-                f.f64(*k as f64);
-            }
-            &mut f
-        }
-    };
-    Ok(f.finish())
-}
-
-/// The cache's file stem for a dataset: a readable name plus a hash of its canonical source, so
-/// datasets sharing a cache folder do not collide and one dataset always maps to one file.
-fn cache_stem(ds: &Dataset) -> String {
-    let src = fs::canonicalize(&ds.source).unwrap_or_else(|_| ds.source.clone());
-    let name: String = src
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default()
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .take(40)
-        .collect();
-    let hash = Fingerprint::new().path(&src).finish();
-    format!(
-        "{}-{hash:016x}",
-        if name.is_empty() { "stack" } else { &name }
-    )
-}
-
-/// An advisory lock on a cache (a lock file beside it; `flock` on Unix, nothing elsewhere).
-#[derive(Debug)]
-struct CacheLock {
-    file: File,
-    path: PathBuf,
-}
-
-impl CacheLock {
-    fn open(path: &Path) -> Result<Self> {
-        let file = OpenOptions::new()
-            .create(true)
-            .truncate(false)
-            .write(true)
-            .open(path)
-            .map_err(|e| Error::write(path, e))?;
-        Ok(Self {
-            file,
-            path: path.to_path_buf(),
-        })
-    }
-
-    #[cfg(unix)]
-    fn set(&self, exclusive: bool) -> Result<()> {
-        use std::os::unix::io::AsRawFd;
-        let op = if exclusive {
-            libc::LOCK_EX
-        } else {
-            libc::LOCK_SH
-        };
-        loop {
-            // SAFETY: flock on a file descriptor we own.
-            if unsafe { libc::flock(self.file.as_raw_fd(), op) } == 0 {
-                return Ok(());
-            }
-            let e = std::io::Error::last_os_error();
-            if e.kind() != std::io::ErrorKind::Interrupted {
-                return Err(Error::write(&self.path, e));
-            }
-        }
-    }
-
-    #[cfg(not(unix))]
-    fn set(&self, _exclusive: bool) -> Result<()> {
-        Ok(())
-    }
-
-    /// Takes the shared lock, waiting while another process holds the exclusive one, polling
-    /// `stop` every 100 ms: `false` (no lock taken) once it is set.
-    #[cfg(unix)]
-    fn shared_unless_stopped(&self, stop: &AtomicBool) -> Result<bool> {
-        use std::os::unix::io::AsRawFd;
-        loop {
-            // SAFETY: flock on a file descriptor we own.
-            if unsafe { libc::flock(self.file.as_raw_fd(), libc::LOCK_SH | libc::LOCK_NB) } == 0 {
-                return Ok(true);
-            }
-            let e = std::io::Error::last_os_error();
-            match e.kind() {
-                std::io::ErrorKind::Interrupted => {}
-                std::io::ErrorKind::WouldBlock => {
-                    if stop.load(Ordering::Relaxed) {
-                        return Ok(false);
-                    }
-                    std::thread::sleep(std::time::Duration::from_millis(100));
-                }
-                _ => return Err(Error::write(&self.path, e)),
-            }
-        }
-    }
-
-    #[cfg(not(unix))]
-    fn shared_unless_stopped(&self, _stop: &AtomicBool) -> Result<bool> {
-        Ok(true)
-    }
-
-    /// Takes the exclusive lock if no one else holds the lock; `false` if someone does (then
-    /// this process holds no lock: a failed conversion gives up the shared one).
-    #[cfg(unix)]
-    fn try_exclusive(&self) -> Result<bool> {
-        use std::os::unix::io::AsRawFd;
-        loop {
-            // SAFETY: flock on a file descriptor we own.
-            if unsafe { libc::flock(self.file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
-                return Ok(true);
-            }
-            let e = std::io::Error::last_os_error();
-            match e.kind() {
-                std::io::ErrorKind::Interrupted => continue,
-                std::io::ErrorKind::WouldBlock => return Ok(false),
-                _ => return Err(Error::write(&self.path, e)),
-            }
-        }
-    }
-
-    #[cfg(not(unix))]
-    fn try_exclusive(&self) -> Result<bool> {
-        Ok(true)
-    }
-}
-
-/// Whether the cache folder `dir` holds work worth keeping after a failed run: a complete
-/// cache, or a partial build that holds at least one batch of images (a rerun resumes it).
-pub fn cache_holds_work(dir: &Path) -> bool {
-    let Ok(rd) = fs::read_dir(dir) else {
-        return false;
-    };
-    rd.flatten().any(|e| {
-        let name = e.file_name().to_string_lossy().into_owned();
-        if name.ends_with(".stack") {
-            return true;
-        }
-        name.ends_with(".stack.partial")
-            && read_header(&e.path()).is_ok_and(|h| h.is_some_and(|(h, _)| h.images_done > 0))
-    })
-}
-
-/// Reads a file's header, `None` if the file is missing or too short.
-fn read_header(path: &Path) -> Result<Option<(Header, u64)>> {
-    use std::io::Read;
-    let mut f = match File::open(path) {
-        Ok(f) => f,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(Error::read(path, e)),
-    };
-    let len = f.metadata().map_err(|e| Error::read(path, e))?.len();
-    let mut b = [0u8; FIELDS];
-    if f.read_exact(&mut b).is_err() {
-        return Ok(None);
-    }
-    Ok(Header::decode(&b).map(|h| (h, len)))
-}
-
-/// Whether `h` (of a file `len` bytes long) is a cache of these inputs with this tile size.
-fn matches(h: &Header, len: u64, fingerprint: u64, tile: usize, n_lights: usize) -> bool {
-    h.fingerprint == fingerprint
-        && h.tile == tile
-        && h.n_lights == n_lights
-        && h.width > 0
-        && h.height > 0
-        && (1..=n_lights).contains(&h.light_block)
-        && len == h.file_len()
 }
 
 /// The blocks of a complete cache whose checksum fails: `(tile, block)` pairs.
@@ -903,348 +425,26 @@ impl TileCache {
     }
 }
 
-/// The samples of one tile: blocks of `light_block` lights (the last block shorter), each block
-/// pixel-major (the tile's pixels in [`TileGrid::pixels`] order, each pixel's RGB under the
-/// block's lights contiguous). With one block this is a [`symframe::Stack`] of the tile.
-#[derive(Debug, Clone, Copy)]
-pub struct TileView<'a> {
-    data: &'a [f32],
-    n_pixels: usize,
-    n_lights: usize,
-    light_block: usize,
-}
-
-impl<'a> TileView<'a> {
-    /// Number of pixels of the tile.
-    pub fn n_pixels(&self) -> usize {
-        self.n_pixels
-    }
-
-    /// Where light `i`'s sample of pixel 0 is, and the step from one pixel to the next.
-    fn locate(&self, i: usize) -> (usize, usize) {
-        let b = i / self.light_block;
-        let len = self.light_block.min(self.n_lights - b * self.light_block);
-        (
-            (b * self.light_block * self.n_pixels + (i - b * self.light_block)) * 3,
-            len * 3,
-        )
-    }
-
-    /// A gatherer of the samples of `lights` (input indices), in that order, pixel by pixel.
-    pub fn gatherer(&self, lights: &[usize]) -> TileGather<'a> {
-        TileGather {
-            data: self.data,
-            table: lights.iter().map(|&i| self.locate(i)).collect(),
-        }
-    }
-
-    /// Every light's RGB at pixel `k` of the tile, in input order (`n_lights * 3` values).
-    pub fn pixel(&self, k: usize, out: &mut [f32]) {
-        for (i, o) in out.chunks_exact_mut(3).enumerate() {
-            let (base, step) = self.locate(i);
-            o.copy_from_slice(&self.data[base + k * step..base + k * step + 3]);
-        }
-    }
-}
-
-/// Gathers chosen lights' samples of a tile's pixels ([`TileView::gatherer`]).
-#[derive(Debug, Clone)]
-pub struct TileGather<'a> {
-    data: &'a [f32],
-    table: Vec<(usize, usize)>,
-}
-
-impl TileGather<'_> {
-    /// The chosen lights' RGB at pixel `k` of the tile (`3` values per light, in `out`).
-    #[inline]
-    pub fn pixel(&self, k: usize, out: &mut [f32]) {
-        for (&(base, step), o) in self.table.iter().zip(out.chunks_exact_mut(3)) {
-            let at = base + k * step;
-            o.copy_from_slice(&self.data[at..at + 3]);
-        }
-    }
-}
-
-/// What a build did.
-struct Built {
-    /// About the images decoded by this build.
-    warnings: Vec<Warning>,
-    decoded: usize,
-    resumed: usize,
-    batch: usize,
-    decode_s: f64,
-    scatter_s: f64,
-}
-
-/// Creates `path` of `len` bytes, reserving the disk space up front where the file system can
-/// (so a full disk is an error here, not a fault while writing through the mapping).
-fn create_sized(path: &Path, len: u64) -> Result<File> {
-    let file = OpenOptions::new()
-        .read(true)
-        .write(true)
-        .create(true)
-        .truncate(true)
-        .open(path)
-        .map_err(|e| Error::write(path, e))?;
-    #[cfg(target_os = "linux")]
-    {
-        use std::os::unix::io::AsRawFd;
-        // SAFETY: fallocate on a file descriptor we own.
-        let r = unsafe { libc::fallocate(file.as_raw_fd(), 0, 0, len as libc::off_t) };
-        if r != 0 {
-            let e = std::io::Error::last_os_error();
-            if e.raw_os_error() != Some(libc::EOPNOTSUPP) {
-                return Err(Error::write(path, e));
-            }
-        }
-    }
-    file.set_len(len).map_err(|e| Error::write(path, e))?;
-    Ok(file)
-}
-
-/// Builds (or resumes building) the partial cache at `partial`; on success it is complete.
-fn build(
-    ds: &Dataset,
-    opts: &DecodeOptions,
-    partial: &Path,
-    fingerprint: u64,
-    copts: CacheOptions,
-    stop: &AtomicBool,
-    on_image: &(dyn Fn() + Sync),
-) -> Result<Built> {
-    let n = ds.images.len();
-    let notes = Notes::new(n);
-    let decode_one = |i: usize| -> Result<(usize, usize, Vec<f32>)> {
-        if stop.load(Ordering::Relaxed) {
-            return Err(Error::Interrupted);
-        }
-        let r = decode_stack_image(ds, i, opts, &notes)?;
-        on_image();
-        Ok(r)
+/// Whether the cache folder `dir` holds work worth keeping after a failed run: a complete
+/// cache, or a partial build that holds at least one batch of images (a rerun resumes it).
+pub fn cache_holds_work(dir: &Path) -> bool {
+    let Ok(rd) = fs::read_dir(dir) else {
+        return false;
     };
-    let mut decode_s = 0.0;
-    let mut first: Option<Vec<f32>> = None;
-    // Resume a partial build of the same inputs, else start afresh from the first image.
-    let resumable = read_header(partial)?
-        .filter(|(h, len)| !h.complete && matches(h, *len, fingerprint, copts.tile, n));
-    let (mut header, file) = match resumable {
-        Some((h, _)) => {
-            let file = OpenOptions::new()
-                .read(true)
-                .write(true)
-                .open(partial)
-                .map_err(|e| Error::write(partial, e))?;
-            (h, file)
+    rd.flatten().any(|e| {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name.ends_with(".stack") {
+            return true;
         }
-        None => {
-            if partial.exists() {
-                fs::remove_file(partial).map_err(|e| Error::write(partial, e))?;
-            }
-            let t = Instant::now();
-            let (w, h, rgb) = decode_one(0)?;
-            decode_s += t.elapsed().as_secs_f64();
-            if w == 0 || h == 0 {
-                return Err(Error::invalid(&ds.images[0], "image is empty"));
-            }
-            first = Some(rgb);
-            let header = Header {
-                width: w,
-                height: h,
-                n_lights: n,
-                tile: copts.tile,
-                fingerprint,
-                images_done: 0,
-                complete: false,
-                light_block: (copts.batch_bytes / (w * h * 12)).clamp(1, n),
-            };
-            let file = create_sized(partial, header.file_len())?;
-            (header, file)
-        }
-    };
-    let write_header =
-        |h: &Header| write_all_at(&file, &h.encode(), 0).map_err(|e| Error::write(partial, e));
-    write_header(&header)?;
-
-    let grid = TileGrid::new(header.width, header.height, header.tile);
-    // One batch fills one block of lights in every tile (a resumed build keeps its blocks).
-    let batch = header.light_block;
-    let resumed = header.images_done;
-    let mut decoded = first.is_some() as usize;
-    let mut scatter_s = 0.0;
-    let mut start = header.images_done;
-    while start < n {
-        if stop.load(Ordering::Relaxed) {
-            return Err(Error::Interrupted);
-        }
-        let end = n.min(start + batch);
-        let t = Instant::now();
-        let from = if start == 0 && first.is_some() {
-            1
-        } else {
-            start
-        };
-        let results: Vec<Result<(usize, usize, Vec<f32>)>> =
-            (from..end).into_par_iter().map(decode_one).collect();
-        decode_s += t.elapsed().as_secs_f64();
-        let mut images = Vec::with_capacity(end - start);
-        if from > start {
-            images.extend(first.take());
-        }
-        // The first error in image order, as the in-memory loader reports it.
-        for (j, r) in results.into_iter().enumerate() {
-            let (w, h, rgb) = r?;
-            check_size(ds, from + j, (w, h), (header.width, header.height))?;
-            images.push(rgb);
-        }
-        decoded += end - from;
-        let t = Instant::now();
-        scatter(&file, partial, &grid, &header, start, &images)?;
-        drop(images);
-        scatter_s += t.elapsed().as_secs_f64();
-        header.images_done = end;
-        write_header(&header)?;
-        start = end;
-    }
-    let warnings = notes.warnings(ds);
-    write_all_at(&file, &encode_warnings(&warnings), WARNINGS_AT as u64)
-        .map_err(|e| Error::write(partial, e))?;
-    header.complete = true;
-    write_header(&header)?;
-    Ok(Built {
-        warnings,
-        decoded,
-        resumed,
-        batch,
-        decode_s,
-        scatter_s,
+        name.ends_with(".stack.partial")
+            && read_header(&e.path()).is_ok_and(|h| h.is_some_and(|(h, _)| h.images_done > 0))
     })
-}
-
-/// Writes `buf` at `offset` of `file` (positioned write; the file's cursor is not used, so
-/// threads can write different ranges at once).
-fn write_all_at(file: &File, buf: &[u8], offset: u64) -> std::io::Result<()> {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileExt;
-        file.write_all_at(buf, offset)
-    }
-    #[cfg(windows)]
-    {
-        use std::os::windows::fs::FileExt;
-        let mut done = 0;
-        while done < buf.len() {
-            let n = file.seek_write(&buf[done..], offset + done as u64)?;
-            if n == 0 {
-                return Err(std::io::ErrorKind::WriteZero.into());
-            }
-            done += n;
-        }
-        Ok(())
-    }
-    #[cfg(not(any(unix, windows)))]
-    {
-        let _ = (file, buf, offset);
-        Err(std::io::ErrorKind::Unsupported.into())
-    }
-}
-
-/// Writes images `start..start + images.len()` (interleaved RGB, row-major; one block of
-/// lights, every block before it full) into every tile of the cache file, and the block's
-/// checksums into the table: per tile, the block is assembled in a per-thread buffer
-/// (`pixels * images * 12` bytes, 1 MB for a 32-pixel tile and 85 images) and written with one
-/// positioned write, so every page of the file is written once, by one batch, and nothing of
-/// the file is mapped while building.
-fn scatter(
-    file: &File,
-    path: &Path,
-    grid: &TileGrid,
-    h: &Header,
-    start: usize,
-    images: &[Vec<f32>],
-) -> Result<()> {
-    let stride = h.n_lights * 3;
-    let b = images.len();
-    let sums: Vec<u64> = (0..grid.n_tiles())
-        .into_par_iter()
-        .map_init(Vec::new, |buf: &mut Vec<f32>, t| {
-            let np = grid.tile_pixels(t);
-            buf.clear();
-            buf.reserve(np * b * 3);
-            for p in grid.pixels(t) {
-                for img in images {
-                    buf.extend_from_slice(&img[p * 3..p * 3 + 3]);
-                }
-            }
-            let bytes: &[u8] = bytemuck::cast_slice(buf);
-            let at = HEADER_BYTES + (grid.first_pixel(t) * stride + start * np * 3) * 4;
-            write_all_at(file, bytes, at as u64).map_err(|e| Error::write(path, e))?;
-            Ok(xxhash_rust::xxh3::xxh3_64(bytes))
-        })
-        .collect::<Result<_>>()?;
-    let table: Vec<u8> = sums.iter().flat_map(|v| v.to_le_bytes()).collect();
-    let block = start / h.light_block;
-    let at = h.table_offset() + (block * grid.n_tiles() * 8) as u64;
-    write_all_at(file, &table, at).map_err(|e| Error::write(path, e))
-}
-
-/// Decodes the lights of the light blocks that hold a failed `(tile, block)` of the complete
-/// cache at `path` again and rewrites those blocks (in every tile) with their checksums, in
-/// place. Called under the exclusive lock. An interruption leaves the cache complete with some
-/// blocks still failing, which the next open repairs.
-#[allow(clippy::too_many_arguments)]
-fn repair(
-    ds: &Dataset,
-    opts: &DecodeOptions,
-    path: &Path,
-    h: &Header,
-    bad: &[(usize, usize)],
-    stop: &AtomicBool,
-    on_image: &(dyn Fn() + Sync),
-    info: &mut CacheInfo,
-) -> Result<()> {
-    let blocks: std::collections::BTreeSet<usize> = bad.iter().map(|&(_, b)| b).collect();
-    info.blocks_corrupt += bad.len();
-    let file = OpenOptions::new()
-        .read(true)
-        .write(true)
-        .open(path)
-        .map_err(|e| Error::write(path, e))?;
-    let grid = TileGrid::new(h.width, h.height, h.tile);
-    let n = h.n_lights;
-    for b in blocks {
-        let (start, end) = (b * h.light_block, n.min((b + 1) * h.light_block));
-        let t = Instant::now();
-        let results: Vec<Result<(usize, usize, Vec<f32>)>> = (start..end)
-            .into_par_iter()
-            .map(|i| {
-                if stop.load(Ordering::Relaxed) {
-                    return Err(Error::Interrupted);
-                }
-                let r = decode_stack_image(ds, i, opts, &Notes::new(0))?;
-                on_image();
-                Ok(r)
-            })
-            .collect();
-        info.decode_s += t.elapsed().as_secs_f64();
-        let mut images = Vec::with_capacity(end - start);
-        for (j, r) in results.into_iter().enumerate() {
-            let (w, hh, rgb) = r?;
-            check_size(ds, start + j, (w, hh), (h.width, h.height))?;
-            images.push(rgb);
-        }
-        let t = Instant::now();
-        scatter(&file, path, &grid, h, start, &images)?;
-        info.scatter_s += t.elapsed().as_secs_f64();
-        info.images_decoded += end - start;
-        info.blocks_repaired += 1;
-    }
-    Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::image::write_exr_rgb;
+    use crate::codecs::write_exr_rgb;
     use crate::stack::load_stack;
     use glam::DVec3;
 
@@ -1512,7 +712,7 @@ mod tests {
         for (i, p) in ds.images.iter_mut().enumerate() {
             *p = d.path().join(format!("{i}.pfm"));
             let v: Vec<f32> = (0..w * h * 3).map(|k| (i * 100 + k) as f32).collect();
-            crate::image::write_pfm(p, w, h, 3, &v).unwrap();
+            crate::codecs::write_pfm(p, w, h, 3, &v).unwrap();
         }
         let dir = d.path().join("cache");
         let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
@@ -1525,7 +725,7 @@ mod tests {
         };
         let mut rgb: Vec<f32> = (0..w * h * 3).map(|k| (200 + k) as f32).collect();
         rgb[7] += 1.0;
-        crate::image::write_pfm(img, w, h, 3, &rgb).unwrap();
+        crate::codecs::write_pfm(img, w, h, 3, &rgb).unwrap();
         File::options()
             .write(true)
             .open(img)
@@ -1548,7 +748,7 @@ mod tests {
         same_as_stack(&cache, &ds);
         drop(cache);
         // Rewritten with the same bytes and time: still a hit.
-        crate::image::write_pfm(img, w, h, 3, &rgb).unwrap();
+        crate::codecs::write_pfm(img, w, h, 3, &rgb).unwrap();
         File::options()
             .write(true)
             .open(img)

@@ -21,14 +21,31 @@
 //! than what the PNG decoder expands to 8 bits, signed-integer or 32/64-bit integer TIFF,
 //! CMYK or other colour spaces, more than 4 channels. A file is read into memory whole, then
 //! decoded; a decoder that panics on a hostile file is caught and reported as a decode error.
+//!
+//! One module per codec: `exr`, `tiff`, `pfm`, `png` (writing), and `image_rs` (PNG, JPEG and
+//! Radiance HDR decoding through the `image` crate); this one holds the common types, the
+//! dispatch by extension and the conversion to linear samples.
 
-use std::io::Write;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
 
-use crate::atomic::write_atomic;
 use crate::error::{Error, Result};
-use crate::limits;
+
+mod exr;
+mod image_rs;
+mod pfm;
+mod png;
+mod tiff;
+
+use exr::read_exr;
+pub(crate) use exr::write_exr_channels;
+pub use exr::write_exr_rgb;
+use image_rs::read_with_image;
+use pfm::pfm_raw;
+pub use pfm::{read_pfm, write_pfm};
+pub(crate) use png::write_png;
+pub use png::{write_png16_rgb, write_png8_rgb};
+use tiff::read_tiff;
 
 /// A decoded image: linear samples, row-major (row 0 at the top), channels interleaved.
 #[derive(Debug, Clone, PartialEq)]
@@ -289,387 +306,6 @@ fn io_err(path: &Path, e: std::io::Error) -> Error {
     }
 }
 
-/// Decodes PNG, JPEG or Radiance HDR with the `image` crate: the declared size is checked
-/// first ([`crate::limits`]), then the image decoded under the same limits.
-fn read_with_image(path: &Path, bytes: &[u8], fmt: ::image::ImageFormat) -> Result<RawImage> {
-    use ::image::{DynamicImage as D, ImageError};
-    use std::io::Cursor;
-    let ierr = |e: ImageError| match e {
-        ImageError::IoError(io) => io_err(path, io),
-        ImageError::Unsupported(u) => Error::unsupported(path, u.to_string()),
-        ImageError::Limits(l) => Error::limits(path, l.to_string()),
-        other => Error::decode(path, other),
-    };
-    let what = match fmt {
-        ::image::ImageFormat::Png => "PNG header",
-        ::image::ImageFormat::Jpeg => "JPEG header",
-        _ => "HDR header",
-    };
-    let (w, h) = ::image::ImageReader::with_format(Cursor::new(bytes), fmt)
-        .into_dimensions()
-        .map_err(ierr)?;
-    limits::check_image_size(path, what, w as u64, h as u64, bytes.len() as u64)?;
-    let mut reader = ::image::ImageReader::with_format(Cursor::new(bytes), fmt);
-    let mut lim = ::image::Limits::default();
-    lim.max_image_width = Some(limits::MAX_SIDE as u32);
-    lim.max_image_height = Some(limits::MAX_SIDE as u32);
-    lim.max_alloc = Some(limits::MAX_DECODED_BYTES);
-    reader.limits(lim);
-    let img = reader.decode().map_err(ierr)?;
-    let (width, height) = (img.width() as usize, img.height() as usize);
-    let (channels, raw) = match img {
-        D::ImageLuma8(b) => (1, Raw::U8(b.into_raw())),
-        D::ImageLumaA8(b) => (2, Raw::U8(b.into_raw())),
-        D::ImageRgb8(b) => (3, Raw::U8(b.into_raw())),
-        D::ImageRgba8(b) => (4, Raw::U8(b.into_raw())),
-        D::ImageLuma16(b) => (1, Raw::U16(b.into_raw())),
-        D::ImageLumaA16(b) => (2, Raw::U16(b.into_raw())),
-        D::ImageRgb16(b) => (3, Raw::U16(b.into_raw())),
-        D::ImageRgba16(b) => (4, Raw::U16(b.into_raw())),
-        D::ImageRgb32F(b) => (3, Raw::F32(b.into_raw())),
-        D::ImageRgba32F(b) => (4, Raw::F32(b.into_raw())),
-        other => {
-            return Err(Error::unsupported(
-                path,
-                format!("pixel layout {:?}", other.color()),
-            ))
-        }
-    };
-    Ok(RawImage {
-        width,
-        height,
-        channels,
-        raw,
-    })
-}
-
-/// The part of an EXR channel name after the last `.` (drops a legacy layer prefix).
-fn base_name(name: &str) -> &str {
-    name.rsplit('.').next().unwrap_or(name)
-}
-
-/// Decodes an OpenEXR file's first valid layer at full resolution (single-threaded), after
-/// checking every part's declared size ([`crate::limits`]).
-fn read_exr(path: &Path, bytes: &[u8]) -> Result<RawImage> {
-    use exr::prelude::traits::*;
-    use exr::prelude::{read, FlatSamples};
-    use std::io::Cursor;
-    let eerr = |e: exr::error::Error| match e {
-        exr::error::Error::Io(io) => io_err(path, io),
-        exr::error::Error::NotSupported(m) => Error::unsupported(path, format!("EXR {m}")),
-        other => Error::decode(path, other),
-    };
-    let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(eerr)?;
-    for h in meta.headers.iter() {
-        let size = h.layer_size;
-        limits::check_image_size(
-            path,
-            "EXR header",
-            size.width() as u64,
-            size.height() as u64,
-            bytes.len() as u64,
-        )?;
-    }
-    let image = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .non_parallel()
-        .from_buffered(Cursor::new(bytes))
-        .map_err(eerr)?;
-    let layer = image.layer_data;
-    let (width, height) = (layer.size.width(), layer.size.height());
-    let list = &layer.channel_data.list;
-    let names: Vec<String> = list.iter().map(|c| c.name.to_string()).collect();
-    let find = |want: &str| {
-        names
-            .iter()
-            .position(|n| base_name(n).eq_ignore_ascii_case(want))
-    };
-    let picked: Vec<usize> = if let (Some(r), Some(g), Some(b)) = (find("R"), find("G"), find("B"))
-    {
-        vec![r, g, b]
-    } else if let Some(y) = find("Y") {
-        vec![y]
-    } else {
-        let non_alpha: Vec<usize> = (0..names.len())
-            .filter(|&i| !base_name(&names[i]).eq_ignore_ascii_case("A"))
-            .collect();
-        if non_alpha.len() != 1 {
-            return Err(Error::unsupported(
-                path,
-                format!(
-                    "{}-channel EXR without R,G,B channels (channels: {})",
-                    names.len(),
-                    names.join(",")
-                ),
-            ));
-        }
-        non_alpha
-    };
-    let n = width * height;
-    let k = picked.len();
-    let mut data = vec![0.0f32; n * k];
-    for (j, &ci) in picked.iter().enumerate() {
-        let samples = &list[ci].sample_data;
-        if samples.len() != n {
-            return Err(Error::unsupported(
-                path,
-                format!("subsampled EXR channel {}", names[ci]),
-            ));
-        }
-        match samples {
-            FlatSamples::F16(v) => {
-                for (p, s) in v.iter().enumerate() {
-                    data[p * k + j] = s.to_f32();
-                }
-            }
-            FlatSamples::F32(v) => {
-                for (p, s) in v.iter().enumerate() {
-                    data[p * k + j] = *s;
-                }
-            }
-            FlatSamples::U32(v) => {
-                for (p, s) in v.iter().enumerate() {
-                    data[p * k + j] = *s as f32;
-                }
-            }
-        }
-    }
-    Ok(RawImage {
-        width,
-        height,
-        channels: k,
-        raw: Raw::F32(data),
-    })
-}
-
-/// Reorders planar samples (all of channel 0, then channel 1, ...) into interleaved pixels.
-fn interleave<T: Copy>(v: Vec<T>, ch: usize) -> Vec<T> {
-    let n = v.len() / ch;
-    (0..n)
-        .flat_map(|p| (0..ch).map(move |c| (p, c)))
-        .map(|(p, c)| v[c * n + p])
-        .collect()
-}
-
-/// Decodes a TIFF (8/16-bit unsigned or 16/32/64-bit float; grey, grey+alpha, RGB or RGBA).
-fn read_tiff(path: &Path, bytes: &[u8]) -> Result<RawImage> {
-    use tiff::decoder::{Decoder, DecodingResult};
-    use tiff::tags::Tag;
-    use tiff::{ColorType, TiffError};
-    let terr = |e: TiffError| match e {
-        TiffError::IoError(io) => io_err(path, io),
-        TiffError::UnsupportedError(u) => Error::unsupported(path, format!("TIFF {u}")),
-        TiffError::LimitsExceeded => Error::limits(path, "TIFF exceeds the decoder's limits"),
-        other => Error::decode(path, other),
-    };
-    let mut lim = tiff::decoder::Limits::default();
-    lim.decoding_buffer_size = limits::MAX_DECODED_BYTES as usize;
-    let mut dec = Decoder::new(std::io::Cursor::new(bytes))
-        .map_err(terr)?
-        .with_limits(lim);
-    let (w, h) = dec.dimensions().map_err(terr)?;
-    limits::check_image_size(path, "TIFF header", w as u64, h as u64, bytes.len() as u64)?;
-    let ct = dec.colortype().map_err(terr)?;
-    let (channels, bits) = match ct {
-        ColorType::Gray(b) => (1, b),
-        ColorType::GrayA(b) => (2, b),
-        ColorType::RGB(b) => (3, b),
-        ColorType::RGBA(b) => (4, b),
-        other => {
-            return Err(Error::unsupported(
-                path,
-                format!("TIFF colour type {other:?} (expected grey or RGB)"),
-            ))
-        }
-    };
-    if ![8, 16, 32, 64].contains(&bits) {
-        return Err(Error::unsupported(path, format!("{bits}-bit TIFF")));
-    }
-    let planar = matches!(
-        dec.find_tag_unsigned::<u16>(Tag::PlanarConfiguration),
-        Ok(Some(2))
-    );
-    let mut buf = DecodingResult::U8(Vec::new());
-    dec.read_image_to_buffer(&mut buf).map_err(terr)?;
-    let raw = match buf {
-        DecodingResult::U8(v) => Raw::U8(v),
-        DecodingResult::U16(v) => Raw::U16(v),
-        DecodingResult::F16(v) => Raw::F32(v.into_iter().map(f32::from).collect()),
-        DecodingResult::F32(v) => Raw::F32(v),
-        DecodingResult::F64(v) => Raw::F32(v.into_iter().map(|x| x as f32).collect()),
-        _ => {
-            return Err(Error::unsupported(
-                path,
-                format!("TIFF sample format ({bits}-bit signed or 32/64-bit integer)"),
-            ))
-        }
-    };
-    let expected = w as usize * h as usize * channels;
-    let raw = if planar && channels > 1 {
-        let ok = |len: usize| {
-            if len == expected {
-                Ok(())
-            } else {
-                Err(Error::unsupported(path, "planar TIFF with missing planes"))
-            }
-        };
-        match raw {
-            Raw::U8(v) => {
-                ok(v.len())?;
-                Raw::U8(interleave(v, channels))
-            }
-            Raw::U16(v) => {
-                ok(v.len())?;
-                Raw::U16(interleave(v, channels))
-            }
-            Raw::F32(v) => {
-                ok(v.len())?;
-                Raw::F32(interleave(v, channels))
-            }
-        }
-    } else {
-        raw
-    };
-    Ok(RawImage {
-        width: w as usize,
-        height: h as usize,
-        channels,
-        raw,
-    })
-}
-
-/// A decoded PFM: size, channels (1 or 3) and linear samples, row 0 at the top.
-type Pfm = (usize, usize, usize, Vec<f32>);
-
-/// Reads the next whitespace-delimited header token of a PFM, at most 64 bytes long.
-fn pfm_token<'a>(bytes: &'a [u8], pos: &mut usize) -> std::result::Result<&'a str, String> {
-    while *pos < bytes.len() && bytes[*pos].is_ascii_whitespace() {
-        *pos += 1;
-    }
-    let start = *pos;
-    while *pos < bytes.len() && !bytes[*pos].is_ascii_whitespace() {
-        *pos += 1;
-        if *pos - start > 64 {
-            return Err("header token too long".into());
-        }
-    }
-    if start == *pos {
-        return Err("truncated header".into());
-    }
-    std::str::from_utf8(&bytes[start..*pos]).map_err(|_| "header is not ASCII".to_string())
-}
-
-/// Parses a whole PFM file from memory. Header: `PF` (RGB) or `Pf` (grey), width, height and
-/// scale (negative: little-endian; its magnitude is ignored), one whitespace byte, then rows
-/// of 32-bit floats stored bottom to top.
-fn parse_pfm(bytes: &[u8]) -> std::result::Result<Pfm, String> {
-    let mut pos = 0;
-    let channels = match pfm_token(bytes, &mut pos)? {
-        "PF" => 3,
-        "Pf" => 1,
-        other => {
-            return Err(format!(
-                "not a PFM file: magic '{}' (expected PF or Pf)",
-                other.escape_default()
-            ))
-        }
-    };
-    let dim = |pos: &mut usize, what: &str| -> std::result::Result<usize, String> {
-        let t = pfm_token(bytes, pos)?;
-        match t.parse::<usize>() {
-            Ok(v) if v > 0 => Ok(v),
-            _ => Err(format!("bad {what} '{}'", t.escape_default())),
-        }
-    };
-    let width = dim(&mut pos, "width")?;
-    let height = dim(&mut pos, "height")?;
-    if width > limits::MAX_SIDE || height > limits::MAX_SIDE || width * height > limits::MAX_PIXELS
-    {
-        return Err(format!(
-            "exceeds limits: PFM header declares {width}x{height} pixels (at most {} per \
-             side, {} in all)",
-            limits::MAX_SIDE,
-            limits::MAX_PIXELS
-        ));
-    }
-    let t = pfm_token(bytes, &mut pos)?;
-    let scale: f32 = t
-        .parse()
-        .map_err(|_| format!("bad scale '{}'", t.escape_default()))?;
-    if !scale.is_finite() || scale == 0.0 {
-        return Err(format!("bad scale {scale} (must be finite and non-zero)"));
-    }
-    if pos >= bytes.len() {
-        return Err("truncated header".into());
-    }
-    pos += 1; // the single whitespace byte after the scale
-    let little = scale < 0.0;
-    let count = width
-        .checked_mul(height)
-        .and_then(|n| n.checked_mul(channels))
-        .ok_or("image dimensions overflow")?;
-    let body = &bytes[pos..];
-    let truncated = match count.checked_mul(4) {
-        Some(need) => body.len() < need,
-        None => true,
-    };
-    if truncated {
-        return Err(format!(
-            "truncated: {width}x{height}x{channels} needs {} bytes of pixels, file has {}",
-            count.saturating_mul(4),
-            body.len()
-        ));
-    }
-    let row = width * channels;
-    let mut data = vec![0.0f32; count];
-    for (i, b) in body[..count * 4].chunks_exact(4).enumerate() {
-        let b = [b[0], b[1], b[2], b[3]];
-        let v = if little {
-            f32::from_le_bytes(b)
-        } else {
-            f32::from_be_bytes(b)
-        };
-        let (file_row, col) = (i / row, i % row);
-        data[(height - 1 - file_row) * row + col] = v;
-    }
-    Ok((width, height, channels, data))
-}
-
-/// Reads a PFM as a raw float image.
-fn read_pfm_raw(path: &Path) -> Result<RawImage> {
-    let bytes = std::fs::read(path).map_err(|e| Error::read(path, e))?;
-    pfm_raw(path, &bytes)
-}
-
-/// Decodes a PFM file's bytes as a raw float image.
-fn pfm_raw(path: &Path, bytes: &[u8]) -> Result<RawImage> {
-    let (width, height, channels, data) =
-        parse_pfm(bytes).map_err(|m| match m.strip_prefix("exceeds limits: ") {
-            Some(m) => Error::limits(path, m),
-            None => Error::decode(path, m),
-        })?;
-    Ok(RawImage {
-        width,
-        height,
-        channels,
-        raw: Raw::F32(data),
-    })
-}
-
-/// Reads a PFM file exactly as stored (no `NaN` marking): `(width, height, channels, data)`,
-/// row 0 at the top. Use [`read_image`] for stack input.
-pub fn read_pfm(path: &Path) -> Result<(usize, usize, usize, Vec<f32>)> {
-    let img = read_pfm_raw(path)?;
-    match img.raw {
-        Raw::F32(d) => Ok((img.width, img.height, img.channels, d)),
-        _ => unreachable!("PFM is always float"),
-    }
-}
-
 /// Checks that `data` holds `w * h * channels` values, so writers never write a torn image.
 pub(crate) fn check_len(
     path: &Path,
@@ -687,159 +323,11 @@ pub(crate) fn check_len(
     Ok(())
 }
 
-/// Writes a little-endian PFM (`PF` for 3 channels, `Pf` for 1), rows bottom to top as the
-/// format requires; `data` is row-major with row 0 at the top.
-pub fn write_pfm(
-    path: &Path,
-    width: usize,
-    height: usize,
-    channels: usize,
-    data: &[f32],
-) -> Result<()> {
-    if channels != 1 && channels != 3 {
-        return Err(Error::invalid(path, "PFM needs 1 or 3 channels"));
-    }
-    check_len(path, width, height, channels, data.len())?;
-    let magic = if channels == 3 { "PF" } else { "Pf" };
-    write_atomic(path, |w| {
-        let e = |e| Error::write(path, e);
-        write!(w, "{magic}\n{width} {height}\n-1.0\n").map_err(e)?;
-        let row = width * channels;
-        for r in (0..height).rev() {
-            for v in &data[r * row..(r + 1) * row] {
-                w.write_all(&v.to_le_bytes()).map_err(e)?;
-            }
-        }
-        Ok(())
-    })
-}
-
-/// Writes named float32 channels (each `w * h`, row-major) to an EXR file, ZIP-compressed.
-pub(crate) fn write_exr_channels(
-    path: &Path,
-    width: usize,
-    height: usize,
-    channels: Vec<(&str, Vec<f32>)>,
-) -> Result<()> {
-    use exr::prelude::{
-        AnyChannel, AnyChannels, Encoding, FlatSamples, Image as ExrImage, Layer, LayerAttributes,
-        SmallVec, WritableImage,
-    };
-    let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = channels
-        .into_iter()
-        .map(|(name, v)| AnyChannel::new(name, FlatSamples::F32(v)))
-        .collect();
-    let layer = Layer::new(
-        (width, height),
-        LayerAttributes::default(),
-        Encoding::SMALL_LOSSLESS,
-        AnyChannels::sort(list),
-    );
-    let image = ExrImage::from_layer(layer);
-    write_atomic(path, |w| {
-        image
-            .write()
-            .non_parallel()
-            .to_buffered(w)
-            .map_err(|e| match e {
-                exr::error::Error::Io(io) => Error::write(path, io),
-                other => Error::encode(path, other),
-            })
-    })
-}
-
 /// Splits interleaved samples into planes.
 pub(crate) fn planes(data: &[f32], channels: usize) -> Vec<Vec<f32>> {
     (0..channels)
         .map(|c| data.iter().skip(c).step_by(channels).copied().collect())
         .collect()
-}
-
-/// Writes interleaved linear RGB (`width * height * 3` values) as a float32 OpenEXR file with
-/// channels R, G, B; `NaN` and infinities are kept as they are.
-pub fn write_exr_rgb(path: &Path, width: usize, height: usize, rgb: &[f32]) -> Result<()> {
-    check_len(path, width, height, 3, rgb.len())?;
-    let mut p = planes(rgb, 3).into_iter();
-    let (r, g, b) = (p.next().unwrap(), p.next().unwrap(), p.next().unwrap());
-    write_exr_channels(path, width, height, vec![("R", r), ("G", g), ("B", b)])
-}
-
-/// Encodes raw pixel bytes as PNG (`bytes` native-endian for 16-bit types).
-pub(crate) fn write_png(
-    path: &Path,
-    width: usize,
-    height: usize,
-    bytes: &[u8],
-    color: ::image::ExtendedColorType,
-) -> Result<()> {
-    use ::image::ImageEncoder;
-    let (w, h) = (
-        u32::try_from(width).map_err(|_| Error::invalid(path, "image too wide for PNG"))?,
-        u32::try_from(height).map_err(|_| Error::invalid(path, "image too tall for PNG"))?,
-    );
-    write_atomic(path, |out| {
-        ::image::codecs::png::PngEncoder::new(out)
-            .write_image(bytes, w, h, color)
-            .map_err(|e| match e {
-                ::image::ImageError::IoError(io) => Error::write(path, io),
-                other => Error::encode(path, other),
-            })
-    })
-}
-
-/// Converts a value to an integer code in `[0, max]`: `NaN` becomes 0, others are clamped.
-fn quantise(v: f32, max: f32) -> f32 {
-    if v.is_nan() {
-        0.0
-    } else {
-        (v.clamp(0.0, 1.0) * max).round()
-    }
-}
-
-/// Writes interleaved linear RGB in `[0, 1]` (clamped; `NaN` as 0) as a 16-bit linear PNG.
-pub fn write_png16_rgb(path: &Path, width: usize, height: usize, rgb: &[f32]) -> Result<()> {
-    check_len(path, width, height, 3, rgb.len())?;
-    let bytes: Vec<u8> = rgb
-        .iter()
-        .flat_map(|&v| (quantise(v, 65535.0) as u16).to_ne_bytes())
-        .collect();
-    write_png(
-        path,
-        width,
-        height,
-        &bytes,
-        ::image::ExtendedColorType::Rgb16,
-    )
-}
-
-/// Writes interleaved RGB in `[0, 1]` (clamped; `NaN` as 0) as an 8-bit PNG, sRGB-encoding
-/// linear values first when `srgb_encode` is set.
-pub fn write_png8_rgb(
-    path: &Path,
-    width: usize,
-    height: usize,
-    rgb: &[f32],
-    srgb_encode: bool,
-) -> Result<()> {
-    check_len(path, width, height, 3, rgb.len())?;
-    let bytes: Vec<u8> = rgb
-        .iter()
-        .map(|&v| {
-            let v = if srgb_encode && !v.is_nan() {
-                linear_to_srgb(v.clamp(0.0, 1.0))
-            } else {
-                v
-            };
-            quantise(v, 255.0) as u8
-        })
-        .collect();
-    write_png(
-        path,
-        width,
-        height,
-        &bytes,
-        ::image::ExtendedColorType::Rgb8,
-    )
 }
 
 #[cfg(test)]
@@ -848,6 +336,8 @@ mod tests {
     use approx::assert_relative_eq;
     use std::fs::File;
     use std::path::PathBuf;
+
+    use super::pfm::parse_pfm;
 
     fn tmp(d: &tempfile::TempDir, name: &str) -> PathBuf {
         d.path().join(name)
@@ -890,7 +380,7 @@ mod tests {
 
     #[test]
     fn exr_half_rgba_drops_alpha() {
-        use exr::prelude::*;
+        use ::exr::prelude::*;
         let d = tempfile::tempdir().unwrap();
         let p = tmp(&d, "half.exr");
         let (w, h) = (3usize, 2usize);
@@ -1013,7 +503,7 @@ mod tests {
 
     #[test]
     fn tiff_float_grey_rgb_and_16bit() {
-        use tiff::encoder::{colortype, TiffEncoder};
+        use ::tiff::encoder::{colortype, TiffEncoder};
         let d = tempfile::tempdir().unwrap();
         let p = tmp(&d, "f.tif");
         let grey = vec![0.5f32, -1.0, 3.25, f32::NAN, 1e5, 0.0];
@@ -1174,7 +664,7 @@ mod tests {
         write_exr_rgb(&exr, 64, 64, &rgb).unwrap();
         let tif = tmp(&d, "t.tif");
         {
-            use tiff::encoder::{colortype, TiffEncoder};
+            use ::tiff::encoder::{colortype, TiffEncoder};
             TiffEncoder::new(File::create(&tif).unwrap())
                 .unwrap()
                 .write_image::<colortype::RGB32Float>(64, 64, &rgb)

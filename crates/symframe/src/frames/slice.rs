@@ -4,7 +4,7 @@
 
 use glam::DVec3;
 
-use crate::rig::Rig;
+use crate::frames::rig::Rig;
 use crate::stack::Stack;
 
 /// Gathers one pixel's samples into rig order (`rig.n_used() * 3` values) in the caller's buffer.
@@ -16,10 +16,10 @@ pub fn gather_slice(rig: &Rig, stack: &Stack, pixel: usize, out: &mut [f32]) {
 }
 
 /// Gathers one pixel's samples, given as every input light's RGB in input order
-/// (`rig.n_input * 3` values, e.g. a pixel of a [`Stack`] or of an on-disk tile), into rig order.
+/// (`rig.n_input() * 3` values, e.g. a pixel of a [`Stack`] or of an on-disk tile), into rig order.
 #[inline]
 pub fn gather_pixel(rig: &Rig, samples: &[f32], out: &mut [f32]) {
-    for (dst, &i) in out.chunks_exact_mut(3).zip(&rig.input_index) {
+    for (dst, &i) in out.chunks_exact_mut(3).zip(rig.input_index()) {
         dst.copy_from_slice(&samples[i * 3..i * 3 + 3]);
     }
 }
@@ -67,7 +67,7 @@ impl SliceLookup for ExactSlice<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rig::{uniform_cone_lights, RigOptions};
+    use crate::frames::rig::{uniform_cone_lights, RigOptions};
 
     fn linear_field(h: DVec3) -> [f32; 3] {
         [
@@ -81,11 +81,11 @@ mod tests {
     fn exact_at_samples_and_linear_fields_are_reproduced() {
         let rig = Rig::new(&uniform_cone_lights(300, 65.0), RigOptions::default()).unwrap();
         let slice: Vec<f32> = rig
-            .halfway_in_camera
+            .halfway_in_camera()
             .iter()
             .flat_map(|&h| linear_field(h))
             .collect();
-        for (i, &h) in rig.halfway_in_camera.iter().enumerate() {
+        for (i, &h) in rig.halfway_in_camera().iter().enumerate() {
             let v = interpolate(&rig, &slice, h).unwrap();
             for c in 0..3 {
                 assert!((v[c] - slice[i * 3 + c] as f64).abs() < 1e-5);
@@ -116,14 +116,14 @@ mod tests {
         assert!(interpolate(&rig, &slice, DVec3::new(0.9, 0.0, 0.3).normalize()).is_none());
         // Poison the sample at the top of the cone: queries next to it have no data.
         let top = rig
-            .halfway_in_camera
+            .halfway_in_camera()
             .iter()
             .enumerate()
             .max_by(|a, b| a.1.z.total_cmp(&b.1.z))
             .unwrap()
             .0;
         slice[top * 3..top * 3 + 3].fill(f32::NAN);
-        assert!(interpolate(&rig, &slice, rig.halfway_in_camera[top]).is_none());
+        assert!(interpolate(&rig, &slice, rig.halfway_in_camera()[top]).is_none());
     }
 
     #[test]
@@ -138,7 +138,7 @@ mod tests {
         let mut out = vec![0.0; rig.n_used() * 3];
         gather_slice(&rig, &stack, 1, &mut out);
         let want: Vec<f32> = rig
-            .input_index
+            .input_index()
             .iter()
             .flat_map(|&i| [i as f32; 3])
             .collect();

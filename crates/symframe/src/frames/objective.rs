@@ -18,9 +18,9 @@ use std::cell::RefCell;
 
 use glam::{DVec3, Vec3, Vec4};
 
-use crate::rig::{Coverage, FastLocator, Rig};
-use crate::slice::{ExactSlice, SliceLookup};
-use crate::symmetry::{
+use crate::frames::rig::{Coverage, FastLocator, Rig};
+use crate::frames::slice::{ExactSlice, SliceLookup};
+use crate::frames::symmetry::{
     symmetry_term, symmetry_term_over, CosineMode, Frame, Symmetry, SymmetryTerm,
 };
 
@@ -62,7 +62,7 @@ impl<'a> ExactObjective<'a> {
     /// The objective of one pixel's slice (rig order, `rig.n_used() * 3` values, NaN = invalid).
     pub fn new(rig: &'a Rig, samples: &'a [f32]) -> Self {
         let order = rig
-            .query_order
+            .query_order()
             .iter()
             .copied()
             .filter(|&j| samples[j as usize * 3].is_finite())
@@ -97,7 +97,7 @@ impl Objective for ExactObjective<'_> {
     }
 
     fn normal_term(&self, n: DVec3, cosine: CosineMode, level: Level) -> SymmetryTerm {
-        let frame = Frame::new(n, crate::symmetry::tangent_basis(n).0);
+        let frame = Frame::new(n, crate::geometry::tangent_basis(n).0);
         self.term(Symmetry::N, frame, cosine, level)
     }
 
@@ -155,13 +155,13 @@ impl FastScratch {
         self.hy.clear();
         self.hz.clear();
         self.samples.clear();
-        for &j in &rig.query_order {
+        for &j in rig.query_order() {
             let j = j as usize;
             let s = &samples[j * 3..j * 3 + 3];
             if !s[0].is_finite() {
                 continue;
             }
-            let h = rig.halfway_in_camera[j];
+            let h = rig.halfway_in_camera()[j];
             self.hx.push(h.x as f32);
             self.hy.push(h.y as f32);
             self.hz.push(h.z as f32);
@@ -169,14 +169,14 @@ impl FastScratch {
         }
         self.focus.get_mut().built = false;
         FastObjective {
-            locator: &rig.fast,
-            coverage: &rig.coverage,
+            locator: rig.fast(),
+            coverage: rig.coverage(),
             lanes: &self.lanes,
             hx: &self.hx,
             hy: &self.hy,
             hz: &self.hz,
             samples: &self.samples,
-            cos_max: rig.cos_theta_d_max as f32,
+            cos_max: rig.cos_theta_d_max() as f32,
             focus: &self.focus,
         }
     }
@@ -678,9 +678,9 @@ impl Default for Reflections {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rig::{uniform_cone_lights, RigOptions};
-    use crate::symmetry::tangent_basis;
-    use crate::symmetry::tests::render_slice;
+    use crate::frames::rig::{uniform_cone_lights, RigOptions};
+    use crate::frames::symmetry::tests::render_slice;
+    use crate::geometry::tangent_basis;
 
     #[test]
     fn fast_terms_agree_with_the_reference_terms() {

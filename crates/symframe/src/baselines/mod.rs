@@ -8,18 +8,26 @@
 //! scales `g = albedo * n`), so averaging first loses nothing and costs a third of three fits.
 //! A sample whose grey value is not finite (the stack's marker of an invalid sample) is skipped.
 //!
+//! One module per baseline: [`woodham`], [`max_reflectance`], [`highlight_centroid`]; this one
+//! holds what they share and the driver.
+//!
 //! Unlike the symmetry method, the baselines use every light given: there is no light cone.
 
-use glam::{DMat3, DVec3};
+use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::estimate::{EstimateMaps, PixelRecord, PixelSource, PixelStatus};
-use crate::highlight::highlight_moments_by;
+use crate::frames::estimator::{EstimateMaps, PixelRecord, PixelSource, PixelStatus};
 use crate::method::{run_stack, PixelMethod};
-use crate::rig::halfway_from_light;
 use crate::stack::Stack;
-use crate::symmetry::tangent_basis;
+
+pub mod highlight_centroid;
+pub mod max_reflectance;
+pub mod woodham;
+
+pub use highlight_centroid::highlight_centroid_pixel;
+pub use max_reflectance::{highlight_peak, max_reflectance_pixel, MAX_REFLECTANCE_NEIGHBOURS};
+pub use woodham::{woodham_pixel, woodham_robust_pixel};
 
 /// Which baseline to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -35,7 +43,7 @@ pub enum Baseline {
     /// value over its nearest neighbours in halfway space.
     MaxReflectance,
     /// The intensity-weighted mean (normal) and second moment (tangent axis) of the halfway
-    /// vectors of the brightest samples ([`crate::highlight`]).
+    /// vectors of the brightest samples ([`crate::frames::highlight`]).
     HighlightCentroid,
 }
 
@@ -208,419 +216,6 @@ fn brightest(samples: &[f32]) -> Option<(usize, f64)> {
     best
 }
 
-/// Accumulated normal equations `A g = b` of the Lambertian model `I = g . l`.
-#[derive(Debug, Clone, Copy, Default)]
-struct NormalEquations {
-    /// Upper triangle of `A = sum l l^T`: xx, xy, xz, yy, yz, zz.
-    a: [f64; 6],
-    /// `b = sum I l`.
-    b: DVec3,
-    /// `sum I^2`, for the goodness of fit.
-    ii: f64,
-    /// Samples added.
-    n: u32,
-}
-
-impl NormalEquations {
-    #[inline]
-    fn add(&mut self, l: DVec3, i: f64) {
-        let a = &mut self.a;
-        a[0] += l.x * l.x;
-        a[1] += l.x * l.y;
-        a[2] += l.x * l.z;
-        a[3] += l.y * l.y;
-        a[4] += l.y * l.z;
-        a[5] += l.z * l.z;
-        self.b += i * l;
-        self.ii += i * i;
-        self.n += 1;
-    }
-
-    fn matrix(&self) -> DMat3 {
-        let a = &self.a;
-        DMat3::from_cols(
-            DVec3::new(a[0], a[1], a[2]),
-            DVec3::new(a[1], a[3], a[4]),
-            DVec3::new(a[2], a[4], a[5]),
-        )
-    }
-
-    /// The least-squares `g`, or `None` with fewer than 3 samples or lights too close to
-    /// coplanar (determinant below `1e-9` of `(trace / 3)^3`, its value for evenly spread
-    /// lights).
-    fn solve(&self) -> Option<DVec3> {
-        if self.n < 3 {
-            return None;
-        }
-        let m = self.matrix();
-        let scale = (self.a[0] + self.a[3] + self.a[5]) / 3.0;
-        let det = m.determinant();
-        if det.is_nan() || det <= 1e-9 * scale * scale * scale {
-            return None;
-        }
-        let g = m.inverse() * self.b;
-        g.is_finite().then_some(g)
-    }
-
-    /// Share of the fitted samples' energy the fit explains, `1 - sum r^2 / sum I^2` (the
-    /// uncentred R^2), in [0, 1].
-    fn explained(&self, g: DVec3) -> f64 {
-        if self.ii <= 0.0 {
-            return 0.0;
-        }
-        // sum (I - g.l)^2 = sum I^2 - 2 g.b + g^T A g.
-        let ss = self.ii - 2.0 * g.dot(self.b) + g.dot(self.matrix() * g);
-        (1.0 - ss.max(0.0) / self.ii).clamp(0.0, 1.0)
-    }
-}
-
-/// The pixel's shadow threshold: [`BaselineParams::shadow_fraction`] of its reference level
-/// (the [`BaselineParams::shadow_reference_quantile`] of its valid grey values, or the maximum
-/// where that is zero); `None` when no valid sample is brighter than zero. `scratch` holds the
-/// grey values for the quantile (reused: no allocation once it has grown to the light count).
-#[inline]
-fn shadow_threshold(
-    samples: &[f32],
-    params: &BaselineParams,
-    scratch: &mut Vec<f64>,
-) -> Option<f64> {
-    let (_, max) = brightest(samples)?;
-    let q = params.shadow_reference_quantile;
-    let reference = if q >= 1.0 {
-        max
-    } else {
-        scratch.clear();
-        scratch.extend(samples.chunks_exact(3).filter_map(grey));
-        let k = ((q * (scratch.len() - 1) as f64).floor() as usize).min(scratch.len() - 1);
-        let (_, &mut v, _) = scratch.select_nth_unstable_by(k, f64::total_cmp);
-        if v > 0.0 {
-            v
-        } else {
-            max
-        }
-    };
-    Some(params.shadow_fraction * reference)
-}
-
-/// The normal equations over the samples at or above `threshold`.
-#[inline]
-fn lit_equations(samples: &[f32], lights: &[DVec3], threshold: f64) -> NormalEquations {
-    let mut eq = NormalEquations::default();
-    for (s, &l) in samples.chunks_exact(3).zip(lights) {
-        if let Some(i) = grey(s) {
-            if i >= threshold {
-                eq.add(l, i);
-            }
-        }
-    }
-    eq
-}
-
-/// The estimate from solved normal equations: the normal is `g / |g|`; a degenerate system or
-/// a normal facing away from the camera is discarded.
-fn finish(eq: &NormalEquations, g: Option<DVec3>) -> BaselinePixel {
-    let Some(g) = g else {
-        return BaselinePixel::empty(PixelStatus::Discarded);
-    };
-    match g.try_normalize() {
-        Some(n) if n.z > 0.0 => BaselinePixel {
-            status: PixelStatus::Estimated,
-            normal: Some(n),
-            tangent: None,
-            confidence: eq.explained(g) as f32,
-            used: eq.n,
-        },
-        _ => BaselinePixel::empty(PixelStatus::Discarded),
-    }
-}
-
-/// Woodham's Lambertian photometric stereo at one pixel: the least-squares `g` of
-/// `I_i = g . l_i` over the unshadowed samples (grey value at or above
-/// [`BaselineParams::shadow_fraction`] of the pixel's reference level, by default the 90th
-/// percentile of its grey values), normal `g / |g|`.
-///
-/// `samples` is the pixel's `n_lights * 3` RGB values (as [`Stack::pixel`]), `lights` the unit
-/// light directions in the same order, `scratch` a buffer reused between pixels. Confidence:
-/// the uncentred R^2 of the fit, `1 - sum r_i^2 / sum I_i^2` over the samples used (1 for an
-/// exact Lambertian pixel). Allocation-free once `scratch` has grown to the light count.
-pub fn woodham_pixel(
-    samples: &[f32],
-    lights: &[DVec3],
-    params: &BaselineParams,
-    scratch: &mut Vec<f64>,
-) -> BaselinePixel {
-    let Some(threshold) = shadow_threshold(samples, params, scratch) else {
-        return BaselinePixel::empty(PixelStatus::NoData);
-    };
-    let eq = lit_equations(samples, lights, threshold);
-    finish(&eq, eq.solve())
-}
-
-/// Woodham with outlier rejection at one pixel (the paper's Figure 4 baseline). The rule:
-///
-/// 1. fit `g_1` over the unshadowed samples as [`woodham_pixel`];
-/// 2. over the same samples, the residuals `r_i = I_i - g_1 . l_i` have mean `m` and (population)
-///    standard deviation `s`;
-/// 3. drop the samples with `|r_i - m| > k s` (`k` = [`BaselineParams::outlier_sigmas`], 2),
-///    and fit again over the rest, once. If fewer than 3 samples are left or the refit is
-///    degenerate, the first fit stands.
-///
-/// Highlights and cast shadows leave large residuals and are dropped; an exact Lambertian pixel
-/// has `s = 0` and keeps every sample. Confidence: the uncentred R^2 of the final fit over the
-/// samples it used. Allocation-free once `scratch` has grown (three passes over the samples).
-pub fn woodham_robust_pixel(
-    samples: &[f32],
-    lights: &[DVec3],
-    params: &BaselineParams,
-    scratch: &mut Vec<f64>,
-) -> BaselinePixel {
-    let Some(threshold) = shadow_threshold(samples, params, scratch) else {
-        return BaselinePixel::empty(PixelStatus::NoData);
-    };
-    let eq = lit_equations(samples, lights, threshold);
-    let Some(g1) = eq.solve() else {
-        return BaselinePixel::empty(PixelStatus::Discarded);
-    };
-    let (mut sum, mut sum2) = (0.0, 0.0);
-    for (s, &l) in samples.chunks_exact(3).zip(lights) {
-        if let Some(i) = grey(s).filter(|&i| i >= threshold) {
-            let r = i - g1.dot(l);
-            sum += r;
-            sum2 += r * r;
-        }
-    }
-    let n = eq.n as f64;
-    let mean = sum / n;
-    let sd = (sum2 / n - mean * mean).max(0.0).sqrt();
-    let limit = params.outlier_sigmas * sd;
-    let mut kept = NormalEquations::default();
-    for (s, &l) in samples.chunks_exact(3).zip(lights) {
-        if let Some(i) = grey(s).filter(|&i| i >= threshold) {
-            if (i - g1.dot(l) - mean).abs() <= limit {
-                kept.add(l, i);
-            }
-        }
-    }
-    match kept.solve() {
-        Some(g2) if kept.n < eq.n => finish(&kept, Some(g2)),
-        _ => finish(&eq, Some(g1)),
-    }
-}
-
-/// Neighbours of the brightest sample (in halfway space) that the max-reflectance refinement
-/// fits over, besides the brightest sample itself.
-pub const MAX_REFLECTANCE_NEIGHBOURS: usize = 12;
-
-/// The max-reflectance ("specularity") method at one pixel: the normal is the halfway vector
-/// `h = normalize(l + v)` where the slice is brightest. Refinement between samples:
-///
-/// 1. take the brightest valid sample `j` and the [`MAX_REFLECTANCE_NEIGHBOURS`] valid,
-///    positive samples whose halfway vectors are nearest to `h_j`;
-/// 2. map their halfway vectors to the gnomonic chart of the tangent plane at `h_j` and fit
-///    `ln I = c0 + c1 u + c2 w + c3 u^2 + c4 u w + c5 w^2` by least squares (exact for a
-///    Gaussian lobe: Beckmann-like highlights are quadratic in log space);
-/// 3. the normal is the chart point of the fitted maximum; if the fit is degenerate, not a
-///    maximum, or its peak lies outside the neighbourhood, it is `h_j` itself.
-///
-/// So the answer is exact for a highlight centred on the normal sampled densely enough, and
-/// within the lights' spacing otherwise. It assumes the peak of the slice is a mirror-like
-/// highlight: on a diffuse surface the brightest light is along the normal, so the halfway
-/// vector lies halfway between the normal and the view (an error of half the normal's angle
-/// from the view; the paper's Figure 4).
-///
-/// Confidence: the highlight's contrast, `1 - mean / max` of the valid grey values (near 1 for
-/// a sharp highlight, about 0.5 for a diffuse surface under lights spread over a wide cone).
-/// Allocation-free.
-pub fn max_reflectance_pixel(samples: &[f32], lights: &[DVec3]) -> BaselinePixel {
-    let Some((j, max)) = brightest(samples) else {
-        return BaselinePixel::empty(PixelStatus::NoData);
-    };
-    let Some(hj) = halfway_from_light(lights[j]) else {
-        return BaselinePixel::empty(PixelStatus::Discarded);
-    };
-    let (near, mean) = peak_neighbours(samples, lights, j, hj);
-    let confidence = (1.0 - mean / max).clamp(0.0, 1.0) as f32;
-    let normal = refine_peak(samples, lights, hj, max, &near).unwrap_or(hj);
-    if normal.z <= 0.0 {
-        return BaselinePixel::empty(PixelStatus::Discarded);
-    }
-    let used = 1 + near.iter().filter(|n| n.1 != usize::MAX).count() as u32;
-    BaselinePixel {
-        status: PixelStatus::Estimated,
-        normal: Some(normal),
-        tangent: None,
-        confidence,
-        used,
-    }
-}
-
-/// Smallest elongation of the highlight for the highlight-centroid baseline to report a
-/// tangent (the estimator's own rule, [`crate::estimate::MIN_ELONGATION`]).
-const CENTROID_MIN_ELONGATION: f64 = crate::estimate::MIN_ELONGATION;
-
-/// The highlight-centroid baseline at one pixel: the normal is the intensity-weighted mean of
-/// the halfway vectors of the samples at or above half the brightest grey value, the tangent
-/// the widest axis of their weighted second moment where the highlight is elongated
-/// ([`highlight_moments`]). Strong on glossy materials under dense rigs; on diffuse surfaces it
-/// shares max-reflectance's bias (half the normal's angle from the view). Confidence: the
-/// highlight's contrast. Allocation-free.
-pub fn highlight_centroid_pixel(samples: &[f32], lights: &[DVec3]) -> BaselinePixel {
-    let Some(m) = highlight_moments_by(samples, |i| halfway_from_light(lights[i])) else {
-        return BaselinePixel::empty(PixelStatus::NoData);
-    };
-    if m.normal.z <= 0.0 {
-        return BaselinePixel::empty(PixelStatus::Discarded);
-    }
-    BaselinePixel {
-        status: PixelStatus::Estimated,
-        normal: Some(m.normal),
-        tangent: m.has_tangent(CENTROID_MIN_ELONGATION).then_some(m.tangent),
-        confidence: m.contrast as f32,
-        used: m.count,
-    }
-}
-
-/// The [`MAX_REFLECTANCE_NEIGHBOURS`] valid, positive samples whose halfway vectors are nearest
-/// to `hj` (the brightest sample `j`'s), as `(cos to hj, index)` sorted nearest first (index
-/// `usize::MAX` where there are fewer), and the mean grey value of the valid samples.
-fn peak_neighbours(
-    samples: &[f32],
-    lights: &[DVec3],
-    j: usize,
-    hj: DVec3,
-) -> ([(f64, usize); MAX_REFLECTANCE_NEIGHBOURS], f64) {
-    const K: usize = MAX_REFLECTANCE_NEIGHBOURS;
-    let mut near = [(f64::NEG_INFINITY, usize::MAX); K];
-    let (mut sum, mut count) = (0.0, 0usize);
-    for (i, (s, &l)) in samples.chunks_exact(3).zip(lights).enumerate() {
-        let Some(v) = grey(s) else { continue };
-        sum += v;
-        count += 1;
-        if i == j || v <= 0.0 {
-            continue;
-        }
-        let Some(h) = halfway_from_light(l) else {
-            continue;
-        };
-        let c = h.dot(hj);
-        if c > near[K - 1].0 {
-            let mut k = K - 1;
-            while k > 0 && near[k - 1].0 < c {
-                near[k] = near[k - 1];
-                k -= 1;
-            }
-            near[k] = (c, i);
-        }
-    }
-    (near, sum / count.max(1) as f64)
-}
-
-/// The log-quadratic peak of a pixel's slice ([`max_reflectance_pixel`]'s refinement): the
-/// centre of a Gaussian reconstruction of the lobe around the brightest sample; `None` where
-/// there is no valid sample, or the fit is degenerate or not a maximum near the brightest
-/// sample. Allocation-free.
-pub fn highlight_peak(samples: &[f32], lights: &[DVec3]) -> Option<DVec3> {
-    let (j, max) = brightest(samples)?;
-    let hj = halfway_from_light(lights[j])?;
-    let (near, _) = peak_neighbours(samples, lights, j, hj);
-    refine_peak(samples, lights, hj, max, &near)
-}
-
-/// Step 2-3 of [`max_reflectance_pixel`]: the log-quadratic peak near `hj`, if well defined.
-fn refine_peak(
-    samples: &[f32],
-    lights: &[DVec3],
-    hj: DVec3,
-    max: f64,
-    near: &[(f64, usize); MAX_REFLECTANCE_NEIGHBOURS],
-) -> Option<DVec3> {
-    let (e1, e2) = tangent_basis(hj);
-    let chart = |h: DVec3| {
-        let d = h.dot(hj);
-        (h.dot(e1) / d, h.dot(e2) / d)
-    };
-    // Chart radius of the neighbourhood: coordinates are scaled by it for conditioning.
-    let mut radius = 0.0f64;
-    let mut n_pts = 1;
-    for &(c, i) in near.iter().filter(|n| n.1 != usize::MAX) {
-        if c <= 0.0 {
-            continue;
-        }
-        let (u, w) = chart(halfway_from_light(lights[i])?);
-        radius = radius.max(u.hypot(w));
-        n_pts += 1;
-    }
-    if n_pts < 7 || radius <= 0.0 {
-        return None;
-    }
-    // Normal equations of the 6-parameter fit, augmented: [A | b].
-    let mut m = [[0.0f64; 7]; 6];
-    let mut add = |u: f64, w: f64, y: f64| {
-        let phi = [1.0, u, w, u * u, u * w, w * w];
-        for r in 0..6 {
-            for c in 0..6 {
-                m[r][c] += phi[r] * phi[c];
-            }
-            m[r][6] += phi[r] * y;
-        }
-    };
-    add(0.0, 0.0, max.ln());
-    for &(c, i) in near.iter().filter(|n| n.1 != usize::MAX) {
-        if c <= 0.0 {
-            continue;
-        }
-        let (u, w) = chart(halfway_from_light(lights[i])?);
-        let y = grey(&samples[i * 3..i * 3 + 3])?;
-        add(u / radius, w / radius, y.ln());
-    }
-    let c = solve6(m)?;
-    // Stationary point: H p = -grad, H = [[2 c3, c4], [c4, 2 c5]] must be negative definite.
-    let (h11, h12, h22) = (2.0 * c[3], c[4], 2.0 * c[5]);
-    let det = h11 * h22 - h12 * h12;
-    if !(h11 < 0.0 && det > 0.0) {
-        return None;
-    }
-    let pu = (-c[1] * h22 + c[2] * h12) / det;
-    let pw = (-c[2] * h11 + c[1] * h12) / det;
-    let step = pu.hypot(pw);
-    if step.is_nan() || step > 1.0 {
-        return None;
-    }
-    (hj + radius * (pu * e1 + pw * e2)).try_normalize()
-}
-
-/// Solves a 6x6 system given as an augmented matrix by Gaussian elimination with partial
-/// pivoting; `None` if (numerically) singular.
-fn solve6(mut m: [[f64; 7]; 6]) -> Option<[f64; 6]> {
-    let scale = (0..6).map(|k| m[k][k].abs()).fold(0.0, f64::max);
-    if scale.is_nan() || scale <= 0.0 {
-        return None;
-    }
-    for col in 0..6 {
-        let piv = (col..6).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;
-        if m[piv][col].is_nan() || m[piv][col].abs() <= 1e-12 * scale {
-            return None;
-        }
-        m.swap(col, piv);
-        let pivot_row = m[col];
-        for row in m.iter_mut().skip(col + 1) {
-            let f = row[col] / pivot_row[col];
-            for (v, p) in row.iter_mut().zip(pivot_row).skip(col) {
-                *v -= f * p;
-            }
-        }
-    }
-    let mut x = [0.0f64; 6];
-    for r in (0..6).rev() {
-        let mut v = m[r][6];
-        for c in r + 1..6 {
-            v -= m[r][c] * x[c];
-        }
-        x[r] = v / m[r][r];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
-}
-
 /// Runs one baseline at one pixel (`samples` as [`Stack::pixel`], `lights` unit, same order;
 /// `scratch` a buffer reused between pixels).
 pub fn baseline_pixel(
@@ -731,7 +326,7 @@ pub fn estimate_stack_baseline_with(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<EstimateMaps> {
     let method = BaselineMethod::new(method, lights, params)?;
-    crate::estimate::check_inputs(
+    crate::frames::estimator::check_inputs(
         stack.width,
         stack.height,
         stack.n_lights,
@@ -766,7 +361,8 @@ pub fn baseline_lights(lights: &[DVec3]) -> Result<Vec<DVec3>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rig::uniform_cone_lights;
+    use crate::frames::rig::uniform_cone_lights;
+    use crate::geometry::halfway_from_light;
 
     /// One Lambertian pixel: `albedo * max(n.l, 0)` per channel.
     fn lambert(n: DVec3, lights: &[DVec3], albedo: [f32; 3]) -> Vec<f32> {

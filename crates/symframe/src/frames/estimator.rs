@@ -6,17 +6,18 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::baseline::{highlight_peak, woodham_robust_pixel, BaselineParams};
+use crate::baselines::{highlight_peak, woodham_robust_pixel, BaselineParams};
 use crate::error::{Error, Result};
-use crate::highlight::highlight_moments;
-use crate::method::{run_stack, PixelMethod};
-use crate::objective::{ExactObjective, FastScratch, Level, Objective};
-use crate::optim::{nelder_mead, NelderMeadOptions};
-use crate::rig::Rig;
-use crate::stack::Stack;
-use crate::symmetry::{
-    default_min_domain, tangent_basis, CosineMode, Frame, SymmetryTerm, EMPTY_DISTANCE,
+use crate::frames::highlight::highlight_moments;
+use crate::frames::objective::{ExactObjective, FastScratch, Level, Objective};
+use crate::frames::optim::{nelder_mead, NelderMeadOptions};
+use crate::frames::rig::Rig;
+use crate::frames::symmetry::{
+    default_min_domain, CosineMode, Frame, SymmetryTerm, EMPTY_DISTANCE,
 };
+use crate::geometry::tangent_basis;
+use crate::method::{run_stack, PixelMethod};
+use crate::stack::Stack;
 
 /// Parameters of the symmetry estimator.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -392,7 +393,7 @@ impl<'a> Estimator<'a> {
         let rig = self.rig;
         let fit = woodham_robust_pixel(
             slice,
-            &rig.lights_in_camera,
+            rig.lights_in_camera(),
             &BaselineParams::default(),
             scratch,
         );
@@ -477,7 +478,7 @@ impl<'a> Estimator<'a> {
     /// fit does not explain (metals) are left as they are: their dark samples are the lobe's
     /// tails.
     fn mark_cast_shadows(&self, slice: &[f32], out: &mut Vec<f32>, scratch: &mut Vec<f64>) -> bool {
-        let lights = &self.rig.lights_in_camera;
+        let lights = self.rig.lights_in_camera();
         let fit = woodham_robust_pixel(slice, lights, &BaselineParams::default(), scratch);
         let Some(n) = fit
             .normal
@@ -530,7 +531,7 @@ impl<'a> Estimator<'a> {
         let rig = self.rig;
         let lambert = woodham_robust_pixel(
             slice,
-            &rig.lights_in_camera,
+            rig.lights_in_camera(),
             &BaselineParams::default(),
             scratch,
         );
@@ -540,7 +541,7 @@ impl<'a> Estimator<'a> {
                 n,
                 FALLBACK_CONFIDENCE * lambert.confidence,
             ),
-            _ => match highlight_moments(slice, &rig.halfway_in_camera) {
+            _ => match highlight_moments(slice, rig.halfway_in_camera()) {
                 Some(m) if m.normal.z > 0.0 => (
                     PixelSource::Highlight,
                     m.normal,
@@ -601,7 +602,7 @@ impl<'a> Estimator<'a> {
                 term.count,
             )
         };
-        let moments = highlight_moments(slice, &rig.halfway_in_camera);
+        let moments = highlight_moments(slice, rig.halfway_in_camera());
         let mut source = PixelSource::Symmetry;
         let diffuse_centre = if self.params.cosine == CosineMode::Auto {
             self.diffuse_centre(slice, scratch)
@@ -619,7 +620,7 @@ impl<'a> Estimator<'a> {
                 // it locates the normal from every lit light; otherwise (a metal) the peak does.
                 let fit = woodham_robust_pixel(
                     slice,
-                    &rig.lights_in_camera,
+                    rig.lights_in_camera(),
                     &BaselineParams::default(),
                     scratch,
                 );
@@ -627,7 +628,7 @@ impl<'a> Estimator<'a> {
                     Some(m) if fit.confidence as f64 >= DIFFUSE_CENTRE_FIT => {
                         Some((m, PixelSource::Lambertian))
                     }
-                    _ => highlight_peak(slice, &rig.lights_in_camera)
+                    _ => highlight_peak(slice, rig.lights_in_camera())
                         .map(|m| (m, PixelSource::Highlight)),
                 }
             } else {
@@ -644,9 +645,9 @@ impl<'a> Estimator<'a> {
             source = PixelSource::Lambertian;
             m
         } else {
-            let mut start = rig.halfway_in_camera[j];
+            let mut start = rig.halfway_in_camera()[j];
             let mut start_at = at(start);
-            let light = rig.lights_in_camera[j];
+            let light = rig.lights_in_camera()[j];
             if light.z > 0.0 {
                 let light_at = at(light);
                 if light_at.0 < start_at.0 {
@@ -665,7 +666,7 @@ impl<'a> Estimator<'a> {
                 self.params.max_normal_evals,
             );
             evals += e;
-            let starts = [Some(rig.halfway_in_camera[j]), moments.map(|m| m.normal)];
+            let starts = [Some(rig.halfway_in_camera()[j]), moments.map(|m| m.normal)];
             // A search that ended beyond the reach is left there (discarded or a fallback): the
             // judge must not turn it into a clamped guess inside the sampled region.
             let mut n = n;
@@ -845,7 +846,7 @@ impl<'a> Estimator<'a> {
     /// (shadows, interreflections, noise).
     fn confidence(&self, slice: &[f32], n: DVec3, term_n: &SymmetryTerm, residual: f64) -> f32 {
         let mut total = 0.0;
-        for (s, l) in slice.chunks_exact(3).zip(&self.rig.lights_in_camera) {
+        for (s, l) in slice.chunks_exact(3).zip(self.rig.lights_in_camera()) {
             let nl = n.dot(*l);
             if nl > 0.0 && s[0].is_finite() {
                 total += nl * nl * (s[0] as f64).powi(2)
@@ -896,8 +897,8 @@ pub const FALLBACK_DIFFUSE_FIT: f64 = 0.95;
 /// symmetry estimate.
 pub const FALLBACK_CONFIDENCE: f32 = 0.5;
 
-/// Smallest elongation of the highlight's second moment ([`crate::highlight::HighlightMoments::elongation`])
-/// for a tangent.
+/// Smallest elongation of the highlight's second moment
+/// ([`crate::frames::highlight::HighlightMoments::elongation`]) for a tangent.
 pub const MIN_ELONGATION: f64 = 0.4;
 
 /// Under [`CosineMode::Auto`], pixels where a Lambertian term leaves at least this share of
@@ -912,7 +913,7 @@ pub const AUTO_SPECULAR_SHARE: f64 = 0.005;
 /// diffuse surface, the specular part's share otherwise.
 fn unexplained_share(rig: &Rig, slice: &[f32], n: DVec3) -> f64 {
     let (mut il, mut ll, mut ii) = ([0.0f64; 3], 0.0f64, 0.0f64);
-    for (s, l) in slice.chunks_exact(3).zip(&rig.lights_in_camera) {
+    for (s, l) in slice.chunks_exact(3).zip(rig.lights_in_camera()) {
         let nl = n.dot(*l);
         if nl < SHADOW_MIN_COSINE || !s[0].is_finite() {
             continue;
@@ -1179,7 +1180,7 @@ impl PixelMethod for Estimator<'_> {
     type Output = PixelRecord;
 
     fn lights(&self) -> Option<&[usize]> {
-        Some(&self.rig.input_index)
+        Some(self.rig.input_index())
     }
 
     fn scratch(&self) -> PixelScratch {
@@ -1215,7 +1216,13 @@ pub fn estimate_stack(
     params: EstimatorParams,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<EstimateMaps> {
-    check_inputs(stack.width, stack.height, stack.n_lights, rig.n_input, mask)?;
+    check_inputs(
+        stack.width,
+        stack.height,
+        stack.n_lights,
+        rig.n_input(),
+        mask,
+    )?;
     let records = run_stack(&Estimator::new(rig, params), stack, mask, progress);
     Ok(EstimateMaps::from_records(
         stack.width,

@@ -1,0 +1,292 @@
+//! Building the cache: decoding the images in batches and scattering each batch into the
+//! file with positioned writes; repairing the blocks that fail their checksum.
+
+use std::fs::{self, File, OpenOptions};
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use super::header::{encode_warnings, matches, read_header, Header, HEADER_BYTES, WARNINGS_AT};
+use super::{CacheInfo, CacheOptions, TileGrid};
+use crate::codecs::DecodeOptions;
+use crate::dataset::Dataset;
+use crate::error::{Error, Result, Warning};
+use crate::stack::{check_size, decode_stack_image, Notes};
+
+/// What a build did.
+pub(super) struct Built {
+    /// About the images decoded by this build.
+    pub(super) warnings: Vec<Warning>,
+    pub(super) decoded: usize,
+    pub(super) resumed: usize,
+    pub(super) batch: usize,
+    pub(super) decode_s: f64,
+    pub(super) scatter_s: f64,
+}
+
+/// Creates `path` of `len` bytes, reserving the disk space up front where the file system can
+/// (so a full disk is an error here, not a fault while writing through the mapping).
+pub(super) fn create_sized(path: &Path, len: u64) -> Result<File> {
+    let file = OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .open(path)
+        .map_err(|e| Error::write(path, e))?;
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::io::AsRawFd;
+        // SAFETY: fallocate on a file descriptor we own.
+        let r = unsafe { libc::fallocate(file.as_raw_fd(), 0, 0, len as libc::off_t) };
+        if r != 0 {
+            let e = std::io::Error::last_os_error();
+            if e.raw_os_error() != Some(libc::EOPNOTSUPP) {
+                return Err(Error::write(path, e));
+            }
+        }
+    }
+    file.set_len(len).map_err(|e| Error::write(path, e))?;
+    Ok(file)
+}
+
+/// Builds (or resumes building) the partial cache at `partial`; on success it is complete.
+pub(super) fn build(
+    ds: &Dataset,
+    opts: &DecodeOptions,
+    partial: &Path,
+    fingerprint: u64,
+    copts: CacheOptions,
+    stop: &AtomicBool,
+    on_image: &(dyn Fn() + Sync),
+) -> Result<Built> {
+    let n = ds.images.len();
+    let notes = Notes::new(n);
+    let decode_one = |i: usize| -> Result<(usize, usize, Vec<f32>)> {
+        if stop.load(Ordering::Relaxed) {
+            return Err(Error::Interrupted);
+        }
+        let r = decode_stack_image(ds, i, opts, &notes)?;
+        on_image();
+        Ok(r)
+    };
+    let mut decode_s = 0.0;
+    let mut first: Option<Vec<f32>> = None;
+    // Resume a partial build of the same inputs, else start afresh from the first image.
+    let resumable = read_header(partial)?
+        .filter(|(h, len)| !h.complete && matches(h, *len, fingerprint, copts.tile, n));
+    let (mut header, file) = match resumable {
+        Some((h, _)) => {
+            let file = OpenOptions::new()
+                .read(true)
+                .write(true)
+                .open(partial)
+                .map_err(|e| Error::write(partial, e))?;
+            (h, file)
+        }
+        None => {
+            if partial.exists() {
+                fs::remove_file(partial).map_err(|e| Error::write(partial, e))?;
+            }
+            let t = Instant::now();
+            let (w, h, rgb) = decode_one(0)?;
+            decode_s += t.elapsed().as_secs_f64();
+            if w == 0 || h == 0 {
+                return Err(Error::invalid(&ds.images[0], "image is empty"));
+            }
+            first = Some(rgb);
+            let header = Header {
+                width: w,
+                height: h,
+                n_lights: n,
+                tile: copts.tile,
+                fingerprint,
+                images_done: 0,
+                complete: false,
+                light_block: (copts.batch_bytes / (w * h * 12)).clamp(1, n),
+            };
+            let file = create_sized(partial, header.file_len())?;
+            (header, file)
+        }
+    };
+    let write_header =
+        |h: &Header| write_all_at(&file, &h.encode(), 0).map_err(|e| Error::write(partial, e));
+    write_header(&header)?;
+
+    let grid = TileGrid::new(header.width, header.height, header.tile);
+    // One batch fills one block of lights in every tile (a resumed build keeps its blocks).
+    let batch = header.light_block;
+    let resumed = header.images_done;
+    let mut decoded = first.is_some() as usize;
+    let mut scatter_s = 0.0;
+    let mut start = header.images_done;
+    while start < n {
+        if stop.load(Ordering::Relaxed) {
+            return Err(Error::Interrupted);
+        }
+        let end = n.min(start + batch);
+        let t = Instant::now();
+        let from = if start == 0 && first.is_some() {
+            1
+        } else {
+            start
+        };
+        let results: Vec<Result<(usize, usize, Vec<f32>)>> =
+            (from..end).into_par_iter().map(decode_one).collect();
+        decode_s += t.elapsed().as_secs_f64();
+        let mut images = Vec::with_capacity(end - start);
+        if from > start {
+            images.extend(first.take());
+        }
+        // The first error in image order, as the in-memory loader reports it.
+        for (j, r) in results.into_iter().enumerate() {
+            let (w, h, rgb) = r?;
+            check_size(ds, from + j, (w, h), (header.width, header.height))?;
+            images.push(rgb);
+        }
+        decoded += end - from;
+        let t = Instant::now();
+        scatter(&file, partial, &grid, &header, start, &images)?;
+        drop(images);
+        scatter_s += t.elapsed().as_secs_f64();
+        header.images_done = end;
+        write_header(&header)?;
+        start = end;
+    }
+    let warnings = notes.warnings(ds);
+    write_all_at(&file, &encode_warnings(&warnings), WARNINGS_AT as u64)
+        .map_err(|e| Error::write(partial, e))?;
+    header.complete = true;
+    write_header(&header)?;
+    Ok(Built {
+        warnings,
+        decoded,
+        resumed,
+        batch,
+        decode_s,
+        scatter_s,
+    })
+}
+
+/// Writes `buf` at `offset` of `file` (positioned write; the file's cursor is not used, so
+/// threads can write different ranges at once).
+pub(super) fn write_all_at(file: &File, buf: &[u8], offset: u64) -> std::io::Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileExt;
+        file.write_all_at(buf, offset)
+    }
+    #[cfg(windows)]
+    {
+        use std::os::windows::fs::FileExt;
+        let mut done = 0;
+        while done < buf.len() {
+            let n = file.seek_write(&buf[done..], offset + done as u64)?;
+            if n == 0 {
+                return Err(std::io::ErrorKind::WriteZero.into());
+            }
+            done += n;
+        }
+        Ok(())
+    }
+    #[cfg(not(any(unix, windows)))]
+    {
+        let _ = (file, buf, offset);
+        Err(std::io::ErrorKind::Unsupported.into())
+    }
+}
+
+/// Writes images `start..start + images.len()` (interleaved RGB, row-major; one block of
+/// lights, every block before it full) into every tile of the cache file, and the block's
+/// checksums into the table: per tile, the block is assembled in a per-thread buffer
+/// (`pixels * images * 12` bytes, 1 MB for a 32-pixel tile and 85 images) and written with one
+/// positioned write, so every page of the file is written once, by one batch, and nothing of
+/// the file is mapped while building.
+pub(super) fn scatter(
+    file: &File,
+    path: &Path,
+    grid: &TileGrid,
+    h: &Header,
+    start: usize,
+    images: &[Vec<f32>],
+) -> Result<()> {
+    let stride = h.n_lights * 3;
+    let b = images.len();
+    let sums: Vec<u64> = (0..grid.n_tiles())
+        .into_par_iter()
+        .map_init(Vec::new, |buf: &mut Vec<f32>, t| {
+            let np = grid.tile_pixels(t);
+            buf.clear();
+            buf.reserve(np * b * 3);
+            for p in grid.pixels(t) {
+                for img in images {
+                    buf.extend_from_slice(&img[p * 3..p * 3 + 3]);
+                }
+            }
+            let bytes: &[u8] = bytemuck::cast_slice(buf);
+            let at = HEADER_BYTES + (grid.first_pixel(t) * stride + start * np * 3) * 4;
+            write_all_at(file, bytes, at as u64).map_err(|e| Error::write(path, e))?;
+            Ok(xxhash_rust::xxh3::xxh3_64(bytes))
+        })
+        .collect::<Result<_>>()?;
+    let table: Vec<u8> = sums.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let block = start / h.light_block;
+    let at = h.table_offset() + (block * grid.n_tiles() * 8) as u64;
+    write_all_at(file, &table, at).map_err(|e| Error::write(path, e))
+}
+
+/// Decodes the lights of the light blocks that hold a failed `(tile, block)` of the complete
+/// cache at `path` again and rewrites those blocks (in every tile) with their checksums, in
+/// place. Called under the exclusive lock. An interruption leaves the cache complete with some
+/// blocks still failing, which the next open repairs.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn repair(
+    ds: &Dataset,
+    opts: &DecodeOptions,
+    path: &Path,
+    h: &Header,
+    bad: &[(usize, usize)],
+    stop: &AtomicBool,
+    on_image: &(dyn Fn() + Sync),
+    info: &mut CacheInfo,
+) -> Result<()> {
+    let blocks: std::collections::BTreeSet<usize> = bad.iter().map(|&(_, b)| b).collect();
+    info.blocks_corrupt += bad.len();
+    let file = OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(path)
+        .map_err(|e| Error::write(path, e))?;
+    let grid = TileGrid::new(h.width, h.height, h.tile);
+    let n = h.n_lights;
+    for b in blocks {
+        let (start, end) = (b * h.light_block, n.min((b + 1) * h.light_block));
+        let t = Instant::now();
+        let results: Vec<Result<(usize, usize, Vec<f32>)>> = (start..end)
+            .into_par_iter()
+            .map(|i| {
+                if stop.load(Ordering::Relaxed) {
+                    return Err(Error::Interrupted);
+                }
+                let r = decode_stack_image(ds, i, opts, &Notes::new(0))?;
+                on_image();
+                Ok(r)
+            })
+            .collect();
+        info.decode_s += t.elapsed().as_secs_f64();
+        let mut images = Vec::with_capacity(end - start);
+        for (j, r) in results.into_iter().enumerate() {
+            let (w, hh, rgb) = r?;
+            check_size(ds, start + j, (w, hh), (h.width, h.height))?;
+            images.push(rgb);
+        }
+        let t = Instant::now();
+        scatter(&file, path, &grid, h, start, &images)?;
+        info.scatter_s += t.elapsed().as_secs_f64();
+        info.images_decoded += end - start;
+        info.blocks_repaired += 1;
+    }
+    Ok(())
+}

@@ -1,0 +1,305 @@
+//! The cache file's header: its fixed fields, the input warnings it keeps, and the
+//! fingerprint of the inputs that decides reuse.
+
+use std::fs::{self, File};
+use std::path::{Path, PathBuf};
+use std::time::UNIX_EPOCH;
+
+use rayon::prelude::*;
+
+use super::{verify, TileGrid};
+use crate::codecs::DecodeOptions;
+use crate::dataset::Dataset;
+use crate::error::{Error, Result, Warning};
+use crate::fingerprint::Fingerprint;
+
+/// Format version of the cache file (bumped whenever the layout changes).
+pub const CACHE_VERSION: u32 = 2;
+pub(super) const MAGIC: &[u8; 8] = b"SYMFCACH";
+pub(super) const HEADER_BYTES: usize = 4096;
+pub(super) const ENDIAN_MARK: u32 = 0x0102_0304;
+
+/// The fixed header fields.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct Header {
+    pub(super) width: usize,
+    pub(super) height: usize,
+    pub(super) n_lights: usize,
+    pub(super) tile: usize,
+    pub(super) fingerprint: u64,
+    pub(super) images_done: usize,
+    pub(super) complete: bool,
+    /// Lights per block inside a tile (the decoding batch).
+    pub(super) light_block: usize,
+}
+
+/// Bytes of the encoded header fields, checksum included.
+pub(super) const FIELDS: usize = 88;
+/// Bytes of the header fields that the header checksum covers.
+pub(super) const SUMMED: usize = 80;
+
+impl Header {
+    pub(super) fn data_bytes(&self) -> u64 {
+        (self.width as u64)
+            .saturating_mul(self.height as u64)
+            .saturating_mul(self.n_lights as u64)
+            .saturating_mul(12)
+    }
+
+    /// Light blocks per tile.
+    pub(super) fn n_blocks(&self) -> usize {
+        self.n_lights.div_ceil(self.light_block.max(1))
+    }
+
+    /// Where the block checksum table starts.
+    pub(super) fn table_offset(&self) -> u64 {
+        (HEADER_BYTES as u64).saturating_add(self.data_bytes())
+    }
+
+    /// The whole file's length: header, samples, checksum table.
+    pub(super) fn file_len(&self) -> u64 {
+        let tiles = (self.width.div_ceil(self.tile.max(1)) as u64)
+            .saturating_mul(self.height.div_ceil(self.tile.max(1)) as u64);
+        self.table_offset().saturating_add(
+            tiles
+                .saturating_mul(self.n_blocks() as u64)
+                .saturating_mul(8),
+        )
+    }
+
+    /// Byte range (from the file's start) of light block `b` of tile `t`.
+    pub(super) fn block_range(&self, grid: &TileGrid, t: usize, b: usize) -> (usize, usize) {
+        let np = grid.tile_pixels(t);
+        let lights = self.light_block.min(self.n_lights - b * self.light_block);
+        (
+            HEADER_BYTES
+                + grid.first_pixel(t) * self.n_lights * 12
+                + b * self.light_block * np * 12,
+            np * lights * 12,
+        )
+    }
+
+    pub(super) fn encode(&self) -> [u8; FIELDS] {
+        let mut b = [0u8; FIELDS];
+        b[..8].copy_from_slice(MAGIC);
+        b[8..12].copy_from_slice(&CACHE_VERSION.to_le_bytes());
+        b[12..16].copy_from_slice(&ENDIAN_MARK.to_ne_bytes());
+        let fields = [
+            self.width as u64,
+            self.height as u64,
+            self.n_lights as u64,
+            self.tile as u64,
+            self.fingerprint,
+            self.images_done as u64,
+            self.complete as u64,
+            self.light_block as u64,
+        ];
+        for (k, v) in fields.iter().enumerate() {
+            b[16 + 8 * k..24 + 8 * k].copy_from_slice(&v.to_le_bytes());
+        }
+        let sum = xxhash_rust::xxh3::xxh3_64(&b[..SUMMED]);
+        b[SUMMED..FIELDS].copy_from_slice(&sum.to_le_bytes());
+        b
+    }
+
+    /// Decodes a header; `None` when it is not a cache of this version and byte order, or
+    /// when its checksum fails.
+    pub(super) fn decode(b: &[u8]) -> Option<Self> {
+        if b.len() < FIELDS || &b[..8] != MAGIC {
+            return None;
+        }
+        let sum = u64::from_le_bytes(b[SUMMED..FIELDS].try_into().unwrap());
+        if xxhash_rust::xxh3::xxh3_64(&b[..SUMMED]) != sum {
+            return None;
+        }
+        let u32_at = |o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap());
+        if u32_at(8) != CACHE_VERSION
+            || u32::from_ne_bytes(b[12..16].try_into().unwrap()) != ENDIAN_MARK
+        {
+            return None;
+        }
+        let f = |k: usize| u64::from_le_bytes(b[16 + 8 * k..24 + 8 * k].try_into().unwrap());
+        Some(Self {
+            width: f(0) as usize,
+            height: f(1) as usize,
+            n_lights: f(2) as usize,
+            tile: f(3) as usize,
+            fingerprint: f(4),
+            images_done: f(5) as usize,
+            complete: f(6) == 1,
+            light_block: f(7) as usize,
+        })
+    }
+}
+
+/// Checks a whole cache file's bytes as a reuse would, for fuzzing the header, table and
+/// warnings parsers: `None` if the header is refused, else the number of failing blocks.
+#[doc(hidden)]
+pub fn check_cache_bytes(b: &[u8]) -> Option<usize> {
+    let h = Header::decode(b)?;
+    if !(h.complete
+        && h.width > 0
+        && h.height > 0
+        && h.tile > 0
+        && (1..=h.n_lights).contains(&h.light_block)
+        && b.len() as u64 == h.file_len())
+    {
+        return None;
+    }
+    let _ = read_warnings(b);
+    Some(verify(b, &h).len())
+}
+
+/// Where the input warnings are kept in the header: length (`u32`), XXH3-64, JSON.
+pub(super) const WARNINGS_AT: usize = 256;
+
+/// Encodes warnings for the header (as many as fit in it).
+pub(super) fn encode_warnings(warnings: &[Warning]) -> Vec<u8> {
+    let mut kept = warnings.to_vec();
+    loop {
+        let json = serde_json::to_vec(&kept).unwrap_or_default();
+        if WARNINGS_AT + 12 + json.len() <= HEADER_BYTES || kept.is_empty() {
+            let mut b = (json.len() as u32).to_le_bytes().to_vec();
+            b.extend_from_slice(&xxhash_rust::xxh3::xxh3_64(&json).to_le_bytes());
+            b.extend_from_slice(&json);
+            return b;
+        }
+        kept.pop();
+    }
+}
+
+/// The warnings kept in a cache's header (none if absent or damaged).
+pub(super) fn read_warnings(file: &[u8]) -> Vec<Warning> {
+    let Some(b) = file.get(WARNINGS_AT..HEADER_BYTES) else {
+        return Vec::new();
+    };
+    let len = u32::from_le_bytes(b[..4].try_into().unwrap()) as usize;
+    let sum = u64::from_le_bytes(b[4..12].try_into().unwrap());
+    match b.get(12..12 + len) {
+        Some(json) if len > 0 && xxhash_rust::xxh3::xxh3_64(json) == sum => {
+            serde_json::from_slice(json).unwrap_or_default()
+        }
+        _ => Vec::new(),
+    }
+}
+
+/// XXH3-64 of a file's bytes, read in 1 MiB pieces.
+pub fn file_content_hash(path: &Path) -> Result<u64> {
+    use std::io::Read;
+    let mut f = File::open(path).map_err(|e| Error::read(path, e))?;
+    let mut h = xxhash_rust::xxh3::Xxh3::new();
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        match f.read(&mut buf) {
+            Ok(0) => return Ok(h.digest()),
+            Ok(k) => h.update(&buf[..k]),
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(Error::read(path, e)),
+        }
+    }
+}
+
+/// The fingerprint of a dataset's decoded samples: every image's path (canonical when
+/// possible), size and content hash ([`file_content_hash`], the files read in parallel) or,
+/// with `trust_mtime`, modification time instead of content; the light intensities, the
+/// decode options, the cache format and the crate version.
+pub fn inputs_fingerprint(ds: &Dataset, opts: &DecodeOptions, trust_mtime: bool) -> Result<u64> {
+    let mut f = Fingerprint::new();
+    f.str("symframe tile cache")
+        .u64(CACHE_VERSION as u64)
+        .str(env!("CARGO_PKG_VERSION"))
+        .u64(ds.images.len() as u64)
+        .u64(opts.linear_8bit as u64)
+        .f64(opts.saturation as f64)
+        .u64(trust_mtime as u64);
+    let per_image: Vec<Result<(PathBuf, u64, u64)>> = ds
+        .images
+        .par_iter()
+        .map(|p| {
+            let meta = fs::metadata(p).map_err(|e| Error::read(p, e))?;
+            let stamp = if trust_mtime {
+                meta.modified()
+                    .ok()
+                    .and_then(|t| t.duration_since(UNIX_EPOCH).ok())
+                    .map_or(0, |d| d.as_nanos() as u64)
+            } else {
+                file_content_hash(p)?
+            };
+            let canonical = fs::canonicalize(p).unwrap_or_else(|_| p.clone());
+            Ok((canonical, meta.len(), stamp))
+        })
+        .collect();
+    for r in per_image {
+        let (p, len, stamp) = r?;
+        f.path(&p).u64(len).u64(stamp);
+    }
+    match &ds.intensities {
+        None => f.u64(0),
+        Some(v) => {
+            f.u64(1);
+            for k in v.iter().flatten() {
+                f.f64(*k as f64);
+            }
+            &mut f
+        }
+    };
+    Ok(f.finish())
+}
+
+/// The cache's file stem for a dataset: a readable name plus a hash of its canonical source, so
+/// datasets sharing a cache folder do not collide and one dataset always maps to one file.
+pub(super) fn cache_stem(ds: &Dataset) -> String {
+    let src = fs::canonicalize(&ds.source).unwrap_or_else(|_| ds.source.clone());
+    let name: String = src
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default()
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .take(40)
+        .collect();
+    let hash = Fingerprint::new().path(&src).finish();
+    format!(
+        "{}-{hash:016x}",
+        if name.is_empty() { "stack" } else { &name }
+    )
+}
+
+/// Reads a file's header, `None` if the file is missing or too short.
+pub(super) fn read_header(path: &Path) -> Result<Option<(Header, u64)>> {
+    use std::io::Read;
+    let mut f = match File::open(path) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(Error::read(path, e)),
+    };
+    let len = f.metadata().map_err(|e| Error::read(path, e))?.len();
+    let mut b = [0u8; FIELDS];
+    if f.read_exact(&mut b).is_err() {
+        return Ok(None);
+    }
+    Ok(Header::decode(&b).map(|h| (h, len)))
+}
+
+/// Whether `h` (of a file `len` bytes long) is a cache of these inputs with this tile size.
+pub(super) fn matches(
+    h: &Header,
+    len: u64,
+    fingerprint: u64,
+    tile: usize,
+    n_lights: usize,
+) -> bool {
+    h.fingerprint == fingerprint
+        && h.tile == tile
+        && h.n_lights == n_lights
+        && h.width > 0
+        && h.height > 0
+        && (1..=n_lights).contains(&h.light_block)
+        && len == h.file_len()
+}

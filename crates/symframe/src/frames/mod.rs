@@ -1,0 +1,16 @@
+//! Finding a pixel's frame (n, t, b): the method itself.
+//!
+//! In the order a pixel meets them: [`rig`] (lights, halfway vectors, their triangulation and
+//! point location), [`slice`](mod@slice) (a pixel's measured BRDF slice, interpolated between
+//! the samples), [`symmetry`] (the symmetry distances), [`objective`] (their reference and fast
+//! implementations), [`highlight`] (the highlight's moments: a start for the search),
+//! [`optim`] (Nelder-Mead) and [`estimator`] (the per-pixel search, confidence, anisotropy and
+//! fallbacks, and the whole-stack pipeline).
+
+pub mod estimator;
+pub mod highlight;
+pub mod objective;
+pub mod optim;
+pub mod rig;
+pub mod slice;
+pub mod symmetry;
