@@ -177,17 +177,17 @@ fn estimate_arrays<'py>(
         match method {
             MethodConfig::Symmetry { rig, params } => {
                 let rig = Rig::new(&lights, rig)?;
-                check_inputs(w, h, n, rig.n_input, mask)?;
+                check_inputs(w, h, n, rig.n_input(), mask)?;
                 let est = Estimator::new(&rig, params);
                 let maps = run_bands(&est, images, (n, h, w), mask, ctl)?;
                 let report = serde_json::json!({
                     "method": "symmetry",
                     "parameters": {
-                        "theta_d_max_deg": rig.theta_d_max_deg,
+                        "theta_d_max_deg": rig.theta_d_max_deg(),
                         "estimator": params,
                         "min_domain_used": est.min_domain(),
                     },
-                    "lights": {"input": rig.n_input, "used": rig.n_used(), "dropped": rig.n_dropped()},
+                    "lights": {"input": rig.n_input(), "used": rig.n_used(), "dropped": rig.n_dropped()},
                     "width": w, "height": h,
                     "pixels": maps.counts,
                     "sources": Sources::of(&maps.source),
@@ -238,6 +238,7 @@ fn estimate_path<'py>(
         decode: options::decode(&mut o)?,
         cache: options::cache(&mut o)?,
         shard: options::shard(&mut o)?,
+        normal_png: symframe_io::NormalPng::OpenGl,
     };
     o.finish()?;
     let outcome = run_job(py, progress, threads, |ctl| {

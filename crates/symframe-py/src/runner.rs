@@ -115,8 +115,8 @@ pub fn run_job<T: Send>(
             let ctl = Control {
                 stop,
                 progress: show,
-                stop_after_tiles: None,
                 warning: warn,
+                ..Control::default()
             };
             let run = || match pool {
                 Some(p) => p.install(|| job(&ctl)),
