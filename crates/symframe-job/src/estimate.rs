@@ -547,36 +547,38 @@ pub(crate) fn lock_warnings(w: &Mutex<Vec<String>>) -> std::sync::MutexGuard<'_,
     w.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-/// Warnings about a finished map: nothing estimated, or most estimated pixels from the
-/// fallbacks beyond the rig's reach (symmetry method only: a baseline's normals all come from
-/// its own measure).
-pub(crate) fn result_warnings(
-    method: &'static str,
-    counts: &PixelCounts,
-    sources: &Sources,
-) -> Vec<String> {
+/// The loud warnings about a finished job's maps: nothing estimated, or (given `beyond`, the
+/// number of estimated normals whose symmetry centre `h = n` the rig does not cover) most
+/// normals beyond the rig's reach, where only the fallbacks answer.
+pub(crate) fn result_warnings(counts: &PixelCounts, beyond: Option<usize>) -> Vec<String> {
     let mut w = Vec::new();
     if counts.estimated == 0 {
         w.push(format!(
             "0 pixels estimated ({} discarded, {} culled, {} without data): the maps are empty",
             counts.discarded, counts.culled, counts.no_data
         ));
-    } else if method == "symmetry" {
-        let fallback: usize = sources
-            .0
-            .iter()
-            .filter(|s| s.code >= 2)
-            .map(|s| s.pixels)
-            .sum();
-        if fallback * 2 > counts.estimated {
-            w.push(format!(
-                "most pixels beyond the rig's reach: {fallback} of {} estimated normals come \
-                 from the fallbacks, not the symmetry (see source.npy)",
-                counts.estimated
-            ));
-        }
+    } else if let Some(beyond) = beyond.filter(|&b| b * 2 > counts.estimated) {
+        w.push(format!(
+            "most pixels beyond the rig's reach: {beyond} of {} estimated normals are where no \
+             light pair is symmetric about them, filled by the fallbacks (see source.npy; a \
+             rig with lights farther from the view reaches them)",
+            counts.estimated
+        ));
     }
     w
+}
+
+/// How many normals of `maps` lie beyond `rig`'s reach (their halfway vector `h = n` is not
+/// covered by the rig's halfway vectors).
+fn beyond_reach(maps: &EstimateMaps, rig: &Rig) -> usize {
+    maps.normals
+        .chunks_exact(3)
+        .filter(|n| n[0].is_finite())
+        .filter(|n| {
+            let n = glam::DVec3::new(n[0] as f64, n[1] as f64, n[2] as f64);
+            !rig.covered(n)
+        })
+        .count()
 }
 
 fn run(
@@ -744,7 +746,11 @@ fn run(
     report.pixels = maps.counts;
     report.sources = Sources::of(&maps.source);
     report.evals_per_pixel = maps.evals as f64 / maps.counts.estimated.max(1) as f64;
-    for w in result_warnings(report.method, &report.pixels, &report.sources) {
+    let beyond = match &plan {
+        Plan::Symmetry(rig, _) => Some(beyond_reach(&maps, rig)),
+        Plan::Baseline(_) => None,
+    };
+    for w in result_warnings(&report.pixels, beyond) {
         ctl.warn(&w);
     }
     report.warnings = lock_warnings(warnings).clone();

@@ -280,10 +280,6 @@ fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcom
         "shards": first.of,
     });
     report["shards"] = serde_json::Value::Array(shard_timings);
-    let method = match report["method"].as_str() {
-        Some("symmetry") => "symmetry",
-        _ => "baseline",
-    };
     let mut warnings: Vec<String> = Vec::new();
     for (_, m) in &manifests {
         for w in m.report["warnings"].as_array().into_iter().flatten() {
@@ -295,7 +291,8 @@ fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcom
             ));
         }
     }
-    for w in result_warnings(method, &maps.counts, &Sources::of(&maps.source)) {
+    // The reach warning needs the rig: each shard's own warnings (above) carry it.
+    for w in result_warnings(&maps.counts, None) {
         ctl.warn(&w);
         warnings.push(w);
     }
