@@ -248,7 +248,12 @@ fn estimate_path<'py>(
     match outcome {
         EstimateOutcome::Maps(done) => {
             let done = *done;
-            dict.set_item("report", to_python(py, &done.report)?)?;
+            // The report as written (with the output set the job adds while writing).
+            let path = config.output.join("report.json");
+            let text = std::fs::read_to_string(&path).map_err(|e| {
+                SymframeError::new_err(format!("{}: cannot read: {e}", path.display()))
+            })?;
+            dict.set_item("report", json_to_py(py, &text)?)?;
             put_maps(py, &dict, done.maps)?;
         }
         EstimateOutcome::Shard(report) => {
