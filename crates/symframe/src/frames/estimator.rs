@@ -6,7 +6,7 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::baselines::{highlight_peak, woodham_robust_pixel, BaselineParams};
+use crate::baselines::{highlight_peak, woodham_robust_pixel, BaselineParams, BaselinePixel};
 use crate::error::{Error, Result};
 use crate::frames::highlight::highlight_moments;
 use crate::frames::objective::{ExactObjective, FastScratch, Level, Objective};
@@ -386,17 +386,24 @@ impl<'a> Estimator<'a> {
         (chart(best.1, best.2), 9)
     }
 
+    /// The robust Lambertian fit (Woodham with outlier rejection, default parameters) of a
+    /// pixel over the rig's lights: the shadow pass, the diffuse test, the sharp-lobe rule and
+    /// the fallback all read the pixel's diffuse part through it.
+    fn lambertian_fit(&self, slice: &[f32], scratch: &mut Vec<f64>) -> BaselinePixel {
+        woodham_robust_pixel(
+            slice,
+            self.rig.lights_in_camera(),
+            &BaselineParams::default(),
+            scratch,
+        )
+    }
+
     /// The normal of a diffuse pixel's robust Lambertian fit, when the fit explains the samples
     /// (uncentred R^2 at least [`DIFFUSE_CENTRE_FIT`]) and leaves less than
     /// [`AUTO_SPECULAR_SHARE`] of the well-lit signal's energy unexplained.
     fn diffuse_centre(&self, slice: &[f32], scratch: &mut Vec<f64>) -> Option<DVec3> {
         let rig = self.rig;
-        let fit = woodham_robust_pixel(
-            slice,
-            rig.lights_in_camera(),
-            &BaselineParams::default(),
-            scratch,
-        );
+        let fit = self.lambertian_fit(slice, scratch);
         fit.normal
             .filter(|_| fit.confidence as f64 >= DIFFUSE_CENTRE_FIT)
             .filter(|&n| unexplained_share(rig, slice, n) < AUTO_SPECULAR_SHARE)
@@ -479,7 +486,7 @@ impl<'a> Estimator<'a> {
     /// tails.
     fn mark_cast_shadows(&self, slice: &[f32], out: &mut Vec<f32>, scratch: &mut Vec<f64>) -> bool {
         let lights = self.rig.lights_in_camera();
-        let fit = woodham_robust_pixel(slice, lights, &BaselineParams::default(), scratch);
+        let fit = self.lambertian_fit(slice, scratch);
         let Some(n) = fit
             .normal
             .filter(|_| fit.confidence as f64 >= SHADOW_DIFFUSE_FIT)
@@ -529,12 +536,7 @@ impl<'a> Estimator<'a> {
             return e;
         }
         let rig = self.rig;
-        let lambert = woodham_robust_pixel(
-            slice,
-            rig.lights_in_camera(),
-            &BaselineParams::default(),
-            scratch,
-        );
+        let lambert = self.lambertian_fit(slice, scratch);
         let (source, normal, confidence) = match lambert.normal {
             Some(n) if lambert.confidence as f64 >= FALLBACK_DIFFUSE_FIT => (
                 PixelSource::Lambertian,
@@ -618,12 +620,7 @@ impl<'a> Estimator<'a> {
             if self.params.cosine == CosineMode::Auto && diffuse_centre.is_none() && sharp {
                 // Where a diffuse part explains the samples once the spike is left out (a plastic),
                 // it locates the normal from every lit light; otherwise (a metal) the peak does.
-                let fit = woodham_robust_pixel(
-                    slice,
-                    rig.lights_in_camera(),
-                    &BaselineParams::default(),
-                    scratch,
-                );
+                let fit = self.lambertian_fit(slice, scratch);
                 match fit.normal {
                     Some(m) if fit.confidence as f64 >= DIFFUSE_CENTRE_FIT => {
                         Some((m, PixelSource::Lambertian))
