@@ -23,6 +23,33 @@ pub fn estimate(input: &Path, out: &Path, extra: &[&str]) -> Output {
     symframe(&[&["estimate", s(input), "-o", s(out)], extra].concat())
 }
 
+/// Runs `symframe estimate INPUT -o OUT --tile-size 8` with `extra` flags (small tiles, so
+/// a 32-40 pixel image has 16-25 of them).
+pub fn estimate_tiled(input: &Path, out: &Path, extra: &[&str]) -> Output {
+    estimate(input, out, &[&["--tile-size", "8"], extra].concat())
+}
+
+/// Asserts the run succeeded, showing its standard error otherwise.
+pub fn ok(o: &Output) {
+    assert!(o.status.success(), "{}", stderr(o));
+}
+
+/// The `report.json` of an output folder.
+pub fn report(out: &Path) -> serde_json::Value {
+    serde_json::from_str(&fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
+}
+
+/// A `size` x `size` anisotropic Ward sphere under `lights` lights as float EXR (decoding is
+/// exact), without ground truth; returns the `.lp` path.
+pub fn ward_sphere(dir: &Path, size: usize, lights: usize) -> PathBuf {
+    let brdf = symframe::brdf::ward::Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
+    let truth = Truth {
+        normals: false,
+        tangents: false,
+    };
+    sphere_dataset(dir, size, lights, &brdf, ImageFormat::Exr, 1.0, truth).1
+}
+
 /// The run's standard error as text.
 pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()

@@ -7,10 +7,12 @@
 use std::fs;
 use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use crate::common::{self, sphere_dataset, stderr, Truth};
+use crate::common::{
+    self, estimate_tiled as estimate, ok, report, sphere_dataset, stderr, ward_sphere, Truth,
+};
 
 use symframe::brdf::ward::Ward;
 use symframe_io::{read_npy_f32, ImageFormat};
@@ -20,12 +22,7 @@ use symframe_job::check_output_set;
 const TILES: usize = 16;
 
 fn dataset(dir: &Path) -> PathBuf {
-    let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
-    let truth = Truth {
-        normals: false,
-        tangents: false,
-    };
-    sphere_dataset(dir, 32, 60, &brdf, ImageFormat::Exr, 1.0, truth).1
+    ward_sphere(dir, 32, 60)
 }
 
 /// `symframe estimate LP -o OUT --tile-size 8 EXTRA...` with environment `env`.
@@ -42,18 +39,6 @@ fn estimate_cmd(lp: &Path, out: &Path, extra: &[&str], env: &[(&str, &str)]) -> 
     .args(extra)
     .envs(env.iter().copied());
     c
-}
-
-fn estimate(lp: &Path, out: &Path, extra: &[&str]) -> Output {
-    estimate_cmd(lp, out, extra, &[]).output().unwrap()
-}
-
-fn ok(o: &Output) {
-    assert!(o.status.success(), "{}", stderr(o));
-}
-
-fn report(out: &Path) -> serde_json::Value {
-    serde_json::from_str(&fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
 }
 
 fn normals(out: &Path) -> Vec<u32> {

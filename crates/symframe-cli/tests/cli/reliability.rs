@@ -2,11 +2,12 @@
 //! result or tile cache is never trusted (recomputed or repaired, with a warning; `merge` names
 //! it), and a changed image is noticed by content even with its size and time kept.
 
+use crate::common::{
+    self, estimate_tiled as estimate, ok, report, sphere_dataset, stderr, symframe, ward_sphere,
+    Truth,
+};
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::process::Output;
-
-use crate::common::{self, sphere_dataset, stderr, symframe, Truth};
 
 use symframe::brdf::ward::Ward;
 use symframe_io::{read_npy_f32, ImageFormat};
@@ -17,34 +18,7 @@ const LIGHTS: usize = 60;
 const TILES: usize = 25;
 
 fn dataset(dir: &Path) -> PathBuf {
-    let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
-    let truth = Truth {
-        normals: false,
-        tangents: false,
-    };
-    sphere_dataset(dir, SIZE, LIGHTS, &brdf, ImageFormat::Exr, 1.0, truth).1
-}
-
-/// `symframe estimate LP -o OUT --tile-size 8 EXTRA...`
-fn estimate(lp: &Path, out: &Path, extra: &[&str]) -> Output {
-    let mut args = vec![
-        "estimate",
-        lp.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--tile-size",
-        "8",
-    ];
-    args.extend_from_slice(extra);
-    symframe(&args)
-}
-
-fn ok(o: &Output) {
-    assert!(o.status.success(), "{}", stderr(o));
-}
-
-fn report(out: &Path) -> serde_json::Value {
-    serde_json::from_str(&fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
+    ward_sphere(dir, SIZE, LIGHTS)
 }
 
 /// The normal maps of two output folders are identical, bit for bit.

@@ -4,15 +4,13 @@
 
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::process::Output;
 
-use crate::common::{sphere_dataset, stderr, symframe, Truth};
+use crate::common::{estimate_tiled as estimate, ok, report, stderr, symframe, ward_sphere};
 
 use symframe::baselines::{estimate_stack_baseline, Baseline};
-use symframe::brdf::ward::Ward;
 use symframe::frames::symmetry::CosineMode;
 use symframe::{estimate_stack, EstimatorParams, Rig, RigOptions};
-use symframe_io::{read_npy_f32, DecodeOptions, ImageFormat};
+use symframe_io::{read_npy_f32, DecodeOptions};
 
 const SIZE: usize = 40;
 const LIGHTS: usize = 100;
@@ -21,34 +19,7 @@ const TILES: usize = 25;
 
 /// A 40x40 anisotropic sphere under 100 lights (float EXR, so decoding is exact).
 fn dataset(dir: &Path) -> PathBuf {
-    let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
-    let truth = Truth {
-        normals: false,
-        tangents: false,
-    };
-    sphere_dataset(dir, SIZE, LIGHTS, &brdf, ImageFormat::Exr, 1.0, truth).1
-}
-
-/// `symframe estimate LP -o OUT --tile-size 8 EXTRA...`
-fn estimate(lp: &Path, out: &Path, extra: &[&str]) -> Output {
-    let mut args = vec![
-        "estimate",
-        lp.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--tile-size",
-        "8",
-    ];
-    args.extend_from_slice(extra);
-    symframe(&args)
-}
-
-fn ok(o: &Output) {
-    assert!(o.status.success(), "{}", stderr(o));
-}
-
-fn report(out: &Path) -> serde_json::Value {
-    serde_json::from_str(&fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
+    ward_sphere(dir, SIZE, LIGHTS)
 }
 
 const MAPS: [&str; 4] = [
