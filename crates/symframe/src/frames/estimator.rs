@@ -401,9 +401,8 @@ impl<'a> Estimator<'a> {
     /// The normal of a diffuse pixel's robust Lambertian fit, when the fit explains the samples
     /// (uncentred R^2 at least [`DIFFUSE_CENTRE_FIT`]) and leaves less than
     /// [`AUTO_SPECULAR_SHARE`] of the well-lit signal's energy unexplained.
-    fn diffuse_centre(&self, slice: &[f32], scratch: &mut Vec<f64>) -> Option<DVec3> {
+    fn diffuse_centre(&self, slice: &[f32], fit: &BaselinePixel) -> Option<DVec3> {
         let rig = self.rig;
-        let fit = self.lambertian_fit(slice, scratch);
         fit.normal
             .filter(|_| fit.confidence as f64 >= DIFFUSE_CENTRE_FIT)
             .filter(|&n| unexplained_share(rig, slice, n) < AUTO_SPECULAR_SHARE)
@@ -459,19 +458,22 @@ impl<'a> Estimator<'a> {
             fallback,
             unshadowed,
         } = scratch;
-        let slice = if self.mark_cast_shadows(slice, unshadowed, fallback) {
-            &unshadowed[..]
+        // The robust Lambertian fit of the slice the estimator reads (refitted once the cast
+        // shadows are out): the diffuse test, the sharp-lobe rule and the fallback share it.
+        let first = self.lambertian_fit(slice, fallback);
+        let (slice, fit) = if self.mark_cast_shadows(slice, &first, unshadowed, fallback) {
+            (&unshadowed[..], self.lambertian_fit(unshadowed, fallback))
         } else {
-            slice
+            (slice, first)
         };
         match self.params.interpolation {
             Interpolation::Exact => {
-                let e = self.solve(slice, &ExactObjective::new(self.rig, slice), fallback);
-                self.or_fallback(e, slice, fallback)
+                let e = self.solve(slice, &ExactObjective::new(self.rig, slice), &fit);
+                self.or_fallback(e, slice, &fit)
             }
             Interpolation::Fast => {
-                let e = self.solve(slice, &fast.prepare(self.rig, slice), fallback);
-                self.or_fallback(e, slice, fallback)
+                let e = self.solve(slice, &fast.prepare(self.rig, slice), &fit);
+                self.or_fallback(e, slice, &fit)
             }
         }
     }
@@ -484,9 +486,14 @@ impl<'a> Estimator<'a> {
     /// part; a sample far below the prediction where it is clearly lit is in shadow. Pixels the
     /// fit does not explain (metals) are left as they are: their dark samples are the lobe's
     /// tails.
-    fn mark_cast_shadows(&self, slice: &[f32], out: &mut Vec<f32>, scratch: &mut Vec<f64>) -> bool {
+    fn mark_cast_shadows(
+        &self,
+        slice: &[f32],
+        fit: &BaselinePixel,
+        out: &mut Vec<f32>,
+        scratch: &mut Vec<f64>,
+    ) -> bool {
         let lights = self.rig.lights_in_camera();
-        let fit = self.lambertian_fit(slice, scratch);
         let Some(n) = fit
             .normal
             .filter(|_| fit.confidence as f64 >= SHADOW_DIFFUSE_FIT)
@@ -530,13 +537,12 @@ impl<'a> Estimator<'a> {
         &self,
         e: PixelEstimate,
         slice: &[f32],
-        scratch: &mut Vec<f64>,
+        lambert: &BaselinePixel,
     ) -> PixelEstimate {
         if e.status != PixelStatus::Discarded || self.params.fallback == Fallback::None {
             return e;
         }
         let rig = self.rig;
-        let lambert = self.lambertian_fit(slice, scratch);
         let (source, normal, confidence) = match lambert.normal {
             Some(n) if lambert.confidence as f64 >= FALLBACK_DIFFUSE_FIT => (
                 PixelSource::Lambertian,
@@ -571,7 +577,7 @@ impl<'a> Estimator<'a> {
         &self,
         slice: &[f32],
         objective: &O,
-        scratch: &mut Vec<f64>,
+        fit: &BaselinePixel,
     ) -> PixelEstimate {
         let rig = self.rig;
         // Start: the halfway vector of the brightest sample (docs/method.md, "The search"). The
@@ -607,7 +613,7 @@ impl<'a> Estimator<'a> {
         let moments = highlight_moments(slice, rig.halfway_in_camera());
         let mut source = PixelSource::Symmetry;
         let diffuse_centre = if self.params.cosine == CosineMode::Auto {
-            self.diffuse_centre(slice, scratch)
+            self.diffuse_centre(slice, fit)
         } else {
             None
         };
@@ -620,7 +626,6 @@ impl<'a> Estimator<'a> {
             if self.params.cosine == CosineMode::Auto && diffuse_centre.is_none() && sharp {
                 // Where a diffuse part explains the samples once the spike is left out (a plastic),
                 // it locates the normal from every lit light; otherwise (a metal) the peak does.
-                let fit = self.lambertian_fit(slice, scratch);
                 match fit.normal {
                     Some(m) if fit.confidence as f64 >= DIFFUSE_CENTRE_FIT => {
                         Some((m, PixelSource::Lambertian))
