@@ -300,9 +300,15 @@ pub fn gray_map_rgb8(values: &[f32], lo: f32, hi: f32) -> Vec<u8> {
 }
 
 /// Colours of the source map's codes (`symframe::PixelSource`): none black, symmetry blue,
-/// Lambertian orange, highlight green; unknown codes magenta. Fixed, so pictures of different
-/// runs compare.
-pub const SOURCE_PALETTE: [[u8; 3]; 4] = [[0, 0, 0], [31, 119, 180], [255, 127, 14], [44, 160, 44]];
+/// Lambertian orange, highlight green, lobe purple; unknown codes magenta. Fixed, so pictures
+/// of different runs compare.
+pub const SOURCE_PALETTE: [[u8; 3]; 5] = [
+    [0, 0, 0],
+    [31, 119, 180],
+    [255, 127, 14],
+    [44, 160, 44],
+    [148, 103, 189],
+];
 
 /// Colours a per-pixel source-code map with [`SOURCE_PALETTE`].
 pub fn source_map_rgb8(codes: &[u8]) -> Vec<u8> {

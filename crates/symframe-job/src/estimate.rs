@@ -213,7 +213,7 @@ pub struct Sources(pub Vec<SourceCount>);
 impl Sources {
     /// The legend and counts of a source map (codes of [`PixelSource`]).
     pub fn of(source: &[u8]) -> Self {
-        let mut counts = [0usize; 4];
+        let mut counts = [0usize; PixelSource::ALL.len()];
         for &c in source {
             if let Some(n) = counts.get_mut(c as usize) {
                 *n += 1;

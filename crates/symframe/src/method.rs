@@ -185,10 +185,11 @@ mod tests {
             let name = serde_json::to_string(s).unwrap();
             assert_eq!(name, format!("\"{}\"", s.name()));
         }
-        assert_eq!(PixelSource::from_code(4), None);
+        assert_eq!(PixelSource::from_code(5), None);
         let legend = PixelSource::legend();
         assert_eq!(legend[0].1, "none");
         assert_eq!(legend[3], (3, "highlight", legend[3].2));
+        assert_eq!(legend[4], (4, "lobe", legend[4].2));
         assert!(legend.iter().all(|l| !l.2.is_empty()));
         // A masked record has no source; a baseline's record carries its method's.
         assert_eq!(PixelRecord::MASKED.source, PixelSource::None);

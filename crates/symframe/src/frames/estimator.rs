@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use crate::baselines::{highlight_peak, woodham_robust_pixel, BaselineParams, BaselinePixel};
 use crate::error::{Error, Result};
 use crate::frames::highlight::highlight_moments;
+use crate::frames::lobe::{fit_lobe, LobeFit, LobeScratch, LobeStart};
 use crate::frames::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::frames::optim::{nelder_mead, NelderMeadOptions};
 use crate::frames::rig::Rig;
@@ -60,7 +61,7 @@ impl Default for EstimatorParams {
             cosine: CosineMode::Auto,
             min_domain: None,
             min_confidence: 0.0,
-            min_anisotropy: 0.6,
+            min_anisotropy: DEFAULT_MIN_ANISOTROPY,
             tangents: true,
             max_normal_evals: 300,
             interpolation: Interpolation::default(),
@@ -114,15 +115,19 @@ pub enum PixelSource {
     /// peak) and its fallback beyond the reach (centroid), or the max-reflectance and
     /// highlight-centroid baselines.
     Highlight = 3,
+    /// A symmetric lobe fitted to the samples: the estimator's smooth reconstruction of the
+    /// slice, its answer wherever the lobe explains the pixel (docs/method.md, "Lobe fit").
+    Lobe = 4,
 }
 
 impl PixelSource {
     /// Every source, in code order.
-    pub const ALL: [PixelSource; 4] = [
+    pub const ALL: [PixelSource; 5] = [
         PixelSource::None,
         PixelSource::Symmetry,
         PixelSource::Lambertian,
         PixelSource::Highlight,
+        PixelSource::Lobe,
     ];
 
     /// The source of a code of `source.npy`; `None` for an unknown code.
@@ -130,18 +135,19 @@ impl PixelSource {
         Self::ALL.get(code as usize).copied()
     }
 
-    /// The source's name as in reports (`none`, `symmetry`, `lambertian`, `highlight`).
+    /// The source's name as in reports (`none`, `symmetry`, `lambertian`, `highlight`, `lobe`).
     pub fn name(self) -> &'static str {
         match self {
             PixelSource::None => "none",
             PixelSource::Symmetry => "symmetry",
             PixelSource::Lambertian => "lambertian",
             PixelSource::Highlight => "highlight",
+            PixelSource::Lobe => "lobe",
         }
     }
 
     /// `(code, name, description)` of every source, for the report's legend.
-    pub fn legend() -> [(u8, &'static str, &'static str); 4] {
+    pub fn legend() -> [(u8, &'static str, &'static str); 5] {
         Self::ALL.map(|s| {
             let what = match s {
                 PixelSource::None => "no normal (masked, no data or discarded)",
@@ -151,6 +157,9 @@ impl PixelSource {
                 }
                 PixelSource::Highlight => {
                     "the highlight's peak or centroid (lobes sharper than the light spacing, beyond the rig's reach, or a highlight baseline)"
+                }
+                PixelSource::Lobe => {
+                    "a symmetric lobe fitted to the samples (the slice's smooth reconstruction)"
                 }
             };
             (s as u8, s.name(), what)
@@ -171,9 +180,11 @@ pub struct PixelEstimate {
     pub tangent: Option<DVec3>,
     /// Confidence in [0, 1] (0 where nothing was estimated).
     pub confidence: f32,
-    /// Anisotropy in [0, 1]: how much the tangent objective varies with the tangent's angle.
+    /// Anisotropy in [0, 1]: how much the tangent objective varies with the tangent's angle
+    /// (for the lobe fit: its elongation).
     pub anisotropy: f32,
-    /// Symmetry distances at the solution: `[SD_n, SD_nt, SD_nb]`.
+    /// Symmetry distances at the solution: `[SD_n, SD_nt, SD_nb]` (for the lobe fit: `[SD_n,
+    /// unexplained share, 0]`).
     pub residual: [f64; 3],
     /// Objective evaluations spent.
     pub evals: u32,
@@ -457,6 +468,7 @@ impl<'a> Estimator<'a> {
             fast,
             fallback,
             unshadowed,
+            lobe,
         } = scratch;
         // The robust Lambertian fit of the slice the estimator reads (refitted once the cast
         // shadows are out): the diffuse test, the sharp-lobe rule and the fallback share it.
@@ -466,14 +478,25 @@ impl<'a> Estimator<'a> {
         } else {
             (slice, first)
         };
+        // Everything a diffuse term does not explain is read through a smooth, symmetric
+        // reconstruction of the slice: the lobe that explains the samples best is centred on
+        // the normal (docs/method.md, "Lobe fit"). Where no lobe of the family explains the
+        // pixel (interreflections, a BRDF outside the family), the search decides.
+        let lobe = if self.params.cosine == CosineMode::Auto {
+            highlight_moments(slice, self.rig.halfway_in_camera())
+                .and_then(|m| self.lobe_fit(slice, m.normal, m.tangent, m.radius, lobe))
+                .filter(|f| f.residual < LOBE_EXPLAINS)
+        } else {
+            None
+        };
         match self.params.interpolation {
             Interpolation::Exact => {
-                let e = self.solve(slice, &ExactObjective::new(self.rig, slice), &fit);
-                self.or_fallback(e, slice, &fit)
+                let e = self.solve(slice, &ExactObjective::new(self.rig, slice), &fit, lobe);
+                self.or_fallback(e, slice, &fit, lobe.as_ref())
             }
             Interpolation::Fast => {
-                let e = self.solve(slice, &fast.prepare(self.rig, slice), &fit);
-                self.or_fallback(e, slice, &fit)
+                let e = self.solve(slice, &fast.prepare(self.rig, slice), &fit, lobe);
+                self.or_fallback(e, slice, &fit, lobe.as_ref())
             }
         }
     }
@@ -532,24 +555,42 @@ impl<'a> Estimator<'a> {
 
     /// `e`, or where it was discarded (beyond the rig's reach) and fallbacks are on, the
     /// fallback's estimate: a robust Lambertian fit where a diffuse term explains the pixel,
-    /// the highlight centroid otherwise, with a lowered confidence.
+    /// the fitted lobe where one explains it, the highlight centroid otherwise, with a lowered
+    /// confidence.
     fn or_fallback(
         &self,
         e: PixelEstimate,
         slice: &[f32],
         lambert: &BaselinePixel,
+        lobe: Option<&LobeFit>,
     ) -> PixelEstimate {
         if e.status != PixelStatus::Discarded || self.params.fallback == Fallback::None {
             return e;
         }
         let rig = self.rig;
-        let (source, normal, confidence) = match lambert.normal {
-            Some(n) if lambert.confidence as f64 >= FALLBACK_DIFFUSE_FIT => (
+        // The lobe where it explains the pixel much better than a diffuse term (the rule that
+        // holds within reach), then the diffuse term, then the highlight.
+        let diffuse = lambert
+            .normal
+            .filter(|_| lambert.confidence as f64 >= FALLBACK_DIFFUSE_FIT);
+        let lobe = lobe.filter(|f| {
+            f.normal.z > 0.0
+                && diffuse.is_none_or(|n| {
+                    f.residual < LOBE_OVER_DIFFUSE * unexplained_share(rig, slice, n)
+                })
+        });
+        let (source, normal, confidence) = match (lobe, diffuse) {
+            (Some(f), _) => (
+                PixelSource::Lobe,
+                f.normal,
+                FALLBACK_CONFIDENCE * (1.0 - f.residual / LOBE_EXPLAINS) as f32,
+            ),
+            (None, Some(n)) => (
                 PixelSource::Lambertian,
                 n,
                 FALLBACK_CONFIDENCE * lambert.confidence,
             ),
-            _ => match highlight_moments(slice, rig.halfway_in_camera()) {
+            (None, None) => match highlight_moments(slice, rig.halfway_in_camera()) {
                 Some(m) if m.normal.z > 0.0 => (
                     PixelSource::Highlight,
                     m.normal,
@@ -578,6 +619,7 @@ impl<'a> Estimator<'a> {
         slice: &[f32],
         objective: &O,
         fit: &BaselinePixel,
+        lobe: Option<LobeFit>,
     ) -> PixelEstimate {
         let rig = self.rig;
         // Start: the halfway vector of the brightest sample (docs/method.md, "The search"). The
@@ -636,7 +678,17 @@ impl<'a> Estimator<'a> {
             } else {
                 None
             };
-        let n = if let Some((m, from)) = sharp_peak {
+        // A lobe explains a pixel a diffuse term explains too only where it leaves much less
+        // unexplained: a broad lobe passes the diffuse test, and biases the Lambertian normal.
+        let lobe = lobe.filter(|f| match diffuse_centre {
+            Some(m) => f.residual < LOBE_OVER_DIFFUSE * unexplained_share(rig, slice, m),
+            None => true,
+        });
+        let n = if let Some(f) = lobe {
+            source = PixelSource::Lobe;
+            evals += f.evals;
+            f.normal
+        } else if let Some((m, from)) = sharp_peak {
             source = from;
             m
         } else if let Some(m) = diffuse_centre {
@@ -719,6 +771,9 @@ impl<'a> Estimator<'a> {
             };
         }
         let sd_n = term_n.numerator / term_n.denominator;
+        if let Some(f) = lobe {
+            return self.lobe_estimate(slice, &f, &term_n, sd_n, evals);
+        }
 
         // Tangent: scan the objective over its 90-degree period on a coarse level, refine the
         // best angle there, then polish on the full level.
@@ -842,6 +897,71 @@ impl<'a> Estimator<'a> {
         }
     }
 
+    /// The symmetric lobe fitted to a pixel, from the highlight's centre `normal`, widest axis
+    /// `tangent` and RMS angular `radius`.
+    fn lobe_fit(
+        &self,
+        slice: &[f32],
+        normal: DVec3,
+        tangent: DVec3,
+        radius: f64,
+        scratch: &mut LobeScratch,
+    ) -> Option<LobeFit> {
+        let rig = self.rig;
+        let r = radius.tan().max(LOBE_START_WIDTH);
+        let start = LobeStart {
+            normal,
+            tangent,
+            alpha: [1.2 * r, 0.8 * r],
+        };
+        fit_lobe(
+            slice,
+            rig.lights_in_camera(),
+            rig.halfway_in_camera(),
+            rig.query_order(),
+            start,
+            scratch,
+        )
+    }
+
+    /// The estimate of a pixel the lobe `f` explains (its normal within the rig's reach): the
+    /// lobe's frame, its elongation as the anisotropy, a tangent where the lobe is elongated.
+    fn lobe_estimate(
+        &self,
+        slice: &[f32],
+        f: &LobeFit,
+        term_n: &SymmetryTerm,
+        sd_n: f64,
+        evals: u32,
+    ) -> PixelEstimate {
+        let anisotropy = f.elongation();
+        // `--min-anisotropy` scales the threshold: its default asks for widths in a ratio of 2.
+        let threshold =
+            LOBE_MIN_ELONGATION * self.params.min_anisotropy as f64 / DEFAULT_MIN_ANISOTROPY as f64;
+        // The rig tells a lobe's shape only where its long axis spans several lights: a lobe
+        // narrower than that reads as elongated or round by where the lights happen to be.
+        let resolved = f.full_width().atan() >= TANGENT_MIN_SPACINGS * self.rig.halfway_spacing();
+        let tangent =
+            (self.params.tangents && anisotropy >= threshold && resolved).then_some(f.tangent);
+        let confidence = self.confidence(slice, f.normal, term_n, f.residual);
+        let status = if confidence < self.params.min_confidence {
+            PixelStatus::Culled
+        } else {
+            PixelStatus::Estimated
+        };
+        let keep = status == PixelStatus::Estimated;
+        PixelEstimate {
+            status,
+            source: PixelSource::Lobe,
+            normal: keep.then_some(f.normal),
+            tangent: if keep { tangent } else { None },
+            confidence,
+            anisotropy: anisotropy as f32,
+            residual: [sd_n, f.residual, 0.0],
+            evals,
+        }
+    }
+
     /// Confidence from the residual and the share of the pixel's signal inside the normal's
     /// symmetry domain (docs/method.md, "Confidence"): low where the domain covers little of the
     /// measured slice (normals near the rig's reach), and where the slice is not symmetric
@@ -865,6 +985,33 @@ impl<'a> Estimator<'a> {
         (coverage * fit) as f32
     }
 }
+
+/// A lobe fit that leaves less than this share of the pixel's energy unexplained is the
+/// pixel's answer ([`PixelSource::Lobe`]); one that leaves more is no evidence, and the
+/// symmetry search decides. Measured on noise-free renders, fits of lobes in the family leave
+/// below 1e-4; shadows, interreflections and noise at a few percent of the signal leave
+/// about their energy share.
+const LOBE_EXPLAINS: f64 = 0.01;
+
+/// Where a diffuse term explains a pixel too, the lobe is its answer only if it leaves less
+/// than this share of what the diffuse term leaves unexplained.
+const LOBE_OVER_DIFFUSE: f64 = 0.25;
+
+/// Smallest width the lobe fit starts from (slope units): a highlight of one sample has no
+/// moment to measure it by.
+const LOBE_START_WIDTH: f64 = 0.02;
+
+/// A fitted lobe has a tangent only where its full width at half maximum along the wider axis
+/// spans at least this many halfway spacings of the rig.
+const TANGENT_MIN_SPACINGS: f64 = 1.5;
+
+/// Default smallest symmetry anisotropy for a tangent.
+pub const DEFAULT_MIN_ANISOTROPY: f32 = 0.6;
+
+/// Smallest elongation `(a_t - a_b) / (a_t + a_b)` of a fitted lobe for a tangent at the
+/// default `min_anisotropy` (scaled with it): a ratio of widths of 2 (an isotropic lobe read
+/// through few lights fits below).
+const LOBE_MIN_ELONGATION: f64 = 1.0 / 3.0;
 
 /// A start must have less than this share of the search answer's full-level `SD_n` to
 /// overrule it ([`Estimator::judge_at_full`]).
@@ -1022,6 +1169,7 @@ pub struct PixelScratch {
     fast: FastScratch,
     fallback: Vec<f64>,
     unshadowed: Vec<f32>,
+    lobe: LobeScratch,
 }
 
 impl PixelScratch {
@@ -1031,6 +1179,7 @@ impl PixelScratch {
             fast: FastScratch::new(rig),
             fallback: Vec::with_capacity(rig.n_used()),
             unshadowed: Vec::with_capacity(rig.n_used() * 3),
+            lobe: LobeScratch::default(),
         }
     }
 }

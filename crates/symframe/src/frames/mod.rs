@@ -9,6 +9,7 @@
 
 pub mod estimator;
 pub mod highlight;
+pub mod lobe;
 pub mod objective;
 pub mod optim;
 pub mod rig;

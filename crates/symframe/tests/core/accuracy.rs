@@ -102,7 +102,11 @@ fn isotropic_ward_sphere_has_normals_but_no_tangents() {
 fn compensated_cosine_removes_the_tilt_bias_on_ward() {
     let scene = Scene::sphere(32, TangentField::Axial(DVec3::Y));
     let ward = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
-    let paper = run(&scene, &ward, 1000);
+    let paper_form = EstimatorParams {
+        cosine: CosineMode::CrossMultiplied,
+        ..Default::default()
+    };
+    let paper = run_with(&scene, &ward, 1000, paper_form);
     let params = EstimatorParams {
         cosine: CosineMode::Compensated(0.5),
         ..Default::default()

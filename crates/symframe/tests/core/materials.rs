@@ -7,6 +7,7 @@
 use glam::DVec3;
 use symframe::baselines::{estimate_stack_baseline, Baseline};
 use symframe::brdf::{Brdf, Ggx, Lambertian};
+use symframe::eval::evaluate;
 use symframe::frames::estimator::{Fallback, PixelSource};
 use symframe::frames::rig::uniform_cone_lights;
 use symframe::frames::slice::gather_pixel;
@@ -80,9 +81,10 @@ fn ggx(kd: f64, f0: f64, ax: f64, ay: f64) -> Ggx {
 
 #[test]
 fn near_mirror_highlights_do_not_derail_the_search() {
-    // Lights ~3.5 degrees apart in halfway space; the lobes are 1-3 degrees wide. Measured:
-    // alpha 0.02: mean 0.80, p99 1.9; 0.03: 0.65, 1.6; 0.05: 0.5, 1.2 (before the full-level
-    // judge: 3.1 mean, 18% of pixels over 5 degrees).
+    // Lights ~3.6 degrees apart in halfway space; the lobes are 1-3 degrees wide. Measured:
+    // alpha 0.02: mean 0.04, p99 0.52; 0.03: 0.002, 0.04; 0.05: 0.0001, 0.0004 (the lobe fit;
+    // the search alone with the full-level judge: 0.5-0.8 mean, p99 to 1.9; before it: 3.1
+    // mean, 18% of pixels over 5 degrees).
     let scene = Scene::sphere(40, TangentField::Circular);
     for alpha in [0.02, 0.03, 0.05] {
         let f = estimate(
@@ -91,7 +93,7 @@ fn near_mirror_highlights_do_not_derail_the_search() {
             &dense(),
             EstimatorParams::default(),
         );
-        assert!(f.mean <= 0.85 && f.p99 <= 3.0, "alpha {alpha}: {f:?}");
+        assert!(f.mean <= 0.2 && f.p99 <= 1.0, "alpha {alpha}: {f:?}");
         assert!(f.coverage >= 0.99, "alpha {alpha}: {f:?}");
     }
 }
@@ -105,11 +107,11 @@ fn the_default_measure_is_right_from_diffuse_to_metal() {
         &dense(),
         EstimatorParams::default(),
     );
-    // Measured 0.04 (the paper's form is exact for diffuse surfaces).
+    // Measured 1e-6 (the robust Lambertian fit is the centre of a diffuse slice).
     assert!(lambert.mean <= 0.1, "{lambert:?}");
     // Diffuse fraction from mostly diffuse to metal, roughness 0.05-0.2. Measured mean
-    // 0.17-0.55, p99 up to 3.75 on the rough plastic (kd 0.7, alpha 0.2, whose weak wide lobe
-    // the paper's form alone tilts by 1.7 degrees on average).
+    // 0.00005-0.01, p99 up to 0.16 (the lobe fit; the search before it: mean 0.17-0.55, p99 to
+    // 3.75 on the rough plastic, whose weak wide lobe the paper's form tilts by 1.7 degrees).
     for (kd, f0, alpha) in [
         (0.5, 0.04, 0.1),
         (0.7, 0.04, 0.2),
@@ -123,7 +125,7 @@ fn the_default_measure_is_right_from_diffuse_to_metal() {
             EstimatorParams::default(),
         );
         assert!(
-            f.mean <= 0.6 && f.p99 <= 4.0,
+            f.mean <= 0.1 && f.p99 <= 0.5,
             "kd {kd} f0 {f0} alpha {alpha}: {f:?}"
         );
     }
@@ -132,7 +134,8 @@ fn the_default_measure_is_right_from_diffuse_to_metal() {
 #[test]
 fn brushed_metal_along_the_tilt_plane_is_not_biased() {
     // The paper's form tilts these normals by 2 degrees on average (the wide axis lies in the
-    // plane of tilt); the default measure removes the bias. Measured: 0.47 mean.
+    // plane of tilt); the default measure removes the bias. Measured: 0.17 mean (0.47 with the
+    // search and the compensated measure alone).
     let scene = Scene::sphere(40, TangentField::Axial(DVec3::X));
     let f = estimate(
         &scene,
@@ -140,7 +143,7 @@ fn brushed_metal_along_the_tilt_plane_is_not_biased() {
         &dense(),
         EstimatorParams::default(),
     );
-    assert!(f.mean <= 0.7, "{f:?}");
+    assert!(f.mean <= 0.3, "{f:?}");
     assert!(f.tangent_share >= 0.95, "{f:?}");
 }
 
@@ -196,19 +199,25 @@ fn narrow_rigs_fill_every_pixel_and_say_where_from() {
         }
     }
     let (centre, rim) = (centre.unwrap(), rim.unwrap());
-    assert_eq!(centre.source, PixelSource::Symmetry);
-    assert_eq!(rim.source, PixelSource::Lambertian);
+    // Within reach the lobe fit answers at full confidence; beyond it, the lobe extrapolated
+    // from the part the rig sees, as a fallback.
+    assert_eq!(centre.source, PixelSource::Lobe);
+    assert_eq!(rim.status, symframe::PixelStatus::Estimated);
+    assert!(
+        matches!(rim.source, PixelSource::Lobe | PixelSource::Lambertian),
+        "{rim:?}"
+    );
     assert!(rim.confidence <= 0.5 && rim.confidence < centre.confidence.max(0.5) + 1e-6);
 }
 
 #[test]
 fn isotropic_materials_get_no_tangents() {
-    // Measured tangent shares: dense and narrow at most 1.1%; sparse (200 lights) up to 6.5%
-    // on plastic, where a highlight of three or four samples can look elongated.
+    // Measured tangent shares: at most 0.7% on every rig (before the lobe fit: up to 6.5% on
+    // plastic under 200 lights, where a highlight of three or four samples can look elongated).
     let scene = Scene::sphere(40, TangentField::Circular);
     let rigs: [(&str, Vec<DVec3>, f64); 3] = [
         ("dense", dense(), 0.02),
-        ("sparse", uniform_cone_lights(200, 65.0), 0.08),
+        ("sparse", uniform_cone_lights(200, 65.0), 0.02),
         ("narrow", rigs::diligent_lights(), 0.02),
     ];
     let materials: [Box<dyn Brdf>; 3] = [
@@ -220,6 +229,68 @@ fn isotropic_materials_get_no_tangents() {
         for brdf in &materials {
             let f = estimate(&scene, brdf.as_ref(), lights, EstimatorParams::default());
             assert!(f.tangent_share <= *limit, "{name} {}: {f:?}", brdf.name());
+        }
+    }
+}
+
+/// Brushed metals under a 200-light rig (halfway vectors ~4 degrees apart, the lobe 3 degrees
+/// wide across the grooves): the piecewise-linear slice is not symmetric about the true planes
+/// there; the lobe fit reconstructs it smoothly (docs/method.md, "Lobe fit").
+#[test]
+fn sparse_rigs_keep_brushed_frames() {
+    let lights = uniform_cone_lights(200, 65.0);
+    let rig = Rig::new(&lights, RigOptions::default()).unwrap();
+    let brdf = ggx(0.02, 0.9, 0.3, 0.06);
+    for field in [TangentField::Circular, TangentField::Axial(DVec3::X)] {
+        let scene = Scene::sphere(40, field);
+        let stack = scene.render_stack(&brdf, &lights);
+        let maps = estimate_stack(
+            &stack,
+            &rig,
+            Some(&scene.mask),
+            EstimatorParams::default(),
+            &|_| {},
+        )
+        .unwrap();
+        let f = figures(&scene, &maps);
+        let e = evaluate(
+            &maps.normals,
+            &maps.tangents,
+            &scene.gt_normals(),
+            Some(&scene.gt_tangents()),
+            Some(&scene.mask),
+            60.0,
+        );
+        eprintln!(
+            "{field:?}: {f:?}, tangent mean {:.2} swapped {:.3} coverage {:.3}",
+            e.tangent_error.mean, e.swapped_share, e.tangent_coverage
+        );
+        // Measured: normals 0.06 / 0.27 mean; tangents 0.03 / 0.28, none swapped, on 95.5-95.7%
+        // of the pixels (before: normals 3.2 / 2.9, tangents on 10-17%, 15% swapped).
+        assert!(f.mean <= 0.5 && f.coverage >= 0.99, "{field:?}: {f:?}");
+        assert!(e.tangent_error.mean <= 1.0, "{field:?}: {e:?}");
+        assert!(e.swapped_share < 0.02, "{field:?}: {e:?}");
+        assert!(e.tangent_coverage >= 0.95, "{field:?}: {e:?}");
+    }
+}
+
+/// Lobes of other families than the fit's microfacet one, and broad ones: Ward's (its
+/// foreshortening is fitted), a rough metal (Fresnel and masking matter over its width).
+#[test]
+fn lobes_outside_the_microfacet_family_and_broad_lobes() {
+    let scene = Scene::sphere(40, TangentField::Axial(DVec3::X));
+    let ward = symframe::brdf::Ward::new([0.3; 3], [0.5; 3], 0.1, 0.4);
+    let rough_metal = ggx(0.0, 0.9, 0.5, 0.5);
+    for (brdf, limit) in [(&ward as &dyn Brdf, 0.5), (&rough_metal, 0.5)] {
+        for lights in [dense(), uniform_cone_lights(200, 65.0)] {
+            // Measured: Ward 0.09 / 0.10, metal alpha 0.5 0.30 / 0.26 (before: 1.67 /
+            // 1.99 and 2.39 / 2.22; max-reflectance 1.40 on the metal).
+            let f = estimate(&scene, brdf, &lights, EstimatorParams::default());
+            assert!(
+                f.mean <= limit && f.coverage >= 0.99,
+                "{}: {f:?}",
+                brdf.name()
+            );
         }
     }
 }

@@ -58,6 +58,24 @@ pub struct Rig {
     /// every prefix of it is a subset spread evenly over the cone, and a coarse evaluation over
     /// any number of lights is a prefix of the full one.
     query_order: Vec<u32>,
+    /// Median angle between neighbouring halfway vectors (radians).
+    halfway_spacing: f64,
+}
+
+/// The median angle of the triangulation's edges between halfway vectors (radians).
+fn median_edge(triangles: &[Triangle], halfways: &[DVec3]) -> f64 {
+    let mut edges: Vec<f64> = triangles
+        .iter()
+        .flat_map(|t| {
+            let [a, b, c] = t.vertices.map(|v| halfways[v as usize]);
+            [a.angle_between(b), b.angle_between(c), c.angle_between(a)]
+        })
+        .collect();
+    if edges.is_empty() {
+        return 0.0;
+    }
+    let k = edges.len() / 2;
+    *edges.select_nth_unstable_by(k, f64::total_cmp).1
 }
 
 /// Indices `0..n` ordered by their bit-reversed value: every prefix spreads evenly over
@@ -129,6 +147,7 @@ impl Rig {
             theta,
         );
         let query_order = bit_reversed_order(lights_in_camera.len());
+        let halfway_spacing = median_edge(&triangles, &halfway_in_camera);
         Ok(Self {
             lights_in_camera,
             halfway_in_camera,
@@ -141,7 +160,15 @@ impl Rig {
             fast,
             coverage,
             query_order,
+            halfway_spacing,
         })
+    }
+
+    /// The median angle between neighbouring halfway vectors (radians, along the edges of the
+    /// triangulation): how finely the rig samples a slice.
+    #[inline]
+    pub fn halfway_spacing(&self) -> f64 {
+        self.halfway_spacing
     }
 
     /// Used lights (inside the cone), camera frame, unit length, in rig order.

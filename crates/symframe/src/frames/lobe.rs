@@ -1,0 +1,768 @@
+//! A symmetric lobe fitted to a pixel's samples: the smooth reconstruction of the slice for
+//! rigs whose lights are too far apart for the piecewise-linear one (docs/method.md, "Sparse
+//! rigs").
+//!
+//! The model is a diffuse term plus a lobe symmetric about the two planes of the frame
+//! `(n, t, b)`, over the pixel's grey values:
+//!
+//! `I(l) = d (n.l)+ + s (n.l)^m L(h)`, `L(h) = (1 + q / k)^-k / (h.n)^4` where `n.l > 0`,
+//! `q = (h.t / (h.n) / a_t)^2 + (h.b / (h.n) / a_b)^2`
+//!
+//! (`h` the halfway vector of `l` and the view; `q` in slope space). At `k = 2` the lobe is
+//! GGX's distribution of normals; as `k` grows it tends to Beckmann's; `m` is the lobe's
+//! foreshortening (0 for microfacet models, whose `1 / (n.l)` cancels the cosine; 1/2 for
+//! Ward's; 1 for Phong-like lobes), so the family covers the lobes a measured slice shows
+//! without assuming one. Whatever `k`, `a_t`, `a_b`,
+//! the lobe is mirror-symmetric about the planes `(n, t)` and `(n, b)` (the foreshortening
+//! breaks it only as the paper's cross-multiplied cosines undo): the frame that lets it
+//! explain the samples best is the frame about which the samples are most symmetric, read
+//! through a smooth reconstruction instead of the triangulation. `d` and `s` enter linearly and
+//! are solved in closed form (variable projection); the seven others (two for `n`, the tangent
+//! angle, `ln a_t`, `ln a_b`, `ln k`, `m`) by Levenberg-Marquardt from the highlight's moments, over
+//! an evenly spread subset of the lights plus every light of the highlight (the lobe's shape
+//! is read there; the rest fix the diffuse term).
+
+use glam::DVec3;
+
+use crate::geometry::tangent_basis;
+
+/// Range of the lobe widths `a_t`, `a_b` (slope units): below, a lobe is a single sample's
+/// spike; above, no highlight is left to locate.
+const ALPHA_RANGE: (f64, f64) = (0.004, 1.5);
+
+/// Range of the shape exponent `k` (2: GGX, large: Beckmann).
+const SHAPE_RANGE: (f64, f64) = (0.75, 40.0);
+
+/// Range of the foreshortening exponent `m`.
+const FORESHORTENING_RANGE: (f64, f64) = (-1.0, 2.0);
+
+/// Number of nonlinear parameters.
+const P: usize = 7;
+
+/// A lobe fitted to one pixel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LobeFit {
+    /// Unit normal: the lobe's centre.
+    pub normal: DVec3,
+    /// Unit tangent: the lobe's wider axis (perpendicular to `normal`).
+    pub tangent: DVec3,
+    /// Widths along `tangent` and along `normal x tangent` (slope units, `alpha[0] >= alpha[1]`).
+    pub alpha: [f64; 2],
+    /// Shape exponent `k`.
+    pub shape: f64,
+    /// Foreshortening exponent `m`.
+    pub foreshortening: f64,
+    /// Diffuse and lobe coefficients (grey, sum of the three channels).
+    pub diffuse: f64,
+    /// The lobe's coefficient at normal incidence (`s f0`).
+    pub specular: f64,
+    /// The lobe's Fresnel coefficient (`s (1 - f0)`, Schlick's form).
+    pub fresnel: f64,
+    /// Share of the samples' energy the model leaves unexplained, in [0, 1].
+    pub residual: f64,
+    /// Model evaluations used.
+    pub evals: u32,
+}
+
+impl LobeFit {
+    /// Full width at half maximum of the lobe along its wider axis (slope units): where
+    /// `(1 + q / k)^-k` falls to 1/2.
+    pub fn full_width(&self) -> f64 {
+        let k = self.shape;
+        2.0 * self.alpha[0] * (k * (2f64.powf(1.0 / k) - 1.0)).sqrt()
+    }
+
+    /// `(a_t - a_b) / (a_t + a_b)`: 0 for a round lobe, towards 1 for a brushed one.
+    pub fn elongation(&self) -> f64 {
+        (self.alpha[0] - self.alpha[1]) / (self.alpha[0] + self.alpha[1])
+    }
+}
+
+/// The model's parameters in the search's coordinates.
+struct Model {
+    normal: DVec3,
+    t: DVec3,
+    b: DVec3,
+    inv_a2: [f64; 2],
+    shape: f64,
+    foreshortening: f64,
+    alpha2: f64,
+}
+
+impl Model {
+    /// The model at `x = [u, w, psi, ln a_t, ln a_b, ln k, m]` around `n0` (chart `e1`, `e2`).
+    fn at(n0: DVec3, e1: DVec3, e2: DVec3, x: &[f64; P]) -> Self {
+        let normal = (n0 + x[0] * e1 + x[1] * e2).normalize();
+        let (u, w) = tangent_basis(normal);
+        let (s, c) = x[2].sin_cos();
+        let t = u * c + w * s;
+        let a = |v: f64| v.exp().clamp(ALPHA_RANGE.0, ALPHA_RANGE.1);
+        Self {
+            normal,
+            t,
+            b: normal.cross(t),
+            inv_a2: [a(x[3]).powi(-2), a(x[4]).powi(-2)],
+            alpha2: a(x[3]) * a(x[4]),
+            shape: x[5].exp().clamp(SHAPE_RANGE.0, SHAPE_RANGE.1),
+            foreshortening: x[6].clamp(FORESHORTENING_RANGE.0, FORESHORTENING_RANGE.1),
+        }
+    }
+
+    /// The lobe `L(h)` for a light of cosine `nl` with the normal (0 where `nl <= 0`).
+    #[inline]
+    fn lobe(&self, h: DVec3, nl: f64) -> f64 {
+        let hn = h.dot(self.normal);
+        if nl <= 0.0 || hn <= 1e-3 {
+            return 0.0;
+        }
+        let (x, y) = (h.dot(self.t) / hn, h.dot(self.b) / hn);
+        let q = x * x * self.inv_a2[0] + y * y * self.inv_a2[1];
+        let hn2 = hn * hn;
+        // Smith's masking of the light for a GGX surface of the lobe's mean width: microfacet
+        // lobes dim towards grazing lights by this much (the view's factor is the same for all).
+        let masking = 2.0 * nl / (nl + (self.alpha2 + (1.0 - self.alpha2) * nl * nl).sqrt());
+        let foreshortening = if self.foreshortening == 0.0 {
+            1.0
+        } else {
+            nl.powf(self.foreshortening)
+        };
+        (1.0 + q / self.shape).powf(-self.shape) * masking * foreshortening / (hn2 * hn2)
+    }
+}
+
+/// Non-negative least squares of `y ~ c . x` over three basis functions from their Gram
+/// matrix `g`, the products `p` with `y` and `syy = y . y`: the coefficients and the residual
+/// sum of squares. Every active set is tried (seven small solves): exact and branch-free in
+/// the number of iterations.
+fn nnls3(g: [[f64; 3]; 3], p: [f64; 3], syy: f64) -> ([f64; 3], f64) {
+    let residual = |x: [f64; 3]| {
+        let mut r = syy;
+        for a in 0..3 {
+            r -= 2.0 * x[a] * p[a];
+            for b in 0..3 {
+                r += x[a] * g[a][b] * x[b];
+            }
+        }
+        r
+    };
+    let mut best = ([0.0; 3], syy);
+    for set in 1u8..8 {
+        let Some(x) = ActiveSet::of(set).solve(&g, &p) else {
+            continue;
+        };
+        if x.iter().all(|&v| v >= 0.0) {
+            let r = residual(x);
+            if r < best.1 {
+                best = (x, r);
+            }
+        }
+    }
+    best
+}
+
+/// A subset of the three basis functions (bit `k` of the mask: function `k`).
+struct ActiveSet {
+    members: [usize; 3],
+    len: usize,
+}
+
+impl ActiveSet {
+    fn of(mask: u8) -> Self {
+        let mut members = [0; 3];
+        let mut len = 0;
+        for k in 0..3 {
+            if mask & (1 << k) != 0 {
+                members[len] = k;
+                len += 1;
+            }
+        }
+        Self { members, len }
+    }
+
+    /// The least-squares coefficients with only the members free (others zero), by Cramer's
+    /// rule on the members' Gram block; `None` where the block is singular.
+    fn solve(&self, g: &[[f64; 3]; 3], p: &[f64; 3]) -> Option<[f64; 3]> {
+        let m = &self.members[..self.len];
+        let mut x = [0.0; 3];
+        match *m {
+            [a] => {
+                if g[a][a] <= 0.0 {
+                    return None;
+                }
+                x[a] = p[a] / g[a][a];
+            }
+            [a, b] => {
+                let det = g[a][a] * g[b][b] - g[a][b] * g[a][b];
+                if det <= 1e-12 * g[a][a] * g[b][b] {
+                    return None;
+                }
+                x[a] = (p[a] * g[b][b] - p[b] * g[a][b]) / det;
+                x[b] = (p[b] * g[a][a] - p[a] * g[a][b]) / det;
+            }
+            [a, b, c] => {
+                let det3 = |m: [[f64; 3]; 3]| {
+                    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+                        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+                        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+                };
+                let gm = [
+                    [g[a][a], g[a][b], g[a][c]],
+                    [g[b][a], g[b][b], g[b][c]],
+                    [g[c][a], g[c][b], g[c][c]],
+                ];
+                let det = det3(gm);
+                if det <= 1e-12 * g[a][a] * g[b][b] * g[c][c] {
+                    return None;
+                }
+                let rhs = [p[a], p[b], p[c]];
+                for (k, &slot) in [a, b, c].iter().enumerate() {
+                    let mut mk = gm;
+                    for row in 0..3 {
+                        mk[row][k] = rhs[row];
+                    }
+                    x[slot] = det3(mk) / det;
+                }
+            }
+            _ => return None,
+        }
+        x.iter().all(|v| v.is_finite()).then_some(x)
+    }
+}
+
+/// Lights of the evenly spread subset the fit reads besides the highlight's.
+const SPREAD_LIGHTS: usize = 256;
+
+/// Samples at or above this share of the brightest are the highlight's, all read by the fit.
+const HIGHLIGHT_SHARE: f64 = 0.02;
+
+/// Levenberg-Marquardt iterations at most.
+const MAX_ITERATIONS: u32 = 60;
+
+/// Finite-difference steps of the six parameters.
+const STEPS: [f64; P] = [1e-5, 1e-5, 1e-4, 1e-4, 1e-4, 1e-4, 1e-4];
+
+/// A fit leaving more than this share of the energy unexplained is retried from other starts
+/// (the tangent and normal axes swapped, the brightest sample's halfway vector).
+const RETRY_RESIDUAL: f64 = 0.01;
+
+/// Per-thread buffers of [`fit_lobe`], reused from pixel to pixel.
+#[derive(Debug, Clone, Default)]
+pub struct LobeScratch {
+    lights: Vec<DVec3>,
+    halfways: Vec<DVec3>,
+    y: Vec<f64>,
+    r: Vec<f64>,
+    trial: Vec<f64>,
+    jacobian: Vec<f64>,
+    in_spread: Vec<bool>,
+}
+
+/// Where the fit starts: a normal, a tangent and the widths along it and across (slope units).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LobeStart {
+    /// Unit normal.
+    pub normal: DVec3,
+    /// Unit tangent.
+    pub tangent: DVec3,
+    /// Widths along `tangent` and across.
+    pub alpha: [f64; 2],
+}
+
+/// Schlick's Fresnel weight `(1 - h.v)^5` of a halfway vector (view `+z`): the lobe's
+/// second basis function is the lobe times it, so that `s1 + s2 (1 - h.v)^5 = s (f0 + (1 - f0)
+/// (1 - h.v)^5)` brightens grazing reflections as a dielectric's Fresnel term does (and
+/// barely at all for a metal's, `s2 ~ 0`), with both coefficients linear.
+#[inline]
+fn schlick(h: DVec3) -> f64 {
+    let c = (1.0 - h.z).clamp(0.0, 1.0);
+    let c2 = c * c;
+    c2 * c2 * c
+}
+
+/// The model's residuals `y - d a - s1 b - s2 b F` at `m` over the chosen samples into `r`;
+/// returns the coefficients `[d, s1, s2]` and the sum of squares.
+fn residuals(
+    m: &Model,
+    lights: &[DVec3],
+    halfways: &[DVec3],
+    y: &[f64],
+    r: &mut [f64],
+) -> ([f64; 3], f64) {
+    let mut g = [[0.0f64; 3]; 3];
+    let mut p = [0.0f64; 3];
+    let mut syy = 0.0;
+    // First pass: the sums; the residuals need the solved coefficients.
+    for ((&l, &h), (&v, slot)) in lights.iter().zip(halfways).zip(y.iter().zip(r.iter_mut())) {
+        let nl = m.normal.dot(l);
+        let b = m.lobe(h, nl);
+        let f = [nl.max(0.0), b, b * schlick(h)];
+        for a in 0..3 {
+            p[a] += f[a] * v;
+            for c in a..3 {
+                g[a][c] += f[a] * f[c];
+            }
+        }
+        syy += v * v;
+        // Keep b for the second pass.
+        *slot = b;
+    }
+    for a in 0..3 {
+        for c in 0..a {
+            g[a][c] = g[c][a];
+        }
+    }
+    let (x, _) = nnls3(g, p, syy);
+    let mut sum = 0.0;
+    for (((&l, &h), &v), slot) in lights.iter().zip(halfways).zip(y).zip(r.iter_mut()) {
+        let a = m.normal.dot(l).max(0.0);
+        let b = *slot;
+        *slot = v - x[0] * a - b * (x[1] + x[2] * schlick(h));
+        sum += *slot * *slot;
+    }
+    (x, sum)
+}
+
+/// A sample is in cast shadow when it is below this fraction of the model's prediction...
+const SHADOW_FRACTION: f64 = 0.25;
+
+/// ...its light is this far above the tangent plane (`n.l`; nearer grazing, a small error in
+/// the normal could put a lit sample in shadow)...
+const SHADOW_MIN_COSINE: f64 = 0.2;
+
+/// ...and the prediction is at least this share of the brightest prediction (not noise).
+const SHADOW_LEVEL: f64 = 1e-3;
+
+/// The parameters a microfacet lobe is fitted with (`m = 0`).
+const MICROFACET: [bool; P] = [true, true, true, true, true, true, false];
+
+/// The foreshortening exponent is kept where it divides the unexplained energy by this...
+const FORESHORTENING_GAIN: f64 = 1.0;
+
+/// ...and is looked for only where the microfacet lobe leaves this share unexplained (times
+/// the gain).
+const FORESHORTENING_FLOOR: f64 = 1e-6;
+
+/// Solves `a x = b` for a symmetric positive definite `a` (Cholesky); `None` if it is not.
+fn solve_spd(mut a: [[f64; P]; P], mut b: [f64; P]) -> Option<[f64; P]> {
+    for j in 0..P {
+        let mut d = a[j][j];
+        for k in 0..j {
+            d -= a[j][k] * a[j][k];
+        }
+        if !(d > 0.0) {
+            return None;
+        }
+        let d = d.sqrt();
+        a[j][j] = d;
+        for i in j + 1..P {
+            let mut v = a[i][j];
+            for k in 0..j {
+                v -= a[i][k] * a[j][k];
+            }
+            a[i][j] = v / d;
+        }
+    }
+    for i in 0..P {
+        let mut v = b[i];
+        for k in 0..i {
+            v -= a[i][k] * b[k];
+        }
+        b[i] = v / a[i][i];
+    }
+    for i in (0..P).rev() {
+        let mut v = b[i];
+        for k in i + 1..P {
+            v -= a[k][i] * b[k];
+        }
+        b[i] = v / a[i][i];
+    }
+    b.iter().all(|v| v.is_finite()).then_some(b)
+}
+
+/// The samples one fit reads, in the scratch's buffers.
+struct Samples<'a> {
+    lights: &'a [DVec3],
+    halfways: &'a [DVec3],
+    y: &'a [f64],
+}
+
+/// Levenberg-Marquardt from `x` in the chart of `n0`, over the parameters marked `free`; returns the parameters, the sum of
+/// squares and the model evaluations. `r`, `trial` (one value per sample) and `jacobian`
+/// (`P` per sample) are work buffers.
+fn levenberg_marquardt(
+    samples: &Samples,
+    n0: DVec3,
+    mut x: [f64; P],
+    free: [bool; P],
+    r: &mut Vec<f64>,
+    trial: &mut Vec<f64>,
+    jacobian: &mut [f64],
+) -> ([f64; P], f64, u32) {
+    let Samples {
+        lights,
+        halfways,
+        y,
+    } = *samples;
+    let n = y.len();
+    let (e1, e2) = tangent_basis(n0);
+    let model = |x: &[f64; P]| Model::at(n0, e1, e2, x);
+    let syy: f64 = y.iter().map(|v| v * v).sum();
+    let (_, mut cost) = residuals(&model(&x), lights, halfways, y, r);
+    let mut lambda = 1e-3;
+    let mut evals = 1u32;
+    for _ in 0..MAX_ITERATIONS {
+        // Forward-difference Jacobian of the projected residuals (d and s re-solved at each
+        // point: the variable-projection Jacobian, up to the difference).
+        for (i, column) in jacobian.chunks_exact_mut(n).enumerate() {
+            if !free[i] {
+                column.fill(0.0);
+                continue;
+            }
+            let mut xi = x;
+            xi[i] += STEPS[i];
+            residuals(&model(&xi), lights, halfways, y, trial);
+            for ((c, &t), &r0) in column.iter_mut().zip(trial.iter()).zip(r.iter()) {
+                *c = (t - r0) / STEPS[i];
+            }
+        }
+        evals += P as u32;
+        let mut jtj = [[0.0f64; P]; P];
+        let mut jtr = [0.0f64; P];
+        for a in 0..P {
+            let ca = &jacobian[a * n..(a + 1) * n];
+            jtr[a] = ca.iter().zip(r.iter()).map(|(p, q)| p * q).sum();
+            for b in a..P {
+                let cb = &jacobian[b * n..(b + 1) * n];
+                let v: f64 = ca.iter().zip(cb).map(|(p, q)| p * q).sum();
+                jtj[a][b] = v;
+                jtj[b][a] = v;
+            }
+        }
+        // A floor on the damping: a parameter the data does not constrain (the tangent angle of
+        // a round lobe, a width at its bound) must not make the system singular.
+        let floor = 1e-9 * (0..P).map(|k| jtj[k][k]).sum::<f64>().max(1e-300);
+        let mut improved = false;
+        for _ in 0..10 {
+            let mut m = jtj;
+            for (a, row) in m.iter_mut().enumerate() {
+                row[a] += lambda * jtj[a][a] + floor;
+            }
+            let Some(step) = solve_spd(m, jtr.map(|v| -v)) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let mut xt = x;
+            for (v, s) in xt.iter_mut().zip(step) {
+                *v += s;
+            }
+            let mt = model(&xt);
+            evals += 1;
+            let c = if mt.normal.z > 0.0 {
+                residuals(&mt, lights, halfways, y, trial).1
+            } else {
+                f64::INFINITY
+            };
+            if c < cost {
+                let gain = cost - c;
+                x = xt;
+                cost = c;
+                std::mem::swap(r, trial);
+                lambda = (lambda / 3.0).max(1e-9);
+                improved = gain > 1e-10 * syy;
+                break;
+            }
+            lambda *= 4.0;
+        }
+        if !improved {
+            break;
+        }
+    }
+    (x, cost, evals)
+}
+
+/// Fits the symmetric lobe model to one pixel: `samples` RGB in rig order (NaN = invalid),
+/// `lights` and `halfways` the rig's unit vectors in the camera frame (view `+z`), `spread`
+/// the rig's evenly spread order ([`Rig::query_order`](crate::rig::Rig::query_order)), from
+/// `start` (retried from other starts where it explains the samples poorly). `None` where
+/// fewer than eight samples are valid or nothing is lit. Allocation-free once `scratch` has
+/// grown to the rig.
+pub fn fit_lobe(
+    samples: &[f32],
+    lights: &[DVec3],
+    halfways: &[DVec3],
+    spread: &[u32],
+    start: LobeStart,
+    scratch: &mut LobeScratch,
+) -> Option<LobeFit> {
+    let grey = |j: usize| {
+        let s = &samples[j * 3..j * 3 + 3];
+        let v = s[0] as f64 + s[1] as f64 + s[2] as f64;
+        v.is_finite().then_some(v)
+    };
+    let (mut max, mut brightest) = (0.0, 0);
+    for j in 0..lights.len() {
+        if let Some(v) = grey(j).filter(|&v| v > max) {
+            (max, brightest) = (v, j);
+        }
+    }
+    if max <= 0.0 {
+        return None;
+    }
+    let LobeScratch {
+        lights: sub_lights,
+        halfways: sub_halfways,
+        y,
+        r,
+        trial,
+        jacobian,
+        in_spread,
+    } = scratch;
+    in_spread.clear();
+    in_spread.resize(lights.len(), false);
+    for &j in spread.iter().take(SPREAD_LIGHTS) {
+        in_spread[j as usize] = true;
+    }
+    sub_lights.clear();
+    sub_halfways.clear();
+    y.clear();
+    for j in 0..lights.len() {
+        let Some(v) = grey(j) else { continue };
+        if in_spread[j] || v >= HIGHLIGHT_SHARE * max {
+            sub_lights.push(lights[j]);
+            sub_halfways.push(halfways[j]);
+            y.push(v);
+        }
+    }
+    let n = y.len();
+    if n < 8 {
+        return None;
+    }
+    r.resize(n, 0.0);
+    trial.resize(n, 0.0);
+    jacobian.resize(P * n, 0.0);
+    let data = Samples {
+        lights: sub_lights,
+        halfways: sub_halfways,
+        y,
+    };
+    let syy: f64 = y.iter().map(|v| v * v).sum();
+    let clamp_ln = |a: f64| a.clamp(ALPHA_RANGE.0, ALPHA_RANGE.1).ln();
+    let start_x = |s: &LobeStart| {
+        let (e1, e2) = tangent_basis(s.normal);
+        [
+            0.0,
+            0.0,
+            s.tangent.dot(e2).atan2(s.tangent.dot(e1)),
+            clamp_ln(s.alpha[0]),
+            clamp_ln(s.alpha[1]),
+            2.0f64.ln(),
+            0.0,
+        ]
+    };
+    let mut evals = 0;
+    let mut best: Option<(LobeStart, [f64; P], f64)> = None;
+    let swapped = LobeStart {
+        tangent: start.normal.cross(start.tangent),
+        ..start
+    };
+    let brightest_start = LobeStart {
+        normal: halfways[brightest],
+        ..start
+    };
+    for (k, s) in [start, swapped, brightest_start].into_iter().enumerate() {
+        if k > 0 && best.is_some_and(|b| b.2 <= RETRY_RESIDUAL * syy) {
+            break;
+        }
+        let (x, cost, e) =
+            levenberg_marquardt(&data, s.normal, start_x(&s), MICROFACET, r, trial, jacobian);
+        evals += e;
+        if best.is_none_or(|b| cost < b.2) {
+            best = Some((s, x, cost));
+        }
+    }
+    let (s, mut x, mut cost) = best?;
+    // Cast shadows take light away where the lobe and the diffuse term predict it: samples far
+    // below a clear prediction, from lights well above the horizon, are left out and the fit
+    // repeated once without them (interreflections add light, and are left in).
+    let (e1, e2) = tangent_basis(s.normal);
+    let fitted = Model::at(s.normal, e1, e2, &x);
+    residuals(&fitted, sub_lights, sub_halfways, y, r);
+    let max_prediction = y
+        .iter()
+        .zip(r.iter())
+        .map(|(v, q)| v - q)
+        .fold(0.0, f64::max);
+    let mut kept = 0;
+    for j in 0..y.len() {
+        let prediction = y[j] - r[j];
+        let shadow = fitted.normal.dot(sub_lights[j]) >= SHADOW_MIN_COSINE
+            && prediction >= SHADOW_LEVEL * max_prediction
+            && y[j] < SHADOW_FRACTION * prediction;
+        if !shadow {
+            sub_lights[kept] = sub_lights[j];
+            sub_halfways[kept] = sub_halfways[j];
+            y[kept] = y[j];
+            kept += 1;
+        }
+    }
+    let mut syy = syy;
+    if kept < y.len() && kept >= 8 {
+        for v in [&mut *y, &mut *r, &mut *trial] {
+            v.truncate(kept);
+        }
+        sub_lights.truncate(kept);
+        sub_halfways.truncate(kept);
+        jacobian.truncate(P * kept);
+        syy = y.iter().map(|v| v * v).sum();
+        let data = Samples {
+            lights: sub_lights,
+            halfways: sub_halfways,
+            y,
+        };
+        let (xs, cost_s, e) =
+            levenberg_marquardt(&data, s.normal, x, MICROFACET, r, trial, jacobian);
+        evals += e;
+        (x, cost) = (xs, cost_s);
+    } else if kept < y.len() {
+        return None;
+    }
+    let data = Samples {
+        lights: sub_lights,
+        halfways: sub_halfways,
+        y,
+    };
+    // A lobe that is not a microfacet one (Ward's, Phong's) leaves a foreshortening the model
+    // above lacks: free `m`, and keep it only where it explains much more (for broad microfacet
+    // lobes `m` would otherwise trade against the normal to absorb Fresnel's small slope).
+    if cost > FORESHORTENING_GAIN * FORESHORTENING_FLOOR * syy {
+        let (xm, cost_m, e) =
+            levenberg_marquardt(&data, s.normal, x, [true; P], r, trial, jacobian);
+        evals += e;
+        if cost_m * FORESHORTENING_GAIN < cost {
+            x = xm;
+        }
+    }
+    let (e1, e2) = tangent_basis(s.normal);
+    let m = Model::at(s.normal, e1, e2, &x);
+    let ([diffuse, specular, fresnel], cost) = residuals(&m, sub_lights, sub_halfways, y, r);
+    let a = [m.inv_a2[0].powf(-0.5), m.inv_a2[1].powf(-0.5)];
+    let (tangent, alpha) = if a[0] >= a[1] {
+        (m.t, a)
+    } else {
+        (m.b, [a[1], a[0]])
+    };
+    Some(LobeFit {
+        normal: m.normal,
+        tangent,
+        alpha,
+        shape: m.shape,
+        foreshortening: m.foreshortening,
+        diffuse,
+        specular,
+        fresnel,
+        residual: (cost / syy).clamp(0.0, 1.0),
+        evals,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::brdf::{Brdf, Ggx, Ward};
+    use crate::frames::rig::{uniform_cone_lights, Rig, RigOptions};
+
+    /// The slice of `brdf` at a pixel of frame `(n, t)` under `rig` (view `+z`), RGB.
+    fn slice(rig: &Rig, brdf: &dyn Brdf, n: DVec3, t: DVec3) -> Vec<f32> {
+        let b = n.cross(t);
+        let to_local = |v: DVec3| DVec3::new(v.dot(t), v.dot(b), v.dot(n));
+        let view = to_local(DVec3::Z);
+        rig.lights_in_camera()
+            .iter()
+            .flat_map(|&l| {
+                let nl = l.dot(n);
+                let v = if nl > 0.0 {
+                    brdf.eval(to_local(l), view)[0] * nl
+                } else {
+                    0.0
+                };
+                [v as f32; 3]
+            })
+            .collect()
+    }
+
+    fn fit(rig: &Rig, samples: &[f32], start: LobeStart) -> LobeFit {
+        fit_lobe(
+            samples,
+            rig.lights_in_camera(),
+            rig.halfway_in_camera(),
+            rig.query_order(),
+            start,
+            &mut LobeScratch::default(),
+        )
+        .unwrap()
+    }
+
+    fn frame() -> (DVec3, DVec3) {
+        let n = DVec3::new(0.35, -0.2, 1.0).normalize();
+        let (u, w) = tangent_basis(n);
+        (n, (u + 0.7 * w).normalize())
+    }
+
+    #[test]
+    fn a_brushed_lobe_under_a_sparse_rig_gives_its_frame() {
+        // Halfway vectors ~4 degrees apart, the lobe ~3 degrees wide across the grooves.
+        let rig = Rig::new(&uniform_cone_lights(200, 65.0), RigOptions::default()).unwrap();
+        let (n, t) = frame();
+        let brdf = Ggx::new([0.02; 3], [0.9; 3], 0.3, 0.06);
+        let samples = slice(&rig, &brdf, n, t);
+        // Start a few degrees off, with the axes swapped.
+        let (u, _) = tangent_basis(n);
+        let start = LobeStart {
+            normal: (n + 0.06 * u).normalize(),
+            tangent: n.cross(t),
+            alpha: [0.1, 0.1],
+        };
+        let f = fit(&rig, &samples, start);
+        assert!(f.normal.angle_between(n).to_degrees() < 0.2, "{f:?}");
+        assert!(f.tangent.dot(t).abs() > 0.999, "{f:?}");
+        assert!(f.elongation() > 0.5 && f.residual < 1e-3, "{f:?}");
+    }
+
+    #[test]
+    fn a_ward_lobe_and_a_cast_shadow_are_explained() {
+        let rig = Rig::new(&uniform_cone_lights(400, 65.0), RigOptions::default()).unwrap();
+        let (n, t) = frame();
+        // Ward's lobe is not a microfacet one (it carries (n.l)^(1/2)).
+        let ward = Ward::new([0.3; 3], [0.5; 3], 0.1, 0.3);
+        let mut samples = slice(&rig, &ward, n, t);
+        let start = LobeStart {
+            normal: n,
+            tangent: t,
+            alpha: [0.2, 0.1],
+        };
+        let f = fit(&rig, &samples, start);
+        assert!(f.normal.angle_between(n).to_degrees() < 0.3, "{f:?}");
+        assert!(f.residual < 1e-3, "{f:?}");
+        // Something blocks the lights on one side (a cast shadow): those samples go dark.
+        for (s, l) in samples.chunks_exact_mut(3).zip(rig.lights_in_camera()) {
+            if l.x < -0.3 && l.dot(n) > 0.2 {
+                s.fill(0.0);
+            }
+        }
+        let shadowed = fit(&rig, &samples, start);
+        assert!(
+            shadowed.normal.angle_between(n).to_degrees() < 0.3,
+            "{shadowed:?}"
+        );
+        assert!(shadowed.residual < 1e-3, "{shadowed:?}");
+    }
+
+    #[test]
+    fn nnls_keeps_coefficients_non_negative() {
+        // y = 2 a exactly, with b anti-correlated: the unconstrained answer would go negative.
+        let g = [[1.0, -0.5, 0.0], [-0.5, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let (x, r) = nnls3(g, [2.0, -1.0, 0.0], 4.0);
+        assert!(x.iter().all(|&v| v >= 0.0), "{x:?}");
+        assert!((x[0] - 2.0).abs() < 1e-12 && r.abs() < 1e-12, "{x:?} {r}");
+    }
+}
