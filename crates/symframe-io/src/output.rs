@@ -49,6 +49,16 @@ pub fn decode_npy_f32(path: &Path, bytes: &[u8]) -> Result<(Vec<usize>, Vec<f32>
     Ok((arr.shape().to_vec(), arr.iter().copied().collect()))
 }
 
+/// Reads a `uint8` `.npy` array (the source map): its shape and values in row-major order,
+/// with the same header checks as [`read_npy_f32`].
+pub fn read_npy_u8(path: &Path) -> Result<(Vec<usize>, Vec<u8>)> {
+    let bytes = std::fs::read(path).map_err(|e| Error::read(path, e))?;
+    check_npy_header(path, &bytes)?;
+    let arr = ArrayD::<u8>::read_npy(std::io::Cursor::new(&bytes[..]))
+        .map_err(|e| Error::decode(path, e))?;
+    Ok((arr.shape().to_vec(), arr.iter().copied().collect()))
+}
+
 /// Checks an `.npy` header: magic, header length, and that the declared shape times the item
 /// size is within the limits and fits in the file.
 fn check_npy_header(path: &Path, b: &[u8]) -> Result<()> {

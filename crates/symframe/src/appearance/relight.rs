@@ -194,6 +194,16 @@ impl Relighter {
         out
     }
 
+    /// The frame pixel `p` (row-major) is shaded in by [`Relighter::render`]: its tangent and
+    /// normal (unit, camera frame) and whether the tangent came from the tangent map (only those
+    /// are turned by a tangent rotation; an isotropic pixel gets a tangent of its own), or `None`
+    /// where the pixel has no model. For renderers of the same maps elsewhere (the viewer's
+    /// shader), so that they shade exactly the pixels this one shades, in the same frames.
+    pub fn frame(&self, p: usize) -> Option<(DVec3, DVec3, bool)> {
+        let m = self.pixels.get(p)?.as_ref()?;
+        Some((m.t, m.n, m.anisotropic))
+    }
+
     /// The tangent field after the edits (`H x W x 3`, NaN where there is no model or no
     /// tangent).
     pub fn tangents(&self) -> Vec<f32> {
