@@ -1,11 +1,12 @@
-// Renders a `symframe view` page in headless Chromium (WebGL2 on SwiftShader, no GPU) at given
-// lights and compares each screenshot with `symframe relight`'s picture of the same fit: PSNR
+// Renders a `symframe view` page in headless Chromium (WebGL2 on SwiftShader, no GPU) in given
+// states (URL fragments: a light, edits) and compares each screenshot with `symframe relight`'s
+// picture of the same fit with the same light and edits: PSNR
 // over the object's mask, with the reference's largest value there as the peak (as
 // symframe::relight::image_psnr). Exits non-zero when a PSNR is below the threshold.
 //
 //   node viewer-test.js --viewer V.html --mask mask.png --min-psnr 30 \
-//       --light x,y,z --ref relit_000.png [--light ... --ref ...] [--shots DIR] \
-//       [--screenshot docs/viewer.png] [--load-only]
+//       --case light=x,y,z relit_000.png [--case 'light=x,y,z&exposure=1' relit.png ...] \
+//       [--shots DIR] [--screenshot docs/viewer.png] [--load-only]
 //
 // --shots keeps the screenshots; --screenshot also saves a picture of the whole viewer (panel
 // included) for the README; --load-only just opens the page and prints its load time.
@@ -16,21 +17,19 @@ const { chromium } = require("playwright-core");
 const { PNG } = require("pngjs");
 
 function parseArgs(argv) {
-  const a = { lights: [], refs: [], minPsnr: 30, shots: null, screenshot: null, loadOnly: false };
+  const a = { cases: [], minPsnr: 30, shots: null, screenshot: null, loadOnly: false };
   for (let i = 0; i < argv.length; i++) {
     const k = argv[i], v = () => argv[++i];
     if (k === "--viewer") a.viewer = path.resolve(v());
     else if (k === "--mask") a.mask = v();
     else if (k === "--min-psnr") a.minPsnr = Number(v());
-    else if (k === "--light") a.lights.push(v());
-    else if (k === "--ref") a.refs.push(v());
+    else if (k === "--case") a.cases.push({ fragment: v(), ref: v() });
     else if (k === "--shots") a.shots = v();
     else if (k === "--screenshot") a.screenshot = v();
     else if (k === "--load-only") a.loadOnly = true;
     else throw new Error(`unknown argument ${k}`);
   }
   if (!a.viewer) throw new Error("--viewer is required");
-  if (a.lights.length !== a.refs.length) throw new Error("give one --ref per --light");
   return a;
 }
 
@@ -94,37 +93,39 @@ async function main() {
     }
     const mask = a.mask ? readPng(a.mask) : null;
     let last = null;
-    for (let i = 0; i < a.lights.length; i++) {
-      const ref = readPng(a.refs[i]);
+    // Compares the canvas of `page` with the reference picture of `c`; returns whether it passed.
+    async function compare(page, c, label, ms) {
+      const ref = readPng(c.ref);
+      const shot = await page.screenshot({ clip: { x: 0, y: 0, width: ref.width, height: ref.height } });
+      const r = psnr(PNG.sync.read(shot), ref, mask);
+      const ok = r.db >= a.minPsnr;
+      console.log(`viewer-test: ${label}: PSNR ${r.db.toFixed(2)} dB over ${r.pixels} object pixels ` +
+                  `(RMS ${r.rms.toFixed(3)}, largest difference ${r.worst} of peak ${r.peak}${ms ? `; ${ms} ms` : ""}) ` +
+                  (ok ? "ok" : "FAIL"));
+      return { ok, shot };
+    }
+    for (let i = 0; i < a.cases.length; i++) {
+      const c = a.cases[i], ref = readPng(c.ref);
       if (last) await last.close();
-      const { page, size, loadMs } = await open(`light=${a.lights[i]}&ui=0`, ref.width, ref.height);
+      const { page, size, loadMs } = await open(`${c.fragment}&ui=0`, ref.width, ref.height);
       last = page;
       if (size[0] !== ref.width || size[1] !== ref.height) throw new Error(`canvas ${size} but reference ${ref.width}x${ref.height}`);
-      const shot = await page.screenshot({ clip: { x: 0, y: 0, width: ref.width, height: ref.height } });
+      const { ok, shot } = await compare(page, c, c.fragment, loadMs);
+      failed ||= !ok;
       if (a.shots) fs.writeFileSync(path.join(a.shots, `view_${String(i).padStart(3, "0")}.png`), shot);
-      const r = psnr(PNG.sync.read(shot), ref, mask);
-      const ok = r.db >= a.minPsnr;
-      failed ||= !ok;
-      console.log(`viewer-test: light ${a.lights[i]}: PSNR ${r.db.toFixed(2)} dB over ${r.pixels} object pixels ` +
-                  `(RMS ${r.rms.toFixed(3)}, largest difference ${r.worst} of peak ${r.peak}; ${loadMs} ms) ${ok ? "ok" : "FAIL"}`);
     }
-    // The same page, relit by changing the fragment (the interactive path): back to light 0.
-    if (last && a.lights.length > 1) {
-      const ref = readPng(a.refs[0]);
+    // The last page again, changed by its fragment alone (the interactive path): the first case.
+    if (last && a.cases.length > 1) {
       const before = await last.evaluate(() => window.symframeFrames);
-      await last.evaluate((l) => { location.hash = `light=${l}&ui=0`; }, a.lights[0]);
+      await last.evaluate((f) => { location.hash = `${f}&ui=0`; }, a.cases[0].fragment);
       await last.waitForFunction((n) => window.symframeFrames > n, before, { timeout: 10000 });
-      const shot = await last.screenshot({ clip: { x: 0, y: 0, width: ref.width, height: ref.height } });
-      const r = psnr(PNG.sync.read(shot), ref, mask);
-      const ok = r.db >= a.minPsnr;
-      failed ||= !ok;
-      console.log(`viewer-test: light ${a.lights[0]} after a fragment change: PSNR ${r.db.toFixed(2)} dB ${ok ? "ok" : "FAIL"}`);
+      failed ||= !(await compare(last, a.cases[0], `${a.cases[0].fragment} after a fragment change`)).ok;
     }
     if (last) await last.close();
-    if (a.screenshot && a.lights.length > 0) {
-      const ref = readPng(a.refs[0]);
-      const w = Math.max(ref.width, 256) + 320, h = Math.max(ref.height, 420) + 24;
-      const { page } = await open(`light=${a.lights[a.lights.length - 1]}`, w, h);
+    if (a.screenshot && a.cases.length > 0) {
+      const ref = readPng(a.cases[0].ref);
+      const w = Math.max(ref.width, 256) + 320, h = Math.max(ref.height, 600) + 24;
+      const { page } = await open(a.cases[0].fragment, w, h);
       // A pixel's readout, as when hovering.
       const box = await page.locator("#view").boundingBox();
       await page.mouse.move(box.x + box.width * 0.6, box.y + box.height * 0.35);

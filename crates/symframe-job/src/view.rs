@@ -183,12 +183,8 @@ pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
         None => None,
     };
 
-    let title = config
-        .fit_dir
-        .canonicalize()
-        .unwrap_or_else(|_| config.fit_dir.clone())
-        .display()
-        .to_string();
+    // The fit folder as given (a full path would show where it was made, not what it is).
+    let title = config.fit_dir.display().to_string();
     let data = PageData {
         format: 1,
         title: title.clone(),
