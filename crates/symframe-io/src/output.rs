@@ -380,6 +380,23 @@ mod tests {
     }
 
     #[test]
+    fn u8_npy_round_trip_and_type_check() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("source.npy");
+        write_npy_u8(&p, &[2, 3], &[0, 1, 2, 3, 255, 7]).unwrap();
+        assert_eq!(
+            read_npy_u8(&p).unwrap(),
+            (vec![2, 3], vec![0, 1, 2, 3, 255, 7])
+        );
+        // A float map is not a source map: an error naming the file, no panic.
+        write_npy_f32(&p, &[2], &[0.5, 1.0]).unwrap();
+        assert!(read_npy_u8(&p)
+            .unwrap_err()
+            .to_string()
+            .contains("source.npy"));
+    }
+
+    #[test]
     fn exr_maps_keep_nan_and_name_channels() {
         use exr::prelude::*;
         let d = tempfile::tempdir().unwrap();

@@ -402,6 +402,31 @@ mod tests {
     }
 
     #[test]
+    fn frames_are_those_rendered() {
+        let w = Ward::new([0.2; 3], [0.6; 3], 0.08, 0.4);
+        let (scene, mut maps) = sphere_maps(16, &w);
+        // One pixel isotropic: it keeps a model, with a tangent of its own.
+        let iso = (0..16 * 16).find(|&p| scene.mask[p]).unwrap();
+        maps.tangents[iso * 3..iso * 3 + 3].fill(f32::NAN);
+        let r = Relighter::new(&maps, &Edits::default()).unwrap();
+        let tangents = r.tangents();
+        for p in 0..16 * 16 {
+            let Some((t, n, aniso)) = r.frame(p) else {
+                assert!(!scene.mask[p], "pixel {p} inside lost its model");
+                continue;
+            };
+            assert!((t.length() - 1.0).abs() < 1e-9 && t.dot(n).abs() < 1e-9);
+            assert_eq!(aniso, p != iso);
+            if aniso {
+                assert!((tangents[p * 3] - t.x as f32).abs() < 1e-6);
+            } else {
+                assert!(tangents[p * 3].is_nan());
+            }
+        }
+        assert!(r.frame(16 * 16).is_none());
+    }
+
+    #[test]
     fn bad_edits_are_refused() {
         let w = Ward::new([0.2; 3], [0.6; 3], 0.08, 0.4);
         let (_, maps) = sphere_maps(8, &w);
