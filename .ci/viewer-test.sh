@@ -2,8 +2,8 @@
 # Browser test of `symframe view`: renders a small synthetic capture, estimates and fits it,
 # writes the viewer, renders it in headless Chromium (WebGL2 on SwiftShader) in several states
 # and compares each screenshot with the picture the command line makes of the same state:
-# `symframe relight` at three lights and with every edit, and the estimate's normal, tangent,
-# confidence and source pictures. Fails when a PSNR over the object is below 30 dB.
+# `symframe relight` at three lights and with every edit, the fit's albedo pictures, and the
+# estimate's normal, tangent, confidence and source pictures. Fails when a PSNR over the object is below 30 dB.
 #   .ci/viewer-test.sh [--size N] [--screenshot FILE.png]
 # --screenshot also saves a picture of the whole viewer (the README's docs/viewer.png is made
 # with --size 160 --screenshot docs/viewer.png).
@@ -73,6 +73,8 @@ args=(--viewer "$work/viewer.html" --mask "$work/data/mask.png" --min-psnr 45
     --case "light=$l2" "$work/relit/relit_001.png"
     --case "light=$l3" "$work/relit/relit_002.png"
     --case "light=$l2&$edits" "$work/edited/relit_000.png"
+    --case "view=kd" "$work/fit/kd.png"
+    --case "view=ks" "$work/fit/ks.png"
     --case "view=normal" "$work/est/normals.png"
     --case "view=tangent" "$work/est/tangents.png"
     --case "view=confidence" "$work/est/confidence.png"

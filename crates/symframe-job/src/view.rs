@@ -91,8 +91,6 @@ struct PageData {
     height: usize,
     textures: Textures,
     views: Vec<&'static str>,
-    /// Range of the anisotropy view's colour map.
-    anisotropy_range: [f32; 2],
     /// Names of the source codes, by code.
     sources: Vec<&'static str>,
 }
@@ -154,7 +152,6 @@ pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
     })?;
 
     let mut views = vec!["relit", "normal", "tangent", "kd", "ks"];
-    let mut anisotropy_range = [0.0, 1.0];
     let est = match est {
         Some(e) => {
             let at = |m: &Option<Vec<f32>>, p: usize| m.as_ref().map_or(f32::NAN, |v| v[p]);
@@ -174,9 +171,6 @@ pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
                 if present {
                     views.push(name);
                 }
-            }
-            if let Some(a) = &e.anisotropy {
-                anisotropy_range = finite_range(a).unwrap_or(anisotropy_range);
             }
             Some(texture)
         }
@@ -198,7 +192,6 @@ pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
             est,
         },
         views: views.clone(),
-        anisotropy_range,
         sources: PixelSource::legend().iter().map(|l| l.1).collect(),
     };
     let page = render_page(&title, &data)?;
@@ -299,17 +292,6 @@ fn read_estimate_maps(dir: &Path, w: usize, h: usize) -> Result<EstimateMaps> {
 fn finite3(map: &[f32], p: usize) -> Option<[f32; 3]> {
     let v = [map[p * 3], map[p * 3 + 1], map[p * 3 + 2]];
     v.iter().all(|x| x.is_finite()).then_some(v)
-}
-
-/// Smallest and largest finite value, if any (and they differ).
-fn finite_range(v: &[f32]) -> Option<[f32; 2]> {
-    let (lo, hi) = v
-        .iter()
-        .filter(|x| x.is_finite())
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &x| {
-            (lo.min(x), hi.max(x))
-        });
-    (lo < hi).then_some([lo, hi])
 }
 
 /// One texture of `n` pixels, four values each from `texel`: half floats (NaN as 0, beyond the
@@ -450,7 +432,6 @@ mod tests {
                 est: None,
             },
             views: vec!["relit"],
-            anisotropy_range: [0.0, 1.0],
             sources: vec![],
         };
         let page = render_page("a</script>", &data).unwrap();

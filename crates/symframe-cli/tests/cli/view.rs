@@ -70,10 +70,6 @@ fn writes_one_page_with_every_map() {
     let data = page_data(&page);
     assert_eq!(data["width"], SIZE);
     assert_eq!(data["height"], SIZE);
-    // The range of the anisotropy view: the finite values' (p / n over the object).
-    let range = &data["anisotropy_range"];
-    assert!((0.0..0.1).contains(&range[0].as_f64().unwrap()), "{range}");
-    assert!((0.9..1.0).contains(&range[1].as_f64().unwrap()), "{range}");
     assert_eq!(data["sources"][1], "symmetry");
     for t in ["geom", "frame", "kd", "ks", "est"] {
         let b64 = data["textures"][t].as_str().unwrap();

@@ -22,7 +22,6 @@ uniform float uDiffuse;          // factor on kd
 uniform float uSpecular;         // factor on ks
 uniform float uRoughness;        // factor on alpha_t and alpha_b
 uniform vec2 uRotation;          // (cos, sin) of the tangent rotation
-uniform vec2 uAnisoRange;        // colour-map range of the anisotropy view
 
 out vec4 outColor;
 
@@ -127,11 +126,11 @@ void main() {
     } else {
         vec4 est = texelFetch(uEst, p, 0);
         int has = int(est.w + 0.5);
+        // Confidence and anisotropy are in [0, 1]: viridis over it, as confidence.png.
         if (uView == 5 && (has & 1) != 0) {
             c = viridis(est.x);
         } else if (uView == 6 && (has & 2) != 0) {
-            float r = uAnisoRange.y - uAnisoRange.x;
-            c = viridis(r > 0.0 ? (est.y - uAnisoRange.x) / r : 0.0);
+            c = viridis(est.y);
         } else if (uView == 7 && (has & 4) != 0) {
             // symframe_io's SOURCE_PALETTE.
             int code = int(est.z + 0.5);

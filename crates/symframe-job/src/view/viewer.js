@@ -108,7 +108,7 @@
     if (!gl.getProgramParameter(program, gl.LINK_STATUS)) throw new Error("link: " + gl.getProgramInfoLog(program));
     gl.useProgram(program);
     for (const name of ["uGeom", "uFrame", "uKd", "uKs", "uEst", "uView", "uLight", "uGain", "uDiffuse",
-                        "uSpecular", "uRoughness", "uRotation", "uAnisoRange"]) {
+                        "uSpecular", "uRoughness", "uRotation"]) {
       uniforms[name] = gl.getUniformLocation(program, name);
     }
     gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
@@ -137,7 +137,6 @@
     gl.uniform1f(uniforms.uSpecular, state.specular);
     gl.uniform1f(uniforms.uRoughness, state.roughness);
     gl.uniform2f(uniforms.uRotation, Math.cos(rad), Math.sin(rad));
-    gl.uniform2fv(uniforms.uAnisoRange, data.anisotropy_range);
     gl.drawArrays(gl.TRIANGLES, 0, 3);
     window.symframeFrames++;
     drawBall();
