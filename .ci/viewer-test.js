@@ -120,6 +120,21 @@ async function main() {
       await last.evaluate((f) => { location.hash = `${f}&ui=0`; }, a.cases[0].fragment);
       await last.waitForFunction((n) => window.symframeFrames > n, before, { timeout: 10000 });
       failed ||= !(await compare(last, a.cases[0], `${a.cases[0].fragment} after a fragment change`)).ok;
+      // A drag to a quarter of the width and height from the top left puts the light at
+      // x = -0.5, y = 0.5 (z = sqrt(0.5)), draws a frame and writes the light into the fragment.
+      const box = await last.locator("#view").boundingBox();
+      const frames = await last.evaluate(() => window.symframeFrames);
+      await last.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+      await last.mouse.down();
+      await last.mouse.move(box.x + box.width * 0.25, box.y + box.height * 0.25, { steps: 4 });
+      await last.mouse.up();
+      await last.waitForFunction((n) => window.symframeFrames > n, frames, { timeout: 10000 });
+      const hash = await last.evaluate(() => location.hash);
+      const l = new URLSearchParams(hash.slice(1)).get("light").split(",").map(Number);
+      const want = [-0.5, 0.5, Math.SQRT1_2], tol = 2.5 / box.width;
+      const ok = l.every((v, i) => Math.abs(v - want[i]) < tol);
+      failed ||= !ok;
+      console.log(`viewer-test: a drag to (1/4, 1/4) set ${hash} (light ${want.map((v) => v.toFixed(3))} expected) ${ok ? "ok" : "FAIL"}`);
     }
     if (last) await last.close();
     if (a.screenshot && a.cases.length > 0) {
