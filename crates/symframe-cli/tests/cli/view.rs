@@ -151,3 +151,32 @@ fn bad_folders_are_refused_naming_the_file() {
         assert!(!name.contains(".partial"), "{name}");
     }
 }
+
+#[test]
+fn a_new_fit_removes_the_old_fits_page() {
+    use crate::common::ward_sphere;
+    let dir = tempfile::tempdir().unwrap();
+    let lp = ward_sphere(&dir.path().join("data"), 16, 60);
+    let (est, fit) = (dir.path().join("est"), dir.path().join("fit"));
+    ok(&symframe(&["estimate", s(&lp), "-o", s(&est)]));
+    ok(&symframe(&[
+        "fit",
+        s(&lp),
+        "--frames",
+        s(&est),
+        "-o",
+        s(&fit),
+    ]));
+    ok(&symframe(&["view", s(&fit)]));
+    assert!(fit.join("viewer.html").is_file());
+    // The page shows the maps it was written from: a new fit into the folder removes it.
+    ok(&symframe(&[
+        "fit",
+        s(&lp),
+        "--frames",
+        s(&est),
+        "-o",
+        s(&fit),
+    ]));
+    assert!(fit.join("kd.npy").is_file() && !fit.join("viewer.html").exists());
+}
