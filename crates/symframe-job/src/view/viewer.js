@@ -231,6 +231,8 @@
     if (!gl) throw new Error("this browser offers no WebGL2");
     if (typeof DecompressionStream !== "function") throw new Error("this browser has no DecompressionStream");
     if (data.format !== 1) throw new Error("unknown data format " + data.format);
+    const most = gl.getParameter(gl.MAX_TEXTURE_SIZE);
+    if (W > most || H > most) throw new Error(`the maps are ${W} x ${H}; this browser's WebGL2 takes at most ${most} x ${most}`);
     const t0 = performance.now();
     const t = data.textures;
     maps = await Promise.all([t.geom, t.frame, t.kd, t.ks, t.est].map((s) => (s ? decodeTexture(s) : null)));
