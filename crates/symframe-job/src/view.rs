@@ -122,7 +122,19 @@ pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
     let mut notes = Vec::new();
     let frames = frames_dir(config, &mut notes)?;
     let est = match &frames {
-        Some(dir) => Some(read_estimate_maps(dir, w, h)?),
+        Some(dir) => {
+            let e = read_estimate_maps(dir, w, h)?;
+            if e.confidence.is_none() && e.anisotropy.is_none() && e.source.is_none() {
+                notes.push(format!(
+                    "{}: no confidence.npy, anisotropy.npy or source.npy; those views are left \
+                     out",
+                    dir.display()
+                ));
+                None
+            } else {
+                Some(e)
+            }
+        }
         None => None,
     };
 
@@ -445,7 +457,7 @@ mod tests {
     #[test]
     fn textures_are_shuffled_half_floats() {
         let s = encode_texture(2, |p| [p as f32, 0.5, f32::NAN, 1e9]).unwrap();
-        // Undo base64 and zlib by hand-free means: decode with flate2.
+        // Back: base64 by hand, then zlib with flate2's decoder.
         let raw: Vec<u8> = {
             let table = |c: u8| -> u32 {
                 match c {

@@ -116,6 +116,15 @@ fn frames_flag_and_missing_estimate() {
     );
     let o = symframe(&["view", s(&fit), "--frames", s(&dir.path().join("nope"))]);
     assert_one_line_error(&o, "nope");
+    // An estimate folder without any of the maps: a warning naming it.
+    let empty = dir.path().join("empty");
+    fs::create_dir(&empty).unwrap();
+    let o = symframe(&["view", s(&fit), "-o", s(&out), "--frames", s(&empty)]);
+    ok(&o);
+    assert!(stderr(&o).contains("warning:") && stderr(&o).contains("empty"));
+    let data = page_data(&fs::read_to_string(&out).unwrap());
+    assert_eq!(data["views"].as_array().unwrap().len(), 5);
+    assert!(data["textures"]["est"].is_null());
 }
 
 #[test]
