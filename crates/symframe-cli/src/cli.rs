@@ -37,6 +37,9 @@ pub enum Command {
     Fit(FitArgs),
     /// Render fitted Ward maps under new lights, optionally edited.
     Relight(RelightArgs),
+    /// Write one self-contained HTML page that relights a fit in the browser (WebGL2): drag the
+    /// light, edit as `relight` does, switch to the maps.
+    View(ViewArgs),
     /// Render a built-in synthetic object, estimate its frames and report the error (no download).
     Demo(DemoArgs),
     /// Render a synthetic capture with known normals and tangents into an .lp dataset folder.
@@ -536,6 +539,20 @@ pub struct RelightArgs {
     /// sRGB-encoded); the EXR files are not affected.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub exposure: f64,
+}
+
+/// Flags of `symframe view`.
+#[derive(Debug, Clone, Args)]
+pub struct ViewArgs {
+    /// Output folder of `symframe fit` (kd, ks, alpha_t, alpha_b, normals, tangents .npy).
+    pub fit_dir: PathBuf,
+    /// The HTML file to write (default: FIT_DIR/viewer.html).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Output folder of the estimate the fit was made in, for the confidence, anisotropy and
+    /// source views (default: the folder fit.json records, if it is still there).
+    #[arg(long)]
+    pub frames: Option<PathBuf>,
 }
 
 /// Solvers of `symframe integrate`.

@@ -2,7 +2,8 @@
 //! the estimation job on it with every default (as `symframe estimate` does), and reports the
 //! error against ground truth; then fits a Ward BRDF per pixel in the estimated frames (the fit
 //! job, on the estimate's tile cache) and relights it under a new light, plain and with the
-//! tangents turned by 90 degrees inside a letter-shaped region, as in the paper's Section 5.1.
+//! tangents turned by 90 degrees inside a letter-shaped region, as in the paper's Section 5.1;
+//! and writes the fit's viewer page (`fit/viewer.html`).
 
 use std::time::Instant;
 
@@ -16,7 +17,7 @@ use symframe::render::{Scene, TangentField};
 use symframe_io::ImageFormat;
 
 use glam::DVec3;
-use symframe_job::{EstimateConfig, EstimateOutcome, FitConfig, RelightConfig};
+use symframe_job::{EstimateConfig, EstimateOutcome, FitConfig, RelightConfig, ViewConfig};
 
 use crate::cli::DemoArgs;
 use crate::progress;
@@ -153,6 +154,14 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         "edited (tangents turned 90 deg inside {}): {}",
         region_path.display(),
         edited[0].display()
+    );
+    // The interactive viewer of the fit (estimate maps included).
+    let mut view = ViewConfig::new(&fit_dir);
+    view.frames = Some(estimate_dir.clone());
+    let viewer = symframe_job::write_viewer(&view)?;
+    println!(
+        "viewer:   {} (open it in a browser; drag to move the light)",
+        viewer.path.display()
     );
     println!("done in {:.1} s", t0.elapsed().as_secs_f64());
     Ok(())

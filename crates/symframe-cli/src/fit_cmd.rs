@@ -1,13 +1,16 @@
-//! `symframe fit` and `symframe relight`: flags checked and turned into a job configuration,
-//! one library call ([`symframe_job::fit`], [`symframe_job::relight`]), a summary line.
+//! `symframe fit`, `symframe relight` and `symframe view`: flags checked and turned into a job
+//! configuration, one library call ([`symframe_job::fit`], [`symframe_job::relight`],
+//! [`symframe_job::write_viewer`]), a summary line.
 
 use anyhow::{bail, Result};
 use glam::DVec3;
 use symframe::appearance::fit::{holdout_lights, FitParams};
 use symframe_io::{CacheOptions, DecodeOptions};
-use symframe_job::{CacheConfig, FitConfig, FitOutcome, RelightConfig, RelightOutcome};
+use symframe_job::{
+    CacheConfig, FitConfig, FitOutcome, RelightConfig, RelightOutcome, ViewConfig, ViewOutcome,
+};
 
-use crate::cli::{FitArgs, RelightArgs};
+use crate::cli::{FitArgs, RelightArgs, ViewArgs};
 use crate::progress;
 
 /// The fit job the flags ask for.
@@ -127,6 +130,35 @@ pub fn relight(args: &RelightArgs) -> Result<RelightOutcome> {
             "symframe: {} pictures written into {}",
             done.pictures.len(),
             args.output.display()
+        );
+    }
+    Ok(done)
+}
+
+/// The viewer the flags ask for.
+pub fn view_config(args: &ViewArgs) -> ViewConfig {
+    let mut config = ViewConfig::new(&args.fit_dir);
+    if let Some(o) = &args.output {
+        config.output = o.clone();
+    }
+    config.frames = args.frames.clone();
+    config
+}
+
+/// Runs `symframe view`: writes the page, prints its notes as warnings and a summary line.
+pub fn view(args: &ViewArgs) -> Result<ViewOutcome> {
+    let done = symframe_job::write_viewer(&view_config(args))?;
+    for note in &done.notes {
+        eprintln!("warning: {note}");
+    }
+    if progress::chatty() {
+        eprintln!(
+            "symframe: {} written ({} x {}, {:.1} MB; views: {})",
+            done.path.display(),
+            done.width,
+            done.height,
+            done.bytes as f64 / 1e6,
+            done.views.join(", ")
         );
     }
     Ok(done)

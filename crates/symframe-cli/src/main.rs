@@ -115,6 +115,7 @@ fn main() {
         cli::Command::Estimate(args) => estimate::run(&args).map(|_| ()),
         cli::Command::Fit(args) => fit_cmd::run(&args).map(|_| ()),
         cli::Command::Relight(args) => fit_cmd::relight(&args).map(|_| ()),
+        cli::Command::View(args) => fit_cmd::view(&args).map(|_| ()),
         cli::Command::Demo(args) => demo::run(&args),
         cli::Command::Merge(args) => estimate::merge(&args),
         cli::Command::BenchPaper(args) => bench::run(&args),

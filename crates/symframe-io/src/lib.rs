@@ -47,7 +47,7 @@ pub use dataset::{open_dataset, Dataset};
 pub use error::{Error, Result, Warning};
 pub use lights::{lp_path_convention, read_light_directions, LpPaths};
 pub use output::{
-    gray_map_rgb8, normal_map_rgb8, normal_map_values, read_npy_f32, source_map_rgb8,
+    gray_map_rgb8, normal_map_rgb8, normal_map_values, read_npy_f32, read_npy_u8, source_map_rgb8,
     tangent_map_rgb8, write_exr_map, write_normal_png16, write_npy_f32, write_npy_u8,
     write_png_rgb8, NormalPng, SOURCE_PALETTE,
 };

@@ -49,6 +49,16 @@ pub fn decode_npy_f32(path: &Path, bytes: &[u8]) -> Result<(Vec<usize>, Vec<f32>
     Ok((arr.shape().to_vec(), arr.iter().copied().collect()))
 }
 
+/// Reads a `uint8` `.npy` array (the source map): its shape and values in row-major order,
+/// with the same header checks as [`read_npy_f32`].
+pub fn read_npy_u8(path: &Path) -> Result<(Vec<usize>, Vec<u8>)> {
+    let bytes = std::fs::read(path).map_err(|e| Error::read(path, e))?;
+    check_npy_header(path, &bytes)?;
+    let arr = ArrayD::<u8>::read_npy(std::io::Cursor::new(&bytes[..]))
+        .map_err(|e| Error::decode(path, e))?;
+    Ok((arr.shape().to_vec(), arr.iter().copied().collect()))
+}
+
 /// Checks an `.npy` header: magic, header length, and that the declared shape times the item
 /// size is within the limits and fits in the file.
 fn check_npy_header(path: &Path, b: &[u8]) -> Result<()> {
@@ -373,6 +383,23 @@ mod tests {
         assert!(e.contains("n.npy") && e.contains("[4, 4]"), "{e}");
         std::fs::write(&p, b"\x93NUMPY garbage").unwrap();
         assert!(read_npy_f32(&p).unwrap_err().to_string().contains("n.npy"));
+    }
+
+    #[test]
+    fn u8_npy_round_trip_and_type_check() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("source.npy");
+        write_npy_u8(&p, &[2, 3], &[0, 1, 2, 3, 255, 7]).unwrap();
+        assert_eq!(
+            read_npy_u8(&p).unwrap(),
+            (vec![2, 3], vec![0, 1, 2, 3, 255, 7])
+        );
+        // A float map is not a source map: an error naming the file, no panic.
+        write_npy_f32(&p, &[2], &[0.5, 1.0]).unwrap();
+        assert!(read_npy_u8(&p)
+            .unwrap_err()
+            .to_string()
+            .contains("source.npy"));
     }
 
     #[test]

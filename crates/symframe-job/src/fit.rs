@@ -278,10 +278,11 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
     Ok(FitOutcome { maps, report })
 }
 
-/// Files a fit writes that an earlier fit into the same folder may have left and this one
-/// may not write (the held-out residual maps of a fit with held-out lights).
+/// Files an earlier fit into the same folder may have left that this one may not write: the
+/// held-out residual maps of a fit with held-out lights, and the viewer page of the old maps
+/// (`symframe view`'s default file), which would no longer show this fit.
 fn fit_owned(name: &str) -> bool {
-    name.starts_with("holdout_residual.")
+    name.starts_with("holdout_residual.") || name == "viewer.html"
 }
 
 /// Writes every output file as one output set (staged, then switched in, `fit.json` last).

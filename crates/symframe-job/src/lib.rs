@@ -1,5 +1,5 @@
-//! The symframe pipeline as a library: what `symframe estimate`, `merge`, `fit` and `relight`
-//! do, callable from any program.
+//! The symframe pipeline as a library: what `symframe estimate`, `merge`, `fit`, `relight` and
+//! `view` do, callable from any program.
 //!
 //! A job decodes the images of a capture once into an on-disk tile cache
 //! ([`symframe_io::TileCache`]), runs a per-pixel method ([`symframe::PixelMethod`]: the
@@ -13,6 +13,8 @@
 //!   source map of a capture, or one shard's tiles; [`merge`] joins shards.
 //! - [`fit`] with a [`FitConfig`]: per-pixel anisotropic Ward parameters in estimated frames.
 //! - [`relight`] with a [`RelightConfig`]: the fitted maps rendered under new lights, edited.
+//! - [`write_viewer`] with a [`ViewConfig`]: one self-contained HTML page relighting a fit in
+//!   the browser (WebGL2), with the same model and edits as [`relight`].
 //!
 //! ```
 //! use symframe::brdf::ward::Ward;
@@ -51,6 +53,7 @@ mod merge;
 mod outdir;
 mod relight;
 mod tiles;
+mod view;
 
 use std::sync::atomic::AtomicBool;
 
@@ -64,6 +67,7 @@ pub use merge::{merge, MergeOutcome, ShardManifest, MANIFEST};
 pub use outdir::{check_output_set, OutputDir, OutputSet, Staging, LOCK_FILE};
 pub use relight::{read_ward_maps, relight, RelightConfig, RelightOutcome};
 pub use tiles::{peak_rss_bytes, shard_tiles, TileCounts};
+pub use view::{write_viewer, ViewConfig, ViewOutcome};
 
 /// The run stopped early on request; what was done (cache images, finished tiles) is kept,
 /// and the same call again resumes.

@@ -681,6 +681,59 @@ fn synth(
     .map_err(to_py)
 }
 
+/// The `symframe merge` job: the output folders of `estimate --tiles K/N` shards joined into
+/// the full maps in `out` (maps, pictures and `report.json`, as the command line writes them).
+#[pyfunction]
+#[pyo3(signature = (shards, out, progress=None, threads=None))]
+fn merge<'py>(
+    py: Python<'py>,
+    shards: Vec<PathBuf>,
+    out: PathBuf,
+    progress: Option<Py<PyAny>>,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let done = run_job(py, progress, threads, |ctl| {
+        symframe_job::merge(&shards, &out, ctl)
+    })?;
+    let path = out.join("report.json");
+    let text = std::fs::read_to_string(&path)
+        .map_err(|e| SymframeError::new_err(format!("{}: cannot read: {e}", path.display())))?;
+    let dict = PyDict::new(py);
+    dict.set_item("report", json_to_py(py, &text)?)?;
+    put_maps(py, &dict, done.maps)?;
+    Ok(dict)
+}
+
+/// The `symframe view` job: the viewer page of a fit folder; returns its path. What the command
+/// line prints as warnings (estimate maps not found) become `UserWarning`s.
+#[pyfunction]
+#[pyo3(signature = (fit_dir, out=None, frames=None))]
+fn view(
+    py: Python<'_>,
+    fit_dir: PathBuf,
+    out: Option<PathBuf>,
+    frames: Option<PathBuf>,
+) -> PyResult<PathBuf> {
+    let mut config = symframe_job::ViewConfig::new(fit_dir);
+    if let Some(out) = out {
+        config.output = out;
+    }
+    config.frames = frames;
+    let done = py
+        .detach(|| symframe_job::write_viewer(&config))
+        .map_err(to_py)?;
+    for note in &done.notes {
+        let message = std::ffi::CString::new(note.replace('\0', " ")).unwrap_or_default();
+        PyErr::warn(
+            py,
+            &py.get_type::<pyo3::exceptions::PyUserWarning>(),
+            &message,
+            1,
+        )?;
+    }
+    Ok(done.path)
+}
+
 /// The native module.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -697,5 +750,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit, m)?)?;
     m.add_function(wrap_pyfunction!(relight, m)?)?;
     m.add_function(wrap_pyfunction!(synth, m)?)?;
+    m.add_function(wrap_pyfunction!(merge, m)?)?;
+    m.add_function(wrap_pyfunction!(view, m)?)?;
     Ok(())
 }

@@ -299,3 +299,47 @@ def test_fit_and_relight_equal_the_command_line(capture, cli, tmp_path):
     assert (tmp_path / "relit_py" / "relit_000.png").read_bytes() == cli_png
     with pytest.raises(ValueError, match="roughness_scale must be finite and > 0"):
         symframe.relight(tmp_path / "fit_py", tmp_path / "r2", light, roughness_scale=0)
+
+
+def test_merge_of_shards_equals_an_unsharded_run(capture, cli, tmp_path):
+    whole = symframe.estimate_path(capture, tmp_path / "whole", tile_size=8)
+    shards = [tmp_path / "s1", tmp_path / "s2"]
+    for k, folder in enumerate(shards, 1):
+        symframe.estimate_path(capture, folder, tiles=f"{k}/2", tile_size=8)
+    with pytest.raises(symframe.SymframeError, match="shard"):
+        symframe.merge(shards[:1], tmp_path / "half")
+    calls = []
+    got = symframe.merge(shards, tmp_path / "merged", progress=lambda *a: calls.append(a))
+    assert_same_maps(got, whole)
+    assert got["report"]["pixels"]["estimated"] == whole["report"]["pixels"]["estimated"] > 800
+    assert calls and calls[-1][0] == "merging" and calls[-1][1] == calls[-1][2]
+    # The command line's merge of the same shards writes the same maps.
+    cli("merge", *shards, "-o", tmp_path / "merged_cli")
+    assert_same_maps(cli_maps(tmp_path / "merged"), cli_maps(tmp_path / "merged_cli"))
+    with pytest.raises(TypeError, match="list of shard folders"):
+        symframe.merge(str(shards[0]), tmp_path / "x")
+    with pytest.raises(ValueError, match="empty"):
+        symframe.merge([], tmp_path / "x")
+
+
+def test_view_writes_the_command_lines_page(capture, cli, tmp_path):
+    frames = tmp_path / "est"
+    symframe.estimate_path(capture, frames)
+    fit_dir = tmp_path / "fit"
+    symframe.fit(capture, frames, fit_dir)
+    page = symframe.view(fit_dir)
+    assert page == str(fit_dir / "viewer.html")
+    cli("view", fit_dir, "-o", tmp_path / "cli.html")
+    text = Path(page).read_text()
+    assert text == (tmp_path / "cli.html").read_text()
+    assert "#version 300 es" in text and '"views":["relit","normal","tangent","kd","ks",' \
+        '"confidence","anisotropy","source"]' in text
+    # Without the estimate's folder: a warning, and a page of the fit's views only.
+    frames.rename(tmp_path / "moved")
+    with pytest.warns(UserWarning, match="--frames"):
+        page = symframe.view(fit_dir, tmp_path / "no_est.html")
+    assert '"views":["relit","normal","tangent","kd","ks"]' in Path(page).read_text()
+    assert symframe.view(fit_dir, tmp_path / "v.html", frames=tmp_path / "moved").endswith("v.html")
+    with pytest.raises(symframe.SymframeError, match="kd.npy"):
+        symframe.view(tmp_path / "moved", tmp_path / "bad.html")
+    assert not (tmp_path / "bad.html").exists()

@@ -293,6 +293,8 @@ fn demo_runs_end_to_end_and_reports_small_errors() {
     assert!(out.join("relit/relit_000.png").is_file());
     assert!(out.join("relit-edited/relit_000.png").is_file());
     assert!(out.join("fit/fit.json").is_file());
+    assert!(stdout.contains("fit/viewer.html"), "{stdout}");
+    assert!(out.join("fit/viewer.html").is_file());
     let eval: serde_json::Value =
         serde_json::from_str(&fs::read_to_string(out.join("estimate/eval.json")).unwrap()).unwrap();
     let mean = eval["normal_error"]["mean"].as_f64().unwrap();

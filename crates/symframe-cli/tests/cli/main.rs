@@ -15,3 +15,4 @@ mod outdir;
 mod reliability;
 mod synth;
 mod tiles;
+mod view;

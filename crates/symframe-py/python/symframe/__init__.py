@@ -39,8 +39,10 @@ __all__ = [
     "estimate_path",
     "evaluate",
     "fit",
+    "merge",
     "relight",
     "synth",
+    "view",
     "__version__",
 ]
 
@@ -157,6 +159,29 @@ def estimate_path(
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+def merge(
+    shards: "list[PathLike]",
+    out: PathLike,
+    *,
+    progress: Optional[Progress] = None,
+    threads: Optional[int] = None,
+) -> Dict[str, Any]:
+    """Runs the ``symframe merge`` job: joins the output folders of the shards of one
+    :func:`estimate_path` job (``tiles="K/N"``, every ``K`` from 1 to ``N``) into the full maps.
+
+    ``out`` is written as the command line writes it. Returns the maps as :func:`estimate_path`
+    does (the same as an unsharded run's, bit for bit) and ``report``: the content of
+    ``report.json``. Missing shards, shards of another job or the same shard twice raise
+    :class:`SymframeError` naming the folder.
+    """
+    if isinstance(shards, (str, os.PathLike)):
+        raise TypeError("shards must be a list of shard folders, not one path")
+    folders = [os.fspath(s) for s in shards]
+    if not folders:
+        raise ValueError("shards is empty: give the output folders of every shard")
+    return _native.merge(folders, os.fspath(out), progress, threads)
+
+
 def evaluate(
     normals: np.ndarray,
     gt_normals: np.ndarray,
@@ -227,6 +252,25 @@ def relight(fit_dir: PathLike, out: PathLike, lights: Any, **options: Any) -> np
         lights = lights[None, :]
     lights = _float_array("lights", lights, 2, 3, np.float64)
     return _native.relight(os.fspath(fit_dir), os.fspath(out), lights, options)
+
+
+def view(fit_dir: PathLike, out: Optional[PathLike] = None, *, frames: Optional[PathLike] = None) -> str:
+    """Runs ``symframe view``: writes one self-contained HTML page that relights the fit in
+    ``fit_dir`` (a :func:`fit` output folder) in the browser, with the model and edits of
+    :func:`relight`; returns its path.
+
+    ``out``: the file (default ``fit_dir/viewer.html``). ``frames``: the estimate's output
+    folder, for the confidence, anisotropy and source views (default: the one ``fit.json``
+    records, if it is still there; otherwise a ``UserWarning`` says they are left out). The URL
+    fragment sets the state, e.g. ``viewer.html#light=0.3,0.4,0.87&exposure=1``.
+    """
+    return os.fspath(
+        _native.view(
+            os.fspath(fit_dir),
+            None if out is None else os.fspath(out),
+            None if frames is None else os.fspath(frames),
+        )
+    )
 
 
 def synth(

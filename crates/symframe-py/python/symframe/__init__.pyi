@@ -99,6 +99,15 @@ def estimate_path(
 ) -> Maps:
     """The tiled, resumable `symframe estimate` job."""
 
+def merge(
+    shards: List[PathLike],
+    out: PathLike,
+    *,
+    progress: Optional[Progress] = None,
+    threads: Optional[int] = None,
+) -> Maps:
+    """The `symframe merge` job: the shards' folders joined into the full maps in `out`."""
+
 def evaluate(
     normals: npt.NDArray[np.floating[Any]],
     gt_normals: npt.NDArray[np.floating[Any]],
@@ -154,3 +163,6 @@ def relight(
     exposure: float = 0.0,
 ) -> npt.NDArray[np.float32]:
     """The `symframe relight` job: N x H x W x 3 linear images, also written to `out`."""
+
+def view(fit_dir: PathLike, out: Optional[PathLike] = None, *, frames: Optional[PathLike] = None) -> str:
+    """`symframe view`: the fit's self-contained HTML viewer page; returns its path."""

@@ -194,6 +194,16 @@ impl Relighter {
         out
     }
 
+    /// The frame pixel `p` (row-major) is shaded in by [`Relighter::render`]: its tangent and
+    /// normal (unit, camera frame) and whether the tangent came from the tangent map (only those
+    /// are turned by a tangent rotation; an isotropic pixel gets a tangent of its own), or `None`
+    /// where the pixel has no model. For renderers of the same maps elsewhere (the viewer's
+    /// shader), so that they shade exactly the pixels this one shades, in the same frames.
+    pub fn frame(&self, p: usize) -> Option<(DVec3, DVec3, bool)> {
+        let m = self.pixels.get(p)?.as_ref()?;
+        Some((m.t, m.n, m.anisotropic))
+    }
+
     /// The tangent field after the edits (`H x W x 3`, NaN where there is no model or no
     /// tangent).
     pub fn tangents(&self) -> Vec<f32> {
@@ -389,6 +399,31 @@ mod tests {
             let d: f32 = (0..3).map(|k| t0[p * 3 + k] * t1[p * 3 + k]).sum();
             assert!(d.abs() < 1e-5);
         }
+    }
+
+    #[test]
+    fn frames_are_those_rendered() {
+        let w = Ward::new([0.2; 3], [0.6; 3], 0.08, 0.4);
+        let (scene, mut maps) = sphere_maps(16, &w);
+        // One pixel isotropic: it keeps a model, with a tangent of its own.
+        let iso = (0..16 * 16).find(|&p| scene.mask[p]).unwrap();
+        maps.tangents[iso * 3..iso * 3 + 3].fill(f32::NAN);
+        let r = Relighter::new(&maps, &Edits::default()).unwrap();
+        let tangents = r.tangents();
+        for p in 0..16 * 16 {
+            let Some((t, n, aniso)) = r.frame(p) else {
+                assert!(!scene.mask[p], "pixel {p} inside lost its model");
+                continue;
+            };
+            assert!((t.length() - 1.0).abs() < 1e-9 && t.dot(n).abs() < 1e-9);
+            assert_eq!(aniso, p != iso);
+            if aniso {
+                assert!((tangents[p * 3] - t.x as f32).abs() < 1e-6);
+            } else {
+                assert!(tangents[p * 3].is_nan());
+            }
+        }
+        assert!(r.frame(16 * 16).is_none());
     }
 
     #[test]

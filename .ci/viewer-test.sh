@@ -1,0 +1,88 @@
+#!/usr/bin/env bash
+# Browser test of `symframe view`: renders a small synthetic capture, estimates and fits it,
+# writes the viewer, renders it in headless Chromium (WebGL2 on SwiftShader) in several states
+# and compares each screenshot with the picture the command line makes of the same state:
+# `symframe relight` at three lights and with every edit, the fit's albedo pictures, and the
+# estimate's normal, tangent, confidence and source pictures; then relights by a change of the
+# URL fragment and by a mouse drag. Fails when a PSNR over the object is below 45 dB (30 dB is
+# the requirement; about 67 dB is measured: pixels differ by at most one level in 255).
+#   .ci/viewer-test.sh [--size N] [--screenshot FILE.png]
+# --screenshot also saves a picture of the whole viewer (the README's docs/viewer.png is made
+# with --size 224 --screenshot docs/viewer.png).
+#
+# Needs Chromium (Debian's `chromium`, installed here with apt-get when missing and running as
+# root), node and npm (playwright-core and pngjs from npm, into target/viewer-test-node).
+# Without them it says so and skips.
+set -euo pipefail
+here="$(cd "$(dirname "$0")" && pwd)"
+root="$(dirname "$here")"
+size=64
+screenshot=""
+while [ $# -gt 0 ]; do
+    case "$1" in
+        --size) size="$2"; shift 2 ;;
+        --screenshot) screenshot="$(realpath -m "$2")"; shift 2 ;;
+        *) echo "viewer-test: unknown argument $1" >&2; exit 2 ;;
+    esac
+done
+skip() {
+    echo "viewer-test: skipping the browser test of symframe view: $*"
+    exit 0
+}
+command -v node >/dev/null && command -v npm >/dev/null || skip "node and npm are not installed"
+
+chromium="${CHROMIUM:-$(command -v chromium || true)}"
+if [ -z "$chromium" ]; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+        echo "viewer-test: installing Debian's chromium"
+        export DEBIAN_FRONTEND=noninteractive
+        apt-get install -y -q chromium >/dev/null 2>&1 ||
+            { apt-get update -q >/dev/null 2>&1 && apt-get install -y -q chromium >/dev/null 2>&1; } || true
+    fi
+    chromium="$(command -v chromium || true)"
+    [ -n "$chromium" ] || skip "chromium is not installed and apt-get could not install it"
+fi
+export CHROMIUM="$chromium"
+
+node_dir="$root/target/viewer-test-node"
+if [ ! -d "$node_dir/node_modules/playwright-core" ] || [ ! -d "$node_dir/node_modules/pngjs" ]; then
+    mkdir -p "$node_dir"
+    # playwright-core drives the system Chromium (it downloads no browser); pngjs reads PNGs.
+    npm install --silent --no-audit --no-fund --prefix "$node_dir" playwright-core@1.65.1 pngjs@7.0.0 >/dev/null ||
+        skip "npm could not install playwright-core and pngjs"
+fi
+export NODE_PATH="$node_dir/node_modules"
+
+start=$(date +%s)
+(cd "$root" && cargo build --locked -q -p symframe-cli)
+sf="$root/target/debug/symframe"
+work="$(mktemp -d)"
+trap 'rm -rf "$work"' EXIT
+"$sf" -q synth -o "$work/data" --size "$size" --rig cone:200 --model ward
+"$sf" -q estimate "$work/data" -o "$work/est"
+"$sf" -q fit "$work/data" --frames "$work/est" -o "$work/fit"
+# From the work folder, so that the page's title is just "fit".
+(cd "$work" && "$sf" -q view fit -o viewer.html)
+
+l1=0.3,0.4,0.866 l2=-0.5,0.2,0.84 l3=0.1,-0.6,0.79
+"$sf" -q relight "$work/fit" -o "$work/relit" --light "$l1" --light "$l2" --light "$l3"
+edits="exposure=0.5&diffuse=0.7&specular=1.5&roughness=0.8&rotate=60"
+"$sf" -q relight "$work/fit" -o "$work/edited" --light "$l2" --exposure 0.5 --diffuse-scale 0.7 \
+    --specular-scale 1.5 --roughness-scale 0.8 --rotate-tangents 60
+
+args=(--viewer "$work/viewer.html" --mask "$work/data/mask.png" --min-psnr 45
+    --case "light=$l1" "$work/relit/relit_000.png"
+    --case "light=$l2" "$work/relit/relit_001.png"
+    --case "light=$l3" "$work/relit/relit_002.png"
+    --case "light=$l2&$edits" "$work/edited/relit_000.png"
+    --case "view=kd" "$work/fit/kd.png"
+    --case "view=ks" "$work/fit/ks.png"
+    --case "view=normal" "$work/est/normals.png"
+    --case "view=tangent" "$work/est/tangents.png"
+    --case "view=confidence" "$work/est/confidence.png"
+    --case "view=source" "$work/est/source.png")
+if [ -n "$screenshot" ]; then
+    args+=(--screenshot "$screenshot")
+fi
+node "$here/viewer-test.js" "${args[@]}"
+echo "viewer-test: passed in $(($(date +%s) - start)) s (${size}x${size} fit, $(stat -c %s "$work/viewer.html") byte page)"

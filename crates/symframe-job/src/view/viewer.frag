@@ -1,0 +1,145 @@
+#version 300 es
+// symframe viewer: relights fitted Ward maps, or shows one map, one texel per canvas pixel.
+//
+// The relit view is `symframe relight`'s image (symframe::Relighter): the radiance
+// f(l, v) (n.l) of each pixel's anisotropic Ward model (normalised form, Ward 1992) in its
+// frame (x = t, y = b = n x t, z = n), view v = (0, 0, 1), a distant light of unit intensity;
+// the same edits (factors on kd, ks and both roughnesses, tangents turned about the normal);
+// then the PNG's tone mapping: times 2^exposure, clamped to [0, 1], sRGB-encoded.
+precision highp float;
+precision highp int;
+
+uniform highp sampler2D uGeom;   // normal, flag (0 none, 1 normal only, 2 model)
+uniform highp sampler2D uFrame;  // shading tangent, 1 if from the tangent map
+uniform highp sampler2D uKd;     // kd, alpha_t
+uniform highp sampler2D uKs;     // ks, alpha_b
+uniform highp sampler2D uEst;    // confidence, anisotropy, source, flags (1, 2, 4)
+uniform int uView;               // 0 relit, 1 normal, 2 tangent, 3 kd, 4 ks, 5 confidence,
+                                 // 6 anisotropy, 7 source
+uniform vec3 uLight;             // unit light direction, camera frame
+uniform float uGain;             // 2^exposure
+uniform float uDiffuse;          // factor on kd
+uniform float uSpecular;         // factor on ks
+uniform float uRoughness;        // factor on alpha_t and alpha_b
+uniform vec2 uRotation;          // (cos, sin) of the tangent rotation
+
+out vec4 outColor;
+
+const float PI = 3.14159265358979;
+
+// symframe_io's linear_to_srgb.
+float srgb(float v) {
+    return v <= 0.0031308 ? v * 12.92 : 1.055 * pow(v, 1.0 / 2.4) - 0.055;
+}
+
+vec3 srgb3(vec3 v) {
+    v = clamp(v, 0.0, 1.0);
+    return vec3(srgb(v.r), srgb(v.g), srgb(v.b));
+}
+
+// symframe_io's viridis polynomial (within about 1% of matplotlib's map).
+vec3 viridis(float t) {
+    t = clamp(t, 0.0, 1.0);
+    const vec3 c0 = vec3(0.2777273272234177, 0.005407344544966578, 0.3340998053353061);
+    const vec3 c1 = vec3(0.1050930431085774, 1.404613529898575, 1.384590162594685);
+    const vec3 c2 = vec3(-0.3308618287255563, 0.214847559468213, 0.09509516302823659);
+    const vec3 c3 = vec3(-4.634230498983486, -5.799100973351585, -19.33244095627987);
+    const vec3 c4 = vec3(6.228269936347081, 14.17993336680509, 56.69055260068105);
+    const vec3 c5 = vec3(4.776384997670288, -13.74514537774601, -65.35303263337234);
+    const vec3 c6 = vec3(-5.435455855934631, 4.645852612178535, 26.3124352495832);
+    return clamp(c0 + t * (c1 + t * (c2 + t * (c3 + t * (c4 + t * (c5 + t * c6))))), 0.0, 1.0);
+}
+
+// symframe_io's tangent picture: hue 2 phi (t and -t alike), saturation and value 1.
+vec3 hue(float turns) {
+    float h = fract(turns) * 6.0;
+    float s = min(floor(h), 5.0);
+    float f = h - s;
+    if (s == 0.0) return vec3(1.0, f, 0.0);
+    if (s == 1.0) return vec3(1.0 - f, 1.0, 0.0);
+    if (s == 2.0) return vec3(0.0, 1.0, f);
+    if (s == 3.0) return vec3(0.0, 1.0 - f, 1.0);
+    if (s == 4.0) return vec3(f, 0.0, 1.0);
+    return vec3(1.0, 0.0, 1.0 - f);
+}
+
+// The tangent after the edit: turned about n where it came from the tangent map.
+vec3 editedTangent(vec3 t, vec3 n, float fromMap) {
+    if (fromMap > 0.5) {
+        t = t * uRotation.x + cross(n, t) * uRotation.y;
+    }
+    return t;
+}
+
+// Ward radiance f(l, v) (n.l) in the frame (t, n x t, n); 0 when l or v is at or below the
+// horizon (symframe::brdf::ward, half_vector_above).
+vec3 ward(vec3 n, vec3 t, vec3 kd, vec3 ks, float ax, float ay, vec3 l) {
+    vec3 b = cross(n, t);
+    vec3 ll = vec3(dot(l, t), dot(l, b), dot(l, n));
+    vec3 vl = vec3(t.z, b.z, n.z);
+    if (ll.z <= 0.0 || vl.z <= 0.0) {
+        return vec3(0.0);
+    }
+    vec3 h = normalize(ll + vl);
+    float sx = h.x / ax;
+    float sy = h.y / ay;
+    float e = (sx * sx + sy * sy) / (h.z * h.z);
+    float lobe = exp(-e) / (4.0 * PI * ax * ay * sqrt(ll.z * vl.z));
+    return (kd / PI + ks * lobe) * ll.z;
+}
+
+void main() {
+    ivec2 size = textureSize(uGeom, 0);
+    // Texture rows run top to bottom, the canvas' y bottom to top.
+    ivec2 p = ivec2(int(gl_FragCoord.x), size.y - 1 - int(gl_FragCoord.y));
+    vec4 geom = texelFetch(uGeom, p, 0);
+    vec4 frame = texelFetch(uFrame, p, 0);
+    int flag = int(geom.w + 0.5);
+    vec3 n = geom.xyz;
+    vec3 c = vec3(0.0);
+    if (uView == 0) {
+        if (flag == 2) {
+            vec4 kd = texelFetch(uKd, p, 0);
+            vec4 ks = texelFetch(uKs, p, 0);
+            // The half floats are near unit length; renormalise, and keep t perpendicular to n.
+            n = normalize(n);
+            vec3 t = normalize(frame.xyz - dot(frame.xyz, n) * n);
+            t = editedTangent(t, n, frame.w);
+            vec3 rad = ward(n, t, kd.rgb * uDiffuse, ks.rgb * uSpecular,
+                            kd.a * uRoughness, ks.a * uRoughness, uLight);
+            c = srgb3(rad * uGain);
+        }
+    } else if (uView == 1) {
+        // symframe_io's normal picture, OpenGL convention: (n + 1) / 2.
+        c = flag > 0 ? (n + 1.0) * 0.5 : vec3(0.0);
+    } else if (uView == 2) {
+        if (frame.w > 0.5) {
+            vec3 t = flag == 2 ? editedTangent(frame.xyz, normalize(n), frame.w) : frame.xyz;
+            c = hue(2.0 * atan(t.y, t.x) / (2.0 * PI));
+        }
+    } else if (uView == 3 || uView == 4) {
+        // The albedo pictures (kd.png, ks.png): clamped, sRGB-encoded, with the edits' factors.
+        if (flag == 2) {
+            c = uView == 3 ? srgb3(texelFetch(uKd, p, 0).rgb * uDiffuse)
+                           : srgb3(texelFetch(uKs, p, 0).rgb * uSpecular);
+        }
+    } else {
+        vec4 est = texelFetch(uEst, p, 0);
+        int has = int(est.w + 0.5);
+        // Confidence and anisotropy are in [0, 1]: viridis over it, as confidence.png.
+        if (uView == 5 && (has & 1) != 0) {
+            c = viridis(est.x);
+        } else if (uView == 6 && (has & 2) != 0) {
+            c = viridis(est.y);
+        } else if (uView == 7 && (has & 4) != 0) {
+            // symframe_io's SOURCE_PALETTE.
+            int code = int(est.z + 0.5);
+            c = code == 0 ? vec3(0.0)
+              : code == 1 ? vec3(31.0, 119.0, 180.0) / 255.0
+              : code == 2 ? vec3(255.0, 127.0, 14.0) / 255.0
+              : code == 3 ? vec3(44.0, 160.0, 44.0) / 255.0
+              : vec3(1.0, 0.0, 1.0);
+        }
+    }
+    outColor = vec4(c, 1.0);
+}
