@@ -90,6 +90,66 @@ fn a_second_job_into_a_busy_folder_is_refused_and_the_first_finishes() {
     assert_eq!(report(&out)["method"], "woodham");
 }
 
+/// Waits until `child` holds the output lock of `dir` (its process id in the lock file).
+fn wait_for_lock(dir: &Path, child: &std::process::Child) {
+    let lock = dir.join(symframe_job::LOCK_FILE);
+    let t = Instant::now();
+    while fs::read_to_string(&lock).unwrap_or_default().trim() != child.id().to_string() {
+        assert!(
+            t.elapsed() < Duration::from_secs(20),
+            "the job never took the lock"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// `synth -o DIR` and `eval` wrote into their folders without the output lock, so they could
+/// interleave with each other and with estimate or fit: now they hold it like those do, and
+/// a second job into the folder is refused while they run.
+#[test]
+fn synth_and_eval_hold_the_output_folder_lock() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let synth = |env: &[(&str, &str)]| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_symframe"));
+        c.args(["--quiet", "synth", "-o", common::s(&data)])
+            .args(["--size", "16", "--rig", "cone:40"])
+            .envs(env.iter().copied())
+            .stderr(Stdio::piped());
+        c
+    };
+    let first = synth(&[("SYMFRAME_TEST_HOLD_LOCK_S", "3")])
+        .spawn()
+        .unwrap();
+    wait_for_lock(&data, &first);
+    let busy = format!("is in use by process {}", first.id());
+    common::assert_one_line_error(&synth(&[]).output().unwrap(), &busy);
+    let lp = data.join("lights.lp");
+    let est = tmp.path().join("est");
+    common::assert_one_line_error(&estimate(&lp, &data, &[]), &busy);
+    ok(&first.wait_with_output().unwrap());
+    assert!(lp.is_file() && data.join("gt_normals.npy").is_file());
+    ok(&estimate(&lp, &est, &["--quiet"]));
+
+    let eval = |env: &[(&str, &str)]| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_symframe"));
+        c.args(["eval", common::s(&data), common::s(&est)])
+            .envs(env.iter().copied())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped());
+        c
+    };
+    let first = eval(&[("SYMFRAME_TEST_HOLD_LOCK_S", "3")]).spawn().unwrap();
+    wait_for_lock(&est, &first);
+    let busy = format!("is in use by process {}", first.id());
+    common::assert_one_line_error(&eval(&[]).output().unwrap(), &busy);
+    common::assert_one_line_error(&estimate(&lp, &est, &[]), &busy);
+    ok(&first.wait_with_output().unwrap());
+    assert!(est.join("eval.json").is_file());
+    assert!(!est.join(symframe_job::LOCK_FILE).exists());
+    check_output_set(&est, "report.json").unwrap();
+}
+
 #[test]
 fn a_late_failure_keeps_tiles_and_cache_and_the_rerun_resumes() {
     let tmp = tempfile::tempdir().unwrap();
