@@ -248,7 +248,7 @@ fn fit_refuses_mismatched_or_missing_frames() {
         "--mask",
         s(&small),
     ]);
-    assert_fails_keeping_cache(&o, "small.png", &out);
+    assert_fails_keeping_cache(&o, "small.png: mask is 5x5 but the images are 12x12", &out);
     // And the good case works with true frames.
     let o = symframe(&["fit", s(&lp), "--frames", s(&frames), "-o", s(&out)]);
     assert!(o.status.success(), "{}", stderr(&o));

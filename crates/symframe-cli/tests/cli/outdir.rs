@@ -191,17 +191,39 @@ fn an_error_in_a_fresh_folder_keeps_only_what_a_rerun_resumes_from() {
     let o = estimate(Path::new("/no/such/data.lp"), &out, &[]);
     common::assert_one_line_error(&o, "/no/such/data.lp");
     assert!(!out.exists());
-    // Failing after the cache is built (a mask of the wrong size): the cache stays for the
-    // rerun, no maps.
+    // A mask of the wrong size is found before the images are decoded: nothing left either.
     let small = tmp.path().join("small.png");
     symframe_io::write_png8_rgb(&small, 5, 5, &[1.0; 75], false).unwrap();
     let o = estimate(&lp, &out, &["--mask", common::s(&small)]);
-    common::assert_one_line_error(&o, "small.png");
+    common::assert_one_line_error(&o, "small.png: mask is 5x5");
+    assert!(!out.exists());
+    // Failing after the cache is built (fit with frames of the wrong size): the cache stays
+    // for the rerun, no maps.
+    let frames = tmp.path().join("frames");
+    ok(&estimate(&lp, &frames, &["--quiet", "--no-keep-cache"]));
+    let wrong = tmp.path().join("wrong");
+    fs::create_dir_all(&wrong).unwrap();
+    for name in ["normals.npy", "tangents.npy"] {
+        symframe_io::write_npy_f32(&wrong.join(name), &[4, 4, 3], &[0.0; 48]).unwrap();
+    }
+    let fit = |frames: &Path| {
+        common::symframe(&[
+            "fit",
+            "--quiet",
+            common::s(&lp),
+            "--frames",
+            common::s(frames),
+            "-o",
+            common::s(&out),
+        ])
+    };
+    common::assert_one_line_error(&fit(&wrong), "normals.npy: shape [4, 4, 3]");
     assert!(out.join(".symframe-cache").is_dir());
-    assert!(!out.join("normals.npy").exists() && !out.join(".symframe-tiles").exists());
-    let o = estimate(&lp, &out, &[]);
-    ok(&o);
-    assert_eq!(report(&out)["cache"]["hit"], true);
+    assert!(!out.join("kd.npy").exists() && !out.join(".symframe-tiles").exists());
+    ok(&fit(&frames));
+    let r: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(out.join("fit.json")).unwrap()).unwrap();
+    assert_eq!(r["cache"]["hit"], true, "{r}");
 }
 
 #[test]
