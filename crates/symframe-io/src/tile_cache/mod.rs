@@ -852,4 +852,68 @@ mod tests {
         .to_string();
         assert!(e.contains("3.exr: image is 3x3 but the first image"), "{e}");
     }
+
+    /// The inputs fingerprint names the capture, not where it lies: a copy elsewhere has the
+    /// same (the cache fingerprint, keyed on paths, differs); a changed image or light does not.
+    #[test]
+    fn inputs_fingerprint_follows_content_not_paths() {
+        let d = tempfile::tempdir().unwrap();
+        fs::create_dir_all(d.path().join("a")).unwrap();
+        let a = dataset(&d.path().join("a"), 3, 2, 4);
+        let copy_dir = d.path().join("copy");
+        fs::create_dir_all(&copy_dir).unwrap();
+        let mut copy = a.clone();
+        for p in &mut copy.images {
+            let q = copy_dir.join(p.file_name().unwrap());
+            fs::copy(&*p, &q).unwrap();
+            *p = q;
+        }
+        let fp = |ds: &Dataset, mtime: bool| {
+            dataset_fingerprints(ds, &DecodeOptions::default(), mtime).unwrap()
+        };
+        let (fa, fc) = (fp(&a, false), fp(&copy, false));
+        assert_eq!(fa.inputs, fc.inputs);
+        assert_ne!(fa.cache, fc.cache);
+        assert_eq!(fa.kind, StampKind::Content);
+        assert_eq!(fp(&a, true).kind, StampKind::SizeAndMtime);
+        assert_ne!(fp(&a, true).inputs, fa.inputs);
+        let mut moved = copy.clone();
+        moved.lights[1] = DVec3::X;
+        assert_ne!(fp(&moved, false).inputs, fa.inputs);
+        write_exr_rgb(&copy.images[2], 3, 2, &[0.5; 18]).unwrap();
+        assert_ne!(fp(&copy, false).inputs, fa.inputs);
+    }
+
+    /// The dataset's mask is checked before the stack is decoded: a wrong size leaves no
+    /// cache file behind.
+    #[test]
+    fn a_wrong_size_mask_fails_before_the_cache_file_is_created() {
+        let d = tempfile::tempdir().unwrap();
+        let mut ds = dataset(d.path(), 4, 3, 5);
+        let mask = d.path().join("mask.png");
+        crate::codecs::write_png8_rgb(&mask, 3, 4, &[1.0; 36], false).unwrap();
+        ds.mask = Some(mask);
+        let dir = d.path().join("cache");
+        let stop = AtomicBool::new(false);
+        let e = TileCache::open_or_build(
+            &ds,
+            &DecodeOptions::default(),
+            &dir,
+            Default::default(),
+            &stop,
+            &|| {},
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("mask.png: mask is 3x4 but the images are 4x3"),
+            "{e}"
+        );
+        let files: Vec<_> = fs::read_dir(&dir)
+            .unwrap()
+            .flatten()
+            .filter(|e| e.file_name().to_string_lossy().contains(".stack"))
+            .collect();
+        assert!(files.is_empty(), "{files:?}");
+    }
 }
