@@ -136,37 +136,71 @@ symframe --quiet estimate data/lights.lp -o single
 SINGLE_S=$(since "$t")
 say "single-machine estimate: $SINGLE_S s"
 
-# 5. The README's recipe: the array job, then the merge after it.
-CPUS=$(nproc)
+# Waits until jobs $1 (an array) and $2 (its merge) have left the queue; fails when the merge
+# can never run (a shard failed).
+wait_jobs() {
+    local t0
+    t0=$(now)
+    while [ -n "$(squeue -h -j "$1,$2" -o %i 2>/dev/null)" ]; do
+        if [ "$(squeue -h -j "$2" -o %r 2>/dev/null)" = DependencyNeverSatisfied ]; then
+            say "FAIL: a shard failed, the merge job will never run"
+            cat slurm-*.out || true
+            scancel "$2" || true
+            exit 1
+        fi
+        if [ "$(echo "$(now) - $t0 > 1800" | bc)" = 1 ]; then
+            say "FAIL: jobs still queued after 30 min"
+            squeue
+            exit 1
+        fi
+        sleep 1
+    done
+}
+
+# Compares every map and picture of result/ with single/, byte for byte.
+same_as_single() {
+    local f status=0
+    for f in normals.npy tangents.npy confidence.npy anisotropy.npy source.npy \
+        normals.exr tangents.exr normals.png tangents.png confidence.png source.png; do
+        if cmp -s "single/$f" "result/$f"; then
+            say "identical: $f ($(stat -c %s "result/$f") bytes)"
+        else
+            say "FAIL: result/$f differs from single/$f"
+            status=1
+        fi
+    done
+    return "$status"
+}
+
+# 5. The README's recipe (section "Shards"): its two sbatch commands, with this check's capture
+# and cache, and the resources a small machine grants (options override the #SBATCH lines).
+SYMFRAME_SRC=$ROOT
 t=$(now)
-ARRAY=$(sbatch --parsable --array=1-"$SHARDS" --cpus-per-task=1 --mem=2G \
+jobid=$(sbatch --parsable --array=1-"$SHARDS" --cpus-per-task=1 --mem=2G \
     --export=ALL,INPUT=data/lights.lp,CACHE="$WORK/cache" \
-    "$ROOT/scripts/slurm/estimate-shards.sbatch")
-MERGE=$(sbatch --parsable --dependency=afterok:"$ARRAY" "$ROOT/scripts/slurm/merge.sbatch")
-say "submitted array job $ARRAY ($SHARDS tasks, 1 CPU each, $CPUS CPUs on the node) and merge job $MERGE"
-while [ -n "$(squeue -h -j "$ARRAY,$MERGE" -o %i 2>/dev/null)" ]; do
-    if [ "$(echo "$(now) - $t > 1800" | bc)" = 1 ]; then
-        say "jobs still queued after 30 min"
-        squeue
-        exit 1
-    fi
-    sleep 1
-done
+    "$SYMFRAME_SRC/scripts/slurm/estimate-shards.sbatch")
+sbatch --parsable --dependency=afterok:"$jobid" "$SYMFRAME_SRC/scripts/slurm/merge.sbatch" >merge.id
+say "submitted array job $jobid ($SHARDS tasks, 1 CPU each, $(nproc) CPUs on the node)" \
+    "and merge job $(cat merge.id)"
+wait_jobs "$jobid" "$(cat merge.id)"
 SLURM_S=$(since "$t")
 say "array and merge jobs done: $SLURM_S s from submission"
 for f in slurm-*.out; do
-    if [ -s "$f" ]; then
-        echo "--- $f"
-        cat "$f"
-    fi
+    echo "--- $f"
+    grep -v -E '^(decoding|tiles|merging) [0-9]+/[0-9]+' "$f" || true
 done
 for k in $(seq 1 "$SHARDS"); do
     if [ ! -f "shard_$k/shard.json" ]; then
         say "FAIL: shard_$k did not finish"
         exit 1
     fi
-    say "shard $k/$SHARDS: $(grep -o '"estimate_s": [0-9.]*' "shard_$k/shard.json" | head -n 1), \
-cache hit $(grep -o '"hit": [a-z]*' "shard_$k/shard.json" | head -n 1 | cut -d' ' -f2)"
+    say "shard $k/$SHARDS: $(python3 -c '
+import json, sys
+r = json.load(open(sys.argv[1]))["report"]
+t, c = r["timings"], r["cache"]
+print("load %.2f s (cache hit %s, %d images decoded), estimation %.2f s, total %.2f s"
+      % (t["load_s"], c["hit"], c["images_decoded"], t["estimate_s"], t["total_s"]))
+' "shard_$k/shard.json")"
 done
 if [ ! -f result/report.json ]; then
     say "FAIL: the merge job wrote no result/report.json"
@@ -174,18 +208,21 @@ if [ ! -f result/report.json ]; then
 fi
 
 # 6. Byte identity of every map and picture.
-status=0
-for f in normals.npy tangents.npy confidence.npy anisotropy.npy source.npy \
-    normals.exr tangents.exr normals.png tangents.png confidence.png source.png; do
-    if cmp -s "single/$f" "result/$f"; then
-        say "identical: $f ($(stat -c %s "result/$f") bytes)"
-    else
-        say "FAIL: result/$f differs from single/$f"
-        status=1
-    fi
-done
-if [ "$status" = 0 ]; then
-    say "PASS: $SHARDS Slurm shards merged equal the single-machine run byte for byte" \
-        "(single ${SINGLE_S} s, Slurm ${SLURM_S} s from submission to merged)"
-fi
-exit "$status"
+same_as_single || exit 1
+say "PASS: $SHARDS Slurm shards merged equal the single-machine run byte for byte" \
+    "(single ${SINGLE_S} s, Slurm ${SLURM_S} s from submission to merged)"
+
+# 7. A shard preempted after some of its tiles: its manifest and last tile gone, the index
+# resubmitted alone (SHARDS keeps the array's size), merged again.
+rm -f shard_3/shard.json
+rm -f "$(ls shard_3/.symframe-tiles/tile-*.bin | tail -n 1)"
+t=$(now)
+jobid=$(sbatch --parsable --array=3 --cpus-per-task=1 --mem=2G \
+    --export=ALL,INPUT=data/lights.lp,CACHE="$WORK/cache",SHARDS="$SHARDS" \
+    "$SYMFRAME_SRC/scripts/slurm/estimate-shards.sbatch")
+sbatch --parsable --dependency=afterok:"$jobid" "$SYMFRAME_SRC/scripts/slurm/merge.sbatch" >merge.id
+wait_jobs "$jobid" "$(cat merge.id)"
+say "shard 3 resubmitted and merged again: $(since "$t") s; $(grep -o '"computed": [0-9]*' \
+    shard_3/shard.json | head -n 1), $(grep -o '"reused": [0-9]*' shard_3/shard.json | head -n 1)"
+same_as_single || exit 1
+say "PASS: after resubmitting shard 3 alone, the merged maps still equal the single run"
