@@ -11,6 +11,7 @@
 #   SLURM_CHECK_DIR  working folder (default: a new /tmp/symframe-slurm.XXXXXX, kept)
 #   SIZE, LIGHTS     the synthetic dataset (default 128 pixels, 400 lights)
 #   SHARDS           array tasks (default 4)
+#   CTLD_PORT, SLURMD_PORT  the daemons' ports (default 6817, 6818)
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
@@ -200,7 +201,7 @@ r = json.load(open(sys.argv[1]))["report"]
 t, c = r["timings"], r["cache"]
 print("load %.2f s (cache hit %s, %d images decoded), estimation %.2f s, total %.2f s"
       % (t["load_s"], c["hit"], c["images_decoded"], t["estimate_s"], t["total_s"]))
-' "shard_$k/shard.json")"
+' "shard_$k/shard.json" 2>/dev/null || echo "finished (python3 shows the timings)")"
 done
 if [ ! -f result/report.json ]; then
     say "FAIL: the merge job wrote no result/report.json"
