@@ -99,10 +99,16 @@ EOF
 export SLURM_CONF=$ETC/slurm.conf
 
 stop_daemons() {
+    local f pid i
     for f in "$WORK/run/slurmd.pid" "$WORK/run/slurmctld.pid" "$WORK/run/munged.pid"; do
-        if [ -s "$f" ]; then kill "$(cat "$f")" 2>/dev/null || true; fi
+        [ -s "$f" ] || continue
+        pid=$(cat "$f")
+        kill "$pid" 2>/dev/null || continue
+        for i in $(seq 1 100); do
+            kill -0 "$pid" 2>/dev/null || break
+            sleep 0.1
+        done
     done
-    sleep 1
     say "daemons stopped; logs in $WORK/log"
 }
 trap stop_daemons EXIT
