@@ -159,7 +159,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     }
     let mut config = EstimateConfig::new(&lp, args.dir.join(format!("out-{tag}-symmetry")));
     config.cache.dir = Some(cache);
-    config.cache.options.batch_bytes = args.decode_memory << 20;
+    config.cache.options.batch_bytes = crate::estimate::decode_memory_bytes(args.decode_memory)?;
     config.shard = args.tiles;
     let sym = run_estimate(&config)?;
     println!(

@@ -42,10 +42,21 @@ fn validate(args: &EstimateArgs) -> Result<()> {
     if !(1..=4096).contains(&args.tile_size) {
         bail!("--tile-size must be in [1, 4096], got {}", args.tile_size);
     }
-    if args.decode_memory == 0 {
-        bail!("--decode-memory must be at least 1 MiB");
-    }
+    decode_memory_bytes(args.decode_memory)?;
     Ok(())
+}
+
+/// The largest `--decode-memory`, in MiB (1 TiB): far above any machine's memory, and its
+/// bytes fit a 64-bit size.
+pub const MAX_DECODE_MEMORY_MIB: usize = 1 << 20;
+
+/// The bytes of `--decode-memory MIB`, checked: 1 MiB to [`MAX_DECODE_MEMORY_MIB`] (a huge
+/// value once wrapped around to a tiny batch).
+pub fn decode_memory_bytes(mib: usize) -> Result<usize> {
+    if !(1..=MAX_DECODE_MEMORY_MIB).contains(&mib) {
+        bail!("--decode-memory must be in [1, {MAX_DECODE_MEMORY_MIB}] MiB (at most 1 TiB), got {mib}");
+    }
+    Ok(mib << 20)
 }
 
 /// The job the flags ask for.
@@ -95,7 +106,7 @@ pub fn config(args: &EstimateArgs) -> Result<EstimateConfig> {
             remove_after: args.no_keep_cache,
             options: CacheOptions {
                 tile: args.tile_size,
-                batch_bytes: args.decode_memory << 20,
+                batch_bytes: decode_memory_bytes(args.decode_memory)?,
                 trust_mtime: args.trust_mtime,
             },
         },

@@ -197,6 +197,10 @@ pub fn run(args: &EvalArgs) -> Result<EvalReport> {
     if !est.is_dir() {
         bail!("{}: no such estimate folder", est.display());
     }
+    // The estimate folder's lock, held while its maps are read and eval's files written: no
+    // estimate, fit or other eval into the folder runs meanwhile.
+    let _lock = symframe_job::OutputDir::lock(est)?;
+    crate::test_checkpoint(symframe_job::Checkpoint::OutputLocked);
     let n_path = est.join("normals.npy");
     if !n_path.is_file() {
         bail!(

@@ -62,7 +62,7 @@ fn control<'a>(
 /// variables, not documented flags): `SYMFRAME_TEST_HOLD_LOCK_S=S` sleeps S seconds once the
 /// output folder is locked; `SYMFRAME_TEST_KILL_AFTER_MOVES=N` kills the process (SIGKILL, as
 /// `kill -9` does) once N files of the new output set are in place.
-fn test_checkpoint(c: Checkpoint) {
+pub(crate) fn test_checkpoint(c: Checkpoint) {
     let var = |name: &str| std::env::var(name).ok()?.parse::<u64>().ok();
     match c {
         Checkpoint::OutputLocked => {

@@ -226,6 +226,21 @@ fn image_format(f: FormatArg) -> (ImageFormat, &'static str) {
 pub fn run(args: &SynthArgs) -> Result<PathBuf> {
     validate(args)?;
     symframe_io::check_synth_target(&args.output, args.force)?;
+    // The output folder's lock, as estimate and fit take it: a second synth (or any job) into
+    // the folder is refused while this one writes. Checked again under the lock.
+    let out = symframe_job::OutputDir::lock(&args.output)?;
+    crate::test_checkpoint(symframe_job::Checkpoint::OutputLocked);
+    let result = symframe_io::check_synth_target(&args.output, args.force)
+        .map_err(anyhow::Error::from)
+        .and_then(|()| render_and_write(args));
+    if result.is_err() {
+        out.discard_unfinished();
+    }
+    result
+}
+
+/// Renders the dataset and writes it into the (locked) output folder.
+fn render_and_write(args: &SynthArgs) -> Result<PathBuf> {
     let t0 = Instant::now();
     let brdf: Box<dyn Brdf> = parse_model(&args.model).map_err(anyhow::Error::msg)?;
     let field = args

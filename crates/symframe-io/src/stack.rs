@@ -247,20 +247,19 @@ pub(crate) fn decode_stack_image(
 /// [`read_image`] reads; no sRGB decoding or saturation test). The mask must be
 /// `width x height` and have at least one pixel inside.
 pub fn read_mask(path: &Path, width: usize, height: usize) -> Result<Vec<bool>> {
+    let (w, h, mask) = read_mask_any_size(path)?;
+    check_mask_size(path, (w, h), (width, height))?;
+    Ok(mask)
+}
+
+/// Reads a mask image of any size (see [`read_mask`]): width, height and the pixels inside;
+/// an error if it cannot be read or has no pixel inside.
+pub fn read_mask_any_size(path: &Path) -> Result<(usize, usize, Vec<bool>)> {
     let opts = DecodeOptions {
         linear_8bit: true,
         saturation: f32::INFINITY,
     };
     let img = read_image(path, &opts)?;
-    if (img.width, img.height) != (width, height) {
-        return Err(Error::invalid(
-            path,
-            format!(
-                "mask is {}x{} but the images are {width}x{height}",
-                img.width, img.height
-            ),
-        ));
-    }
     let mask: Vec<bool> = img
         .data
         .chunks_exact(img.channels)
@@ -269,7 +268,25 @@ pub fn read_mask(path: &Path, width: usize, height: usize) -> Result<Vec<bool>> 
     if !mask.iter().any(|&m| m) {
         return Err(Error::invalid(path, "mask is empty (no pixel is inside)"));
     }
-    Ok(mask)
+    Ok((img.width, img.height, mask))
+}
+
+/// Checks that the mask at `path`, of `mask` (width, height), has the images' size.
+pub(crate) fn check_mask_size(
+    path: &Path,
+    mask: (usize, usize),
+    images: (usize, usize),
+) -> Result<()> {
+    if mask == images {
+        return Ok(());
+    }
+    Err(Error::invalid(
+        path,
+        format!(
+            "mask is {}x{} but the images are {}x{}",
+            mask.0, mask.1, images.0, images.1
+        ),
+    ))
 }
 
 #[cfg(test)]

@@ -109,9 +109,14 @@ pub fn write_lp_dataset(
 /// The file that marks a folder as written by [`write_lp_dataset`] (`symframe synth`).
 pub const SYNTH_MARKER: &str = ".symframe-synth";
 
+/// The lock file symframe's jobs (`symframe_job::OutputDir`) hold in their output folder; a
+/// folder holding only it counts as empty for [`check_synth_target`].
+pub const OUTPUT_LOCK_FILE: &str = ".symframe-lock";
+
 /// Whether a synthetic dataset may be written into `dir`, replacing what is there: yes if it
-/// does not exist, is empty, or holds the [`SYNTH_MARKER`] of an earlier dataset; else an error
-/// naming the folder (a user's folder, whose files must not be replaced), unless `force`.
+/// does not exist, is empty (but for the [`OUTPUT_LOCK_FILE`]), or holds the [`SYNTH_MARKER`]
+/// of an earlier dataset; else an error naming the folder (a user's folder, whose files must
+/// not be replaced), unless `force`.
 pub fn check_synth_target(dir: &Path, force: bool) -> Result<()> {
     if force || dir.join(SYNTH_MARKER).is_file() {
         return Ok(());
@@ -120,8 +125,11 @@ pub fn check_synth_target(dir: &Path, force: bool) -> Result<()> {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
         Err(_) if !dir.is_dir() => Err(Error::invalid(dir, "exists and is not a folder")),
         Err(e) => Err(Error::read(dir, e)),
-        Ok(mut entries) => {
-            if entries.next().is_none() {
+        Ok(entries) => {
+            let mut others = entries
+                .flatten()
+                .filter(|e| e.file_name() != OUTPUT_LOCK_FILE);
+            if others.next().is_none() {
                 return Ok(());
             }
             Err(Error::invalid(

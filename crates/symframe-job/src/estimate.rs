@@ -8,14 +8,15 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use glam::DVec3;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use symframe::baselines::{Baseline, BaselineMethod, BaselineParams};
 use symframe::frames::estimator::{check_inputs, PixelCounts};
 use symframe::{EstimateMaps, Estimator, EstimatorParams, PixelRecord, PixelSource};
 use symframe::{Rig, RigOptions};
 use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{
-    CacheInfo, CacheOptions, Dataset, DecodeOptions, NormalPng, TileCache, TileGrid,
+    CacheInfo, CacheOptions, Dataset, DecodeOptions, Fingerprints, NormalPng, StampKind, TileCache,
+    TileGrid,
 };
 
 use crate::merge::{write_manifest, ShardManifest, MANIFEST, MANIFEST_FORMAT, MANIFEST_VERSION};
@@ -165,6 +166,8 @@ pub struct Report {
     pub version: &'static str,
     /// The input as given.
     pub input: PathBuf,
+    /// The capture's fingerprint, which `fit` checks its own input against.
+    pub inputs: InputsRecord,
     /// The mask used, if any.
     pub mask: Option<PathBuf>,
     /// The estimation method: `symmetry`, `woodham`, `woodham-robust` or `max-reflectance`.
@@ -191,6 +194,27 @@ pub struct Report {
     pub timings: Timings,
     /// Every warning of the run, as printed (inputs, recomputed tiles, suspicious results).
     pub warnings: Vec<String>,
+}
+
+/// The capture a job read, as its report records it: the path-free inputs fingerprint (see
+/// [`Fingerprints::inputs`]), so that a later job on the maps can tell whether it reads the
+/// same capture (a copy of it included).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct InputsRecord {
+    /// The fingerprint (hex).
+    pub fingerprint: String,
+    /// How the images entered it: by `content` or by `size_and_mtime` (`--trust-mtime`).
+    pub images_by: StampKind,
+}
+
+impl InputsRecord {
+    /// The record of `f`.
+    pub fn of(f: &Fingerprints) -> Self {
+        Self {
+            fingerprint: format!("{:016x}", f.inputs),
+            images_by: f.kind,
+        }
+    }
 }
 
 /// One code of the source map, as recorded in the report.
@@ -466,28 +490,33 @@ fn job_fingerprint(cache: &TileCache, plan: &Plan, mask: Option<&[bool]>) -> Res
 }
 
 /// Opens (or builds) the tile cache of `ds` in `dir`, reporting decoding progress and the
-/// loader's warnings about the inputs.
+/// loader's warnings about the inputs. The dataset's fingerprints are computed first and given
+/// to `check`, so a job can refuse its inputs before anything is decoded.
 pub(crate) fn open_cache(
     ds: &Dataset,
     decode: &DecodeOptions,
     dir: &Path,
     options: CacheOptions,
     ctl: &Control,
-) -> Result<(TileCache, CacheInfo)> {
+    check: &dyn Fn(&Fingerprints) -> Result<()>,
+) -> Result<(TileCache, CacheInfo, Fingerprints)> {
+    let fps = symframe_io::dataset_fingerprints(ds, decode, options.trust_mtime)?;
+    check(&fps)?;
     let decoded = AtomicU64::new(0);
     let total = ds.images.len() as u64;
-    let (cache, info) = TileCache::open_or_build(ds, decode, dir, options, ctl.stop, &|| {
-        let n = decoded.fetch_add(1, Ordering::SeqCst) + 1;
-        ctl.report(Progress::new(Stage::Decoding, n, total));
-    })
-    .map_err(|e| match e {
-        symframe_io::Error::Interrupted => anyhow::Error::from(Interrupted),
-        e => e.into(),
-    })?;
+    let (cache, info) =
+        TileCache::open_or_build_with(ds, decode, dir, options, Some(fps), ctl.stop, &|| {
+            let n = decoded.fetch_add(1, Ordering::SeqCst) + 1;
+            ctl.report(Progress::new(Stage::Decoding, n, total));
+        })
+        .map_err(|e| match e {
+            symframe_io::Error::Interrupted => anyhow::Error::from(Interrupted),
+            e => e.into(),
+        })?;
     for w in &info.warnings {
         ctl.warn(&w.to_string());
     }
-    Ok((cache, info))
+    Ok((cache, info, fps))
 }
 
 /// Reads the mask of a job (`mask`, else the dataset's) at the cache's image size.
@@ -588,14 +617,22 @@ fn run(
     warnings: &Mutex<Vec<String>>,
 ) -> Result<EstimateOutcome> {
     let t0 = Instant::now();
-    let ds: Dataset = symframe_io::open_dataset(&config.input)?;
+    let mut ds: Dataset = symframe_io::open_dataset(&config.input)?;
+    // The mask in force is checked with the cache, before the images are decoded.
+    ds.mask = config.mask.clone().or(ds.mask);
     let plan = Plan::new(&config.method, &ds)?;
     let rig_s = t0.elapsed().as_secs_f64();
 
     let t_load = Instant::now();
     let cache_dir = config.cache_dir();
-    let (cache, cache_info) =
-        open_cache(&ds, &config.decode, &cache_dir, config.cache.options, ctl)?;
+    let (cache, cache_info, fps) = open_cache(
+        &ds,
+        &config.decode,
+        &cache_dir,
+        config.cache.options,
+        ctl,
+        &|_| Ok(()),
+    )?;
     let load_s = t_load.elapsed().as_secs_f64();
     let grid = *cache.grid();
     let (mask_path, mask) = read_mask(&config.mask, &ds, &grid)?;
@@ -670,6 +707,7 @@ fn run(
     let mut report = Report {
         version: env!("CARGO_PKG_VERSION"),
         input: config.input.clone(),
+        inputs: InputsRecord::of(&fps),
         mask: mask_path,
         method: method.name(),
         parameters,

@@ -12,11 +12,11 @@ use symframe::appearance::fit::{
     holdout_lights, FitMaps, FitMethod, FitParams, FitSummary, HoldoutError, PixelFit, PixelOutcome,
 };
 use symframe_io::fingerprint::Fingerprint;
-use symframe_io::{CacheOptions, Dataset, DecodeOptions, TileFile};
+use symframe_io::{CacheOptions, Dataset, DecodeOptions, Fingerprints, StampKind, TileFile};
 
 use crate::estimate::{
     cache_dir, fingerprint_lights, fingerprint_mask, open_cache, read_mask, remove_cache,
-    CacheConfig, CacheReport, CACHE_DIR, TILES_DIR,
+    CacheConfig, CacheReport, InputsRecord, CACHE_DIR, TILES_DIR,
 };
 use crate::outdir::{OutputDir, OutputSet};
 use crate::tiles::{read_tiles, run_tiles, tile_path, TileCounts, TileRecord};
@@ -92,6 +92,8 @@ pub struct FitReport {
     pub input: PathBuf,
     /// The frames folder as given.
     pub frames: PathBuf,
+    /// The capture's fingerprint (the same as in the frames' `report.json`).
+    pub inputs: InputsRecord,
     /// The mask used, if any.
     pub mask: Option<PathBuf>,
     /// The reflectance model fitted.
@@ -159,6 +161,65 @@ fn read_frame_map(path: &Path, width: usize, height: usize) -> Result<Vec<f32>> 
     Ok(data)
 }
 
+/// Refuses frames estimated from another capture: the inputs fingerprint recorded in
+/// `FRAMES/report.json` must be this capture's (`ours`, recomputed in the recorded way when
+/// that differs). A report without one (older, or not from `estimate`) is a warning.
+fn check_frames_inputs(
+    config: &FitConfig,
+    ds: &Dataset,
+    ours: &Fingerprints,
+    ctl: &Control,
+) -> Result<()> {
+    let rp = config.frames.join("report.json");
+    let text = match std::fs::read_to_string(&rp) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            ctl.warn(&format!(
+                "{}: missing; the frames cannot be checked against {}",
+                rp.display(),
+                config.input.display()
+            ));
+            return Ok(());
+        }
+        Err(e) => return Err(e).with_context(|| format!("{}: cannot read", rp.display())),
+    };
+    let report: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", rp.display()))?;
+    let Some(recorded) = report
+        .get("inputs")
+        .and_then(|v| serde_json::from_value::<InputsRecord>(v.clone()).ok())
+    else {
+        ctl.warn(&format!(
+            "{}: records no input fingerprint (written by an older symframe?); the frames \
+             cannot be checked against {}",
+            rp.display(),
+            config.input.display()
+        ));
+        return Ok(());
+    };
+    let here = if recorded.images_by == ours.kind {
+        InputsRecord::of(ours)
+    } else {
+        let trust_mtime = recorded.images_by == StampKind::SizeAndMtime;
+        InputsRecord::of(&symframe_io::dataset_fingerprints(
+            ds,
+            &config.decode,
+            trust_mtime,
+        )?)
+    };
+    if here.fingerprint != recorded.fingerprint {
+        bail!(
+            "{}: frames estimated from another capture than {} (input fingerprint {} in its \
+             report.json, {} here); give the output folder of an estimate of this capture",
+            config.frames.display(),
+            config.input.display(),
+            recorded.fingerprint,
+            here.fingerprint
+        );
+    }
+    Ok(())
+}
+
 /// Runs a fit job. The output folder is locked for the whole job; on an error the finished
 /// tiles and the cache are kept (the same call resumes), and only what this job created and
 /// holds nothing to resume from is removed again.
@@ -185,14 +246,19 @@ pub fn fit(config: &FitConfig, ctl: &Control) -> Result<FitOutcome> {
 
 fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome> {
     let t0 = Instant::now();
-    let ds: Dataset = symframe_io::open_dataset(&config.input)?;
+    let mut ds: Dataset = symframe_io::open_dataset(&config.input)?;
+    // The mask in force is checked with the cache, before the images are decoded.
+    ds.mask = config.mask.clone().or(ds.mask);
     let params = FitParams {
         holdout: holdout_lights(ds.lights.len(), config.holdout)
             .with_context(|| format!("holding out {} lights", config.holdout))?,
         ..config.params.clone()
     };
     let (cache_dir, options) = config.cache_in_force();
-    let (cache, cache_info) = open_cache(&ds, &config.decode, &cache_dir, options, ctl)?;
+    let (cache, cache_info, fps) =
+        open_cache(&ds, &config.decode, &cache_dir, options, ctl, &|f| {
+            check_frames_inputs(config, &ds, f, ctl)
+        })?;
     let load_s = t0.elapsed().as_secs_f64();
     let grid = *cache.grid();
     let (w, h) = (grid.width, grid.height);
@@ -246,6 +312,7 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
         version: env!("CARGO_PKG_VERSION"),
         input: config.input.clone(),
         frames: config.frames.clone(),
+        inputs: InputsRecord::of(&fps),
         mask: mask_path,
         model: "anisotropic Ward (Ward 1992, normalised form), frame x = t, y = n x t, z = n",
         lights: FitLights {

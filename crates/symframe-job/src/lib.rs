@@ -59,8 +59,9 @@ use std::sync::atomic::AtomicBool;
 
 pub use estimate::{
     estimate, write_estimate_outputs, BaselineParameters, CacheConfig, CacheReport, Done,
-    EstimateConfig, EstimateOutcome, LightCounts, MethodConfig, MethodParameters, Report, Shard,
-    SourceCount, Sources, SymmetryParameters, TileReport, Timings, CACHE_DIR, TILES_DIR,
+    EstimateConfig, EstimateOutcome, InputsRecord, LightCounts, MethodConfig, MethodParameters,
+    Report, Shard, SourceCount, Sources, SymmetryParameters, TileReport, Timings, CACHE_DIR,
+    TILES_DIR,
 };
 pub use fit::{fit, FitConfig, FitLights, FitOutcome, FitReport, FitTimings};
 pub use merge::{merge, MergeOutcome, ShardManifest, MANIFEST};

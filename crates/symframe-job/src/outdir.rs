@@ -86,7 +86,7 @@ impl Drop for Staging {
 }
 
 /// The lock file of an output folder, held by the job writing into it.
-pub const LOCK_FILE: &str = ".symframe-lock";
+pub const LOCK_FILE: &str = symframe_io::OUTPUT_LOCK_FILE;
 /// Prefix of the staging folders inside an output folder (`.symframe-staging-PID`).
 const STAGING_PREFIX: &str = ".symframe-staging-";
 /// Inside a staging folder: the switch plan, written once every file of the new set is staged.

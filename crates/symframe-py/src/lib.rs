@@ -658,25 +658,34 @@ fn synth(
     };
     py.detach(|| -> anyhow::Result<PathBuf> {
         symframe_io::check_synth_target(&out, false)?;
-        let lights = symframe::rig::uniform_cone_lights(n_lights, theta_d_max);
-        let images: Vec<Vec<f32>> = {
-            use rayon::prelude::*;
-            lights
-                .par_iter()
-                .map(|&l| scene.render(brdf.as_ref(), l))
-                .collect()
-        };
-        Ok(symframe_io::write_lp_dataset(
-            &out,
-            &lights,
-            &images,
-            scene.width,
-            scene.height,
-            format,
-            Some(&scene.gt_normals()),
-            Some(&scene.gt_tangents()),
-            Some(&scene.mask),
-        )?)
+        // The output folder's lock, as the CLI's synth takes it; checked again under it.
+        let lock = symframe_job::OutputDir::lock(&out)?;
+        let written = (|| -> anyhow::Result<PathBuf> {
+            symframe_io::check_synth_target(&out, false)?;
+            let lights = symframe::rig::uniform_cone_lights(n_lights, theta_d_max);
+            let images: Vec<Vec<f32>> = {
+                use rayon::prelude::*;
+                lights
+                    .par_iter()
+                    .map(|&l| scene.render(brdf.as_ref(), l))
+                    .collect()
+            };
+            Ok(symframe_io::write_lp_dataset(
+                &out,
+                &lights,
+                &images,
+                scene.width,
+                scene.height,
+                format,
+                Some(&scene.gt_normals()),
+                Some(&scene.gt_tangents()),
+                Some(&scene.mask),
+            )?)
+        })();
+        if written.is_err() {
+            lock.discard_unfinished();
+        }
+        written
     })
     .map_err(to_py)
 }

@@ -71,13 +71,13 @@ pub fn is_progress_line(line: &str) -> bool {
         })
 }
 
-/// The run failed with a one-line error (no panic) that names `needle` (progress lines
-/// before it aside).
+/// The run failed with a one-line error (no panic) that names `needle` (progress and
+/// `warning:` lines before it aside).
 pub fn assert_one_line_error(o: &Output, needle: &str) {
     let all = stderr(o);
     let err: String = all
         .lines()
-        .filter(|l| !is_progress_line(l))
+        .filter(|l| !is_progress_line(l) && !l.starts_with("warning: "))
         .collect::<Vec<_>>()
         .join("\n");
     assert!(!o.status.success(), "expected failure, stderr: {all}");

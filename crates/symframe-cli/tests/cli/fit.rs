@@ -6,7 +6,8 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use crate::common::{
-    assert_fails_keeping_cache, assert_fails_naming, s, sphere_dataset, stderr, symframe, Truth,
+    assert_fails_keeping_cache, assert_fails_naming, estimate, ok, report, s, sphere_dataset,
+    stderr, symframe, Truth,
 };
 
 use glam::DVec3;
@@ -247,11 +248,119 @@ fn fit_refuses_mismatched_or_missing_frames() {
         "--mask",
         s(&small),
     ]);
-    assert_fails_keeping_cache(&o, "small.png", &out);
+    assert_fails_keeping_cache(&o, "small.png: mask is 5x5 but the images are 12x12", &out);
     // And the good case works with true frames.
     let o = symframe(&["fit", s(&lp), "--frames", s(&frames), "-o", s(&out)]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(!out.join("holdout_residual.npy").exists());
+}
+
+/// Copies the files of a dataset folder (one level of subfolders, as `synth` writes).
+fn copy_dataset(from: &Path, to: &Path) {
+    fs::create_dir_all(to).unwrap();
+    for e in fs::read_dir(from).unwrap().flatten() {
+        let dest = to.join(e.file_name());
+        if e.path().is_dir() {
+            copy_dataset(&e.path(), &dest);
+        } else {
+            fs::copy(e.path(), dest).unwrap();
+        }
+    }
+}
+
+/// `fit --frames` from another capture of the same size was accepted (wrong Ward maps, exit
+/// 0): the estimate's report.json now records the capture's fingerprint and fit checks it
+/// before decoding anything. A copy of the capture elsewhere is the same capture.
+#[test]
+fn fit_refuses_frames_of_another_capture() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (_, _, lp_a) = dataset(&tmp.path().join("a"), 12, 60);
+    let truth = Truth {
+        normals: false,
+        tangents: false,
+    };
+    // Another capture of the same size and lights: the same sphere, brighter.
+    let lp_b = sphere_dataset(
+        &tmp.path().join("b"),
+        12,
+        60,
+        &material(),
+        ImageFormat::Exr,
+        1.5,
+        truth,
+    )
+    .1;
+    let est = tmp.path().join("est-a");
+    ok(&estimate(&lp_a, &est, &["--quiet"]));
+    let recorded = report(&est)["inputs"].clone();
+    assert_eq!(recorded["images_by"], "content", "{recorded}");
+    assert_eq!(recorded["fingerprint"].as_str().unwrap().len(), 16);
+    let cache = est.join(".symframe-cache");
+    let listing = |d: &Path| {
+        let mut v: Vec<String> = fs::read_dir(d)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    };
+    let cached = listing(&cache);
+
+    let out = tmp.path().join("fit");
+    let o = symframe(&["fit", s(&lp_b), "--frames", s(&est), "-o", s(&out)]);
+    assert_fails_naming(
+        &o,
+        &format!(
+            "{}: frames estimated from another capture than {}",
+            est.display(),
+            lp_b.display()
+        ),
+        &out,
+    );
+    assert_eq!(
+        listing(&cache),
+        cached,
+        "nothing of b decoded into a's cache"
+    );
+
+    // A copy of capture a is a: accepted, and fit.json records the same fingerprint.
+    copy_dataset(&tmp.path().join("a"), &tmp.path().join("a-copy"));
+    let lp_copy = tmp.path().join("a-copy").join(lp_a.file_name().unwrap());
+    let o = symframe(&[
+        "fit",
+        "--quiet",
+        s(&lp_copy),
+        "--frames",
+        s(&est),
+        "-o",
+        s(&out),
+    ]);
+    ok(&o);
+    let fit: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(out.join("fit.json")).unwrap()).unwrap();
+    assert_eq!(fit["inputs"], recorded);
+
+    // A report without the record (an older symframe): fitted, with a warning.
+    let rp = est.join("report.json");
+    let mut r = report(&est);
+    r.as_object_mut().unwrap().remove("inputs");
+    fs::write(&rp, serde_json::to_string(&r).unwrap()).unwrap();
+    let o = symframe(&[
+        "fit",
+        "--quiet",
+        s(&lp_b),
+        "--frames",
+        s(&est),
+        "-o",
+        s(&out),
+    ]);
+    ok(&o);
+    assert!(
+        stderr(&o).contains("records no input fingerprint"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 #[test]

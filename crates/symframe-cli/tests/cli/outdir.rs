@@ -90,6 +90,66 @@ fn a_second_job_into_a_busy_folder_is_refused_and_the_first_finishes() {
     assert_eq!(report(&out)["method"], "woodham");
 }
 
+/// Waits until `child` holds the output lock of `dir` (its process id in the lock file).
+fn wait_for_lock(dir: &Path, child: &std::process::Child) {
+    let lock = dir.join(symframe_job::LOCK_FILE);
+    let t = Instant::now();
+    while fs::read_to_string(&lock).unwrap_or_default().trim() != child.id().to_string() {
+        assert!(
+            t.elapsed() < Duration::from_secs(20),
+            "the job never took the lock"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// `synth -o DIR` and `eval` wrote into their folders without the output lock, so they could
+/// interleave with each other and with estimate or fit: now they hold it like those do, and
+/// a second job into the folder is refused while they run.
+#[test]
+fn synth_and_eval_hold_the_output_folder_lock() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let synth = |env: &[(&str, &str)]| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_symframe"));
+        c.args(["--quiet", "synth", "-o", common::s(&data)])
+            .args(["--size", "16", "--rig", "cone:40"])
+            .envs(env.iter().copied())
+            .stderr(Stdio::piped());
+        c
+    };
+    let first = synth(&[("SYMFRAME_TEST_HOLD_LOCK_S", "3")])
+        .spawn()
+        .unwrap();
+    wait_for_lock(&data, &first);
+    let busy = format!("is in use by process {}", first.id());
+    common::assert_one_line_error(&synth(&[]).output().unwrap(), &busy);
+    let lp = data.join("lights.lp");
+    let est = tmp.path().join("est");
+    common::assert_one_line_error(&estimate(&lp, &data, &[]), &busy);
+    ok(&first.wait_with_output().unwrap());
+    assert!(lp.is_file() && data.join("gt_normals.npy").is_file());
+    ok(&estimate(&lp, &est, &["--quiet"]));
+
+    let eval = |env: &[(&str, &str)]| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_symframe"));
+        c.args(["eval", common::s(&data), common::s(&est)])
+            .envs(env.iter().copied())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped());
+        c
+    };
+    let first = eval(&[("SYMFRAME_TEST_HOLD_LOCK_S", "3")]).spawn().unwrap();
+    wait_for_lock(&est, &first);
+    let busy = format!("is in use by process {}", first.id());
+    common::assert_one_line_error(&eval(&[]).output().unwrap(), &busy);
+    common::assert_one_line_error(&estimate(&lp, &est, &[]), &busy);
+    ok(&first.wait_with_output().unwrap());
+    assert!(est.join("eval.json").is_file());
+    assert!(!est.join(symframe_job::LOCK_FILE).exists());
+    check_output_set(&est, "report.json").unwrap();
+}
+
 #[test]
 fn a_late_failure_keeps_tiles_and_cache_and_the_rerun_resumes() {
     let tmp = tempfile::tempdir().unwrap();
@@ -131,17 +191,39 @@ fn an_error_in_a_fresh_folder_keeps_only_what_a_rerun_resumes_from() {
     let o = estimate(Path::new("/no/such/data.lp"), &out, &[]);
     common::assert_one_line_error(&o, "/no/such/data.lp");
     assert!(!out.exists());
-    // Failing after the cache is built (a mask of the wrong size): the cache stays for the
-    // rerun, no maps.
+    // A mask of the wrong size is found before the images are decoded: nothing left either.
     let small = tmp.path().join("small.png");
     symframe_io::write_png8_rgb(&small, 5, 5, &[1.0; 75], false).unwrap();
     let o = estimate(&lp, &out, &["--mask", common::s(&small)]);
-    common::assert_one_line_error(&o, "small.png");
+    common::assert_one_line_error(&o, "small.png: mask is 5x5");
+    assert!(!out.exists());
+    // Failing after the cache is built (fit with frames of the wrong size): the cache stays
+    // for the rerun, no maps.
+    let frames = tmp.path().join("frames");
+    ok(&estimate(&lp, &frames, &["--quiet", "--no-keep-cache"]));
+    let wrong = tmp.path().join("wrong");
+    fs::create_dir_all(&wrong).unwrap();
+    for name in ["normals.npy", "tangents.npy"] {
+        symframe_io::write_npy_f32(&wrong.join(name), &[4, 4, 3], &[0.0; 48]).unwrap();
+    }
+    let fit = |frames: &Path| {
+        common::symframe(&[
+            "fit",
+            "--quiet",
+            common::s(&lp),
+            "--frames",
+            common::s(frames),
+            "-o",
+            common::s(&out),
+        ])
+    };
+    common::assert_one_line_error(&fit(&wrong), "normals.npy: shape [4, 4, 3]");
     assert!(out.join(".symframe-cache").is_dir());
-    assert!(!out.join("normals.npy").exists() && !out.join(".symframe-tiles").exists());
-    let o = estimate(&lp, &out, &[]);
-    ok(&o);
-    assert_eq!(report(&out)["cache"]["hit"], true);
+    assert!(!out.join("kd.npy").exists() && !out.join(".symframe-tiles").exists());
+    ok(&fit(&frames));
+    let r: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(out.join("fit.json")).unwrap()).unwrap();
+    assert_eq!(r["cache"]["hit"], true, "{r}");
 }
 
 #[test]

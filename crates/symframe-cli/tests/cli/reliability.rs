@@ -310,3 +310,72 @@ fn absurd_thread_counts_are_refused() {
         assert_eq!(o.status.code(), Some(2));
     }
 }
+
+/// `--decode-memory` was shifted into bytes unchecked: a huge value wrapped around (2^44 MiB
+/// became a zero-byte batch). Out of range now is a one-line error naming the flag.
+#[test]
+fn huge_decode_memory_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    for n in ["17592186044416", "18446744073709551615", "1048577", "0"] {
+        let out = tmp.path().join("out");
+        let o = symframe(&[
+            "estimate",
+            "nowhere.lp",
+            "-o",
+            common::s(&out),
+            "--decode-memory",
+            n,
+        ]);
+        common::assert_fails_naming(
+            &o,
+            &format!("--decode-memory must be in [1, 1048576] MiB (at most 1 TiB), got {n}"),
+            &out,
+        );
+    }
+}
+
+/// The mask was read only after every image was decoded into the cache: a wrong-size or empty
+/// `mask.png` now fails after the first image, before the cache file is created.
+#[test]
+fn a_bad_mask_fails_before_the_cache_is_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = dataset(&tmp.path().join("data"));
+    let mask = lp.parent().unwrap().join("mask.png");
+    let cache = tmp.path().join("cache");
+    let cache_files = || -> Vec<String> {
+        fs::read_dir(&cache)
+            .map(|rd| {
+                rd.flatten()
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .filter(|n| n.contains(".stack"))
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    let run = |extra: &[&str]| {
+        let out = tmp.path().join("out");
+        let o = estimate(
+            &lp,
+            &out,
+            &[&["--cache", common::s(&cache)], extra].concat(),
+        );
+        (o, out)
+    };
+    // The dataset's own mask.png of the wrong size.
+    symframe_io::write_png8_rgb(&mask, 5, 7, &[1.0; 105], false).unwrap();
+    let (o, out) = run(&[]);
+    common::assert_fails_naming(&o, "mask.png: mask is 5x7 but the images are 40x40", &out);
+    assert_eq!(cache_files(), Vec::<String>::new());
+    // An empty one given with --mask.
+    let empty = tmp.path().join("empty.png");
+    symframe_io::write_png8_rgb(&empty, SIZE, SIZE, &vec![0.0; SIZE * SIZE * 3], false).unwrap();
+    let (o, out) = run(&["--mask", common::s(&empty)]);
+    common::assert_fails_naming(&o, "empty.png: mask is empty", &out);
+    assert_eq!(cache_files(), Vec::<String>::new());
+    // A right one: the cache is built and the job runs.
+    let full = tmp.path().join("full.png");
+    symframe_io::write_png8_rgb(&full, SIZE, SIZE, &vec![1.0; SIZE * SIZE * 3], false).unwrap();
+    let (o, _) = run(&["--mask", common::s(&full), "--method", "woodham"]);
+    ok(&o);
+    assert_eq!(cache_files().len(), 1, "{:?}", cache_files());
+}

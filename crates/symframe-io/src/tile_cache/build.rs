@@ -53,12 +53,16 @@ pub(super) fn create_sized(path: &Path, len: u64) -> Result<File> {
 }
 
 /// Builds (or resumes building) the partial cache at `partial`; on success it is complete.
+/// `size_ok` checks the images' size (against the mask) once it is known: from a resumed
+/// header, or from the first image before the file is created and any other image decoded.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn build(
     ds: &Dataset,
     opts: &DecodeOptions,
     partial: &Path,
     fingerprint: u64,
     copts: CacheOptions,
+    size_ok: &dyn Fn(usize, usize) -> Result<()>,
     stop: &AtomicBool,
     on_image: &(dyn Fn() + Sync),
 ) -> Result<Built> {
@@ -79,6 +83,7 @@ pub(super) fn build(
         .filter(|(h, len)| !h.complete && matches(h, *len, fingerprint, copts.tile, n));
     let (mut header, file) = match resumable {
         Some((h, _)) => {
+            size_ok(h.width, h.height)?;
             let file = OpenOptions::new()
                 .read(true)
                 .write(true)
@@ -96,6 +101,7 @@ pub(super) fn build(
             if w == 0 || h == 0 {
                 return Err(Error::invalid(&ds.images[0], "image is empty"));
             }
+            size_ok(w, h)?;
             first = Some(rgb);
             let header = Header {
                 width: w,

@@ -199,11 +199,49 @@ pub fn file_content_hash(path: &Path) -> Result<u64> {
     }
 }
 
-/// The fingerprint of a dataset's decoded samples: every image's path (canonical when
-/// possible), size and content hash ([`file_content_hash`], the files read in parallel) or,
-/// with `trust_mtime`, modification time instead of content; the light intensities, the
-/// decode options, the cache format and the crate version.
+/// How the images enter an inputs fingerprint: their bytes, or only their size and
+/// modification time (`--trust-mtime`: no file is read).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StampKind {
+    /// XXH3-64 of each image file's bytes.
+    Content,
+    /// Each image file's size and modification time.
+    SizeAndMtime,
+}
+
+/// The two fingerprints of a dataset, from one pass over its images.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fingerprints {
+    /// What the tile cache is keyed on: the images' canonical paths and stamps, the light
+    /// intensities, the decode options, the cache format and the crate version.
+    pub cache: u64,
+    /// The capture itself, wherever it lies: the images' sizes and stamps in light order, the
+    /// light directions and intensities (no paths, no options). A copied dataset has the same;
+    /// any changed image or light a different one. Recorded in `report.json` so that `fit`
+    /// can tell frames estimated from another capture.
+    pub inputs: u64,
+    /// How the images were stamped.
+    pub kind: StampKind,
+    /// Seconds spent computing them (reading and hashing every image unless `trust_mtime`).
+    pub seconds: f64,
+}
+
+/// The fingerprint of a dataset's decoded samples (see [`Fingerprints::cache`]), the files
+/// read in parallel ([`file_content_hash`]) unless `trust_mtime`.
 pub fn inputs_fingerprint(ds: &Dataset, opts: &DecodeOptions, trust_mtime: bool) -> Result<u64> {
+    Ok(dataset_fingerprints(ds, opts, trust_mtime)?.cache)
+}
+
+/// Both fingerprints of a dataset (see [`Fingerprints`]): every image's size and content hash
+/// ([`file_content_hash`], the files read in parallel) or, with `trust_mtime`, modification
+/// time instead of content.
+pub fn dataset_fingerprints(
+    ds: &Dataset,
+    opts: &DecodeOptions,
+    trust_mtime: bool,
+) -> Result<Fingerprints> {
+    let t = std::time::Instant::now();
     let mut f = Fingerprint::new();
     f.str("symframe tile cache")
         .u64(CACHE_VERSION as u64)
@@ -212,6 +250,18 @@ pub fn inputs_fingerprint(ds: &Dataset, opts: &DecodeOptions, trust_mtime: bool)
         .u64(opts.linear_8bit as u64)
         .f64(opts.saturation as f64)
         .u64(trust_mtime as u64);
+    let kind = if trust_mtime {
+        StampKind::SizeAndMtime
+    } else {
+        StampKind::Content
+    };
+    let mut g = Fingerprint::new();
+    g.str("symframe inputs")
+        .str(match kind {
+            StampKind::Content => "content",
+            StampKind::SizeAndMtime => "size and mtime",
+        })
+        .u64(ds.images.len() as u64);
     let per_image: Vec<Result<(PathBuf, u64, u64)>> = ds
         .images
         .par_iter()
@@ -232,18 +282,29 @@ pub fn inputs_fingerprint(ds: &Dataset, opts: &DecodeOptions, trust_mtime: bool)
     for r in per_image {
         let (p, len, stamp) = r?;
         f.path(&p).u64(len).u64(stamp);
+        g.u64(len).u64(stamp);
     }
-    match &ds.intensities {
-        None => f.u64(0),
-        Some(v) => {
-            f.u64(1);
-            for k in v.iter().flatten() {
-                f.f64(*k as f64);
+    for l in &ds.lights {
+        g.f64(l.x).f64(l.y).f64(l.z);
+    }
+    for h in [&mut f, &mut g] {
+        match &ds.intensities {
+            None => h.u64(0),
+            Some(v) => {
+                h.u64(1);
+                for k in v.iter().flatten() {
+                    h.f64(*k as f64);
+                }
+                h
             }
-            &mut f
-        }
-    };
-    Ok(f.finish())
+        };
+    }
+    Ok(Fingerprints {
+        cache: f.finish(),
+        inputs: g.finish(),
+        kind,
+        seconds: t.elapsed().as_secs_f64(),
+    })
 }
 
 /// The cache's file stem for a dataset: a readable name plus a hash of its canonical source, so

@@ -63,7 +63,7 @@ use crate::codecs::DecodeOptions;
 use crate::dataset::Dataset;
 use crate::error::Warning;
 use crate::error::{Error, Result};
-use crate::stack::check_dataset;
+use crate::stack::{check_dataset, check_mask_size, read_mask_any_size};
 
 mod build;
 mod grid;
@@ -76,7 +76,10 @@ pub use grid::{TileGrid, TileRect};
 #[doc(hidden)]
 pub use header::check_cache_bytes;
 use header::{cache_stem, matches, read_header, read_warnings, Header, HEADER_BYTES};
-pub use header::{file_content_hash, inputs_fingerprint, CACHE_VERSION};
+pub use header::{
+    dataset_fingerprints, file_content_hash, inputs_fingerprint, Fingerprints, StampKind,
+    CACHE_VERSION,
+};
 use lock::CacheLock;
 pub use view::{TileGather, TileView};
 
@@ -217,6 +220,10 @@ impl TileCache {
     /// checksum. `stop` is polled between images: when it is set the build stops with
     /// [`Error::Interrupted`], keeping the images done for the next call.
     /// `on_image` is called once per decoded image (from worker threads).
+    ///
+    /// The dataset's mask (`ds.mask`), if any, is read first and must have a pixel inside and
+    /// the images' size: checked against the cache's header, or against the first image
+    /// before any other is decoded and before the cache file is created.
     pub fn open_or_build(
         ds: &Dataset,
         opts: &DecodeOptions,
@@ -225,14 +232,43 @@ impl TileCache {
         stop: &AtomicBool,
         on_image: &(dyn Fn() + Sync),
     ) -> Result<(TileCache, CacheInfo)> {
+        Self::open_or_build_with(ds, opts, dir, copts, None, stop, on_image)
+    }
+
+    /// [`TileCache::open_or_build`] with the dataset's fingerprints already computed by
+    /// [`dataset_fingerprints`] (with `copts.trust_mtime`), so a caller that checks them first
+    /// does not read every image twice; `None` computes them.
+    pub fn open_or_build_with(
+        ds: &Dataset,
+        opts: &DecodeOptions,
+        dir: &Path,
+        copts: CacheOptions,
+        known: Option<Fingerprints>,
+        stop: &AtomicBool,
+        on_image: &(dyn Fn() + Sync),
+    ) -> Result<(TileCache, CacheInfo)> {
         check_dataset(ds)?;
         if copts.tile == 0 {
             return Err(Error::invalid(dir, "tile size must be positive"));
         }
+        // The mask is one image: a bad one fails here, not after decoding the stack.
+        let mask = match &ds.mask {
+            Some(p) => {
+                let (w, h, _) = read_mask_any_size(p)?;
+                Some((p.as_path(), (w, h)))
+            }
+            None => None,
+        };
+        let fps = match known {
+            Some(f) => f,
+            None => dataset_fingerprints(ds, opts, copts.trust_mtime)?,
+        };
+        let (fingerprint, fingerprint_s) = (fps.cache, fps.seconds);
+        let fits_mask = |w: usize, h: usize| match mask {
+            Some((p, size)) => check_mask_size(p, size, (w, h)),
+            None => Ok(()),
+        };
         fs::create_dir_all(dir).map_err(|e| Error::write(dir, e))?;
-        let t = Instant::now();
-        let fingerprint = inputs_fingerprint(ds, opts, copts.trust_mtime)?;
-        let fingerprint_s = t.elapsed().as_secs_f64();
         let stem = cache_stem(ds);
         let path = dir.join(format!("{stem}.stack"));
         let partial = dir.join(format!("{stem}.stack.partial"));
@@ -267,6 +303,7 @@ impl TileCache {
                 return Err(Error::Interrupted);
             }
             if let Some(found) = open_complete(&path, fingerprint, copts.tile, n)? {
+                fits_mask(found.header.width, found.header.height)?;
                 info.verify_s += found.verify_s;
                 if found.bad.is_empty() {
                     info.hit = true;
@@ -288,6 +325,7 @@ impl TileCache {
         // Someone may have finished building (or repairing) between our check and the
         // exclusive lock.
         if let Some(found) = open_complete(&path, fingerprint, copts.tile, n)? {
+            fits_mask(found.header.width, found.header.height)?;
             info.verify_s += found.verify_s;
             if found.bad.is_empty() {
                 lock.set(false)?;
@@ -305,7 +343,16 @@ impl TileCache {
             if path.exists() {
                 fs::remove_file(&path).map_err(|e| Error::write(&path, e))?;
             }
-            let built = build(ds, opts, &partial, fingerprint, copts, stop, on_image)?;
+            let built = build(
+                ds,
+                opts,
+                &partial,
+                fingerprint,
+                copts,
+                &fits_mask,
+                stop,
+                on_image,
+            )?;
             fs::rename(&partial, &path).map_err(|e| Error::write(&path, e))?;
             info.images_decoded = built.decoded;
             info.images_resumed = built.resumed;
@@ -804,5 +851,69 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("3.exr: image is 3x3 but the first image"), "{e}");
+    }
+
+    /// The inputs fingerprint names the capture, not where it lies: a copy elsewhere has the
+    /// same (the cache fingerprint, keyed on paths, differs); a changed image or light does not.
+    #[test]
+    fn inputs_fingerprint_follows_content_not_paths() {
+        let d = tempfile::tempdir().unwrap();
+        fs::create_dir_all(d.path().join("a")).unwrap();
+        let a = dataset(&d.path().join("a"), 3, 2, 4);
+        let copy_dir = d.path().join("copy");
+        fs::create_dir_all(&copy_dir).unwrap();
+        let mut copy = a.clone();
+        for p in &mut copy.images {
+            let q = copy_dir.join(p.file_name().unwrap());
+            fs::copy(&*p, &q).unwrap();
+            *p = q;
+        }
+        let fp = |ds: &Dataset, mtime: bool| {
+            dataset_fingerprints(ds, &DecodeOptions::default(), mtime).unwrap()
+        };
+        let (fa, fc) = (fp(&a, false), fp(&copy, false));
+        assert_eq!(fa.inputs, fc.inputs);
+        assert_ne!(fa.cache, fc.cache);
+        assert_eq!(fa.kind, StampKind::Content);
+        assert_eq!(fp(&a, true).kind, StampKind::SizeAndMtime);
+        assert_ne!(fp(&a, true).inputs, fa.inputs);
+        let mut moved = copy.clone();
+        moved.lights[1] = DVec3::X;
+        assert_ne!(fp(&moved, false).inputs, fa.inputs);
+        write_exr_rgb(&copy.images[2], 3, 2, &[0.5; 18]).unwrap();
+        assert_ne!(fp(&copy, false).inputs, fa.inputs);
+    }
+
+    /// The dataset's mask is checked before the stack is decoded: a wrong size leaves no
+    /// cache file behind.
+    #[test]
+    fn a_wrong_size_mask_fails_before_the_cache_file_is_created() {
+        let d = tempfile::tempdir().unwrap();
+        let mut ds = dataset(d.path(), 4, 3, 5);
+        let mask = d.path().join("mask.png");
+        crate::codecs::write_png8_rgb(&mask, 3, 4, &[1.0; 36], false).unwrap();
+        ds.mask = Some(mask);
+        let dir = d.path().join("cache");
+        let stop = AtomicBool::new(false);
+        let e = TileCache::open_or_build(
+            &ds,
+            &DecodeOptions::default(),
+            &dir,
+            Default::default(),
+            &stop,
+            &|| {},
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("mask.png: mask is 3x4 but the images are 4x3"),
+            "{e}"
+        );
+        let files: Vec<_> = fs::read_dir(&dir)
+            .unwrap()
+            .flatten()
+            .filter(|e| e.file_name().to_string_lossy().contains(".stack"))
+            .collect();
+        assert!(files.is_empty(), "{files:?}");
     }
 }
