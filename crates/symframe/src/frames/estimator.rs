@@ -482,7 +482,12 @@ impl<'a> Estimator<'a> {
         // reconstruction of the slice: the lobe that explains the samples best is centred on
         // the normal (docs/method.md, "Lobe fit"). Where no lobe of the family explains the
         // pixel (interreflections, a BRDF outside the family), the search decides.
-        let lobe = if self.params.cosine == CosineMode::Auto {
+        // A pixel its Lambertian fit explains to the noise floor has no lobe to find.
+        let pure_diffuse = fit
+            .normal
+            .filter(|_| fit.confidence as f64 >= DIFFUSE_CENTRE_FIT)
+            .is_some_and(|n| unexplained_share(self.rig, slice, n) < PURE_DIFFUSE_SHARE);
+        let lobe = if self.params.cosine == CosineMode::Auto && !pure_diffuse {
             highlight_moments(slice, self.rig.halfway_in_camera())
                 .and_then(|m| self.lobe_fit(slice, m.normal, m.tangent, m.radius, lobe))
                 .filter(|f| f.residual < LOBE_EXPLAINS)
@@ -992,6 +997,10 @@ impl<'a> Estimator<'a> {
 /// below 1e-4; shadows, interreflections and noise at a few percent of the signal leave
 /// about their energy share.
 const LOBE_EXPLAINS: f64 = 0.01;
+
+/// A pixel whose Lambertian fit leaves less than this share of its energy unexplained (1%
+/// RMS noise leaves 1e-4) is diffuse: no lobe fit is tried.
+const PURE_DIFFUSE_SHARE: f64 = 1e-4;
 
 /// Where a diffuse term explains a pixel too, the lobe is its answer only if it leaves less
 /// than this share of what the diffuse term leaves unexplained.

@@ -468,7 +468,7 @@ fn levenberg_marquardt(
                 cost = c;
                 std::mem::swap(r, trial);
                 lambda = (lambda / 3.0).max(1e-9);
-                improved = gain > 1e-10 * syy;
+                improved = gain > 1e-6 * cost && gain > 1e-12 * syy;
                 break;
             }
             lambda *= 4.0;
