@@ -13,6 +13,12 @@
 //!   source map of a capture, or one shard's tiles; [`merge`] joins shards.
 //! - [`fit`] with a [`FitConfig`]: per-pixel anisotropic Ward parameters in estimated frames.
 //! - [`relight`] with a [`RelightConfig`]: the fitted maps rendered under new lights, edited.
+//! - [`calibrate()`] with a [`CalibrateConfig`]: light directions from a mirror sphere.
+//! - [`integrate_job`] with an [`IntegrateConfig`]: an estimate's normals to a height map and a
+//!   mesh.
+//! - [`export_gltf`] with an [`ExportConfig`]: a fit or estimate as a glTF 2.0 asset.
+//! - [`synth()`] with a [`SynthConfig`]: a rendered capture with ground truth;
+//!   [`evaluate_job`] with an [`EvalConfig`]: an estimate against that truth.
 //!
 //! ```
 //! use symframe::brdf::ward::Ward;
@@ -45,11 +51,17 @@
 //! # }
 //! ```
 
+pub mod calibrate;
+pub mod colorbar;
 mod estimate;
+pub mod eval;
+pub mod export;
 mod fit;
+pub mod integrate;
 mod merge;
 mod outdir;
 mod relight;
+pub mod synth;
 mod tiles;
 
 use std::sync::atomic::AtomicBool;
@@ -64,6 +76,12 @@ pub use merge::{merge, MergeOutcome, ShardManifest, MANIFEST};
 pub use outdir::{check_output_set, OutputDir, OutputSet, Staging, LOCK_FILE};
 pub use relight::{read_ward_maps, relight, RelightConfig, RelightOutcome};
 pub use tiles::{peak_rss_bytes, shard_tiles, TileCounts};
+
+pub use calibrate::{calibrate, CalibrateConfig, CalibrationReport};
+pub use eval::{evaluate_job, EvalConfig, EvalReport};
+pub use export::{export_gltf, ExportConfig, ExportOutcome};
+pub use integrate::{integrate_job, IntegrateConfig, IntegrateReport};
+pub use synth::{synth, RigSpec, SynthConfig, SynthOutcome, SynthShape};
 
 /// The run stopped early on request; what was done (cache images, finished tiles) is kept,
 /// and the same call again resumes.
@@ -87,6 +105,8 @@ pub enum Stage {
     Tiles,
     /// Reading the shards' tiles (steps: tiles).
     Merging,
+    /// Rendering a synthetic capture (steps: images).
+    Rendering,
 }
 
 impl Stage {
@@ -96,6 +116,7 @@ impl Stage {
             Stage::Decoding => "decoding",
             Stage::Tiles => "tiles",
             Stage::Merging => "merging",
+            Stage::Rendering => "rendering",
         }
     }
 }

@@ -299,3 +299,17 @@ def test_fit_and_relight_equal_the_command_line(capture, cli, tmp_path):
     assert (tmp_path / "relit_py" / "relit_000.png").read_bytes() == cli_png
     with pytest.raises(ValueError, match="roughness_scale must be finite and > 0"):
         symframe.relight(tmp_path / "fit_py", tmp_path / "r2", light, roughness_scale=0)
+
+
+def test_integrate_equals_the_command_line(capture, cli, tmp_path):
+    frames = tmp_path / "est"
+    symframe.estimate_path(capture, frames)
+    cli("integrate", frames, "-o", tmp_path / "int_cli", "--solver", "poisson")
+    got = symframe.integrate(frames, tmp_path / "int_py", solver="poisson")
+    want = np.load(tmp_path / "int_cli" / "depth.npy")
+    assert got["depth"].shape == (40, 40) and got["depth"].dtype == np.float32
+    assert np.array_equal(bits(got["depth"]), bits(want))
+    assert got["report"]["solver"] == "poisson" and got["report"]["pixels"] > 800
+    assert (tmp_path / "int_py" / "mesh.ply").read_bytes() == (tmp_path / "int_cli" / "mesh.ply").read_bytes()
+    with pytest.raises(ValueError, match="solver must be poisson or bilateral"):
+        symframe.integrate(frames, tmp_path / "bad", solver="multigrid")

@@ -40,6 +40,7 @@ __all__ = [
     "evaluate",
     "fit",
     "relight",
+    "integrate",
     "synth",
     "__version__",
 ]
@@ -227,6 +228,19 @@ def relight(fit_dir: PathLike, out: PathLike, lights: Any, **options: Any) -> np
         lights = lights[None, :]
     lights = _float_array("lights", lights, 2, 3, np.float64)
     return _native.relight(os.fspath(fit_dir), os.fspath(out), lights, options)
+
+
+def integrate(estimate: PathLike, out: PathLike, **options: Any) -> Dict[str, Any]:
+    """Runs the ``symframe integrate`` job: the normals of an :func:`estimate_path` folder to a
+    height map and a mesh (``depth.npy``, ``depth.exr``, ``depth.png``, ``mesh.ply``,
+    ``integrate.json`` in ``out``).
+
+    Options: ``solver`` (``"bilateral"``, the default, or ``"poisson"``), ``k`` (bilateral
+    sharpness, 10), ``tolerance`` (conjugate gradients, 1e-7), ``use_confidence`` (weight by
+    ``confidence.npy``, True), ``max_jump`` (mesh discontinuities, 2 pixels). Returns
+    ``{"depth": H x W float32 (NaN outside), "report": the content of integrate.json}``.
+    """
+    return _native.integrate(os.fspath(estimate), os.fspath(out), options)
 
 
 def synth(

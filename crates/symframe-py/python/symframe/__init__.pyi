@@ -141,6 +141,19 @@ def fit(
 ) -> Dict[str, Any]:
     """The `symframe fit` job: Ward maps (kd, ks, alpha_t, alpha_b, ...) and its report."""
 
+def integrate(
+    estimate: PathLike,
+    out: PathLike,
+    *,
+    solver: str = "bilateral",
+    k: float = 10.0,
+    tolerance: float = 1e-7,
+    use_confidence: bool = True,
+    max_jump: float = 2.0,
+) -> Dict[str, Any]:
+    """The `symframe integrate` job: {"depth": H x W float32, "report": integrate.json}."""
+    ...
+
 def relight(
     fit_dir: PathLike,
     out: PathLike,
