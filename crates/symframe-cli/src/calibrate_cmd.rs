@@ -21,8 +21,9 @@ pub fn run(args: &CalibrateArgs) -> Result<CalibrationReport> {
         output: args.output.clone(),
         threshold: args.threshold,
         strict: args.strict,
+        matte_sphere: args.matte_sphere,
         decode: DecodeOptions {
-            linear_8bit: args.linear,
+            gamma: crate::cli::gamma(args.gamma, args.linear),
             saturation: args.saturation,
         },
     };
@@ -60,5 +61,12 @@ pub fn run(args: &CalibrateArgs) -> Result<CalibrationReport> {
         pic.display(),
         json.display()
     );
+    if let (Some(path), Some(mean)) = (&report.intensities_file, report.intensity_mean_raw) {
+        println!(
+            "symframe calibrate: light intensities from the matte sphere (mean {mean:.4} before \
+             normalising to 1): wrote {}",
+            path.display()
+        );
+    }
     Ok(report)
 }

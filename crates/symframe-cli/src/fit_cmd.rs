@@ -42,7 +42,7 @@ pub fn config(args: &FitArgs) -> Result<FitConfig> {
         },
         mask: args.mask.clone(),
         decode: DecodeOptions {
-            linear_8bit: args.linear,
+            gamma: crate::cli::gamma(args.gamma, args.linear),
             saturation: args.saturation,
         },
         cache: CacheConfig {

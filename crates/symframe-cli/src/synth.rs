@@ -17,6 +17,12 @@ fn validate(args: &SynthArgs) -> Result<()> {
     if !(8..=2048).contains(&args.size) {
         bail!("--size must be between 8 and 2048, got {}", args.size);
     }
+    if !(0.0..1.0).contains(&args.intensity_spread) {
+        bail!(
+            "--intensity-spread must be in [0, 1), got {}",
+            args.intensity_spread
+        );
+    }
     if !(args.exposure.is_finite() && args.exposure > 0.0) {
         bail!(
             "--exposure must be a positive number, got {}",
@@ -93,6 +99,8 @@ pub fn run(args: &SynthArgs) -> Result<PathBuf> {
         exposure: args.exposure,
         seed: args.seed,
         chrome_sphere: args.chrome_sphere,
+        matte_sphere: args.matte_sphere,
+        intensity_spread: args.intensity_spread,
     };
     let bars = progress::Bars::default();
     let done = synth(&config, &crate::control(&|p| bars.update(p), None))?;

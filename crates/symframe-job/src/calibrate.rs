@@ -9,7 +9,8 @@ use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
 use symframe::calibrate::{
-    detect_sphere, find_highlight, Circle, Highlight, HighlightError, HighlightParams,
+    detect_sphere, find_highlight, matte_intensity, Circle, Highlight, HighlightError,
+    HighlightParams, MatteError, MatteParams,
 };
 use symframe_io::{DecodeOptions, Image};
 
@@ -30,6 +31,10 @@ pub struct CalibrateConfig {
     pub threshold: f64,
     /// Fail on the first image without a single clear highlight (else drop it with a warning).
     pub strict: bool,
+    /// A diffuse (matte, grey) sphere's circle: per light, its RGB intensity is measured there
+    /// ([`symframe::calibrate::matte_intensity`]) and written as `light_intensities.txt` beside
+    /// the `.lp`, normalised to a mean of 1 over every light and channel.
+    pub matte_sphere: Option<Circle>,
     /// How images are decoded.
     pub decode: DecodeOptions,
 }
@@ -43,6 +48,7 @@ impl CalibrateConfig {
             output: output.into(),
             threshold: 0.3,
             strict: false,
+            matte_sphere: None,
             decode: DecodeOptions {
                 saturation: 0.995,
                 ..DecodeOptions::default()
@@ -100,6 +106,10 @@ pub struct ImageRecord {
     pub pixels: Option<usize>,
     /// Saturated pixels in it.
     pub saturated: Option<usize>,
+    /// The light's RGB intensity from the matte sphere, before normalising (times the
+    /// sphere's albedo).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub intensity: Option<[f64; 3]>,
     /// Why it was dropped.
     pub error: Option<String>,
 }
@@ -123,9 +133,19 @@ pub struct CalibrationReport {
     pub records: Vec<ImageRecord>,
     /// The conventions of the figures.
     pub conventions: &'static str,
+    /// The matte sphere's circle, when intensities were measured.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub matte_sphere: Option<Circle>,
+    /// The mean of the raw intensities over lights and channels, by which they were divided
+    /// (so that `light_intensities.txt` has a mean of 1).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub intensity_mean_raw: Option<f64>,
     /// The files written: the `.lp`, the picture, this report.
     #[serde(skip)]
     pub written: [PathBuf; 3],
+    /// `light_intensities.txt`, when intensities were measured.
+    #[serde(skip)]
+    pub intensities_file: Option<PathBuf>,
 }
 
 /// The image list: every image file of a folder sorted by name (leaving out `mask.*`), the
@@ -201,6 +221,7 @@ fn read_grey(path: &Path, opts: &DecodeOptions, size: Option<(usize, usize)>) ->
         channels: 1,
         data: g,
         kind: img.kind,
+        colour: img.colour,
     })
 }
 
@@ -408,14 +429,30 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
     };
     // The brightest of all images (NaN where any was saturated), for the picture.
     let max_image = std::sync::Mutex::new(vec![0.0f32; w * h]);
-    let results: Vec<Result<Highlight, HighlightError>> = images
+    type Outcome = (
+        Result<Highlight, HighlightError>,
+        Option<Result<[f64; 3], MatteError>>,
+    );
+    let results: Vec<Outcome> = images
         .par_iter()
         .map(|p| -> Result<_> {
             if stopped() {
                 return Err(Interrupted.into());
             }
-            let g = read_grey(p, &opts, Some((w, h)))?.data;
+            let img = read_sized(p, &opts, Some((w, h)))?;
+            let g = grey(&img);
             let res = find_highlight(w, h, &g, &circle, &params);
+            let matte = match (&res, &config.matte_sphere) {
+                (Ok(hl), Some(c)) => Some(matte_intensity(
+                    w,
+                    h,
+                    &img.into_rgb(),
+                    c,
+                    hl.light,
+                    &MatteParams::default(),
+                )),
+                _ => None,
+            };
             let mut m = max_image.lock().unwrap_or_else(|e| e.into_inner());
             for (m, v) in m.iter_mut().zip(&g) {
                 if !v.is_finite() {
@@ -424,7 +461,7 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
                     *m = m.max(*v);
                 }
             }
-            Ok(res)
+            Ok((res, matte))
         })
         .collect::<Result<Vec<_>>>()?;
     let max_image = max_image.into_inner().unwrap_or_else(|e| e.into_inner());
@@ -437,9 +474,25 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
         .filter(|d| !d.as_os_str().is_empty())
         .unwrap_or(Path::new("."))
         .to_path_buf();
-    for (path, res) in images.iter().zip(results) {
+    let mut intensities: Vec<[f64; 3]> = Vec::new();
+    for (path, (res, matte)) in images.iter().zip(results) {
+        // A light whose intensity cannot be measured is dropped as one without a highlight.
+        let res = match (res, matte) {
+            (Ok(_), Some(Err(e))) => Err(e.to_string()),
+            (Ok(hl), Some(Ok(e))) => {
+                intensities.push(e);
+                Ok((hl, Some(e)))
+            }
+            (Ok(hl), None) => Ok((hl, None)),
+            (Err(e), _) => {
+                if let HighlightError::Several { x1, y1, x2, y2, .. } = e {
+                    bad.extend([(x1, y1), (x2, y2)]);
+                }
+                Err(e.to_string())
+            }
+        };
         match res {
-            Ok(hl) => {
+            Ok((hl, intensity)) => {
                 found.push((hl.x, hl.y));
                 let rel = relative_to(path, &lp_dir);
                 let name = rel.to_string_lossy().replace('\\', "/");
@@ -460,13 +513,11 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
                     light: Some(hl.light.to_array()),
                     pixels: Some(hl.pixels),
                     saturated: Some(hl.saturated),
+                    intensity,
                     error: None,
                 });
             }
             Err(e) => {
-                if let HighlightError::Several { x1, y1, x2, y2, .. } = e {
-                    bad.extend([(x1, y1), (x2, y2)]);
-                }
                 if config.strict {
                     bail!("{}: {e}", path.display());
                 }
@@ -478,7 +529,8 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
                     light: None,
                     pixels: None,
                     saturated: None,
-                    error: Some(e.to_string()),
+                    intensity: None,
+                    error: Some(e),
                 });
             }
         }
@@ -518,6 +570,25 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
     let pic = lp_dir.join(format!("{stem}-highlights.png"));
     symframe_io::write_png_rgb8(&pic, pw, ph, &rgb)?;
     let used = lp_lines.len();
+    let mut intensity_mean_raw = None;
+    let mut intensities_file = None;
+    if config.matte_sphere.is_some() {
+        let mean = intensities.iter().flatten().sum::<f64>() / (3 * intensities.len()) as f64;
+        if !(mean.is_finite() && mean > 0.0) {
+            bail!(
+                "{}: the matte sphere is black under every light (mean intensity {mean})",
+                config.images.display()
+            );
+        }
+        let rows: Vec<String> = intensities
+            .iter()
+            .map(|e| format!("{:.6} {:.6} {:.6}", e[0] / mean, e[1] / mean, e[2] / mean))
+            .collect();
+        let path = lp_dir.join("light_intensities.txt");
+        symframe_io::write_bytes(&path, (rows.join("\n") + "\n").as_bytes())?;
+        intensity_mean_raw = Some(mean);
+        intensities_file = Some(path);
+    }
     let json_path = lp_dir.join(format!("{stem}-calibration.json"));
     let report = CalibrationReport {
         version: env!("CARGO_PKG_VERSION"),
@@ -529,7 +600,10 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
         records,
         conventions: "pixels: x right, y down, centre of the top-left pixel (0.5, 0.5); \
                       lights: x right, y up, z toward the camera, surface toward light",
+        matte_sphere: config.matte_sphere,
+        intensity_mean_raw,
         written: [config.output.clone(), pic, json_path.clone()],
+        intensities_file,
     };
     std::fs::write(&json_path, serde_json::to_string_pretty(&report)? + "\n")
         .with_context(|| format!("{}: cannot write", json_path.display()))?;

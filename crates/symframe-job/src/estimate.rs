@@ -16,7 +16,7 @@ use symframe::{EstimateMaps, Estimator, EstimatorParams, PixelRecord, PixelSourc
 use symframe::{Rig, RigOptions};
 use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{
-    CacheInfo, CacheOptions, Dataset, DecodeOptions, NormalPng, TileCache, TileGrid,
+    CacheInfo, CacheOptions, Dataset, DecodeOptions, Gamma, NormalPng, TileCache, TileGrid,
 };
 
 use crate::merge::{write_manifest, ShardManifest, MANIFEST, MANIFEST_FORMAT, MANIFEST_VERSION};
@@ -280,6 +280,8 @@ pub struct BaselineParameters {
     pub baseline: BaselineParams,
     /// 8-bit inputs read as linear.
     pub linear_8bit: bool,
+    /// The transfer curve of integer inputs (`auto`: 8-bit sRGB, 16-bit linear).
+    pub gamma: Gamma,
     /// Saturation threshold (fraction of the integer maximum).
     pub saturation: f32,
 }
@@ -296,6 +298,8 @@ pub struct SymmetryParameters {
     pub min_domain_used: u32,
     /// 8-bit inputs read as linear.
     pub linear_8bit: bool,
+    /// The transfer curve of integer inputs (`auto`: 8-bit sRGB, 16-bit linear).
+    pub gamma: Gamma,
     /// Saturation threshold (fraction of the integer maximum).
     pub saturation: f32,
 }
@@ -646,7 +650,8 @@ fn run(
                 theta_d_max_deg: rig.theta_d_max_deg(),
                 estimator: *params,
                 min_domain_used: Estimator::new(rig, *params).min_domain(),
-                linear_8bit: decode.linear_8bit,
+                linear_8bit: !decode.gamma.srgb(8),
+                gamma: decode.gamma,
                 saturation: decode.saturation,
             }),
             LightCounts {
@@ -658,7 +663,8 @@ fn run(
         Plan::Baseline(b) => (
             MethodParameters::Baseline(BaselineParameters {
                 baseline: *b.params(),
-                linear_8bit: decode.linear_8bit,
+                linear_8bit: !decode.gamma.srgb(8),
+                gamma: decode.gamma,
                 saturation: decode.saturation,
             }),
             LightCounts {

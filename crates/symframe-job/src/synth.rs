@@ -154,6 +154,14 @@ pub struct SynthConfig {
     pub seed: u64,
     /// Put a mirror (chrome) sphere beside the object (the images become twice as wide).
     pub chrome_sphere: bool,
+    /// With `chrome_sphere`: a matte (Lambertian, grey albedo 0.5) sphere to its right too, for
+    /// intensity calibration (the images become three times as wide).
+    pub matte_sphere: bool,
+    /// Per-light RGB intensities drawn uniformly from `[1 - s, 1 + s]` (seeded by `seed`),
+    /// applied to the whole image before noise; 0: every light of intensity 1. The truth is
+    /// written as `gt_light_intensities.txt` (not `light_intensities.txt`, which the loader
+    /// would apply).
+    pub intensity_spread: f64,
 }
 
 impl SynthConfig {
@@ -180,6 +188,8 @@ impl SynthConfig {
             exposure: 1.0,
             seed: 0,
             chrome_sphere: false,
+            matte_sphere: false,
+            intensity_spread: 0.0,
         }
     }
 }
@@ -277,6 +287,15 @@ pub fn synth(config: &SynthConfig, ctl: &Control) -> Result<SynthOutcome> {
             config.exposure
         );
     }
+    if config.matte_sphere && !config.chrome_sphere {
+        bail!("the matte sphere goes beside the chrome sphere: ask for both");
+    }
+    if !(0.0..1.0).contains(&config.intensity_spread) {
+        bail!(
+            "the intensity spread must be in [0, 1), got {}",
+            config.intensity_spread
+        );
+    }
     symframe_io::check_synth_target(&config.output, config.force)?;
     let brdf: Box<dyn Brdf> = parse_model(&config.model).map_err(anyhow::Error::msg)?;
     let field = config
@@ -288,7 +307,7 @@ pub fn synth(config: &SynthConfig, ctl: &Control) -> Result<SynthOutcome> {
     let noise = Noise::parse(&config.noise).map_err(anyhow::Error::msg)?;
     let rig = &config.rig;
     let lights = rig.lights()?;
-    let squares = 1 + config.chrome_sphere as usize;
+    let squares = 1 + config.chrome_sphere as usize + config.matte_sphere as usize;
     let n = config.size * config.size * squares;
     let bytes = (lights.len() * n * 3 * 4) as f64;
     if bytes > MAX_STACK_BYTES {
@@ -311,7 +330,10 @@ pub fn synth(config: &SynthConfig, ctl: &Control) -> Result<SynthOutcome> {
     let n_lights = lights.len() as u64;
     let rendered = std::sync::atomic::AtomicU64::new(0);
     let stop = || ctl.stop.load(std::sync::atomic::Ordering::SeqCst);
-    let chrome = config.chrome_sphere.then(|| ChromeSphere::new(config.size));
+    let chrome = config
+        .chrome_sphere
+        .then(|| ChromeSphere::new(config.size, config.matte_sphere));
+    let intensities = light_intensities(lights.len(), config.intensity_spread, config.seed);
     let images: Vec<Vec<f32>> = lights
         .par_iter()
         .enumerate()
@@ -320,9 +342,22 @@ pub fn synth(config: &SynthConfig, ctl: &Control) -> Result<SynthOutcome> {
                 return Err(Interrupted.into());
             }
             let img = match &chrome {
-                None => scene.render_degraded(brdf.as_ref(), l, i, &degradation),
+                None if intensities.is_none() => {
+                    scene.render_degraded(brdf.as_ref(), l, i, &degradation)
+                }
+                None => {
+                    let mut img = scene.render(brdf.as_ref(), l);
+                    if let Some(e) = &intensities {
+                        scale(&mut img, e[i]);
+                    }
+                    degradation.apply(&mut img, i);
+                    img
+                }
                 Some(c) => {
                     let mut img = c.beside(&scene.render(brdf.as_ref(), l), l);
+                    if let Some(e) = &intensities {
+                        scale(&mut img, e[i]);
+                    }
                     degradation.apply(&mut img, i);
                     img
                 }
@@ -393,6 +428,8 @@ pub fn synth(config: &SynthConfig, ctl: &Control) -> Result<SynthOutcome> {
         "seed": config.seed,
         "cast_shadows": scene.heights.is_some(),
         "chrome_sphere": chrome.as_ref().map(|c| c.describe()),
+        "matte_sphere": chrome.as_ref().and_then(|c| c.describe_matte()),
+        "intensity_spread": config.intensity_spread,
         "width": width,
         "height": scene.height,
         "mask_pixels": scene.mask.iter().filter(|&&m| m).count(),
@@ -400,6 +437,15 @@ pub fn synth(config: &SynthConfig, ctl: &Control) -> Result<SynthOutcome> {
         "conventions": "camera frame x right, y up, z toward the camera; row 0 at the top; \
                         lights point from the surface to the light; gt maps NaN outside the mask",
     });
+    if let Some(e) = &intensities {
+        let rows: Vec<String> = e
+            .iter()
+            .map(|c| format!("{:.6} {:.6} {:.6}", c[0], c[1], c[2]))
+            .collect();
+        let path = staging.path("gt_light_intensities.txt");
+        std::fs::write(&path, rows.join("\n") + "\n")
+            .with_context(|| format!("{}: cannot write", path.display()))?;
+    }
     write_json(&staging.path("scene.json"), &description)?;
     staging.commit()?;
     Ok(SynthOutcome {
@@ -410,48 +456,65 @@ pub fn synth(config: &SynthConfig, ctl: &Control) -> Result<SynthOutcome> {
 }
 
 /// A mirror sphere rendered beside the object (`--chrome-sphere`): in a square as large as the
-/// object's frame, to its right, with a black margin of `size / 16` (at least 2) pixels.
+/// object's frame, to its right, with a black margin of `size / 16` (at least 2) pixels; and
+/// optionally a matte sphere in a third square to the right of it.
 struct ChromeSphere {
     size: usize,
     margin: usize,
     scene: Scene,
     brdf: symframe::brdf::Ggx,
+    matte: Option<symframe::brdf::Lambertian>,
 }
 
 impl ChromeSphere {
-    fn new(size: usize) -> Self {
+    fn new(size: usize, matte: bool) -> Self {
         let margin = (size / 16).max(2);
         Self {
             size,
             margin,
             scene: Scene::sphere(size - 2 * margin, TangentField::Circular),
             brdf: symframe::brdf::Ggx::new([0.02; 3], [0.9; 3], 0.05, 0.05),
+            matte: matte.then(|| symframe::brdf::Lambertian::new([0.5; 3])),
         }
     }
 
-    /// The object's image (`size x size x 3`) with the sphere under light `l` to its right.
+    /// Squares to the right of the object's.
+    fn extra(&self) -> usize {
+        1 + self.matte.is_some() as usize
+    }
+
+    /// The object's image (`size x size x 3`) with the sphere(s) under light `l` to its right.
     fn beside(&self, object: &[f32], l: DVec3) -> Vec<f32> {
-        let sphere = self.scene.render(&self.brdf, l);
+        let mut spheres = vec![self.scene.render(&self.brdf, l)];
+        if let Some(m) = &self.matte {
+            spheres.push(self.scene.render(m, l));
+        }
         let (m, d) = (self.margin, self.scene.width);
         let row = 3 * self.size;
-        let mut out = Vec::with_capacity(2 * object.len());
+        let mut out = Vec::with_capacity((1 + spheres.len()) * object.len());
         for (r, a) in object.chunks_exact(row).enumerate() {
             out.extend_from_slice(a);
-            let start = out.len();
-            out.resize(start + row, 0.0);
-            if (m..m + d).contains(&r) {
-                let src = &sphere[3 * (r - m) * d..3 * (r - m + 1) * d];
-                out[start + 3 * m..start + 3 * (m + d)].copy_from_slice(src);
+            for sphere in &spheres {
+                let start = out.len();
+                out.resize(start + row, 0.0);
+                if (m..m + d).contains(&r) {
+                    let src = &sphere[3 * (r - m) * d..3 * (r - m + 1) * d];
+                    out[start + 3 * m..start + 3 * (m + d)].copy_from_slice(src);
+                }
             }
         }
         out
     }
 
-    /// A map of `channels` per pixel widened with `fill` on the sphere's side.
+    /// A map of `channels` per pixel widened with `fill` on the spheres' side.
     fn widen(&self, v: &[f32], channels: usize, fill: f32) -> Vec<f32> {
         let row = channels * self.size;
         v.chunks_exact(row)
-            .flat_map(|a| a.iter().copied().chain(std::iter::repeat_n(fill, row)))
+            .flat_map(|a| {
+                a.iter()
+                    .copied()
+                    .chain(std::iter::repeat_n(fill, row * self.extra()))
+            })
             .collect()
     }
 
@@ -460,9 +523,25 @@ impl ChromeSphere {
             .flat_map(|a| {
                 a.iter()
                     .copied()
-                    .chain(std::iter::repeat_n(false, self.size))
+                    .chain(std::iter::repeat_n(false, self.size * self.extra()))
             })
             .collect()
+    }
+
+    /// What `scene.json` records about the matte sphere: its circle.
+    fn describe_matte(&self) -> Option<Value> {
+        let lambertian = self.matte.as_ref()?;
+        let r = self.scene.width as f64 / 2.0;
+        let (cx, cy) = (
+            (2 * self.size + self.margin) as f64 + r,
+            self.margin as f64 + r,
+        );
+        Some(json!({
+            "cx": cx, "cy": cy, "r": r,
+            "model": lambertian.name(),
+            "albedo": lambertian.albedo,
+            "sphere_arg": format!("{cx},{cy},{r}"),
+        }))
     }
 
     fn describe(&self) -> Value {
@@ -474,6 +553,28 @@ impl ChromeSphere {
             "model": self.brdf.name(),
             "sphere_arg": format!("{cx},{cy},{r}"),
         })
+    }
+}
+
+/// Per-light RGB intensities uniform in `[1 - spread, 1 + spread)`, one stream per light under
+/// `seed`; `None` for no spread.
+fn light_intensities(n: usize, spread: f64, seed: u64) -> Option<Vec<[f32; 3]>> {
+    (spread > 0.0).then(|| {
+        (0..n)
+            .map(|i| {
+                let mut rng = symframe::render::Rng::for_image(seed ^ 0x1a7e_5ca1e, i as u64);
+                [0; 3].map(|_| rng.range(1.0 - spread, 1.0 + spread) as f32)
+            })
+            .collect()
+    })
+}
+
+/// Multiplies an RGB image by a light's intensity.
+fn scale(img: &mut [f32], e: [f32; 3]) {
+    for px in img.chunks_exact_mut(3) {
+        for (v, k) in px.iter_mut().zip(e) {
+            *v *= k;
+        }
     }
 }
 

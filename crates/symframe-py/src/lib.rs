@@ -398,7 +398,7 @@ fn relight<'py>(
         let mut data = Vec::new();
         let mut size = (0, 0);
         let exr = DecodeOptions {
-            linear_8bit: true,
+            gamma: symframe_io::Gamma::Linear,
             saturation: f32::INFINITY,
         };
         for png in &done.pictures {
@@ -570,7 +570,11 @@ impl Dataset {
 #[pyo3(signature = (path, linear=false, saturation=None))]
 fn load(py: Python<'_>, path: PathBuf, linear: bool, saturation: Option<f32>) -> PyResult<Dataset> {
     let mut decode = DecodeOptions {
-        linear_8bit: linear,
+        gamma: if linear {
+            symframe_io::Gamma::Linear
+        } else {
+            symframe_io::Gamma::Auto
+        },
         ..DecodeOptions::default()
     };
     if let Some(s) = saturation {
