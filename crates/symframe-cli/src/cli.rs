@@ -571,6 +571,14 @@ pub struct RelightArgs {
     /// sRGB-encoded); the EXR files are not affected.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub exposure: f64,
+    /// Cast shadows from the integrated height map (ray-marched toward each light): pixels the
+    /// relief hides from a light are dark.
+    #[arg(long)]
+    pub shadows: bool,
+    /// With --shadows: the height map, `depth.npy` of `symframe integrate` (default:
+    /// FIT_DIR/depth.npy).
+    #[arg(long, requires = "shadows")]
+    pub depth: Option<PathBuf>,
 }
 
 /// Solvers of `symframe integrate`.

@@ -116,6 +116,11 @@ pub fn relight_config(args: &RelightArgs) -> Result<RelightConfig> {
         rotate_tangents: args.rotate_tangents,
         region: args.region.clone(),
         exposure: args.exposure,
+        shadows: args.shadows.then(|| {
+            args.depth
+                .clone()
+                .unwrap_or_else(|| args.fit_dir.join("depth.npy"))
+        }),
     })
 }
 
