@@ -823,6 +823,10 @@ pub fn write_estimate_outputs(
             symframe_io::gray_map_rgb8(&maps.confidence, 0.0, 1.0),
         ),
         ("source.png", symframe_io::source_map_rgb8(&maps.source)),
+        (
+            "tangents_gltf.png",
+            crate::export::gltf_anisotropy_rgb8(&maps.tangents, &maps.anisotropy),
+        ),
     ];
     for (name, rgb) in pictures {
         symframe_io::write_png_rgb8(&staging.path(name), w, h, &rgb)?;

@@ -279,6 +279,24 @@ pub fn textures(m: &Maps, quad: bool) -> [Vec<u8>; 4] {
     [base, mr, normal, aniso]
 }
 
+/// The estimate's tangents as a glTF `KHR_materials_anisotropy` texture for a surface whose
+/// tangent space is the image's (tangent +x right, bitangent +y up, as the exported quad's):
+/// red/green the tangent's image-plane direction mapped `(d + 1) / 2`, blue the strength
+/// (`strength`, clamped to [0, 1]); where there is no tangent, direction +x and strength 0.
+/// Written by the estimate as `tangents_gltf.png`.
+pub fn gltf_anisotropy_rgb8(tangents: &[f32], strength: &[f32]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(3 * strength.len());
+    for (t, &s) in tangents.chunks_exact(3).zip(strength) {
+        let (mut dx, mut dy, mut st) = (1.0f32, 0.0f32, 0.0f32);
+        let l = t[0].hypot(t[1]);
+        if t.iter().all(|v| v.is_finite()) && s.is_finite() && l > 1e-6 {
+            (dx, dy, st) = (t[0] / l, t[1] / l, s.clamp(0.0, 1.0));
+        }
+        out.extend([byte((dx + 1.0) / 2.0), byte((dy + 1.0) / 2.0), byte(st)]);
+    }
+    out
+}
+
 /// Geometry: positions, normals, tangents (xyzw), texture coordinates, triangle indices.
 pub struct Geometry {
     positions: Vec<[f32; 3]>,
@@ -649,6 +667,32 @@ mod tests {
         assert_eq!(&aniso[..3], &[128, 255, 204]);
         assert_eq!(aniso[5], 0);
         assert_eq!(base[0], 188); // 0.5 linear, sRGB-encoded
+    }
+
+    #[test]
+    fn gltf_anisotropy_texture_encodes_direction_and_strength() {
+        let s = 0.5f32.sqrt();
+        let t = [s, -s, 0.0, f32::NAN, f32::NAN, f32::NAN, 0.0, 0.6, 0.8];
+        let rgb = gltf_anisotropy_rgb8(&t, &[0.5, 0.9, 1.5]);
+        // (0.707, -0.707) -> (218, 37); strength 0.5 -> 128.
+        assert_eq!(&rgb[..3], &[218, 37, 128]);
+        // No tangent: +x, strength 0.
+        assert_eq!(&rgb[3..6], &[255, 128, 0]);
+        // A tilted tangent counts by its image-plane direction (+y); strength clamped.
+        assert_eq!(&rgb[6..], &[128, 255, 255]);
+        // The quad export's anisotropy texture of an estimate is the same picture.
+        let m = Maps {
+            w: 3,
+            h: 1,
+            normals: vec![0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, -0.8, 0.6],
+            tangents: t.to_vec(),
+            base: vec![0.5; 9],
+            metallic: vec![0.0; 3],
+            roughness: vec![0.5; 3],
+            strength: vec![0.5, 0.0, 1.0],
+            fitted: false,
+        };
+        assert_eq!(textures(&m, true)[3], rgb);
     }
 
     #[test]
