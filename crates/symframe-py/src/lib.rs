@@ -360,6 +360,7 @@ fn relight<'py>(
     config.rotate_tangents = o.get("rotate_tangents")?;
     config.region = o.get("region")?;
     config.exposure = o.or("exposure", config.exposure)?;
+    config.shadows = o.get("shadows")?;
     o.finish()?;
     for (name, v) in [
         ("specular_scale", config.specular_scale),

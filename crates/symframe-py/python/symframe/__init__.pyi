@@ -89,6 +89,7 @@ def estimate_path(
     reference: bool = False,
     mask: Optional[PathLike] = None,
     linear: bool = False,
+    gamma: Optional[str] = None,
     saturation: float = 0.995,
     cache: Optional[PathLike] = None,
     no_keep_cache: bool = False,
@@ -135,6 +136,7 @@ def fit(
     max_peak_ratio: float = 8.0,
     mask: Optional[PathLike] = None,
     linear: bool = False,
+    gamma: Optional[str] = None,
     saturation: float = 0.995,
     cache: Optional[PathLike] = None,
     no_keep_cache: bool = False,
@@ -165,5 +167,6 @@ def relight(
     rotate_tangents: Optional[float] = None,
     region: Optional[PathLike] = None,
     exposure: float = 0.0,
+    shadows: Optional[PathLike] = None,
 ) -> npt.NDArray[np.float32]:
     """The `symframe relight` job: N x H x W x 3 linear images, also written to `out`."""
