@@ -1,470 +1,72 @@
-//! `symframe calibrate`: light directions from a mirror sphere in the images, written as an
-//! `.lp` file, with a picture of the detected highlights and a JSON record beside it.
+//! `symframe calibrate`: flags to a [`CalibrateConfig`], the library's calibration, a summary.
 
-use std::path::{Component, Path, PathBuf};
-
-use anyhow::{bail, Context, Result};
-use rayon::prelude::*;
-use serde::Serialize;
-use symframe::calibrate::{
-    detect_sphere, find_highlight, Circle, Highlight, HighlightError, HighlightParams,
-};
-use symframe_io::{DecodeOptions, Image};
+use anyhow::{bail, Result};
+use symframe_io::DecodeOptions;
+use symframe_job::calibrate::SphereNotFound;
+use symframe_job::{calibrate, CalibrateConfig, CalibrationReport, Control};
 
 use crate::cli::CalibrateArgs;
 
-/// Image file extensions read from a folder.
-const EXTENSIONS: &[&str] = &["exr", "png", "tif", "tiff", "hdr", "pfm", "jpg", "jpeg"];
-
-/// One image's outcome in `<stem>-calibration.json`.
-#[derive(Debug, Serialize)]
-pub struct ImageRecord {
-    /// The image path.
-    pub image: String,
-    /// Whether its light is in the `.lp` file.
-    pub used: bool,
-    /// Highlight centre `(x, y)`, pixels (x right, y down, top-left pixel centre (0.5, 0.5)).
-    pub highlight: Option<[f64; 2]>,
-    /// The light direction (x right, y up, z toward the camera; surface toward light).
-    pub light: Option<[f64; 3]>,
-    /// Pixels in the highlight spot.
-    pub pixels: Option<usize>,
-    /// Saturated pixels in it.
-    pub saturated: Option<usize>,
-    /// Why it was dropped.
-    pub error: Option<String>,
-}
-
-/// What `<stem>-calibration.json` holds.
-#[derive(Debug, Serialize)]
-pub struct CalibrationReport {
-    /// symframe version.
-    pub version: &'static str,
-    /// The sphere's circle.
-    pub sphere: Circle,
-    /// `given` (--sphere) or `detected`.
-    pub sphere_source: &'static str,
-    /// Detection figures (share of images whose brightest spot is in the sphere, roundness).
-    pub detection: Option<serde_json::Value>,
-    /// Images read.
-    pub images: usize,
-    /// Images whose light was written.
-    pub used: usize,
-    /// Per image.
-    pub records: Vec<ImageRecord>,
-    /// The conventions of the figures.
-    pub conventions: &'static str,
-}
-
-/// The image list: every image file of a folder sorted by name (leaving out `mask.*`), the
-/// images of an `.lp` file, or a list file of paths (one per line, relative to the list's
-/// folder; blank lines and `#` comments allowed).
-fn image_list(input: &Path) -> Result<Vec<PathBuf>> {
-    if input.is_dir() {
-        let mut v: Vec<PathBuf> = std::fs::read_dir(input)
-            .with_context(|| format!("{}: cannot read folder", input.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| {
-                p.is_file()
-                    && p.extension()
-                        .and_then(|e| e.to_str())
-                        .is_some_and(|e| EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
-                    && p.file_stem().and_then(|s| s.to_str()) != Some("mask")
-            })
-            .collect();
-        v.sort();
-        if v.is_empty() {
-            bail!("{}: no image files in the folder", input.display());
-        }
-        return Ok(v);
-    }
-    if input
-        .extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("lp"))
-    {
-        return Ok(symframe_io::open_dataset(input)?.images);
-    }
-    let text = std::fs::read_to_string(input)
-        .with_context(|| format!("{}: cannot read the image list", input.display()))?;
-    let dir = input.parent().unwrap_or(Path::new(""));
-    let mut v = Vec::new();
-    for (k, line) in text.lines().enumerate() {
-        let line = line.split('#').next().unwrap_or("").trim();
-        if line.is_empty() {
-            continue;
-        }
-        let p = dir.join(line);
-        if !p.is_file() {
-            bail!(
-                "{}: line {}: image {} does not exist",
-                input.display(),
-                k + 1,
-                p.display()
-            );
-        }
-        v.push(p);
-    }
-    if v.is_empty() {
-        bail!("{}: the image list is empty", input.display());
-    }
-    Ok(v)
-}
-
-/// The image's grey values (mean of the channels; `NaN` where any is saturated).
-fn grey(img: &Image) -> Vec<f32> {
-    img.data
-        .chunks_exact(img.channels)
-        .map(|p| p.iter().sum::<f32>() / p.len() as f32)
-        .collect()
-}
-
-/// Decodes one image as grey values, checking its size against the first one's.
-fn read_grey(path: &Path, opts: &DecodeOptions, size: Option<(usize, usize)>) -> Result<Image> {
-    let img = symframe_io::read_image(path, opts)?;
-    if let Some((w, h)) = size {
-        if (img.width, img.height) != (w, h) {
-            bail!(
-                "{}: {}x{} pixels, but the first image is {w}x{h}",
-                path.display(),
-                img.width,
-                img.height
-            );
-        }
-    }
-    let g = grey(&img);
-    Ok(Image {
-        width: img.width,
-        height: img.height,
-        channels: 1,
-        data: g,
-        kind: img.kind,
-    })
-}
-
-/// `path` relative to folder `base` when it lies below it (else absolute).
-fn relative_to(path: &Path, base: &Path) -> PathBuf {
-    let abs = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
-    let (p, b) = (abs(path), abs(base));
-    let (pc, bc): (Vec<Component>, Vec<Component>) =
-        (p.components().collect(), b.components().collect());
-    let common = pc.iter().zip(&bc).take_while(|(a, b)| a == b).count();
-    if common == 0 {
-        return p;
-    }
-    let mut out = PathBuf::new();
-    for _ in common..bc.len() {
-        out.push("..");
-    }
-    for c in &pc[common..] {
-        out.push(c.as_os_str());
-    }
-    out
-}
-
-/// Draws the picture of the highlights: the brightest of all images around the sphere
-/// (tone-mapped), the circle in yellow, found highlights as green crosses and the spots of
-/// ambiguous images as red ones, enlarged to at least 384 pixels across.
-fn picture(
-    max_image: &[f32],
-    width: usize,
-    height: usize,
-    circle: &Circle,
-    found: &[(f64, f64)],
-    bad: &[(f64, f64)],
-) -> (usize, usize, Vec<u8>) {
-    let margin = 4.0;
-    let clip = |v: f64, n: usize| (v.max(0.0) as usize).min(n);
-    let (c0, c1) = (
-        clip((circle.cx - circle.r - margin).floor(), width),
-        clip((circle.cx + circle.r + margin).ceil(), width),
-    );
-    let (r0, r1) = (
-        clip((circle.cy - circle.r - margin).floor(), height),
-        clip((circle.cy + circle.r + margin).ceil(), height),
-    );
-    let (cw, ch) = ((c1 - c0).max(1), (r1 - r0).max(1));
-    let k = (384 / cw.max(ch)).max(1);
-    let (ow, oh) = (cw * k, ch * k);
-    let mut vals: Vec<f32> = max_image
-        .iter()
-        .filter(|v| v.is_finite())
-        .cloned()
-        .collect();
-    vals.sort_by(f32::total_cmp);
-    let white = vals
-        .get(vals.len() * 99 / 100)
-        .cloned()
-        .unwrap_or(1.0)
-        .max(1e-12);
-    let mut rgb = vec![0u8; ow * oh * 3];
-    for oy in 0..oh {
-        for ox in 0..ow {
-            let (col, row) = (c0 + ox / k, r0 + oy / k);
-            let v = if col < width && row < height {
-                max_image[row * width + col]
-            } else {
-                0.0
-            };
-            let g = if v.is_finite() {
-                symframe_io::linear_to_srgb((v / white).clamp(0.0, 1.0))
-            } else {
-                1.0
-            };
-            let b = (g * 200.0).round() as u8;
-            rgb[3 * (oy * ow + ox)..3 * (oy * ow + ox) + 3].copy_from_slice(&[b, b, b]);
-        }
-    }
-    let mut put = |x: f64, y: f64, c: [u8; 3]| {
-        if x >= 0.0 && y >= 0.0 && (x as usize) < ow && (y as usize) < oh {
-            let i = 3 * (y as usize * ow + x as usize);
-            rgb[i..i + 3].copy_from_slice(&c);
-        }
-    };
-    // Image point to picture point.
-    let to = |x: f64, y: f64| ((x - c0 as f64) * k as f64, (y - r0 as f64) * k as f64);
-    let steps = (8.0 * circle.r * k as f64) as usize + 16;
-    for s in 0..steps {
-        let a = s as f64 / steps as f64 * std::f64::consts::TAU;
-        let (x, y) = to(
-            circle.cx + circle.r * a.cos(),
-            circle.cy + circle.r * a.sin(),
-        );
-        put(x, y, [255, 220, 0]);
-    }
-    for (list, colour) in [(found, [0u8, 255, 0]), (bad, [255, 40, 40])] {
-        for &(x, y) in list {
-            let (px, py) = to(x, y);
-            for d in -3i32..=3 {
-                put(px + d as f64, py, colour);
-                put(px, py + d as f64, colour);
-            }
-        }
-    }
-    (ow, oh, rgb)
-}
-
 /// Runs the command; returns the report (also written as JSON beside the `.lp`).
 pub fn run(args: &CalibrateArgs) -> Result<CalibrationReport> {
-    let ext_ok = args
-        .output
-        .extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("lp"));
-    if !ext_ok {
-        bail!("{}: the output must be an .lp file", args.output.display());
-    }
     if !(args.saturation > 0.0 && args.saturation <= 1.0) {
         bail!("--saturation must be in (0, 1], got {}", args.saturation);
     }
     if !(args.threshold > 0.0 && args.threshold < 1.0) {
         bail!("--threshold must be in (0, 1), got {}", args.threshold);
     }
-    let images = image_list(&args.images)?;
-    let opts = DecodeOptions {
-        linear_8bit: args.linear,
-        saturation: args.saturation,
+    let config = CalibrateConfig {
+        images: args.images.clone(),
+        sphere: args.sphere,
+        output: args.output.clone(),
+        threshold: args.threshold,
+        strict: args.strict,
+        matte_sphere: args.matte_sphere,
+        decode: DecodeOptions {
+            gamma: crate::cli::gamma(args.gamma, args.linear),
+            saturation: args.saturation,
+        },
     };
-    let first = read_grey(&images[0], &opts, None)?;
-    let (w, h) = (first.width, first.height);
-    drop(first);
-
-    // The sphere: given, or found in the mean image.
-    let (circle, source, detection) = match args.sphere {
-        Some(c) => (c, "given", None),
-        None => {
-            let (sum, brightest) = images
-                .par_iter()
-                .map(|p| -> Result<(Vec<f32>, Vec<usize>)> {
-                    let g = read_grey(p, &opts, Some((w, h)))?.data;
-                    let best = g
-                        .iter()
-                        .enumerate()
-                        .max_by(|a, b| {
-                            let key = |v: f32| if v.is_finite() { v } else { f32::INFINITY };
-                            key(*a.1).total_cmp(&key(*b.1))
-                        })
-                        .map(|(i, _)| i)
-                        .unwrap_or(0);
-                    Ok((g, vec![best]))
-                })
-                .try_reduce(
-                    || (vec![0.0f32; w * h], Vec::new()),
-                    |(mut a, mut ba), (b, bb)| {
-                        a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
-                        ba.extend(bb);
-                        Ok((a, ba))
-                    },
-                )?;
-            let n = images.len() as f32;
-            let mean: Vec<f32> = sum.iter().map(|v| v / n).collect();
-            let d = detect_sphere(w, h, &mean, &brightest).map_err(|e| {
-                anyhow::anyhow!(
-                    "{}: cannot find the mirror sphere: {e}; give its circle with --sphere CX,CY,R",
-                    args.images.display()
-                )
-            })?;
-            println!(
-                "symframe calibrate: found the sphere at ({:.2}, {:.2}), radius {:.2} px \
-                 (holds the brightest spot of {:.0}% of the images; roundness {:.3})",
-                d.circle.cx,
-                d.circle.cy,
-                d.circle.r,
-                100.0 * d.highlight_share,
-                d.roundness
-            );
-            (
-                d.circle,
-                "detected",
-                Some(serde_json::json!({
-                    "highlight_share": d.highlight_share,
-                    "roundness": d.roundness,
-                })),
-            )
-        }
+    let ctl = Control {
+        warning: &|line| eprintln!("symframe calibrate: warning: {line}"),
+        ..crate::control(&|_| {}, None)
     };
-    let params = HighlightParams {
-        fraction: args.threshold,
-        ..HighlightParams::default()
-    };
-    // The brightest of all images (NaN where any was saturated), for the picture.
-    let max_image = std::sync::Mutex::new(vec![0.0f32; w * h]);
-    let results: Vec<Result<Highlight, HighlightError>> = images
-        .par_iter()
-        .map(|p| -> Result<_> {
-            let g = read_grey(p, &opts, Some((w, h)))?.data;
-            let res = find_highlight(w, h, &g, &circle, &params);
-            let mut m = max_image.lock().unwrap_or_else(|e| e.into_inner());
-            for (m, v) in m.iter_mut().zip(&g) {
-                if !v.is_finite() {
-                    *m = f32::NAN;
-                } else if m.is_finite() {
-                    *m = m.max(*v);
-                }
-            }
-            Ok(res)
-        })
-        .collect::<Result<Vec<_>>>()?;
-    let max_image = max_image.into_inner().unwrap_or_else(|e| e.into_inner());
-    let mut records = Vec::with_capacity(images.len());
-    let (mut found, mut bad) = (Vec::new(), Vec::new());
-    let mut lp_lines = Vec::new();
-    let lp_dir = args
-        .output
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."))
-        .to_path_buf();
-    for (path, res) in images.iter().zip(results) {
-        match res {
-            Ok(hl) => {
-                found.push((hl.x, hl.y));
-                let rel = relative_to(path, &lp_dir);
-                let name = rel.to_string_lossy().replace('\\', "/");
-                if name.contains(char::is_whitespace) || name.contains('#') {
-                    bail!(
-                        "{}: .lp files cannot hold paths with spaces or '#'",
-                        path.display()
-                    );
-                }
-                lp_lines.push(format!(
-                    "{name} {:.6} {:.6} {:.6}",
-                    hl.light.x, hl.light.y, hl.light.z
-                ));
-                records.push(ImageRecord {
-                    image: path.display().to_string(),
-                    used: true,
-                    highlight: Some([hl.x, hl.y]),
-                    light: Some(hl.light.to_array()),
-                    pixels: Some(hl.pixels),
-                    saturated: Some(hl.saturated),
-                    error: None,
-                });
-            }
-            Err(e) => {
-                if let HighlightError::Several { x1, y1, x2, y2, .. } = e {
-                    bad.extend([(x1, y1), (x2, y2)]);
-                }
-                if args.strict {
-                    bail!("{}: {e}", path.display());
-                }
-                eprintln!(
-                    "symframe calibrate: warning: {}: dropped: {e}",
-                    path.display()
-                );
-                records.push(ImageRecord {
-                    image: path.display().to_string(),
-                    used: false,
-                    highlight: None,
-                    light: None,
-                    pixels: None,
-                    saturated: None,
-                    error: Some(e.to_string()),
-                });
-            }
-        }
-    }
-    if lp_lines.len() < 3 {
-        bail!(
-            "{}: only {} of {} images have a usable highlight on the sphere at ({:.1}, {:.1}), \
-             radius {:.1}; at least 3 are needed",
-            args.images.display(),
-            lp_lines.len(),
-            images.len(),
-            circle.cx,
-            circle.cy,
-            circle.r
+    let report =
+        calibrate(&config, &ctl).map_err(|e| match e.downcast_ref::<SphereNotFound>() {
+            Some(nf) => anyhow::anyhow!("{nf}; give its circle with --sphere CX,CY,R"),
+            None => e,
+        })?;
+    let c = &report.sphere;
+    if let Some(d) = &report.detection {
+        println!(
+            "symframe calibrate: found the sphere at ({:.2}, {:.2}), radius {:.2} px \
+             (holds the brightest spot of {:.0}% of the images; roundness {:.3})",
+            c.cx,
+            c.cy,
+            c.r,
+            100.0 * d.highlight_share,
+            d.roundness
         );
     }
-    // Write the three files (each atomically through a temporary name).
-    let stem = args
-        .output
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "lights".into());
-    std::fs::create_dir_all(&lp_dir)
-        .with_context(|| format!("{}: cannot create folder", lp_dir.display()))?;
-    let lp_text = format!(
-        "{}\n# symframe calibrate: mirror sphere at ({:.3}, {:.3}), radius {:.3} px ({source}); \
-         x right, y up, z toward the camera; surface toward light\n{}\n",
-        lp_lines.len(),
-        circle.cx,
-        circle.cy,
-        circle.r,
-        lp_lines.join("\n")
-    );
-    let tmp = lp_dir.join(format!(".{stem}.lp.partial-{}", std::process::id()));
-    std::fs::write(&tmp, lp_text).with_context(|| format!("{}: cannot write", tmp.display()))?;
-    let (pw, ph, rgb) = picture(&max_image, w, h, &circle, &found, &bad);
-    let pic = lp_dir.join(format!("{stem}-highlights.png"));
-    symframe_io::write_png_rgb8(&pic, pw, ph, &rgb)?;
-    let used = lp_lines.len();
-    let report = CalibrationReport {
-        version: env!("CARGO_PKG_VERSION"),
-        sphere: circle,
-        sphere_source: source,
-        detection,
-        images: images.len(),
-        used,
-        records,
-        conventions: "pixels: x right, y down, centre of the top-left pixel (0.5, 0.5); \
-                      lights: x right, y up, z toward the camera, surface toward light",
-    };
-    let json_path = lp_dir.join(format!("{stem}-calibration.json"));
-    std::fs::write(&json_path, serde_json::to_string_pretty(&report)? + "\n")
-        .with_context(|| format!("{}: cannot write", json_path.display()))?;
-    std::fs::rename(&tmp, &args.output)
-        .with_context(|| format!("{}: cannot write", args.output.display()))?;
+    let [lp, pic, json] = &report.written;
     println!(
-        "symframe calibrate: {used} of {} lights from the sphere at ({:.2}, {:.2}), radius \
+        "symframe calibrate: {} of {} lights from the sphere at ({:.2}, {:.2}), radius \
          {:.2} px; wrote {}, {} and {}",
-        images.len(),
-        circle.cx,
-        circle.cy,
-        circle.r,
-        args.output.display(),
+        report.used,
+        report.images,
+        c.cx,
+        c.cy,
+        c.r,
+        lp.display(),
         pic.display(),
-        json_path.display()
+        json.display()
     );
+    if let (Some(path), Some(mean)) = (&report.intensities_file, report.intensity_mean_raw) {
+        println!(
+            "symframe calibrate: light intensities from the matte sphere (mean {mean:.4} before \
+             normalising to 1): wrote {}",
+            path.display()
+        );
+    }
     Ok(report)
 }

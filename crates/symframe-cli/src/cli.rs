@@ -99,6 +99,24 @@ pub struct ExperimentArgs {
     pub quick: bool,
 }
 
+/// Values of `--gamma`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum GammaArg {
+    /// sRGB-decode 8- and 16-bit samples.
+    Srgb,
+    /// Take 8- and 16-bit samples as linear.
+    Linear,
+}
+
+/// The transfer curve of `--gamma` and `--linear` (its alias).
+pub fn gamma(gamma: Option<GammaArg>, linear: bool) -> symframe_io::Gamma {
+    match (gamma, linear) {
+        (Some(GammaArg::Linear), _) | (None, true) => symframe_io::Gamma::Linear,
+        (Some(GammaArg::Srgb), _) => symframe_io::Gamma::Srgb,
+        (None, false) => symframe_io::Gamma::Auto,
+    }
+}
+
 /// Which estimator `symframe estimate` runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum MethodArg {
@@ -235,7 +253,11 @@ pub struct EstimateArgs {
     /// lobes, 1 for Blinn-Phong).
     #[arg(long, default_value_t = default_cosine_power())]
     pub cosine_power: f64,
-    /// Treat 8-bit images as linear (default: sRGB-decode them).
+    /// Transfer curve of 8- and 16-bit PNG, TIFF and JPEG images: `srgb` (e.g. 16-bit files
+    /// from raw converters) or `linear` (default: 8-bit sRGB, 16-bit linear; float is linear).
+    #[arg(long, value_enum, conflicts_with = "linear")]
+    pub gamma: Option<GammaArg>,
+    /// Same as `--gamma linear`.
     #[arg(long)]
     pub linear: bool,
     /// Integer samples at or above this fraction of the format's maximum are saturated and
@@ -443,6 +465,15 @@ pub struct SynthArgs {
     /// scene.json; the mask and ground truth cover the object only.
     #[arg(long)]
     pub chrome_sphere: bool,
+    /// With --chrome-sphere: a matte sphere (Lambertian, grey albedo 0.5) to the right of the
+    /// chrome one, for `symframe calibrate --matte-sphere` (the images become three times as
+    /// wide; its circle is recorded in scene.json).
+    #[arg(long, requires = "chrome_sphere")]
+    pub matte_sphere: bool,
+    /// Per-light RGB intensities drawn uniformly from [1 - S, 1 + S] (seeded by --seed), the
+    /// truth written as gt_light_intensities.txt (default 0: every light of intensity 1).
+    #[arg(long, default_value_t = 0.0, value_name = "S")]
+    pub intensity_spread: f64,
 }
 
 /// Flags of `symframe fit`.
@@ -464,7 +495,11 @@ pub struct FitArgs {
     /// input, if any).
     #[arg(long)]
     pub mask: Option<PathBuf>,
-    /// Treat 8-bit images as linear (default: sRGB-decode them).
+    /// Transfer curve of 8- and 16-bit PNG, TIFF and JPEG images: `srgb` (e.g. 16-bit files
+    /// from raw converters) or `linear` (default: 8-bit sRGB, 16-bit linear; float is linear).
+    #[arg(long, value_enum, conflicts_with = "linear")]
+    pub gamma: Option<GammaArg>,
+    /// Same as `--gamma linear`.
     #[arg(long)]
     pub linear: bool,
     /// Integer samples at or above this fraction of the format's maximum are saturated and
@@ -539,6 +574,14 @@ pub struct RelightArgs {
     /// sRGB-encoded); the EXR files are not affected.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub exposure: f64,
+    /// Cast shadows from the integrated height map (ray-marched toward each light): pixels the
+    /// relief hides from a light are dark.
+    #[arg(long)]
+    pub shadows: bool,
+    /// With --shadows: the height map, `depth.npy` of `symframe integrate` (default:
+    /// FIT_DIR/depth.npy).
+    #[arg(long, requires = "shadows")]
+    pub depth: Option<PathBuf>,
 }
 
 /// Flags of `symframe view`.
@@ -617,7 +660,16 @@ pub struct CalibrateArgs {
     /// Fail on the first image without a single clear highlight (default: drop it, warn).
     #[arg(long)]
     pub strict: bool,
-    /// Treat 8-bit images as linear (default: sRGB-decode them).
+    /// A matte (diffuse, grey) sphere's circle CX,CY,R (as --sphere): per light, its RGB
+    /// intensity is measured there and written as light_intensities.txt beside the .lp,
+    /// normalised to a mean of 1 over all lights and channels.
+    #[arg(long, value_parser = parse_circle, allow_hyphen_values = true, value_name = "CX,CY,R")]
+    pub matte_sphere: Option<symframe::calibrate::Circle>,
+    /// Transfer curve of 8- and 16-bit PNG, TIFF and JPEG images: `srgb` (e.g. 16-bit files
+    /// from raw converters) or `linear` (default: 8-bit sRGB, 16-bit linear; float is linear).
+    #[arg(long, value_enum, conflicts_with = "linear")]
+    pub gamma: Option<GammaArg>,
+    /// Same as `--gamma linear`.
     #[arg(long)]
     pub linear: bool,
     /// Integer samples at or above this fraction of the format's maximum are saturated.

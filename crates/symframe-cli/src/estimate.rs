@@ -98,7 +98,7 @@ pub fn config(args: &EstimateArgs) -> Result<EstimateConfig> {
         method,
         mask: args.mask.clone(),
         decode: DecodeOptions {
-            linear_8bit: args.linear,
+            gamma: crate::cli::gamma(args.gamma, args.linear),
             saturation: args.saturation,
         },
         cache: CacheConfig {

@@ -45,7 +45,7 @@ pub fn config(args: &FitArgs) -> Result<FitConfig> {
         },
         mask: args.mask.clone(),
         decode: DecodeOptions {
-            linear_8bit: args.linear,
+            gamma: crate::cli::gamma(args.gamma, args.linear),
             saturation: args.saturation,
         },
         cache: CacheConfig {
@@ -119,6 +119,11 @@ pub fn relight_config(args: &RelightArgs) -> Result<RelightConfig> {
         rotate_tangents: args.rotate_tangents,
         region: args.region.clone(),
         exposure: args.exposure,
+        shadows: args.shadows.then(|| {
+            args.depth
+                .clone()
+                .unwrap_or_else(|| args.fit_dir.join("depth.npy"))
+        }),
     })
 }
 

@@ -5,7 +5,6 @@
 mod bench;
 mod calibrate_cmd;
 mod cli;
-mod colorbar;
 mod demo;
 mod estimate;
 mod eval_cmd;

@@ -52,6 +52,7 @@ fn unit(stage: Stage) -> &'static str {
         Stage::Decoding => " images",
         Stage::Tiles => "",
         Stage::Merging => " tiles",
+        Stage::Rendering => " images",
     }
 }
 
@@ -80,7 +81,10 @@ impl Bars {
             return;
         }
         if !interactive() {
-            self.line(p);
+            // Rendering is quick: no log lines for it.
+            if p.stage != Stage::Rendering {
+                self.line(p);
+            }
             return;
         }
         let mut current = self.current.lock().unwrap_or_else(|e| e.into_inner());

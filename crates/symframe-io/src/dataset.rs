@@ -136,15 +136,50 @@ fn open_folder(dir: &Path) -> Result<Dataset> {
     ))
 }
 
-/// Opens an `.lp` dataset; `mask.png` beside it is picked up.
+/// Opens an `.lp` dataset; `mask.png` beside it is picked up, and so is
+/// `light_intensities.txt` (one `r g b` row per light, in the `.lp`'s order, as `symframe
+/// calibrate --matte-sphere` writes it) when this is the only `.lp` file in its folder (with
+/// several, which one it belongs to is unclear, and it is not read).
 fn open_lp(lp: &Path) -> Result<Dataset> {
     let (images, lights) = lights::parse_lp(lp)?;
+    let dir = parent_dir(lp);
+    let int_path = dir.join(INTENSITIES);
+    let only_lp = || {
+        let listed = if dir.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            dir.as_path()
+        };
+        std::fs::read_dir(listed).is_ok_and(|rd| {
+            rd.filter_map(|e| e.ok())
+                .filter(|e| e.path().is_file() && is_lp(&e.path()))
+                .count()
+                == 1
+        })
+    };
+    let intensities = if int_path.is_file() && only_lp() {
+        let v = lights::parse_intensities(&int_path)?;
+        if v.len() != images.len() {
+            return Err(Error::invalid(
+                &int_path,
+                format!(
+                    "{} light intensities but {} lists {} images",
+                    v.len(),
+                    lp.display(),
+                    images.len()
+                ),
+            ));
+        }
+        Some(v)
+    } else {
+        None
+    };
     Ok(Dataset {
         source: lp.to_path_buf(),
         lights,
         images,
-        intensities: None,
-        mask: mask_in(&parent_dir(lp))?,
+        intensities,
+        mask: mask_in(&dir)?,
     })
 }
 

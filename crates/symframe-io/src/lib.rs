@@ -41,7 +41,7 @@ pub mod tile_results;
 pub use atomic::write_bytes;
 pub use codecs::{
     decode_image, linear_to_srgb, read_image, read_pfm, srgb_to_linear, write_exr_rgb, write_pfm,
-    write_png16_rgb, write_png8_rgb, DecodeOptions, Image, SampleKind,
+    write_png16_rgb, write_png8_rgb, ColourTag, DecodeOptions, Gamma, Image, SampleKind,
 };
 pub use dataset::{open_dataset, Dataset};
 pub use error::{Error, Result, Warning};

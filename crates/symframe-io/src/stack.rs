@@ -6,7 +6,7 @@ use std::sync::Mutex;
 use rayon::prelude::*;
 use symframe::Stack;
 
-use crate::codecs::{read_image, DecodeOptions, SampleKind};
+use crate::codecs::{read_image, ColourTag, DecodeOptions, SampleKind};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result, Warning};
 
@@ -73,11 +73,12 @@ pub fn load_stack_with_warnings(
 }
 
 /// What was noticed of one decoded image.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 struct ImageNote {
     kind: SampleKind,
     grey: bool,
     negative: usize,
+    colour: Option<ColourTag>,
 }
 
 /// Notes of every decoded image of a dataset (filled from worker threads), turned into the
@@ -109,14 +110,14 @@ impl Notes {
             Ok(v) => v
                 .iter()
                 .enumerate()
-                .filter_map(|(i, n)| Some((i, (*n)?)))
+                .filter_map(|(i, n)| Some((i, n.clone()?)))
                 .collect(),
             Err(_) => return Vec::new(),
         };
         let mut out = Vec::new();
         let mut kinds = std::collections::BTreeMap::<SampleKind, (usize, usize)>::new();
-        for &(i, n) in &notes {
-            kinds.entry(n.kind).or_insert((0, i)).0 += 1;
+        for (i, n) in &notes {
+            kinds.entry(n.kind).or_insert((0, *i)).0 += 1;
         }
         if let Some((&major, _)) = kinds
             .iter()
@@ -138,7 +139,7 @@ impl Notes {
         let grey: Vec<usize> = notes
             .iter()
             .filter(|(_, n)| n.grey)
-            .map(|&(i, _)| i)
+            .map(|(i, _)| *i)
             .collect();
         if !grey.is_empty() && grey.len() < notes.len() {
             out.push(Warning {
@@ -153,7 +154,7 @@ impl Notes {
         let neg: Vec<(usize, usize)> = notes
             .iter()
             .filter(|(_, n)| n.negative > 0)
-            .map(|&(i, n)| (i, n.negative))
+            .map(|(i, n)| (*i, n.negative))
             .collect();
         if let Some(&(first, _)) = neg.first() {
             out.push(Warning {
@@ -166,8 +167,66 @@ impl Notes {
                 ),
             });
         }
+        out.extend(colour_warnings(ds, &notes));
         out
     }
+}
+
+/// Warnings about colour tags that disagree with the decoding: a profile that is not sRGB
+/// (its primaries are not converted), a linear tag on sRGB-decoded samples, an sRGB-like curve
+/// on samples taken as linear. One warning per kind of disagreement, naming the first image
+/// and the count.
+fn colour_warnings(ds: &Dataset, notes: &[(usize, ImageNote)]) -> Vec<Warning> {
+    let mut found: Vec<(&'static str, usize, usize, String)> = Vec::new();
+    let mut note =
+        |key: &'static str, i: usize, text: String| match found.iter_mut().find(|f| f.0 == key) {
+            Some(f) => f.2 += 1,
+            None => found.push((key, i, 1, text)),
+        };
+    for (i, n) in notes {
+        let Some(tag) = &n.colour else { continue };
+        let decoded_srgb = matches!(n.kind, SampleKind::Srgb8 | SampleKind::Srgb16);
+        let decoded_linear = matches!(n.kind, SampleKind::Linear8 | SampleKind::U16);
+        if tag.source == "ICC profile" && !tag.srgb {
+            note(
+                "profile",
+                *i,
+                format!(
+                    "{} '{}' is not sRGB: its colours are taken as they are (not converted), \
+                     so hues and the balance of the channels may be off",
+                    tag.source, tag.name
+                ),
+            );
+        }
+        if tag.says_linear() && decoded_srgb {
+            note(
+                "linear",
+                *i,
+                format!(
+                    "its {} says the samples are linear, but they were sRGB-decoded (decode \
+                     them as linear)",
+                    tag.source
+                ),
+            );
+        } else if tag.says_srgb_curve() && !tag.says_linear() && decoded_linear {
+            note(
+                "srgb",
+                *i,
+                format!(
+                    "its {} ({}) says the samples are gamma-encoded, but they were taken as \
+                     linear (decode them as sRGB)",
+                    tag.source, tag.name
+                ),
+            );
+        }
+    }
+    found
+        .into_iter()
+        .map(|(_, first, count, text)| Warning {
+            path: ds.images[first].clone(),
+            message: format!("{text} ({count} of the images; this is the first)"),
+        })
+        .collect()
 }
 
 /// Checks that a dataset has images, and one light (and intensity, if any) per image.
@@ -229,6 +288,7 @@ pub(crate) fn decode_stack_image(
             kind: img.kind,
             grey: img.channels == 1,
             negative: img.data.iter().filter(|&&v| v < 0.0).count(),
+            colour: img.colour.clone(),
         },
     );
     let mut rgb = img.into_rgb();
@@ -256,7 +316,7 @@ pub fn read_mask(path: &Path, width: usize, height: usize) -> Result<Vec<bool>> 
 /// an error if it cannot be read or has no pixel inside.
 pub fn read_mask_any_size(path: &Path) -> Result<(usize, usize, Vec<bool>)> {
     let opts = DecodeOptions {
-        linear_8bit: true,
+        gamma: crate::codecs::Gamma::Linear,
         saturation: f32::INFINITY,
     };
     let img = read_image(path, &opts)?;

@@ -10,13 +10,14 @@ use anyhow::{Context, Result};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use symframe::baselines::{Baseline, BaselineMethod, BaselineParams};
-use symframe::frames::estimator::{check_inputs, PixelCounts};
+use symframe::frames::estimator::check_inputs;
+use symframe::maps::PixelCounts;
 use symframe::{EstimateMaps, Estimator, EstimatorParams, PixelRecord, PixelSource};
 use symframe::{Rig, RigOptions};
 use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{
-    CacheInfo, CacheOptions, Dataset, DecodeOptions, Fingerprints, NormalPng, StampKind, TileCache,
-    TileGrid,
+    CacheInfo, CacheOptions, Dataset, DecodeOptions, Fingerprints, Gamma, NormalPng, StampKind,
+    TileCache, TileGrid,
 };
 
 use crate::merge::{write_manifest, ShardManifest, MANIFEST, MANIFEST_FORMAT, MANIFEST_VERSION};
@@ -303,6 +304,8 @@ pub struct BaselineParameters {
     pub baseline: BaselineParams,
     /// 8-bit inputs read as linear.
     pub linear_8bit: bool,
+    /// The transfer curve of integer inputs (`auto`: 8-bit sRGB, 16-bit linear).
+    pub gamma: Gamma,
     /// Saturation threshold (fraction of the integer maximum).
     pub saturation: f32,
 }
@@ -319,6 +322,8 @@ pub struct SymmetryParameters {
     pub min_domain_used: u32,
     /// 8-bit inputs read as linear.
     pub linear_8bit: bool,
+    /// The transfer curve of integer inputs (`auto`: 8-bit sRGB, 16-bit linear).
+    pub gamma: Gamma,
     /// Saturation threshold (fraction of the integer maximum).
     pub saturation: f32,
 }
@@ -682,7 +687,8 @@ fn run(
                 theta_d_max_deg: rig.theta_d_max_deg(),
                 estimator: *params,
                 min_domain_used: Estimator::new(rig, *params).min_domain(),
-                linear_8bit: decode.linear_8bit,
+                linear_8bit: !decode.gamma.srgb(8),
+                gamma: decode.gamma,
                 saturation: decode.saturation,
             }),
             LightCounts {
@@ -694,7 +700,8 @@ fn run(
         Plan::Baseline(b) => (
             MethodParameters::Baseline(BaselineParameters {
                 baseline: *b.params(),
-                linear_8bit: decode.linear_8bit,
+                linear_8bit: !decode.gamma.srgb(8),
+                gamma: decode.gamma,
                 saturation: decode.saturation,
             }),
             LightCounts {
@@ -854,6 +861,10 @@ pub fn write_estimate_outputs(
             symframe_io::gray_map_rgb8(&maps.confidence, 0.0, 1.0),
         ),
         ("source.png", symframe_io::source_map_rgb8(&maps.source)),
+        (
+            "tangents_gltf.png",
+            crate::export::gltf_anisotropy_rgb8(&maps.tangents, &maps.anisotropy),
+        ),
     ];
     for (name, rgb) in pictures {
         symframe_io::write_png_rgb8(&staging.path(name), w, h, &rgb)?;

@@ -15,6 +15,12 @@
 //! - [`relight`] with a [`RelightConfig`]: the fitted maps rendered under new lights, edited.
 //! - [`write_viewer`] with a [`ViewConfig`]: one self-contained HTML page relighting a fit in
 //!   the browser (WebGL2), with the same model and edits as [`relight`].
+//! - [`calibrate()`] with a [`CalibrateConfig`]: light directions from a mirror sphere.
+//! - [`integrate_job`] with an [`IntegrateConfig`]: an estimate's normals to a height map and a
+//!   mesh.
+//! - [`export_gltf`] with an [`ExportConfig`]: a fit or estimate as a glTF 2.0 asset.
+//! - [`synth()`] with a [`SynthConfig`]: a rendered capture with ground truth;
+//!   [`evaluate_job`] with an [`EvalConfig`]: an estimate against that truth.
 //!
 //! ```
 //! use symframe::brdf::ward::Ward;
@@ -47,11 +53,17 @@
 //! # }
 //! ```
 
+pub mod calibrate;
+pub mod colorbar;
 mod estimate;
+pub mod eval;
+pub mod export;
 mod fit;
+pub mod integrate;
 mod merge;
 mod outdir;
 mod relight;
+pub mod synth;
 mod tiles;
 mod view;
 
@@ -69,6 +81,12 @@ pub use outdir::{check_output_set, OutputDir, OutputSet, Staging, LOCK_FILE};
 pub use relight::{read_ward_maps, relight, RelightConfig, RelightOutcome};
 pub use tiles::{peak_rss_bytes, shard_tiles, TileCounts};
 pub use view::{write_viewer, ViewConfig, ViewOutcome};
+
+pub use calibrate::{calibrate, CalibrateConfig, CalibrationReport};
+pub use eval::{evaluate_job, EvalConfig, EvalReport};
+pub use export::{export_gltf, ExportConfig, ExportOutcome};
+pub use integrate::{integrate_job, IntegrateConfig, IntegrateReport};
+pub use synth::{synth, RigSpec, SynthConfig, SynthOutcome, SynthShape};
 
 /// The run stopped early on request; what was done (cache images, finished tiles) is kept,
 /// and the same call again resumes.
@@ -92,6 +110,8 @@ pub enum Stage {
     Tiles,
     /// Reading the shards' tiles (steps: tiles).
     Merging,
+    /// Rendering a synthetic capture (steps: images).
+    Rendering,
 }
 
 impl Stage {
@@ -101,6 +121,7 @@ impl Stage {
             Stage::Decoding => "decoding",
             Stage::Tiles => "tiles",
             Stage::Merging => "merging",
+            Stage::Rendering => "rendering",
         }
     }
 }

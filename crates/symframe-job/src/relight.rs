@@ -34,6 +34,10 @@ pub struct RelightConfig {
     pub region: Option<PathBuf>,
     /// Exposure of the PNG pictures in stops (the EXR files are not affected).
     pub exposure: f64,
+    /// A height map (`depth.npy` of [`crate::integrate`], H x W in pixel units, NaN where
+    /// none) whose cast shadows darken the relit images: a pixel the relief hides from a
+    /// light gets no light from it (ray-marched per pixel toward the light).
+    pub shadows: Option<PathBuf>,
 }
 
 /// What a relight job wrote.
@@ -58,6 +62,9 @@ struct RelightReport<'a> {
     rotate_tangents_deg: Option<f64>,
     region: Option<&'a Path>,
     exposure_stops: f64,
+    /// The height map whose cast shadows were applied.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    shadows: Option<&'a Path>,
 }
 
 /// Reads one map of the fit folder, which must have the shape `expect`.
@@ -121,6 +128,7 @@ impl RelightConfig {
             rotate_tangents: None,
             region: None,
             exposure: 0.0,
+            shadows: None,
         }
     }
 }
@@ -142,9 +150,30 @@ pub fn relight(config: &RelightConfig) -> Result<RelightOutcome> {
     };
     let relighter =
         Relighter::new(&maps, &edits).with_context(|| config.fit_dir.display().to_string())?;
+    let heights = match &config.shadows {
+        Some(p) => {
+            let (shape, depth) = symframe_io::read_npy_f32(p)?;
+            if shape != [h, w] {
+                bail!(
+                    "{}: shape {shape:?} does not match the fitted maps ({h} x {w})",
+                    p.display()
+                );
+            }
+            Some(depth.iter().map(|&v| v as f64).collect::<Vec<f64>>())
+        }
+        None => None,
+    };
 
     let out = OutputDir::lock(&config.output)?;
-    let result = write_relit(config, &out, &maps, &relighter, &lights, &edits);
+    let result = write_relit(
+        config,
+        &out,
+        &maps,
+        &relighter,
+        &lights,
+        &edits,
+        heights.as_deref(),
+    );
     if result.is_err() {
         out.discard_unfinished();
     }
@@ -169,13 +198,20 @@ fn write_relit(
     relighter: &Relighter,
     lights: &[DVec3],
     edits: &Edits,
+    heights: Option<&[f64]>,
 ) -> Result<RelightOutcome> {
     let (w, h) = (maps.width, maps.height);
     let staging = OutputSet::new(out, relight_owned)?;
     let mut names = Vec::with_capacity(lights.len());
     for (i, &l) in lights.iter().enumerate() {
         let name = format!("relit_{i:03}");
-        let img = relighter.render(l);
+        let mut img = relighter.render(l);
+        if let Some(hf) = heights {
+            let shadowed = symframe::render::shadow::cast_shadows(hf, w, h, l);
+            for (px, _) in img.chunks_exact_mut(3).zip(&shadowed).filter(|(_, &s)| s) {
+                px.fill(0.0);
+            }
+        }
         symframe_io::write_exr_rgb(&staging.path(&format!("{name}.exr")), w, h, &img)?;
         symframe_io::write_png8_rgb(
             &staging.path(&format!("{name}.png")),
@@ -205,6 +241,7 @@ fn write_relit(
         rotate_tangents_deg: config.rotate_tangents,
         region: config.region.as_deref(),
         exposure_stops: config.exposure,
+        shadows: config.shadows.as_deref(),
     };
     staging.commit("relight.json", serde_json::to_value(&report)?, &|_| {})?;
     Ok(RelightOutcome {

@@ -107,7 +107,7 @@ fn progress_is_reported_and_a_set_stop_flag_interrupts_before_any_work() {
         let counter = match p.stage {
             Stage::Decoding => &images,
             Stage::Tiles => &tiles,
-            Stage::Merging => unreachable!("no merge here"),
+            Stage::Merging | Stage::Rendering => unreachable!("no merge or rendering here"),
         };
         counter.fetch_max(p.done, Ordering::SeqCst);
         assert!(p.done <= p.total);

@@ -360,6 +360,7 @@ fn relight<'py>(
     config.rotate_tangents = o.get("rotate_tangents")?;
     config.region = o.get("region")?;
     config.exposure = o.or("exposure", config.exposure)?;
+    config.shadows = o.get("shadows")?;
     o.finish()?;
     for (name, v) in [
         ("specular_scale", config.specular_scale),
@@ -398,7 +399,7 @@ fn relight<'py>(
         let mut data = Vec::new();
         let mut size = (0, 0);
         let exr = DecodeOptions {
-            linear_8bit: true,
+            gamma: symframe_io::Gamma::Linear,
             saturation: f32::INFINITY,
         };
         for png in &done.pictures {
@@ -411,6 +412,55 @@ fn relight<'py>(
     Ok(PyArray1::from_vec(py, data)
         .reshape([n, h, w, 3])?
         .into_any())
+}
+
+/// The `symframe integrate` job: an estimate's normals to a height map and a mesh written to
+/// `out`; returns `{"depth": H x W float32, "report": integrate.json}`.
+#[pyfunction]
+#[pyo3(signature = (estimate, out, options=None))]
+fn integrate<'py>(
+    py: Python<'py>,
+    estimate: PathBuf,
+    out: PathBuf,
+    options: Option<Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use symframe::integrate::Solver;
+    let mut o = Options::new("integrate", options);
+    let mut config = symframe_job::IntegrateConfig::new(estimate, out);
+    let solver: String = o.or("solver", "bilateral".to_string())?;
+    let k: f64 = o.or("k", 10.0)?;
+    config.params.solver = match solver.as_str() {
+        "poisson" => Solver::Poisson,
+        "bilateral" => match Solver::bilateral() {
+            Solver::Bilateral {
+                max_iterations,
+                tolerance,
+                ..
+            } => Solver::Bilateral {
+                k,
+                max_iterations,
+                tolerance,
+            },
+            Solver::Poisson => Solver::Poisson,
+        },
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "solver must be poisson or bilateral, got '{other}'"
+            )))
+        }
+    };
+    config.params.cg_tolerance = o.or("tolerance", config.params.cg_tolerance)?;
+    config.use_confidence = o.or("use_confidence", config.use_confidence)?;
+    config.max_jump = o.or("max_jump", config.max_jump)?;
+    o.finish()?;
+    let (depth, report) = run_job(py, None, None, |_| symframe_job::integrate_job(&config))?;
+    let dict = PyDict::new(py);
+    dict.set_item(
+        "depth",
+        PyArray1::from_vec(py, depth.depth).reshape([depth.height, depth.width])?,
+    )?;
+    dict.set_item("report", to_python(py, &report)?)?;
+    Ok(dict)
 }
 
 /// A dataset's lights, image paths, mask and image size, read without decoding the stack.
@@ -521,7 +571,11 @@ impl Dataset {
 #[pyo3(signature = (path, linear=false, saturation=None))]
 fn load(py: Python<'_>, path: PathBuf, linear: bool, saturation: Option<f32>) -> PyResult<Dataset> {
     let mut decode = DecodeOptions {
-        linear_8bit: linear,
+        gamma: if linear {
+            symframe_io::Gamma::Linear
+        } else {
+            symframe_io::Gamma::Auto
+        },
         ..DecodeOptions::default()
     };
     if let Some(s) = saturation {
@@ -758,6 +812,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(fit, m)?)?;
     m.add_function(wrap_pyfunction!(relight, m)?)?;
+    m.add_function(wrap_pyfunction!(integrate, m)?)?;
     m.add_function(wrap_pyfunction!(synth, m)?)?;
     m.add_function(wrap_pyfunction!(merge, m)?)?;
     m.add_function(wrap_pyfunction!(view, m)?)?;

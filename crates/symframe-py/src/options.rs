@@ -12,7 +12,7 @@ use symframe::baseline::{Baseline, BaselineParams};
 use symframe::estimate::Fallback;
 use symframe::symmetry::CosineMode;
 use symframe::{EstimatorParams, Interpolation, RigOptions};
-use symframe_io::{CacheOptions, DecodeOptions};
+use symframe_io::{CacheOptions, DecodeOptions, Gamma};
 use symframe_job::{CacheConfig, MethodConfig, Shard};
 
 /// The keyword options of one call; every key must be read by the end ([`Options::finish`]).
@@ -189,20 +189,28 @@ pub fn method(o: &mut Options) -> PyResult<MethodConfig> {
     })
 }
 
-/// How images are decoded (`linear`, `saturation`).
+/// How images are decoded (`gamma`, `linear` its alias for `gamma="linear"`, `saturation`).
 pub fn decode(o: &mut Options) -> PyResult<DecodeOptions> {
     let d = DecodeOptions::default();
-    let linear_8bit: bool = o.or("linear", d.linear_8bit)?;
+    let linear: bool = o.or("linear", false)?;
+    let gamma = match o.get::<String>("gamma")?.as_deref() {
+        None if linear => Gamma::Linear,
+        None => d.gamma,
+        Some("srgb") if !linear => Gamma::Srgb,
+        Some("linear") => Gamma::Linear,
+        Some(other) => {
+            return Err(bad(format!(
+                "gamma must be 'srgb' or 'linear' (linear=True is 'linear'), got '{other}'"
+            )))
+        }
+    };
     let saturation: f32 = o.or("saturation", d.saturation)?;
     if !(saturation > 0.0 && saturation <= 1.0) {
         return Err(bad(format!(
             "saturation must be in (0, 1], got {saturation}"
         )));
     }
-    Ok(DecodeOptions {
-        linear_8bit,
-        saturation,
-    })
+    Ok(DecodeOptions { gamma, saturation })
 }
 
 /// The tile cache (`cache`, `no_keep_cache`, `trust_mtime`, `tile_size`, `decode_memory`).

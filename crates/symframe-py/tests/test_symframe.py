@@ -343,3 +343,17 @@ def test_view_writes_the_command_lines_page(capture, cli, tmp_path):
     with pytest.raises(symframe.SymframeError, match="kd.npy"):
         symframe.view(tmp_path / "moved", tmp_path / "bad.html")
     assert not (tmp_path / "bad.html").exists()
+
+
+def test_integrate_equals_the_command_line(capture, cli, tmp_path):
+    frames = tmp_path / "est"
+    symframe.estimate_path(capture, frames)
+    cli("integrate", frames, "-o", tmp_path / "int_cli", "--solver", "poisson")
+    got = symframe.integrate(frames, tmp_path / "int_py", solver="poisson")
+    want = np.load(tmp_path / "int_cli" / "depth.npy")
+    assert got["depth"].shape == (40, 40) and got["depth"].dtype == np.float32
+    assert np.array_equal(bits(got["depth"]), bits(want))
+    assert got["report"]["solver"] == "poisson" and got["report"]["pixels"] > 800
+    assert (tmp_path / "int_py" / "mesh.ply").read_bytes() == (tmp_path / "int_cli" / "mesh.ply").read_bytes()
+    with pytest.raises(ValueError, match="solver must be poisson or bilateral"):
+        symframe.integrate(frames, tmp_path / "bad", solver="multigrid")

@@ -437,6 +437,136 @@ pub fn detect_sphere(
     })
 }
 
+/// What [`matte_intensity`] needs besides the image.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MatteParams {
+    /// Pixels where the light is this close to grazing (`n.l` below it) are left out: their
+    /// values are small, and a cast shadow or a slightly wrong normal there weighs most.
+    pub min_cosine: f64,
+    /// Pixels within this many pixels of the rim are left out (partly covered by the sphere).
+    pub rim_margin: f64,
+    /// Fewest usable pixels for a fit.
+    pub min_pixels: usize,
+}
+
+impl Default for MatteParams {
+    fn default() -> Self {
+        Self {
+            min_cosine: 0.2,
+            rim_margin: 1.5,
+            min_pixels: 20,
+        }
+    }
+}
+
+/// Why no intensity was measured on the matte sphere for one light.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MatteError {
+    /// Too few sphere pixels face the light (a light far behind the sphere) or are usable, or
+    /// their normals are too alike to fix the light.
+    #[error("only {pixels} pixels of the matte sphere face the light usably ({needed} needed)")]
+    TooFewPixels {
+        /// Usable pixels.
+        pixels: usize,
+        /// Pixels needed.
+        needed: usize,
+    },
+}
+
+/// The RGB intensity (times the sphere's albedo) of the light `light` from a diffuse sphere of
+/// circle `circle` in an RGB image (`width x height x 3`, `NaN` where saturated). The lit
+/// pixels are chosen with `light` (inside the circle by at least
+/// [`MatteParams::rim_margin`], `n.l` at least [`MatteParams::min_cosine`], not saturated);
+/// then, per channel, `I = b . n` is fitted by least squares over them (`n` the sphere's normal
+/// at the pixel centre), refitted once without the pixels whose residual exceeds three times
+/// the median one (a shadow, a highlight, a bad rim pixel), and the intensity is `|b|`. The
+/// fit takes the direction from the sphere itself, so an error of the chrome sphere's light,
+/// which near grazing would change `n.l` by many percent, does not enter.
+pub fn matte_intensity(
+    width: usize,
+    height: usize,
+    rgb: &[f32],
+    circle: &Circle,
+    light: DVec3,
+    params: &MatteParams,
+) -> Result<[f64; 3], MatteError> {
+    let l = light.normalize();
+    let inner = Circle {
+        r: (circle.r - params.rim_margin).max(0.0),
+        ..*circle
+    };
+    let (x0, x1) = (
+        (circle.cx - circle.r).floor().max(0.0) as usize,
+        ((circle.cx + circle.r).ceil().max(0.0) as usize).min(width),
+    );
+    let (y0, y1) = (
+        (circle.cy - circle.r).floor().max(0.0) as usize,
+        ((circle.cy + circle.r).ceil().max(0.0) as usize).min(height),
+    );
+    let mut samples: Vec<(DVec3, [f64; 3])> = Vec::new();
+    for row in y0..y1 {
+        for col in x0..x1 {
+            let (x, y) = (col as f64 + 0.5, row as f64 + 0.5);
+            if inner.normal_at(x, y).is_none() {
+                continue;
+            }
+            let Some(n) = circle.normal_at(x, y) else {
+                continue;
+            };
+            let px = &rgb[3 * (row * width + col)..3 * (row * width + col) + 3];
+            if n.dot(l) < params.min_cosine || !px.iter().all(|v| v.is_finite()) {
+                continue;
+            }
+            samples.push((n, [px[0] as f64, px[1] as f64, px[2] as f64]));
+        }
+    }
+    let needed = params.min_pixels.max(3);
+    let too_few = |pixels: usize| MatteError::TooFewPixels { pixels, needed };
+    if samples.len() < needed {
+        return Err(too_few(samples.len()));
+    }
+    let mut out = [0.0; 3];
+    for (c, o) in out.iter_mut().enumerate() {
+        let all: Vec<(DVec3, f64)> = samples.iter().map(|(n, v)| (*n, v[c])).collect();
+        let b = lambertian_fit(&all).ok_or_else(|| too_few(all.len()))?;
+        let mut res: Vec<f64> = all.iter().map(|(n, v)| (v - b.dot(*n)).abs()).collect();
+        let cut = {
+            let mut r = res.clone();
+            r.sort_by(f64::total_cmp);
+            3.0 * r[r.len() / 2] + 1e-12
+        };
+        let kept: Vec<(DVec3, f64)> = all
+            .iter()
+            .zip(res.drain(..))
+            .filter(|(_, r)| *r <= cut)
+            .map(|(s, _)| *s)
+            .collect();
+        let b = if kept.len() >= needed {
+            lambertian_fit(&kept).unwrap_or(b)
+        } else {
+            b
+        };
+        *o = b.length();
+    }
+    Ok(out)
+}
+
+/// The least-squares `b` of `v = b . n` over `(n, v)` samples; `None` when the normals do not
+/// span three dimensions well enough to fix it.
+fn lambertian_fit(samples: &[(DVec3, f64)]) -> Option<DVec3> {
+    let mut ata = glam::DMat3::ZERO;
+    let mut atb = DVec3::ZERO;
+    for &(n, v) in samples {
+        ata += glam::DMat3::from_cols(n * n.x, n * n.y, n * n.z);
+        atb += n * v;
+    }
+    let scale = (ata.x_axis.x + ata.y_axis.y + ata.z_axis.z) / 3.0;
+    if scale.is_nan() || scale <= 0.0 || ata.determinant() < 1e-9 * scale.powi(3) {
+        return None;
+    }
+    Some(ata.inverse() * atb)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -592,5 +722,42 @@ mod tests {
         let e = detect_sphere(w, h, &mean, &[30 * w + 30]).unwrap_err();
         assert!(e.contains("not round"), "{e}");
         assert!(detect_sphere(w, h, &vec![0.0; w * h], &brightest).is_err());
+    }
+
+    #[test]
+    fn matte_intensity_recovers_a_lambertian_sphere_s_light() {
+        let (w, h) = (48usize, 40usize);
+        let c = Circle {
+            cx: 24.0,
+            cy: 20.0,
+            r: 16.0,
+        };
+        let l = DVec3::new(0.4, -0.3, 0.6).normalize();
+        let e = [0.7, 0.5, 0.9];
+        let mut rgb = vec![0.0f32; w * h * 3];
+        for row in 0..h {
+            for col in 0..w {
+                if let Some(n) = c.normal_at(col as f64 + 0.5, row as f64 + 0.5) {
+                    for k in 0..3 {
+                        rgb[3 * (row * w + col) + k] = (e[k] * n.dot(l).max(0.0)) as f32;
+                    }
+                }
+            }
+        }
+        // A few saturated and shadowed pixels do not move the median.
+        for p in [3 * (20 * w + 24), 3 * (21 * w + 25)] {
+            rgb[p..p + 3].fill(f32::NAN);
+        }
+        rgb[3 * (18 * w + 22)..3 * (18 * w + 22) + 3].fill(0.0);
+        let got = matte_intensity(w, h, &rgb, &c, l, &MatteParams::default()).unwrap();
+        for k in 0..3 {
+            assert!((got[k] - e[k]).abs() < 1e-5, "{got:?}");
+        }
+        // A light from behind leaves too few pixels.
+        let back = DVec3::new(0.0, 0.0, -1.0);
+        assert!(matches!(
+            matte_intensity(w, h, &rgb, &c, back, &MatteParams::default()),
+            Err(MatteError::TooFewPixels { .. })
+        ));
     }
 }

@@ -73,6 +73,7 @@ pub mod eval;
 pub mod frames;
 pub mod geometry;
 pub mod integrate;
+pub mod maps;
 pub mod method;
 pub mod render;
 pub mod stack;
@@ -93,9 +94,9 @@ pub use appearance::relight::{Edits, Relighter};
 pub use baselines::{estimate_stack_baseline, Baseline, BaselineMethod};
 pub use error::{Error, Result};
 pub use frames::estimator::{
-    estimate_stack, EstimateMaps, Estimator, EstimatorParams, Interpolation, PixelRecord,
-    PixelScratch, PixelSource, PixelStatus,
+    estimate_stack, Estimator, EstimatorParams, Interpolation, PixelScratch,
 };
 pub use frames::rig::{Rig, RigOptions};
+pub use maps::{EstimateMaps, PixelCounts, PixelRecord, PixelSource, PixelStatus};
 pub use method::{run_stack, PixelMethod};
 pub use stack::Stack;

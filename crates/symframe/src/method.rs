@@ -112,7 +112,7 @@ pub fn gather(lights: &[usize], all: &[f32], out: &mut [f32]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frames::estimator::{PixelRecord, PixelSource, PixelStatus};
+    use crate::maps::{PixelRecord, PixelSource, PixelStatus};
 
     /// Reports the pixel index and the samples it was given.
     struct Echo(Option<Vec<usize>>);

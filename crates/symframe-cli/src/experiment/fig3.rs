@@ -12,7 +12,7 @@ use symframe::{Rig, RigOptions};
 
 use super::plot::{self, fmt_opt, md_table};
 use super::{angle_deg, axis_angle_deg, max, mean, Ctx, Section};
-use crate::colorbar::Scale;
+use symframe_job::colorbar::Scale;
 
 /// Tangent angle off the x-z plane (the paper's 25 degrees).
 const TANGENT_ANGLE: f64 = 25.0;

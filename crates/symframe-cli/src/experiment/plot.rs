@@ -1,7 +1,7 @@
 //! Small plotting helpers for the experiments: heat maps with a colour bar, line plots with a
 //! legend, and labelled picture grids, drawn with plotters into RGB buffers and saved as PNG.
 //!
-//! All text uses the embedded DejaVu subset of [`crate::colorbar`] (printable ASCII plus `°`,
+//! All text uses the embedded DejaVu subset of [`symframe_job::colorbar`] (printable ASCII plus `°`,
 //! `−`, `≤`, `≥`), so nothing depends on the system's fonts.
 
 use std::path::Path;
@@ -10,7 +10,7 @@ use anyhow::{anyhow, Context, Result};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use crate::colorbar::{font_ready, Scale, FAMILY};
+use symframe_job::colorbar::{font_ready, Scale, FAMILY};
 
 /// An RGB picture.
 pub struct Picture {

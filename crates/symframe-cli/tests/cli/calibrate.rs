@@ -244,3 +244,108 @@ fn saturated_16_bit_highlights_and_bad_images() {
     );
     assert_eq!(err.trim().lines().count(), 63, "{err}");
 }
+
+/// `r g b` rows of an intensity table.
+fn read_rows(path: &Path) -> Vec<[f64; 3]> {
+    fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            [v[0], v[1], v[2]]
+        })
+        .collect()
+}
+
+/// Rows scaled to a mean of 1 over every light and channel (the calibration's normalisation).
+fn mean_one(rows: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    let mean = rows.iter().flatten().sum::<f64>() / (3 * rows.len()) as f64;
+    rows.iter().map(|r| r.map(|v| v / mean)).collect()
+}
+
+#[test]
+fn matte_sphere_intensities_match_the_truth_and_estimates_agree() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("cs");
+    run_ok(&[
+        "synth",
+        "-o",
+        s(&data),
+        "--size",
+        "48",
+        "--rig",
+        "cone:80",
+        "--model",
+        "ward",
+        "--chrome-sphere",
+        "--matte-sphere",
+        "--intensity-spread",
+        "0.3",
+    ]);
+    let scene: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(data.join("scene.json")).unwrap()).unwrap();
+    let matte = scene["matte_sphere"]["sphere_arg"].as_str().unwrap();
+    let cal = tmp.path().join("cal");
+    let out = run_ok(&[
+        "calibrate",
+        s(&data.join("images")),
+        "--matte-sphere",
+        matte,
+        "-o",
+        s(&cal.join("lights.lp")),
+    ]);
+    assert!(
+        out.contains("light intensities from the matte sphere"),
+        "{out}"
+    );
+    let got = read_rows(&cal.join("light_intensities.txt"));
+    let truth = mean_one(&read_rows(&data.join("gt_light_intensities.txt")));
+    assert_eq!(got.len(), truth.len());
+    let mut worst = 0.0f64;
+    for (g, t) in got.iter().zip(&truth) {
+        for c in 0..3 {
+            worst = worst.max((g[c] / t[c] - 1.0).abs());
+        }
+    }
+    println!(
+        "matte sphere, 48 px object, 80 lights, spread 0.3: largest relative intensity error \
+         {:.4}%",
+        100.0 * worst
+    );
+    assert!(worst < 0.01, "largest relative error {worst}");
+
+    // Estimating with the calibrated intensities (picked up beside the .lp) and with the true
+    // ones (same lights) gives the same normals.
+    let truth_dir = tmp.path().join("truth");
+    fs::create_dir_all(&truth_dir).unwrap();
+    fs::copy(cal.join("lights.lp"), truth_dir.join("lights.lp")).unwrap();
+    let rows: Vec<String> = truth
+        .iter()
+        .map(|r| format!("{} {} {}", r[0], r[1], r[2]))
+        .collect();
+    fs::write(truth_dir.join("light_intensities.txt"), rows.join("\n")).unwrap();
+    let mask = data.join("mask.png");
+    let normals = |lp: &Path, out: &Path| {
+        run_ok(&["-q", "estimate", s(lp), "-o", s(out), "--mask", s(&mask)]);
+        read_npy_f32(&out.join("normals.npy")).unwrap().1
+    };
+    let a = normals(&cal.join("lights.lp"), &tmp.path().join("est_cal"));
+    let b = normals(&truth_dir.join("lights.lp"), &tmp.path().join("est_true"));
+    let diffs: Vec<f64> = a
+        .chunks_exact(3)
+        .zip(b.chunks_exact(3))
+        .filter(|(x, y)| x[0].is_finite() && y[0].is_finite())
+        .map(|(x, y)| {
+            let d = (x[0] * y[0] + x[1] * y[1] + x[2] * y[2]) as f64;
+            d.clamp(-1.0, 1.0).acos().to_degrees()
+        })
+        .collect();
+    let mean = diffs.iter().sum::<f64>() / diffs.len() as f64;
+    println!("estimates with calibrated and true intensities differ by {mean:.4} deg on average");
+    assert!(
+        diffs.len() > 1000 && mean < 0.05,
+        "mean {mean} over {}",
+        diffs.len()
+    );
+}

@@ -48,11 +48,38 @@ fn estimate_on_an_lp_dataset_writes_every_output_and_is_accurate() {
         "tangents.exr",
         "normals.png",
         "tangents.png",
+        "tangents_gltf.png",
         "confidence.png",
         "report.json",
     ] {
         assert!(out.join(f).is_file(), "missing {f}");
     }
+    // tangents_gltf.png: red/green the tangent's image-plane direction as (d + 1) / 2, blue
+    // the anisotropy, at every pixel with a tangent.
+    let (_, tan) = read_npy_f32(&out.join("tangents.npy")).unwrap();
+    let (_, aniso) = read_npy_f32(&out.join("anisotropy.npy")).unwrap();
+    let exact = symframe_io::DecodeOptions {
+        gamma: symframe_io::Gamma::Linear,
+        saturation: f32::INFINITY,
+    };
+    let png = symframe_io::read_image(&out.join("tangents_gltf.png"), &exact).unwrap();
+    let mut checked = 0;
+    for (p, t) in tan.chunks_exact(3).enumerate() {
+        if !t[0].is_finite() {
+            continue;
+        }
+        let l = t[0].hypot(t[1]);
+        let want = [
+            (t[0] / l + 1.0) / 2.0,
+            (t[1] / l + 1.0) / 2.0,
+            aniso[p].clamp(0.0, 1.0),
+        ];
+        for (got, want) in png.data[3 * p..3 * p + 3].iter().zip(want) {
+            assert!((got - want).abs() <= 0.5 / 255.0 + 1e-6, "pixel {p}");
+        }
+        checked += 1;
+    }
+    assert!(checked > 200, "{checked} pixels with a tangent");
     let (shape, normals) = read_npy_f32(&out.join("normals.npy")).unwrap();
     assert_eq!(shape, vec![28, 28, 3]);
     let (_, tangents) = read_npy_f32(&out.join("tangents.npy")).unwrap();

@@ -415,3 +415,111 @@ fn relight_refuses_bad_fit_folders_regions_and_light_files() {
     let o = symframe(&["relight", "/no/such/fit", "-o", s(&out), "--light", "0,0,1"]);
     assert_fails_naming(&o, "/no/such/fit", &out);
 }
+
+/// PSNR (dB) of the `relit_NNN.exr` of `dir` against the dataset's images of `lights`, over
+/// every pixel of every image where both are defined (the fit leaves a few pixels NaN; a light
+/// below the ground's horizon gives a black image, so a per-image PSNR is not defined).
+fn relit_psnr(dir: &Path, data: &Path, lights: &[usize]) -> f64 {
+    let exact = DecodeOptions {
+        saturation: f32::INFINITY,
+        ..DecodeOptions::default()
+    };
+    let (mut relit, mut truth) = (Vec::new(), Vec::new());
+    for (k, &i) in lights.iter().enumerate() {
+        let r = symframe_io::read_image(&dir.join(format!("relit_{k:03}.exr")), &exact);
+        let t =
+            symframe_io::read_image(&data.join("images").join(format!("img_{i:04}.exr")), &exact);
+        relit.extend(r.unwrap().into_rgb());
+        truth.extend(t.unwrap().into_rgb());
+    }
+    let both: Vec<bool> = relit
+        .chunks_exact(3)
+        .zip(truth.chunks_exact(3))
+        .map(|(a, b)| a.iter().chain(b).all(|v| v.is_finite()))
+        .collect();
+    image_psnr(&relit, &truth, Some(&both))
+}
+
+#[test]
+fn cast_shadows_from_the_integrated_relief_raise_held_out_psnr_on_bumps() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = |n: &str| tmp.path().join(n);
+    let run = |args: &[&str]| {
+        let o = symframe(args);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+    };
+    let (n_lights, k) = (200, 20);
+    run(&[
+        "-q",
+        "synth",
+        "-o",
+        s(&p("d")),
+        "--shape",
+        "bumps",
+        "--size",
+        "32",
+        "--relief",
+        "1.5",
+        "--rig",
+        "cone:200",
+        "--model",
+        "ward:kd=0.5,ks=0.2,ax=0.2,ay=0.2",
+    ]);
+    run(&["-q", "estimate", s(&p("d")), "-o", s(&p("est"))]);
+    run(&[
+        "-q",
+        "fit",
+        s(&p("d")),
+        "--frames",
+        s(&p("est")),
+        "-o",
+        s(&p("fit")),
+        "--holdout",
+        "20",
+    ]);
+    run(&[
+        "-q",
+        "integrate",
+        s(&p("est")),
+        "-o",
+        s(&p("shape")),
+        "--solver",
+        "poisson",
+    ]);
+    let held = symframe::appearance::fit::holdout_lights(n_lights, k).unwrap();
+    let all = symframe_io::open_dataset(&p("d")).unwrap().lights;
+    let rows: Vec<String> = held
+        .iter()
+        .map(|&i| format!("{} {} {}", all[i].x, all[i].y, all[i].z))
+        .collect();
+    fs::write(p("held.txt"), rows.join("\n") + "\n").unwrap();
+    let relight = |out: &str, extra: &[&str]| {
+        run(&[
+            &[
+                "-q",
+                "relight",
+                s(&p("fit")),
+                "-o",
+                s(&p(out)),
+                "--lights",
+                s(&p("held.txt")),
+            ],
+            extra,
+        ]
+        .concat());
+        relit_psnr(&p(out), &p("d"), &held)
+    };
+    let plain = relight("plain", &[]);
+    let shadowed = relight(
+        "shadowed",
+        &["--shadows", "--depth", s(&p("shape/depth.npy"))],
+    );
+    println!(
+        "bumps (32 px, relief 1.5, 200 lights, 20 held out): held-out relit PSNR {plain:.2} dB \
+         without cast shadows, {shadowed:.2} dB with them"
+    );
+    assert!(shadowed > plain + 0.5, "{plain} -> {shadowed}");
+    let report: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(p("shadowed/relight.json")).unwrap()).unwrap();
+    assert!(report["shadows"].as_str().unwrap().ends_with("depth.npy"));
+}

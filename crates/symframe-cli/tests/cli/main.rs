@@ -9,6 +9,7 @@ mod eval;
 mod experiment;
 mod export;
 mod fit;
+mod gamma;
 mod integrate;
 mod normal_png;
 mod outdir;

@@ -7,13 +7,14 @@ use crate::error::{Error, Result};
 use crate::limits;
 
 /// Decodes PNG, JPEG or Radiance HDR with the `image` crate: the declared size is checked
-/// first ([`crate::limits`]), then the image decoded under the same limits.
+/// first ([`crate::limits`]), then the image decoded under the same limits. Returns its ICC
+/// profile too, when it has one.
 pub(super) fn read_with_image(
     path: &Path,
     bytes: &[u8],
     fmt: ::image::ImageFormat,
-) -> Result<RawImage> {
-    use ::image::{DynamicImage as D, ImageError};
+) -> Result<(RawImage, Option<Vec<u8>>)> {
+    use ::image::{DynamicImage as D, ImageDecoder, ImageError};
     use std::io::Cursor;
     let ierr = |e: ImageError| match e {
         ImageError::IoError(io) => io_err(path, io),
@@ -36,7 +37,10 @@ pub(super) fn read_with_image(
     lim.max_image_height = Some(limits::MAX_SIDE as u32);
     lim.max_alloc = Some(limits::MAX_DECODED_BYTES);
     reader.limits(lim);
-    let img = reader.decode().map_err(ierr)?;
+    let mut decoder = reader.into_decoder().map_err(ierr)?;
+    // A profile that cannot be read is no reason to refuse the pixels.
+    let icc = decoder.icc_profile().ok().flatten();
+    let img = D::from_decoder(decoder).map_err(ierr)?;
     let (width, height) = (img.width() as usize, img.height() as usize);
     let (channels, raw) = match img {
         D::ImageLuma8(b) => (1, Raw::U8(b.into_raw())),
@@ -56,10 +60,13 @@ pub(super) fn read_with_image(
             ))
         }
     };
-    Ok(RawImage {
-        width,
-        height,
-        channels,
-        raw,
-    })
+    Ok((
+        RawImage {
+            width,
+            height,
+            channels,
+            raw,
+        },
+        icc,
+    ))
 }

@@ -7,9 +7,11 @@
 //! Formats, chosen by extension (case-insensitive):
 //! - `.exr`: OpenEXR, half/float/uint; `R,G,B` (others such as `A` ignored), else `Y`, else the
 //!   single non-alpha channel. Linear; first valid layer, full resolution level.
-//! - `.png`, `.jpg`/`.jpeg`, `.tif`/`.tiff`: 8-bit is sRGB-decoded unless
-//!   [`DecodeOptions::linear_8bit`]; 16-bit is `value / 65535`; TIFF 16/32/64-bit float is
-//!   linear. Grey or RGB, alpha dropped.
+//! - `.png`, `.jpg`/`.jpeg`, `.tif`/`.tiff`: by [`DecodeOptions::gamma`], 8-bit is
+//!   sRGB-decoded and 16-bit is `value / 65535` unless told otherwise ([`Gamma`]); TIFF
+//!   16/32/64-bit float is linear. Grey or RGB, alpha dropped. Their colour tags (PNG `sRGB`,
+//!   `gAMA`, `iCCP`; the ICC profile of JPEG and TIFF) are read into [`Image::colour`], not
+//!   applied.
 //! - `.hdr`: Radiance RGBE, linear.
 //! - `.pfm`: portable float map (`PF` RGB, `Pf` grey), linear.
 //!
@@ -31,12 +33,14 @@ use std::path::Path;
 
 use crate::error::{Error, Result};
 
+mod colour;
 mod exr;
 mod image_rs;
 mod pfm;
 mod png;
 mod tiff;
 
+pub use colour::ColourTag;
 use exr::read_exr;
 pub(crate) use exr::write_exr_channels;
 pub use exr::write_exr_rgb;
@@ -60,6 +64,8 @@ pub struct Image {
     pub data: Vec<f32>,
     /// What the file stored and how it was made linear.
     pub kind: SampleKind,
+    /// The file's colour tag, when it has one (integer formats only).
+    pub colour: Option<ColourTag>,
 }
 
 /// The sample type of an image file, and so how its values were made linear.
@@ -71,6 +77,8 @@ pub enum SampleKind {
     Linear8,
     /// 16-bit, linear (`value / 65535`).
     U16,
+    /// 16-bit, sRGB-decoded.
+    Srgb16,
     /// Floating point, linear as stored.
     Float,
 }
@@ -82,6 +90,7 @@ impl SampleKind {
             SampleKind::Srgb8 => "8-bit (sRGB-decoded)",
             SampleKind::Linear8 => "8-bit (linear)",
             SampleKind::U16 => "16-bit (linear)",
+            SampleKind::Srgb16 => "16-bit (sRGB-decoded)",
             SampleKind::Float => "float (linear)",
         }
     }
@@ -97,21 +106,67 @@ impl Image {
     }
 }
 
+/// How the integer samples of PNG, JPEG and TIFF files are made linear (float formats are
+/// always linear).
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "kebab-case")]
+pub enum Gamma {
+    /// 8-bit sRGB-decoded, 16-bit linear: what cameras' JPEGs and linear 16-bit exports are.
+    #[default]
+    Auto,
+    /// 8- and 16-bit sRGB-decoded (16-bit files from raw converters are often gamma-encoded).
+    Srgb,
+    /// 8- and 16-bit taken as linear (`value / max`).
+    Linear,
+}
+
+impl Gamma {
+    /// Whether samples of `bits` (8 or 16) are sRGB-decoded.
+    pub fn srgb(self, bits: u32) -> bool {
+        match self {
+            Gamma::Auto => bits == 8,
+            Gamma::Srgb => true,
+            Gamma::Linear => false,
+        }
+    }
+
+    /// The value in the cache fingerprint (`Auto` 0 and `Linear` 1 as the former
+    /// "8-bit linear" switch, so existing caches stay valid).
+    pub fn code(self) -> u64 {
+        match self {
+            Gamma::Auto => 0,
+            Gamma::Linear => 1,
+            Gamma::Srgb => 2,
+        }
+    }
+
+    /// The name in reports (`auto`, `srgb`, `linear`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Gamma::Auto => "auto",
+            Gamma::Srgb => "srgb",
+            Gamma::Linear => "linear",
+        }
+    }
+}
+
 /// How integer images are turned into linear radiance.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DecodeOptions {
-    /// Treat 8-bit images as already linear (`value / 255`) instead of sRGB-decoding them.
-    pub linear_8bit: bool,
+    /// The transfer curve of the integer formats.
+    pub gamma: Gamma,
     /// Fraction of an integer format's maximum at or above which a raw sample counts as
     /// saturated (its pixel becomes `NaN`); a value above 1 disables the test.
     pub saturation: f32,
 }
 
 impl Default for DecodeOptions {
-    /// sRGB-decoded 8-bit, saturation at 99.5% of the format's maximum.
+    /// sRGB-decoded 8-bit, linear 16-bit, saturation at 99.5% of the format's maximum.
     fn default() -> Self {
         Self {
-            linear_8bit: false,
+            gamma: Gamma::Auto,
             saturation: 0.995,
         }
     }
@@ -150,10 +205,10 @@ pub fn read_image(path: &Path, opts: &DecodeOptions) -> Result<Image> {
 pub fn decode_image(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Image> {
     let ext = extension(path)?;
     let run = || -> Result<Image> {
-        let (raw, srgb8) = match ext.as_str() {
-            "exr" => (read_exr(path, bytes)?, false),
+        let ((raw, icc), integer) = match ext.as_str() {
+            "exr" => ((read_exr(path, bytes)?, None), false),
             "tif" | "tiff" => (read_tiff(path, bytes)?, true),
-            "pfm" => (pfm_raw(path, bytes)?, false),
+            "pfm" => ((pfm_raw(path, bytes)?, None), false),
             "png" => (
                 read_with_image(path, bytes, ::image::ImageFormat::Png)?,
                 true,
@@ -167,7 +222,14 @@ pub fn decode_image(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<I
                 false,
             ),
         };
-        finish(path, raw, opts, srgb8)
+        let colour = match ext.as_str() {
+            "png" => colour::png_tag(bytes, icc.as_deref()),
+            _ if integer => icc.as_deref().and_then(colour::icc_tag),
+            _ => None,
+        };
+        let mut img = finish(path, raw, opts, integer)?;
+        img.colour = colour;
+        Ok(img)
     };
     // Belt and braces: a decoder bug on a hostile file must not take down a whole stack load.
     catch_unwind(AssertUnwindSafe(run))
@@ -208,8 +270,9 @@ struct RawImage {
     raw: Raw,
 }
 
-/// Keeps grey or RGB (dropping alpha), converts to linear and marks bad pixels `NaN`.
-fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, srgb8: bool) -> Result<Image> {
+/// Keeps grey or RGB (dropping alpha), converts to linear (`integer`: a format whose integer
+/// samples may be gamma-encoded, decoded by `opts.gamma`) and marks bad pixels `NaN`.
+fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, integer: bool) -> Result<Image> {
     let RawImage {
         width,
         height,
@@ -238,9 +301,14 @@ fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, srgb8: bool) -> Resu
     }
     let mut data = Vec::with_capacity(width * height * take);
     let nan = [f32::NAN; 3];
+    let (srgb8, srgb16) = (
+        integer && opts.gamma.srgb(8),
+        integer && opts.gamma.srgb(16),
+    );
     let kind = match &raw {
-        Raw::U8(_) if srgb8 && !opts.linear_8bit => SampleKind::Srgb8,
+        Raw::U8(_) if srgb8 => SampleKind::Srgb8,
         Raw::U8(_) => SampleKind::Linear8,
+        Raw::U16(_) if srgb16 => SampleKind::Srgb16,
         Raw::U16(_) => SampleKind::U16,
         Raw::F32(_) => SampleKind::Float,
     };
@@ -249,7 +317,7 @@ fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, srgb8: bool) -> Resu
             let lut: Vec<f32> = (0..256)
                 .map(|i| {
                     let x = i as f32 / 255.0;
-                    if srgb8 && !opts.linear_8bit {
+                    if srgb8 {
                         srgb_to_linear(x)
                     } else {
                         x
@@ -268,12 +336,20 @@ fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, srgb8: bool) -> Resu
         }
         Raw::U16(v) => {
             let sat = opts.saturation * 65535.0;
+            let linear = |s: u16| {
+                let x = s as f32 / 65535.0;
+                if srgb16 {
+                    srgb_to_linear(x)
+                } else {
+                    x
+                }
+            };
             for px in v.chunks_exact(ch) {
                 let px = &px[..take];
                 if px.iter().any(|&s| s as f32 >= sat) {
                     data.extend_from_slice(&nan[..take]);
                 } else {
-                    data.extend(px.iter().map(|&s| s as f32 / 65535.0));
+                    data.extend(px.iter().map(|&s| linear(s)));
                 }
             }
         }
@@ -294,6 +370,7 @@ fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, srgb8: bool) -> Resu
         channels: take,
         data,
         kind,
+        colour: None,
     })
 }
 
@@ -464,7 +541,7 @@ mod tests {
         assert_relative_eq!(img.data[2], srgb_to_linear(253.0 / 255.0));
         assert!(img.data[3].is_nan() && img.data[4].is_nan());
         let lin = DecodeOptions {
-            linear_8bit: true,
+            gamma: Gamma::Linear,
             ..opts()
         };
         let img = read_image(&p, &lin).unwrap();
@@ -493,7 +570,7 @@ mod tests {
         )
         .unwrap();
         let lin = DecodeOptions {
-            linear_8bit: true,
+            gamma: Gamma::Linear,
             ..opts()
         };
         let img = read_image(&p, &lin).unwrap();
@@ -718,7 +795,7 @@ mod tests {
         assert!(write_exr_rgb(&tmp(&d, "w.exr"), 0, 2, &[]).is_err());
         write_png8_rgb(&p, 1, 1, &[f32::NAN, 2.0, -1.0], false).unwrap();
         let lin = DecodeOptions {
-            linear_8bit: true,
+            gamma: Gamma::Linear,
             saturation: 2.0,
         };
         assert_eq!(read_image(&p, &lin).unwrap().data, vec![0.0, 1.0, 0.0]);

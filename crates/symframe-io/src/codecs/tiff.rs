@@ -15,8 +15,9 @@ pub(super) fn interleave<T: Copy>(v: Vec<T>, ch: usize) -> Vec<T> {
         .collect()
 }
 
-/// Decodes a TIFF (8/16-bit unsigned or 16/32/64-bit float; grey, grey+alpha, RGB or RGBA).
-pub(super) fn read_tiff(path: &Path, bytes: &[u8]) -> Result<RawImage> {
+/// Decodes a TIFF (8/16-bit unsigned or 16/32/64-bit float; grey, grey+alpha, RGB or RGBA);
+/// returns its ICC profile too, when it has one.
+pub(super) fn read_tiff(path: &Path, bytes: &[u8]) -> Result<(RawImage, Option<Vec<u8>>)> {
     use tiff::decoder::{Decoder, DecodingResult};
     use tiff::tags::Tag;
     use tiff::{ColorType, TiffError};
@@ -53,6 +54,7 @@ pub(super) fn read_tiff(path: &Path, bytes: &[u8]) -> Result<RawImage> {
         dec.find_tag_unsigned::<u16>(Tag::PlanarConfiguration),
         Ok(Some(2))
     );
+    let icc = dec.get_tag_u8_vec(Tag::IccProfile).ok();
     let mut buf = DecodingResult::U8(Vec::new());
     dec.read_image_to_buffer(&mut buf).map_err(terr)?;
     let raw = match buf {
@@ -94,10 +96,13 @@ pub(super) fn read_tiff(path: &Path, bytes: &[u8]) -> Result<RawImage> {
     } else {
         raw
     };
-    Ok(RawImage {
-        width: w as usize,
-        height: h as usize,
-        channels,
-        raw,
-    })
+    Ok((
+        RawImage {
+            width: w as usize,
+            height: h as usize,
+            channels,
+            raw,
+        },
+        icc,
+    ))
 }

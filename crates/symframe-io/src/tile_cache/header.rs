@@ -247,7 +247,7 @@ pub fn dataset_fingerprints(
         .u64(CACHE_VERSION as u64)
         .str(env!("CARGO_PKG_VERSION"))
         .u64(ds.images.len() as u64)
-        .u64(opts.linear_8bit as u64)
+        .u64(opts.gamma.code())
         .f64(opts.saturation as f64)
         .u64(trust_mtime as u64);
     let kind = if trust_mtime {

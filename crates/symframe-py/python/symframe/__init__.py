@@ -41,6 +41,7 @@ __all__ = [
     "fit",
     "merge",
     "relight",
+    "integrate",
     "synth",
     "view",
     "__version__",
@@ -144,9 +145,9 @@ def estimate_path(
     removed afterwards (nothing is kept for a rerun).
 
     Options: those of :func:`estimate`, and ``mask`` (a mask image path), ``linear``,
-    ``saturation``, ``cache`` (folder), ``no_keep_cache``, ``trust_mtime``, ``tiles``
-    (``"K/N"``: one shard; then only ``report`` is returned), ``tile_size``, ``decode_memory``
-    (MiB).
+    ``gamma`` (``"srgb"`` or ``"linear"``: the curve of 8- and 16-bit images), ``saturation``,
+    ``cache`` (folder), ``no_keep_cache``, ``trust_mtime``, ``tiles`` (``"K/N"``: one shard;
+    then only ``report`` is returned), ``tile_size``, ``decode_memory`` (MiB).
 
     Returns the maps as :func:`estimate` does and ``report``: the content of ``report.json``.
     """
@@ -229,7 +230,7 @@ def fit(
     ``path``: the capture; ``frames``: the output folder of :func:`estimate_path` for it (its
     tile cache is reused, so nothing is decoded again); ``out``: the output folder (maps as
     ``.npy``, ``fit.json``). Options: ``holdout`` (lights left out of the fit to judge it),
-    ``max_iterations``, ``max_peak_ratio``, ``mask``, ``linear``, ``saturation``, ``cache``,
+    ``max_iterations``, ``max_peak_ratio``, ``mask``, ``linear``, ``gamma``, ``saturation``, ``cache``,
     ``no_keep_cache``.
 
     Returns ``kd``, ``ks`` (``H x W x 3``), ``alpha_t``, ``alpha_b`` (``H x W``), ``normals``,
@@ -243,7 +244,8 @@ def relight(fit_dir: PathLike, out: PathLike, lights: Any, **options: Any) -> np
 
     ``lights``: ``N x 3`` directions (or one ``(x, y, z)``). Options: ``diffuse_scale``,
     ``specular_scale``, ``roughness_scale``, ``rotate_tangents`` (degrees), ``region`` (mask
-    image limiting the rotation), ``exposure`` (stops, pictures only). Writes
+    image limiting the rotation), ``exposure`` (stops, pictures only), ``shadows`` (a
+    ``depth.npy`` of :func:`integrate` whose cast shadows darken the images). Writes
     ``relit_NNN.exr``/``.png`` into ``out`` and returns the linear images, ``N x H x W x 3``
     float32.
     """
@@ -271,6 +273,19 @@ def view(fit_dir: PathLike, out: Optional[PathLike] = None, *, frames: Optional[
             None if frames is None else os.fspath(frames),
         )
     )
+
+
+def integrate(estimate: PathLike, out: PathLike, **options: Any) -> Dict[str, Any]:
+    """Runs the ``symframe integrate`` job: the normals of an :func:`estimate_path` folder to a
+    height map and a mesh (``depth.npy``, ``depth.exr``, ``depth.png``, ``mesh.ply``,
+    ``integrate.json`` in ``out``).
+
+    Options: ``solver`` (``"bilateral"``, the default, or ``"poisson"``), ``k`` (bilateral
+    sharpness, 10), ``tolerance`` (conjugate gradients, 1e-7), ``use_confidence`` (weight by
+    ``confidence.npy``, True), ``max_jump`` (mesh discontinuities, 2 pixels). Returns
+    ``{"depth": H x W float32 (NaN outside), "report": the content of integrate.json}``.
+    """
+    return _native.integrate(os.fspath(estimate), os.fspath(out), options)
 
 
 def synth(

@@ -89,6 +89,7 @@ def estimate_path(
     reference: bool = False,
     mask: Optional[PathLike] = None,
     linear: bool = False,
+    gamma: Optional[str] = None,
     saturation: float = 0.995,
     cache: Optional[PathLike] = None,
     no_keep_cache: bool = False,
@@ -144,11 +145,25 @@ def fit(
     max_peak_ratio: float = 8.0,
     mask: Optional[PathLike] = None,
     linear: bool = False,
+    gamma: Optional[str] = None,
     saturation: float = 0.995,
     cache: Optional[PathLike] = None,
     no_keep_cache: bool = False,
 ) -> Dict[str, Any]:
     """The `symframe fit` job: Ward maps (kd, ks, alpha_t, alpha_b, ...) and its report."""
+
+def integrate(
+    estimate: PathLike,
+    out: PathLike,
+    *,
+    solver: str = "bilateral",
+    k: float = 10.0,
+    tolerance: float = 1e-7,
+    use_confidence: bool = True,
+    max_jump: float = 2.0,
+) -> Dict[str, Any]:
+    """The `symframe integrate` job: {"depth": H x W float32, "report": integrate.json}."""
+    ...
 
 def relight(
     fit_dir: PathLike,
@@ -161,6 +176,7 @@ def relight(
     rotate_tangents: Optional[float] = None,
     region: Optional[PathLike] = None,
     exposure: float = 0.0,
+    shadows: Optional[PathLike] = None,
 ) -> npt.NDArray[np.float32]:
     """The `symframe relight` job: N x H x W x 3 linear images, also written to `out`."""
 

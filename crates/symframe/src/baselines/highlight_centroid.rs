@@ -3,9 +3,9 @@
 use glam::DVec3;
 
 use super::BaselinePixel;
-use crate::frames::estimator::PixelStatus;
 use crate::frames::highlight::highlight_moments_by;
 use crate::geometry::halfway_from_light;
+use crate::maps::PixelStatus;
 
 /// Smallest elongation of the highlight for the highlight-centroid baseline to report a
 /// tangent (the estimator's own rule, [`crate::frames::estimator::MIN_ELONGATION`]).

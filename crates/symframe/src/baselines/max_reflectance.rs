@@ -4,8 +4,8 @@
 use glam::DVec3;
 
 use super::{brightest, grey, BaselinePixel};
-use crate::frames::estimator::PixelStatus;
 use crate::geometry::{halfway_from_light, tangent_basis};
+use crate::maps::PixelStatus;
 
 /// Neighbours of the brightest sample (in halfway space) that the max-reflectance refinement
 /// fits over, besides the brightest sample itself.

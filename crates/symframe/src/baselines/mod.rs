@@ -17,7 +17,7 @@ use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::frames::estimator::{EstimateMaps, PixelRecord, PixelSource, PixelStatus};
+use crate::maps::{EstimateMaps, PixelRecord, PixelSource, PixelStatus};
 use crate::method::{run_stack, PixelMethod};
 use crate::stack::Stack;
 

@@ -3,7 +3,7 @@
 use glam::{DMat3, DVec3};
 
 use super::{brightest, grey, BaselineParams, BaselinePixel};
-use crate::frames::estimator::PixelStatus;
+use crate::maps::PixelStatus;
 
 /// Accumulated normal equations `A g = b` of the Lambertian model `I = g . l`.
 #[derive(Debug, Clone, Copy, Default)]

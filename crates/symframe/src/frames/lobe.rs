@@ -306,11 +306,11 @@ fn residuals(
         // Keep b for the second pass.
         *slot = b;
     }
-    for a in 0..3 {
-        for c in 0..a {
-            g[a][c] = g[c][a];
-        }
-    }
+    let g = [
+        [g[0][0], g[0][1], g[0][2]],
+        [g[0][1], g[1][1], g[1][2]],
+        [g[0][2], g[1][2], g[2][2]],
+    ];
     let (x, _) = nnls3(g, p, syy);
     let mut sum = 0.0;
     for (((&l, &h), &v), slot) in lights.iter().zip(halfways).zip(y).zip(r.iter_mut()) {
@@ -343,13 +343,15 @@ const FORESHORTENING_GAIN: f64 = 1.0;
 const FORESHORTENING_FLOOR: f64 = 1e-6;
 
 /// Solves `a x = b` for a symmetric positive definite `a` (Cholesky); `None` if it is not.
+// Index loops: the triangular recurrences read clearer as the textbook's indices.
+#[allow(clippy::needless_range_loop)]
 fn solve_spd(mut a: [[f64; P]; P], mut b: [f64; P]) -> Option<[f64; P]> {
     for j in 0..P {
         let mut d = a[j][j];
         for k in 0..j {
             d -= a[j][k] * a[j][k];
         }
-        if !(d > 0.0) {
+        if d.is_nan() || d <= 0.0 {
             return None;
         }
         let d = d.sqrt();

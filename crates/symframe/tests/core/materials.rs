@@ -8,9 +8,10 @@ use glam::DVec3;
 use symframe::baselines::{estimate_stack_baseline, Baseline};
 use symframe::brdf::{Brdf, Ggx, Lambertian};
 use symframe::eval::evaluate;
-use symframe::frames::estimator::{Fallback, PixelSource};
+use symframe::frames::estimator::Fallback;
 use symframe::frames::rig::uniform_cone_lights;
 use symframe::frames::slice::gather_pixel;
+use symframe::maps::PixelSource;
 use symframe::render::{rigs, Scene, TangentField};
 use symframe::{estimate_stack, EstimateMaps, Estimator, EstimatorParams, Rig, RigOptions};
 

@@ -1,5 +1,6 @@
 //! Error-map pictures: the map coloured with viridis (enlarged when small), a colour bar with
-//! labelled ticks in degrees, a title and a legend, drawn with plotters into an RGB buffer.
+//! labelled ticks in degrees, a title and a legend, drawn with plotters into an RGB buffer
+//! (for [`crate::eval`] and the experiments' plots).
 //!
 //! Text uses an embedded subset of DejaVu Sans (`assets/`, with its licence), so nothing depends
 //! on the system's fonts.
@@ -14,7 +15,7 @@ use plotters::style::{register_font, FontStyle};
 /// The embedded font: DejaVu Sans, printable ASCII plus a few signs.
 const FONT: &[u8] = include_bytes!("../assets/DejaVuSans-subset.ttf");
 /// The family name the embedded font is registered under.
-pub(crate) const FAMILY: &str = "symframe-dejavu-sans";
+pub const FAMILY: &str = "symframe-dejavu-sans";
 
 /// Colour of pixels whose reference exists but that have no estimate.
 const NO_ESTIMATE: [u8; 3] = [150, 150, 150];
@@ -22,7 +23,7 @@ const NO_ESTIMATE: [u8; 3] = [150, 150, 150];
 const NO_REFERENCE: [u8; 3] = [0, 0, 0];
 
 /// Registers the embedded font with plotters once per process.
-pub(crate) fn font_ready() -> Result<()> {
+pub fn font_ready() -> Result<()> {
     static REGISTERED: OnceLock<bool> = OnceLock::new();
     let ok = *REGISTERED.get_or_init(|| register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
     ensure!(ok, "the embedded font cannot be read");
@@ -105,7 +106,7 @@ impl Scale {
     }
 
     /// The viridis colour of a value on this scale.
-    pub(crate) fn colour(&self, v: f32) -> [u8; 3] {
+    pub fn colour(&self, v: f32) -> [u8; 3] {
         let rgb = symframe_io::gray_map_rgb8(&[v], 0.0, self.max as f32);
         [rgb[0], rgb[1], rgb[2]]
     }

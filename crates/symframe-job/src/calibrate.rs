@@ -1,0 +1,613 @@
+//! The calibration job (`symframe calibrate`): light directions from a mirror sphere in the
+//! images, written as an `.lp` file, with a picture of the detected highlights and a JSON
+//! record beside it. The per-image highlight and the sphere detection are
+//! [`symframe::calibrate`]'s; this module reads the images and writes the files.
+
+use std::path::{Component, Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use rayon::prelude::*;
+use serde::Serialize;
+use symframe::calibrate::{
+    detect_sphere, find_highlight, matte_intensity, Circle, Highlight, HighlightError,
+    HighlightParams, MatteError, MatteParams,
+};
+use symframe_io::{DecodeOptions, Image};
+
+use crate::{Control, Interrupted};
+
+/// Everything a calibration needs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CalibrateConfig {
+    /// A folder of images (every image file in it, sorted by name; `mask.*` left out), an
+    /// `.lp` file (its images), or a list file of image paths (one per line, relative to it).
+    pub images: PathBuf,
+    /// The mirror sphere's circle in pixels (`None`: detect it).
+    pub sphere: Option<Circle>,
+    /// The `.lp` file to write (image paths relative to its folder); `<stem>-highlights.png`
+    /// and `<stem>-calibration.json` are written beside it.
+    pub output: PathBuf,
+    /// A highlight is the pixels above this fraction of its peak (above the sphere's median).
+    pub threshold: f64,
+    /// Fail on the first image without a single clear highlight (else drop it with a warning).
+    pub strict: bool,
+    /// A diffuse (matte, grey) sphere's circle: per light, its RGB intensity is measured there
+    /// ([`symframe::calibrate::matte_intensity`]) and written as `light_intensities.txt` beside
+    /// the `.lp`, normalised to a mean of 1 over every light and channel.
+    pub matte_sphere: Option<Circle>,
+    /// How images are decoded.
+    pub decode: DecodeOptions,
+}
+
+impl CalibrateConfig {
+    /// Detect the sphere, threshold 0.3, drop unclear images, saturation at 0.995.
+    pub fn new(images: impl Into<PathBuf>, output: impl Into<PathBuf>) -> Self {
+        Self {
+            images: images.into(),
+            sphere: None,
+            output: output.into(),
+            threshold: 0.3,
+            strict: false,
+            matte_sphere: None,
+            decode: DecodeOptions {
+                saturation: 0.995,
+                ..DecodeOptions::default()
+            },
+        }
+    }
+}
+
+/// How the sphere was found, when it was detected.
+#[derive(Debug, Clone, Serialize)]
+pub struct SphereDetection {
+    /// Share of the images whose brightest spot is in the sphere.
+    pub highlight_share: f64,
+    /// Roundness of the detected outline.
+    pub roundness: f64,
+}
+
+/// No sphere was given and none was found in the images.
+#[derive(Debug, Clone)]
+pub struct SphereNotFound {
+    /// The images argument.
+    pub images: PathBuf,
+    /// What the detection found wrong.
+    pub reason: String,
+}
+
+impl std::fmt::Display for SphereNotFound {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}: cannot find the mirror sphere: {}",
+            self.images.display(),
+            self.reason
+        )
+    }
+}
+
+impl std::error::Error for SphereNotFound {}
+
+/// Image file extensions read from a folder.
+const EXTENSIONS: &[&str] = &["exr", "png", "tif", "tiff", "hdr", "pfm", "jpg", "jpeg"];
+
+/// One image's outcome in `<stem>-calibration.json`.
+#[derive(Debug, Serialize)]
+pub struct ImageRecord {
+    /// The image path.
+    pub image: String,
+    /// Whether its light is in the `.lp` file.
+    pub used: bool,
+    /// Highlight centre `(x, y)`, pixels (x right, y down, top-left pixel centre (0.5, 0.5)).
+    pub highlight: Option<[f64; 2]>,
+    /// The light direction (x right, y up, z toward the camera; surface toward light).
+    pub light: Option<[f64; 3]>,
+    /// Pixels in the highlight spot.
+    pub pixels: Option<usize>,
+    /// Saturated pixels in it.
+    pub saturated: Option<usize>,
+    /// The light's RGB intensity from the matte sphere, before normalising (times the
+    /// sphere's albedo).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub intensity: Option<[f64; 3]>,
+    /// Why it was dropped.
+    pub error: Option<String>,
+}
+
+/// What `<stem>-calibration.json` holds.
+#[derive(Debug, Serialize)]
+pub struct CalibrationReport {
+    /// symframe version.
+    pub version: &'static str,
+    /// The sphere's circle.
+    pub sphere: Circle,
+    /// `given` (--sphere) or `detected`.
+    pub sphere_source: &'static str,
+    /// Detection figures (share of images whose brightest spot is in the sphere, roundness).
+    pub detection: Option<SphereDetection>,
+    /// Images read.
+    pub images: usize,
+    /// Images whose light was written.
+    pub used: usize,
+    /// Per image.
+    pub records: Vec<ImageRecord>,
+    /// The conventions of the figures.
+    pub conventions: &'static str,
+    /// The matte sphere's circle, when intensities were measured.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub matte_sphere: Option<Circle>,
+    /// The mean of the raw intensities over lights and channels, by which they were divided
+    /// (so that `light_intensities.txt` has a mean of 1).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub intensity_mean_raw: Option<f64>,
+    /// The files written: the `.lp`, the picture, this report.
+    #[serde(skip)]
+    pub written: [PathBuf; 3],
+    /// `light_intensities.txt`, when intensities were measured.
+    #[serde(skip)]
+    pub intensities_file: Option<PathBuf>,
+}
+
+/// The image list: every image file of a folder sorted by name (leaving out `mask.*`), the
+/// images of an `.lp` file, or a list file of paths (one per line, relative to the list's
+/// folder; blank lines and `#` comments allowed).
+fn image_list(input: &Path) -> Result<Vec<PathBuf>> {
+    if input.is_dir() {
+        let mut v: Vec<PathBuf> = std::fs::read_dir(input)
+            .with_context(|| format!("{}: cannot read folder", input.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| {
+                p.is_file()
+                    && p.extension()
+                        .and_then(|e| e.to_str())
+                        .is_some_and(|e| EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+                    && p.file_stem().and_then(|s| s.to_str()) != Some("mask")
+            })
+            .collect();
+        v.sort();
+        if v.is_empty() {
+            bail!("{}: no image files in the folder", input.display());
+        }
+        return Ok(v);
+    }
+    if input
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("lp"))
+    {
+        return Ok(symframe_io::open_dataset(input)?.images);
+    }
+    let text = std::fs::read_to_string(input)
+        .with_context(|| format!("{}: cannot read the image list", input.display()))?;
+    let dir = input.parent().unwrap_or(Path::new(""));
+    let mut v = Vec::new();
+    for (k, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        let p = dir.join(line);
+        if !p.is_file() {
+            bail!(
+                "{}: line {}: image {} does not exist",
+                input.display(),
+                k + 1,
+                p.display()
+            );
+        }
+        v.push(p);
+    }
+    if v.is_empty() {
+        bail!("{}: the image list is empty", input.display());
+    }
+    Ok(v)
+}
+
+/// The image's grey values (mean of the channels; `NaN` where any is saturated).
+fn grey(img: &Image) -> Vec<f32> {
+    img.data
+        .chunks_exact(img.channels)
+        .map(|p| p.iter().sum::<f32>() / p.len() as f32)
+        .collect()
+}
+
+/// Decodes one image as grey values, checking its size against the first one's.
+fn read_grey(path: &Path, opts: &DecodeOptions, size: Option<(usize, usize)>) -> Result<Image> {
+    let img = read_sized(path, opts, size)?;
+    let g = grey(&img);
+    Ok(Image {
+        width: img.width,
+        height: img.height,
+        channels: 1,
+        data: g,
+        kind: img.kind,
+        colour: img.colour,
+    })
+}
+
+/// Decodes one image, checking its size against the first one's.
+fn read_sized(path: &Path, opts: &DecodeOptions, size: Option<(usize, usize)>) -> Result<Image> {
+    let img = symframe_io::read_image(path, opts)?;
+    if let Some((w, h)) = size {
+        if (img.width, img.height) != (w, h) {
+            bail!(
+                "{}: {}x{} pixels, but the first image is {w}x{h}",
+                path.display(),
+                img.width,
+                img.height
+            );
+        }
+    }
+    Ok(img)
+}
+
+/// `path` relative to folder `base` when it lies below it (else absolute).
+fn relative_to(path: &Path, base: &Path) -> PathBuf {
+    let abs = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+    let (p, b) = (abs(path), abs(base));
+    let (pc, bc): (Vec<Component>, Vec<Component>) =
+        (p.components().collect(), b.components().collect());
+    let common = pc.iter().zip(&bc).take_while(|(a, b)| a == b).count();
+    if common == 0 {
+        return p;
+    }
+    let mut out = PathBuf::new();
+    for _ in common..bc.len() {
+        out.push("..");
+    }
+    for c in &pc[common..] {
+        out.push(c.as_os_str());
+    }
+    out
+}
+
+/// Draws the picture of the highlights: the brightest of all images around the sphere
+/// (tone-mapped), the circle in yellow, found highlights as green crosses and the spots of
+/// ambiguous images as red ones, enlarged to at least 384 pixels across.
+fn picture(
+    max_image: &[f32],
+    width: usize,
+    height: usize,
+    circle: &Circle,
+    found: &[(f64, f64)],
+    bad: &[(f64, f64)],
+) -> (usize, usize, Vec<u8>) {
+    let margin = 4.0;
+    let clip = |v: f64, n: usize| (v.max(0.0) as usize).min(n);
+    let (c0, c1) = (
+        clip((circle.cx - circle.r - margin).floor(), width),
+        clip((circle.cx + circle.r + margin).ceil(), width),
+    );
+    let (r0, r1) = (
+        clip((circle.cy - circle.r - margin).floor(), height),
+        clip((circle.cy + circle.r + margin).ceil(), height),
+    );
+    let (cw, ch) = ((c1 - c0).max(1), (r1 - r0).max(1));
+    let k = (384 / cw.max(ch)).max(1);
+    let (ow, oh) = (cw * k, ch * k);
+    let mut vals: Vec<f32> = max_image
+        .iter()
+        .filter(|v| v.is_finite())
+        .cloned()
+        .collect();
+    vals.sort_by(f32::total_cmp);
+    let white = vals
+        .get(vals.len() * 99 / 100)
+        .cloned()
+        .unwrap_or(1.0)
+        .max(1e-12);
+    let mut rgb = vec![0u8; ow * oh * 3];
+    for oy in 0..oh {
+        for ox in 0..ow {
+            let (col, row) = (c0 + ox / k, r0 + oy / k);
+            let v = if col < width && row < height {
+                max_image[row * width + col]
+            } else {
+                0.0
+            };
+            let g = if v.is_finite() {
+                symframe_io::linear_to_srgb((v / white).clamp(0.0, 1.0))
+            } else {
+                1.0
+            };
+            let b = (g * 200.0).round() as u8;
+            rgb[3 * (oy * ow + ox)..3 * (oy * ow + ox) + 3].copy_from_slice(&[b, b, b]);
+        }
+    }
+    let mut put = |x: f64, y: f64, c: [u8; 3]| {
+        if x >= 0.0 && y >= 0.0 && (x as usize) < ow && (y as usize) < oh {
+            let i = 3 * (y as usize * ow + x as usize);
+            rgb[i..i + 3].copy_from_slice(&c);
+        }
+    };
+    // Image point to picture point.
+    let to = |x: f64, y: f64| ((x - c0 as f64) * k as f64, (y - r0 as f64) * k as f64);
+    let steps = (8.0 * circle.r * k as f64) as usize + 16;
+    for s in 0..steps {
+        let a = s as f64 / steps as f64 * std::f64::consts::TAU;
+        let (x, y) = to(
+            circle.cx + circle.r * a.cos(),
+            circle.cy + circle.r * a.sin(),
+        );
+        put(x, y, [255, 220, 0]);
+    }
+    for (list, colour) in [(found, [0u8, 255, 0]), (bad, [255, 40, 40])] {
+        for &(x, y) in list {
+            let (px, py) = to(x, y);
+            for d in -3i32..=3 {
+                put(px + d as f64, py, colour);
+                put(px, py + d as f64, colour);
+            }
+        }
+    }
+    (ow, oh, rgb)
+}
+
+/// Runs a calibration: finds the highlight of every image on the sphere and writes the `.lp`,
+/// the picture and the JSON report; returns the report. Dropped images are told through
+/// `ctl`'s warnings; its stop flag is polled between images.
+pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationReport> {
+    let ext_ok = config
+        .output
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("lp"));
+    if !ext_ok {
+        bail!(
+            "{}: the output must be an .lp file",
+            config.output.display()
+        );
+    }
+    if !(config.decode.saturation > 0.0 && config.decode.saturation <= 1.0) {
+        bail!(
+            "the saturation level must be in (0, 1], got {}",
+            config.decode.saturation
+        );
+    }
+    if !(config.threshold > 0.0 && config.threshold < 1.0) {
+        bail!(
+            "the highlight threshold must be in (0, 1), got {}",
+            config.threshold
+        );
+    }
+    let images = image_list(&config.images)?;
+    let opts = config.decode;
+    let stopped = || ctl.stop.load(std::sync::atomic::Ordering::SeqCst);
+    let first = read_grey(&images[0], &opts, None)?;
+    let (w, h) = (first.width, first.height);
+    drop(first);
+
+    // The sphere: given, or found in the mean image.
+    let (circle, source, detection) = match config.sphere {
+        Some(c) => (c, "given", None),
+        None => {
+            let (sum, brightest) = images
+                .par_iter()
+                .map(|p| -> Result<(Vec<f32>, Vec<usize>)> {
+                    if stopped() {
+                        return Err(Interrupted.into());
+                    }
+                    let g = read_grey(p, &opts, Some((w, h)))?.data;
+                    let best = g
+                        .iter()
+                        .enumerate()
+                        .max_by(|a, b| {
+                            let key = |v: f32| if v.is_finite() { v } else { f32::INFINITY };
+                            key(*a.1).total_cmp(&key(*b.1))
+                        })
+                        .map(|(i, _)| i)
+                        .unwrap_or(0);
+                    Ok((g, vec![best]))
+                })
+                .try_reduce(
+                    || (vec![0.0f32; w * h], Vec::new()),
+                    |(mut a, mut ba), (b, bb)| {
+                        a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
+                        ba.extend(bb);
+                        Ok((a, ba))
+                    },
+                )?;
+            let n = images.len() as f32;
+            let mean: Vec<f32> = sum.iter().map(|v| v / n).collect();
+            let d = detect_sphere(w, h, &mean, &brightest).map_err(|e| SphereNotFound {
+                images: config.images.clone(),
+                reason: e.to_string(),
+            })?;
+            (
+                d.circle,
+                "detected",
+                Some(SphereDetection {
+                    highlight_share: d.highlight_share,
+                    roundness: d.roundness,
+                }),
+            )
+        }
+    };
+    let params = HighlightParams {
+        fraction: config.threshold,
+        ..HighlightParams::default()
+    };
+    // The brightest of all images (NaN where any was saturated), for the picture.
+    let max_image = std::sync::Mutex::new(vec![0.0f32; w * h]);
+    type Outcome = (
+        Result<Highlight, HighlightError>,
+        Option<Result<[f64; 3], MatteError>>,
+    );
+    let results: Vec<Outcome> = images
+        .par_iter()
+        .map(|p| -> Result<_> {
+            if stopped() {
+                return Err(Interrupted.into());
+            }
+            let img = read_sized(p, &opts, Some((w, h)))?;
+            let g = grey(&img);
+            let res = find_highlight(w, h, &g, &circle, &params);
+            let matte = match (&res, &config.matte_sphere) {
+                (Ok(hl), Some(c)) => Some(matte_intensity(
+                    w,
+                    h,
+                    &img.into_rgb(),
+                    c,
+                    hl.light,
+                    &MatteParams::default(),
+                )),
+                _ => None,
+            };
+            let mut m = max_image.lock().unwrap_or_else(|e| e.into_inner());
+            for (m, v) in m.iter_mut().zip(&g) {
+                if !v.is_finite() {
+                    *m = f32::NAN;
+                } else if m.is_finite() {
+                    *m = m.max(*v);
+                }
+            }
+            Ok((res, matte))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let max_image = max_image.into_inner().unwrap_or_else(|e| e.into_inner());
+    let mut records = Vec::with_capacity(images.len());
+    let (mut found, mut bad) = (Vec::new(), Vec::new());
+    let mut lp_lines = Vec::new();
+    let lp_dir = config
+        .output
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."))
+        .to_path_buf();
+    let mut intensities: Vec<[f64; 3]> = Vec::new();
+    for (path, (res, matte)) in images.iter().zip(results) {
+        // A light whose intensity cannot be measured is dropped as one without a highlight.
+        let res = match (res, matte) {
+            (Ok(_), Some(Err(e))) => Err(e.to_string()),
+            (Ok(hl), Some(Ok(e))) => {
+                intensities.push(e);
+                Ok((hl, Some(e)))
+            }
+            (Ok(hl), None) => Ok((hl, None)),
+            (Err(e), _) => {
+                if let HighlightError::Several { x1, y1, x2, y2, .. } = e {
+                    bad.extend([(x1, y1), (x2, y2)]);
+                }
+                Err(e.to_string())
+            }
+        };
+        match res {
+            Ok((hl, intensity)) => {
+                found.push((hl.x, hl.y));
+                let rel = relative_to(path, &lp_dir);
+                let name = rel.to_string_lossy().replace('\\', "/");
+                if name.contains(char::is_whitespace) || name.contains('#') {
+                    bail!(
+                        "{}: .lp files cannot hold paths with spaces or '#'",
+                        path.display()
+                    );
+                }
+                lp_lines.push(format!(
+                    "{name} {:.6} {:.6} {:.6}",
+                    hl.light.x, hl.light.y, hl.light.z
+                ));
+                records.push(ImageRecord {
+                    image: path.display().to_string(),
+                    used: true,
+                    highlight: Some([hl.x, hl.y]),
+                    light: Some(hl.light.to_array()),
+                    pixels: Some(hl.pixels),
+                    saturated: Some(hl.saturated),
+                    intensity,
+                    error: None,
+                });
+            }
+            Err(e) => {
+                if config.strict {
+                    bail!("{}: {e}", path.display());
+                }
+                ctl.warn(&format!("{}: dropped: {e}", path.display()));
+                records.push(ImageRecord {
+                    image: path.display().to_string(),
+                    used: false,
+                    highlight: None,
+                    light: None,
+                    pixels: None,
+                    saturated: None,
+                    intensity: None,
+                    error: Some(e),
+                });
+            }
+        }
+    }
+    if lp_lines.len() < 3 {
+        bail!(
+            "{}: only {} of {} images have a usable highlight on the sphere at ({:.1}, {:.1}), \
+             radius {:.1}; at least 3 are needed",
+            config.images.display(),
+            lp_lines.len(),
+            images.len(),
+            circle.cx,
+            circle.cy,
+            circle.r
+        );
+    }
+    // Write the three files (each atomically through a temporary name).
+    let stem = config
+        .output
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "lights".into());
+    std::fs::create_dir_all(&lp_dir)
+        .with_context(|| format!("{}: cannot create folder", lp_dir.display()))?;
+    let lp_text = format!(
+        "{}\n# symframe calibrate: mirror sphere at ({:.3}, {:.3}), radius {:.3} px ({source}); \
+         x right, y up, z toward the camera; surface toward light\n{}\n",
+        lp_lines.len(),
+        circle.cx,
+        circle.cy,
+        circle.r,
+        lp_lines.join("\n")
+    );
+    let tmp = lp_dir.join(format!(".{stem}.lp.partial-{}", std::process::id()));
+    std::fs::write(&tmp, lp_text).with_context(|| format!("{}: cannot write", tmp.display()))?;
+    let (pw, ph, rgb) = picture(&max_image, w, h, &circle, &found, &bad);
+    let pic = lp_dir.join(format!("{stem}-highlights.png"));
+    symframe_io::write_png_rgb8(&pic, pw, ph, &rgb)?;
+    let used = lp_lines.len();
+    let mut intensity_mean_raw = None;
+    let mut intensities_file = None;
+    if config.matte_sphere.is_some() {
+        let mean = intensities.iter().flatten().sum::<f64>() / (3 * intensities.len()) as f64;
+        if !(mean.is_finite() && mean > 0.0) {
+            bail!(
+                "{}: the matte sphere is black under every light (mean intensity {mean})",
+                config.images.display()
+            );
+        }
+        let rows: Vec<String> = intensities
+            .iter()
+            .map(|e| format!("{:.6} {:.6} {:.6}", e[0] / mean, e[1] / mean, e[2] / mean))
+            .collect();
+        let path = lp_dir.join("light_intensities.txt");
+        symframe_io::write_bytes(&path, (rows.join("\n") + "\n").as_bytes())?;
+        intensity_mean_raw = Some(mean);
+        intensities_file = Some(path);
+    }
+    let json_path = lp_dir.join(format!("{stem}-calibration.json"));
+    let report = CalibrationReport {
+        version: env!("CARGO_PKG_VERSION"),
+        sphere: circle,
+        sphere_source: source,
+        detection,
+        images: images.len(),
+        used,
+        records,
+        conventions: "pixels: x right, y down, centre of the top-left pixel (0.5, 0.5); \
+                      lights: x right, y up, z toward the camera, surface toward light",
+        matte_sphere: config.matte_sphere,
+        intensity_mean_raw,
+        written: [config.output.clone(), pic, json_path.clone()],
+        intensities_file,
+    };
+    std::fs::write(&json_path, serde_json::to_string_pretty(&report)? + "\n")
+        .with_context(|| format!("{}: cannot write", json_path.display()))?;
+    std::fs::rename(&tmp, &config.output)
+        .with_context(|| format!("{}: cannot write", config.output.display()))?;
+    Ok(report)
+}

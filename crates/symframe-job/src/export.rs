@@ -1,0 +1,733 @@
+//! The glTF export job (`symframe export gltf`): a fit's (or an estimate's) maps as a glTF 2.0 asset: a quad, or the
+//! integrated mesh, with a metallic-roughness material, a tangent-space normal texture and
+//! `KHR_materials_anisotropy`.
+//!
+//! Frames: the quad lies in the x-y plane facing +z (x right, y up: the camera frame), one image
+//! width across; its vertex tangent is +x and bitangent +y, so a camera-frame normal *is* its
+//! tangent-space normal (glTF's +Y-up normal-map convention). For `--mesh` the vertex normals and
+//! tangents come from the maps at each pixel (one vertex per pixel), so the shading detail is in
+//! the geometry and no normal texture is written.
+//!
+//! Material, from a `symframe fit` folder (a conversion of the Ward fit, not a fit of the glTF
+//! model): `metallic = ks / (kd + ks)` (luminances), `baseColor = kd + metallic (ks - kd)`; the
+//! narrow roughness `alpha_narrow = min(alpha_t, alpha_b)` gives `roughness = sqrt(alpha_narrow)`
+//! (glTF's `alpha = roughness^2`), and the anisotropy strength `s` solves
+//! `alpha_wide = alpha_narrow + s^2 (1 - alpha_narrow)` (the extension's stretch), its direction
+//! the axis of the wider highlight. From an estimate folder: grey base colour, roughness 0.5,
+//! metallic 0, and anisotropy strength = the estimate's anisotropy where it has a tangent.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use serde_json::{json, Value};
+
+/// Everything a glTF export needs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExportConfig {
+    /// Output folder of [`crate::fit`] (kd, ks, alpha_t, alpha_b, normals, tangents `.npy`) or
+    /// of [`crate::estimate`] (normals, tangents, anisotropy `.npy`).
+    pub input: PathBuf,
+    /// The file to write: `.gltf` (textures and `.bin` beside it) or `.glb` (all in one).
+    pub output: PathBuf,
+    /// Export the integrated mesh (one vertex per pixel) instead of a flat quad.
+    pub mesh: bool,
+    /// With `mesh`: the height map of [`crate::integrate`] (`None`: `INPUT/depth.npy`).
+    pub depth: Option<PathBuf>,
+    /// With `mesh`: leave out triangles across depth jumps (as the integrate job's `max_jump`).
+    pub max_jump: f64,
+}
+
+impl ExportConfig {
+    /// A quad, no mesh, the integrate job's default jump limit.
+    pub fn new(input: impl Into<PathBuf>, output: impl Into<PathBuf>) -> Self {
+        Self {
+            input: input.into(),
+            output: output.into(),
+            mesh: false,
+            depth: None,
+            max_jump: 2.0,
+        }
+    }
+}
+
+/// What an export wrote.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExportOutcome {
+    /// The files written, the asset first.
+    pub written: Vec<PathBuf>,
+    /// Whether the material comes from a fit (else from an estimate's frames).
+    pub fitted: bool,
+    /// Vertices of the geometry.
+    pub vertices: usize,
+    /// Triangles of the geometry.
+    pub triangles: usize,
+}
+
+/// The per-pixel material and frame maps an export is made from.
+pub struct Maps {
+    /// Width.
+    pub w: usize,
+    /// Height.
+    pub h: usize,
+    /// Unit normals, `H x W x 3`, NaN where none.
+    pub normals: Vec<f32>,
+    /// Unit tangents (wide-highlight axis), NaN where isotropic.
+    pub tangents: Vec<f32>,
+    /// Linear base colour, `H x W x 3`.
+    pub base: Vec<f32>,
+    /// Metallic, `H x W`.
+    pub metallic: Vec<f32>,
+    /// Roughness, `H x W`.
+    pub roughness: Vec<f32>,
+    /// Anisotropy strength, `H x W`.
+    pub strength: Vec<f32>,
+    /// Whether the maps come from a fit (else an estimate).
+    pub fitted: bool,
+}
+
+fn read_map(dir: &Path, name: &str, shape: &[usize]) -> Result<Vec<f32>> {
+    let p = dir.join(name);
+    if !p.is_file() {
+        bail!("{}: missing", p.display());
+    }
+    let (s, v) = symframe_io::read_npy_f32(&p)?;
+    if s != shape {
+        bail!("{}: shape {s:?}, expected {shape:?}", p.display());
+    }
+    Ok(v)
+}
+
+fn lum(c: &[f32]) -> f32 {
+    0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+}
+
+/// Reads a fit folder (kd.npy present) or an estimate folder.
+pub fn read_maps(dir: &Path) -> Result<Maps> {
+    let np = dir.join("normals.npy");
+    if !np.is_file() {
+        bail!(
+            "{}: missing (the input must be an output folder of symframe fit or estimate)",
+            np.display()
+        );
+    }
+    let (shape, normals) = symframe_io::read_npy_f32(&np)?;
+    if shape.len() != 3 || shape[2] != 3 || shape[0] == 0 || shape[1] == 0 {
+        bail!(
+            "{}: expected an H x W x 3 array, got {shape:?}",
+            np.display()
+        );
+    }
+    let (h, w) = (shape[0], shape[1]);
+    let tangents = read_map(dir, "tangents.npy", &[h, w, 3])?;
+    let n = w * h;
+    if dir.join("kd.npy").is_file() {
+        let kd = read_map(dir, "kd.npy", &[h, w, 3])?;
+        let ks = read_map(dir, "ks.npy", &[h, w, 3])?;
+        let at = read_map(dir, "alpha_t.npy", &[h, w])?;
+        let ab = read_map(dir, "alpha_b.npy", &[h, w])?;
+        let mut base = vec![0.0; 3 * n];
+        let mut metallic = vec![0.0; n];
+        let mut roughness = vec![1.0; n];
+        let mut strength = vec![0.0; n];
+        let mut tangents = tangents;
+        for i in 0..n {
+            let (d, s) = (&kd[3 * i..3 * i + 3], &ks[3 * i..3 * i + 3]);
+            if !d.iter().chain(s).all(|v| v.is_finite()) {
+                continue;
+            }
+            let (ld, ls) = (lum(d).max(0.0), lum(s).max(0.0));
+            let m = if ld + ls > 0.0 { ls / (ld + ls) } else { 0.0 };
+            metallic[i] = m;
+            for c in 0..3 {
+                base[3 * i + c] = (d[c] + m * (s[c] - d[c])).clamp(0.0, 1.0);
+            }
+            let (a_t, a_b) = (at[i] as f64, ab[i] as f64);
+            if !(a_t.is_finite() && a_b.is_finite()) {
+                continue;
+            }
+            let (narrow, wide) = (a_t.min(a_b).clamp(1e-4, 1.0), a_t.max(a_b).clamp(1e-4, 1.0));
+            roughness[i] = narrow.sqrt() as f32;
+            strength[i] = ((wide - narrow) / (1.0 - narrow).max(1e-9))
+                .sqrt()
+                .clamp(0.0, 1.0) as f32;
+            if a_b > a_t {
+                // The wider highlight is along the binormal n x t.
+                let nv = &normals[3 * i..3 * i + 3];
+                let t = &tangents[3 * i..3 * i + 3];
+                let b = [
+                    nv[1] * t[2] - nv[2] * t[1],
+                    nv[2] * t[0] - nv[0] * t[2],
+                    nv[0] * t[1] - nv[1] * t[0],
+                ];
+                tangents[3 * i..3 * i + 3].copy_from_slice(&b);
+            }
+        }
+        Ok(Maps {
+            w,
+            h,
+            normals,
+            tangents,
+            base,
+            metallic,
+            roughness,
+            strength,
+            fitted: true,
+        })
+    } else {
+        let aniso = if dir.join("anisotropy.npy").is_file() {
+            read_map(dir, "anisotropy.npy", &[h, w])?
+        } else {
+            vec![0.0; n]
+        };
+        let strength = (0..n)
+            .map(|i| {
+                if tangents[3 * i].is_finite() && aniso[i].is_finite() {
+                    aniso[i].clamp(0.0, 1.0)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        Ok(Maps {
+            w,
+            h,
+            base: vec![0.5; 3 * n],
+            metallic: vec![0.0; n],
+            roughness: vec![0.5; n],
+            strength,
+            normals,
+            tangents,
+            fitted: false,
+        })
+    }
+}
+
+fn byte(v: f32) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// The tangent-space frame at a vertex with normal `n`: tangent = +x projected onto the plane
+/// of `n` (+y where `n` is along x), bitangent = `n x tangent`.
+fn vertex_frame(n: [f32; 3]) -> ([f32; 3], [f32; 3]) {
+    let dot = |a: [f32; 3], b: [f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let norm = |a: [f32; 3]| {
+        let l = dot(a, a).sqrt().max(1e-30);
+        [a[0] / l, a[1] / l, a[2] / l]
+    };
+    let mut t = [1.0 - n[0] * n[0], -n[0] * n[1], -n[0] * n[2]];
+    if dot(t, t) < 1e-6 {
+        t = [-n[1] * n[0], 1.0 - n[1] * n[1], -n[1] * n[2]];
+    }
+    let t = norm(t);
+    let b = [
+        n[1] * t[2] - n[2] * t[1],
+        n[2] * t[0] - n[0] * t[2],
+        n[0] * t[1] - n[1] * t[0],
+    ];
+    (t, b)
+}
+
+/// The textures, as RGB bytes: base colour (sRGB), metallic-roughness (G roughness, B
+/// metallic), normal (tangent space of the quad, `(n + 1) / 2`), anisotropy (RG direction in
+/// the vertex tangent space, `(d + 1) / 2`, B strength).
+pub fn textures(m: &Maps, quad: bool) -> [Vec<u8>; 4] {
+    let n = m.w * m.h;
+    let mut base = vec![0u8; 3 * n];
+    let mut mr = vec![0u8; 3 * n];
+    let mut normal = vec![0u8; 3 * n];
+    let mut aniso = vec![0u8; 3 * n];
+    for i in 0..n {
+        for c in 0..3 {
+            base[3 * i + c] = byte(symframe_io::linear_to_srgb(
+                m.base[3 * i + c].clamp(0.0, 1.0),
+            ));
+        }
+        mr[3 * i..3 * i + 3].copy_from_slice(&[0, byte(m.roughness[i]), byte(m.metallic[i])]);
+        let nv = &m.normals[3 * i..3 * i + 3];
+        let nv = if nv.iter().all(|v| v.is_finite()) {
+            [nv[0], nv[1], nv[2]]
+        } else {
+            [0.0, 0.0, 1.0]
+        };
+        for c in 0..3 {
+            normal[3 * i + c] = byte((nv[c] + 1.0) / 2.0);
+        }
+        // The vertex frame the direction is expressed in.
+        let (tf, bf) = if quad {
+            ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+        } else {
+            vertex_frame(nv)
+        };
+        let t = &m.tangents[3 * i..3 * i + 3];
+        let (mut dx, mut dy, mut s) = (1.0f32, 0.0f32, 0.0f32);
+        if t.iter().all(|v| v.is_finite()) {
+            let (x, y) = (
+                t[0] * tf[0] + t[1] * tf[1] + t[2] * tf[2],
+                t[0] * bf[0] + t[1] * bf[1] + t[2] * bf[2],
+            );
+            let l = (x * x + y * y).sqrt();
+            if l > 1e-6 {
+                (dx, dy, s) = (x / l, y / l, m.strength[i]);
+            }
+        }
+        aniso[3 * i..3 * i + 3].copy_from_slice(&[
+            byte((dx + 1.0) / 2.0),
+            byte((dy + 1.0) / 2.0),
+            byte(s),
+        ]);
+    }
+    [base, mr, normal, aniso]
+}
+
+/// The estimate's tangents as a glTF `KHR_materials_anisotropy` texture for a surface whose
+/// tangent space is the image's (tangent +x right, bitangent +y up, as the exported quad's):
+/// red/green the tangent's image-plane direction mapped `(d + 1) / 2`, blue the strength
+/// (`strength`, clamped to [0, 1]); where there is no tangent, direction +x and strength 0.
+/// Written by the estimate as `tangents_gltf.png`.
+pub fn gltf_anisotropy_rgb8(tangents: &[f32], strength: &[f32]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(3 * strength.len());
+    for (t, &s) in tangents.chunks_exact(3).zip(strength) {
+        let (mut dx, mut dy, mut st) = (1.0f32, 0.0f32, 0.0f32);
+        let l = t[0].hypot(t[1]);
+        if t.iter().all(|v| v.is_finite()) && s.is_finite() && l > 1e-6 {
+            (dx, dy, st) = (t[0] / l, t[1] / l, s.clamp(0.0, 1.0));
+        }
+        out.extend([byte((dx + 1.0) / 2.0), byte((dy + 1.0) / 2.0), byte(st)]);
+    }
+    out
+}
+
+/// Geometry: positions, normals, tangents (xyzw), texture coordinates, triangle indices.
+pub struct Geometry {
+    positions: Vec<[f32; 3]>,
+    normals: Vec<[f32; 3]>,
+    tangents: Vec<[f32; 4]>,
+    uvs: Vec<[f32; 2]>,
+    indices: Vec<u32>,
+}
+
+/// A quad one unit wide, `h / w` tall, centred at the origin, facing +z.
+pub fn quad(w: usize, h: usize) -> Geometry {
+    let a = h as f32 / w as f32;
+    Geometry {
+        positions: vec![
+            [-0.5, a / 2.0, 0.0],
+            [0.5, a / 2.0, 0.0],
+            [-0.5, -a / 2.0, 0.0],
+            [0.5, -a / 2.0, 0.0],
+        ],
+        normals: vec![[0.0, 0.0, 1.0]; 4],
+        tangents: vec![[1.0, 0.0, 0.0, 1.0]; 4],
+        uvs: vec![[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]],
+        indices: vec![0, 2, 1, 1, 2, 3],
+    }
+}
+
+/// The integrated mesh (`symframe integrate`), scaled like the quad (image width = 1).
+pub fn from_mesh(m: &symframe::integrate::Mesh, w: usize, h: usize) -> Geometry {
+    let s = 1.0 / w as f32;
+    let (ox, oy) = (w as f32 / 2.0, h as f32 / 2.0);
+    let mut g = Geometry {
+        positions: Vec::with_capacity(m.positions.len()),
+        normals: m.normals.clone(),
+        tangents: Vec::with_capacity(m.positions.len()),
+        uvs: Vec::with_capacity(m.positions.len()),
+        indices: m.triangles.iter().flatten().copied().collect(),
+    };
+    for ((p, n), px) in m.positions.iter().zip(&m.normals).zip(&m.pixels) {
+        g.positions
+            .push([(p[0] - ox) * s, (p[1] - oy) * s, p[2] * s]);
+        let (t, _) = vertex_frame(*n);
+        g.tangents.push([t[0], t[1], t[2], 1.0]);
+        g.uvs.push([
+            (px[0] as f32 + 0.5) / w as f32,
+            (px[1] as f32 + 0.5) / h as f32,
+        ]);
+    }
+    g
+}
+
+fn pad4(v: &mut Vec<u8>, fill: u8) {
+    while v.len() & 3 != 0 {
+        v.push(fill);
+    }
+}
+
+/// Builds the glTF document and its binary buffer; `images` are PNG files, embedded in the
+/// buffer (`embed`, for .glb) or referenced by their file name.
+pub fn document(
+    g: &Geometry,
+    images: &[(&str, &Path)],
+    with_normal_texture: bool,
+    embed: bool,
+    bin_uri: Option<&str>,
+) -> Result<(Value, Vec<u8>)> {
+    let mut bin: Vec<u8> = Vec::new();
+    let mut views = Vec::new();
+    let mut accessors = Vec::new();
+    let mut push_view = |bin: &mut Vec<u8>, bytes: &[u8], target: Option<u32>| -> usize {
+        pad4(bin, 0);
+        let offset = bin.len();
+        bin.extend_from_slice(bytes);
+        let mut v = json!({ "buffer": 0, "byteOffset": offset, "byteLength": bytes.len() });
+        if let Some(t) = target {
+            v["target"] = json!(t);
+        }
+        views.push(v);
+        views.len() - 1
+    };
+    let floats = |rows: &[f32]| -> Vec<u8> { rows.iter().flat_map(|v| v.to_le_bytes()).collect() };
+    let mut attr = |bin: &mut Vec<u8>, data: Vec<f32>, comps: usize, kind: &str, minmax: bool| {
+        let view = push_view(bin, &floats(&data), Some(34962));
+        let count = data.len() / comps;
+        let mut a = json!({
+            "bufferView": view, "componentType": 5126, "count": count, "type": kind,
+        });
+        if minmax {
+            let mut lo = vec![f32::INFINITY; comps];
+            let mut hi = vec![f32::NEG_INFINITY; comps];
+            for row in data.chunks_exact(comps) {
+                for c in 0..comps {
+                    lo[c] = lo[c].min(row[c]);
+                    hi[c] = hi[c].max(row[c]);
+                }
+            }
+            a["min"] = json!(lo);
+            a["max"] = json!(hi);
+        }
+        accessors.push(a);
+        accessors.len() - 1
+    };
+    let pos = attr(
+        &mut bin,
+        g.positions.iter().flatten().copied().collect(),
+        3,
+        "VEC3",
+        true,
+    );
+    let nor = attr(
+        &mut bin,
+        g.normals.iter().flatten().copied().collect(),
+        3,
+        "VEC3",
+        false,
+    );
+    let tan = attr(
+        &mut bin,
+        g.tangents.iter().flatten().copied().collect(),
+        4,
+        "VEC4",
+        false,
+    );
+    let uv = attr(
+        &mut bin,
+        g.uvs.iter().flatten().copied().collect(),
+        2,
+        "VEC2",
+        false,
+    );
+    let idx_bytes: Vec<u8> = g.indices.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let iv = push_view(&mut bin, &idx_bytes, Some(34963));
+    accessors.push(json!({
+        "bufferView": iv, "componentType": 5125, "count": g.indices.len(), "type": "SCALAR",
+    }));
+    let ind = accessors.len() - 1;
+    let mut image_json = Vec::new();
+    for (name, path) in images {
+        if embed {
+            let bytes =
+                std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+            let v = push_view(&mut bin, &bytes, None);
+            image_json.push(json!({ "bufferView": v, "mimeType": "image/png", "name": name }));
+        } else {
+            let file = path.file_name().unwrap_or_default().to_string_lossy();
+            image_json.push(json!({ "uri": file, "name": name }));
+        }
+    }
+    pad4(&mut bin, 0);
+    let tex = |i: usize| json!({ "index": i });
+    let mut pbr = json!({
+        "baseColorTexture": tex(0),
+        "metallicRoughnessTexture": tex(1),
+        "metallicFactor": 1.0,
+        "roughnessFactor": 1.0,
+    });
+    pbr["baseColorFactor"] = json!([1.0, 1.0, 1.0, 1.0]);
+    let mut material = json!({
+        "name": "symframe",
+        "pbrMetallicRoughness": pbr,
+        "extensions": {
+            "KHR_materials_anisotropy": {
+                "anisotropyStrength": 1.0,
+                "anisotropyRotation": 0.0,
+                "anisotropyTexture": tex(3),
+            }
+        },
+    });
+    if with_normal_texture {
+        material["normalTexture"] = json!({ "index": 2, "scale": 1.0 });
+    }
+    let textures: Vec<Value> = (0..images.len())
+        .map(|i| json!({ "sampler": 0, "source": i }))
+        .collect();
+    let mut buffer = json!({ "byteLength": bin.len() });
+    if let Some(uri) = bin_uri {
+        buffer["uri"] = json!(uri);
+    }
+    let doc = json!({
+        "asset": { "version": "2.0", "generator": format!("symframe {}", env!("CARGO_PKG_VERSION")) },
+        "extensionsUsed": ["KHR_materials_anisotropy"],
+        "scene": 0,
+        "scenes": [{ "nodes": [0] }],
+        "nodes": [{ "mesh": 0, "name": "symframe" }],
+        "meshes": [{
+            "primitives": [{
+                "attributes": { "POSITION": pos, "NORMAL": nor, "TANGENT": tan, "TEXCOORD_0": uv },
+                "indices": ind,
+                "material": 0,
+                "mode": 4,
+            }]
+        }],
+        "materials": [material],
+        "samplers": [{ "magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071 }],
+        "textures": textures,
+        "images": image_json,
+        "accessors": accessors,
+        "bufferViews": views,
+        "buffers": [buffer],
+    });
+    Ok((doc, bin))
+}
+
+/// Packs a GLB: header, JSON chunk (space-padded), BIN chunk (zero-padded).
+pub fn glb(doc: &Value, bin: &[u8]) -> Vec<u8> {
+    let mut json = serde_json::to_vec(doc).unwrap_or_default();
+    pad4(&mut json, b' ');
+    let mut b = bin.to_vec();
+    pad4(&mut b, 0);
+    let total = 12 + 8 + json.len() + 8 + b.len();
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&json);
+    out.extend_from_slice(&(b.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(&b);
+    out
+}
+
+/// Runs a glTF export; returns the files written and what they hold.
+pub fn export_gltf(config: &ExportConfig) -> Result<ExportOutcome> {
+    let ext = config
+        .output
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let embed = match ext.as_deref() {
+        Some("glb") => true,
+        Some("gltf") => false,
+        _ => bail!(
+            "{}: the output must end in .gltf or .glb",
+            config.output.display()
+        ),
+    };
+    let maps = read_maps(&config.input)?;
+    let (w, h) = (maps.w, maps.h);
+    let geometry = if config.mesh {
+        let depth_path = config
+            .depth
+            .clone()
+            .unwrap_or_else(|| config.input.join("depth.npy"));
+        let (shape, depth) = symframe_io::read_npy_f32(&depth_path).with_context(|| {
+            format!(
+                "a mesh needs a height map: the depth.npy of symframe integrate ({} missing or \
+                 unreadable)",
+                depth_path.display()
+            )
+        })?;
+        if shape != [h, w] {
+            bail!(
+                "{}: shape {shape:?} does not match the maps ({h} x {w})",
+                depth_path.display()
+            );
+        }
+        let dm = symframe::integrate::DepthMap {
+            width: w,
+            height: h,
+            depth,
+            cg_iterations: 0,
+            reweight_iterations: 0,
+            energy: 0.0,
+            regions: 0,
+            pixels: 0,
+        };
+        let mesh = symframe::integrate::mesh(&dm, &maps.normals, config.max_jump);
+        if mesh.triangles.is_empty() {
+            bail!("{}: the mesh has no triangles", depth_path.display());
+        }
+        from_mesh(&mesh, w, h)
+    } else {
+        quad(w, h)
+    };
+    let out_dir = config
+        .output
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."))
+        .to_path_buf();
+    std::fs::create_dir_all(&out_dir)
+        .with_context(|| format!("{}: cannot create folder", out_dir.display()))?;
+    let stem = config
+        .output
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "asset".into());
+    let [base, mr, normal, aniso] = textures(&maps, !config.mesh);
+    let names = ["basecolor", "metallicroughness", "normal", "anisotropy"];
+    // Embedded textures go through a temporary folder; referenced ones lie beside the .gltf.
+    let tmp = tempdir_in(&out_dir)?;
+    let tex_dir = if embed { tmp.clone() } else { out_dir.clone() };
+    let mut written = Vec::new();
+    let mut images = Vec::new();
+    for (name, bytes) in names.iter().zip([&base, &mr, &normal, &aniso]) {
+        let p = tex_dir.join(format!("{stem}_{name}.png"));
+        symframe_io::write_png_rgb8(&p, w, h, bytes)?;
+        images.push((*name, p));
+    }
+    let refs: Vec<(&str, &Path)> = images.iter().map(|(n, p)| (*n, p.as_path())).collect();
+    let bin_name = format!("{stem}.bin");
+    let result = (|| -> Result<()> {
+        let (doc, bin) = document(
+            &geometry,
+            &refs,
+            !config.mesh,
+            embed,
+            (!embed).then_some(&bin_name),
+        )?;
+        if embed {
+            std::fs::write(&config.output, glb(&doc, &bin))
+                .with_context(|| format!("{}: cannot write", config.output.display()))?;
+        } else {
+            let bp = out_dir.join(&bin_name);
+            std::fs::write(&bp, &bin).with_context(|| format!("{}: cannot write", bp.display()))?;
+            std::fs::write(&config.output, serde_json::to_string_pretty(&doc)? + "\n")
+                .with_context(|| format!("{}: cannot write", config.output.display()))?;
+            written.push(bp);
+            written.extend(images.iter().map(|(_, p)| p.clone()));
+        }
+        Ok(())
+    })();
+    std::fs::remove_dir_all(&tmp).ok();
+    result?;
+    written.insert(0, config.output.clone());
+    Ok(ExportOutcome {
+        written,
+        fitted: maps.fitted,
+        vertices: geometry.positions.len(),
+        triangles: geometry.indices.len() / 3,
+    })
+}
+
+/// A fresh hidden folder inside `dir`.
+fn tempdir_in(dir: &Path) -> Result<PathBuf> {
+    let p = dir.join(format!(".symframe-export-{}", std::process::id()));
+    if p.exists() {
+        std::fs::remove_dir_all(&p).ok();
+    }
+    std::fs::create_dir(&p).with_context(|| format!("{}: cannot create", p.display()))?;
+    Ok(p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quad_tangent_space_is_the_camera_frame_and_anisotropy_follows_the_tangent() {
+        let s = 0.5f32.sqrt();
+        let m = Maps {
+            w: 2,
+            h: 1,
+            normals: vec![0.0, 0.0, 1.0, s, 0.0, s],
+            tangents: vec![0.0, 1.0, 0.0, f32::NAN, f32::NAN, f32::NAN],
+            base: vec![0.5; 6],
+            metallic: vec![1.0, 0.0],
+            roughness: vec![0.25, 1.0],
+            strength: vec![0.8, 0.3],
+            fitted: true,
+        };
+        let [base, mr, normal, aniso] = textures(&m, true);
+        assert_eq!(&normal[..3], &[128, 128, 255]);
+        assert_eq!(&normal[3..], &[218, 128, 218]);
+        assert_eq!(&mr[..3], &[0, 64, 255]);
+        // Tangent along +y: direction (0, 1), strength 0.8; no tangent: strength 0.
+        assert_eq!(&aniso[..3], &[128, 255, 204]);
+        assert_eq!(aniso[5], 0);
+        assert_eq!(base[0], 188); // 0.5 linear, sRGB-encoded
+    }
+
+    #[test]
+    fn gltf_anisotropy_texture_encodes_direction_and_strength() {
+        let s = 0.5f32.sqrt();
+        let t = [s, -s, 0.0, f32::NAN, f32::NAN, f32::NAN, 0.0, 0.6, 0.8];
+        let rgb = gltf_anisotropy_rgb8(&t, &[0.5, 0.9, 1.5]);
+        // (0.707, -0.707) -> (218, 37); strength 0.5 -> 128.
+        assert_eq!(&rgb[..3], &[218, 37, 128]);
+        // No tangent: +x, strength 0.
+        assert_eq!(&rgb[3..6], &[255, 128, 0]);
+        // A tilted tangent counts by its image-plane direction (+y); strength clamped.
+        assert_eq!(&rgb[6..], &[128, 255, 255]);
+        // The quad export's anisotropy texture of an estimate is the same picture.
+        let m = Maps {
+            w: 3,
+            h: 1,
+            normals: vec![0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, -0.8, 0.6],
+            tangents: t.to_vec(),
+            base: vec![0.5; 9],
+            metallic: vec![0.0; 3],
+            roughness: vec![0.5; 3],
+            strength: vec![0.5, 0.0, 1.0],
+            fitted: false,
+        };
+        assert_eq!(textures(&m, true)[3], rgb);
+    }
+
+    #[test]
+    fn vertex_frames_are_orthonormal() {
+        for n in [
+            [0.0f32, 0.0, 1.0],
+            [0.6, 0.0, 0.8],
+            [1.0, 0.0, 0.0],
+            [0.0, -0.6, 0.8],
+        ] {
+            let (t, b) = vertex_frame(n);
+            let d = |a: [f32; 3], c: [f32; 3]| a[0] * c[0] + a[1] * c[1] + a[2] * c[2];
+            assert!(d(t, n).abs() < 1e-6 && d(b, n).abs() < 1e-6 && d(t, b).abs() < 1e-6);
+            assert!((d(t, t) - 1.0).abs() < 1e-5 && (d(b, b) - 1.0).abs() < 1e-5);
+        }
+        // Head-on: the quad's frame.
+        assert_eq!(
+            vertex_frame([0.0, 0.0, 1.0]),
+            ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+        );
+    }
+
+    #[test]
+    fn glb_layout() {
+        let doc = json!({ "asset": { "version": "2.0" } });
+        let g = glb(&doc, &[1, 2, 3]);
+        assert_eq!(&g[..4], b"glTF");
+        assert_eq!(
+            u32::from_le_bytes(g[8..12].try_into().unwrap()) as usize,
+            g.len()
+        );
+        let jl = u32::from_le_bytes(g[12..16].try_into().unwrap()) as usize;
+        assert_eq!(jl % 4, 0);
+        assert_eq!(&g[16..20], b"JSON");
+        assert_eq!(&g[20 + jl + 4..20 + jl + 8], b"BIN\0");
+        assert_eq!(g.len() % 4, 0);
+    }
+}
