@@ -236,6 +236,24 @@ fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, srgb8: bool) -> Resu
             format!("expected {n} samples for {width}x{height}x{ch}, decoded {len}"),
         ));
     }
+    // Float samples with no channel to drop are marked in place: no second buffer, no copy.
+    let raw = match raw {
+        Raw::F32(mut v) if take == ch => {
+            for px in v.chunks_exact_mut(ch) {
+                if !px.iter().all(|s| s.is_finite()) {
+                    px.fill(f32::NAN);
+                }
+            }
+            return Ok(Image {
+                width,
+                height,
+                channels: take,
+                data: v,
+                kind: SampleKind::Float,
+            });
+        }
+        other => other,
+    };
     let mut data = Vec::with_capacity(width * height * take);
     let nan = [f32::NAN; 3];
     let kind = match &raw {
