@@ -97,6 +97,7 @@ pub fn config(args: &EstimateArgs) -> Result<EstimateConfig> {
                 tile: args.tile_size,
                 batch_bytes: args.decode_memory << 20,
                 trust_mtime: args.trust_mtime,
+                format: args.cache_format.into(),
             },
         },
         shard: args.tiles,

@@ -54,7 +54,8 @@ pub use output::{
 pub use stack::{load_stack, load_stack_with_warnings, read_mask};
 pub use synth_out::{check_synth_target, write_lp_dataset, ImageFormat};
 pub use tile_cache::{
-    cache_holds_work, CacheInfo, CacheOptions, TileCache, TileGather, TileGrid, TileView,
+    cache_holds_work, CacheFormat, CacheInfo, CacheOptions, TileCache, TileGather, TileGrid,
+    TileView,
 };
 pub use tile_results::{
     check_tile_result, read_tile_result, tile_result_done, tile_result_path, write_tile_result,

@@ -80,6 +80,49 @@ pub use header::{file_content_hash, inputs_fingerprint, CACHE_VERSION};
 use lock::CacheLock;
 pub use view::{TileGather, TileView};
 
+/// How the cache stores samples.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CacheFormat {
+    /// 32-bit floats, 12 bytes per pixel per light: the samples exactly as decoded, so a tiled
+    /// estimate equals the in-memory one bit for bit.
+    #[default]
+    F32,
+    /// Half floats, 6 bytes per pixel per light: half the disk and I/O. Each block of a tile
+    /// (its pixels under one decoding batch of lights) is scaled by a power of two so that its
+    /// largest finite magnitude lands in [32768, 65504] before rounding, so any HDR range
+    /// survives; samples keep 11 significant bits (relative error at most 2^-11) down to
+    /// 2^-29 of the block's largest, and lose precision gradually below (half-float
+    /// subnormals) to 2^-39 of it, under which they read as 0. `NaN` (missing) stays `NaN`.
+    F16,
+}
+
+impl CacheFormat {
+    /// Bytes of one pixel's RGB under one light.
+    pub fn pixel_bytes(self) -> usize {
+        match self {
+            CacheFormat::F32 => 12,
+            CacheFormat::F16 => 6,
+        }
+    }
+
+    /// The header's code for it.
+    pub(super) fn code(self) -> u64 {
+        match self {
+            CacheFormat::F32 => 0,
+            CacheFormat::F16 => 1,
+        }
+    }
+
+    pub(super) fn from_code(c: u64) -> Option<Self> {
+        match c {
+            0 => Some(CacheFormat::F32),
+            1 => Some(CacheFormat::F16),
+            _ => None,
+        }
+    }
+}
+
 /// How the cache is built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct CacheOptions {
@@ -91,15 +134,18 @@ pub struct CacheOptions {
     /// (skips reading every image on a rerun; an image changed with its size and time kept,
     /// as `cp -p`, `rsync -a` or `tar x` do, then goes unnoticed).
     pub trust_mtime: bool,
+    /// How samples are stored (a cache of another format is rebuilt).
+    pub format: CacheFormat,
 }
 
 impl Default for CacheOptions {
-    /// 32-pixel tiles, 1 GiB batches.
+    /// 32-pixel tiles, 1 GiB batches, float32 samples.
     fn default() -> Self {
         Self {
             tile: 32,
             batch_bytes: 1 << 30,
             trust_mtime: false,
+            format: CacheFormat::F32,
         }
     }
 }
@@ -111,6 +157,8 @@ pub struct CacheInfo {
     pub path: PathBuf,
     /// Its size in bytes.
     pub bytes: u64,
+    /// How it stores samples.
+    pub format: CacheFormat,
     /// Whether a complete cache for these inputs was found (no image decoded).
     pub hit: bool,
     /// Images decoded by this call.
@@ -144,6 +192,7 @@ pub struct CacheInfo {
 #[derive(Debug)]
 pub struct TileCache {
     map: Mmap,
+    header: Header,
     grid: TileGrid,
     n_lights: usize,
     light_block: usize,
@@ -151,6 +200,12 @@ pub struct TileCache {
     path: PathBuf,
     /// Held (shared) while the cache is mapped, so no other process rebuilds it meanwhile.
     _lock: CacheLock,
+}
+
+/// The checksum of a block's bytes: XXH3-64 seeded with its scale exponent (0 for float32, so
+/// plain XXH3-64 there), so that a damaged exponent fails the block too.
+pub(super) fn block_sum(bytes: &[u8], exponent: i32) -> u64 {
+    xxhash_rust::xxh3::xxh3_64_with_seed(bytes, exponent as u32 as u64)
 }
 
 /// The blocks of a complete cache whose checksum fails: `(tile, block)` pairs.
@@ -165,7 +220,7 @@ fn verify(map: &[u8], h: &Header) -> Vec<(usize, usize)> {
             let (o, len) = h.block_range(&grid, t, b);
             let want =
                 u64::from_le_bytes(map[table + 8 * k..table + 8 * k + 8].try_into().unwrap());
-            (xxhash_rust::xxh3::xxh3_64(&map[o..o + len]) != want).then_some((t, b))
+            (block_sum(&map[o..o + len], h.scale_exponent(map, k)) != want).then_some((t, b))
         })
         .collect()
 }
@@ -231,7 +286,7 @@ impl TileCache {
         }
         fs::create_dir_all(dir).map_err(|e| Error::write(dir, e))?;
         let t = Instant::now();
-        let fingerprint = inputs_fingerprint(ds, opts, copts.trust_mtime)?;
+        let fingerprint = inputs_fingerprint(ds, opts, copts.trust_mtime, copts.format)?;
         let fingerprint_s = t.elapsed().as_secs_f64();
         let stem = cache_stem(ds);
         let path = dir.join(format!("{stem}.stack"));
@@ -241,6 +296,7 @@ impl TileCache {
         let mut info = CacheInfo {
             path: path.clone(),
             bytes: 0,
+            format: copts.format,
             hit: false,
             images_decoded: 0,
             images_resumed: 0,
@@ -349,6 +405,7 @@ impl TileCache {
         (
             TileCache {
                 map: found.map,
+                header: h,
                 grid: TileGrid::new(h.width, h.height, h.tile),
                 n_lights: h.n_lights,
                 light_block: h.light_block,
@@ -380,9 +437,14 @@ impl TileCache {
         &self.path
     }
 
+    /// How the cache stores samples.
+    pub fn format(&self) -> CacheFormat {
+        self.header.format
+    }
+
     /// Byte range of tile `t` in the file.
     fn range(&self, t: usize) -> (usize, usize) {
-        let stride = self.n_lights * 12;
+        let stride = self.n_lights * self.header.format.pixel_bytes();
         let p0 = self.grid.first_pixel(t);
         (
             HEADER_BYTES + p0 * stride,
@@ -395,12 +457,42 @@ impl TileCache {
         self.light_block
     }
 
-    /// Tile `t`'s samples.
-    pub fn tile(&self, t: usize) -> TileView<'_> {
+    /// Tile `t`'s samples: read in place from a float32 cache; converted into `scratch`
+    /// (resized to the tile's samples) from a half-float one.
+    pub fn tile<'a>(&'a self, t: usize, scratch: &'a mut Vec<f32>) -> TileView<'a> {
         let (o, len) = self.range(t);
+        let bytes = &self.map[o..o + len];
+        let np = self.grid.tile_pixels(t);
+        let data: &[f32] = match self.header.format {
+            CacheFormat::F32 => bytemuck::cast_slice(bytes),
+            CacheFormat::F16 => {
+                use half::slice::{HalfBitsSliceExt, HalfFloatSliceExt};
+                let halves: &[u16] = bytemuck::cast_slice(bytes);
+                scratch.clear();
+                scratch.resize(halves.len(), 0.0);
+                halves
+                    .reinterpret_cast::<half::f16>()
+                    .convert_to_f32_slice(scratch);
+                // Undo each block's power-of-two scale (exact).
+                for b in 0..self.header.n_blocks() {
+                    let e = self
+                        .header
+                        .scale_exponent(&self.map, b * self.grid.n_tiles() + t);
+                    if e != 0 {
+                        let lights = self.light_block.min(self.n_lights - b * self.light_block);
+                        let from = b * self.light_block * np * 3;
+                        let f = pow2(-e);
+                        for v in &mut scratch[from..from + lights * np * 3] {
+                            *v *= f;
+                        }
+                    }
+                }
+                scratch
+            }
+        };
         TileView {
-            data: bytemuck::cast_slice(&self.map[o..o + len]),
-            n_pixels: self.grid.tile_pixels(t),
+            data,
+            n_pixels: np,
             n_lights: self.n_lights,
             light_block: self.light_block,
         }
@@ -423,6 +515,11 @@ impl TileCache {
         #[cfg(not(unix))]
         let _ = t;
     }
+}
+
+/// `2^e` for `e` in [-126, 127] (exact).
+pub(super) fn pow2(e: i32) -> f32 {
+    f32::from_bits(((127 + e.clamp(-126, 127)) as u32) << 23)
 }
 
 /// Whether the cache folder `dir` holds work worth keeping after a failed run: a complete
@@ -469,6 +566,11 @@ mod tests {
     }
 
     fn dataset(dir: &Path, w: usize, h: usize, n: usize) -> Dataset {
+        dataset_scaled(dir, w, h, n, 1.0)
+    }
+
+    /// Images of samples `(i * 1000 + k) * scale`, some `NaN`.
+    fn dataset_scaled(dir: &Path, w: usize, h: usize, n: usize, scale: f32) -> Dataset {
         let images: Vec<PathBuf> = (0..n)
             .map(|i| {
                 let p = dir.join(format!("{i}.exr"));
@@ -477,7 +579,7 @@ mod tests {
                         if (i + k) % 17 == 0 {
                             f32::NAN
                         } else {
-                            (i * 1000 + k) as f32
+                            (i * 1000 + k) as f32 * scale
                         }
                     })
                     .collect();
@@ -506,7 +608,8 @@ mod tests {
         let mut c = vec![0.0f32; stack.n_lights * 3];
         let reversed: Vec<usize> = (0..stack.n_lights).rev().collect();
         for t in 0..g.n_tiles() {
-            let tile = cache.tile(t);
+            let mut scratch = Vec::new();
+            let tile = cache.tile(t, &mut scratch);
             let gather = tile.gatherer(&reversed);
             for (k, p) in g.pixels(t).enumerate() {
                 tile.pixel(k, &mut a);
@@ -804,5 +907,156 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("3.exr: image is 3x3 but the first image"), "{e}");
+    }
+    /// Every sample of a half-float cache against the in-memory stack: `NaN` where it is
+    /// `NaN`, else within half a unit in the 11th significant bit.
+    fn close_to_stack(cache: &TileCache, ds: &Dataset) {
+        let stack = load_stack(ds, &DecodeOptions::default(), &|| {}).unwrap();
+        let g = cache.grid();
+        let mut a = vec![0.0f32; stack.n_lights * 3];
+        let mut scratch = Vec::new();
+        for t in 0..g.n_tiles() {
+            let tile = cache.tile(t, &mut scratch);
+            for (k, p) in g.pixels(t).enumerate() {
+                tile.pixel(k, &mut a);
+                for (x, y) in a.iter().zip(stack.pixel(p)) {
+                    assert_eq!(x.is_nan(), y.is_nan(), "tile {t} px {p}");
+                    assert!(
+                        y.is_nan() || (x - y).abs() <= y.abs() / 2048.0,
+                        "{x} vs {y}"
+                    );
+                }
+            }
+        }
+    }
+
+    fn f16_options(w: usize, h: usize) -> CacheOptions {
+        CacheOptions {
+            format: CacheFormat::F16,
+            ..copts_batches_of_2(w, h)
+        }
+    }
+
+    #[test]
+    fn half_float_cache_records_its_format_and_a_change_rebuilds() {
+        let d = tempfile::tempdir().unwrap();
+        let (w, h, n) = (11, 6, 9);
+        let ds = dataset(d.path(), w, h, n);
+        let dir = d.path().join("cache");
+        let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
+        let f32s = copts_batches_of_2(w, h);
+        let f16s = f16_options(w, h);
+        drop(TileCache::open_or_build(&ds, &opts, &dir, f32s, &go, &|| {}).unwrap());
+        let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, f16s, &go, &|| {}).unwrap();
+        assert!(!info.hit && info.images_decoded == n, "{info:?}");
+        assert_eq!(
+            (info.format, cache.format()),
+            (CacheFormat::F16, CacheFormat::F16)
+        );
+        // Header, 6 bytes per pixel per light, a checksum and a scale per block of each tile.
+        assert_eq!(
+            info.bytes,
+            (HEADER_BYTES + w * h * n * 6 + 5 * 6 * 8 + 5 * 6 * 4) as u64
+        );
+        let b = fs::read(stack_file(&dir)).unwrap();
+        assert_eq!(b[16 + 8 * 8], 1, "format field");
+        close_to_stack(&cache, &ds);
+        drop(cache);
+        let (_, info) = TileCache::open_or_build(&ds, &opts, &dir, f16s, &go, &|| {}).unwrap();
+        assert!(info.hit, "{info:?}");
+        let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, f32s, &go, &|| {}).unwrap();
+        assert!(!info.hit && info.format == CacheFormat::F32, "{info:?}");
+        same_as_stack(&cache, &ds);
+        drop(cache);
+        // A header whose format field alone was changed (checksum redone) is not trusted:
+        // the fingerprint differs, so the cache is rebuilt.
+        let file = stack_file(&dir);
+        let mut b = fs::read(&file).unwrap();
+        b[16 + 8 * 8] = 1;
+        let sum = xxhash_rust::xxh3::xxh3_64(&b[..header::SUMMED]);
+        b[header::SUMMED..header::FIELDS].copy_from_slice(&sum.to_le_bytes());
+        fs::write(&file, &b).unwrap();
+        let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, f32s, &go, &|| {}).unwrap();
+        assert!(!info.hit, "{info:?}");
+        same_as_stack(&cache, &ds);
+    }
+
+    /// Samples far above half floats' largest value (65504) keep their range, and a power of
+    /// two scales the cache exactly.
+    #[test]
+    fn half_float_cache_keeps_the_hdr_range() {
+        let d = tempfile::tempdir().unwrap();
+        let (w, h, n) = (11, 6, 9);
+        let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
+        for sub in ["a", "b"] {
+            fs::create_dir(d.path().join(sub)).unwrap();
+        }
+        let small = dataset(&d.path().join("a"), w, h, n);
+        let big = dataset_scaled(&d.path().join("b"), w, h, n, 1048576.0);
+        let f16s = f16_options(w, h);
+        let (c1, _) =
+            TileCache::open_or_build(&small, &opts, &d.path().join("c1"), f16s, &go, &|| {})
+                .unwrap();
+        let (c2, _) =
+            TileCache::open_or_build(&big, &opts, &d.path().join("c2"), f16s, &go, &|| {}).unwrap();
+        close_to_stack(&c2, &big);
+        let (mut s1, mut s2) = (Vec::new(), Vec::new());
+        for t in 0..c1.grid().n_tiles() {
+            let (a, b) = (c1.tile(t, &mut s1), c2.tile(t, &mut s2));
+            let mut x = vec![0.0f32; n * 3];
+            let mut y = vec![0.0f32; n * 3];
+            for k in 0..a.n_pixels() {
+                a.pixel(k, &mut x);
+                b.pixel(k, &mut y);
+                for (u, v) in x.iter().zip(&y) {
+                    assert!((u * 1048576.0).to_bits() == v.to_bits() || u.is_nan() && v.is_nan());
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn corrupt_half_float_block_or_scale_is_detected_and_repaired() {
+        let d = tempfile::tempdir().unwrap();
+        let (w, h, n) = (40, 30, 9);
+        let ds = dataset(d.path(), w, h, n);
+        let dir = d.path().join("cache");
+        let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
+        let copts = CacheOptions {
+            tile: 8,
+            ..f16_options(w, h)
+        };
+        drop(TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap());
+        let file = stack_file(&dir);
+        let clean = fs::read(&file).unwrap();
+        let g = TileGrid::new(w, h, 8);
+        // One byte of light block 1 of tile 7; then one byte of the scale of block 0 of tile 3.
+        let data_at = HEADER_BYTES + g.first_pixel(7) * n * 6 + 2 * 64 * 6 + 20;
+        let (hd, _) = read_header(&file).unwrap().unwrap();
+        let scale_at = hd.scales_offset() as usize + 4 * 3;
+        for at in [data_at, scale_at] {
+            let mut b = clean.clone();
+            b[at] ^= 1;
+            fs::write(&file, &b).unwrap();
+            let (cache, info) =
+                TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
+            assert_eq!(
+                (
+                    info.hit,
+                    info.blocks_corrupt,
+                    info.blocks_repaired,
+                    info.images_decoded
+                ),
+                (false, 1, 1, 2),
+                "byte {at}: {info:?}"
+            );
+            close_to_stack(&cache, &ds);
+            drop(cache);
+            assert_eq!(
+                fs::read(&file).unwrap(),
+                clean,
+                "repaired in place, byte {at}"
+            );
+        }
     }
 }
