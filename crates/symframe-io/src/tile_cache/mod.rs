@@ -468,22 +468,28 @@ impl TileCache {
             CacheFormat::F16 => {
                 use half::slice::{HalfBitsSliceExt, HalfFloatSliceExt};
                 let halves: &[u16] = bytemuck::cast_slice(bytes);
-                scratch.clear();
-                scratch.resize(halves.len(), 0.0);
-                halves
-                    .reinterpret_cast::<half::f16>()
-                    .convert_to_f32_slice(scratch);
-                // Undo each block's power-of-two scale (exact).
+                // Resized only when the tile's size changes: every sample is overwritten.
+                if scratch.len() != halves.len() {
+                    scratch.clear();
+                    scratch.resize(halves.len(), 0.0);
+                }
                 for b in 0..self.header.n_blocks() {
+                    let lights = self.light_block.min(self.n_lights - b * self.light_block);
+                    let from = b * self.light_block * np * 3;
+                    let to = from + lights * np * 3;
                     let e = self
                         .header
                         .scale_exponent(&self.map, b * self.grid.n_tiles() + t);
-                    if e != 0 {
-                        let lights = self.light_block.min(self.n_lights - b * self.light_block);
-                        let from = b * self.light_block * np * 3;
-                        let f = pow2(-e);
-                        for v in &mut scratch[from..from + lights * np * 3] {
-                            *v *= f;
+                    let f = pow2(-e);
+                    // In pieces that stay in L1 between the conversion and the exact
+                    // power-of-two rescaling.
+                    let src = halves[from..to].reinterpret_cast::<half::f16>();
+                    for (h, o) in src.chunks(2048).zip(scratch[from..to].chunks_mut(2048)) {
+                        h.convert_to_f32_slice(o);
+                        if e != 0 {
+                            for v in o.iter_mut() {
+                                *v *= f;
+                            }
                         }
                     }
                 }
