@@ -144,7 +144,7 @@ def estimate_path(
     Options: those of :func:`estimate`, and ``mask`` (a mask image path), ``linear``,
     ``saturation``, ``cache`` (folder), ``no_keep_cache``, ``trust_mtime``, ``tiles``
     (``"K/N"``: one shard; then only ``report`` is returned), ``tile_size``, ``decode_memory``
-    (MiB).
+    (MiB), ``cache_format`` (``"f32"`` or ``"f16"``, as ``--cache-format``).
 
     Returns the maps as :func:`estimate` does and ``report``: the content of ``report.json``.
     """
