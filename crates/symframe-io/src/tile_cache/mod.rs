@@ -1,13 +1,13 @@
 //! A pixel-major on-disk tile cache of a dataset's images, for stacks that do not fit in memory.
 //!
-//! Each image is decoded once and its samples are scattered into one cache file, laid out tile
-//! by tile (tiles of `tile x tile` pixels, row-major over the tile grid, the right and bottom
-//! tiles cropped; each tile one contiguous range of `pixels * lights * 12` bytes, so estimation
-//! maps one tile at a time). Inside a tile the lights come in blocks of `light_block` lights
-//! (the decoding batch; the last block shorter), each block pixel-major: the tile's pixels
+//! Each image is decoded once and its samples are scattered into one cache file, laid out tile by
+//! tile (tiles of `tile x tile` pixels, row-major over the tile grid, the right and bottom tiles
+//! cropped; each tile one contiguous range of `pixels * lights * 12` bytes (6 for half floats), so
+//! estimation maps one tile at a time). Inside a tile the lights come in blocks of `light_block`
+//! lights (the decoding batch; the last block shorter), each block pixel-major: the tile's pixels
 //! row-major, each pixel's RGB under the block's lights contiguous. When one batch holds every
-//! image (up to 1 GiB of decoded images by default: 1,365 images of 256x256, 85 of 1024x1024)
-//! there is one block and a tile is exactly a [`symframe::Stack`] of its pixels.
+//! image (up to 1 GiB of decoded images by default: 1,365 images of 256x256, 85 of 1024x1024) there
+//! is one block and a tile is exactly a [`symframe::Stack`] of its pixels.
 //!
 //! Why blocks: a batch then fills one contiguous range per tile, written with one positioned
 //! write, so every page of the file is written once. With each pixel's samples under all lights
@@ -20,14 +20,16 @@
 //! pixel's samples in any light order.
 //!
 //! File: a 4,096-byte header (magic, format version, an endianness mark, width, height, lights,
-//! tile size, the inputs' fingerprint, the number of images already scattered, a completion
-//! flag, the light block, and an XXH3-64 checksum of these fields), then the samples in native
-//! byte order (`f32`, so the tiled estimate equals the in-memory one bit for bit), then a table
-//! of one XXH3-64 checksum per block of each tile (block-major: block 0 of every tile, then
-//! block 1, ...; little-endian `u64`). The fingerprint covers every image's path, size and
-//! content (XXH3-64 of the file's bytes; modification time instead of content with
-//! [`CacheOptions::trust_mtime`]), the light intensities, the decode options and the crate
-//! version: the cache is reused when they match and rebuilt when they do not.
+//! tile size, the inputs' fingerprint, the number of images already scattered, a completion flag,
+//! the light block, the sample format, and an XXH3-64 checksum of these fields), then the samples
+//! in native byte order (`f32` by default, so the tiled estimate equals the in-memory one bit for
+//! bit; half floats with [`CacheFormat::F16`]), then a table of one XXH3-64 checksum per block of
+//! each tile (block-major: block 0 of every tile, then block 1, ...; little-endian `u64`; seeded
+//! with the block's scale exponent), and for half floats a table of the blocks' power-of-two scale
+//! exponents in the same order (little-endian `i32`). The fingerprint covers every image's path,
+//! size and content (XXH3-64 of the file's bytes; modification time instead of content with
+//! [`CacheOptions::trust_mtime`]), the light intensities, the decode options, the sample format and
+//! the crate version: the cache is reused when they match and rebuilt when they do not.
 //!
 //! Integrity: a header whose checksum fails is not a cache (the whole file is rebuilt). A
 //! complete cache is verified before every reuse, every block of every tile against the table
