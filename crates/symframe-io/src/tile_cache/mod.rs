@@ -80,6 +80,7 @@ pub use header::check_cache_bytes;
 use header::{cache_stem, matches, read_header, read_warnings, Header, HEADER_BYTES};
 pub use header::{file_content_hash, inputs_fingerprint, CACHE_VERSION};
 use lock::CacheLock;
+use view::Samples;
 pub use view::{TileGather, TileView};
 
 /// How the cache stores samples.
@@ -459,48 +460,28 @@ impl TileCache {
         self.light_block
     }
 
-    /// Tile `t`'s samples: read in place from a float32 cache; converted into `scratch`
-    /// (resized to the tile's samples) from a half-float one.
+    /// Tile `t`'s samples, read in place; for a half-float cache `scratch` holds the factors
+    /// that undo each light block's scale (converted to floats pixel by pixel when read).
     pub fn tile<'a>(&'a self, t: usize, scratch: &'a mut Vec<f32>) -> TileView<'a> {
         let (o, len) = self.range(t);
         let bytes = &self.map[o..o + len];
-        let np = self.grid.tile_pixels(t);
-        let data: &[f32] = match self.header.format {
-            CacheFormat::F32 => bytemuck::cast_slice(bytes),
+        let data = match self.header.format {
+            CacheFormat::F32 => Samples::F32(bytemuck::cast_slice(bytes)),
             CacheFormat::F16 => {
-                use half::slice::{HalfBitsSliceExt, HalfFloatSliceExt};
-                let halves: &[u16] = bytemuck::cast_slice(bytes);
-                // Resized only when the tile's size changes: every sample is overwritten.
-                if scratch.len() != halves.len() {
-                    scratch.clear();
-                    scratch.resize(halves.len(), 0.0);
-                }
-                for b in 0..self.header.n_blocks() {
-                    let lights = self.light_block.min(self.n_lights - b * self.light_block);
-                    let from = b * self.light_block * np * 3;
-                    let to = from + lights * np * 3;
-                    let e = self
-                        .header
-                        .scale_exponent(&self.map, b * self.grid.n_tiles() + t);
-                    let f = pow2(-e);
-                    // In pieces that stay in L1 between the conversion and the exact
-                    // power-of-two rescaling.
-                    let src = halves[from..to].reinterpret_cast::<half::f16>();
-                    for (h, o) in src.chunks(2048).zip(scratch[from..to].chunks_mut(2048)) {
-                        h.convert_to_f32_slice(o);
-                        if e != 0 {
-                            for v in o.iter_mut() {
-                                *v *= f;
-                            }
-                        }
-                    }
-                }
-                scratch
+                scratch.clear();
+                scratch.extend((0..self.header.n_blocks()).map(|b| {
+                    pow2(
+                        -self
+                            .header
+                            .scale_exponent(&self.map, b * self.grid.n_tiles() + t),
+                    )
+                }));
+                Samples::F16(bytemuck::cast_slice(bytes), scratch)
             }
         };
         TileView {
             data,
-            n_pixels: np,
+            n_pixels: self.grid.tile_pixels(t),
             n_lights: self.n_lights,
             light_block: self.light_block,
         }
@@ -923,10 +904,24 @@ mod tests {
         let g = cache.grid();
         let mut a = vec![0.0f32; stack.n_lights * 3];
         let mut scratch = Vec::new();
+        let all: Vec<usize> = (0..stack.n_lights).collect();
+        let reversed: Vec<usize> = all.iter().rev().copied().collect();
+        let mut c = vec![0.0f32; stack.n_lights * 3];
         for t in 0..g.n_tiles() {
             let tile = cache.tile(t, &mut scratch);
             for (k, p) in g.pixels(t).enumerate() {
                 tile.pixel(k, &mut a);
+                // In order (converted run by run) and reversed (light by light): the same.
+                tile.gatherer(&all).pixel(k, &mut c);
+                assert!(a.iter().zip(&c).all(|(x, y)| x.to_bits() == y.to_bits()));
+                tile.gatherer(&reversed).pixel(k, &mut c);
+                for (i, rgb) in c.chunks_exact(3).enumerate() {
+                    let j = stack.n_lights - 1 - i;
+                    assert!(rgb
+                        .iter()
+                        .zip(&a[j * 3..j * 3 + 3])
+                        .all(|(x, y)| x.to_bits() == y.to_bits()));
+                }
                 for (x, y) in a.iter().zip(stack.pixel(p)) {
                     assert_eq!(x.is_nan(), y.is_nan(), "tile {t} px {p}");
                     assert!(
