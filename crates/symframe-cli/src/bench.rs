@@ -160,6 +160,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let mut config = EstimateConfig::new(&lp, args.dir.join(format!("out-{tag}-symmetry")));
     config.cache.dir = Some(cache);
     config.cache.options.batch_bytes = crate::estimate::decode_memory_bytes(args.decode_memory)?;
+    config.cache.options.format = args.cache_format.into();
     config.shard = args.tiles;
     let sym = run_estimate(&config)?;
     println!(

@@ -294,6 +294,11 @@ pub struct EstimateArgs {
     /// Memory for one batch of decoded images while the cache is built, in MiB.
     #[arg(long, default_value_t = CacheOptions::default().batch_bytes >> 20, value_name = "MIB")]
     pub decode_memory: usize,
+    /// Sample type of the tile cache: f32 (12 bytes per pixel per light; tiled results equal
+    /// in-memory ones bit for bit) or f16 (half the size and I/O, 11 significant bits, HDR
+    /// range kept by a power-of-two scale per block; see docs/performance.md for its effect).
+    #[arg(long, value_enum, default_value_t = CacheFormatArg::F32)]
+    pub cache_format: CacheFormatArg,
     /// The y convention of normals.png (16-bit, `(n + 1) / 2` per channel): opengl (green =
     /// up: glTF, Blender) or directx (green = down: Unreal).
     #[arg(long, value_enum, default_value_t = NormalPngArg::Opengl)]
@@ -335,6 +340,9 @@ pub struct BenchArgs {
     /// Passed to `estimate --decode-memory` (MiB per batch of decoded images).
     #[arg(long, default_value_t = CacheOptions::default().batch_bytes >> 20, value_name = "MIB")]
     pub decode_memory: usize,
+    /// Passed to `estimate --cache-format`.
+    #[arg(long, value_enum, default_value_t = CacheFormatArg::F32)]
+    pub cache_format: CacheFormatArg,
     /// Estimate only this shard of the tiles (`estimate --tiles K/N`): the whole cache is
     /// still built, so decoding and memory are measured at full size in a fraction of the time.
     #[arg(long, value_name = "K/N")]
@@ -710,6 +718,24 @@ pub struct ExportArgs {
     /// With --mesh: leave out triangles across depth jumps (as `integrate --max-jump`).
     #[arg(long, default_value_t = 2.0)]
     pub max_jump: f64,
+}
+
+/// Sample type of the tile cache.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CacheFormatArg {
+    /// 32-bit floats (exact).
+    F32,
+    /// Half floats (half the size).
+    F16,
+}
+
+impl From<CacheFormatArg> for symframe_io::CacheFormat {
+    fn from(a: CacheFormatArg) -> Self {
+        match a {
+            CacheFormatArg::F32 => symframe_io::CacheFormat::F32,
+            CacheFormatArg::F16 => symframe_io::CacheFormat::F16,
+        }
+    }
 }
 
 /// The y convention of `normals.png`.

@@ -108,6 +108,7 @@ pub fn config(args: &EstimateArgs) -> Result<EstimateConfig> {
                 tile: args.tile_size,
                 batch_bytes: decode_memory_bytes(args.decode_memory)?,
                 trust_mtime: args.trust_mtime,
+                format: args.cache_format.into(),
             },
         },
         shard: args.tiles,

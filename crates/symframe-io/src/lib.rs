@@ -54,8 +54,8 @@ pub use output::{
 pub use stack::{load_stack, load_stack_with_warnings, read_mask, read_mask_any_size};
 pub use synth_out::{check_synth_target, write_lp_dataset, ImageFormat, OUTPUT_LOCK_FILE};
 pub use tile_cache::{
-    cache_holds_work, dataset_fingerprints, CacheInfo, CacheOptions, Fingerprints, StampKind,
-    TileCache, TileGather, TileGrid, TileView,
+    cache_holds_work, dataset_fingerprints, CacheFormat, CacheInfo, CacheOptions, Fingerprints,
+    StampKind, TileCache, TileGather, TileGrid, TileView,
 };
 pub use tile_results::{
     check_tile_result, read_tile_result, tile_result_done, tile_result_path, write_tile_result,

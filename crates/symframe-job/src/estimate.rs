@@ -505,7 +505,7 @@ pub(crate) fn open_cache(
     ctl: &Control,
     check: &dyn Fn(&Fingerprints) -> Result<()>,
 ) -> Result<(TileCache, CacheInfo, Fingerprints)> {
-    let fps = symframe_io::dataset_fingerprints(ds, decode, options.trust_mtime)?;
+    let fps = symframe_io::dataset_fingerprints(ds, decode, options.trust_mtime, options.format)?;
     check(&fps)?;
     let decoded = AtomicU64::new(0);
     let total = ds.images.len() as u64;

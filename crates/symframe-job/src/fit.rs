@@ -12,7 +12,9 @@ use symframe::appearance::fit::{
     holdout_lights, FitMaps, FitMethod, FitParams, FitSummary, HoldoutError, PixelFit, PixelOutcome,
 };
 use symframe_io::fingerprint::Fingerprint;
-use symframe_io::{CacheOptions, Dataset, DecodeOptions, Fingerprints, StampKind, TileFile};
+use symframe_io::{
+    CacheFormat, CacheOptions, Dataset, DecodeOptions, Fingerprints, StampKind, TileFile,
+};
 
 use crate::estimate::{
     cache_dir, fingerprint_lights, fingerprint_mask, open_cache, read_mask, remove_cache,
@@ -65,16 +67,29 @@ impl FitConfig {
         }
     }
 
-    /// The cache folder and options in force.
+    /// The cache folder and options in force: an estimate's own cache is read with the tile
+    /// size and sample format its report records.
     pub fn cache_in_force(&self) -> (PathBuf, CacheOptions) {
         let estimate_cache = self.frames.join(CACHE_DIR);
         if self.cache.dir.is_none() && estimate_cache.is_dir() {
-            let tile = std::fs::read_to_string(self.frames.join("report.json"))
+            let report = std::fs::read_to_string(self.frames.join("report.json"))
                 .ok()
-                .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+                .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok());
+            let tile = report
+                .as_ref()
                 .and_then(|r| r.pointer("/tiles/size")?.as_u64());
+            // The estimate's cache format, so that its cache is reused rather than rebuilt.
+            let format = match report
+                .as_ref()
+                .and_then(|r| r.pointer("/cache/format")?.as_str())
+            {
+                Some("f16") => CacheFormat::F16,
+                Some("f32") => CacheFormat::F32,
+                _ => self.cache.options.format,
+            };
             let options = CacheOptions {
                 tile: tile.map_or(self.cache.options.tile, |t| t as usize),
+                format,
                 ..self.cache.options
             };
             return (estimate_cache, options);
@@ -201,10 +216,12 @@ fn check_frames_inputs(
         InputsRecord::of(ours)
     } else {
         let trust_mtime = recorded.images_by == StampKind::SizeAndMtime;
+        // The inputs fingerprint does not depend on the cache format; any will do.
         InputsRecord::of(&symframe_io::dataset_fingerprints(
             ds,
             &config.decode,
             trust_mtime,
+            CacheFormat::default(),
         )?)
     };
     if here.fingerprint != recorded.fingerprint {

@@ -119,12 +119,12 @@ where
     let results: Vec<Result<bool>> = todo
         .par_iter()
         .map_init(
-            || Worker::new(method, cache.n_lights()),
-            |worker, &t| -> Result<bool> {
+            || (Worker::new(method, cache.n_lights()), Vec::new()),
+            |(worker, scratch), &t| -> Result<bool> {
                 if ctl.stop.load(Ordering::SeqCst) || stopped.load(Ordering::SeqCst) {
                     return Ok(false);
                 }
-                let view = cache.tile(t);
+                let view = cache.tile(t, scratch);
                 let gather = view.gatherer(&lights);
                 let records: Vec<M::Output> = grid
                     .pixels(t)

@@ -213,7 +213,8 @@ pub fn decode(o: &mut Options) -> PyResult<DecodeOptions> {
     Ok(DecodeOptions { gamma, saturation })
 }
 
-/// The tile cache (`cache`, `no_keep_cache`, `trust_mtime`, `tile_size`, `decode_memory`).
+/// The tile cache (`cache`, `no_keep_cache`, `trust_mtime`, `tile_size`, `decode_memory`,
+/// `cache_format`).
 pub fn cache(o: &mut Options) -> PyResult<CacheConfig> {
     let d = CacheOptions::default();
     let dir: Option<PathBuf> = o.get("cache")?;
@@ -221,6 +222,11 @@ pub fn cache(o: &mut Options) -> PyResult<CacheConfig> {
     let trust_mtime: bool = o.or("trust_mtime", d.trust_mtime)?;
     let tile: usize = o.or("tile_size", d.tile)?;
     let decode_memory: usize = o.or("decode_memory", d.batch_bytes >> 20)?;
+    let format = match o.or("cache_format", "f32".to_string())?.as_str() {
+        "f32" => symframe_io::CacheFormat::F32,
+        "f16" => symframe_io::CacheFormat::F16,
+        other => return Err(bad(format!("cache_format must be f32 or f16, got {other}"))),
+    };
     if !(1..=4096).contains(&tile) {
         return Err(bad(format!("tile_size must be in [1, 4096], got {tile}")));
     }
@@ -236,6 +242,7 @@ pub fn cache(o: &mut Options) -> PyResult<CacheConfig> {
             tile,
             batch_bytes: decode_memory << 20,
             trust_mtime,
+            format,
         },
     })
 }

@@ -348,3 +348,52 @@ fn shards_merge_into_the_single_run() {
     assert!(e.contains("tile-000004.bin: cannot read"), "{e}");
     assert!(!bad.exists());
 }
+
+/// `--cache-format f16`: recorded in the report, reused while it matches, rebuilt when the
+/// format changes; a rerun gives the same maps bit for bit, close to the float32 cache's.
+#[test]
+fn half_float_cache_is_recorded_reused_and_rebuilt_on_a_format_change() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = dataset(&tmp.path().join("data"));
+    let cache = tmp.path().join("cache");
+    let run = |out: &str, format: &str| {
+        let out = tmp.path().join(out);
+        let flags = ["--method", "woodham", "--cache", cache.to_str().unwrap()];
+        ok(&estimate(
+            &lp,
+            &out,
+            &[&flags[..], &["--cache-format", format]].concat(),
+        ));
+        let r = report(&out);
+        (out, r)
+    };
+    let (a, r) = run("a", "f16");
+    assert_eq!(
+        (&r["cache"]["format"], &r["cache"]["hit"]),
+        (&"f16".into(), &false.into())
+    );
+    let bytes16 = r["cache"]["bytes"].as_u64().unwrap();
+    let (b, r) = run("b", "f16");
+    assert_eq!(r["cache"]["hit"], true, "{r}");
+    same_maps(&a, &b);
+    let (c, r) = run("c", "f32");
+    assert_eq!(
+        (&r["cache"]["format"], &r["cache"]["hit"]),
+        (&"f32".into(), &false.into())
+    );
+    assert!(
+        r["cache"]["bytes"].as_u64().unwrap() > 2 * bytes16 - 10_000,
+        "{r}"
+    );
+    let (_, n16) = read_npy_f32(&a.join("normals.npy")).unwrap();
+    let (_, n32) = read_npy_f32(&c.join("normals.npy")).unwrap();
+    let mut worst = 0.0f32;
+    for (u, v) in n16.chunks_exact(3).zip(n32.chunks_exact(3)) {
+        assert_eq!(u[0].is_nan(), v[0].is_nan());
+        if !u[0].is_nan() {
+            let d: f32 = u.iter().zip(v).map(|(x, y)| x * y).sum();
+            worst = worst.max(d.clamp(-1.0, 1.0).acos().to_degrees());
+        }
+    }
+    assert!(worst < 0.1, "{worst} degrees");
+}

@@ -12,17 +12,25 @@ pub(super) fn base_name(name: &str) -> &str {
     name.rsplit('.').next().unwrap_or(name)
 }
 
-/// Decodes an OpenEXR file's first valid layer at full resolution (single-threaded), after
-/// checking every part's declared size ([`crate::limits`]).
+/// Decodes an OpenEXR file's first valid (non-deep) layer at full resolution (single-threaded),
+/// after checking every part's declared size ([`crate::limits`]).
+///
+/// Reads the file's blocks with `exr`'s block API and converts each decompressed block's lines
+/// straight into the interleaved output, instead of building `exr`'s per-channel image first:
+/// no per-channel sample vectors, no second copy. Measured on one
+/// thread with float RGB ZIP files: 1.2x faster at 128x128 (5.59 -> 4.87 million instructions
+/// per image), 1.3-1.45x at 1024x1024 (docs/performance.md, "Decoding").
 pub(super) fn read_exr(path: &Path, bytes: &[u8]) -> Result<RawImage> {
-    use exr::prelude::traits::*;
-    use exr::prelude::{read, FlatSamples};
+    use exr::block::reader::ChunksReader;
+    use exr::meta::attribute::SampleType;
     use std::io::Cursor;
     let eerr = |e: exr::error::Error| match e {
         exr::error::Error::Io(io) => io_err(path, io),
         exr::error::Error::NotSupported(m) => Error::unsupported(path, format!("EXR {m}")),
         other => Error::decode(path, other),
     };
+    // The declared sizes first, from the headers as written (the block reader's own
+    // validation would otherwise answer a forged size with a less useful error).
     let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(eerr)?;
     for h in meta.headers.iter() {
         let size = h.layer_size;
@@ -34,18 +42,13 @@ pub(super) fn read_exr(path: &Path, bytes: &[u8]) -> Result<RawImage> {
             bytes.len() as u64,
         )?;
     }
-    let image = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .non_parallel()
-        .from_buffered(Cursor::new(bytes))
-        .map_err(eerr)?;
-    let layer = image.layer_data;
-    let (width, height) = (layer.size.width(), layer.size.height());
-    let list = &layer.channel_data.list;
+    let reader = exr::block::read(Cursor::new(bytes), false).map_err(eerr)?;
+    let Some(layer) = reader.headers().iter().position(|h| !h.deep) else {
+        return Err(Error::unsupported(path, "EXR with deep data only"));
+    };
+    let header = &reader.headers()[layer];
+    let (width, height) = (header.layer_size.width(), header.layer_size.height());
+    let list = &header.channels.list;
     let names: Vec<String> = list.iter().map(|c| c.name.to_string()).collect();
     let find = |want: &str| {
         names
@@ -73,35 +76,73 @@ pub(super) fn read_exr(path: &Path, bytes: &[u8]) -> Result<RawImage> {
         }
         non_alpha
     };
-    let n = width * height;
-    let k = picked.len();
-    let mut data = vec![0.0f32; n * k];
-    for (j, &ci) in picked.iter().enumerate() {
-        let samples = &list[ci].sample_data;
-        if samples.len() != n {
-            return Err(Error::unsupported(
-                path,
-                format!("subsampled EXR channel {}", names[ci]),
-            ));
-        }
-        match samples {
-            FlatSamples::F16(v) => {
-                for (p, s) in v.iter().enumerate() {
-                    data[p * k + j] = s.to_f32();
-                }
-            }
-            FlatSamples::F32(v) => {
-                for (p, s) in v.iter().enumerate() {
-                    data[p * k + j] = *s;
-                }
-            }
-            FlatSamples::U32(v) => {
-                for (p, s) in v.iter().enumerate() {
-                    data[p * k + j] = *s as f32;
-                }
-            }
-        }
+    // Every channel's samples per pixel of a line, in file order (all must be unsampled: the
+    // line layout below assumes one sample per pixel).
+    if let Some(c) = list
+        .iter()
+        .find(|c| c.sampling.x() != 1 || c.sampling.y() != 1)
+    {
+        return Err(Error::unsupported(
+            path,
+            format!("subsampled EXR channel {}", c.name),
+        ));
     }
+    let sizes: Vec<usize> = list
+        .iter()
+        .map(|c| c.sample_type.bytes_per_sample())
+        .collect();
+    let types: Vec<SampleType> = list.iter().map(|c| c.sample_type).collect();
+    let pixel_bytes: usize = sizes.iter().sum();
+    let k = picked.len();
+    let mut data = vec![0.0f32; width * height * k];
+    let chunks = reader
+        .filter_chunks(false, |_, tile, block| {
+            block.layer == layer && tile.is_largest_resolution_level()
+        })
+        .map_err(eerr)?;
+    chunks
+        .decompress_sequential(false, |_, block| {
+            let (x0, y0) = (
+                block.index.pixel_position.x(),
+                block.index.pixel_position.y(),
+            );
+            let (bw, bh) = (
+                block.index.pixel_size.width(),
+                block.index.pixel_size.height(),
+            );
+            let line = bw * pixel_bytes;
+            if x0 + bw > width || y0 + bh > height || block.data.len() != line * bh {
+                return Err(exr::error::Error::Invalid("block size".into()));
+            }
+            for (dy, row) in block.data.chunks_exact(line).enumerate() {
+                let out =
+                    &mut data[((y0 + dy) * width + x0) * k..((y0 + dy) * width + x0 + bw) * k];
+                for (j, &ci) in picked.iter().enumerate() {
+                    let at = bw * sizes[..ci].iter().sum::<usize>();
+                    let src = &row[at..at + bw * sizes[ci]];
+                    let dst = out.iter_mut().skip(j).step_by(k);
+                    match types[ci] {
+                        SampleType::F32 => {
+                            for (o, s) in dst.zip(src.chunks_exact(4)) {
+                                *o = f32::from_ne_bytes([s[0], s[1], s[2], s[3]]);
+                            }
+                        }
+                        SampleType::F16 => {
+                            for (o, s) in dst.zip(src.chunks_exact(2)) {
+                                *o = exr::prelude::f16::from_ne_bytes([s[0], s[1]]).to_f32();
+                            }
+                        }
+                        SampleType::U32 => {
+                            for (o, s) in dst.zip(src.chunks_exact(4)) {
+                                *o = u32::from_ne_bytes([s[0], s[1], s[2], s[3]]) as f32;
+                            }
+                        }
+                    }
+                }
+            }
+            Ok(())
+        })
+        .map_err(eerr)?;
     Ok(RawImage {
         width,
         height,

@@ -9,7 +9,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use super::header::{encode_warnings, matches, read_header, Header, HEADER_BYTES, WARNINGS_AT};
-use super::{CacheInfo, CacheOptions, TileGrid};
+use super::{block_sum, pow2, CacheFormat, CacheInfo, CacheOptions, TileGrid};
 use crate::codecs::DecodeOptions;
 use crate::dataset::Dataset;
 use crate::error::{Error, Result, Warning};
@@ -112,6 +112,7 @@ pub(super) fn build(
                 images_done: 0,
                 complete: false,
                 light_block: (copts.batch_bytes / (w * h * 12)).clamp(1, n),
+                format: copts.format,
             };
             let file = create_sized(partial, header.file_len())?;
             (header, file)
@@ -206,8 +207,9 @@ pub(super) fn write_all_at(file: &File, buf: &[u8], offset: u64) -> std::io::Res
 
 /// Writes images `start..start + images.len()` (interleaved RGB, row-major; one block of
 /// lights, every block before it full) into every tile of the cache file, and the block's
-/// checksums into the table: per tile, the block is assembled in a per-thread buffer
-/// (`pixels * images * 12` bytes, 1 MB for a 32-pixel tile and 85 images) and written with one
+/// checksums (and, for half floats, scale exponents) into the tables: per tile, the block is
+/// assembled in a per-thread buffer (`pixels * images * 12` bytes, 1 MB for a 32-pixel tile and
+/// 85 images; converted to half floats in a second one for that format) and written with one
 /// positioned write, so every page of the file is written once, by one batch, and nothing of
 /// the file is mapped while building.
 pub(super) fn scatter(
@@ -218,29 +220,75 @@ pub(super) fn scatter(
     start: usize,
     images: &[Vec<f32>],
 ) -> Result<()> {
-    let stride = h.n_lights * 3;
     let b = images.len();
-    let sums: Vec<u64> = (0..grid.n_tiles())
+    let px = h.format.pixel_bytes();
+    let sums: Vec<(u64, i32)> = (0..grid.n_tiles())
         .into_par_iter()
-        .map_init(Vec::new, |buf: &mut Vec<f32>, t| {
-            let np = grid.tile_pixels(t);
-            buf.clear();
-            buf.reserve(np * b * 3);
-            for p in grid.pixels(t) {
-                for img in images {
-                    buf.extend_from_slice(&img[p * 3..p * 3 + 3]);
+        .map_init(
+            || (Vec::new(), Vec::new()),
+            |(buf, halves): &mut (Vec<f32>, Vec<half::f16>), t| {
+                let np = grid.tile_pixels(t);
+                buf.clear();
+                buf.reserve(np * b * 3);
+                for p in grid.pixels(t) {
+                    for img in images {
+                        buf.extend_from_slice(&img[p * 3..p * 3 + 3]);
+                    }
                 }
-            }
-            let bytes: &[u8] = bytemuck::cast_slice(buf);
-            let at = HEADER_BYTES + (grid.first_pixel(t) * stride + start * np * 3) * 4;
-            write_all_at(file, bytes, at as u64).map_err(|e| Error::write(path, e))?;
-            Ok(xxhash_rust::xxh3::xxh3_64(bytes))
-        })
+                let (bytes, e): (&[u8], i32) = match h.format {
+                    CacheFormat::F32 => (bytemuck::cast_slice(buf), 0),
+                    CacheFormat::F16 => {
+                        use half::slice::HalfFloatSliceExt;
+                        let e = half_exponent(buf);
+                        if e != 0 {
+                            let f = pow2(e);
+                            for v in buf.iter_mut() {
+                                *v *= f;
+                            }
+                        }
+                        halves.clear();
+                        halves.resize(buf.len(), half::f16::ZERO);
+                        halves.convert_from_f32_slice(buf);
+                        let bits: &[u16] = halves.reinterpret_cast();
+                        (bytemuck::cast_slice(bits), e)
+                    }
+                };
+                let at = HEADER_BYTES + grid.first_pixel(t) * h.n_lights * px + start * np * px;
+                write_all_at(file, bytes, at as u64).map_err(|e| Error::write(path, e))?;
+                Ok((block_sum(bytes, e), e))
+            },
+        )
         .collect::<Result<_>>()?;
-    let table: Vec<u8> = sums.iter().flat_map(|v| v.to_le_bytes()).collect();
     let block = start / h.light_block;
+    let table: Vec<u8> = sums.iter().flat_map(|v| v.0.to_le_bytes()).collect();
     let at = h.table_offset() + (block * grid.n_tiles() * 8) as u64;
-    write_all_at(file, &table, at).map_err(|e| Error::write(path, e))
+    write_all_at(file, &table, at).map_err(|e| Error::write(path, e))?;
+    if h.format == CacheFormat::F16 {
+        let scales: Vec<u8> = sums.iter().flat_map(|v| v.1.to_le_bytes()).collect();
+        let at = h.scales_offset() + (block * grid.n_tiles() * 4) as u64;
+        write_all_at(file, &scales, at).map_err(|e| Error::write(path, e))?;
+    }
+    Ok(())
+}
+
+/// The power-of-two exponent `e` that puts the largest finite magnitude of `v` times `2^e` in
+/// [32768, 65504] (half floats' largest binade); 0 when `v` holds no finite non-zero value.
+fn half_exponent(v: &[f32]) -> i32 {
+    let max = v
+        .iter()
+        .filter(|x| x.is_finite())
+        .fold(0.0f32, |m, x| m.max(x.abs()));
+    if max == 0.0 {
+        return 0;
+    }
+    // max = m * 2^k with m in [1, 2): m * 2^(k + e) in [32768, 65536) for e = 15 - k, and the
+    // values that round up to 65536 (above 65504) take one less.
+    let k = ((max.to_bits() >> 23) & 0xff) as i32 - 127;
+    let mut e = (15 - k).clamp(-125, 126);
+    if max * pow2(e) > 65504.0 {
+        e -= 1;
+    }
+    e
 }
 
 /// Decodes the lights of the light blocks that hold a failed `(tile, block)` of the complete

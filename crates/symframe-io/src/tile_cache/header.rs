@@ -7,14 +7,14 @@ use std::time::UNIX_EPOCH;
 
 use rayon::prelude::*;
 
-use super::{verify, TileGrid};
+use super::{verify, CacheFormat, TileGrid};
 use crate::codecs::DecodeOptions;
 use crate::dataset::Dataset;
 use crate::error::{Error, Result, Warning};
 use crate::fingerprint::Fingerprint;
 
 /// Format version of the cache file (bumped whenever the layout changes).
-pub const CACHE_VERSION: u32 = 2;
+pub const CACHE_VERSION: u32 = 3;
 pub(super) const MAGIC: &[u8; 8] = b"SYMFCACH";
 pub(super) const HEADER_BYTES: usize = 4096;
 pub(super) const ENDIAN_MARK: u32 = 0x0102_0304;
@@ -31,19 +31,27 @@ pub(super) struct Header {
     pub(super) complete: bool,
     /// Lights per block inside a tile (the decoding batch).
     pub(super) light_block: usize,
+    /// How samples are stored.
+    pub(super) format: CacheFormat,
 }
 
 /// Bytes of the encoded header fields, checksum included.
-pub(super) const FIELDS: usize = 88;
+pub(super) const FIELDS: usize = 96;
 /// Bytes of the header fields that the header checksum covers.
-pub(super) const SUMMED: usize = 80;
+pub(super) const SUMMED: usize = 88;
 
 impl Header {
     pub(super) fn data_bytes(&self) -> u64 {
         (self.width as u64)
             .saturating_mul(self.height as u64)
             .saturating_mul(self.n_lights as u64)
-            .saturating_mul(12)
+            .saturating_mul(self.format.pixel_bytes() as u64)
+    }
+
+    /// Number of tiles.
+    fn n_tiles(&self) -> u64 {
+        (self.width.div_ceil(self.tile.max(1)) as u64)
+            .saturating_mul(self.height.div_ceil(self.tile.max(1)) as u64)
     }
 
     /// Light blocks per tile.
@@ -56,26 +64,48 @@ impl Header {
         (HEADER_BYTES as u64).saturating_add(self.data_bytes())
     }
 
-    /// The whole file's length: header, samples, checksum table.
-    pub(super) fn file_len(&self) -> u64 {
-        let tiles = (self.width.div_ceil(self.tile.max(1)) as u64)
-            .saturating_mul(self.height.div_ceil(self.tile.max(1)) as u64);
+    /// Where the table of block scale exponents starts (half-float caches only).
+    pub(super) fn scales_offset(&self) -> u64 {
         self.table_offset().saturating_add(
-            tiles
+            self.n_tiles()
                 .saturating_mul(self.n_blocks() as u64)
                 .saturating_mul(8),
         )
+    }
+
+    /// The whole file's length: header, samples, checksum table, and for half floats the
+    /// table of block scale exponents.
+    pub(super) fn file_len(&self) -> u64 {
+        let scales = match self.format {
+            CacheFormat::F32 => 0,
+            CacheFormat::F16 => self.n_tiles().saturating_mul(self.n_blocks() as u64) * 4,
+        };
+        self.scales_offset().saturating_add(scales)
+    }
+
+    /// The power-of-two exponent that scaled block `k` (`block * n_tiles + tile`) before it
+    /// was stored as half floats (0 for float32 caches).
+    pub(super) fn scale_exponent(&self, file: &[u8], k: usize) -> i32 {
+        match self.format {
+            CacheFormat::F32 => 0,
+            CacheFormat::F16 => {
+                let at = self.scales_offset() as usize + 4 * k;
+                file.get(at..at + 4)
+                    .map_or(0, |b| i32::from_le_bytes(b.try_into().unwrap()))
+            }
+        }
     }
 
     /// Byte range (from the file's start) of light block `b` of tile `t`.
     pub(super) fn block_range(&self, grid: &TileGrid, t: usize, b: usize) -> (usize, usize) {
         let np = grid.tile_pixels(t);
         let lights = self.light_block.min(self.n_lights - b * self.light_block);
+        let px = self.format.pixel_bytes();
         (
             HEADER_BYTES
-                + grid.first_pixel(t) * self.n_lights * 12
-                + b * self.light_block * np * 12,
-            np * lights * 12,
+                + grid.first_pixel(t) * self.n_lights * px
+                + b * self.light_block * np * px,
+            np * lights * px,
         )
     }
 
@@ -93,6 +123,7 @@ impl Header {
             self.images_done as u64,
             self.complete as u64,
             self.light_block as u64,
+            self.format.code(),
         ];
         for (k, v) in fields.iter().enumerate() {
             b[16 + 8 * k..24 + 8 * k].copy_from_slice(&v.to_le_bytes());
@@ -128,6 +159,7 @@ impl Header {
             images_done: f(5) as usize,
             complete: f(6) == 1,
             light_block: f(7) as usize,
+            format: CacheFormat::from_code(f(8))?,
         })
     }
 }
@@ -229,8 +261,13 @@ pub struct Fingerprints {
 
 /// The fingerprint of a dataset's decoded samples (see [`Fingerprints::cache`]), the files
 /// read in parallel ([`file_content_hash`]) unless `trust_mtime`.
-pub fn inputs_fingerprint(ds: &Dataset, opts: &DecodeOptions, trust_mtime: bool) -> Result<u64> {
-    Ok(dataset_fingerprints(ds, opts, trust_mtime)?.cache)
+pub fn inputs_fingerprint(
+    ds: &Dataset,
+    opts: &DecodeOptions,
+    trust_mtime: bool,
+    format: CacheFormat,
+) -> Result<u64> {
+    Ok(dataset_fingerprints(ds, opts, trust_mtime, format)?.cache)
 }
 
 /// Both fingerprints of a dataset (see [`Fingerprints`]): every image's size and content hash
@@ -240,11 +277,13 @@ pub fn dataset_fingerprints(
     ds: &Dataset,
     opts: &DecodeOptions,
     trust_mtime: bool,
+    format: CacheFormat,
 ) -> Result<Fingerprints> {
     let t = std::time::Instant::now();
     let mut f = Fingerprint::new();
     f.str("symframe tile cache")
         .u64(CACHE_VERSION as u64)
+        .u64(format.code())
         .str(env!("CARGO_PKG_VERSION"))
         .u64(ds.images.len() as u64)
         .u64(opts.gamma.code())

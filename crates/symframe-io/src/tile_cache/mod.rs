@@ -1,13 +1,13 @@
 //! A pixel-major on-disk tile cache of a dataset's images, for stacks that do not fit in memory.
 //!
-//! Each image is decoded once and its samples are scattered into one cache file, laid out tile
-//! by tile (tiles of `tile x tile` pixels, row-major over the tile grid, the right and bottom
-//! tiles cropped; each tile one contiguous range of `pixels * lights * 12` bytes, so estimation
-//! maps one tile at a time). Inside a tile the lights come in blocks of `light_block` lights
-//! (the decoding batch; the last block shorter), each block pixel-major: the tile's pixels
+//! Each image is decoded once and its samples are scattered into one cache file, laid out tile by
+//! tile (tiles of `tile x tile` pixels, row-major over the tile grid, the right and bottom tiles
+//! cropped; each tile one contiguous range of `pixels * lights * 12` bytes (6 for half floats), so
+//! estimation maps one tile at a time). Inside a tile the lights come in blocks of `light_block`
+//! lights (the decoding batch; the last block shorter), each block pixel-major: the tile's pixels
 //! row-major, each pixel's RGB under the block's lights contiguous. When one batch holds every
-//! image (up to 1 GiB of decoded images by default: 1,365 images of 256x256, 85 of 1024x1024)
-//! there is one block and a tile is exactly a [`symframe::Stack`] of its pixels.
+//! image (up to 1 GiB of decoded images by default: 1,365 images of 256x256, 85 of 1024x1024) there
+//! is one block and a tile is exactly a [`symframe::Stack`] of its pixels.
 //!
 //! Why blocks: a batch then fills one contiguous range per tile, written with one positioned
 //! write, so every page of the file is written once. With each pixel's samples under all lights
@@ -20,14 +20,16 @@
 //! pixel's samples in any light order.
 //!
 //! File: a 4,096-byte header (magic, format version, an endianness mark, width, height, lights,
-//! tile size, the inputs' fingerprint, the number of images already scattered, a completion
-//! flag, the light block, and an XXH3-64 checksum of these fields), then the samples in native
-//! byte order (`f32`, so the tiled estimate equals the in-memory one bit for bit), then a table
-//! of one XXH3-64 checksum per block of each tile (block-major: block 0 of every tile, then
-//! block 1, ...; little-endian `u64`). The fingerprint covers every image's path, size and
-//! content (XXH3-64 of the file's bytes; modification time instead of content with
-//! [`CacheOptions::trust_mtime`]), the light intensities, the decode options and the crate
-//! version: the cache is reused when they match and rebuilt when they do not.
+//! tile size, the inputs' fingerprint, the number of images already scattered, a completion flag,
+//! the light block, the sample format, and an XXH3-64 checksum of these fields), then the samples
+//! in native byte order (`f32` by default, so the tiled estimate equals the in-memory one bit for
+//! bit; half floats with [`CacheFormat::F16`]), then a table of one XXH3-64 checksum per block of
+//! each tile (block-major: block 0 of every tile, then block 1, ...; little-endian `u64`; seeded
+//! with the block's scale exponent), and for half floats a table of the blocks' power-of-two scale
+//! exponents in the same order (little-endian `i32`). The fingerprint covers every image's path,
+//! size and content (XXH3-64 of the file's bytes; modification time instead of content with
+//! [`CacheOptions::trust_mtime`]), the light intensities, the decode options, the sample format and
+//! the crate version: the cache is reused when they match and rebuilt when they do not.
 //!
 //! Integrity: a header whose checksum fails is not a cache (the whole file is rebuilt). A
 //! complete cache is verified before every reuse, every block of every tile against the table
@@ -81,7 +83,51 @@ pub use header::{
     CACHE_VERSION,
 };
 use lock::CacheLock;
+use view::Samples;
 pub use view::{TileGather, TileView};
+
+/// How the cache stores samples.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CacheFormat {
+    /// 32-bit floats, 12 bytes per pixel per light: the samples exactly as decoded, so a tiled
+    /// estimate equals the in-memory one bit for bit.
+    #[default]
+    F32,
+    /// Half floats, 6 bytes per pixel per light: half the disk and I/O. Each block of a tile
+    /// (its pixels under one decoding batch of lights) is scaled by a power of two so that its
+    /// largest finite magnitude lands in [32768, 65504] before rounding, so any HDR range
+    /// survives; samples keep 11 significant bits (relative error at most 2^-11) down to
+    /// 2^-29 of the block's largest, and lose precision gradually below (half-float
+    /// subnormals) to 2^-39 of it, under which they read as 0. `NaN` (missing) stays `NaN`.
+    F16,
+}
+
+impl CacheFormat {
+    /// Bytes of one pixel's RGB under one light.
+    pub fn pixel_bytes(self) -> usize {
+        match self {
+            CacheFormat::F32 => 12,
+            CacheFormat::F16 => 6,
+        }
+    }
+
+    /// The header's code for it.
+    pub(super) fn code(self) -> u64 {
+        match self {
+            CacheFormat::F32 => 0,
+            CacheFormat::F16 => 1,
+        }
+    }
+
+    pub(super) fn from_code(c: u64) -> Option<Self> {
+        match c {
+            0 => Some(CacheFormat::F32),
+            1 => Some(CacheFormat::F16),
+            _ => None,
+        }
+    }
+}
 
 /// How the cache is built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -94,15 +140,18 @@ pub struct CacheOptions {
     /// (skips reading every image on a rerun; an image changed with its size and time kept,
     /// as `cp -p`, `rsync -a` or `tar x` do, then goes unnoticed).
     pub trust_mtime: bool,
+    /// How samples are stored (a cache of another format is rebuilt).
+    pub format: CacheFormat,
 }
 
 impl Default for CacheOptions {
-    /// 32-pixel tiles, 1 GiB batches.
+    /// 32-pixel tiles, 1 GiB batches, float32 samples.
     fn default() -> Self {
         Self {
             tile: 32,
             batch_bytes: 1 << 30,
             trust_mtime: false,
+            format: CacheFormat::F32,
         }
     }
 }
@@ -114,6 +163,8 @@ pub struct CacheInfo {
     pub path: PathBuf,
     /// Its size in bytes.
     pub bytes: u64,
+    /// How it stores samples.
+    pub format: CacheFormat,
     /// Whether a complete cache for these inputs was found (no image decoded).
     pub hit: bool,
     /// Images decoded by this call.
@@ -147,6 +198,7 @@ pub struct CacheInfo {
 #[derive(Debug)]
 pub struct TileCache {
     map: Mmap,
+    header: Header,
     grid: TileGrid,
     n_lights: usize,
     light_block: usize,
@@ -154,6 +206,12 @@ pub struct TileCache {
     path: PathBuf,
     /// Held (shared) while the cache is mapped, so no other process rebuilds it meanwhile.
     _lock: CacheLock,
+}
+
+/// The checksum of a block's bytes: XXH3-64 seeded with its scale exponent (0 for float32, so
+/// plain XXH3-64 there), so that a damaged exponent fails the block too.
+pub(super) fn block_sum(bytes: &[u8], exponent: i32) -> u64 {
+    xxhash_rust::xxh3::xxh3_64_with_seed(bytes, exponent as u32 as u64)
 }
 
 /// The blocks of a complete cache whose checksum fails: `(tile, block)` pairs.
@@ -168,7 +226,7 @@ fn verify(map: &[u8], h: &Header) -> Vec<(usize, usize)> {
             let (o, len) = h.block_range(&grid, t, b);
             let want =
                 u64::from_le_bytes(map[table + 8 * k..table + 8 * k + 8].try_into().unwrap());
-            (xxhash_rust::xxh3::xxh3_64(&map[o..o + len]) != want).then_some((t, b))
+            (block_sum(&map[o..o + len], h.scale_exponent(map, k)) != want).then_some((t, b))
         })
         .collect()
 }
@@ -261,7 +319,7 @@ impl TileCache {
         };
         let fps = match known {
             Some(f) => f,
-            None => dataset_fingerprints(ds, opts, copts.trust_mtime)?,
+            None => dataset_fingerprints(ds, opts, copts.trust_mtime, copts.format)?,
         };
         let (fingerprint, fingerprint_s) = (fps.cache, fps.seconds);
         let fits_mask = |w: usize, h: usize| match mask {
@@ -277,6 +335,7 @@ impl TileCache {
         let mut info = CacheInfo {
             path: path.clone(),
             bytes: 0,
+            format: copts.format,
             hit: false,
             images_decoded: 0,
             images_resumed: 0,
@@ -396,6 +455,7 @@ impl TileCache {
         (
             TileCache {
                 map: found.map,
+                header: h,
                 grid: TileGrid::new(h.width, h.height, h.tile),
                 n_lights: h.n_lights,
                 light_block: h.light_block,
@@ -427,9 +487,14 @@ impl TileCache {
         &self.path
     }
 
+    /// How the cache stores samples.
+    pub fn format(&self) -> CacheFormat {
+        self.header.format
+    }
+
     /// Byte range of tile `t` in the file.
     fn range(&self, t: usize) -> (usize, usize) {
-        let stride = self.n_lights * 12;
+        let stride = self.n_lights * self.header.format.pixel_bytes();
         let p0 = self.grid.first_pixel(t);
         (
             HEADER_BYTES + p0 * stride,
@@ -442,11 +507,27 @@ impl TileCache {
         self.light_block
     }
 
-    /// Tile `t`'s samples.
-    pub fn tile(&self, t: usize) -> TileView<'_> {
+    /// Tile `t`'s samples, read in place; for a half-float cache `scratch` holds the factors
+    /// that undo each light block's scale (converted to floats pixel by pixel when read).
+    pub fn tile<'a>(&'a self, t: usize, scratch: &'a mut Vec<f32>) -> TileView<'a> {
         let (o, len) = self.range(t);
+        let bytes = &self.map[o..o + len];
+        let data = match self.header.format {
+            CacheFormat::F32 => Samples::F32(bytemuck::cast_slice(bytes)),
+            CacheFormat::F16 => {
+                scratch.clear();
+                scratch.extend((0..self.header.n_blocks()).map(|b| {
+                    pow2(
+                        -self
+                            .header
+                            .scale_exponent(&self.map, b * self.grid.n_tiles() + t),
+                    )
+                }));
+                Samples::F16(bytemuck::cast_slice(bytes), scratch)
+            }
+        };
         TileView {
-            data: bytemuck::cast_slice(&self.map[o..o + len]),
+            data,
             n_pixels: self.grid.tile_pixels(t),
             n_lights: self.n_lights,
             light_block: self.light_block,
@@ -470,6 +551,11 @@ impl TileCache {
         #[cfg(not(unix))]
         let _ = t;
     }
+}
+
+/// `2^e` for `e` in [-126, 127] (exact).
+pub(super) fn pow2(e: i32) -> f32 {
+    f32::from_bits(((127 + e.clamp(-126, 127)) as u32) << 23)
 }
 
 /// Whether the cache folder `dir` holds work worth keeping after a failed run: a complete
@@ -516,6 +602,11 @@ mod tests {
     }
 
     fn dataset(dir: &Path, w: usize, h: usize, n: usize) -> Dataset {
+        dataset_scaled(dir, w, h, n, 1.0)
+    }
+
+    /// Images of samples `(i * 1000 + k) * scale`, some `NaN`.
+    fn dataset_scaled(dir: &Path, w: usize, h: usize, n: usize, scale: f32) -> Dataset {
         let images: Vec<PathBuf> = (0..n)
             .map(|i| {
                 let p = dir.join(format!("{i}.exr"));
@@ -524,7 +615,7 @@ mod tests {
                         if (i + k) % 17 == 0 {
                             f32::NAN
                         } else {
-                            (i * 1000 + k) as f32
+                            (i * 1000 + k) as f32 * scale
                         }
                     })
                     .collect();
@@ -553,7 +644,8 @@ mod tests {
         let mut c = vec![0.0f32; stack.n_lights * 3];
         let reversed: Vec<usize> = (0..stack.n_lights).rev().collect();
         for t in 0..g.n_tiles() {
-            let tile = cache.tile(t);
+            let mut scratch = Vec::new();
+            let tile = cache.tile(t, &mut scratch);
             let gather = tile.gatherer(&reversed);
             for (k, p) in g.pixels(t).enumerate() {
                 tile.pixel(k, &mut a);
@@ -869,7 +961,8 @@ mod tests {
             *p = q;
         }
         let fp = |ds: &Dataset, mtime: bool| {
-            dataset_fingerprints(ds, &DecodeOptions::default(), mtime).unwrap()
+            dataset_fingerprints(ds, &DecodeOptions::default(), mtime, CacheFormat::default())
+                .unwrap()
         };
         let (fa, fc) = (fp(&a, false), fp(&copy, false));
         assert_eq!(fa.inputs, fc.inputs);
@@ -915,5 +1008,171 @@ mod tests {
             .filter(|e| e.file_name().to_string_lossy().contains(".stack"))
             .collect();
         assert!(files.is_empty(), "{files:?}");
+    }
+
+    /// Every sample of a half-float cache against the in-memory stack: `NaN` where it is
+    /// `NaN`, else within half a unit in the 11th significant bit.
+    fn close_to_stack(cache: &TileCache, ds: &Dataset) {
+        let stack = load_stack(ds, &DecodeOptions::default(), &|| {}).unwrap();
+        let g = cache.grid();
+        let mut a = vec![0.0f32; stack.n_lights * 3];
+        let mut scratch = Vec::new();
+        let all: Vec<usize> = (0..stack.n_lights).collect();
+        let reversed: Vec<usize> = all.iter().rev().copied().collect();
+        let mut c = vec![0.0f32; stack.n_lights * 3];
+        for t in 0..g.n_tiles() {
+            let tile = cache.tile(t, &mut scratch);
+            for (k, p) in g.pixels(t).enumerate() {
+                tile.pixel(k, &mut a);
+                // In order (converted run by run) and reversed (light by light): the same.
+                tile.gatherer(&all).pixel(k, &mut c);
+                assert!(a.iter().zip(&c).all(|(x, y)| x.to_bits() == y.to_bits()));
+                tile.gatherer(&reversed).pixel(k, &mut c);
+                for (i, rgb) in c.chunks_exact(3).enumerate() {
+                    let j = stack.n_lights - 1 - i;
+                    assert!(rgb
+                        .iter()
+                        .zip(&a[j * 3..j * 3 + 3])
+                        .all(|(x, y)| x.to_bits() == y.to_bits()));
+                }
+                for (x, y) in a.iter().zip(stack.pixel(p)) {
+                    assert_eq!(x.is_nan(), y.is_nan(), "tile {t} px {p}");
+                    assert!(
+                        y.is_nan() || (x - y).abs() <= y.abs() / 2048.0,
+                        "{x} vs {y}"
+                    );
+                }
+            }
+        }
+    }
+
+    fn f16_options(w: usize, h: usize) -> CacheOptions {
+        CacheOptions {
+            format: CacheFormat::F16,
+            ..copts_batches_of_2(w, h)
+        }
+    }
+
+    #[test]
+    fn half_float_cache_records_its_format_and_a_change_rebuilds() {
+        let d = tempfile::tempdir().unwrap();
+        let (w, h, n) = (11, 6, 9);
+        let ds = dataset(d.path(), w, h, n);
+        let dir = d.path().join("cache");
+        let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
+        let f32s = copts_batches_of_2(w, h);
+        let f16s = f16_options(w, h);
+        drop(TileCache::open_or_build(&ds, &opts, &dir, f32s, &go, &|| {}).unwrap());
+        let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, f16s, &go, &|| {}).unwrap();
+        assert!(!info.hit && info.images_decoded == n, "{info:?}");
+        assert_eq!(
+            (info.format, cache.format()),
+            (CacheFormat::F16, CacheFormat::F16)
+        );
+        // Header, 6 bytes per pixel per light, a checksum and a scale per block of each tile.
+        assert_eq!(
+            info.bytes,
+            (HEADER_BYTES + w * h * n * 6 + 5 * 6 * 8 + 5 * 6 * 4) as u64
+        );
+        let b = fs::read(stack_file(&dir)).unwrap();
+        assert_eq!(b[16 + 8 * 8], 1, "format field");
+        close_to_stack(&cache, &ds);
+        drop(cache);
+        let (_, info) = TileCache::open_or_build(&ds, &opts, &dir, f16s, &go, &|| {}).unwrap();
+        assert!(info.hit, "{info:?}");
+        let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, f32s, &go, &|| {}).unwrap();
+        assert!(!info.hit && info.format == CacheFormat::F32, "{info:?}");
+        same_as_stack(&cache, &ds);
+        drop(cache);
+        // A header whose format field alone was changed (checksum redone) is not trusted:
+        // the fingerprint differs, so the cache is rebuilt.
+        let file = stack_file(&dir);
+        let mut b = fs::read(&file).unwrap();
+        b[16 + 8 * 8] = 1;
+        let sum = xxhash_rust::xxh3::xxh3_64(&b[..header::SUMMED]);
+        b[header::SUMMED..header::FIELDS].copy_from_slice(&sum.to_le_bytes());
+        fs::write(&file, &b).unwrap();
+        let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, f32s, &go, &|| {}).unwrap();
+        assert!(!info.hit, "{info:?}");
+        same_as_stack(&cache, &ds);
+    }
+
+    /// Samples far above half floats' largest value (65504) keep their range, and a power of
+    /// two scales the cache exactly.
+    #[test]
+    fn half_float_cache_keeps_the_hdr_range() {
+        let d = tempfile::tempdir().unwrap();
+        let (w, h, n) = (11, 6, 9);
+        let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
+        for sub in ["a", "b"] {
+            fs::create_dir(d.path().join(sub)).unwrap();
+        }
+        let small = dataset(&d.path().join("a"), w, h, n);
+        let big = dataset_scaled(&d.path().join("b"), w, h, n, 1048576.0);
+        let f16s = f16_options(w, h);
+        let (c1, _) =
+            TileCache::open_or_build(&small, &opts, &d.path().join("c1"), f16s, &go, &|| {})
+                .unwrap();
+        let (c2, _) =
+            TileCache::open_or_build(&big, &opts, &d.path().join("c2"), f16s, &go, &|| {}).unwrap();
+        close_to_stack(&c2, &big);
+        let (mut s1, mut s2) = (Vec::new(), Vec::new());
+        for t in 0..c1.grid().n_tiles() {
+            let (a, b) = (c1.tile(t, &mut s1), c2.tile(t, &mut s2));
+            let mut x = vec![0.0f32; n * 3];
+            let mut y = vec![0.0f32; n * 3];
+            for k in 0..a.n_pixels() {
+                a.pixel(k, &mut x);
+                b.pixel(k, &mut y);
+                for (u, v) in x.iter().zip(&y) {
+                    assert!((u * 1048576.0).to_bits() == v.to_bits() || u.is_nan() && v.is_nan());
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn corrupt_half_float_block_or_scale_is_detected_and_repaired() {
+        let d = tempfile::tempdir().unwrap();
+        let (w, h, n) = (40, 30, 9);
+        let ds = dataset(d.path(), w, h, n);
+        let dir = d.path().join("cache");
+        let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
+        let copts = CacheOptions {
+            tile: 8,
+            ..f16_options(w, h)
+        };
+        drop(TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap());
+        let file = stack_file(&dir);
+        let clean = fs::read(&file).unwrap();
+        let g = TileGrid::new(w, h, 8);
+        // One byte of light block 1 of tile 7; then one byte of the scale of block 0 of tile 3.
+        let data_at = HEADER_BYTES + g.first_pixel(7) * n * 6 + 2 * 64 * 6 + 20;
+        let (hd, _) = read_header(&file).unwrap().unwrap();
+        let scale_at = hd.scales_offset() as usize + 4 * 3;
+        for at in [data_at, scale_at] {
+            let mut b = clean.clone();
+            b[at] ^= 1;
+            fs::write(&file, &b).unwrap();
+            let (cache, info) =
+                TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
+            assert_eq!(
+                (
+                    info.hit,
+                    info.blocks_corrupt,
+                    info.blocks_repaired,
+                    info.images_decoded
+                ),
+                (false, 1, 1, 2),
+                "byte {at}: {info:?}"
+            );
+            close_to_stack(&cache, &ds);
+            drop(cache);
+            assert_eq!(
+                fs::read(&file).unwrap(),
+                clean,
+                "repaired in place, byte {at}"
+            );
+        }
     }
 }
