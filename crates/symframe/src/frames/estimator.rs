@@ -523,11 +523,7 @@ impl<'a> Estimator<'a> {
                 _ => return e,
             },
         };
-        let status = if confidence < self.params.min_confidence {
-            PixelStatus::Culled
-        } else {
-            PixelStatus::Estimated
-        };
+        let status = self.status_of(confidence);
         PixelEstimate {
             status,
             source,
@@ -803,11 +799,7 @@ impl<'a> Estimator<'a> {
             };
 
         let confidence = self.confidence(slice, n, &term_n, sd_n + sd_nt + sd_nb);
-        let status = if confidence < self.params.min_confidence {
-            PixelStatus::Culled
-        } else {
-            PixelStatus::Estimated
-        };
+        let status = self.status_of(confidence);
         let keep = status == PixelStatus::Estimated;
         PixelEstimate {
             status,
@@ -868,11 +860,7 @@ impl<'a> Estimator<'a> {
         let tangent =
             (self.params.tangents && anisotropy >= threshold && resolved).then_some(f.tangent);
         let confidence = self.confidence(slice, f.normal, term_n, f.residual);
-        let status = if confidence < self.params.min_confidence {
-            PixelStatus::Culled
-        } else {
-            PixelStatus::Estimated
-        };
+        let status = self.status_of(confidence);
         let keep = status == PixelStatus::Estimated;
         PixelEstimate {
             status,
@@ -883,6 +871,15 @@ impl<'a> Estimator<'a> {
             anisotropy: anisotropy as f32,
             residual: [sd_n, f.residual, 0.0],
             evals,
+        }
+    }
+
+    /// A pixel's status for its `confidence`: culled under the user's threshold.
+    fn status_of(&self, confidence: f32) -> PixelStatus {
+        if confidence < self.params.min_confidence {
+            PixelStatus::Culled
+        } else {
+            PixelStatus::Estimated
         }
     }
 
