@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::baselines::{highlight_peak, woodham_robust_pixel, BaselineParams, BaselinePixel};
 use crate::error::{Error, Result};
-use crate::frames::highlight::highlight_moments;
+use crate::frames::highlight::{highlight_moments, HighlightMoments};
 use crate::frames::lobe::{fit_lobe, LobeFit, LobeScratch, LobeStart};
 use crate::frames::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::frames::optim::{nelder_mead, NelderMeadOptions};
@@ -330,12 +330,12 @@ impl<'a> Estimator<'a> {
 
     /// The normal of a diffuse pixel's robust Lambertian fit, when the fit explains the samples
     /// (uncentred R^2 at least [`DIFFUSE_CENTRE_FIT`]) and leaves less than
-    /// [`AUTO_SPECULAR_SHARE`] of the well-lit signal's energy unexplained.
-    fn diffuse_centre(&self, slice: &[f32], fit: &BaselinePixel) -> Option<DVec3> {
-        let rig = self.rig;
+    /// [`AUTO_SPECULAR_SHARE`] of the well-lit signal's energy unexplained (`share`, the
+    /// [`unexplained_share`] at the fit's normal).
+    fn diffuse_centre(&self, fit: &BaselinePixel, share: Option<f64>) -> Option<DVec3> {
         fit.normal
             .filter(|_| fit.confidence as f64 >= DIFFUSE_CENTRE_FIT)
-            .filter(|&n| unexplained_share(rig, slice, n) < AUTO_SPECULAR_SHARE)
+            .filter(|_| share.is_some_and(|s| s < AUTO_SPECULAR_SHARE))
     }
 
     /// The search's answer `found`, unless one of `starts` has a clearly lower `SD_n` on the full
@@ -401,13 +401,19 @@ impl<'a> Estimator<'a> {
         // reconstruction of the slice: the lobe that explains the samples best is centred on
         // the normal (docs/method.md, "Lobe fit"). Where no lobe of the family explains the
         // pixel (interreflections, a BRDF outside the family), the search decides.
-        // A pixel its Lambertian fit explains to the noise floor has no lobe to find.
-        let pure_diffuse = fit
+        let auto = self.params.cosine == CosineMode::Auto;
+        let moments = highlight_moments(slice, self.rig.halfway_in_camera());
+        // Under the default measure, the share of the energy the fit's Lambertian term leaves
+        // unexplained, once: the diffuse tests and the lobe-over-diffuse rules read it.
+        let share = fit
             .normal
-            .filter(|_| fit.confidence as f64 >= DIFFUSE_CENTRE_FIT)
-            .is_some_and(|n| unexplained_share(self.rig, slice, n) < PURE_DIFFUSE_SHARE);
-        let lobe = if self.params.cosine == CosineMode::Auto && !pure_diffuse {
-            highlight_moments(slice, self.rig.halfway_in_camera())
+            .filter(|_| auto)
+            .map(|n| unexplained_share(self.rig, slice, n));
+        // A pixel its Lambertian fit explains to the noise floor has no lobe to find.
+        let pure_diffuse = fit.confidence as f64 >= DIFFUSE_CENTRE_FIT
+            && share.is_some_and(|s| s < PURE_DIFFUSE_SHARE);
+        let lobe = if auto && !pure_diffuse {
+            moments
                 .and_then(|m| self.lobe_fit(slice, m.normal, m.tangent, m.radius, lobe))
                 .filter(|f| f.residual < LOBE_EXPLAINS)
         } else {
@@ -415,12 +421,14 @@ impl<'a> Estimator<'a> {
         };
         match self.params.interpolation {
             Interpolation::Exact => {
-                let e = self.solve(slice, &ExactObjective::new(self.rig, slice), &fit, lobe);
-                self.or_fallback(e, slice, &fit, lobe.as_ref())
+                let objective = ExactObjective::new(self.rig, slice);
+                let e = self.solve(slice, &objective, &fit, share, moments, lobe);
+                self.or_fallback(e, &fit, share, moments, lobe.as_ref())
             }
             Interpolation::Fast => {
-                let e = self.solve(slice, &fast.prepare(self.rig, slice), &fit, lobe);
-                self.or_fallback(e, slice, &fit, lobe.as_ref())
+                let objective = fast.prepare(self.rig, slice);
+                let e = self.solve(slice, &objective, &fit, share, moments, lobe);
+                self.or_fallback(e, &fit, share, moments, lobe.as_ref())
             }
         }
     }
@@ -484,14 +492,14 @@ impl<'a> Estimator<'a> {
     fn or_fallback(
         &self,
         e: PixelEstimate,
-        slice: &[f32],
         lambert: &BaselinePixel,
+        share: Option<f64>,
+        moments: Option<HighlightMoments>,
         lobe: Option<&LobeFit>,
     ) -> PixelEstimate {
         if e.status != PixelStatus::Discarded || self.params.fallback == Fallback::None {
             return e;
         }
-        let rig = self.rig;
         // The lobe where it explains the pixel much better than a diffuse term (the rule that
         // holds within reach), then the diffuse term, then the highlight.
         let diffuse = lambert
@@ -499,9 +507,9 @@ impl<'a> Estimator<'a> {
             .filter(|_| lambert.confidence as f64 >= FALLBACK_DIFFUSE_FIT);
         let lobe = lobe.filter(|f| {
             f.normal.z > 0.0
-                && diffuse.is_none_or(|n| {
-                    f.residual < LOBE_OVER_DIFFUSE * unexplained_share(rig, slice, n)
-                })
+                && diffuse
+                    .and(share)
+                    .is_none_or(|s| f.residual < LOBE_OVER_DIFFUSE * s)
         });
         let (source, normal, confidence) = match (lobe, diffuse) {
             (Some(f), _) => (
@@ -514,7 +522,7 @@ impl<'a> Estimator<'a> {
                 n,
                 FALLBACK_CONFIDENCE * lambert.confidence,
             ),
-            (None, None) => match highlight_moments(slice, rig.halfway_in_camera()) {
+            (None, None) => match moments {
                 Some(m) if m.normal.z > 0.0 => (
                     PixelSource::Highlight,
                     m.normal,
@@ -533,12 +541,15 @@ impl<'a> Estimator<'a> {
         }
     }
 
-    /// The estimate of one pixel with a given objective of its slice.
+    /// The estimate of one pixel with a given objective of its slice; `share` (the Lambertian
+    /// term's unexplained share, default measure only) and `moments` as computed once per pixel.
     fn solve<O: Objective>(
         &self,
         slice: &[f32],
         objective: &O,
         fit: &BaselinePixel,
+        share: Option<f64>,
+        moments: Option<HighlightMoments>,
         lobe: Option<LobeFit>,
     ) -> PixelEstimate {
         let rig = self.rig;
@@ -572,10 +583,9 @@ impl<'a> Estimator<'a> {
                 term.count,
             )
         };
-        let moments = highlight_moments(slice, rig.halfway_in_camera());
         let mut source = PixelSource::Symmetry;
         let diffuse_centre = if self.params.cosine == CosineMode::Auto {
-            self.diffuse_centre(slice, fit)
+            self.diffuse_centre(fit, share)
         } else {
             None
         };
@@ -600,8 +610,8 @@ impl<'a> Estimator<'a> {
             };
         // A lobe explains a pixel a diffuse term explains too only where it leaves much less
         // unexplained: a broad lobe passes the diffuse test, and biases the Lambertian normal.
-        let lobe = lobe.filter(|f| match diffuse_centre {
-            Some(m) => f.residual < LOBE_OVER_DIFFUSE * unexplained_share(rig, slice, m),
+        let lobe = lobe.filter(|f| match diffuse_centre.and(share) {
+            Some(s) => f.residual < LOBE_OVER_DIFFUSE * s,
             None => true,
         });
         let n = if let Some(f) = lobe {

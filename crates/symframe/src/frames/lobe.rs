@@ -1,14 +1,16 @@
 //! A symmetric lobe fitted to a pixel's samples: the smooth reconstruction of the slice for
-//! rigs whose lights are too far apart for the piecewise-linear one (docs/method.md, "Sparse
-//! rigs").
+//! rigs whose lights are too far apart for the piecewise-linear one (docs/method.md, "Lobe
+//! fit").
 //!
 //! The model is a diffuse term plus a lobe symmetric about the two planes of the frame
 //! `(n, t, b)`, over the pixel's grey values:
 //!
-//! `I(l) = d (n.l)+ + s (n.l)^m L(h)`, `L(h) = (1 + q / k)^-k / (h.n)^4` where `n.l > 0`,
+//! `I(l) = d (n.l)+ + (s1 + s2 (1 - h.v)^5) G1(n.l) (n.l)^m L(h)`,
+//! `L(h) = (1 + q / k)^-k / (h.n)^4` where `n.l > 0`,
 //! `q = (h.t / (h.n) / a_t)^2 + (h.b / (h.n) / a_b)^2`
 //!
-//! (`h` the halfway vector of `l` and the view; `q` in slope space). At `k = 2` the lobe is
+//! (`h` the halfway vector of `l` and the view; `q` in slope space; `G1` Smith's masking,
+//! `s1 + s2 (1 - h.v)^5` Schlick's Fresnel in linear form). At `k = 2` the lobe is
 //! GGX's distribution of normals; as `k` grows it tends to Beckmann's; `m` is the lobe's
 //! foreshortening (0 for microfacet models, whose `1 / (n.l)` cancels the cosine; 1/2 for
 //! Ward's; 1 for Phong-like lobes), so the family covers the lobes a measured slice shows
@@ -16,10 +18,10 @@
 //! the lobe is mirror-symmetric about the planes `(n, t)` and `(n, b)` (the foreshortening
 //! breaks it only as the paper's cross-multiplied cosines undo): the frame that lets it
 //! explain the samples best is the frame about which the samples are most symmetric, read
-//! through a smooth reconstruction instead of the triangulation. `d` and `s` enter linearly and
+//! through a smooth reconstruction instead of the triangulation. `d`, `s1`, `s2` enter linearly and
 //! are solved in closed form (variable projection); the seven others (two for `n`, the tangent
 //! angle, `ln a_t`, `ln a_b`, `ln k`, `m`) by Levenberg-Marquardt from the highlight's moments, over
-//! an evenly spread subset of the lights plus every light of the highlight (the lobe's shape
+//! an evenly spread subset of the lights plus the lights of the highlight (the lobe's shape
 //! is read there; the rest fix the diffuse term).
 
 use glam::DVec3;
@@ -52,7 +54,7 @@ pub struct LobeFit {
     pub shape: f64,
     /// Foreshortening exponent `m`.
     pub foreshortening: f64,
-    /// Diffuse and lobe coefficients (grey, sum of the three channels).
+    /// The diffuse coefficient (grey, sum of the three channels, as the lobe's).
     pub diffuse: f64,
     /// The lobe's coefficient at normal incidence (`s f0`).
     pub specular: f64,
@@ -242,7 +244,7 @@ const HIGHLIGHT_SHARE: f64 = 0.02;
 /// Levenberg-Marquardt iterations at most.
 const MAX_ITERATIONS: u32 = 60;
 
-/// Finite-difference steps of the six parameters.
+/// Finite-difference steps of the seven parameters.
 const STEPS: [f64; P] = [1e-5, 1e-5, 1e-4, 1e-4, 1e-4, 1e-4, 1e-4];
 
 /// A fit leaving more than this share of the energy unexplained is retried from other starts
@@ -258,7 +260,7 @@ pub struct LobeScratch {
     r: Vec<f64>,
     trial: Vec<f64>,
     jacobian: Vec<f64>,
-    in_spread: Vec<bool>,
+    chosen: Vec<bool>,
 }
 
 /// Where the fit starts: a normal, a tangent and the widths along it and across (slope units).
@@ -339,11 +341,8 @@ const SHADOW_LEVEL: f64 = 1e-3;
 /// The parameters a microfacet lobe is fitted with (`m = 0`).
 const MICROFACET: [bool; P] = [true, true, true, true, true, true, false];
 
-/// The foreshortening exponent is kept where it divides the unexplained energy by this...
-const FORESHORTENING_GAIN: f64 = 1.0;
-
-/// ...and is looked for only where the microfacet lobe leaves this share unexplained (times
-/// the gain).
+/// The foreshortening exponent is looked for only where the microfacet lobe leaves more than
+/// this share of the energy unexplained.
 const FORESHORTENING_FLOOR: f64 = 1e-6;
 
 /// Solves `a x = b` for a symmetric positive definite `a` (Cholesky); `None` if it is not.
@@ -521,25 +520,25 @@ pub fn fit_lobe(
         r,
         trial,
         jacobian,
-        in_spread,
+        chosen,
     } = scratch;
-    in_spread.clear();
-    in_spread.resize(lights.len(), false);
+    chosen.clear();
+    chosen.resize(lights.len(), false);
     for &j in spread.iter().take(SPREAD_LIGHTS) {
-        in_spread[j as usize] = true;
+        chosen[j as usize] = true;
     }
     // A broad highlight under a dense rig holds hundreds of lights: at most HIGHLIGHT_LIGHTS of
     // them are read, the first in the spread order (so evenly over the highlight).
     let mut highlight = 0;
     for &j in spread {
         let j = j as usize;
-        if in_spread[j] || !grey(j).is_some_and(|v| v >= HIGHLIGHT_SHARE * max) {
+        if chosen[j] || !grey(j).is_some_and(|v| v >= HIGHLIGHT_SHARE * max) {
             continue;
         }
         if highlight == HIGHLIGHT_LIGHTS {
             break;
         }
-        in_spread[j] = true;
+        chosen[j] = true;
         highlight += 1;
     }
     sub_lights.clear();
@@ -547,7 +546,7 @@ pub fn fit_lobe(
     y.clear();
     for j in 0..lights.len() {
         let Some(v) = grey(j) else { continue };
-        if in_spread[j] {
+        if chosen[j] {
             sub_lights.push(lights[j]);
             sub_halfways.push(halfways[j]);
             y.push(v);
@@ -652,13 +651,12 @@ pub fn fit_lobe(
         y,
     };
     // A lobe that is not a microfacet one (Ward's, Phong's) leaves a foreshortening the model
-    // above lacks: free `m`, and keep it only where it explains much more (for broad microfacet
-    // lobes `m` would otherwise trade against the normal to absorb Fresnel's small slope).
-    if cost > FORESHORTENING_GAIN * FORESHORTENING_FLOOR * syy {
+    // above lacks: free `m` (from the microfacet answer), and keep it where it explains more.
+    if cost > FORESHORTENING_FLOOR * syy {
         let (xm, cost_m, e) =
             levenberg_marquardt(&data, s.normal, x, [true; P], r, trial, jacobian);
         evals += e;
-        if cost_m * FORESHORTENING_GAIN < cost {
+        if cost_m < cost {
             x = xm;
         }
     }
