@@ -629,9 +629,9 @@ fn levenberg_marquardt(
             let i = 3 + k;
             if (state.shape[k] <= lo && rhs[i] < 0.0) || (state.shape[k] >= hi && rhs[i] > 0.0) {
                 rhs[i] = 0.0;
-                for j in 0..P {
-                    jtj[i][j] = 0.0;
-                    jtj[j][i] = 0.0;
+                jtj[i] = [0.0; P];
+                for row in jtj.iter_mut() {
+                    row[i] = 0.0;
                 }
             }
         }
