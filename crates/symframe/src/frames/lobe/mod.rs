@@ -28,6 +28,11 @@ use glam::{DQuat, DVec3};
 
 use crate::geometry::tangent_basis;
 
+mod kernel;
+mod lanes;
+
+use kernel::Subset;
+
 /// Range of the lobe widths `a_t`, `a_b` (slope units): below, a lobe is a single sample's
 /// spike; above, no highlight is left to locate.
 const ALPHA_RANGE: (f64, f64) = (0.004, 1.5);
@@ -167,76 +172,6 @@ impl Model {
             shape: s.shape[2].exp().clamp(SHAPE_RANGE.0, SHAPE_RANGE.1),
             foreshortening: s.shape[3].clamp(FORESHORTENING_RANGE.0, FORESHORTENING_RANGE.1),
         }
-    }
-
-    /// The lobe `L(h)` for a light of cosine `nl` with the normal (0 where `nl <= 0`).
-    #[inline]
-    fn lobe(&self, h: DVec3, nl: f64) -> f64 {
-        let hn = h.dot(self.normal);
-        if nl <= 0.0 || hn <= 1e-3 {
-            return 0.0;
-        }
-        let (x, y) = (h.dot(self.t) / hn, h.dot(self.b) / hn);
-        let q = x * x * self.inv_a2[0] + y * y * self.inv_a2[1];
-        let hn2 = hn * hn;
-        // Smith's masking of the light for a GGX surface of the lobe's mean width: microfacet
-        // lobes dim towards grazing lights by this much (the view's factor is the same for all).
-        let masking = 2.0 * nl / (nl + (self.alpha2 + (1.0 - self.alpha2) * nl * nl).sqrt());
-        // (1 + q/k)^-k (n.l)^m as one exponential: two powers cost twice as much (and `ln_1p`
-        // three times `ln`; near q = 0 the lobe is ~1 and the absolute error ~1e-15).
-        let mut ln_value = -self.shape * (1.0 + q / self.shape).ln();
-        if self.foreshortening != 0.0 {
-            ln_value += self.foreshortening * nl.ln();
-        }
-        ln_value.exp() * masking / (hn2 * hn2)
-    }
-
-    /// The lobe and the derivatives of its logarithm with respect to the seven parameters
-    /// (the frame's rotations about `t`, `b`, `n`, then the shape's), for a light `l` with
-    /// `nl = n.l > 0`; `None` where the lobe is 0.
-    #[inline]
-    fn lobe_gradient(&self, l: DVec3, h: DVec3, nl: f64) -> Option<(f64, [f64; P])> {
-        let hn = h.dot(self.normal);
-        if hn <= 1e-3 {
-            return None;
-        }
-        let (ht, hb) = (h.dot(self.t), h.dot(self.b));
-        let (lt, lb) = (l.dot(self.t), l.dot(self.b));
-        let (x, y) = (ht / hn, hb / hn);
-        let (qt, qb) = (x * x * self.inv_a2[0], y * y * self.inv_a2[1]);
-        let q = qt + qb;
-        let base = 1.0 + q / self.shape;
-        let ln_base = base.ln();
-        let ln_nl = nl.ln();
-        let root = (self.alpha2 + (1.0 - self.alpha2) * nl * nl).sqrt();
-        let masking = 2.0 * nl / (nl + root);
-        let hn2 = hn * hn;
-        let value = (-self.shape * ln_base + self.foreshortening * ln_nl).exp() * masking
-            / (hn2 * hn2);
-        // d ln L / dq, and d ln L / d(n.l) through the masking and the foreshortening.
-        let by_q = -1.0 / base;
-        let by_nl = 1.0 / nl - (1.0 + (1.0 - self.alpha2) * nl / root) / (nl + root)
-            + self.foreshortening / nl;
-        // A rotation w = (w_t, w_b, w_n) of the frame moves n by w x n = w_b t - w_t b,
-        // t by w_n b - w_b n, and b by w_t n - w_n t.
-        let d_nl = [-lb, lt, 0.0];
-        let d_hn = [-hb, ht, 0.0];
-        let d_ht = [0.0, -hn, hb];
-        let d_hb = [hn, 0.0, -ht];
-        let mut g = [0.0; P];
-        for i in 0..3 {
-            let dx = (d_ht[i] - x * d_hn[i]) / hn;
-            let dy = (d_hb[i] - y * d_hn[i]) / hn;
-            let dq = 2.0 * (x * self.inv_a2[0] * dx + y * self.inv_a2[1] * dy);
-            g[i] = by_q * dq + by_nl * d_nl[i] - 4.0 * d_hn[i] / hn;
-        }
-        // The masking reads the widths' product: d ln M / d ln a = a_t a_b d ln M / d(a_t a_b).
-        let by_width = -(1.0 - nl * nl) / (2.0 * root * (nl + root)) * self.alpha2;
-        g[3] = by_q * (-2.0 * qt) + by_width;
-        g[4] = by_q * (-2.0 * qb) + by_width;
-        g[5] = self.shape * (q / self.shape / base - ln_base);
-        g[6] = ln_nl;
-        Some((value, g))
     }
 }
 
@@ -389,80 +324,56 @@ const COARSE_HIGHLIGHT: usize = 128;
 pub struct LobeScratch {
     fine: Subset,
     coarse: Subset,
-    r: Vec<f64>,
+    buffers: Buffers,
     chosen: Vec<u8>,
 }
 
-/// The samples of one subset of the lights (grey values, lights and halfway vectors).
+/// Per-sample work buffers: the lobe's values and the residuals.
 #[derive(Debug, Clone, Default)]
-struct Subset {
-    lights: Vec<DVec3>,
-    halfways: Vec<DVec3>,
-    y: Vec<f64>,
+struct Buffers {
+    lobe: Vec<f64>,
+    r: Vec<f64>,
 }
 
-impl Subset {
-    fn clear(&mut self) {
-        self.lights.clear();
-        self.halfways.clear();
-        self.y.clear();
-    }
-
-    fn push(&mut self, l: DVec3, h: DVec3, y: f64) {
-        self.lights.push(l);
-        self.halfways.push(h);
-        self.y.push(y);
-    }
-
-    fn samples(&self) -> Samples<'_> {
-        Samples {
-            lights: &self.lights,
-            halfways: &self.halfways,
-            y: &self.y,
-        }
-    }
-
-    fn energy(&self) -> f64 {
-        self.y.iter().map(|v| v * v).sum()
-    }
-
-    /// Leaves out the samples in cast shadow under `model`: light is taken away where the lobe
-    /// and the diffuse term predict it, so samples far below a clear prediction, from lights
-    /// well above the horizon, go (interreflections add light, and stay). Returns how many
-    /// went; `None` where fewer than eight samples would be left.
-    fn trim_shadows(&mut self, model: &Model, r: &mut Vec<f64>) -> Option<usize> {
-        r.resize(self.y.len(), 0.0);
-        residuals(model, &self.samples(), r);
-        let max_prediction = self
-            .y
-            .iter()
-            .zip(r.iter())
-            .map(|(v, q)| v - q)
-            .fold(0.0, f64::max);
-        let mut kept = 0;
-        for j in 0..self.y.len() {
-            let prediction = self.y[j] - r[j];
-            let shadow = model.normal.dot(self.lights[j]) >= SHADOW_MIN_COSINE
-                && prediction >= SHADOW_LEVEL * max_prediction
-                && self.y[j] < SHADOW_FRACTION * prediction;
-            if !shadow {
-                self.lights[kept] = self.lights[j];
-                self.halfways[kept] = self.halfways[j];
-                self.y[kept] = self.y[j];
-                kept += 1;
-            }
-        }
-        let removed = self.y.len() - kept;
-        if removed > 0 && kept < 8 {
-            return None;
-        }
-        self.lights.truncate(kept);
-        self.halfways.truncate(kept);
-        self.y.truncate(kept);
-        r.truncate(kept);
-        Some(removed)
+impl Buffers {
+    /// Makes the buffers as long as the subset's samples with the padding.
+    fn fit(&mut self, data: &Subset) {
+        self.lobe.resize(data.padded_len(), 0.0);
+        self.r.resize(data.padded_len(), 0.0);
     }
 }
+
+/// Leaves out the samples of `data` in cast shadow under `model`: light is taken away where
+/// the lobe and the diffuse term predict it, so samples far below a clear prediction, from
+/// lights well above the horizon, go (interreflections add light, and stay). Returns how many
+/// went; `None` where fewer than eight samples would be left.
+fn trim_shadows(data: &mut Subset, model: &Model, buffers: &mut Buffers) -> Option<usize> {
+    buffers.fit(data);
+    let Buffers { lobe, r } = buffers;
+    residuals(model, data, lobe, r);
+    let max_prediction = (0..data.len())
+        .map(|j| data.value(j) - r[j])
+        .fold(0.0, f64::max);
+    let shadow = |j: usize| {
+        let prediction = data.value(j) - r[j];
+        model.normal.dot(data.light(j)) >= SHADOW_MIN_COSINE
+            && prediction >= SHADOW_LEVEL * max_prediction
+            && data.value(j) < SHADOW_FRACTION * prediction
+    };
+    let removed = (0..data.len()).filter(|&j| shadow(j)).count();
+    if removed > 0 && data.len() - removed < 8 {
+        return None;
+    }
+    if removed > 0 {
+        let keep: Vec<bool> = (0..data.len()).map(|j| !shadow(j)).collect();
+        data.retain(|j| keep[j]);
+    }
+    Some(removed)
+}
+
+/// Widths of the broad starts tried where the highlight's own fail (slope units, along and
+/// across the highlight's axis).
+const BROAD_START: (f64, f64) = (0.3, 0.1);
 
 /// Where the fit starts: a normal, a tangent and the widths along it and across (slope units).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -475,70 +386,21 @@ pub struct LobeStart {
     pub alpha: [f64; 2],
 }
 
-/// Schlick's Fresnel weight `(1 - h.v)^5` of a halfway vector (view `+z`): the lobe's
-/// second basis function is the lobe times it, so that `s1 + s2 (1 - h.v)^5 = s (f0 + (1 - f0)
-/// (1 - h.v)^5)` brightens grazing reflections as a dielectric's Fresnel term does (and
-/// barely at all for a metal's, `s2 ~ 0`), with both coefficients linear.
-#[inline]
-fn schlick(h: DVec3) -> f64 {
-    let c = (1.0 - h.z).clamp(0.0, 1.0);
-    let c2 = c * c;
-    c2 * c2 * c
-}
-
 /// The linear part at `m`: the basis functions' sums over the samples and their non-negative
 /// least squares (the residual sum of squares from the sums, without a second pass); the
 /// lobe's value per sample into `lobe`.
-fn project(m: &Model, samples: &Samples, lobe: &mut [f64]) -> Linear {
-    let mut g = [[0.0f64; 3]; 3];
-    let mut p = [0.0f64; 3];
-    let mut syy = 0.0;
-    for ((&l, &h), (&v, slot)) in samples
-        .lights
-        .iter()
-        .zip(samples.halfways)
-        .zip(samples.y.iter().zip(lobe.iter_mut()))
-    {
-        let nl = m.normal.dot(l);
-        let b = m.lobe(h, nl);
-        let f = [nl.max(0.0), b, b * schlick(h)];
-        for a in 0..3 {
-            p[a] += f[a] * v;
-            for c in a..3 {
-                g[a][c] += f[a] * f[c];
-            }
-        }
-        syy += v * v;
-        *slot = b;
-    }
-    let g = [
-        [g[0][0], g[0][1], g[0][2]],
-        [g[0][1], g[1][1], g[1][2]],
-        [g[0][2], g[1][2], g[2][2]],
-    ];
-    let mut linear = nnls3(g, p, syy);
+fn project(m: &Model, samples: &Subset, lobe: &mut [f64]) -> Linear {
+    let sums = kernel::sums(m, samples, lobe);
+    let mut linear = nnls3(sums.gram, sums.products, sums.energy);
     linear.cost = linear.cost.max(0.0);
     linear
 }
 
-/// The model's residuals `y - d a - s1 b - s2 b F` at `m` over the samples into `r`; returns
-/// the coefficients `[d, s1, s2]` and the sum of squares.
-fn residuals(m: &Model, samples: &Samples, r: &mut [f64]) -> ([f64; 3], f64) {
-    let x = project(m, samples, r).coefficients;
-    let mut sum = 0.0;
-    for (((&l, &h), &v), slot) in samples
-        .lights
-        .iter()
-        .zip(samples.halfways)
-        .zip(samples.y)
-        .zip(r.iter_mut())
-    {
-        let a = m.normal.dot(l).max(0.0);
-        let b = *slot;
-        *slot = v - x[0] * a - b * (x[1] + x[2] * schlick(h));
-        sum += *slot * *slot;
-    }
-    (x, sum)
+/// The model's residuals `y - d a - s1 L - s2 L F` at `m` over the samples into `r` (one per
+/// sample with the padding; `lobe`, as long, gets the lobe's values); returns the coefficients `[d, s1, s2]` and the sum of squares.
+fn residuals(m: &Model, samples: &Subset, lobe: &mut [f64], r: &mut [f64]) -> ([f64; 3], f64) {
+    let x = project(m, samples, lobe).coefficients;
+    (x, kernel::residuals(m, samples, x, lobe, r))
 }
 
 /// The Gauss-Newton system of the reduced (variable-projection) problem at `m`, whose linear
@@ -553,52 +415,10 @@ fn normal_equations(
     m: &Model,
     linear: &Linear,
     free: [bool; P],
-    samples: &Samples,
+    samples: &Subset,
 ) -> ([[f64; P]; P], [f64; P]) {
-    let c = linear.coefficients;
-    let mut vtv = [[0.0f64; P]; P];
-    let mut vtr = [0.0f64; P];
-    // The basis functions' products with v (rows: d, s1, s2).
-    let mut ftv = [[0.0f64; P]; 3];
-    for ((&l, &h), &y) in samples.lights.iter().zip(samples.halfways).zip(samples.y) {
-        let nl = m.normal.dot(l);
-        if nl <= 0.0 {
-            // Nothing here depends on the parameters (to first order).
-            continue;
-        }
-        let mut v = [0.0; P];
-        v[0] = -c[0] * l.dot(m.b);
-        v[1] = c[0] * l.dot(m.t);
-        let fresnel = schlick(h);
-        let mut f = [nl, 0.0, 0.0];
-        let mut prediction = c[0] * nl;
-        if let Some((lobe, g)) = m.lobe_gradient(l, h, nl) {
-            let s = (c[1] + c[2] * fresnel) * lobe;
-            for (vi, gi) in v.iter_mut().zip(g) {
-                *vi += s * gi;
-            }
-            f[1] = lobe;
-            f[2] = lobe * fresnel;
-            prediction += s;
-        }
-        for (vi, &on) in v.iter_mut().zip(&free) {
-            if !on {
-                *vi = 0.0;
-            }
-        }
-        let r = y - prediction;
-        for a in 0..P {
-            vtr[a] += v[a] * r;
-            for b in a..P {
-                vtv[a][b] += v[a] * v[b];
-            }
-        }
-        for (row, fk) in ftv.iter_mut().zip(f) {
-            for (e, va) in row.iter_mut().zip(v) {
-                *e += fk * va;
-            }
-        }
-    }
+    let kernel::GaussNewton { vtv, vtr, ftv } =
+        kernel::gauss_newton(m, samples, linear.coefficients, free);
     // J^T J = v^T v - (F_A^T v)^T (F_A^T F_A)^-1 (F_A^T v).
     let set = ActiveSet::of(linear.set);
     let mut solved = [[0.0f64; 3]; P];
@@ -675,23 +495,16 @@ fn solve_spd(mut a: [[f64; P]; P], mut b: [f64; P]) -> Option<[f64; P]> {
     b.iter().all(|v| v.is_finite()).then_some(b)
 }
 
-/// The samples one fit reads, in the scratch's buffers.
-struct Samples<'a> {
-    lights: &'a [DVec3],
-    halfways: &'a [DVec3],
-    y: &'a [f64],
-}
-
 /// Levenberg-Marquardt from `state` over the parameters marked `free`; returns the state,
 /// the sum of squares and the passes over the samples. `lobe` (one value per sample) is a work
 /// buffer.
 fn levenberg_marquardt(
-    samples: &Samples,
+    samples: &Subset,
     mut state: State,
     free: [bool; P],
     lobe: &mut [f64],
 ) -> (State, f64, u32) {
-    let syy: f64 = samples.y.iter().map(|v| v * v).sum();
+    let syy = samples.energy();
     let mut model = Model::of(&state);
     let mut linear = project(&model, samples, lobe);
     let mut lambda = 1e-3;
@@ -755,10 +568,10 @@ fn levenberg_marquardt(
 /// parameters that were free in it, and the passes over the samples.
 fn search_subset(
     data: &mut Subset,
-    starts: [LobeStart; 3],
-    r: &mut Vec<f64>,
+    starts: &[LobeStart],
+    buffers: &mut Buffers,
 ) -> Option<(State, [bool; P], u32)> {
-    r.resize(data.y.len(), 0.0);
+    buffers.fit(data);
     let syy = data.energy();
     let mut evals = 0;
     let mut best: Option<(State, f64)> = None;
@@ -766,7 +579,8 @@ fn search_subset(
         if k > 0 && best.is_some_and(|b| b.1 <= RETRY_RESIDUAL * syy) {
             break;
         }
-        let (state, cost, e) = levenberg_marquardt(&data.samples(), State::new(s), MICROFACET, r);
+        let (state, cost, e) =
+            levenberg_marquardt(data, State::new(s), MICROFACET, &mut buffers.lobe);
         evals += e;
         if best.is_none_or(|b| cost < b.1) {
             best = Some((state, cost));
@@ -774,9 +588,11 @@ fn search_subset(
     }
     let (mut state, mut cost) = best?;
     let mut syy = syy;
-    if data.trim_shadows(&Model::of(&state), r)? > 0 {
+    if trim_shadows(data, &Model::of(&state), buffers)? > 0 {
         syy = data.energy();
-        let (refit, refit_cost, e) = levenberg_marquardt(&data.samples(), state, MICROFACET, r);
+        buffers.fit(data);
+        let (refit, refit_cost, e) =
+            levenberg_marquardt(data, state, MICROFACET, &mut buffers.lobe);
         evals += e;
         (state, cost) = (refit, refit_cost);
     }
@@ -784,7 +600,7 @@ fn search_subset(
     // above lacks: free `m` (from the microfacet answer), and keep it where it explains more.
     let mut free = MICROFACET;
     if cost > FORESHORTENING_FLOOR * syy {
-        let (free_m, cost_m, e) = levenberg_marquardt(&data.samples(), state, [true; P], r);
+        let (free_m, cost_m, e) = levenberg_marquardt(data, state, [true; P], &mut buffers.lobe);
         evals += e;
         if cost_m < cost {
             (state, free) = (free_m, [true; P]);
@@ -824,7 +640,7 @@ pub fn fit_lobe(
     let LobeScratch {
         fine,
         coarse,
-        r,
+        buffers,
         chosen,
     } = scratch;
     // 0: not read; 1: the fine subset; 2: the coarse one too.
@@ -858,7 +674,9 @@ pub fn fit_lobe(
             coarse.push(lights[j], halfways[j], v);
         }
     }
-    if coarse.y.len() < 8 {
+    fine.pad();
+    coarse.pad();
+    if coarse.len() < 8 {
         return None;
     }
     let swapped = LobeStart {
@@ -869,25 +687,45 @@ pub fn fit_lobe(
         normal: halfways[brightest],
         ..start
     };
-    let (mut state, free, mut evals) =
-        search_subset(coarse, [start, swapped, brightest_start], r)?;
+    // Broad lobes from the same centre, both ways: a highlight cut by the rig's edge (its peak
+    // outside the lights) has moments far narrower than the lobe, and a start that narrow
+    // converges to a spurious fit (measured: brushed metal under a 65-degree rig, normals at
+    // 35-55 degrees).
+    let broad = LobeStart {
+        alpha: [BROAD_START.0, BROAD_START.1],
+        ..start
+    };
+    let broad_swapped = LobeStart {
+        alpha: [BROAD_START.0, BROAD_START.1],
+        ..swapped
+    };
+    let mut starts = [start, swapped, brightest_start, broad, broad_swapped];
+    // The brightest sample is often the moments' centre already.
+    let distinct = brightest_start.normal.angle_between(start.normal) > 1e-3;
+    if !distinct {
+        starts[2] = broad_swapped;
+    }
+    let starts = &starts[..if distinct { 5 } else { 4 }];
+    // The coarse subset pays where it is much smaller than the whole one (dense rigs); under a
+    // sparse rig the search reads every light: a lobe sampled by few lights can alias in a
+    // subset (measured on 200 lights: more fits left unexplained).
+    let polish = fine.len() >= 2 * coarse.len();
+    let searched = if polish { &mut *coarse } else { &mut *fine };
+    let (mut state, free, mut evals) = search_subset(searched, starts, buffers)?;
     // The polish on the whole subset, from the coarse answer (a few iterations).
-    let polish = fine.y.len() > coarse.y.len();
     if polish {
-        fine.trim_shadows(&Model::of(&state), r)?;
-        let (polished, _, e) = levenberg_marquardt(&fine.samples(), state, free, r);
+        trim_shadows(fine, &Model::of(&state), buffers)?;
+        buffers.fit(fine);
+        let (polished, _, e) = levenberg_marquardt(fine, state, free, &mut buffers.lobe);
         evals += e;
         state = polished;
     }
-    let data = if polish {
-        &*fine
-    } else {
-        &*coarse
-    };
+    let data = &*fine;
     let syy = data.energy();
-    r.resize(data.y.len(), 0.0);
+    buffers.fit(data);
     let m = Model::of(&state);
-    let ([diffuse, specular, fresnel], cost) = residuals(&m, &data.samples(), r);
+    let ([diffuse, specular, fresnel], cost) =
+        residuals(&m, data, &mut buffers.lobe, &mut buffers.r);
     let a = [m.inv_a2[0].powf(-0.5), m.inv_a2[1].powf(-0.5)];
     let (tangent, alpha) = if a[0] >= a[1] {
         (m.t, a)
@@ -998,44 +836,6 @@ mod tests {
             "{shadowed:?}"
         );
         assert!(shadowed.residual < 1e-3, "{shadowed:?}");
-    }
-
-    #[test]
-    fn the_lobe_gradient_matches_central_differences() {
-        let (n, t) = frame();
-        let state = State {
-            normal: n,
-            tangent: t,
-            shape: [0.3f64.ln(), 0.08f64.ln(), 3f64.ln(), 0.4],
-        };
-        let model = Model::of(&state);
-        let rig = Rig::new(&uniform_cone_lights(60, 65.0), RigOptions::default()).unwrap();
-        let mut checked = 0;
-        for (&l, &h) in rig.lights_in_camera().iter().zip(rig.halfway_in_camera()) {
-            let nl = n.dot(l);
-            let Some((value, g)) = model.lobe_gradient(l, h, nl) else {
-                continue;
-            };
-            if nl < 0.1 || value < 1e-6 {
-                continue;
-            }
-            assert!((value - model.lobe(h, nl)).abs() <= 1e-12 * value);
-            for (i, &gi) in g.iter().enumerate() {
-                let ln_lobe = |step: f64| {
-                    let mut d = [0.0; P];
-                    d[i] = step;
-                    let m = Model::of(&state.moved(&d));
-                    m.lobe(h, m.normal.dot(l)).ln()
-                };
-                let fd = (ln_lobe(1e-6) - ln_lobe(-1e-6)) / 2e-6;
-                assert!(
-                    (fd - gi).abs() <= 1e-5 * (1.0 + fd.abs()),
-                    "{i}: {fd} vs {gi}"
-                );
-            }
-            checked += 1;
-        }
-        assert!(checked > 20, "{checked}");
     }
 
     #[test]

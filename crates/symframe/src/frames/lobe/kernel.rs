@@ -1,0 +1,563 @@
+//! The lobe fit's loops over the samples: the sums the linear solve, the residuals and the
+//! Gauss-Newton system need, block by block of [`LANES`] samples.
+//!
+//! Written by hand for speed (measured: the fit is ~90% of the estimator's time on dense rigs):
+//! the samples are stored as columns (one array per coordinate, padded to whole blocks with
+//! empty samples of weight 0), and every block's terms are branch-free arithmetic on four lanes
+//! ([`F4`]), so they run as vector instructions; the block loops are compiled twice, for AVX2
+//! where the processor has it and for the baseline, with the same operations in the same order
+//! (identical results).
+
+use glam::DVec3;
+
+#[cfg(target_arch = "x86_64")]
+use super::lanes::Avx4;
+use super::lanes::{Lanes, F4, LANES};
+use super::{Model, P};
+
+/// The samples of one subset of the lights, as columns: light and halfway vectors (camera
+/// frame), Schlick's Fresnel weight of the halfway vector, the grey value and a weight (1 for a
+/// sample, 0 for the padding that completes the last block).
+#[derive(Debug, Clone, Default)]
+pub(super) struct Subset {
+    l: [Vec<f64>; 3],
+    h: [Vec<f64>; 3],
+    fresnel: Vec<f64>,
+    y: Vec<f64>,
+    w: Vec<f64>,
+    len: usize,
+}
+
+impl Subset {
+    pub(super) fn clear(&mut self) {
+        for v in self.columns() {
+            v.clear();
+        }
+        self.len = 0;
+    }
+
+    fn columns(&mut self) -> [&mut Vec<f64>; 9] {
+        let [lx, ly, lz] = &mut self.l;
+        let [hx, hy, hz] = &mut self.h;
+        [
+            lx,
+            ly,
+            lz,
+            hx,
+            hy,
+            hz,
+            &mut self.fresnel,
+            &mut self.y,
+            &mut self.w,
+        ]
+    }
+
+    /// Appends a sample (call [`Subset::pad`] once all are in).
+    pub(super) fn push(&mut self, l: DVec3, h: DVec3, y: f64) {
+        // Only whole samples are stored before the padding: drop the padding first.
+        self.truncate(self.len);
+        let values = [l.x, l.y, l.z, h.x, h.y, h.z, schlick(h), y, 1.0];
+        for (v, x) in self.columns().into_iter().zip(values) {
+            v.push(x);
+        }
+        self.len += 1;
+    }
+
+    /// Completes the last block with empty samples.
+    pub(super) fn pad(&mut self) {
+        let padded = self.len.div_ceil(LANES) * LANES;
+        // An empty sample: weight 0, no light, behind every normal the fit can reach.
+        let values = [0.0, 0.0, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0];
+        for (v, x) in self.columns().into_iter().zip(values) {
+            v.resize(padded, x);
+        }
+    }
+
+    fn truncate(&mut self, len: usize) {
+        for v in self.columns() {
+            v.truncate(len);
+        }
+    }
+
+    /// Number of samples (without the padding).
+    pub(super) fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Number of samples with the padding: the length of the per-sample buffers.
+    pub(super) fn padded_len(&self) -> usize {
+        self.y.len()
+    }
+
+    /// Light of sample `i`.
+    pub(super) fn light(&self, i: usize) -> DVec3 {
+        DVec3::new(self.l[0][i], self.l[1][i], self.l[2][i])
+    }
+
+    /// Grey value of sample `i`.
+    pub(super) fn value(&self, i: usize) -> f64 {
+        self.y[i]
+    }
+
+    /// Sum of the squared values.
+    pub(super) fn energy(&self) -> f64 {
+        self.y.iter().map(|v| v * v).sum()
+    }
+
+    /// Keeps the samples for which `keep(i)` holds, in order, and pads again.
+    pub(super) fn retain(&mut self, keep: impl Fn(usize) -> bool) {
+        let mut kept = 0;
+        for i in 0..self.len {
+            if keep(i) {
+                for v in self.columns() {
+                    v[kept] = v[i];
+                }
+                kept += 1;
+            }
+        }
+        self.len = kept;
+        self.truncate(kept);
+        self.pad();
+    }
+}
+
+/// Schlick's Fresnel weight `(1 - h.v)^5` of a halfway vector (view `+z`): the lobe's
+/// second basis function is the lobe times it, so that `s1 + s2 (1 - h.v)^5 = s (f0 + (1 - f0)
+/// (1 - h.v)^5)` brightens grazing reflections as a dielectric's Fresnel term does (and
+/// barely at all for a metal's, `s2 ~ 0`), with both coefficients linear.
+pub(super) fn schlick(h: DVec3) -> f64 {
+    let c = (1.0 - h.z).clamp(0.0, 1.0);
+    let c2 = c * c;
+    c2 * c2 * c
+}
+
+/// The model's constants as the loops read them.
+#[derive(Clone, Copy)]
+struct Frame {
+    n: [f64; 3],
+    t: [f64; 3],
+    b: [f64; 3],
+    inv_a2: [f64; 2],
+    alpha2: f64,
+    shape: f64,
+    foreshortening: f64,
+}
+
+impl Frame {
+    fn of(m: &Model) -> Self {
+        Self {
+            n: m.normal.to_array(),
+            t: m.t.to_array(),
+            b: m.b.to_array(),
+            inv_a2: m.inv_a2,
+            alpha2: m.alpha2,
+            shape: m.shape,
+            foreshortening: m.foreshortening,
+        }
+    }
+}
+
+/// A block's terms: the diffuse basis `a = (n.l)+`, the lobe `L`, and (used by the
+/// Gauss-Newton loop only; the other loops let the compiler drop them) the derivatives of
+/// `a` with respect to the frame's rotations about `t` and `b`, and of `ln L` with respect to
+/// the seven parameters (the frame's rotations about `t`, `b`, `n`, then `ln a_t`, `ln a_b`,
+/// `ln k`, `m`).
+struct Terms<V> {
+    a: V,
+    lobe: V,
+    d_a: [V; 2],
+    d_ln_lobe: [V; P],
+}
+
+#[inline(always)]
+fn dot<V: Lanes>(a: [f64; 3], b: [V; 3]) -> V {
+    b[0] * a[0] + b[1] * a[1] + b[2] * a[2]
+}
+
+/// A block of samples, as the loops read them.
+struct Block<V> {
+    l: [V; 3],
+    h: [V; 3],
+    fresnel: V,
+    y: V,
+    w: V,
+}
+
+impl Subset {
+    #[inline(always)]
+    fn block<V: Lanes>(&self, i: usize) -> Block<V> {
+        let load = |c: &Vec<f64>| V::load(c, i);
+        Block {
+            l: [load(&self.l[0]), load(&self.l[1]), load(&self.l[2])],
+            h: [load(&self.h[0]), load(&self.h[1]), load(&self.h[2])],
+            fresnel: load(&self.fresnel),
+            y: load(&self.y),
+            w: load(&self.w),
+        }
+    }
+}
+
+/// The terms of a block; `FORESHORTENED`: whether `m` may be non-zero (with `m = 0` the power
+/// of `n.l` is left out).
+#[inline(always)]
+fn terms<V: Lanes, const FORESHORTENED: bool>(f: &Frame, s: &Block<V>) -> Terms<V> {
+    let zero = V::splat(0.0);
+    let one = V::splat(1.0);
+    let nl = dot(f.n, s.l);
+    let (hn, ht, hb) = (dot(f.n, s.h), dot(f.t, s.h), dot(f.b, s.h));
+    let (lt, lb) = (dot(f.t, s.l), dot(f.b, s.l));
+    let lit = nl.gt(zero) & s.w.gt(zero);
+    let lobed = lit & hn.gt(V::splat(1e-3));
+    // Safe stand-ins where the sample is unlit (the results are masked out below).
+    let nl_s = V::select(lit, nl, one);
+    let hn_s = V::select(lobed, hn, one);
+    let (x, y) = (ht / hn_s, hb / hn_s);
+    let (qt, qb) = (x * x * f.inv_a2[0], y * y * f.inv_a2[1]);
+    let q = qt + qb;
+    let base = q * (1.0 / f.shape) + 1.0;
+    let ln_base = base.ln();
+    let ln_nl = if FORESHORTENED { nl_s.ln() } else { zero };
+    let root = (nl_s * nl_s * (1.0 - f.alpha2) + f.alpha2).sqrt();
+    // Smith's masking of the light for a GGX surface of the lobe's mean width: microfacet
+    // lobes dim towards grazing lights by this much (the view's factor is the same for all).
+    let masking = nl_s * 2.0 / (nl_s + root);
+    let hn2 = hn_s * hn_s;
+    let ln_power = if FORESHORTENED {
+        ln_base * -f.shape + ln_nl * f.foreshortening
+    } else {
+        ln_base * -f.shape
+    };
+    let value = ln_power.exp() * masking / (hn2 * hn2);
+    // d ln L / dq, and d ln L / d(n.l) through the masking and the foreshortening.
+    let by_q = -(one / base);
+    let mut by_nl = one / nl_s - (nl_s * (1.0 - f.alpha2) / root + 1.0) / (nl_s + root);
+    if FORESHORTENED {
+        by_nl = by_nl + one / nl_s * f.foreshortening;
+    }
+    // A rotation w = (w_t, w_b, w_n) of the frame moves n by w x n = w_b t - w_t b,
+    // t by w_n b - w_b n, and b by w_t n - w_n t.
+    let d_nl = [-lb, lt, zero];
+    let d_hn = [-hb, ht, zero];
+    let d_ht = [zero, -hn_s, hb];
+    let d_hb = [hn_s, zero, -ht];
+    let inv_hn = one / hn_s;
+    let mut g = [zero; P];
+    for k in 0..3 {
+        let dx = (d_ht[k] - x * d_hn[k]) * inv_hn;
+        let dy = (d_hb[k] - y * d_hn[k]) * inv_hn;
+        let dq = (x * dx * f.inv_a2[0] + y * dy * f.inv_a2[1]) * 2.0;
+        g[k] = by_q * dq + by_nl * d_nl[k] - d_hn[k] * inv_hn * 4.0;
+    }
+    // The masking reads the widths' product: d ln M / d ln a = a_t a_b d ln M / d(a_t a_b).
+    let by_width = -((one - nl_s * nl_s) / (root * 2.0 * (nl_s + root))) * f.alpha2;
+    g[3] = by_q * (qt * -2.0) + by_width;
+    g[4] = by_q * (qb * -2.0) + by_width;
+    g[5] = (q / base * (1.0 / f.shape) - ln_base) * f.shape;
+    g[6] = ln_nl;
+    Terms {
+        a: V::select(lit, nl * s.w, zero),
+        lobe: V::select(lobed, value * s.w, zero),
+        d_a: [
+            V::select(lit, -lb * s.w, zero),
+            V::select(lit, lt * s.w, zero),
+        ],
+        d_ln_lobe: g,
+    }
+}
+
+/// The basis functions' sums over the samples: the Gram matrix of `(a, L, L F)`, their
+/// products with the values, and the values' energy.
+pub(super) struct Sums {
+    pub(super) gram: [[f64; 3]; 3],
+    pub(super) products: [f64; 3],
+    pub(super) energy: f64,
+}
+
+#[inline(always)]
+fn sums_kernel<V: Lanes, const M: bool>(f: &Frame, s: &Subset, lobe: &mut [f64]) -> [f64; 10] {
+    let mut acc = [V::splat(0.0); 10];
+    for (i, out) in (0..s.padded_len())
+        .step_by(LANES)
+        .zip(lobe.chunks_exact_mut(LANES))
+    {
+        let b = s.block::<V>(i);
+        let t = terms::<V, M>(f, &b);
+        let (fa, fb, fc, y) = (t.a, t.lobe, t.lobe * b.fresnel, b.y);
+        fb.store(out);
+        for (slot, v) in acc.iter_mut().zip([
+            fa * fa,
+            fa * fb,
+            fa * fc,
+            fb * fb,
+            fb * fc,
+            fc * fc,
+            fa * y,
+            fb * y,
+            fc * y,
+            y * y,
+        ]) {
+            *slot = *slot + v;
+        }
+    }
+    acc.map(V::sum)
+}
+
+/// The basis functions' sums at `m` over the samples; the lobe's value per sample into `lobe`
+/// (one per sample with the padding).
+pub(super) fn sums(m: &Model, s: &Subset, lobe: &mut [f64]) -> Sums {
+    let f = Frame::of(m);
+    let foreshortened = m.foreshortening != 0.0;
+    let v = 'done: {
+        #[cfg(target_arch = "x86_64")]
+        {
+            #[target_feature(enable = "avx2")]
+            fn avx2<const M: bool>(f: &Frame, s: &Subset, lobe: &mut [f64]) -> [f64; 10] {
+                sums_kernel::<Avx4, M>(f, s, lobe)
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the processor supports AVX2 (checked just above).
+                break 'done unsafe {
+                    if foreshortened {
+                        avx2::<true>(&f, s, lobe)
+                    } else {
+                        avx2::<false>(&f, s, lobe)
+                    }
+                };
+            }
+        }
+        if foreshortened {
+            sums_kernel::<F4, true>(&f, s, lobe)
+        } else {
+            sums_kernel::<F4, false>(&f, s, lobe)
+        }
+    };
+    Sums {
+        gram: [[v[0], v[1], v[2]], [v[1], v[3], v[4]], [v[2], v[4], v[5]]],
+        products: [v[6], v[7], v[8]],
+        energy: v[9],
+    }
+}
+
+/// The residuals `y - d a - (s1 + s2 F) L` into `r` from the lobe's values `lobe` (as
+/// [`sums`] left them) and the coefficients `c`; returns their sum of squares.
+pub(super) fn residuals(m: &Model, s: &Subset, c: [f64; 3], lobe: &[f64], r: &mut [f64]) -> f64 {
+    let n = m.normal.to_array();
+    let mut sum = 0.0;
+    for i in 0..s.padded_len() {
+        let nl = n[0] * s.l[0][i] + n[1] * s.l[1][i] + n[2] * s.l[2][i];
+        let a = nl.max(0.0) * s.w[i];
+        r[i] = s.y[i] - c[0] * a - lobe[i] * (c[1] + c[2] * s.fresnel[i]);
+        sum += r[i] * r[i];
+    }
+    sum
+}
+
+/// The Gauss-Newton loop's sums at `m` with coefficients `c`: with `v_i` the derivative of the
+/// prediction with respect to parameter `i` (0 unless `free[i]`) and `r` the residual, `v^T v`,
+/// `v^T r` and the products `F^T v` of the basis functions `F = (a, L, L F)` with `v`.
+pub(super) struct GaussNewton {
+    pub(super) vtv: [[f64; P]; P],
+    pub(super) vtr: [f64; P],
+    pub(super) ftv: [[f64; P]; 3],
+}
+
+/// Entries of the upper triangle of `v^T v`.
+const TRIANGLE: usize = P * (P + 1) / 2;
+
+/// What [`gauss_newton_kernel`] sums: the triangle of `v^T v`, `v^T r`, `F^T v`.
+type GaussNewtonSums = ([f64; TRIANGLE], [f64; P], [[f64; P]; 3]);
+
+#[inline(always)]
+fn gauss_newton_kernel<V: Lanes, const M: bool>(
+    f: &Frame,
+    s: &Subset,
+    c: [f64; 3],
+    free: [f64; P],
+) -> GaussNewtonSums {
+    let zero = V::splat(0.0);
+    let mut vtv = [zero; TRIANGLE];
+    let mut vtr = [zero; P];
+    let mut ftv = [[zero; P]; 3];
+    for i in (0..s.padded_len()).step_by(LANES) {
+        let b = s.block::<V>(i);
+        let t = terms::<V, M>(f, &b);
+        let lobe = (b.fresnel * c[2] + c[1]) * t.lobe;
+        let mut v = [zero; P];
+        for (j, vj) in v.iter_mut().enumerate() {
+            *vj = lobe * t.d_ln_lobe[j] * free[j];
+        }
+        v[0] = v[0] + t.d_a[0] * (c[0] * free[0]);
+        v[1] = v[1] + t.d_a[1] * (c[0] * free[1]);
+        let r = b.y - t.a * c[0] - lobe;
+        let basis = [t.a, t.lobe, t.lobe * b.fresnel];
+        let mut e = 0;
+        for p in 0..P {
+            vtr[p] = vtr[p] + v[p] * r;
+            for q in p..P {
+                vtv[e] = vtv[e] + v[p] * v[q];
+                e += 1;
+            }
+        }
+        for (row, fb) in ftv.iter_mut().zip(basis) {
+            for (slot, vp) in row.iter_mut().zip(v) {
+                *slot = *slot + fb * vp;
+            }
+        }
+    }
+    (
+        vtv.map(V::sum),
+        vtr.map(V::sum),
+        ftv.map(|row| row.map(V::sum)),
+    )
+}
+
+/// The Gauss-Newton loop's sums at `m` with coefficients `c` over the parameters marked
+/// `free`, in one pass over the samples.
+pub(super) fn gauss_newton(m: &Model, s: &Subset, c: [f64; 3], free: [bool; P]) -> GaussNewton {
+    let f = Frame::of(m);
+    let foreshortened = m.foreshortening != 0.0 || free[6];
+    let on = free.map(|b| if b { 1.0 } else { 0.0 });
+    let (triangle, vtr, ftv) = 'done: {
+        #[cfg(target_arch = "x86_64")]
+        {
+            #[target_feature(enable = "avx2")]
+            fn avx2<const M: bool>(
+                f: &Frame,
+                s: &Subset,
+                c: [f64; 3],
+                on: [f64; P],
+            ) -> GaussNewtonSums {
+                gauss_newton_kernel::<Avx4, M>(f, s, c, on)
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the processor supports AVX2 (checked just above).
+                break 'done unsafe {
+                    if foreshortened {
+                        avx2::<true>(&f, s, c, on)
+                    } else {
+                        avx2::<false>(&f, s, c, on)
+                    }
+                };
+            }
+        }
+        if foreshortened {
+            gauss_newton_kernel::<F4, true>(&f, s, c, on)
+        } else {
+            gauss_newton_kernel::<F4, false>(&f, s, c, on)
+        }
+    };
+    GaussNewton {
+        vtv: mirrored(triangle),
+        vtr,
+        ftv,
+    }
+}
+
+/// The symmetric matrix whose upper triangle, row by row, is `triangle`.
+// Index loops: the triangle's layout reads clearer with the textbook's indices.
+#[allow(clippy::needless_range_loop)]
+fn mirrored(triangle: [f64; TRIANGLE]) -> [[f64; P]; P] {
+    let mut m = [[0.0; P]; P];
+    let mut e = 0;
+    for p in 0..P {
+        for q in p..P {
+            (m[p][q], m[q][p]) = (triangle[e], triangle[e]);
+            e += 1;
+        }
+    }
+    m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::State;
+    use super::*;
+    use crate::frames::rig::{uniform_cone_lights, Rig, RigOptions};
+
+    fn state() -> State {
+        let n = DVec3::new(0.35, -0.2, 1.0).normalize();
+        let (u, w) = crate::geometry::tangent_basis(n);
+        State {
+            normal: n,
+            tangent: (u + 0.7 * w).normalize(),
+            shape: [0.3f64.ln(), 0.08f64.ln(), 3f64.ln(), 0.4],
+        }
+    }
+
+    #[test]
+    fn the_derivatives_match_central_differences() {
+        let state = state();
+        let frame = Frame::of(&Model::of(&state));
+        let rig = Rig::new(&uniform_cone_lights(60, 65.0), RigOptions::default()).unwrap();
+        // One sample in every lane.
+        let block = |l: DVec3, h: DVec3| Block {
+            l: [F4::splat(l.x), F4::splat(l.y), F4::splat(l.z)],
+            h: [F4::splat(h.x), F4::splat(h.y), F4::splat(h.z)],
+            fresnel: F4::splat(0.0),
+            y: F4::splat(0.0),
+            w: F4::splat(1.0),
+        };
+        let at = |d: [f64; P], l: DVec3, h: DVec3| {
+            let f = Frame::of(&Model::of(&state.moved(&d)));
+            let t = terms::<F4, true>(&f, &block(l, h));
+            (t.a.0[0], t.lobe.0[0])
+        };
+        let mut checked = 0;
+        for (&l, &h) in rig.lights_in_camera().iter().zip(rig.halfway_in_camera()) {
+            let t = terms::<F4, true>(&frame, &block(l, h));
+            if state.normal.dot(l) < 0.1 || t.lobe.0[0] < 1e-6 {
+                continue;
+            }
+            for i in 0..P {
+                let (mut plus, mut minus) = ([0.0; P], [0.0; P]);
+                plus[i] = 1e-6;
+                minus[i] = -1e-6;
+                let fd = (at(plus, l, h).1.ln() - at(minus, l, h).1.ln()) / 2e-6;
+                let g = t.d_ln_lobe[i].0[0];
+                assert!(
+                    (fd - g).abs() <= 1e-5 * (1.0 + fd.abs()),
+                    "{i}: {fd} vs {g}"
+                );
+                if i < 2 {
+                    let fd = (at(plus, l, h).0 - at(minus, l, h).0) / 2e-6;
+                    let d = t.d_a[i].0[0];
+                    assert!((fd - d).abs() <= 1e-6, "{i}: {fd} vs {d}");
+                }
+            }
+            checked += 1;
+        }
+        assert!(checked > 20, "{checked}");
+    }
+
+    #[test]
+    fn the_avx2_build_and_the_baseline_build_give_identical_sums() {
+        let model = Model::of(&state());
+        let rig = Rig::new(&uniform_cone_lights(101, 65.0), RigOptions::default()).unwrap();
+        let mut s = Subset::default();
+        for (k, (&l, &h)) in rig
+            .lights_in_camera()
+            .iter()
+            .zip(rig.halfway_in_camera())
+            .enumerate()
+        {
+            s.push(l, h, 0.1 + (k % 7) as f64);
+        }
+        s.pad();
+        let mut lobe = vec![0.0; s.padded_len()];
+        let dispatched = sums(&model, &s, &mut lobe);
+        let baseline = sums_kernel::<F4, true>(&Frame::of(&model), &s, &mut lobe);
+        assert_eq!(dispatched.products, [baseline[6], baseline[7], baseline[8]]);
+        assert_eq!(dispatched.gram[0], [baseline[0], baseline[1], baseline[2]]);
+        let free = [1.0; P];
+        let gn = gauss_newton(&model, &s, [0.3, 1.0, 0.5], [true; P]);
+        let (_, vtr, ftv) =
+            gauss_newton_kernel::<F4, true>(&Frame::of(&model), &s, [0.3, 1.0, 0.5], free);
+        assert_eq!(gn.vtr, vtr);
+        assert_eq!(gn.ftv, ftv);
+        assert!(
+            gn.vtr.iter().all(|v| v.is_finite() && *v != 0.0),
+            "{:?}",
+            gn.vtr
+        );
+    }
+}
