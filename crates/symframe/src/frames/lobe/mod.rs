@@ -309,7 +309,7 @@ const MAX_ITERATIONS: u32 = 60;
 
 /// A fit leaving more than this share of the energy unexplained is retried from other starts
 /// (the tangent and normal axes swapped, the brightest sample's halfway vector).
-const RETRY_RESIDUAL: f64 = 0.01;
+const RETRY_RESIDUAL: f64 = 0.002;
 
 /// Lights of the coarse subset the search runs on: the first of the spread subset's and of the
 /// highlight's (so evenly spread too); the fit is then polished on the whole subset. Measured
