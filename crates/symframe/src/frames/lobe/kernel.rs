@@ -299,7 +299,12 @@ fn sums_kernel<V: Lanes, const M: bool>(f: &Frame, s: &Subset, lobe: &mut [f64])
             *slot = *slot + v;
         }
     }
-    acc.map(V::sum)
+    // Loops, not `map`: a closure would be compiled outside this function's target features.
+    let mut out = [0.0; 10];
+    for (o, a) in out.iter_mut().zip(acc) {
+        *o = a.sum();
+    }
+    out
 }
 
 /// The basis functions' sums at `m` over the samples; the lobe's value per sample into `lobe`
@@ -375,6 +380,8 @@ fn gauss_newton_kernel<V: Lanes, const M: bool>(
     free: [f64; P],
 ) -> GaussNewtonSums {
     let zero = V::splat(0.0);
+    // Without the foreshortening, its derivative is 0: six parameters.
+    let used = if M { P } else { P - 1 };
     let mut vtv = [zero; TRIANGLE];
     let mut vtr = [zero; P];
     let mut ftv = [[zero; P]; 3];
@@ -383,32 +390,40 @@ fn gauss_newton_kernel<V: Lanes, const M: bool>(
         let t = terms::<V, M>(f, &b);
         let lobe = (b.fresnel * c[2] + c[1]) * t.lobe;
         let mut v = [zero; P];
-        for (j, vj) in v.iter_mut().enumerate() {
-            *vj = lobe * t.d_ln_lobe[j] * free[j];
+        for j in 0..used {
+            v[j] = lobe * t.d_ln_lobe[j] * free[j];
         }
         v[0] = v[0] + t.d_a[0] * (c[0] * free[0]);
         v[1] = v[1] + t.d_a[1] * (c[0] * free[1]);
         let r = b.y - t.a * c[0] - lobe;
         let basis = [t.a, t.lobe, t.lobe * b.fresnel];
-        let mut e = 0;
-        for p in 0..P {
+        for p in 0..used {
             vtr[p] = vtr[p] + v[p] * r;
-            for q in p..P {
+            for q in p..used {
+                let e = triangle_index(p, q);
                 vtv[e] = vtv[e] + v[p] * v[q];
-                e += 1;
             }
         }
         for (row, fb) in ftv.iter_mut().zip(basis) {
-            for (slot, vp) in row.iter_mut().zip(v) {
-                *slot = *slot + fb * vp;
+            for p in 0..used {
+                row[p] = row[p] + fb * v[p];
             }
         }
     }
-    (
-        vtv.map(V::sum),
-        vtr.map(V::sum),
-        ftv.map(|row| row.map(V::sum)),
-    )
+    // Loops, not `map`: a closure would be compiled outside this function's target features.
+    let mut sums: GaussNewtonSums = ([0.0; TRIANGLE], [0.0; P], [[0.0; P]; 3]);
+    for (o, a) in sums.0.iter_mut().zip(vtv) {
+        *o = a.sum();
+    }
+    for (o, a) in sums.1.iter_mut().zip(vtr) {
+        *o = a.sum();
+    }
+    for (row, acc) in sums.2.iter_mut().zip(ftv) {
+        for (o, a) in row.iter_mut().zip(acc) {
+            *o = a.sum();
+        }
+    }
+    sums
 }
 
 /// The Gauss-Newton loop's sums at `m` with coefficients `c` over the parameters marked
@@ -453,16 +468,21 @@ pub(super) fn gauss_newton(m: &Model, s: &Subset, c: [f64; 3], free: [bool; P]) 
     }
 }
 
+/// Index of entry `(p, q)`, `p <= q`, of the upper triangle stored row by row.
+#[inline(always)]
+const fn triangle_index(p: usize, q: usize) -> usize {
+    p * P - p * (p + 1) / 2 + q
+}
+
 /// The symmetric matrix whose upper triangle, row by row, is `triangle`.
 // Index loops: the triangle's layout reads clearer with the textbook's indices.
 #[allow(clippy::needless_range_loop)]
 fn mirrored(triangle: [f64; TRIANGLE]) -> [[f64; P]; P] {
     let mut m = [[0.0; P]; P];
-    let mut e = 0;
     for p in 0..P {
         for q in p..P {
+            let e = triangle_index(p, q);
             (m[p][q], m[q][p]) = (triangle[e], triangle[e]);
-            e += 1;
         }
     }
     m
