@@ -23,7 +23,8 @@
 //! its three axes, `ln a_t`, `ln a_b`, `ln k`, `m`) by Levenberg-Marquardt with an analytic
 //! (Kaufman) Jacobian from the highlight's moments and other starts, over an evenly spread
 //! subset of the lights plus the lights of the highlight (the lobe's shape is read there; the
-//! rest fix the diffuse term). The loops over the samples are vector code (`lobe/kernel.rs`, `lobe/lanes.rs`).
+//! rest fix the diffuse term). The loops over the samples are vector code (`lobe/kernel.rs`,
+//! `lobe/lanes.rs`).
 
 use glam::{DQuat, DVec3};
 
