@@ -89,7 +89,7 @@ pub use frames::estimator as estimate;
 #[doc(hidden)]
 pub use frames::{highlight, objective, optim, rig, slice, symmetry};
 
-pub use appearance::fit::{fit_stack, FitMaps, FitMethod, FitParams, WardMaps};
+pub use appearance::fit::{fit_stack, FitMaps, FitMethod, FitModel, FitParams, GltfMaps, WardMaps};
 pub use appearance::relight::{Edits, Relighter};
 pub use baselines::{estimate_stack_baseline, Baseline, BaselineMethod};
 pub use error::{Error, Result};

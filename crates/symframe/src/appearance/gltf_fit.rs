@@ -1,0 +1,394 @@
+//! Per-pixel fits of the glTF 2.0 metallic-roughness model with `KHR_materials_anisotropy`
+//! ([`GltfPbr`], anisotropy direction = the estimated tangent): base colour per channel,
+//! metallic, roughness and anisotropy strength, so that an exported glTF material is what was
+//! fitted.
+//!
+//! # Method
+//!
+//! The predicted radiance under a light of intensity `E` (the job's exposure, see
+//! [`FitParams::exposure`]) is `E f(l, v) (n.l)`. Per channel `f = c A + B`
+//! ([`GltfPbr::terms`]), so given the three nonlinear parameters (metallic `m`, roughness `r`,
+//! strength `s`) the best base colour of each channel is a one-dimensional least-squares
+//! problem, bounded to `[0, 1]` and solved in closed form. The fit is variable projection over
+//! `(m, ln r, s²)`: Levenberg-Marquardt on the reduced residuals (the colour re-solved at every
+//! point), with their Jacobian by forward differences, steps projected on the bounds
+//! `m, s² in [0, 1]`, `r in [roughness_min, 1]` (a parameter at a bound whose gradient points
+//! out is held for the step). `s²` rather than `s` because `α_t = mix(α, 1, s²)` is flat in `s`
+//! at `s = 0`. The start is the best point of a coarse grid: `m` 0 and 1 over eight
+//! roughnesses, then strengths 0.3 to 0.95 around the best roughness when there is a tangent.
+//! A pixel without a tangent is fitted with strength 0.
+
+use glam::DVec3;
+
+use super::fit::{FitParams, HoldoutError};
+use crate::brdf::gltf::GltfPbr;
+
+/// The fitted glTF parameters of one pixel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GltfFit {
+    /// Base colour per channel, in `[0, 1]`.
+    pub base_color: [f64; 3],
+    /// Metalness, in `[0, 1]`.
+    pub metallic: f64,
+    /// Perceptual roughness, in `[roughness_min, 1]`.
+    pub roughness: f64,
+    /// Anisotropy strength along the tangent, in `[0, 1]` (0 without a tangent).
+    pub anisotropy: f64,
+    /// Whether the pixel had no tangent (strength held at 0).
+    pub isotropic: bool,
+    /// Training samples used.
+    pub samples: usize,
+    /// Sum of squared errors over the training samples and channels.
+    pub sse: f64,
+    /// Levenberg-Marquardt iterations.
+    pub iterations: u32,
+}
+
+impl GltfFit {
+    /// RMS error over the training samples and channels.
+    pub fn rms(&self) -> f64 {
+        (self.sse / (3 * self.samples.max(1)) as f64).sqrt()
+    }
+}
+
+/// One usable sample: the light in the pixel's local frame (x = t, y = n x t, z = n) and the
+/// measured radiance.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct GSample {
+    pub l: DVec3,
+    pub rgb: [f64; 3],
+}
+
+/// Nonlinear parameters `[m, ln r, s²]`.
+type P = [f64; 3];
+
+/// Per-thread buffers: the residuals at the current point and at the difference points.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Scratch {
+    r: Vec<f64>,
+    rj: [Vec<f64>; 3],
+}
+
+/// The optimal base colour at `p` and, when `out` is given, the residuals (3 per sample).
+fn project(samples: &[GSample], v: DVec3, p: P, e: f64, out: Option<&mut Vec<f64>>) -> ([f64; 3], f64) {
+    let (at, ab) = GltfPbr::alphas(p[1].exp(), p[2].sqrt());
+    let (mut aa, mut ai) = (0.0, [0.0f64; 3]);
+    // Pass 1: the colour.
+    for s in samples {
+        let Some((a, b)) = GltfPbr::terms(s.l, v, p[0], at, ab) else {
+            continue;
+        };
+        let k = e * s.l.z;
+        let (a, b) = (a * k, b * k);
+        aa += a * a;
+        for c in 0..3 {
+            ai[c] += a * (s.rgb[c] - b);
+        }
+    }
+    let color = ai.map(|x| if aa > 0.0 { (x / aa).clamp(0.0, 1.0) } else { 0.0 });
+    // Pass 2: the residuals (direct, no cancellation).
+    let mut cost = 0.0;
+    let mut out = out;
+    if let Some(o) = out.as_deref_mut() {
+        o.clear();
+    }
+    for s in samples {
+        let (a, b) = GltfPbr::terms(s.l, v, p[0], at, ab).unwrap_or((0.0, 0.0));
+        let k = e * s.l.z;
+        for c in 0..3 {
+            let r = s.rgb[c] - k * (color[c] * a + b);
+            cost += r * r;
+            if let Some(o) = out.as_deref_mut() {
+                o.push(r);
+            }
+        }
+    }
+    (color, cost)
+}
+
+/// Fits one pixel's usable training samples (light directions local to the pixel's frame, `v`
+/// the view in that frame); `iso` holds the strength at 0.
+pub(crate) fn fit_samples(
+    samples: &[GSample],
+    v: DVec3,
+    iso: bool,
+    params: &FitParams,
+    scratch: &mut Scratch,
+) -> GltfFit {
+    let e = params.exposure;
+    let lo = [0.0, params.roughness_min.ln(), 0.0];
+    let hi = [1.0, 0.0, if iso { 0.0 } else { 1.0 }];
+    let clamp = |p: P| -> P { std::array::from_fn(|j| p[j].clamp(lo[j], hi[j])) };
+    let cost_at = |p: P| project(samples, v, clamp(p), e, None).1;
+
+    // Start: a coarse grid.
+    let mut best = (f64::INFINITY, [0.0; 3]);
+    let consider = |p: P, best: &mut (f64, P)| {
+        let p = clamp(p);
+        let c = cost_at(p);
+        if c < best.0 {
+            *best = (c, p);
+        }
+    };
+    for m in [0.0, 1.0] {
+        for r in [0.1f64, 0.15, 0.2, 0.3, 0.45, 0.6, 0.8, 1.0] {
+            consider([m, r.ln(), 0.0], &mut best);
+        }
+    }
+    if !iso {
+        let (m, lr) = (best.1[0], best.1[1]);
+        for dr in [-0.7f64, -0.35, 0.0] {
+            for q in [0.09, 0.25, 0.5, 0.9] {
+                consider([m, lr + dr, q], &mut best);
+            }
+        }
+    }
+
+    // Levenberg-Marquardt on the reduced residuals.
+    let n_par = if iso { 2 } else { 3 };
+    let mut p = best.1;
+    let mut cur = project(samples, v, p, e, Some(&mut scratch.r)).1;
+    let mut lambda = 1e-3;
+    let mut iterations = 0;
+    'outer: while iterations < params.max_iterations {
+        iterations += 1;
+        // Jacobian columns by forward differences (toward the inside at an upper bound).
+        let mut jtj = [[0.0f64; 3]; 3];
+        let mut g = [0.0f64; 3];
+        for j in 0..n_par {
+            let mut q = p;
+            let h = 1e-6 * if p[j] + 1e-6 > hi[j] { -1.0 } else { 1.0 };
+            q[j] += h;
+            let (rj, r0) = (&mut scratch.rj[j], &scratch.r);
+            project(samples, v, q, e, Some(rj));
+            for (a, b) in rj.iter_mut().zip(r0) {
+                *a = (*a - b) / h;
+            }
+        }
+        for j in 0..n_par {
+            for k in j..n_par {
+                let s: f64 = scratch.rj[j].iter().zip(&scratch.rj[k]).map(|(a, b)| a * b).sum();
+                jtj[j][k] = s;
+                jtj[k][j] = s;
+            }
+            g[j] = scratch.rj[j].iter().zip(&scratch.r).map(|(a, b)| a * b).sum();
+        }
+        // Parameters at a bound whose descent direction points out are held.
+        let free: [bool; 3] = std::array::from_fn(|j| {
+            j < n_par && !((p[j] <= lo[j] && g[j] > 0.0) || (p[j] >= hi[j] && g[j] < 0.0))
+        });
+        if !free.iter().any(|&f| f) {
+            break;
+        }
+        loop {
+            let mut a = [[0.0f64; 3]; 3];
+            let mut b = [0.0f64; 3];
+            for j in 0..3 {
+                if !free[j] {
+                    a[j][j] = 1.0;
+                    continue;
+                }
+                for k in 0..3 {
+                    if free[k] {
+                        a[j][k] = jtj[j][k];
+                    }
+                }
+                a[j][j] += lambda * jtj[j][j].max(1e-12 * (jtj[0][0] + jtj[1][1] + jtj[2][2]) + 1e-300);
+                b[j] = -g[j];
+            }
+            let Some(step) = solve3(a, b) else {
+                lambda *= 10.0;
+                if lambda > 1e12 {
+                    break 'outer;
+                }
+                continue;
+            };
+            let q = clamp(std::array::from_fn(|j| p[j] + step[j]));
+            let moved = (0..3).map(|j| (q[j] - p[j]).abs()).fold(0.0, f64::max);
+            if !moved.is_finite() || moved < 1e-10 {
+                break 'outer;
+            }
+            let next = cost_at(q);
+            if next < cur {
+                let gain = cur - next;
+                p = q;
+                cur = project(samples, v, p, e, Some(&mut scratch.r)).1;
+                lambda = (lambda / 3.0).max(1e-9);
+                if moved < 1e-8 || gain <= 1e-15 * cur.max(1e-300) {
+                    break 'outer;
+                }
+                break;
+            }
+            lambda *= 4.0;
+            if lambda > 1e12 {
+                break 'outer;
+            }
+        }
+    }
+    let (color, _) = project(samples, v, p, e, None);
+    let fit = GltfFit {
+        base_color: color,
+        metallic: p[0],
+        roughness: p[1].exp(),
+        anisotropy: p[2].sqrt(),
+        isotropic: iso,
+        samples: samples.len(),
+        sse: 0.0,
+        iterations,
+    };
+    GltfFit {
+        sse: sse(&fit, samples, v, e).0,
+        ..fit
+    }
+}
+
+/// Solves a symmetric 3x3 system by Cramer's rule; `None` when singular.
+fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
+    let m = glam::DMat3::from_cols_array_2d(&a).transpose();
+    let det = m.determinant();
+    if !(det.is_finite() && det.abs() > 1e-300) {
+        return None;
+    }
+    let x = m.inverse() * DVec3::from(b);
+    x.is_finite().then(|| x.to_array())
+}
+
+/// The radiance a fit predicts under exposure `e` for one sample.
+#[inline]
+fn predict(fit: &GltfFit, s: &GSample, v: DVec3, e: f64) -> [f64; 3] {
+    let (at, ab) = GltfPbr::alphas(fit.roughness, fit.anisotropy);
+    let (a, b) = GltfPbr::terms(s.l, v, fit.metallic, at, ab).unwrap_or((0.0, 0.0));
+    fit.base_color.map(|c| e * s.l.z * (c * a + b))
+}
+
+/// Sum of squared errors and the largest measurement.
+pub(crate) fn sse(fit: &GltfFit, samples: &[GSample], v: DVec3, e: f64) -> (f64, f64) {
+    let mut sum = 0.0;
+    let mut peak = 0.0f64;
+    for s in samples {
+        for (f, &i) in predict(fit, s, v, e).iter().zip(&s.rgb) {
+            sum += (f - i).powi(2);
+            peak = peak.max(i);
+        }
+    }
+    (sum, peak)
+}
+
+/// The held-out error of a fit.
+pub(crate) fn holdout(fit: &GltfFit, test: &[GSample], v: DVec3, e: f64) -> HoldoutError {
+    let (sse, peak) = sse(fit, test, v, e);
+    HoldoutError {
+        sse,
+        samples: test.len(),
+        peak,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::appearance::fit::{FitModel, PixelFitter, PixelOutcome};
+    use crate::brdf::Brdf;
+    use crate::frames::rig::uniform_cone_lights;
+    use crate::geometry::tangent_basis;
+
+    /// One pixel's samples of a glTF material in the frame (n, t, b = n x t) under lights of
+    /// intensity `e`.
+    fn render_pixel(m: &GltfPbr, n: DVec3, t: DVec3, lights: &[DVec3], e: f64) -> Vec<f32> {
+        let b = n.cross(t);
+        let local = |d: DVec3| DVec3::new(d.dot(t), d.dot(b), d.dot(n));
+        lights
+            .iter()
+            .flat_map(|&l| {
+                let nl = n.dot(l).max(0.0);
+                m.eval(local(l), local(DVec3::Z)).map(|v| (e * v * nl) as f32)
+            })
+            .collect()
+    }
+
+    fn frame() -> (DVec3, DVec3) {
+        let n = DVec3::new(0.3, -0.2, 0.9).normalize();
+        let (t0, b0) = tangent_basis(n);
+        (n, t0 * 0.6 + b0 * 0.8)
+    }
+
+    fn params(e: f64) -> FitParams {
+        FitParams {
+            model: FitModel::Gltf,
+            exposure: e,
+            ..FitParams::default()
+        }
+    }
+
+    #[test]
+    fn recovers_known_materials_exactly() {
+        let (n, t) = frame();
+        let lights = uniform_cone_lights(500, 65.0);
+        for (base, m, r, s, e) in [
+            ([0.6, 0.3, 0.1], 0.0, 0.3, 0.0, 1.0),
+            ([0.6, 0.3, 0.1], 0.0, 0.45, 0.6, 2.5),
+            ([0.9, 0.7, 0.5], 1.0, 0.3, 0.5, 1.0),
+            ([0.95, 0.93, 0.88], 1.0, 0.5, 0.8, 1.0),
+            ([0.2, 0.5, 0.8], 0.4, 0.25, 0.3, 0.7),
+        ] {
+            let truth = GltfPbr::new(base, m, r, s);
+            let rgb = render_pixel(&truth, n, t, &lights, e);
+            let params = params(e);
+            let PixelOutcome::FittedGltf(fit, _) = PixelFitter::new(&lights, &params)
+                .unwrap()
+                .fit(n, Some(t), &rgb)
+            else {
+                panic!("not fitted")
+            };
+            for c in 0..3 {
+                assert!((fit.base_color[c] - base[c]).abs() < 2e-3, "{fit:?} {truth:?}");
+            }
+            assert!((fit.metallic - m).abs() < 2e-3, "{fit:?} {truth:?}");
+            assert!((fit.roughness - r).abs() < 2e-3, "{fit:?} {truth:?}");
+            assert!((fit.anisotropy - s).abs() < 5e-3, "{fit:?} {truth:?}");
+            assert!(fit.rms() < 1e-4, "{fit:?}");
+        }
+    }
+
+    #[test]
+    fn isotropic_pixels_have_no_strength_and_holdout_is_judged() {
+        let (n, t) = frame();
+        let lights = uniform_cone_lights(400, 65.0);
+        let truth = GltfPbr::new([0.5, 0.4, 0.3], 0.0, 0.35, 0.0);
+        let rgb = render_pixel(&truth, n, t, &lights, 1.0);
+        let params = FitParams {
+            holdout: crate::appearance::fit::holdout_lights(400, 10).unwrap(),
+            ..params(1.0)
+        };
+        let PixelOutcome::FittedGltf(fit, hold) = PixelFitter::new(&lights, &params)
+            .unwrap()
+            .fit(n, None, &rgb)
+        else {
+            panic!("not fitted")
+        };
+        assert!(fit.isotropic && fit.anisotropy == 0.0);
+        assert!((fit.roughness - 0.35).abs() < 2e-3, "{fit:?}");
+        assert!(hold.samples > 0 && (hold.sse / hold.samples as f64).sqrt() < 1e-4);
+    }
+
+    #[test]
+    fn base_colour_stays_in_the_unit_interval() {
+        // Rendered four times brighter than the fit assumes: the colour saturates at 1.
+        let (n, t) = frame();
+        let lights = uniform_cone_lights(300, 65.0);
+        let rgb = render_pixel(&GltfPbr::new([0.8; 3], 0.0, 0.4, 0.0), n, t, &lights, 4.0);
+        let params = params(1.0);
+        let PixelOutcome::FittedGltf(fit, _) = PixelFitter::new(&lights, &params)
+            .unwrap()
+            .fit(n, Some(t), &rgb)
+        else {
+            panic!("not fitted")
+        };
+        assert!(fit.base_color.iter().all(|&c| (0.0..=1.0).contains(&c)), "{fit:?}");
+        let bad = FitParams {
+            exposure: 0.0,
+            ..params
+        };
+        assert!(PixelFitter::new(&lights, &bad).is_err());
+    }
+}
