@@ -813,10 +813,10 @@ impl<'a> PixelFitter<'a> {
 }
 
 impl PixelFitter<'_> {
-    /// The glTF fit of one pixel in the frame `(t, b, n)`.
-    fn fit_gltf(&mut self, n: DVec3, t: DVec3, b: DVec3, iso: bool, rgb: &[f32]) -> PixelOutcome {
+    /// Collects the usable samples of one pixel for the glTF fit in the frame `(t, b, n)`;
+    /// returns the view in that frame.
+    fn gltf_samples(&mut self, n: DVec3, t: DVec3, b: DVec3, rgb: &[f32]) -> DVec3 {
         let local = |d: DVec3| DVec3::new(d.dot(t), d.dot(b), d.dot(n));
-        let v = local(DVec3::Z);
         self.gtrain.clear();
         self.gtest.clear();
         for (i, (l, px)) in self.lights.iter().zip(rgb.chunks_exact(3)).enumerate() {
@@ -833,12 +833,46 @@ impl PixelFitter<'_> {
                 self.gtrain.push(s);
             }
         }
+        local(DVec3::Z)
+    }
+
+    /// The glTF fit of one pixel in the frame `(t, b, n)`.
+    fn fit_gltf(&mut self, n: DVec3, t: DVec3, b: DVec3, iso: bool, rgb: &[f32]) -> PixelOutcome {
+        let v = self.gltf_samples(n, t, b, rgb);
         if self.gtrain.len() < self.params.min_samples {
             return PixelOutcome::TooFewSamples;
         }
         let fit = gltf_fit::fit_samples(&self.gtrain, v, iso, self.params, &mut self.gscratch);
         let hold = gltf_fit::holdout(&fit, &self.gtest, v, self.params.exposure);
         PixelOutcome::FittedGltf(fit, hold)
+    }
+
+    /// A free-scale glTF fit of one pixel (its own light intensity), on the training samples,
+    /// for choosing the exposure ([`gltf_fit::choose_exposure`]); `None` where the pixel would
+    /// not be fitted.
+    pub fn scale(
+        &mut self,
+        normal: DVec3,
+        tangent: Option<DVec3>,
+        rgb: &[f32],
+    ) -> Option<gltf_fit::PixelScale> {
+        let n = normal.try_normalize().filter(|n| n.z > 0.0)?;
+        let t = tangent
+            .map(|t| t - t.dot(n) * n)
+            .and_then(|t| t.try_normalize());
+        let iso = t.is_none();
+        let t = t.unwrap_or_else(|| tangent_basis(n).0);
+        let v = self.gltf_samples(n, t, n.cross(t), rgb);
+        if self.gtrain.len() < self.params.min_samples {
+            return None;
+        }
+        Some(gltf_fit::fit_exposure(
+            &self.gtrain,
+            v,
+            iso,
+            self.params,
+            &mut self.gscratch,
+        ))
     }
 }
 

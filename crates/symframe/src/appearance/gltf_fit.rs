@@ -69,23 +69,60 @@ pub(crate) struct Scratch {
     rj: [Vec<f64>; 3],
 }
 
-/// The optimal base colour at `p` and, when `out` is given, the residuals (3 per sample).
-fn project(samples: &[GSample], v: DVec3, p: P, e: f64, out: Option<&mut Vec<f64>>) -> ([f64; 3], f64) {
+/// The optimal linear parameters at `p` and the cost; with `out`, the residuals (3 per
+/// sample). With an exposure `Some(e)`: the base colour in `[0, 1]` under lights of intensity
+/// `e`. With `None` (free scale, [`fit_exposure`]): the products `e c` (at least 0) and the
+/// pixel's own best `e` (at least 0), returned as `([e c_r, e c_g, e c_b], e)`.
+fn project(
+    samples: &[GSample],
+    v: DVec3,
+    p: P,
+    e: Option<f64>,
+    out: Option<&mut Vec<f64>>,
+) -> ([f64; 3], f64, f64) {
     let (at, ab) = GltfPbr::alphas(p[1].exp(), p[2].sqrt());
-    let (mut aa, mut ai) = (0.0, [0.0f64; 3]);
-    // Pass 1: the colour.
+    let (mut aa, mut ab_, mut bb, mut ai, mut bi) = (0.0, 0.0, 0.0, [0.0f64; 3], [0.0f64; 3]);
+    // Pass 1: the sums of the linear problem.
     for s in samples {
         let Some((a, b)) = GltfPbr::terms(s.l, v, p[0], at, ab) else {
             continue;
         };
-        let k = e * s.l.z;
-        let (a, b) = (a * k, b * k);
+        let (a, b) = (a * s.l.z, b * s.l.z);
         aa += a * a;
+        ab_ += a * b;
+        bb += b * b;
         for c in 0..3 {
-            ai[c] += a * (s.rgb[c] - b);
+            ai[c] += a * s.rgb[c];
+            bi[c] += b * s.rgb[c];
         }
     }
-    let color = ai.map(|x| if aa > 0.0 { (x / aa).clamp(0.0, 1.0) } else { 0.0 });
+    // `lin[c]` multiplies A and `scale` B in the prediction.
+    let (lin, scale, coef) = match e {
+        Some(e) => {
+            let color = std::array::from_fn(|c| {
+                if aa > 0.0 {
+                    ((ai[c] - e * ab_) / (e * aa)).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                }
+            });
+            (color.map(|x| x * e), e, color)
+        }
+        None => {
+            // Interior solution of the four-parameter problem, then the bounds.
+            let den = 3.0 * (bb - ab_ * ab_ / aa.max(1e-300));
+            let num: f64 = (0..3).map(|c| bi[c] - ab_ * ai[c] / aa.max(1e-300)).sum();
+            let e = if den > 0.0 { (num / den).max(0.0) } else { 0.0 };
+            let a = std::array::from_fn(|c| {
+                if aa > 0.0 {
+                    ((ai[c] - e * ab_) / aa).max(0.0)
+                } else {
+                    0.0
+                }
+            });
+            (a, e, a)
+        }
+    };
     // Pass 2: the residuals (direct, no cancellation).
     let mut cost = 0.0;
     let mut out = out;
@@ -94,16 +131,16 @@ fn project(samples: &[GSample], v: DVec3, p: P, e: f64, out: Option<&mut Vec<f64
     }
     for s in samples {
         let (a, b) = GltfPbr::terms(s.l, v, p[0], at, ab).unwrap_or((0.0, 0.0));
-        let k = e * s.l.z;
+        let (a, b) = (a * s.l.z, b * s.l.z);
         for c in 0..3 {
-            let r = s.rgb[c] - k * (color[c] * a + b);
+            let r = s.rgb[c] - (lin[c] * a + scale * b);
             cost += r * r;
             if let Some(o) = out.as_deref_mut() {
                 o.push(r);
             }
         }
     }
-    (color, cost)
+    (coef, scale, cost)
 }
 
 /// Fits one pixel's usable training samples (light directions local to the pixel's frame, `v`
@@ -115,11 +152,92 @@ pub(crate) fn fit_samples(
     params: &FitParams,
     scratch: &mut Scratch,
 ) -> GltfFit {
-    let e = params.exposure;
+    let (fit, _, _) = search(samples, v, iso, params, Some(params.exposure), scratch);
+    GltfFit {
+        sse: sse(&fit, samples, v, params.exposure).0,
+        ..fit
+    }
+}
+
+/// A free-scale fit of one pixel: the model with the light intensity a parameter of the pixel
+/// (`e`, at least 0) and products `e c` (at least 0) in place of the colour. Returns `e`, the
+/// products and the fitted metalness: what [`choose_exposure`] needs.
+pub(crate) fn fit_exposure(
+    samples: &[GSample],
+    v: DVec3,
+    iso: bool,
+    params: &FitParams,
+    scratch: &mut Scratch,
+) -> PixelScale {
+    let (fit, products, e) = search(samples, v, iso, params, None, scratch);
+    PixelScale {
+        exposure: e,
+        products,
+        metallic: fit.metallic,
+    }
+}
+
+/// The result of a free-scale fit of one pixel ([`fit_exposure`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelScale {
+    /// The pixel's own best light intensity.
+    pub exposure: f64,
+    /// Light intensity times base colour, per channel.
+    pub products: [f64; 3],
+    /// The fitted metalness.
+    pub metallic: f64,
+}
+
+/// The job-level light intensity from free-scale fits of sampled pixels: the median of the
+/// pixels' own intensities where the fit is mostly dielectric (metalness below 0.5: its
+/// specular layer has a known strength, 4% at normal incidence, which fixes the scale; a
+/// metal's does not), raised if needed to the 99th percentile of the brightest channel of
+/// `e c`, so that at most 1% of the pixels' base colours would exceed 1. `None` without any
+/// usable pixel.
+pub fn choose_exposure(pixels: &[PixelScale]) -> Option<f64> {
+    let quantile = |mut v: Vec<f64>, q: f64| -> Option<f64> {
+        v.retain(|x| x.is_finite() && *x > 0.0);
+        if v.is_empty() {
+            return None;
+        }
+        v.sort_by(f64::total_cmp);
+        Some(v[((v.len() - 1) as f64 * q).round() as usize])
+    };
+    let dielectric = quantile(
+        pixels
+            .iter()
+            .filter(|p| p.metallic < 0.5)
+            .map(|p| p.exposure)
+            .collect(),
+        0.5,
+    );
+    let brightest = quantile(
+        pixels
+            .iter()
+            .map(|p| p.products.iter().copied().fold(0.0, f64::max))
+            .collect(),
+        0.99,
+    );
+    match (dielectric, brightest) {
+        (Some(d), Some(b)) => Some(d.max(b)),
+        (d, b) => d.or(b),
+    }
+}
+
+/// The grid start and Levenberg-Marquardt search; returns the fit (its `sse` unset), the
+/// linear coefficients of [`project`] and the scale used.
+fn search(
+    samples: &[GSample],
+    v: DVec3,
+    iso: bool,
+    params: &FitParams,
+    e: Option<f64>,
+    scratch: &mut Scratch,
+) -> (GltfFit, [f64; 3], f64) {
     let lo = [0.0, params.roughness_min.ln(), 0.0];
     let hi = [1.0, 0.0, if iso { 0.0 } else { 1.0 }];
     let clamp = |p: P| -> P { std::array::from_fn(|j| p[j].clamp(lo[j], hi[j])) };
-    let cost_at = |p: P| project(samples, v, clamp(p), e, None).1;
+    let cost_at = |p: P| project(samples, v, clamp(p), e, None).2;
 
     // Start: a coarse grid.
     let mut best = (f64::INFINITY, [0.0; 3]);
@@ -147,7 +265,7 @@ pub(crate) fn fit_samples(
     // Levenberg-Marquardt on the reduced residuals.
     let n_par = if iso { 2 } else { 3 };
     let mut p = best.1;
-    let mut cur = project(samples, v, p, e, Some(&mut scratch.r)).1;
+    let mut cur = project(samples, v, p, e, Some(&mut scratch.r)).2;
     let mut lambda = 1e-3;
     let mut iterations = 0;
     'outer: while iterations < params.max_iterations {
@@ -212,7 +330,7 @@ pub(crate) fn fit_samples(
             if next < cur {
                 let gain = cur - next;
                 p = q;
-                cur = project(samples, v, p, e, Some(&mut scratch.r)).1;
+                cur = project(samples, v, p, e, Some(&mut scratch.r)).2;
                 lambda = (lambda / 3.0).max(1e-9);
                 if moved < 1e-8 || gain <= 1e-15 * cur.max(1e-300) {
                     break 'outer;
@@ -225,9 +343,9 @@ pub(crate) fn fit_samples(
             }
         }
     }
-    let (color, _) = project(samples, v, p, e, None);
+    let (coef, scale, _) = project(samples, v, p, e, None);
     let fit = GltfFit {
-        base_color: color,
+        base_color: coef,
         metallic: p[0],
         roughness: p[1].exp(),
         anisotropy: p[2].sqrt(),
@@ -236,10 +354,7 @@ pub(crate) fn fit_samples(
         sse: 0.0,
         iterations,
     };
-    GltfFit {
-        sse: sse(&fit, samples, v, e).0,
-        ..fit
-    }
+    (fit, coef, scale)
 }
 
 /// Solves a symmetric 3x3 system by Cramer's rule; `None` when singular.
@@ -390,5 +505,57 @@ mod tests {
             ..params
         };
         assert!(PixelFitter::new(&lights, &bad).is_err());
+    }
+}
+
+#[cfg(test)]
+mod exposure_tests {
+    use super::*;
+    use crate::appearance::fit::{FitModel, PixelFitter};
+    use crate::brdf::Brdf;
+    use crate::frames::rig::uniform_cone_lights;
+
+    #[test]
+    fn the_exposure_of_a_dielectric_is_recovered() {
+        let lights = uniform_cone_lights(400, 65.0);
+        let params = FitParams {
+            model: FitModel::Gltf,
+            ..FitParams::default()
+        };
+        let mut f = PixelFitter::new(&lights, &params).unwrap();
+        let mut scales = Vec::new();
+        for (k, base) in [[0.6, 0.3, 0.1], [0.2, 0.5, 0.4], [0.3, 0.3, 0.3]]
+            .into_iter()
+            .enumerate()
+        {
+            let m = GltfPbr::new(base, 0.0, 0.3 + 0.1 * k as f64, 0.0);
+            let n = DVec3::new(0.1 * k as f64, 0.2, 1.0).normalize();
+            let (t, b) = crate::geometry::tangent_basis(n);
+            let local = |d: DVec3| DVec3::new(d.dot(t), d.dot(b), d.dot(n));
+            let rgb: Vec<f32> = lights
+                .iter()
+                .flat_map(|&l| {
+                    let nl = n.dot(l).max(0.0);
+                    m.eval(local(l), local(DVec3::Z))
+                        .map(|v| (3.0 * v * nl) as f32)
+                })
+                .collect();
+            let s = f.scale(n, None, &rgb).unwrap();
+            assert!((s.exposure / 3.0 - 1.0).abs() < 1e-3, "{s:?}");
+            for c in 0..3 {
+                assert!((s.products[c] - 3.0 * base[c]).abs() < 3e-3, "{s:?}");
+            }
+            scales.push(s);
+        }
+        let e = choose_exposure(&scales).unwrap();
+        assert!((e / 3.0 - 1.0).abs() < 1e-3, "{e}");
+        // A bright metal alone: the brightest colour sets it.
+        let metal = PixelScale {
+            exposure: 0.0,
+            products: [2.0, 1.5, 1.0],
+            metallic: 1.0,
+        };
+        assert_eq!(choose_exposure(&[metal]), Some(2.0));
+        assert_eq!(choose_exposure(&[]), None);
     }
 }
