@@ -38,8 +38,12 @@ pub struct FitConfig {
     /// Lights left out of the fit (evenly spaced in input order) to judge it on; they replace
     /// `params.holdout`.
     pub holdout: usize,
-    /// The fit's parameters.
+    /// The fit's parameters (`params.model` chooses the model).
     pub params: FitParams,
+    /// glTF fit: the light intensity ([`FitParams::exposure`]); `None` chooses it from
+    /// free-scale fits of up to [`EXPOSURE_PIXELS`] pixels spread over the image
+    /// ([`symframe::appearance::gltf_fit::choose_exposure`]). Replaces `params.exposure`.
+    pub exposure: Option<f64>,
     /// Mask image (`None`: the dataset's `mask.png`, if any).
     pub mask: Option<PathBuf>,
     /// How images are decoded.
@@ -63,6 +67,7 @@ impl FitConfig {
             output: output.into(),
             holdout: 0,
             params: FitParams::default(),
+            exposure: None,
             mask: None,
             decode: DecodeOptions::default(),
             cache: CacheConfig::default(),
@@ -120,6 +125,8 @@ pub struct FitReport {
     /// The light intensity the glTF fit assumed (`parameters.exposure`), which relighting and
     /// export use; `None` for a Ward fit.
     pub exposure: Option<f64>,
+    /// Whether that exposure was chosen from the data (`true`) or given (`false`).
+    pub exposure_chosen: Option<bool>,
     /// Fit parameters, including the held-out light indices.
     pub parameters: FitParams,
     /// Light counts.
@@ -278,6 +285,7 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
             .with_context(|| format!("holding out {} lights", config.holdout))?,
         ..config.params.clone()
     };
+    let mut params = params;
     let (cache_dir, options) = config.cache_in_force();
     let (cache, cache_info, fps) =
         open_cache(&ds, &config.decode, &cache_dir, options, ctl, &|f| {
@@ -297,6 +305,17 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
         mask.as_deref(),
     )
     .with_context(|| ds.source.display().to_string())?;
+    let mut exposure_chosen = false;
+    if params.model == FitModel::Gltf {
+        params.exposure = match config.exposure {
+            Some(e) => e,
+            None => {
+                exposure_chosen = true;
+                choose_exposure(&cache, &ds.lights, &params, &normals, &tangents, mask.as_deref())
+                    .with_context(|| ds.source.display().to_string())?
+            }
+        };
+    }
     let method = FitMethod::new(&ds.lights, &params, &normals, &tangents, w * h)
         .with_context(|| ds.source.display().to_string())?;
 
@@ -341,6 +360,7 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
         model: params.model.name(),
         model_description: params.model.description(),
         exposure: (params.model == FitModel::Gltf).then_some(params.exposure),
+        exposure_chosen: (params.model == FitModel::Gltf).then_some(exposure_chosen),
         lights: FitLights {
             input: ds.lights.len(),
             fitted: ds.lights.len() - params.holdout.len(),
@@ -374,6 +394,61 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
 /// The parameter maps of each model (without extension; `.npy` and `.exr` are written).
 const WARD_MAPS: [&str; 4] = ["kd", "ks", "alpha_t", "alpha_b"];
 const GLTF_MAPS: [&str; 4] = ["base_color", "metallic", "roughness", "anisotropy_strength"];
+
+/// Pixels the exposure of a glTF fit is chosen from, at most.
+pub const EXPOSURE_PIXELS: usize = 2048;
+
+/// The light intensity of a glTF fit chosen from free-scale fits of up to
+/// [`EXPOSURE_PIXELS`] pixels (inside the mask, with a frame) spread evenly over the image,
+/// read tile by tile from the cache.
+fn choose_exposure(
+    cache: &symframe_io::TileCache,
+    lights: &[glam::DVec3],
+    params: &FitParams,
+    normals: &[f32],
+    tangents: &[f32],
+    mask: Option<&[bool]>,
+) -> Result<f64> {
+    use rayon::prelude::*;
+    use symframe::appearance::fit::PixelFitter;
+    use symframe::eval::vec_at;
+    let grid = *cache.grid();
+    let usable = |p: usize| mask.is_none_or(|m| m[p]) && vec_at(normals, p).is_some();
+    let count = (0..grid.width * grid.height).filter(|&p| usable(p)).count();
+    let stride = count.div_ceil(EXPOSURE_PIXELS).max(1);
+    // The k-th usable pixel (row-major) is chosen when k is a multiple of the stride.
+    let mut chosen = vec![false; grid.width * grid.height];
+    for (k, p) in (0..chosen.len()).filter(|&p| usable(p)).enumerate() {
+        chosen[p] = k % stride == 0;
+    }
+    // The held-out lights stay out of this choice too.
+    PixelFitter::new(lights, params)?;
+    let scales: Vec<_> = (0..grid.n_tiles())
+        .into_par_iter()
+        .flat_map_iter(|t| {
+            let mut fitter = PixelFitter::new(lights, params).expect("checked above");
+            let mut scratch = Vec::new();
+            let view = cache.tile(t, &mut scratch);
+            let mut rgb = vec![0.0f32; lights.len() * 3];
+            let mut out = Vec::new();
+            for (k, p) in grid.pixels(t).enumerate() {
+                if !chosen[p] {
+                    continue;
+                }
+                view.pixel(k, &mut rgb);
+                let (Some(n), t) = (vec_at(normals, p), vec_at(tangents, p)) else {
+                    continue;
+                };
+                out.extend(fitter.scale(n, t, &rgb));
+            }
+            cache.release(t);
+            out
+        })
+        .collect();
+    symframe::appearance::gltf_fit::choose_exposure(&scales).with_context(|| {
+        "no pixel to choose the exposure of the glTF fit from; give it with --exposure"
+    })
+}
 
 /// Files an earlier fit into the same folder may have left that this one may not write: the
 /// held-out residual maps of a fit with held-out lights, the other model's parameter maps and

@@ -105,6 +105,10 @@ impl std::str::FromStr for FitModel {
     }
 }
 
+/// The model `symframe fit --model` fits by default: the one that predicts held-out lights
+/// better on the validation scenes (docs/validation.md, "Relighting").
+pub const DEFAULT_MODEL: FitModel = FitModel::Gltf;
+
 /// Parameters of the per-pixel fit.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FitParams {
