@@ -191,7 +191,7 @@ pub struct PixelScale {
 /// The job-level light intensity from free-scale fits of sampled pixels: the median of the
 /// pixels' own intensities where the fit is mostly dielectric (metalness below 0.5: its
 /// specular layer has a known strength, 4% at normal incidence, which fixes the scale; a
-/// metal's does not), raised if needed to the 99th percentile of the brightest channel of
+/// metal's does not), when at least a quarter of the pixels are, raised if needed to the 99th percentile of the brightest channel of
 /// `e c`, so that at most 1% of the pixels' base colours would exceed 1. `None` without any
 /// usable pixel.
 pub fn choose_exposure(pixels: &[PixelScale]) -> Option<f64> {
@@ -203,14 +203,16 @@ pub fn choose_exposure(pixels: &[PixelScale]) -> Option<f64> {
         v.sort_by(f64::total_cmp);
         Some(v[((v.len() - 1) as f64 * q).round() as usize])
     };
-    let dielectric = quantile(
-        pixels
-            .iter()
-            .filter(|p| p.metallic < 0.5)
-            .map(|p| p.exposure)
-            .collect(),
-        0.5,
-    );
+    let dielectrics: Vec<f64> = pixels
+        .iter()
+        .filter(|p| p.metallic < 0.5)
+        .map(|p| p.exposure)
+        .collect();
+    let dielectric = if 4 * dielectrics.len() >= pixels.len() {
+        quantile(dielectrics, 0.5)
+    } else {
+        None
+    };
     let brightest = quantile(
         pixels
             .iter()
