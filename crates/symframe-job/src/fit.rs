@@ -311,8 +311,15 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
             Some(e) => e,
             None => {
                 exposure_chosen = true;
-                choose_exposure(&cache, &ds.lights, &params, &normals, &tangents, mask.as_deref())
-                    .with_context(|| ds.source.display().to_string())?
+                choose_exposure(
+                    &cache,
+                    &ds.lights,
+                    &params,
+                    &normals,
+                    &tangents,
+                    mask.as_deref(),
+                )
+                .with_context(|| ds.source.display().to_string())?
             }
         };
     }
@@ -474,7 +481,9 @@ fn write_outputs(
     let m = &maps.ward;
     let (w, h) = (m.width, m.height);
     let staging = OutputSet::new(out, fit_owned)?;
-    let (maps3, maps1): (Vec<(&str, &[f32])>, Vec<(&str, &[f32])>) = match &maps.gltf {
+    // The model's (name, data) maps: per pixel three values, then one.
+    type Named<'a> = Vec<(&'a str, &'a [f32])>;
+    let (maps3, maps1): (Named, Named) = match &maps.gltf {
         None => (
             vec![("kd", &m.kd), ("ks", &m.ks)],
             vec![("alpha_t", &m.alpha_t), ("alpha_b", &m.alpha_b)],

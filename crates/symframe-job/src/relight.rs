@@ -118,7 +118,10 @@ pub fn read_gltf_maps(dir: &Path) -> Result<GltfMaps> {
     let path = dir.join("base_color.npy");
     let (shape, base_color) = symframe_io::read_npy_f32(&path)?;
     let [h, w, 3] = shape[..] else {
-        bail!("{}: shape {shape:?} is not an H x W x 3 map", path.display());
+        bail!(
+            "{}: shape {shape:?} is not an H x W x 3 map",
+            path.display()
+        );
     };
     let report = dir.join("fit.json");
     let text = std::fs::read_to_string(&report).with_context(|| {
@@ -143,8 +146,7 @@ pub fn read_gltf_maps(dir: &Path) -> Result<GltfMaps> {
         base_color,
         exposure,
     };
-    maps.check()
-        .with_context(|| format!("{}", dir.display()))?;
+    maps.check().with_context(|| format!("{}", dir.display()))?;
     Ok(maps)
 }
 

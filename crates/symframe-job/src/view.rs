@@ -474,6 +474,8 @@ mod tests {
             },
             views: vec!["relit"],
             sources: vec![],
+            model: "ward",
+            light_intensity: 1.0,
         };
         let page = render_page("a</script>", &data).unwrap();
         assert!(!page.contains("{{"), "a mark was left");

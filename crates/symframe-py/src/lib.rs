@@ -353,10 +353,7 @@ fn fit<'py>(
             dict.set_item("base_color", map_array(py, g.base_color, h, w, 3)?)?;
             dict.set_item("metallic", map_array(py, g.metallic, h, w, 1)?)?;
             dict.set_item("roughness", map_array(py, g.roughness, h, w, 1)?)?;
-            dict.set_item(
-                "anisotropy_strength",
-                map_array(py, g.anisotropy, h, w, 1)?,
-            )?;
+            dict.set_item("anisotropy_strength", map_array(py, g.anisotropy, h, w, 1)?)?;
         }
         None => {
             dict.set_item("kd", map_array(py, m.ward.kd, h, w, 3)?)?;

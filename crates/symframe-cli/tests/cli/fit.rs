@@ -592,8 +592,16 @@ fn gltf_fit_relight_and_export_reproduce_a_brushed_gltf_metal_at_any_exposure() 
     let centre = (12 * 24 + 12) as usize;
     assert!((base[centre * 3 + 1] as f64 / 0.7 * 0.9 - 1.0).abs() < 0.02);
     assert!(metallic[centre] > 0.97, "{}", metallic[centre]);
-    assert!((rough[centre] as f64 - 0.35).abs() < 0.01, "{}", rough[centre]);
-    assert!((strength[centre] as f64 - 0.6).abs() < 0.02, "{}", strength[centre]);
+    assert!(
+        (rough[centre] as f64 - 0.35).abs() < 0.01,
+        "{}",
+        rough[centre]
+    );
+    assert!(
+        (strength[centre] as f64 - 0.6).abs() < 0.02,
+        "{}",
+        strength[centre]
+    );
 
     // Relit under the held-out lights, the photographs come back (exposure included).
     let held: Vec<usize> = report["parameters"]["holdout"]
@@ -674,7 +682,11 @@ fn fit_refuses_bad_model_flags() {
             value,
         ]);
         assert!(!o.status.success(), "{flag} {value}");
-        assert!(stderr(&o).contains(needle), "{flag} {value}: {}", stderr(&o));
+        assert!(
+            stderr(&o).contains(needle),
+            "{flag} {value}: {}",
+            stderr(&o)
+        );
         assert!(!out.exists(), "{flag} {value}");
     }
     // An explicit exposure is used as given and recorded.
@@ -692,7 +704,10 @@ fn fit_refuses_bad_model_flags() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let r = report_of(&out);
-    assert_eq!((r["exposure"].as_f64(), r["exposure_chosen"].as_bool()), (Some(2.5), Some(false)));
+    assert_eq!(
+        (r["exposure"].as_f64(), r["exposure_chosen"].as_bool()),
+        (Some(2.5), Some(false))
+    );
     assert_eq!(r["parameters"]["model"], "gltf");
 }
 

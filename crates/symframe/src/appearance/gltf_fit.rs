@@ -132,8 +132,8 @@ fn project(
     for s in samples {
         let (a, b) = GltfPbr::terms(s.l, v, p[0], at, ab).unwrap_or((0.0, 0.0));
         let (a, b) = (a * s.l.z, b * s.l.z);
-        for c in 0..3 {
-            let r = s.rgb[c] - (lin[c] * a + scale * b);
+        for (&i, &k) in s.rgb.iter().zip(&lin) {
+            let r = i - (k * a + scale * b);
             cost += r * r;
             if let Some(o) = out.as_deref_mut() {
                 o.push(r);
@@ -285,13 +285,22 @@ fn search(
                 *a = (*a - b) / h;
             }
         }
+        #[allow(clippy::needless_range_loop)] // a symmetric matrix filled by index pairs
         for j in 0..n_par {
             for k in j..n_par {
-                let s: f64 = scratch.rj[j].iter().zip(&scratch.rj[k]).map(|(a, b)| a * b).sum();
+                let s: f64 = scratch.rj[j]
+                    .iter()
+                    .zip(&scratch.rj[k])
+                    .map(|(a, b)| a * b)
+                    .sum();
                 jtj[j][k] = s;
                 jtj[k][j] = s;
             }
-            g[j] = scratch.rj[j].iter().zip(&scratch.r).map(|(a, b)| a * b).sum();
+            g[j] = scratch.rj[j]
+                .iter()
+                .zip(&scratch.r)
+                .map(|(a, b)| a * b)
+                .sum();
         }
         // Parameters at a bound whose descent direction points out are held.
         let free: [bool; 3] = std::array::from_fn(|j| {
@@ -313,7 +322,8 @@ fn search(
                         a[j][k] = jtj[j][k];
                     }
                 }
-                a[j][j] += lambda * jtj[j][j].max(1e-12 * (jtj[0][0] + jtj[1][1] + jtj[2][2]) + 1e-300);
+                a[j][j] +=
+                    lambda * jtj[j][j].max(1e-12 * (jtj[0][0] + jtj[1][1] + jtj[2][2]) + 1e-300);
                 b[j] = -g[j];
             }
             let Some(step) = solve3(a, b) else {
@@ -418,7 +428,8 @@ mod tests {
             .iter()
             .flat_map(|&l| {
                 let nl = n.dot(l).max(0.0);
-                m.eval(local(l), local(DVec3::Z)).map(|v| (e * v * nl) as f32)
+                m.eval(local(l), local(DVec3::Z))
+                    .map(|v| (e * v * nl) as f32)
             })
             .collect()
     }
@@ -451,14 +462,15 @@ mod tests {
             let truth = GltfPbr::new(base, m, r, s);
             let rgb = render_pixel(&truth, n, t, &lights, e);
             let params = params(e);
-            let PixelOutcome::FittedGltf(fit, _) = PixelFitter::new(&lights, &params)
-                .unwrap()
-                .fit(n, Some(t), &rgb)
+            let PixelOutcome::FittedGltf(fit, _) =
+                PixelFitter::new(&lights, &params)
+                    .unwrap()
+                    .fit(n, Some(t), &rgb)
             else {
                 panic!("not fitted")
             };
-            for c in 0..3 {
-                assert!((fit.base_color[c] - base[c]).abs() < 2e-3, "{fit:?} {truth:?}");
+            for (got, want) in fit.base_color.iter().zip(base) {
+                assert!((got - want).abs() < 2e-3, "{fit:?} {truth:?}");
             }
             assert!((fit.metallic - m).abs() < 2e-3, "{fit:?} {truth:?}");
             assert!((fit.roughness - r).abs() < 2e-3, "{fit:?} {truth:?}");
@@ -495,13 +507,17 @@ mod tests {
         let lights = uniform_cone_lights(300, 65.0);
         let rgb = render_pixel(&GltfPbr::new([0.8; 3], 0.0, 0.4, 0.0), n, t, &lights, 4.0);
         let params = params(1.0);
-        let PixelOutcome::FittedGltf(fit, _) = PixelFitter::new(&lights, &params)
-            .unwrap()
-            .fit(n, Some(t), &rgb)
+        let PixelOutcome::FittedGltf(fit, _) =
+            PixelFitter::new(&lights, &params)
+                .unwrap()
+                .fit(n, Some(t), &rgb)
         else {
             panic!("not fitted")
         };
-        assert!(fit.base_color.iter().all(|&c| (0.0..=1.0).contains(&c)), "{fit:?}");
+        assert!(
+            fit.base_color.iter().all(|&c| (0.0..=1.0).contains(&c)),
+            "{fit:?}"
+        );
         let bad = FitParams {
             exposure: 0.0,
             ..params
@@ -544,8 +560,8 @@ mod exposure_tests {
                 .collect();
             let s = f.scale(n, None, &rgb).unwrap();
             assert!((s.exposure / 3.0 - 1.0).abs() < 1e-3, "{s:?}");
-            for c in 0..3 {
-                assert!((s.products[c] - 3.0 * base[c]).abs() < 3e-3, "{s:?}");
+            for (got, want) in s.products.iter().zip(base) {
+                assert!((got - 3.0 * want).abs() < 3e-3, "{s:?}");
             }
             scales.push(s);
         }

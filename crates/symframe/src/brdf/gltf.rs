@@ -166,7 +166,10 @@ mod tests {
         let b = GltfPbr::new([0.5; 3], 1.0, 0.3, 0.7);
         let (at, ab) = GltfPbr::alphas(0.3, 0.7);
         let d_of = |h: DVec3| {
-            1.0 / (PI * at * ab * (h.x * h.x / (at * at) + h.y * h.y / (ab * ab) + h.z * h.z).powi(2))
+            1.0 / (PI
+                * at
+                * ab
+                * (h.x * h.x / (at * at) + h.y * h.y / (ab * ab) + h.z * h.z).powi(2))
         };
         for h in [dir(0.2, 0.0), dir(0.2, 0.5 * PI)] {
             let v = DVec3::Z;

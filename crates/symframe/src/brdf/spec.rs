@@ -35,7 +35,8 @@
 
 use super::Brdf;
 use super::{
-    AshikhminShirley, BlinnPhong, CookTorrance, Ggx, GltfPbr, Lambertian, Merl, TorranceSparrow, Ward,
+    AshikhminShirley, BlinnPhong, CookTorrance, Ggx, GltfPbr, Lambertian, Merl, TorranceSparrow,
+    Ward,
 };
 
 /// Formats a colour for a spec: one number when all channels are equal, else `r/g/b`. Uses
