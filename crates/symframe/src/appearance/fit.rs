@@ -2,7 +2,9 @@
 //! `kd` and specular albedo `ks` per RGB channel, roughness `alpha_t` along the tangent and
 //! `alpha_b` along the binormal, chosen to minimise the squared error of the predicted radiance
 //! `f(l, v) (n.l)` (the [`Ward`](crate::brdf::ward::Ward) formula, local frame x = t, y = b,
-//! z = n) against the measured samples.
+//! z = n) against the measured samples. With [`FitModel::Gltf`] the same driver (samples,
+//! held-out lights, summary, [`PixelMethod`]) fits the glTF 2.0 metallic-roughness model
+//! instead ([`super::gltf_fit`]); the method below is the Ward fit's.
 //!
 //! # Method
 //!

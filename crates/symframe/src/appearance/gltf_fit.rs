@@ -17,6 +17,13 @@
 //! at `s = 0`. The start is the best point of a coarse grid: `m` 0 and 1 over eight
 //! roughnesses, then strengths 0.3 to 0.95 around the best roughness when there is a tangent.
 //! A pixel without a tangent is fitted with strength 0.
+//!
+//! # Exposure
+//!
+//! The base colour is bounded, so the light intensity `E` of the photographs must be known.
+//! [`PixelFitter::scale`](super::fit::PixelFitter::scale) fits a pixel with its own
+//! intensity (products `E c` and `E` as four linear parameters, solved in closed form);
+//! [`choose_exposure`] turns such fits of sampled pixels into one intensity for the whole fit.
 
 use glam::DVec3;
 
@@ -177,7 +184,8 @@ pub(crate) fn fit_exposure(
     }
 }
 
-/// The result of a free-scale fit of one pixel ([`fit_exposure`]).
+/// The result of a free-scale fit of one pixel
+/// ([`PixelFitter::scale`](super::fit::PixelFitter::scale)).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PixelScale {
     /// The pixel's own best light intensity.
