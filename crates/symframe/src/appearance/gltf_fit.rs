@@ -74,6 +74,8 @@ type P = [f64; 3];
 pub(crate) struct Scratch {
     r: Vec<f64>,
     rj: [Vec<f64>; 3],
+    /// `(A, B) (n.l)` per sample at the point of the last [`project`].
+    terms: Vec<[f64; 2]>,
 }
 
 /// The optimal linear parameters at `p` and the cost; with `out`, the residuals (3 per
@@ -85,16 +87,17 @@ fn project(
     v: DVec3,
     p: P,
     e: Option<f64>,
+    terms: &mut Vec<[f64; 2]>,
     out: Option<&mut Vec<f64>>,
 ) -> ([f64; 3], f64, f64) {
     let (at, ab) = GltfPbr::alphas(p[1].exp(), p[2].sqrt());
     let (mut aa, mut ab_, mut bb, mut ai, mut bi) = (0.0, 0.0, 0.0, [0.0f64; 3], [0.0f64; 3]);
-    // Pass 1: the sums of the linear problem.
+    // Pass 1: the model's terms (kept for pass 2) and the sums of the linear problem.
+    terms.clear();
     for s in samples {
-        let Some((a, b)) = GltfPbr::terms(s.l, v, p[0], at, ab) else {
-            continue;
-        };
+        let (a, b) = GltfPbr::terms(s.l, v, p[0], at, ab).unwrap_or((0.0, 0.0));
         let (a, b) = (a * s.l.z, b * s.l.z);
+        terms.push([a, b]);
         aa += a * a;
         ab_ += a * b;
         bb += b * b;
@@ -136,9 +139,7 @@ fn project(
     if let Some(o) = out.as_deref_mut() {
         o.clear();
     }
-    for s in samples {
-        let (a, b) = GltfPbr::terms(s.l, v, p[0], at, ab).unwrap_or((0.0, 0.0));
-        let (a, b) = (a * s.l.z, b * s.l.z);
+    for (s, &[a, b]) in samples.iter().zip(terms.iter()) {
         for (&i, &k) in s.rgb.iter().zip(&lin) {
             let r = i - (k * a + scale * b);
             cost += r * r;
@@ -247,27 +248,27 @@ fn search(
     let lo = [0.0, params.roughness_min.ln(), 0.0];
     let hi = [1.0, 0.0, if iso { 0.0 } else { 1.0 }];
     let clamp = |p: P| -> P { std::array::from_fn(|j| p[j].clamp(lo[j], hi[j])) };
-    let cost_at = |p: P| project(samples, v, clamp(p), e, None).2;
+    let cost_at = |p: P, t: &mut Vec<[f64; 2]>| project(samples, v, clamp(p), e, t, None).2;
 
     // Start: a coarse grid.
     let mut best = (f64::INFINITY, [0.0; 3]);
-    let consider = |p: P, best: &mut (f64, P)| {
+    let consider = |p: P, best: &mut (f64, P), t: &mut Vec<[f64; 2]>| {
         let p = clamp(p);
-        let c = cost_at(p);
+        let c = cost_at(p, t);
         if c < best.0 {
             *best = (c, p);
         }
     };
     for m in [0.0, 1.0] {
         for r in [0.1f64, 0.15, 0.2, 0.3, 0.45, 0.6, 0.8, 1.0] {
-            consider([m, r.ln(), 0.0], &mut best);
+            consider([m, r.ln(), 0.0], &mut best, &mut scratch.terms);
         }
     }
     if !iso {
         let (m, lr) = (best.1[0], best.1[1]);
         for dr in [-0.7f64, -0.35, 0.0] {
             for q in [0.09, 0.25, 0.5, 0.9] {
-                consider([m, lr + dr, q], &mut best);
+                consider([m, lr + dr, q], &mut best, &mut scratch.terms);
             }
         }
     }
@@ -275,7 +276,7 @@ fn search(
     // Levenberg-Marquardt on the reduced residuals.
     let n_par = if iso { 2 } else { 3 };
     let mut p = best.1;
-    let mut cur = project(samples, v, p, e, Some(&mut scratch.r)).2;
+    let mut cur = project(samples, v, p, e, &mut scratch.terms, Some(&mut scratch.r)).2;
     let mut lambda = 1e-3;
     let mut iterations = 0;
     'outer: while iterations < params.max_iterations {
@@ -288,7 +289,7 @@ fn search(
             let h = 1e-6 * if p[j] + 1e-6 > hi[j] { -1.0 } else { 1.0 };
             q[j] += h;
             let (rj, r0) = (&mut scratch.rj[j], &scratch.r);
-            project(samples, v, q, e, Some(rj));
+            project(samples, v, q, e, &mut scratch.terms, Some(rj));
             for (a, b) in rj.iter_mut().zip(r0) {
                 *a = (*a - b) / h;
             }
@@ -346,11 +347,11 @@ fn search(
             if !moved.is_finite() || moved < 1e-10 {
                 break 'outer;
             }
-            let next = cost_at(q);
+            let next = cost_at(q, &mut scratch.terms);
             if next < cur {
                 let gain = cur - next;
                 p = q;
-                cur = project(samples, v, p, e, Some(&mut scratch.r)).2;
+                cur = project(samples, v, p, e, &mut scratch.terms, Some(&mut scratch.r)).2;
                 lambda = (lambda / 3.0).max(1e-9);
                 if moved < 1e-8 || gain <= 1e-15 * cur.max(1e-300) {
                     break 'outer;
@@ -363,7 +364,7 @@ fn search(
             }
         }
     }
-    let (coef, scale, _) = project(samples, v, p, e, None);
+    let (coef, scale, _) = project(samples, v, p, e, &mut scratch.terms, None);
     let fit = GltfFit {
         base_color: coef,
         metallic: p[0],
