@@ -114,7 +114,9 @@ pub const DEFAULT_MODEL: FitModel = FitModel::Gltf;
 /// Parameters of the per-pixel fit.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FitParams {
-    /// The model fitted.
+    /// The model fitted. `FitParams::default()` keeps the paper's Ward model (the library's
+    /// callers and tests rely on it); `symframe fit` and the Python package default to
+    /// [`DEFAULT_MODEL`].
     #[serde(default)]
     pub model: FitModel,
     /// glTF model: the intensity of every light, in the units of the measurements (a white
