@@ -17,12 +17,13 @@ use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{Scene, TangentField};
 use symframe::{estimate_stack, EstimatorParams, Rig, RigOptions, Stack};
 
-/// Models rendered: a brushed Ward material (the Ward fit's own family), a GGX plastic, a
+/// Models rendered: a brushed Ward material (the Ward fit's own family), two GGX plastics, a
 /// glTF plastic and a brushed glTF metal (the glTF fit's family), and three that neither fit
 /// represents exactly (a brushed GGX metal with a diffuse base, Cook-Torrance, Ashikhmin-Shirley).
-const MODELS: [&str; 7] = [
+const MODELS: [&str; 8] = [
     "ward:kd=0.4/0.3/0.2,ks=0.3/0.45/0.6,ax=0.08,ay=0.3",
     "ggx:kd=0.5/0.3/0.2,f0=0.04,alpha=0.15",
+    "ggx:kd=0.5/0.3/0.2,f0=0.04,alpha=0.05",
     "gltf:base=0.6/0.35/0.2,metallic=0,roughness=0.4",
     "gltf:base=0.9/0.75/0.5,metallic=1,roughness=0.3,anisotropy=0.6",
     "ggx:kd=0.1,f0=0.9,ax=0.3,ay=0.1",
