@@ -390,6 +390,46 @@ mod tests {
     }
 
     #[test]
+    fn relighting_a_gltf_fit_reproduces_the_renderer_at_its_exposure() {
+        let g = GltfPbr::new([0.8, 0.6, 0.3], 0.7, 0.35, 0.5);
+        let scene = Scene::sphere(20, TangentField::Circular);
+        let n = scene.n_pixels();
+        let masked = |v: f32, p: usize| if scene.mask[p] { v } else { f32::NAN };
+        let maps = GltfMaps {
+            width: 20,
+            height: 20,
+            normals: scene.gt_normals(),
+            tangents: scene.gt_tangents(),
+            base_color: (0..n)
+                .flat_map(|p| g.base_color.map(|c| masked(c as f32, p)))
+                .collect(),
+            metallic: (0..n).map(|p| masked(0.7, p)).collect(),
+            roughness: (0..n).map(|p| masked(0.35, p)).collect(),
+            anisotropy: (0..n).map(|p| masked(0.5, p)).collect(),
+            exposure: 2.5,
+        };
+        let r = Relighter::gltf(&maps, &Edits::default()).unwrap();
+        for l in [DVec3::new(0.3, 0.4, 0.8), DVec3::new(-0.7, 0.1, 0.5)] {
+            let a = r.render(l);
+            let b = scene.render(&g, l);
+            for (x, y) in a.iter().zip(&b) {
+                assert!((x - 2.5 * y).abs() <= 1e-5 * y.abs().max(1.0), "{x} {y}");
+            }
+        }
+        // No specular albedo to scale; an exposure that is not positive is refused.
+        let spec = Edits {
+            specular_scale: 2.0,
+            ..Edits::default()
+        };
+        assert!(Relighter::gltf(&maps, &spec).is_err());
+        let dark = GltfMaps {
+            exposure: 0.0,
+            ..maps
+        };
+        assert!(Relighter::gltf(&dark, &Edits::default()).is_err());
+    }
+
+    #[test]
     fn scales_edit_the_parts() {
         let w = Ward::new([0.3, 0.2, 0.1], [0.4, 0.5, 0.6], 0.1, 0.4);
         let (scene, maps) = sphere_maps(16, &w);
