@@ -75,7 +75,8 @@ pub enum ExperimentArg {
     Fig10,
     /// Error against Gaussian noise and quantisation.
     Noise,
-    /// Relighting from per-pixel Ward fits: held-out PSNR per model, side-by-side picture.
+    /// Relighting from per-pixel Ward and glTF fits: held-out PSNR per model and fit, side-by-side
+    /// picture.
     Relight,
     /// Every BRDF family over roughness and diffuse fraction, spheres and shadowed bumps, dense,
     /// sparse and narrow rigs: the estimator against every baseline.

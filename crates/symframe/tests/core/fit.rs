@@ -1,5 +1,5 @@
-//! Accuracy of the per-pixel Ward and glTF fits (paper Section 5.1) on synthetic spheres with known
-//! parameters: with the true frames, with estimated frames, relit under held-out lights, and on
+//! Accuracy of the per-pixel Ward and glTF fits (paper Section 5.1) on synthetic spheres with
+//! known parameters: with the true frames, with estimated frames, relit under held-out lights, and on
 //! data from other reflectance models (the fit's model error).
 
 use glam::DVec3;
