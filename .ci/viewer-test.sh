@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Browser test of `symframe view`: renders a small synthetic capture, estimates and fits it,
+# Browser test of `symframe view`: renders a small synthetic capture, estimates and fits it
+# (Ward, then glTF: each page is checked),
 # writes the viewer, renders it in headless Chromium (WebGL2 on SwiftShader) in several states
 # and compares each screenshot with the picture the command line makes of the same state:
 # `symframe relight` at three lights and with every edit, the fit's albedo pictures, and the
@@ -60,9 +61,10 @@ work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 "$sf" -q synth -o "$work/data" --size "$size" --rig cone:200 --model ward
 "$sf" -q estimate "$work/data" -o "$work/est"
-"$sf" -q fit "$work/data" --frames "$work/est" -o "$work/fit"
+"$sf" -q fit "$work/data" --frames "$work/est" -o "$work/fit" --model ward
+"$sf" -q fit "$work/data" --frames "$work/est" -o "$work/gltf" --model gltf
 # From the work folder, so that the page's title is just "fit".
-(cd "$work" && "$sf" -q view fit -o viewer.html)
+(cd "$work" && "$sf" -q view fit -o viewer.html && "$sf" -q view gltf -o viewer_gltf.html)
 
 l1=0.3,0.4,0.866 l2=-0.5,0.2,0.84 l3=0.1,-0.6,0.79
 "$sf" -q relight "$work/fit" -o "$work/relit" --light "$l1" --light "$l2" --light "$l3"
@@ -85,4 +87,15 @@ if [ -n "$screenshot" ]; then
     args+=(--screenshot "$screenshot")
 fi
 node "$here/viewer-test.js" "${args[@]}"
+
+# The same for the glTF fit of the capture (its model in the shader; no specular factor).
+"$sf" -q relight "$work/gltf" -o "$work/grelit" --light "$l1" --light "$l2" --light "$l3"
+"$sf" -q relight "$work/gltf" -o "$work/gedited" --light "$l2" --exposure 0.5 --diffuse-scale 0.7 \
+    --roughness-scale 0.8 --rotate-tangents 60
+node "$here/viewer-test.js" --viewer "$work/viewer_gltf.html" --mask "$work/data/mask.png" --min-psnr 45 \
+    --case "light=$l1" "$work/grelit/relit_000.png" \
+    --case "light=$l2" "$work/grelit/relit_001.png" \
+    --case "light=$l3" "$work/grelit/relit_002.png" \
+    --case "light=$l2&exposure=0.5&diffuse=0.7&roughness=0.8&rotate=60" "$work/gedited/relit_000.png" \
+    --case "view=base_color" "$work/gltf/base_color.png"
 echo "viewer-test: passed in $(($(date +%s) - start)) s (${size}x${size} fit, $(stat -c %s "$work/viewer.html") byte page)"

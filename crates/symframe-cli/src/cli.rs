@@ -75,7 +75,8 @@ pub enum ExperimentArg {
     Fig10,
     /// Error against Gaussian noise and quantisation.
     Noise,
-    /// Relighting from per-pixel Ward fits: held-out PSNR per model, side-by-side picture.
+    /// Relighting from per-pixel Ward and glTF fits: held-out PSNR per model and fit, side-by-side
+    /// picture.
     Relight,
     /// Every BRDF family over roughness and diffuse fraction, spheres and shadowed bumps, dense,
     /// sparse and narrow rigs: the estimator against every baseline.
@@ -106,6 +107,50 @@ pub enum GammaArg {
     Srgb,
     /// Take 8- and 16-bit samples as linear.
     Linear,
+}
+
+/// Values of `symframe fit --model`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ModelArg {
+    /// Anisotropic Ward (the paper's model): kd, ks, alpha_t, alpha_b.
+    Ward,
+    /// glTF 2.0 metallic-roughness GGX with KHR_materials_anisotropy: base colour, metallic,
+    /// roughness, anisotropy strength (direction = the tangent).
+    Gltf,
+}
+
+impl ModelArg {
+    /// The library's model.
+    pub fn model(self) -> symframe::FitModel {
+        match self {
+            ModelArg::Ward => symframe::FitModel::Ward,
+            ModelArg::Gltf => symframe::FitModel::Gltf,
+        }
+    }
+
+    /// The default of `--model`: the model that predicts held-out lights better on the
+    /// validation scenes (docs/validation.md, "Relighting").
+    pub const DEFAULT: ModelArg = match symframe::appearance::fit::DEFAULT_MODEL {
+        symframe::FitModel::Ward => ModelArg::Ward,
+        symframe::FitModel::Gltf => ModelArg::Gltf,
+    };
+}
+
+/// A value of `symframe fit --exposure`: a light intensity, `None` for `auto`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExposureArg(pub Option<f64>);
+
+/// Parses `symframe fit --exposure`: `auto` or a positive number.
+fn parse_exposure(s: &str) -> Result<ExposureArg, String> {
+    if s.trim().eq_ignore_ascii_case("auto") {
+        return Ok(ExposureArg(None));
+    }
+    match s.trim().parse::<f64>() {
+        Ok(x) if x > 0.0 && x.is_finite() => Ok(ExposureArg(Some(x))),
+        _ => Err(format!(
+            "expected 'auto' or a positive finite number, got '{s}'"
+        )),
+    }
 }
 
 /// The transfer curve of `--gamma` and `--linear` (its alias).
@@ -514,6 +559,19 @@ pub struct FitArgs {
     /// excluded.
     #[arg(long, default_value_t = DecodeOptions::default().saturation)]
     pub saturation: f32,
+    /// The reflectance model fitted per pixel (default: the one that predicts held-out lights
+    /// better on the validation scenes, docs/validation.md).
+    #[arg(long, value_enum, default_value_t = ModelArg::DEFAULT)]
+    pub model: ModelArg,
+    /// glTF model: the intensity of the lights in the images' units (a white diffuse surface
+    /// facing a light of intensity E has radiance E/pi), or `auto`: chosen from free-scale
+    /// fits of sampled pixels so that base colours fit in [0, 1]. Recorded in fit.json and
+    /// used by relight, view and export.
+    #[arg(long, default_value = "auto", value_parser = parse_exposure, value_name = "E|auto")]
+    pub exposure: ExposureArg,
+    /// glTF model: the smallest roughness the fit may return.
+    #[arg(long, default_value_t = FitParams::default().roughness_min)]
+    pub roughness_min: f64,
     /// Levenberg-Marquardt iterations per pixel at most.
     #[arg(long, default_value_t = FitParams::default().max_iterations)]
     pub max_iterations: u32,

@@ -27,6 +27,12 @@ pub fn config(args: &FitArgs) -> Result<FitConfig> {
             args.max_peak_ratio
         );
     }
+    if !(args.roughness_min > 0.0 && args.roughness_min <= 1.0) {
+        bail!(
+            "--roughness-min must be in (0, 1], got {}",
+            args.roughness_min
+        );
+    }
     if args.holdout > 0 {
         // Checked here to name the flag (reading the light file is cheap).
         let n = symframe_io::open_dataset(&args.input)?.lights.len();
@@ -38,7 +44,10 @@ pub fn config(args: &FitArgs) -> Result<FitConfig> {
         frames: args.frames.clone(),
         output: args.output.clone(),
         holdout: args.holdout,
+        exposure: args.exposure.0,
         params: FitParams {
+            model: args.model.model(),
+            roughness_min: args.roughness_min,
             max_iterations: args.max_iterations,
             max_peak_ratio: args.max_peak_ratio,
             ..FitParams::default()
@@ -69,9 +78,13 @@ pub fn run(args: &FitArgs) -> Result<FitOutcome> {
             (Some(r), Some(p)) => format!("; held-out RMS {r:.4}, PSNR {p:.1} dB"),
             _ => String::new(),
         };
+        let model = match done.report.exposure {
+            Some(e) => format!("glTF, exposure {e:.4}"),
+            None => "Ward".into(),
+        };
         eprintln!(
-            "symframe: {} pixels fitted ({} isotropic), {} without a frame, {} with too few \
-             samples; training RMS {:.4}{held}; {:.1} s",
+            "symframe: {} pixels fitted ({model}; {} isotropic), {} without a frame, {} with too \
+             few samples; training RMS {:.4}{held}; {:.1} s",
             s.anisotropic + s.isotropic,
             s.isotropic,
             s.no_frame,

@@ -8,7 +8,11 @@
 //! tangents come from the maps at each pixel (one vertex per pixel), so the shading detail is in
 //! the geometry and no normal texture is written.
 //!
-//! Material, from a `symframe fit` folder (a conversion of the Ward fit, not a fit of the glTF
+//! Material, from a `symframe fit --model gltf` folder: exactly the fitted base colour,
+//! metallic, roughness and anisotropy strength (direction = the fit's tangent), quantised to
+//! the 8-bit textures; the light intensity the fit assumed is recorded in the material's
+//! `extras.symframe.lightIntensity` (a renderer lighting the asset with lights of that
+//! intensity reproduces the photographs). From a Ward fit (a conversion, not a fit of the glTF
 //! model): `metallic = ks / (kd + ks)` (luminances), `baseColor = kd + metallic (ks - kd)`; the
 //! narrow roughness `alpha_narrow = min(alpha_t, alpha_b)` gives `roughness = sqrt(alpha_narrow)`
 //! (glTF's `alpha = roughness^2`), and the anisotropy strength `s` solves
@@ -83,6 +87,9 @@ pub struct Maps {
     pub strength: Vec<f32>,
     /// Whether the maps come from a fit (else an estimate).
     pub fitted: bool,
+    /// For a glTF fit: the light intensity it was fitted under (`fit.json`'s `exposure`);
+    /// `None` for a Ward fit (converted) or an estimate.
+    pub light_intensity: Option<f64>,
 }
 
 fn read_map(dir: &Path, name: &str, shape: &[usize]) -> Result<Vec<f32>> {
@@ -120,6 +127,40 @@ pub fn read_maps(dir: &Path) -> Result<Maps> {
     let (h, w) = (shape[0], shape[1]);
     let tangents = read_map(dir, "tangents.npy", &[h, w, 3])?;
     let n = w * h;
+    if dir.join("base_color.npy").is_file() {
+        let g = crate::relight::read_gltf_maps(dir)?;
+        if (g.width, g.height) != (w, h) {
+            bail!("{}: the maps disagree in size", dir.display());
+        }
+        // The fitted values; where nothing was fitted, black, rough, isotropic.
+        let fill = |v: &[f32], default: f32| -> Vec<f32> {
+            v.iter()
+                .map(|&x| if x.is_finite() { x } else { default })
+                .collect()
+        };
+        let strength = (0..n)
+            .map(|i| {
+                let s = g.anisotropy[i];
+                if tangents[3 * i].is_finite() && s.is_finite() {
+                    s
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        return Ok(Maps {
+            w,
+            h,
+            base: fill(&g.base_color, 0.0),
+            metallic: fill(&g.metallic, 0.0),
+            roughness: fill(&g.roughness, 1.0),
+            strength,
+            normals,
+            tangents,
+            fitted: true,
+            light_intensity: Some(g.exposure),
+        });
+    }
     if dir.join("kd.npy").is_file() {
         let kd = read_map(dir, "kd.npy", &[h, w, 3])?;
         let ks = read_map(dir, "ks.npy", &[h, w, 3])?;
@@ -172,6 +213,7 @@ pub fn read_maps(dir: &Path) -> Result<Maps> {
             roughness,
             strength,
             fitted: true,
+            light_intensity: None,
         })
     } else {
         let aniso = if dir.join("anisotropy.npy").is_file() {
@@ -198,6 +240,7 @@ pub fn read_maps(dir: &Path) -> Result<Maps> {
             normals,
             tangents,
             fitted: false,
+            light_intensity: None,
         })
     }
 }
@@ -361,6 +404,7 @@ pub fn document(
     with_normal_texture: bool,
     embed: bool,
     bin_uri: Option<&str>,
+    light_intensity: Option<f64>,
 ) -> Result<(Value, Vec<u8>)> {
     let mut bin: Vec<u8> = Vec::new();
     let mut views = Vec::new();
@@ -464,6 +508,9 @@ pub fn document(
             }
         },
     });
+    if let Some(e) = light_intensity {
+        material["extras"] = json!({ "symframe": { "lightIntensity": e } });
+    }
     if with_normal_texture {
         material["normalTexture"] = json!({ "index": 2, "scale": 1.0 });
     }
@@ -606,6 +653,7 @@ pub fn export_gltf(config: &ExportConfig) -> Result<ExportOutcome> {
             !config.mesh,
             embed,
             (!embed).then_some(&bin_name),
+            maps.light_intensity,
         )?;
         if embed {
             std::fs::write(&config.output, glb(&doc, &bin))
@@ -658,6 +706,7 @@ mod tests {
             roughness: vec![0.25, 1.0],
             strength: vec![0.8, 0.3],
             fitted: true,
+            light_intensity: None,
         };
         let [base, mr, normal, aniso] = textures(&m, true);
         assert_eq!(&normal[..3], &[128, 128, 255]);
@@ -691,6 +740,7 @@ mod tests {
             roughness: vec![0.5; 3],
             strength: vec![0.5, 0.0, 1.0],
             fitted: false,
+            light_intensity: None,
         };
         assert_eq!(textures(&m, true)[3], rgb);
     }

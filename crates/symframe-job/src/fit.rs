@@ -1,5 +1,5 @@
-//! The fit job: a capture and its estimated frames in, per-pixel anisotropic Ward parameters
-//! out (paper Section 5.1), in a folder that [`crate::relight`] reads on its own. The samples
+//! The fit job: a capture and its estimated frames in, per-pixel anisotropic Ward (paper
+//! Section 5.1) or glTF metallic-roughness parameters out, in a folder that [`crate::relight`] reads on its own. The samples
 //! come from the tile cache tile by tile, as in [`crate::estimate`]: memory stays bounded, and
 //! an interrupted fit resumes.
 
@@ -9,8 +9,10 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 use symframe::appearance::fit::{
-    holdout_lights, FitMaps, FitMethod, FitParams, FitSummary, HoldoutError, PixelFit, PixelOutcome,
+    holdout_lights, FitMaps, FitMethod, FitModel, FitParams, FitSummary, HoldoutError, PixelFit,
+    PixelOutcome,
 };
+use symframe::appearance::gltf_fit::GltfFit;
 use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{
     CacheFormat, CacheOptions, Dataset, DecodeOptions, Fingerprints, StampKind, TileFile,
@@ -36,8 +38,12 @@ pub struct FitConfig {
     /// Lights left out of the fit (evenly spaced in input order) to judge it on; they replace
     /// `params.holdout`.
     pub holdout: usize,
-    /// The fit's parameters.
+    /// The fit's parameters (`params.model` chooses the model).
     pub params: FitParams,
+    /// glTF fit: the light intensity ([`FitParams::exposure`]); `None` chooses it from
+    /// free-scale fits of up to [`EXPOSURE_PIXELS`] pixels spread over the image
+    /// ([`symframe::appearance::gltf_fit::choose_exposure`]). Replaces `params.exposure`.
+    pub exposure: Option<f64>,
     /// Mask image (`None`: the dataset's `mask.png`, if any).
     pub mask: Option<PathBuf>,
     /// How images are decoded.
@@ -61,6 +67,7 @@ impl FitConfig {
             output: output.into(),
             holdout: 0,
             params: FitParams::default(),
+            exposure: None,
             mask: None,
             decode: DecodeOptions::default(),
             cache: CacheConfig::default(),
@@ -111,8 +118,15 @@ pub struct FitReport {
     pub inputs: InputsRecord,
     /// The mask used, if any.
     pub mask: Option<PathBuf>,
-    /// The reflectance model fitted.
+    /// The reflectance model fitted: `ward` or `gltf` (also in `parameters.model`).
     pub model: &'static str,
+    /// The model in words, and its frame.
+    pub model_description: &'static str,
+    /// The light intensity the glTF fit assumed (`parameters.exposure`), which relighting and
+    /// export use; `None` for a Ward fit.
+    pub exposure: Option<f64>,
+    /// Whether that exposure was chosen from the data (`true`) or given (`false`).
+    pub exposure_chosen: Option<bool>,
     /// Fit parameters, including the held-out light indices.
     pub parameters: FitParams,
     /// Light counts.
@@ -271,6 +285,7 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
             .with_context(|| format!("holding out {} lights", config.holdout))?,
         ..config.params.clone()
     };
+    let mut params = params;
     let (cache_dir, options) = config.cache_in_force();
     let (cache, cache_info, fps) =
         open_cache(&ds, &config.decode, &cache_dir, options, ctl, &|f| {
@@ -290,6 +305,24 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
         mask.as_deref(),
     )
     .with_context(|| ds.source.display().to_string())?;
+    let mut exposure_chosen = false;
+    if params.model == FitModel::Gltf {
+        params.exposure = match config.exposure {
+            Some(e) => e,
+            None => {
+                exposure_chosen = true;
+                choose_exposure(
+                    &cache,
+                    &ds.lights,
+                    &params,
+                    &normals,
+                    &tangents,
+                    mask.as_deref(),
+                )
+                .with_context(|| ds.source.display().to_string())?
+            }
+        };
+    }
     let method = FitMethod::new(&ds.lights, &params, &normals, &tangents, w * h)
         .with_context(|| ds.source.display().to_string())?;
 
@@ -322,7 +355,7 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
         |t| tile_path(&tiles_dir, t),
         |p, r: Option<PixelOutcome>| outcomes[p] = r,
     )?;
-    let maps = FitMaps::from_outcomes(w, h, &normals, &tangents, outcomes);
+    let maps = FitMaps::from_outcomes(w, h, &normals, &tangents, &params, outcomes);
     let fit_s = t_fit.elapsed().as_secs_f64();
 
     let mut report = FitReport {
@@ -331,7 +364,10 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
         frames: config.frames.clone(),
         inputs: InputsRecord::of(&fps),
         mask: mask_path,
-        model: "anisotropic Ward (Ward 1992, normalised form), frame x = t, y = n x t, z = n",
+        model: params.model.name(),
+        model_description: params.model.description(),
+        exposure: (params.model == FitModel::Gltf).then_some(params.exposure),
+        exposure_chosen: (params.model == FitModel::Gltf).then_some(exposure_chosen),
         lights: FitLights {
             input: ds.lights.len(),
             fitted: ds.lights.len() - params.holdout.len(),
@@ -362,11 +398,75 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
     Ok(FitOutcome { maps, report })
 }
 
+/// The parameter maps of each model (without extension; `.npy` and `.exr` are written).
+const WARD_MAPS: [&str; 4] = ["kd", "ks", "alpha_t", "alpha_b"];
+const GLTF_MAPS: [&str; 4] = ["base_color", "metallic", "roughness", "anisotropy_strength"];
+
+/// Pixels the exposure of a glTF fit is chosen from, at most.
+pub const EXPOSURE_PIXELS: usize = 2048;
+
+/// The light intensity of a glTF fit chosen from free-scale fits of up to
+/// [`EXPOSURE_PIXELS`] pixels (inside the mask, with a frame) spread evenly over the image,
+/// read tile by tile from the cache.
+fn choose_exposure(
+    cache: &symframe_io::TileCache,
+    lights: &[glam::DVec3],
+    params: &FitParams,
+    normals: &[f32],
+    tangents: &[f32],
+    mask: Option<&[bool]>,
+) -> Result<f64> {
+    use rayon::prelude::*;
+    use symframe::appearance::fit::PixelFitter;
+    use symframe::eval::vec_at;
+    let grid = *cache.grid();
+    let usable = |p: usize| mask.is_none_or(|m| m[p]) && vec_at(normals, p).is_some();
+    let count = (0..grid.width * grid.height).filter(|&p| usable(p)).count();
+    let stride = count.div_ceil(EXPOSURE_PIXELS).max(1);
+    // The k-th usable pixel (row-major) is chosen when k is a multiple of the stride.
+    let mut chosen = vec![false; grid.width * grid.height];
+    for (k, p) in (0..chosen.len()).filter(|&p| usable(p)).enumerate() {
+        chosen[p] = k % stride == 0;
+    }
+    // The held-out lights stay out of this choice too.
+    PixelFitter::new(lights, params)?;
+    let scales: Vec<_> = (0..grid.n_tiles())
+        .into_par_iter()
+        .flat_map_iter(|t| {
+            let mut fitter = PixelFitter::new(lights, params).expect("checked above");
+            let mut scratch = Vec::new();
+            let view = cache.tile(t, &mut scratch);
+            let mut rgb = vec![0.0f32; lights.len() * 3];
+            let mut out = Vec::new();
+            for (k, p) in grid.pixels(t).enumerate() {
+                if !chosen[p] {
+                    continue;
+                }
+                view.pixel(k, &mut rgb);
+                let (Some(n), t) = (vec_at(normals, p), vec_at(tangents, p)) else {
+                    continue;
+                };
+                out.extend(fitter.scale(n, t, &rgb));
+            }
+            cache.release(t);
+            out
+        })
+        .collect();
+    symframe::appearance::gltf_fit::choose_exposure(&scales).with_context(|| {
+        "no pixel to choose the exposure of the glTF fit from; give it with --exposure"
+    })
+}
+
 /// Files an earlier fit into the same folder may have left that this one may not write: the
-/// held-out residual maps of a fit with held-out lights, and the viewer page of the old maps
-/// (`symframe view`'s default file), which would no longer show this fit.
+/// held-out residual maps of a fit with held-out lights, the other model's parameter maps and
+/// pictures, and the viewer page of the old maps (`symframe view`'s default file), which would
+/// no longer show this fit.
 fn fit_owned(name: &str) -> bool {
-    name.starts_with("holdout_residual.") || name == "viewer.html"
+    let stem = name.split('.').next().unwrap_or(name);
+    name.starts_with("holdout_residual.")
+        || name == "viewer.html"
+        || WARD_MAPS.contains(&stem)
+        || GLTF_MAPS.contains(&stem)
 }
 
 /// Writes every output file as one output set (staged, then switched in, `fit.json` last).
@@ -381,32 +481,42 @@ fn write_outputs(
     let m = &maps.ward;
     let (w, h) = (m.width, m.height);
     let staging = OutputSet::new(out, fit_owned)?;
-    let maps3: [(&str, &[f32]); 4] = [
-        ("kd", &m.kd),
-        ("ks", &m.ks),
-        ("normals", &m.normals),
-        ("tangents", &m.tangents),
-    ];
-    for (name, data) in maps3 {
+    // The model's (name, data) maps: per pixel three values, then one.
+    type Named<'a> = Vec<(&'a str, &'a [f32])>;
+    let (maps3, maps1): (Named, Named) = match &maps.gltf {
+        None => (
+            vec![("kd", &m.kd), ("ks", &m.ks)],
+            vec![("alpha_t", &m.alpha_t), ("alpha_b", &m.alpha_b)],
+        ),
+        Some(g) => (
+            vec![("base_color", &g.base_color)],
+            vec![
+                ("metallic", &g.metallic),
+                ("roughness", &g.roughness),
+                ("anisotropy_strength", &g.anisotropy),
+            ],
+        ),
+    };
+    let frames: [(&str, &[f32]); 2] = [("normals", &m.normals), ("tangents", &m.tangents)];
+    for (name, data) in maps3.iter().chain(&frames) {
         symframe_io::write_npy_f32(&staging.path(&format!("{name}.npy")), &[h, w, 3], data)?;
         symframe_io::write_exr_map(&staging.path(&format!("{name}.exr")), w, h, 3, data)?;
     }
-    let maps1: [(&str, &[f32]); 4] = [
-        ("alpha_t", &m.alpha_t),
-        ("alpha_b", &m.alpha_b),
+    let residuals: [(&str, &[f32]); 2] = [
         ("residual", &maps.residual),
         ("holdout_residual", &maps.holdout_residual),
     ];
-    for (name, data) in maps1 {
-        if name == "holdout_residual" && report.parameters.holdout.is_empty() {
+    for (name, data) in maps1.iter().chain(&residuals) {
+        if *name == "holdout_residual" && report.parameters.holdout.is_empty() {
             continue;
         }
         symframe_io::write_npy_f32(&staging.path(&format!("{name}.npy")), &[h, w], data)?;
         symframe_io::write_exr_map(&staging.path(&format!("{name}.exr")), w, h, 1, data)?;
     }
     // Albedo pictures: clamped and sRGB-encoded, black where nothing was fitted.
-    symframe_io::write_png8_rgb(&staging.path("kd.png"), w, h, &m.kd, true)?;
-    symframe_io::write_png8_rgb(&staging.path("ks.png"), w, h, &m.ks, true)?;
+    for (name, data) in &maps3 {
+        symframe_io::write_png8_rgb(&staging.path(&format!("{name}.png")), w, h, data, true)?;
+    }
     report.timings.write_s = t_write.elapsed().as_secs_f64();
     report.timings.total_s = t0.elapsed().as_secs_f64();
     let json = serde_json::to_value(&*report)?;
@@ -417,14 +527,15 @@ fn write_outputs(
 
 /// Per-tile fit results: a 40-byte header (magic `SYMFFITR`, format version, the job's
 /// fingerprint, the tile index, the pixel count), then [`FIT_RECORD`] bytes per pixel
-/// (little-endian): outcome (1 byte: 0 masked, 1 no frame, 2 too few samples, 3 fitted),
-/// isotropic (1 byte), 6 padding, `kd` and `ks` (6 x f64), `alpha_t`, `alpha_b`, training SSE
+/// (little-endian): outcome (1 byte: 0 masked, 1 no frame, 2 too few samples, 3 fitted Ward,
+/// 4 fitted glTF), isotropic (1 byte), 6 padding, `kd` and `ks` (6 x f64), `alpha_t`,
+/// `alpha_b` (glTF: base colour, metallic, roughness, strength, 0, 0), training SSE
 /// (f64), training samples (u64), iterations (u32, 4 padding), held-out SSE (f64), held-out
 /// samples (u64), held-out peak (f64). Doubles, so the summary sums are those of an in-memory
 /// fit bit for bit.
 const FIT_MAGIC: &[u8; 8] = b"SYMFFITR";
 /// Format version of fit tile files.
-const FIT_TILE_VERSION: u32 = 1;
+const FIT_TILE_VERSION: u32 = 2;
 const FIT_HEADER: usize = 40;
 const FIT_RECORD: usize = 120;
 
@@ -440,24 +551,54 @@ fn fit_header(job: u64, t: usize, n: usize) -> [u8; FIT_HEADER] {
 
 fn encode(r: &Option<PixelOutcome>, b: &mut Vec<u8>) {
     let start = b.len();
-    let (tag, fitted) = match r {
-        None => (0u8, None),
+    // (tag, isotropic, eight parameters, sse, samples, iterations, held-out error)
+    type Fitted<'a> = (bool, [f64; 8], f64, usize, u32, &'a HoldoutError);
+    let (tag, fitted): (u8, Option<Fitted>) = match r {
+        None => (0, None),
         Some(PixelOutcome::NoFrame) => (1, None),
         Some(PixelOutcome::TooFewSamples) => (2, None),
-        Some(PixelOutcome::Fitted(f, h)) => (3, Some((f, h))),
+        Some(PixelOutcome::Fitted(f, h)) => (
+            3,
+            Some((
+                f.isotropic,
+                [
+                    f.kd[0], f.kd[1], f.kd[2], f.ks[0], f.ks[1], f.ks[2], f.alpha_t, f.alpha_b,
+                ],
+                f.sse,
+                f.samples,
+                f.iterations,
+                h,
+            )),
+        ),
+        Some(PixelOutcome::FittedGltf(f, h)) => (
+            4,
+            Some((
+                f.isotropic,
+                [
+                    f.base_color[0],
+                    f.base_color[1],
+                    f.base_color[2],
+                    f.metallic,
+                    f.roughness,
+                    f.anisotropy,
+                    0.0,
+                    0.0,
+                ],
+                f.sse,
+                f.samples,
+                f.iterations,
+                h,
+            )),
+        ),
     };
-    b.extend_from_slice(&[tag, fitted.is_some_and(|(f, _)| f.isotropic) as u8]);
+    b.extend_from_slice(&[tag, fitted.is_some_and(|f| f.0) as u8]);
     b.resize(start + 8, 0);
-    if let Some((f, h)) = fitted {
-        for v in
-            f.kd.iter()
-                .chain(&f.ks)
-                .chain(&[f.alpha_t, f.alpha_b, f.sse])
-        {
+    if let Some((_, values, sse, samples, iterations, h)) = fitted {
+        for v in values.iter().chain(&[sse]) {
             b.extend_from_slice(&v.to_le_bytes());
         }
-        b.extend_from_slice(&(f.samples as u64).to_le_bytes());
-        b.extend_from_slice(&f.iterations.to_le_bytes());
+        b.extend_from_slice(&(samples as u64).to_le_bytes());
+        b.extend_from_slice(&iterations.to_le_bytes());
         b.extend_from_slice(&[0; 4]);
         b.extend_from_slice(&h.sse.to_le_bytes());
         b.extend_from_slice(&(h.samples as u64).to_le_bytes());
@@ -490,6 +631,24 @@ fn decode(r: &[u8]) -> Option<Option<PixelOutcome>> {
                 peak: f64_at(112),
             };
             Some(PixelOutcome::Fitted(fit, hold))
+        }
+        4 => {
+            let fit = GltfFit {
+                base_color: [f64_at(8), f64_at(16), f64_at(24)],
+                metallic: f64_at(32),
+                roughness: f64_at(40),
+                anisotropy: f64_at(48),
+                isotropic: r[1] != 0,
+                sse: f64_at(72),
+                samples: u64_at(80) as usize,
+                iterations: u32::from_le_bytes(r[88..92].try_into().unwrap_or_default()),
+            };
+            let hold = HoldoutError {
+                sse: f64_at(96),
+                samples: u64_at(104) as usize,
+                peak: f64_at(112),
+            };
+            Some(PixelOutcome::FittedGltf(fit, hold))
         }
         _ => return None,
     })
@@ -571,19 +730,30 @@ mod tests {
             samples: 12,
             peak: 3.5,
         };
+        let gltf = GltfFit {
+            base_color: [0.25, 1.0 / 7.0, 1.0],
+            metallic: 0.3,
+            roughness: 0.07,
+            anisotropy: 0.9,
+            isotropic: false,
+            samples: 99,
+            sse: 2e-7,
+            iterations: 3,
+        };
         let recs = vec![
             None,
             Some(PixelOutcome::NoFrame),
             Some(PixelOutcome::TooFewSamples),
             Some(PixelOutcome::Fitted(fit, hold)),
+            Some(PixelOutcome::FittedGltf(gltf, hold)),
         ];
         let p = tile_path(d.path(), 3);
-        assert!(!fit_tile_done(&p, 5, 3, 4));
+        assert!(!fit_tile_done(&p, 5, 3, 5));
         <Option<PixelOutcome>>::write(&p, 5, 3, &recs).unwrap();
-        assert!(fit_tile_done(&p, 5, 3, 4));
-        assert!(!fit_tile_done(&p, 6, 3, 4));
-        assert_eq!(<Option<PixelOutcome>>::read(&p, 5, 3, 4).unwrap(), recs);
-        let e = <Option<PixelOutcome>>::read(&p, 6, 3, 4)
+        assert!(fit_tile_done(&p, 5, 3, 5));
+        assert!(!fit_tile_done(&p, 6, 3, 5));
+        assert_eq!(<Option<PixelOutcome>>::read(&p, 5, 3, 5).unwrap(), recs);
+        let e = <Option<PixelOutcome>>::read(&p, 6, 3, 5)
             .unwrap_err()
             .to_string();
         assert!(e.contains("not the fit result of tile 3"), "{e}");

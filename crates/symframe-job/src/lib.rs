@@ -78,7 +78,10 @@ pub use estimate::{
 pub use fit::{fit, FitConfig, FitLights, FitOutcome, FitReport, FitTimings};
 pub use merge::{merge, MergeOutcome, ShardManifest, MANIFEST};
 pub use outdir::{check_output_set, OutputDir, OutputSet, Staging, LOCK_FILE};
-pub use relight::{read_ward_maps, relight, RelightConfig, RelightOutcome};
+pub use relight::{
+    read_fit_maps, read_gltf_maps, read_ward_maps, relight, FittedMaps, RelightConfig,
+    RelightOutcome,
+};
 pub use tiles::{peak_rss_bytes, shard_tiles, TileCounts};
 pub use view::{write_viewer, ViewConfig, ViewOutcome};
 

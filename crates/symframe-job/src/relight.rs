@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use serde::Serialize;
 use symframe::appearance::relight::{tone_map, Edits, Relighter};
-use symframe::WardMaps;
+use symframe::{GltfMaps, WardMaps};
 
 use crate::outdir::{OutputDir, OutputSet};
 
@@ -67,6 +67,89 @@ struct RelightReport<'a> {
     shadows: Option<&'a Path>,
 }
 
+/// The maps of a fit folder, of either model.
+#[derive(Debug, Clone)]
+pub enum FittedMaps {
+    /// A Ward fit (`kd`, `ks`, `alpha_t`, `alpha_b`).
+    Ward(WardMaps),
+    /// A glTF fit (`base_color`, `metallic`, `roughness`, `anisotropy_strength`, and the
+    /// exposure from `fit.json`).
+    Gltf(GltfMaps),
+}
+
+impl FittedMaps {
+    /// Width and height in pixels.
+    pub fn size(&self) -> (usize, usize) {
+        match self {
+            FittedMaps::Ward(m) => (m.width, m.height),
+            FittedMaps::Gltf(m) => (m.width, m.height),
+        }
+    }
+
+    /// The relighter of these maps with `edits`.
+    pub fn relighter(&self, edits: &Edits) -> symframe::Result<Relighter> {
+        match self {
+            FittedMaps::Ward(m) => Relighter::new(m, edits),
+            FittedMaps::Gltf(m) => Relighter::gltf(m, edits),
+        }
+    }
+
+    /// Unit normals, `H x W x 3`.
+    pub fn normals(&self) -> &[f32] {
+        match self {
+            FittedMaps::Ward(m) => &m.normals,
+            FittedMaps::Gltf(m) => &m.normals,
+        }
+    }
+}
+
+/// Reads the maps of a fit folder of either model: a glTF fit where `base_color.npy` is
+/// there, else a Ward fit.
+pub fn read_fit_maps(dir: &Path) -> Result<FittedMaps> {
+    if dir.join("base_color.npy").is_file() {
+        read_gltf_maps(dir).map(FittedMaps::Gltf)
+    } else {
+        read_ward_maps(dir).map(FittedMaps::Ward)
+    }
+}
+
+/// Reads the fitted glTF maps of `dir` and the exposure its `fit.json` records.
+pub fn read_gltf_maps(dir: &Path) -> Result<GltfMaps> {
+    let path = dir.join("base_color.npy");
+    let (shape, base_color) = symframe_io::read_npy_f32(&path)?;
+    let [h, w, 3] = shape[..] else {
+        bail!(
+            "{}: shape {shape:?} is not an H x W x 3 map",
+            path.display()
+        );
+    };
+    let report = dir.join("fit.json");
+    let text = std::fs::read_to_string(&report).with_context(|| {
+        format!(
+            "{}: cannot read (a glTF fit's exposure is recorded there)",
+            report.display()
+        )
+    })?;
+    let json: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", report.display()))?;
+    let Some(exposure) = json.get("exposure").and_then(|v| v.as_f64()) else {
+        bail!("{}: records no exposure of the glTF fit", report.display());
+    };
+    let maps = GltfMaps {
+        width: w,
+        height: h,
+        metallic: read_map(dir, "metallic", &[h, w])?,
+        roughness: read_map(dir, "roughness", &[h, w])?,
+        anisotropy: read_map(dir, "anisotropy_strength", &[h, w])?,
+        normals: read_map(dir, "normals", &[h, w, 3])?,
+        tangents: read_map(dir, "tangents", &[h, w, 3])?,
+        base_color,
+        exposure,
+    };
+    maps.check().with_context(|| format!("{}", dir.display()))?;
+    Ok(maps)
+}
+
 /// Reads one map of the fit folder, which must have the shape `expect`.
 fn read_map(dir: &Path, name: &str, expect: &[usize]) -> Result<Vec<f32>> {
     let path = dir.join(format!("{name}.npy"));
@@ -79,7 +162,7 @@ fn read_map(dir: &Path, name: &str, expect: &[usize]) -> Result<Vec<f32>> {
     let (shape, data) = symframe_io::read_npy_f32(&path)?;
     if shape != expect {
         bail!(
-            "{}: shape {shape:?} does not match kd.npy ({expect:?} expected)",
+            "{}: shape {shape:?} does not match the fit's other maps ({expect:?} expected)",
             path.display()
         );
     }
@@ -135,8 +218,8 @@ impl RelightConfig {
 
 /// Runs a relight job: renders the fitted maps under every light, edited, into `output`.
 pub fn relight(config: &RelightConfig) -> Result<RelightOutcome> {
-    let maps = read_ward_maps(&config.fit_dir)?;
-    let (w, h) = (maps.width, maps.height);
+    let maps = read_fit_maps(&config.fit_dir)?;
+    let (w, h) = maps.size();
     let lights: Vec<DVec3> = config.lights.iter().map(|l| l.normalize()).collect();
     let edits = Edits {
         diffuse_scale: config.diffuse_scale,
@@ -148,8 +231,9 @@ pub fn relight(config: &RelightConfig) -> Result<RelightOutcome> {
             None => None,
         },
     };
-    let relighter =
-        Relighter::new(&maps, &edits).with_context(|| config.fit_dir.display().to_string())?;
+    let relighter = maps
+        .relighter(&edits)
+        .with_context(|| config.fit_dir.display().to_string())?;
     let heights = match &config.shadows {
         Some(p) => {
             let (shape, depth) = symframe_io::read_npy_f32(p)?;
@@ -168,7 +252,7 @@ pub fn relight(config: &RelightConfig) -> Result<RelightOutcome> {
     let result = write_relit(
         config,
         &out,
-        &maps,
+        (w, h),
         &relighter,
         &lights,
         &edits,
@@ -194,13 +278,12 @@ fn relight_owned(name: &str) -> bool {
 fn write_relit(
     config: &RelightConfig,
     out: &OutputDir,
-    maps: &WardMaps,
+    (w, h): (usize, usize),
     relighter: &Relighter,
     lights: &[DVec3],
     edits: &Edits,
     heights: Option<&[f64]>,
 ) -> Result<RelightOutcome> {
-    let (w, h) = (maps.width, maps.height);
     let staging = OutputSet::new(out, relight_owned)?;
     let mut names = Vec::with_capacity(lights.len());
     for (i, &l) in lights.iter().enumerate() {

@@ -13,7 +13,9 @@
 //! - `geom`: the normal, then a flag (0 no normal, 1 a normal but no model, 2 a model);
 //! - `frame`: the shading tangent (the map's, or the relighter's own for isotropic pixels),
 //!   then 1 where it came from the tangent map (only those are turned by a rotation);
-//! - `kd`: diffuse albedo and `alpha_t`; `ks`: specular albedo and `alpha_b`;
+//! - `kd`: diffuse albedo and `alpha_t`; `ks`: specular albedo and `alpha_b` (a glTF fit:
+//!   `kd` base colour and metallic, `ks` roughness, anisotropy strength, 0, 0; the fitted
+//!   light intensity is in the page's data);
 //! - `est` (when the estimate's maps are found): confidence, anisotropy, source code, and a
 //!   flag sum (1 confidence, 2 anisotropy, 4 source present).
 //!
@@ -24,9 +26,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
-use symframe::{Edits, PixelSource, Relighter};
+use symframe::{Edits, PixelSource};
 
-use crate::relight::read_ward_maps;
+use crate::relight::{read_fit_maps, FittedMaps};
 
 /// The page template; `{{NAME}}` marks are filled in by [`render_page`].
 const PAGE: &str = include_str!("view/viewer.html");
@@ -93,6 +95,10 @@ struct PageData {
     views: Vec<&'static str>,
     /// Names of the source codes, by code.
     sources: Vec<&'static str>,
+    /// The fitted model: `ward` or `gltf`.
+    model: &'static str,
+    /// A glTF fit's light intensity (1 for Ward).
+    light_intensity: f64,
 }
 
 /// The encoded textures (see the module documentation).
@@ -115,10 +121,15 @@ struct EstimateMaps {
 /// Writes the viewer of a fit: see the module documentation. Errors name the file at fault
 /// (a fit map missing or of the wrong size, an estimate map of the wrong size, the output).
 pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
-    let maps = read_ward_maps(&config.fit_dir)?;
-    let (w, h) = (maps.width, maps.height);
-    let relighter = Relighter::new(&maps, &Edits::default())
+    let fitted = read_fit_maps(&config.fit_dir)?;
+    let (w, h) = fitted.size();
+    let relighter = fitted
+        .relighter(&Edits::default())
         .with_context(|| config.fit_dir.display().to_string())?;
+    let (normals, tangents) = match &fitted {
+        FittedMaps::Ward(m) => (&m.normals, &m.tangents),
+        FittedMaps::Gltf(m) => (&m.normals, &m.tangents),
+    };
     let mut notes = Vec::new();
     let frames = frames_dir(config, &mut notes)?;
     let est = match &frames {
@@ -141,29 +152,45 @@ pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
     let n = w * h;
     let geom = encode_texture(n, |p| match relighter.frame(p) {
         Some((_, nrm, _)) => [nrm.x as f32, nrm.y as f32, nrm.z as f32, 2.0],
-        None => match finite3(&maps.normals, p) {
+        None => match finite3(normals, p) {
             Some([x, y, z]) => [x, y, z, 1.0],
             None => [0.0; 4],
         },
     })?;
     let frame = encode_texture(n, |p| match relighter.frame(p) {
         Some((t, _, aniso)) => [t.x as f32, t.y as f32, t.z as f32, f32::from(aniso)],
-        None => match finite3(&maps.tangents, p) {
+        None => match finite3(tangents, p) {
             Some([x, y, z]) => [x, y, z, 1.0],
             None => [0.0; 4],
         },
     })?;
     // Albedos and roughnesses matter only where there is a model (the flag of `geom`).
-    let kd = encode_texture(n, |p| {
-        let c = &maps.kd[p * 3..p * 3 + 3];
-        [c[0], c[1], c[2], maps.alpha_t[p]]
-    })?;
-    let ks = encode_texture(n, |p| {
-        let c = &maps.ks[p * 3..p * 3 + 3];
-        [c[0], c[1], c[2], maps.alpha_b[p]]
-    })?;
+    let (kd, ks, mut views, model, light_intensity) = match &fitted {
+        FittedMaps::Ward(maps) => (
+            encode_texture(n, |p| {
+                let c = &maps.kd[p * 3..p * 3 + 3];
+                [c[0], c[1], c[2], maps.alpha_t[p]]
+            })?,
+            encode_texture(n, |p| {
+                let c = &maps.ks[p * 3..p * 3 + 3];
+                [c[0], c[1], c[2], maps.alpha_b[p]]
+            })?,
+            vec!["relit", "normal", "tangent", "kd", "ks"],
+            "ward",
+            1.0,
+        ),
+        FittedMaps::Gltf(maps) => (
+            encode_texture(n, |p| {
+                let c = &maps.base_color[p * 3..p * 3 + 3];
+                [c[0], c[1], c[2], maps.metallic[p]]
+            })?,
+            encode_texture(n, |p| [maps.roughness[p], maps.anisotropy[p], 0.0, 0.0])?,
+            vec!["relit", "normal", "tangent", "base_color"],
+            "gltf",
+            maps.exposure,
+        ),
+    };
 
-    let mut views = vec!["relit", "normal", "tangent", "kd", "ks"];
     let est = match est {
         Some(e) => {
             let at = |m: &Option<Vec<f32>>, p: usize| m.as_ref().map_or(f32::NAN, |v| v[p]);
@@ -205,6 +232,8 @@ pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
         },
         views: views.clone(),
         sources: PixelSource::legend().iter().map(|l| l.1).collect(),
+        model,
+        light_intensity,
     };
     let page = render_page(&title, &data)?;
     write_file(&config.output, page.as_bytes())?;
@@ -445,6 +474,8 @@ mod tests {
             },
             views: vec!["relit"],
             sources: vec![],
+            model: "ward",
+            light_intensity: 1.0,
         };
         let page = render_page("a</script>", &data).unwrap();
         assert!(!page.contains("{{"), "a mark was left");

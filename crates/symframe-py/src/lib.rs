@@ -279,7 +279,7 @@ fn map_array<'py>(
     })
 }
 
-/// The `symframe fit` job: per-pixel Ward parameters in the frames of an estimate.
+/// The `symframe fit` job: per-pixel Ward or glTF parameters in the frames of an estimate.
 #[pyfunction]
 #[pyo3(signature = (path, frames, out, progress=None, threads=None, options=None))]
 fn fit<'py>(
@@ -294,12 +294,30 @@ fn fit<'py>(
     let mut o = Options::new("fit", options);
     let d = symframe::FitParams::default();
     let holdout: usize = o.or("holdout", 0)?;
+    let model: String = o.or(
+        "model",
+        symframe::appearance::fit::DEFAULT_MODEL.name().to_string(),
+    )?;
+    let exposure: Option<f64> = o.get("exposure")?;
+    let roughness_min: f64 = o.or("roughness_min", d.roughness_min)?;
     let max_iterations: u32 = o.or("max_iterations", d.max_iterations)?;
     let max_peak_ratio: f64 = o.or("max_peak_ratio", d.max_peak_ratio)?;
     let mask: Option<PathBuf> = o.get("mask")?;
     let decode = options::decode(&mut o)?;
     let cache = options::cache(&mut o)?;
     o.finish()?;
+    let model: symframe::FitModel = model.parse().map_err(PyValueError::new_err)?;
+    if exposure.is_some_and(|e| !(e > 0.0 && e.is_finite())) {
+        return Err(PyValueError::new_err(format!(
+            "exposure must be positive and finite (or None: chosen from the data), got {}",
+            exposure.unwrap_or_default()
+        )));
+    }
+    if !(roughness_min > 0.0 && roughness_min <= 1.0) {
+        return Err(PyValueError::new_err(format!(
+            "roughness_min must be in (0, 1], got {roughness_min}"
+        )));
+    }
     if max_iterations == 0 {
         return Err(PyValueError::new_err("max_iterations must be at least 1"));
     }
@@ -313,7 +331,10 @@ fn fit<'py>(
         frames,
         output: out,
         holdout,
+        exposure,
         params: symframe::FitParams {
+            model,
+            roughness_min,
             max_iterations,
             max_peak_ratio,
             ..d
@@ -327,10 +348,20 @@ fn fit<'py>(
     dict.set_item("report", to_python(py, &done.report)?)?;
     let m = done.maps;
     let (h, w) = (m.ward.height, m.ward.width);
-    dict.set_item("kd", map_array(py, m.ward.kd, h, w, 3)?)?;
-    dict.set_item("ks", map_array(py, m.ward.ks, h, w, 3)?)?;
-    dict.set_item("alpha_t", map_array(py, m.ward.alpha_t, h, w, 1)?)?;
-    dict.set_item("alpha_b", map_array(py, m.ward.alpha_b, h, w, 1)?)?;
+    match m.gltf {
+        Some(g) => {
+            dict.set_item("base_color", map_array(py, g.base_color, h, w, 3)?)?;
+            dict.set_item("metallic", map_array(py, g.metallic, h, w, 1)?)?;
+            dict.set_item("roughness", map_array(py, g.roughness, h, w, 1)?)?;
+            dict.set_item("anisotropy_strength", map_array(py, g.anisotropy, h, w, 1)?)?;
+        }
+        None => {
+            dict.set_item("kd", map_array(py, m.ward.kd, h, w, 3)?)?;
+            dict.set_item("ks", map_array(py, m.ward.ks, h, w, 3)?)?;
+            dict.set_item("alpha_t", map_array(py, m.ward.alpha_t, h, w, 1)?)?;
+            dict.set_item("alpha_b", map_array(py, m.ward.alpha_b, h, w, 1)?)?;
+        }
+    }
     dict.set_item("normals", map_array(py, m.ward.normals, h, w, 3)?)?;
     dict.set_item("tangents", map_array(py, m.ward.tangents, h, w, 3)?)?;
     dict.set_item("residual", map_array(py, m.residual, h, w, 1)?)?;

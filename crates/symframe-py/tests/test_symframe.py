@@ -285,9 +285,20 @@ def test_fit_and_relight_equal_the_command_line(capture, cli, tmp_path):
     symframe.estimate_path(capture, frames)
     cli("fit", capture, "--frames", frames, "-o", tmp_path / "fit_cli", "--holdout", "10")
     got = symframe.fit(capture, frames, tmp_path / "fit_py", holdout=10)
-    for name in ["kd", "ks", "alpha_t", "alpha_b", "normals", "tangents"]:
+    for name in ["base_color", "metallic", "roughness", "anisotropy_strength", "normals", "tangents"]:
         want = np.load(tmp_path / "fit_cli" / f"{name}.npy")
         assert np.array_equal(bits(got[name]), bits(want)), name
+    assert got["report"]["model"] == "gltf" and got["report"]["exposure"] > 0
+    cli("fit", capture, "--frames", frames, "-o", tmp_path / "ward_cli", "--model", "ward",
+        "--exposure", "2")
+    ward = symframe.fit(capture, frames, tmp_path / "ward_py", model="ward", exposure=2.0)
+    for name in ["kd", "ks", "alpha_t", "alpha_b"]:
+        want = np.load(tmp_path / "ward_cli" / f"{name}.npy")
+        assert np.array_equal(bits(ward[name]), bits(want)), name
+    with pytest.raises(ValueError, match="unknown fit model"):
+        symframe.fit(capture, frames, tmp_path / "bad", model="phong")
+    with pytest.raises(ValueError, match="exposure must be positive"):
+        symframe.fit(capture, frames, tmp_path / "bad", model="gltf", exposure=0.0)
     assert np.isfinite(got["residual"]).any()
     light = [0.3, 0.2, 0.9]
     cli("relight", tmp_path / "fit_cli", "-o", tmp_path / "relit_cli", "--light", "0.3,0.2,0.9",
@@ -332,13 +343,13 @@ def test_view_writes_the_command_lines_page(capture, cli, tmp_path):
     cli("view", fit_dir, "-o", tmp_path / "cli.html")
     text = Path(page).read_text()
     assert text == (tmp_path / "cli.html").read_text()
-    assert "#version 300 es" in text and '"views":["relit","normal","tangent","kd","ks",' \
+    assert "#version 300 es" in text and '"views":["relit","normal","tangent","base_color",' \
         '"confidence","anisotropy","source"]' in text
     # Without the estimate's folder: a warning, and a page of the fit's views only.
     frames.rename(tmp_path / "moved")
     with pytest.warns(UserWarning, match="--frames"):
         page = symframe.view(fit_dir, tmp_path / "no_est.html")
-    assert '"views":["relit","normal","tangent","kd","ks"]' in Path(page).read_text()
+    assert '"views":["relit","normal","tangent","base_color"]' in Path(page).read_text()
     assert symframe.view(fit_dir, tmp_path / "v.html", frames=tmp_path / "moved").endswith("v.html")
     with pytest.raises(symframe.SymframeError, match="kd.npy"):
         symframe.view(tmp_path / "moved", tmp_path / "bad.html")

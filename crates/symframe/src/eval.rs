@@ -66,7 +66,7 @@ pub struct Evaluation {
 }
 
 /// Reads the unit vector at pixel `p` of an `H x W x 3` map; `None` for NaN or zero.
-pub(crate) fn vec_at(v: &[f32], p: usize) -> Option<DVec3> {
+pub fn vec_at(v: &[f32], p: usize) -> Option<DVec3> {
     let s = &v[p * 3..p * 3 + 3];
     s.iter()
         .all(|x| x.is_finite())

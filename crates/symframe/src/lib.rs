@@ -16,8 +16,9 @@
 //!   tangent-plane basis.
 //! - [`baselines`]: the photometric-stereo, max-reflectance and highlight-centroid baselines the
 //!   paper compares against.
-//! - [`appearance`]: per-pixel Ward fits in the estimated frames ([`appearance::fit`]) and
-//!   rendering and editing them ([`appearance::relight`]).
+//! - [`appearance`]: per-pixel Ward or glTF metallic-roughness fits in the estimated frames
+//!   ([`appearance::fit`], [`appearance::gltf_fit`]) and rendering and editing them
+//!   ([`appearance::relight`]).
 //! - [`method`]: the [`PixelMethod`] interface and the in-memory driver [`run_stack`];
 //!   [`stack`] (the measurement stack); [`eval`] (error figures against ground truth);
 //!   [`error`].
@@ -89,7 +90,7 @@ pub use frames::estimator as estimate;
 #[doc(hidden)]
 pub use frames::{highlight, objective, optim, rig, slice, symmetry};
 
-pub use appearance::fit::{fit_stack, FitMaps, FitMethod, FitParams, WardMaps};
+pub use appearance::fit::{fit_stack, FitMaps, FitMethod, FitModel, FitParams, GltfMaps, WardMaps};
 pub use appearance::relight::{Edits, Relighter};
 pub use baselines::{estimate_stack_baseline, Baseline, BaselineMethod};
 pub use error::{Error, Result};

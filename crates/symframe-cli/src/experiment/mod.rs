@@ -313,7 +313,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let s = relight::run(&quick(dir.path())).unwrap();
         assert!(dir.path().join("relight_side_by_side.png").is_file());
-        assert_eq!(s.figures.len(), 4);
+        assert_eq!(s.figures.len(), 16);
         for r in &s.figures {
             // Bounds that catch a broken fit; the report states the figures.
             assert!(

@@ -72,6 +72,8 @@ fn estimate_fit_relight_end_to_end() {
         s(&fit),
         "--holdout",
         "10",
+        "--model",
+        "ward",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     for f in [
@@ -369,7 +371,16 @@ fn relight_refuses_bad_fit_folders_regions_and_light_files() {
     let (scene, _, lp) = dataset(&tmp.path().join("data"), 12, 60);
     let frames = true_frames(&tmp.path().join("frames"), &scene);
     let fit = tmp.path().join("fit");
-    let o = symframe(&["fit", s(&lp), "--frames", s(&frames), "-o", s(&fit)]);
+    let o = symframe(&[
+        "fit",
+        s(&lp),
+        "--frames",
+        s(&frames),
+        "-o",
+        s(&fit),
+        "--model",
+        "ward",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = tmp.path().join("out");
     let relight = |extra: &[&str]| {
@@ -522,4 +533,185 @@ fn cast_shadows_from_the_integrated_relief_raise_held_out_psnr_on_bumps() {
     let report: serde_json::Value =
         serde_json::from_str(&fs::read_to_string(p("shadowed/relight.json")).unwrap()).unwrap();
     assert!(report["shadows"].as_str().unwrap().ends_with("depth.npy"));
+}
+
+#[test]
+fn gltf_fit_relight_and_export_reproduce_a_brushed_gltf_metal_at_any_exposure() {
+    use symframe::brdf::gltf::GltfPbr;
+    let tmp = tempfile::tempdir().unwrap();
+    let p = |n: &str| tmp.path().join(n);
+    let truth = GltfPbr::new([0.9, 0.7, 0.5], 1.0, 0.35, 0.6);
+    let flags = Truth {
+        normals: true,
+        tangents: true,
+    };
+    // Photographs three times brighter than unit lights: the exposure is chosen from them.
+    let (scene, lp) = sphere_dataset(&p("data"), 24, 300, &truth, ImageFormat::Exr, 3.0, flags);
+    let frames = true_frames(&p("frames"), &scene);
+    let fit = p("fit");
+    let o = symframe(&[
+        "fit",
+        s(&lp),
+        "--frames",
+        s(&frames),
+        "-o",
+        s(&fit),
+        "--model",
+        "gltf",
+        "--holdout",
+        "10",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [
+        "base_color.npy",
+        "metallic.npy",
+        "roughness.npy",
+        "anisotropy_strength.npy",
+        "normals.npy",
+        "tangents.npy",
+        "base_color.png",
+        "holdout_residual.npy",
+    ] {
+        assert!(fit.join(f).is_file(), "missing {f}");
+    }
+    assert!(!fit.join("kd.npy").exists());
+    let report = report_of(&fit);
+    assert_eq!(report["model"], "gltf");
+    assert_eq!(report["exposure_chosen"], true);
+    // A metal's scale is set by its brightest base colour (0.9 here): 3 x 0.9 / 1.
+    let e = report["exposure"].as_f64().unwrap();
+    assert!((e / 2.7 - 1.0).abs() < 0.02, "{e}");
+    let psnr = report["fit"]["holdout_psnr_db"].as_f64().unwrap();
+    assert!(psnr > 40.0, "{report}");
+    // The parameters (with the base colour relative to the brightest channel).
+    let (shape, base) = read_npy_f32(&fit.join("base_color.npy")).unwrap();
+    assert_eq!(shape, vec![24, 24, 3]);
+    let (_, metallic) = read_npy_f32(&fit.join("metallic.npy")).unwrap();
+    let (_, rough) = read_npy_f32(&fit.join("roughness.npy")).unwrap();
+    let (_, strength) = read_npy_f32(&fit.join("anisotropy_strength.npy")).unwrap();
+    let centre = (12 * 24 + 12) as usize;
+    assert!((base[centre * 3 + 1] as f64 / 0.7 * 0.9 - 1.0).abs() < 0.02);
+    assert!(metallic[centre] > 0.97, "{}", metallic[centre]);
+    assert!(
+        (rough[centre] as f64 - 0.35).abs() < 0.01,
+        "{}",
+        rough[centre]
+    );
+    assert!(
+        (strength[centre] as f64 - 0.6).abs() < 0.02,
+        "{}",
+        strength[centre]
+    );
+
+    // Relit under the held-out lights, the photographs come back (exposure included).
+    let held: Vec<usize> = report["parameters"]["holdout"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap() as usize)
+        .collect();
+    let all = symframe_io::open_dataset(&lp).unwrap().lights;
+    let mut args = vec![
+        "relight".to_string(),
+        s(&fit).into(),
+        "-o".into(),
+        s(&p("relit")).into(),
+    ];
+    for &i in &held {
+        args.push("--light".into());
+        args.push(format!("{},{},{}", all[i].x, all[i].y, all[i].z));
+    }
+    let o = symframe(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let relit = relit_psnr(&p("relit"), &p("data"), &held);
+    assert!(relit > 40.0, "{relit}");
+    // A glTF fit has no specular albedo to scale.
+    let o = symframe(&[
+        "relight",
+        s(&fit),
+        "-o",
+        s(&p("bad")),
+        "--light",
+        "0,0,1",
+        "--specular-scale",
+        "2",
+    ]);
+    assert_fails_naming(&o, "specular scale", &p("bad"));
+
+    // The export carries the fitted values and the light intensity.
+    let gltf = p("out/asset.gltf");
+    let o = symframe(&["export", "gltf", s(&fit), "-o", s(&gltf)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let doc: serde_json::Value = serde_json::from_str(&fs::read_to_string(&gltf).unwrap()).unwrap();
+    let m = &doc["materials"][0];
+    let li = m["extras"]["symframe"]["lightIntensity"].as_f64().unwrap();
+    assert!((li - e).abs() < 1e-12);
+    let linear = DecodeOptions {
+        gamma: symframe_io::Gamma::Linear,
+        saturation: f32::INFINITY,
+    };
+    let mr = symframe_io::read_image(&p("out/asset_metallicroughness.png"), &linear)
+        .unwrap()
+        .into_rgb();
+    // Linear 8-bit, rounded: green roughness, blue metallic.
+    assert!((mr[centre * 3 + 1] as f64 - rough[centre] as f64).abs() < 0.51 / 255.0);
+    assert!((mr[centre * 3 + 2] as f64 - metallic[centre] as f64).abs() < 0.51 / 255.0);
+}
+
+#[test]
+fn fit_refuses_bad_model_flags() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (scene, _, lp) = dataset(&tmp.path().join("data"), 12, 60);
+    let frames = true_frames(&tmp.path().join("frames"), &scene);
+    let out = tmp.path().join("out");
+    for (flag, value, needle) in [
+        ("--model", "phong", "--model"),
+        ("--exposure", "0", "--exposure"),
+        ("--exposure", "bright", "--exposure"),
+        ("--roughness-min", "0", "--roughness-min"),
+        ("--roughness-min", "1.5", "--roughness-min"),
+    ] {
+        let o = symframe(&[
+            "fit",
+            s(&lp),
+            "--frames",
+            s(&frames),
+            "-o",
+            s(&out),
+            flag,
+            value,
+        ]);
+        assert!(!o.status.success(), "{flag} {value}");
+        assert!(
+            stderr(&o).contains(needle),
+            "{flag} {value}: {}",
+            stderr(&o)
+        );
+        assert!(!out.exists(), "{flag} {value}");
+    }
+    // An explicit exposure is used as given and recorded.
+    let o = symframe(&[
+        "fit",
+        s(&lp),
+        "--frames",
+        s(&frames),
+        "-o",
+        s(&out),
+        "--model",
+        "gltf",
+        "--exposure",
+        "2.5",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = report_of(&out);
+    assert_eq!(
+        (r["exposure"].as_f64(), r["exposure_chosen"].as_bool()),
+        (Some(2.5), Some(false))
+    );
+    assert_eq!(r["parameters"]["model"], "gltf");
+}
+
+/// The `fit.json` of a fit folder.
+fn report_of(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&fs::read_to_string(dir.join("fit.json")).unwrap()).unwrap()
 }

@@ -175,6 +175,8 @@ fn a_new_fit_removes_the_old_fits_page() {
         s(&est),
         "-o",
         s(&fit),
+        "--model",
+        "ward",
     ]));
     ok(&symframe(&["view", s(&fit)]));
     assert!(fit.join("viewer.html").is_file());
@@ -187,5 +189,7 @@ fn a_new_fit_removes_the_old_fits_page() {
         "-o",
         s(&fit),
     ]));
-    assert!(fit.join("kd.npy").is_file() && !fit.join("viewer.html").exists());
+    // The default model's maps replace the Ward fit's.
+    assert!(fit.join("base_color.npy").is_file() && !fit.join("viewer.html").exists());
+    assert!(!fit.join("kd.npy").exists());
 }

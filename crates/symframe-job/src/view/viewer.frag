@@ -1,21 +1,27 @@
 #version 300 es
-// symframe viewer: relights fitted Ward maps, or shows one map, one texel per canvas pixel.
+// symframe viewer: relights fitted Ward or glTF maps, or shows one map, one texel per canvas
+// pixel.
 //
 // The relit view is `symframe relight`'s image (symframe::Relighter): the radiance
-// f(l, v) (n.l) of each pixel's anisotropic Ward model (normalised form, Ward 1992) in its
-// frame (x = t, y = b = n x t, z = n), view v = (0, 0, 1), a distant light of unit intensity;
-// the same edits (factors on kd, ks and both roughnesses, tangents turned about the normal);
-// then the PNG's tone mapping: times 2^exposure, clamped to [0, 1], sRGB-encoded.
+// f(l, v) (n.l) of each pixel's model in its frame (x = t, y = b = n x t, z = n), view
+// v = (0, 0, 1), a distant light of unit intensity (a glTF fit: of its fitted intensity). The
+// model is anisotropic Ward (normalised form, Ward 1992) or glTF 2.0 metallic-roughness with
+// KHR_materials_anisotropy (symframe::brdf::gltf); the same edits (Ward: factors on kd, ks and
+// both roughnesses; glTF: on the base colour and the roughness, clamped to 1; tangents turned
+// about the normal); then the PNG's tone mapping: times 2^exposure, clamped to [0, 1],
+// sRGB-encoded.
 precision highp float;
 precision highp int;
 
 uniform highp sampler2D uGeom;   // normal, flag (0 none, 1 normal only, 2 model)
 uniform highp sampler2D uFrame;  // shading tangent, 1 if from the tangent map
-uniform highp sampler2D uKd;     // kd, alpha_t
-uniform highp sampler2D uKs;     // ks, alpha_b
+uniform highp sampler2D uKd;     // Ward: kd, alpha_t; glTF: base colour, metallic
+uniform highp sampler2D uKs;     // Ward: ks, alpha_b; glTF: roughness, strength, 0, 0
 uniform highp sampler2D uEst;    // confidence, anisotropy, source, flags (1, 2, 4)
 uniform int uView;               // 0 relit, 1 normal, 2 tangent, 3 kd, 4 ks, 5 confidence,
-                                 // 6 anisotropy, 7 source
+                                 // 6 anisotropy, 7 source, 8 base colour
+uniform int uModel;              // 0 Ward, 1 glTF
+uniform float uIntensity;        // glTF: the fitted light intensity
 uniform vec3 uLight;             // unit light direction, camera frame
 uniform float uGain;             // 2^exposure
 uniform float uDiffuse;          // factor on kd
@@ -88,6 +94,34 @@ vec3 ward(vec3 n, vec3 t, vec3 kd, vec3 ks, float ax, float ay, vec3 l) {
     return (kd / PI + ks * lobe) * ll.z;
 }
 
+// glTF radiance intensity f(l, v) (n.l), f = base A + B (symframe::brdf::gltf::GltfPbr::terms):
+// GGX D and height-correlated V of KHR_materials_anisotropy, alpha_t = mix(alpha, 1, s^2),
+// alpha_b = alpha = roughness^2, Schlick on v.h; dielectric fresnel_mix (f0 0.04) and conductor
+// mixed by metallic.
+vec3 gltf(vec3 n, vec3 t, vec3 base, float metallic, float roughness, float strength, vec3 l) {
+    vec3 b = cross(n, t);
+    vec3 ll = vec3(dot(l, t), dot(l, b), dot(l, n));
+    vec3 vl = vec3(t.z, b.z, n.z);
+    if (ll.z <= 0.0 || vl.z <= 0.0) {
+        return vec3(0.0);
+    }
+    vec3 h = normalize(ll + vl);
+    float a = roughness * roughness;
+    float at = a + (1.0 - a) * strength * strength;
+    float ab = a;
+    vec3 f = vec3(ab * h.x, at * h.y, at * ab * h.z);
+    float w2 = at * ab / dot(f, f);
+    float d = at * ab * w2 * w2 / PI;
+    float gv = ll.z * length(vec3(at * vl.x, ab * vl.y, vl.z));
+    float gl = vl.z * length(vec3(at * ll.x, ab * ll.y, ll.z));
+    float spec = min(0.5 / (gv + gl), 1.0) * d;
+    float s = pow(1.0 - abs(dot(vl, h)), 5.0);
+    float fd = 0.04 + 0.96 * s;
+    float ta = (1.0 - metallic) * (1.0 - fd) / PI + metallic * (1.0 - s) * spec;
+    float tb = ((1.0 - metallic) * fd + metallic * s) * spec;
+    return (base * ta + tb) * ll.z;
+}
+
 void main() {
     ivec2 size = textureSize(uGeom, 0);
     // Texture rows run top to bottom, the canvas' y bottom to top.
@@ -105,8 +139,12 @@ void main() {
             n = normalize(n);
             vec3 t = normalize(frame.xyz - dot(frame.xyz, n) * n);
             t = editedTangent(t, n, frame.w);
-            vec3 rad = ward(n, t, kd.rgb * uDiffuse, ks.rgb * uSpecular,
-                            kd.a * uRoughness, ks.a * uRoughness, uLight);
+            vec3 rad = uModel == 1
+                ? uIntensity * gltf(n, t, min(kd.rgb * uDiffuse, 1.0), kd.a,
+                                    min(ks.r * uRoughness, 1.0), frame.w > 0.5 ? ks.g : 0.0,
+                                    uLight)
+                : ward(n, t, kd.rgb * uDiffuse, ks.rgb * uSpecular,
+                       kd.a * uRoughness, ks.a * uRoughness, uLight);
             c = srgb3(rad * uGain);
         }
     } else if (uView == 1) {
@@ -117,13 +155,18 @@ void main() {
             vec3 t = flag == 2 ? editedTangent(frame.xyz, normalize(n), frame.w) : frame.xyz;
             c = hue(2.0 * atan(t.y, t.x) / (2.0 * PI));
         }
+    } else if (uView == 8) {
+        // The glTF fit's base_color.png: clamped, sRGB-encoded, with the diffuse factor.
+        if (flag == 2) {
+            c = srgb3(texelFetch(uKd, p, 0).rgb * uDiffuse);
+        }
     } else if (uView == 3 || uView == 4) {
         // The albedo pictures (kd.png, ks.png): clamped, sRGB-encoded, with the edits' factors.
         if (flag == 2) {
             c = uView == 3 ? srgb3(texelFetch(uKd, p, 0).rgb * uDiffuse)
                            : srgb3(texelFetch(uKs, p, 0).rgb * uSpecular);
         }
-    } else {
+    } else if (uView >= 5 && uView <= 7) {
         vec4 est = texelFetch(uEst, p, 0);
         int has = int(est.w + 0.5);
         // Confidence and anisotropy are in [0, 1]: viridis over it, as confidence.png.

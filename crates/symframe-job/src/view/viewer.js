@@ -4,16 +4,19 @@
 // URL fragment (all optional), e.g. viewer.html#light=0.3,0.4,0.87&exposure=1&view=relit:
 //   light=x,y,z      light direction, camera frame (x right, y up, z toward the camera)
 //   exposure=E       stops (the picture is times 2^E, clamped, sRGB-encoded)
-//   diffuse=S, specular=S, roughness=S   factors on kd, ks and both roughnesses
+//   diffuse=S, specular=S, roughness=S   factors on kd, ks and both roughnesses (a glTF fit:
+//                    on the base colour and the roughness; no specular factor)
 //   rotate=DEG       tangent rotation about the normal, degrees
-//   view=NAME        relit, normal, tangent, kd, ks, confidence, anisotropy, source
+//   view=NAME        relit, normal, tangent, kd, ks (Ward) or base_color (glTF), confidence,
+//                    anisotropy, source
 //   ui=0             the canvas alone at the page's corner (for screenshots and tests)
 // window.symframeReady becomes true once the first frame is drawn; window.symframeFrames
 // counts frames drawn (a test that changes the fragment waits for it to grow).
 "use strict";
 
 (function () {
-  const VIEWS = ["relit", "normal", "tangent", "kd", "ks", "confidence", "anisotropy", "source"];
+  const VIEWS = ["relit", "normal", "tangent", "kd", "ks", "confidence", "anisotropy", "source",
+                 "base_color"];
   const DEFAULTS = { light: [0, 0, 1], exposure: 0, diffuse: 1, specular: 1, roughness: 1,
                      rotate: 0, view: "relit", ui: 1 };
   const $ = (id) => document.getElementById(id);
@@ -108,9 +111,11 @@
     if (!gl.getProgramParameter(program, gl.LINK_STATUS)) throw new Error("link: " + gl.getProgramInfoLog(program));
     gl.useProgram(program);
     for (const name of ["uGeom", "uFrame", "uKd", "uKs", "uEst", "uView", "uLight", "uGain", "uDiffuse",
-                        "uSpecular", "uRoughness", "uRotation"]) {
+                        "uSpecular", "uRoughness", "uRotation", "uModel", "uIntensity"]) {
       uniforms[name] = gl.getUniformLocation(program, name);
     }
+    gl.uniform1i(uniforms.uModel, data.model === "gltf" ? 1 : 0);
+    gl.uniform1f(uniforms.uIntensity, data.light_intensity || 1);
     gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
     ["uGeom", "uFrame", "uKd", "uKs", "uEst"].forEach((name, unit) => {
       const tex = gl.createTexture();
@@ -210,7 +215,11 @@
     lines.push(`shown   ${px[0]} ${px[1]} ${px[2]} (sRGB)`);
     lines.push("normal " + (flag > 0 ? vec(maps[0]) : "     n/a"));
     lines.push("tangent" + (at(maps[1], 3) > 0.5 ? vec(maps[1]) : "     n/a (isotropic)"));
-    if (flag === 2) {
+    if (flag === 2 && data.model === "gltf") {
+      lines.push("base   " + vec(maps[2]));
+      lines.push("metallic " + f(at(maps[2], 3)) + "  roughness " + f(at(maps[3], 0)));
+      lines.push("anisotropy strength " + f(at(maps[3], 1)));
+    } else if (flag === 2) {
       lines.push("kd     " + vec(maps[2]));
       lines.push("ks     " + vec(maps[3]));
       lines.push("alpha_t" + f(at(maps[2], 3)) + "  alpha_b" + f(at(maps[3], 3)));
@@ -237,6 +246,8 @@
     const t = data.textures;
     maps = await Promise.all([t.geom, t.frame, t.kd, t.ks, t.est].map((s) => (s ? decodeTexture(s) : null)));
     setup(maps);
+    // A glTF fit has no free specular albedo: its slider does nothing.
+    if (data.model === "gltf") $("specular").disabled = true;
     const sel = $("viewSel");
     for (const v of data.views) sel.add(new Option(v, v));
     sel.addEventListener("change", () => { state.view = sel.value; writeFragment(); redraw(); });

@@ -226,16 +226,21 @@ def fit(
     threads: Optional[int] = None,
     **options: Any,
 ) -> Dict[str, Any]:
-    """Runs the ``symframe fit`` job: an anisotropic Ward BRDF per pixel in estimated frames.
+    """Runs the ``symframe fit`` job: a BRDF per pixel in estimated frames.
 
     ``path``: the capture; ``frames``: the output folder of :func:`estimate_path` for it (its
     tile cache is reused, so nothing is decoded again); ``out``: the output folder (maps as
-    ``.npy``, ``fit.json``). Options: ``holdout`` (lights left out of the fit to judge it),
+    ``.npy``, ``fit.json``). Options: ``model`` (``"gltf"``, the default: glTF 2.0
+    metallic-roughness with KHR_materials_anisotropy; ``"ward"``: anisotropic Ward),
+    ``exposure`` (glTF: the lights' intensity; ``None``, the default, chooses it from the
+    data), ``roughness_min``, ``holdout`` (lights left out of the fit to judge it),
     ``max_iterations``, ``max_peak_ratio``, ``mask``, ``linear``, ``gamma``, ``saturation``, ``cache``,
     ``no_keep_cache``.
 
-    Returns ``kd``, ``ks`` (``H x W x 3``), ``alpha_t``, ``alpha_b`` (``H x W``), ``normals``,
-    ``tangents``, ``residual``, ``holdout_residual`` and ``report``.
+    Returns ``normals``, ``tangents``, ``residual``, ``holdout_residual``, ``report`` and the
+    model's maps: glTF ``base_color`` (``H x W x 3``), ``metallic``, ``roughness``,
+    ``anisotropy_strength`` (``H x W``); Ward ``kd``, ``ks`` (``H x W x 3``), ``alpha_t``,
+    ``alpha_b`` (``H x W``).
     """
     return _native.fit(os.fspath(path), os.fspath(frames), os.fspath(out), progress, threads, options)
 

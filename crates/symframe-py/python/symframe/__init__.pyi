@@ -141,6 +141,9 @@ def fit(
     *,
     progress: Optional[Progress] = None,
     threads: Optional[int] = None,
+    model: str = "gltf",
+    exposure: Optional[float] = None,
+    roughness_min: float = 0.07,
     holdout: int = 0,
     max_iterations: int = 60,
     max_peak_ratio: float = 8.0,
@@ -151,7 +154,8 @@ def fit(
     cache: Optional[PathLike] = None,
     no_keep_cache: bool = False,
 ) -> Dict[str, Any]:
-    """The `symframe fit` job: Ward maps (kd, ks, alpha_t, alpha_b, ...) and its report."""
+    """The `symframe fit` job: glTF maps (base_color, metallic, roughness,
+    anisotropy_strength) or Ward maps (kd, ks, alpha_t, alpha_b), frames and its report."""
 
 def integrate(
     estimate: PathLike,

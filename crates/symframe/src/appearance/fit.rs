@@ -2,7 +2,9 @@
 //! `kd` and specular albedo `ks` per RGB channel, roughness `alpha_t` along the tangent and
 //! `alpha_b` along the binormal, chosen to minimise the squared error of the predicted radiance
 //! `f(l, v) (n.l)` (the [`Ward`](crate::brdf::ward::Ward) formula, local frame x = t, y = b,
-//! z = n) against the measured samples.
+//! z = n) against the measured samples. With [`FitModel::Gltf`] the same driver (samples,
+//! held-out lights, summary, [`PixelMethod`]) fits the glTF 2.0 metallic-roughness model
+//! instead ([`super::gltf_fit`]); the method below is the Ward fit's.
 //!
 //! # Method
 //!
@@ -52,15 +54,80 @@ use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
+use super::gltf_fit::{self, GSample, GltfFit};
 use crate::error::{Error, Result};
 use crate::eval::vec_at;
 use crate::geometry::tangent_basis;
 use crate::method::{run_stack, PixelMethod};
 use crate::stack::Stack;
 
-/// Parameters of the per-pixel Ward fit.
+/// The reflectance model a fit estimates per pixel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FitModel {
+    /// Anisotropic Ward (the paper's model): `kd`, `ks`, `alpha_t`, `alpha_b`.
+    #[default]
+    Ward,
+    /// glTF 2.0 metallic-roughness GGX with `KHR_materials_anisotropy`: base colour,
+    /// metallic, roughness, anisotropy strength ([`super::gltf_fit`]).
+    Gltf,
+}
+
+impl FitModel {
+    /// The name on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            FitModel::Ward => "ward",
+            FitModel::Gltf => "gltf",
+        }
+    }
+
+    /// One line on the model and its frame, for reports.
+    pub fn description(self) -> &'static str {
+        match self {
+            FitModel::Ward => {
+                "anisotropic Ward (Ward 1992, normalised form), frame x = t, y = n x t, z = n"
+            }
+            FitModel::Gltf => {
+                "glTF 2.0 metallic-roughness (Appendix B) with KHR_materials_anisotropy, \
+                 anisotropy direction = t, frame x = t, y = n x t, z = n"
+            }
+        }
+    }
+}
+
+impl std::str::FromStr for FitModel {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "ward" => Ok(FitModel::Ward),
+            "gltf" => Ok(FitModel::Gltf),
+            other => Err(format!("unknown fit model '{other}' (valid: ward, gltf)")),
+        }
+    }
+}
+
+/// The model `symframe fit --model` fits by default: the one that predicts held-out lights
+/// better on the validation scenes (docs/validation.md, "Relighting").
+pub const DEFAULT_MODEL: FitModel = FitModel::Gltf;
+
+/// Parameters of the per-pixel fit.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FitParams {
+    /// The model fitted. `FitParams::default()` keeps the paper's Ward model (the library's
+    /// callers and tests rely on it); `symframe fit` and the Python package default to
+    /// [`DEFAULT_MODEL`].
+    #[serde(default)]
+    pub model: FitModel,
+    /// glTF model: the intensity of every light, in the units of the measurements (a white
+    /// Lambertian surface facing a light of intensity `E` has radiance `E / pi`). Base colours
+    /// are bounded to `[0, 1]`, so photographs of an arbitrary exposure need it: relighting and
+    /// export use the same value. Unused by the Ward fit, whose albedos absorb any scale.
+    #[serde(default = "unit")]
+    pub exposure: f64,
+    /// glTF model: the smallest roughness the fit may return.
+    #[serde(default = "default_roughness_min")]
+    pub roughness_min: f64,
     /// Light indices (into the stack) left out of the fit, to judge it on.
     pub holdout: Vec<usize>,
     /// Levenberg-Marquardt iterations at most.
@@ -76,9 +143,20 @@ pub struct FitParams {
     pub max_peak_ratio: f64,
 }
 
+fn unit() -> f64 {
+    1.0
+}
+
+fn default_roughness_min() -> f64 {
+    0.07
+}
+
 impl Default for FitParams {
     fn default() -> Self {
         Self {
+            model: FitModel::Ward,
+            exposure: 1.0,
+            roughness_min: default_roughness_min(),
             holdout: Vec::new(),
             max_iterations: 60,
             alpha_min: 0.005,
@@ -107,6 +185,18 @@ impl FitParams {
             return Err(Error::BadParameter(format!(
                 "max_peak_ratio must be at least 1, got {}",
                 self.max_peak_ratio
+            )));
+        }
+        if !(self.exposure > 0.0 && self.exposure.is_finite()) {
+            return Err(Error::BadParameter(format!(
+                "exposure must be positive and finite, got {}",
+                self.exposure
+            )));
+        }
+        if !(self.roughness_min > 0.0 && self.roughness_min <= 1.0) {
+            return Err(Error::BadParameter(format!(
+                "roughness_min must be in (0, 1], got {}",
+                self.roughness_min
             )));
         }
         if self.min_samples < 3 {
@@ -180,6 +270,62 @@ impl WardMaps {
     }
 }
 
+/// Per-pixel glTF metallic-roughness parameters with `KHR_materials_anisotropy`, the frames
+/// they live in and the light intensity they were fitted under: what relighting and export
+/// need. Row-major, row 0 at the top; NaN where there is no value.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GltfMaps {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Unit normals, `H x W x 3`, camera frame.
+    pub normals: Vec<f32>,
+    /// Unit tangents (the anisotropy direction), `H x W x 3`; NaN where isotropic.
+    pub tangents: Vec<f32>,
+    /// Base colour, `H x W x 3`, in `[0, 1]`.
+    pub base_color: Vec<f32>,
+    /// Metalness, `H x W`.
+    pub metallic: Vec<f32>,
+    /// Perceptual roughness, `H x W`.
+    pub roughness: Vec<f32>,
+    /// Anisotropy strength, `H x W`.
+    pub anisotropy: Vec<f32>,
+    /// The light intensity of the fit ([`FitParams::exposure`]).
+    pub exposure: f64,
+}
+
+impl GltfMaps {
+    /// Checks that every map has the size `width x height` implies and the exposure is usable.
+    pub fn check(&self) -> Result<()> {
+        let n = self.width * self.height;
+        for (name, len, per) in [
+            ("normals", self.normals.len(), 3),
+            ("tangents", self.tangents.len(), 3),
+            ("base_color", self.base_color.len(), 3),
+            ("metallic", self.metallic.len(), 1),
+            ("roughness", self.roughness.len(), 1),
+            ("anisotropy_strength", self.anisotropy.len(), 1),
+        ] {
+            if len != n * per {
+                return Err(Error::BadParameter(format!(
+                    "{name} map has {len} values, expected {} for {}x{}",
+                    n * per,
+                    self.width,
+                    self.height
+                )));
+            }
+        }
+        if !(self.exposure > 0.0 && self.exposure.is_finite()) {
+            return Err(Error::BadParameter(format!(
+                "exposure must be positive and finite, got {}",
+                self.exposure
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// What happened at a pixel of [`fit_stack`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -228,8 +374,10 @@ pub struct FitSummary {
 /// The result of [`fit_stack`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct FitMaps {
-    /// Fitted parameters and the frames used.
+    /// The frames used and, for a Ward fit, the fitted parameters (NaN for a glTF fit).
     pub ward: WardMaps,
+    /// The fitted parameters of a glTF fit (`None` for a Ward fit).
+    pub gltf: Option<GltfMaps>,
     /// RMS error of the fit on each pixel's training samples, `H x W`.
     pub residual: Vec<f32>,
     /// RMS error on each pixel's held-out samples, `H x W` (NaN without any).
@@ -284,6 +432,8 @@ pub struct HoldoutError {
 pub enum PixelOutcome {
     /// Fitted: the parameters and the held-out error.
     Fitted(PixelFit, HoldoutError),
+    /// Fitted with the glTF model: the parameters and the held-out error.
+    FittedGltf(GltfFit, HoldoutError),
     /// No normal, or it faces away from the view.
     NoFrame,
     /// Too few usable samples.
@@ -580,6 +730,9 @@ pub struct PixelFitter<'a> {
     held_out: Vec<bool>,
     train: Vec<Sample>,
     test: Vec<Sample>,
+    gtrain: Vec<GSample>,
+    gtest: Vec<GSample>,
+    gscratch: gltf_fit::Scratch,
 }
 
 impl<'a> PixelFitter<'a> {
@@ -599,8 +752,11 @@ impl<'a> PixelFitter<'a> {
             lights,
             params,
             held_out,
-            train: Vec::with_capacity(lights.len()),
-            test: Vec::with_capacity(params.holdout.len()),
+            train: Vec::new(),
+            test: Vec::new(),
+            gtrain: Vec::new(),
+            gtest: Vec::new(),
+            gscratch: gltf_fit::Scratch::default(),
         }
     }
 
@@ -617,6 +773,9 @@ impl<'a> PixelFitter<'a> {
         let t = t.unwrap_or_else(|| tangent_basis(n).0);
         let b = n.cross(t);
         let nv = n.z;
+        if self.params.model == FitModel::Gltf {
+            return self.fit_gltf(n, t, b, iso, rgb);
+        }
         self.train.clear();
         self.test.clear();
         for (i, (l, px)) in self.lights.iter().zip(rgb.chunks_exact(3)).enumerate() {
@@ -658,6 +817,70 @@ impl<'a> PixelFitter<'a> {
                 peak,
             },
         )
+    }
+}
+
+impl PixelFitter<'_> {
+    /// Collects the usable samples of one pixel for the glTF fit in the frame `(t, b, n)`;
+    /// returns the view in that frame.
+    fn gltf_samples(&mut self, n: DVec3, t: DVec3, b: DVec3, rgb: &[f32]) -> DVec3 {
+        let local = |d: DVec3| DVec3::new(d.dot(t), d.dot(b), d.dot(n));
+        self.gtrain.clear();
+        self.gtest.clear();
+        for (i, (l, px)) in self.lights.iter().zip(rgb.chunks_exact(3)).enumerate() {
+            if !px.iter().all(|v| v.is_finite()) || n.dot(*l) <= 0.0 {
+                continue;
+            }
+            let s = GSample {
+                l: local(*l),
+                rgb: [px[0] as f64, px[1] as f64, px[2] as f64],
+            };
+            if self.held_out[i] {
+                self.gtest.push(s);
+            } else {
+                self.gtrain.push(s);
+            }
+        }
+        local(DVec3::Z)
+    }
+
+    /// The glTF fit of one pixel in the frame `(t, b, n)`.
+    fn fit_gltf(&mut self, n: DVec3, t: DVec3, b: DVec3, iso: bool, rgb: &[f32]) -> PixelOutcome {
+        let v = self.gltf_samples(n, t, b, rgb);
+        if self.gtrain.len() < self.params.min_samples {
+            return PixelOutcome::TooFewSamples;
+        }
+        let fit = gltf_fit::fit_samples(&self.gtrain, v, iso, self.params, &mut self.gscratch);
+        let hold = gltf_fit::holdout(&fit, &self.gtest, v, self.params.exposure);
+        PixelOutcome::FittedGltf(fit, hold)
+    }
+
+    /// A free-scale glTF fit of one pixel (its own light intensity), on the training samples,
+    /// for choosing the exposure ([`gltf_fit::choose_exposure`]); `None` where the pixel would
+    /// not be fitted.
+    pub fn scale(
+        &mut self,
+        normal: DVec3,
+        tangent: Option<DVec3>,
+        rgb: &[f32],
+    ) -> Option<gltf_fit::PixelScale> {
+        let n = normal.try_normalize().filter(|n| n.z > 0.0)?;
+        let t = tangent
+            .map(|t| t - t.dot(n) * n)
+            .and_then(|t| t.try_normalize());
+        let iso = t.is_none();
+        let t = t.unwrap_or_else(|| tangent_basis(n).0);
+        let v = self.gltf_samples(n, t, n.cross(t), rgb);
+        if self.gtrain.len() < self.params.min_samples {
+            return None;
+        }
+        Some(gltf_fit::fit_exposure(
+            &self.gtrain,
+            v,
+            iso,
+            self.params,
+            &mut self.gscratch,
+        ))
     }
 }
 
@@ -741,17 +964,21 @@ pub fn fit_stack(
     crate::frames::estimator::check_inputs(w, h, stack.n_lights, lights.len(), mask)?;
     let method = FitMethod::new(lights, params, normals, tangents, w * h)?;
     let outcomes = run_stack(&method, stack, mask, progress);
-    Ok(FitMaps::from_outcomes(w, h, normals, tangents, outcomes))
+    Ok(FitMaps::from_outcomes(
+        w, h, normals, tangents, params, outcomes,
+    ))
 }
 
 impl FitMaps {
     /// The maps and summary of `width x height` pixels fitted in the frames `normals` and
-    /// `tangents`, from their outcomes in row-major order (`None`: outside the mask).
+    /// `tangents` with `params`, from their outcomes in row-major order (`None`: outside the
+    /// mask).
     pub fn from_outcomes(
         width: usize,
         height: usize,
         normals: &[f32],
         tangents: &[f32],
+        params: &FitParams,
         outcomes: impl IntoIterator<Item = Option<PixelOutcome>>,
     ) -> Self {
         let (w, h) = (width, height);
@@ -767,6 +994,17 @@ impl FitMaps {
                 alpha_t: vec![f32::NAN; n],
                 alpha_b: vec![f32::NAN; n],
             },
+            gltf: (params.model == FitModel::Gltf).then(|| GltfMaps {
+                width: w,
+                height: h,
+                normals: normals.to_vec(),
+                tangents: tangents.to_vec(),
+                base_color: vec![f32::NAN; n * 3],
+                metallic: vec![f32::NAN; n],
+                roughness: vec![f32::NAN; n],
+                anisotropy: vec![f32::NAN; n],
+                exposure: params.exposure,
+            }),
             residual: vec![f32::NAN; n],
             holdout_residual: vec![f32::NAN; n],
             status: Vec::with_capacity(n),
@@ -775,18 +1013,22 @@ impl FitMaps {
         let (mut train_sse, mut hold_sse, mut hold_peak, mut iters) = (0.0, 0.0, 0.0f64, 0u64);
         for (p, outcome) in outcomes.into_iter().enumerate() {
             let s = &mut maps.summary;
-            let status = match outcome {
+            // (isotropic, rms, sse, samples, iterations, held-out error) of a fitted pixel.
+            let fitted = match outcome {
                 None => {
                     s.masked += 1;
-                    FitStatus::Masked
+                    maps.status.push(FitStatus::Masked);
+                    continue;
                 }
                 Some(PixelOutcome::NoFrame) => {
                     s.no_frame += 1;
-                    FitStatus::NoFrame
+                    maps.status.push(FitStatus::NoFrame);
+                    continue;
                 }
                 Some(PixelOutcome::TooFewSamples) => {
                     s.too_few_samples += 1;
-                    FitStatus::TooFewSamples
+                    maps.status.push(FitStatus::TooFewSamples);
+                    continue;
                 }
                 Some(PixelOutcome::Fitted(fit, hold)) => {
                     let wm = &mut maps.ward;
@@ -796,31 +1038,59 @@ impl FitMaps {
                     }
                     wm.alpha_t[p] = fit.alpha_t as f32;
                     wm.alpha_b[p] = fit.alpha_b as f32;
-                    if fit.isotropic {
-                        // The frame used has no tangent: keep the map saying so.
-                        wm.tangents[p * 3..p * 3 + 3].fill(f32::NAN);
+                    (
+                        fit.isotropic,
+                        fit.rms(),
+                        fit.sse,
+                        fit.samples,
+                        fit.iterations,
+                        hold,
+                    )
+                }
+                Some(PixelOutcome::FittedGltf(fit, hold)) => {
+                    if let Some(g) = maps.gltf.as_mut() {
+                        for c in 0..3 {
+                            g.base_color[p * 3 + c] = fit.base_color[c] as f32;
+                        }
+                        g.metallic[p] = fit.metallic as f32;
+                        g.roughness[p] = fit.roughness as f32;
+                        g.anisotropy[p] = fit.anisotropy as f32;
+                        if fit.isotropic {
+                            g.tangents[p * 3..p * 3 + 3].fill(f32::NAN);
+                        }
                     }
-                    maps.residual[p] = fit.rms() as f32;
-                    train_sse += fit.sse;
-                    s.train_samples += fit.samples;
-                    iters += fit.iterations as u64;
-                    if hold.samples > 0 {
-                        maps.holdout_residual[p] =
-                            (hold.sse / (3 * hold.samples) as f64).sqrt() as f32;
-                        hold_sse += hold.sse;
-                        hold_peak = hold_peak.max(hold.peak);
-                        s.holdout_samples += hold.samples;
-                    }
-                    if fit.isotropic {
-                        s.isotropic += 1;
-                        FitStatus::Isotropic
-                    } else {
-                        s.anisotropic += 1;
-                        FitStatus::Anisotropic
-                    }
+                    (
+                        fit.isotropic,
+                        fit.rms(),
+                        fit.sse,
+                        fit.samples,
+                        fit.iterations,
+                        hold,
+                    )
                 }
             };
-            maps.status.push(status);
+            let (isotropic, rms, fit_sse, samples, iterations, hold) = fitted;
+            if isotropic {
+                // The frame used has no tangent: keep the map saying so.
+                maps.ward.tangents[p * 3..p * 3 + 3].fill(f32::NAN);
+            }
+            maps.residual[p] = rms as f32;
+            train_sse += fit_sse;
+            s.train_samples += samples;
+            iters += iterations as u64;
+            if hold.samples > 0 {
+                maps.holdout_residual[p] = (hold.sse / (3 * hold.samples) as f64).sqrt() as f32;
+                hold_sse += hold.sse;
+                hold_peak = hold_peak.max(hold.peak);
+                s.holdout_samples += hold.samples;
+            }
+            if isotropic {
+                s.isotropic += 1;
+                maps.status.push(FitStatus::Isotropic);
+            } else {
+                s.anisotropic += 1;
+                maps.status.push(FitStatus::Anisotropic);
+            }
         }
         let s = &mut maps.summary;
         let fitted = s.anisotropic + s.isotropic;

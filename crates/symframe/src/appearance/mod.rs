@@ -1,5 +1,7 @@
-//! Appearance in the estimated frames: per-pixel anisotropic Ward fits ([`fit`]) and rendering
+//! Appearance in the estimated frames: per-pixel anisotropic Ward or glTF fits ([`fit`],
+//! [`gltf_fit`]) and rendering
 //! and editing them under new lights ([`relight`]).
 
 pub mod fit;
+pub mod gltf_fit;
 pub mod relight;

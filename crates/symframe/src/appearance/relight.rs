@@ -1,4 +1,4 @@
-//! Relighting fitted Ward maps under new lights, with appearance edits (paper Section 5.1):
+//! Relighting fitted Ward or glTF maps under new lights, with appearance edits (paper Section 5.1):
 //! scaling the diffuse part, the specular part and the roughness, and rotating the tangent field
 //! about the normal inside a region (the paper's logo example: tangents turned by 90 degrees
 //! inside a mask change the direction of the brushed highlight there).
@@ -6,12 +6,15 @@
 //! The image under a distant light `l` of unit intensity is the radiance
 //! `f(l, v) (n.l)` of each pixel's [`Ward`] model in its frame (x = t, y = b = n x t, z = n),
 //! `v = (0, 0, 1)`: the same quantity the fit matched, so relighting a fit under one of the
-//! measured lights reproduces that measurement. Pixels without a model are 0.
+//! measured lights reproduces that measurement. Pixels without a model are 0. A glTF fit
+//! ([`GltfMaps`]) is rendered the same way with its [`GltfPbr`] model under lights of its
+//! fitted intensity ([`GltfMaps::exposure`]): "unit intensity" means the photographs' lights.
 
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::appearance::fit::WardMaps;
+use crate::appearance::fit::{GltfMaps, WardMaps};
+use crate::brdf::gltf::GltfPbr;
 use crate::brdf::ward::Ward;
 use crate::brdf::Brdf;
 use crate::error::{Error, Result};
@@ -78,14 +81,21 @@ impl Edits {
     }
 }
 
-/// One pixel's model: its frame and its (edited) Ward BRDF.
+/// A pixel's (edited) BRDF and the light intensity it is lit with.
+#[derive(Debug, Clone)]
+enum Material {
+    Ward(Ward),
+    Gltf(GltfPbr, f64),
+}
+
+/// One pixel's model: its frame and its material.
 #[derive(Debug, Clone)]
 struct PixelModel {
     t: DVec3,
     b: DVec3,
     n: DVec3,
     anisotropic: bool,
-    ward: Ward,
+    material: Material,
 }
 
 impl PixelModel {
@@ -96,8 +106,11 @@ impl PixelModel {
             return [0.0; 3];
         }
         let local = |d: DVec3| DVec3::new(d.dot(self.t), d.dot(self.b), d.dot(self.n));
-        let f = self.ward.eval(local(l), local(DVec3::Z));
-        f.map(|v| (v * nl) as f32)
+        let (f, e) = match &self.material {
+            Material::Ward(w) => (w.eval(local(l), local(DVec3::Z)), 1.0),
+            Material::Gltf(g, e) => (g.eval(local(l), local(DVec3::Z)), *e),
+        };
+        f.map(|v| (e * v * nl) as f32)
     }
 }
 
@@ -132,15 +145,7 @@ impl Relighter {
                 if !(at > 0.0 && ab > 0.0 && at.is_finite() && ab.is_finite()) {
                     return None;
                 }
-                let tangent = vec_at(&maps.tangents, p)
-                    .map(|t| t - t.dot(n) * n)
-                    .and_then(|t| t.try_normalize());
-                let anisotropic = tangent.is_some();
-                let mut t = tangent.unwrap_or_else(|| tangent_basis(n).0);
-                let in_region = edits.region.as_ref().is_none_or(|r| r[p]);
-                if anisotropic && in_region && edits.tangent_rotation_deg != 0.0 {
-                    t = t * cos + n.cross(t) * sin;
-                }
+                let (t, anisotropic) = edited_frame(&maps.tangents, n, p, edits, sin, cos);
                 let ward = Ward::new(
                     kd.map(|v| v * edits.diffuse_scale),
                     ks.map(|v| v * edits.specular_scale),
@@ -152,7 +157,58 @@ impl Relighter {
                     b: n.cross(t),
                     n,
                     anisotropic,
-                    ward,
+                    material: Material::Ward(ward),
+                })
+            })
+            .collect();
+        Ok(Self {
+            width: maps.width,
+            height: maps.height,
+            pixels,
+        })
+    }
+
+    /// Builds the per-pixel models of a glTF fit with `edits` applied: the diffuse scale
+    /// multiplies the base colour and the roughness scale the roughness (both clamped to 1);
+    /// the specular scale must be 1 (the model has no free specular albedo). A pixel has a
+    /// model where its normal faces the view and its parameters are finite and in range.
+    pub fn gltf(maps: &GltfMaps, edits: &Edits) -> Result<Self> {
+        maps.check()?;
+        edits.check(maps.width, maps.height)?;
+        if edits.specular_scale != 1.0 {
+            return Err(Error::BadParameter(
+                "a specular scale cannot edit a glTF fit (its specular part follows from the \
+                 base colour and metalness); use the diffuse or roughness scale"
+                    .into(),
+            ));
+        }
+        let (sin, cos) = edits.tangent_rotation_deg.to_radians().sin_cos();
+        let pixels = (0..maps.width * maps.height)
+            .map(|p| {
+                let n = vec_at(&maps.normals, p).filter(|n| n.z > 0.0)?;
+                let base = rgb(&maps.base_color, p)?;
+                let (m, r, s) = (
+                    maps.metallic[p] as f64,
+                    maps.roughness[p] as f64,
+                    maps.anisotropy[p] as f64,
+                );
+                let unit = |x: f64| (0.0..=1.0).contains(&x);
+                if !(unit(m) && r > 0.0 && r <= 1.0 && unit(s) && base.iter().all(|&c| c >= 0.0)) {
+                    return None;
+                }
+                let (t, anisotropic) = edited_frame(&maps.tangents, n, p, edits, sin, cos);
+                let g = GltfPbr::new(
+                    base.map(|c| (c * edits.diffuse_scale).min(1.0)),
+                    m,
+                    (r * edits.roughness_scale).min(1.0),
+                    if anisotropic { s } else { 0.0 },
+                );
+                Some(PixelModel {
+                    t,
+                    b: n.cross(t),
+                    n,
+                    anisotropic,
+                    material: Material::Gltf(g, maps.exposure),
                 })
             })
             .collect();
@@ -215,6 +271,28 @@ impl Relighter {
             })
             .collect()
     }
+}
+
+/// The tangent of pixel `p` (projected off the normal `n`), turned by the edit's rotation
+/// (`sin`, `cos`) inside its region, and whether the map has one (else a tangent of its own).
+fn edited_frame(
+    tangents: &[f32],
+    n: DVec3,
+    p: usize,
+    edits: &Edits,
+    sin: f64,
+    cos: f64,
+) -> (DVec3, bool) {
+    let tangent = vec_at(tangents, p)
+        .map(|t| t - t.dot(n) * n)
+        .and_then(|t| t.try_normalize());
+    let anisotropic = tangent.is_some();
+    let mut t = tangent.unwrap_or_else(|| tangent_basis(n).0);
+    let in_region = edits.region.as_ref().is_none_or(|r| r[p]);
+    if anisotropic && in_region && edits.tangent_rotation_deg != 0.0 {
+        t = t * cos + n.cross(t) * sin;
+    }
+    (t, anisotropic)
 }
 
 /// Scales linear RGB by `2^exposure_stops` and clamps to `[0, 1]` (NaN becomes 0), ready for an
@@ -309,6 +387,46 @@ mod tests {
                 assert!((x - y).abs() <= 1e-5 * y.abs().max(1.0), "{x} {y}");
             }
         }
+    }
+
+    #[test]
+    fn relighting_a_gltf_fit_reproduces_the_renderer_at_its_exposure() {
+        let g = GltfPbr::new([0.8, 0.6, 0.3], 0.7, 0.35, 0.5);
+        let scene = Scene::sphere(20, TangentField::Circular);
+        let n = scene.n_pixels();
+        let masked = |v: f32, p: usize| if scene.mask[p] { v } else { f32::NAN };
+        let maps = GltfMaps {
+            width: 20,
+            height: 20,
+            normals: scene.gt_normals(),
+            tangents: scene.gt_tangents(),
+            base_color: (0..n)
+                .flat_map(|p| g.base_color.map(|c| masked(c as f32, p)))
+                .collect(),
+            metallic: (0..n).map(|p| masked(0.7, p)).collect(),
+            roughness: (0..n).map(|p| masked(0.35, p)).collect(),
+            anisotropy: (0..n).map(|p| masked(0.5, p)).collect(),
+            exposure: 2.5,
+        };
+        let r = Relighter::gltf(&maps, &Edits::default()).unwrap();
+        for l in [DVec3::new(0.3, 0.4, 0.8), DVec3::new(-0.7, 0.1, 0.5)] {
+            let a = r.render(l);
+            let b = scene.render(&g, l);
+            for (x, y) in a.iter().zip(&b) {
+                assert!((x - 2.5 * y).abs() <= 1e-5 * y.abs().max(1.0), "{x} {y}");
+            }
+        }
+        // No specular albedo to scale; an exposure that is not positive is refused.
+        let spec = Edits {
+            specular_scale: 2.0,
+            ..Edits::default()
+        };
+        assert!(Relighter::gltf(&maps, &spec).is_err());
+        let dark = GltfMaps {
+            exposure: 0.0,
+            ..maps
+        };
+        assert!(Relighter::gltf(&dark, &Edits::default()).is_err());
     }
 
     #[test]

@@ -19,10 +19,11 @@
 //! | `cook-torrance` (`ct`) | `kd` (0.5), `ks` (0.5), `m` (0.2), `ior` (1.5) |
 //! | `ashikhmin-shirley` (`as`) | `rd` (0.5), `rs` (0.05), `nu` (100), `nv` (10) |
 //! | `ggx` | `kd` (0.1), `f0` (0.9), `ax` (0.3), `ay` (0.1), `alpha` (sets both) |
+//! | `gltf` | `base` (0.5), `metallic` (0), `roughness` (0.5), `anisotropy` (0) |
 //! | `merl` | `path` (required; the rest of the spec after `path=`, commas allowed) |
 //! | `merl-trilinear` | as `merl`, with trilinear interpolation between bins |
 //!
-//! Colour keys: `albedo`, `kd`, `ks`, `rd`, `rs`, `f0`. Unknown keys, repeated keys, missing
+//! Colour keys: `albedo`, `kd`, `ks`, `rd`, `rs`, `f0`, `base`. Unknown keys, repeated keys, missing
 //! values, non-finite numbers and out-of-range parameters (negative colours, non-positive
 //! roughness/exponent/index) are errors; the message lists the valid keys. Missing keys take
 //! the defaults above. Every model's [`Brdf::name`] prints a spec that parses back to the same
@@ -34,7 +35,8 @@
 
 use super::Brdf;
 use super::{
-    AshikhminShirley, BlinnPhong, CookTorrance, Ggx, Lambertian, Merl, TorranceSparrow, Ward,
+    AshikhminShirley, BlinnPhong, CookTorrance, Ggx, GltfPbr, Lambertian, Merl, TorranceSparrow,
+    Ward,
 };
 
 /// Formats a colour for a spec: one number when all channels are equal, else `r/g/b`. Uses
@@ -174,6 +176,7 @@ pub const MODEL_NAMES: &[&str] = &[
     "cook-torrance",
     "ashikhmin-shirley",
     "ggx",
+    "gltf",
     "merl",
     "merl-trilinear",
 ];
@@ -244,6 +247,37 @@ pub fn parse_model(spec: &str) -> Result<Box<dyn Brdf>, String> {
                 return Err(format!("ggx: f0={} must be at most 1", fmt_rgb(&f0)));
             }
             Ok(Box::new(Ggx::new(p.rgb("kd", 0.1)?, f0, ax, ay)))
+        }
+        "gltf" => {
+            let p = Params::parse(
+                "gltf",
+                &["base", "metallic", "roughness", "anisotropy"],
+                rest,
+            )?;
+            let base = p.rgb("base", 0.5)?;
+            let unit = |key: &str, default: f64| -> Result<f64, String> {
+                let x = match p.raw(key) {
+                    Some(t) => p.number(key, t)?,
+                    None => default,
+                };
+                if !(0.0..=1.0).contains(&x) {
+                    return Err(format!("gltf: {key}={x} must be in [0, 1]"));
+                }
+                Ok(x)
+            };
+            let roughness = unit("roughness", 0.5)?;
+            if base.iter().any(|&x| x > 1.0) || roughness == 0.0 {
+                return Err(format!(
+                    "gltf: base={} must be at most 1 and roughness={roughness} positive",
+                    fmt_rgb(&base)
+                ));
+            }
+            Ok(Box::new(GltfPbr::new(
+                base,
+                unit("metallic", 0.0)?,
+                roughness,
+                unit("anisotropy", 0.0)?,
+            )))
         }
         "merl" | "merl-trilinear" => {
             // The path may contain ',' or '=': everything after "path=" is the path.
