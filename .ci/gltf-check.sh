@@ -2,9 +2,9 @@
 # Validates glTF files with the Khronos glTF validator (npm `gltf-validator`), installed into
 # .ci/node_modules on first use. Exits non-zero when any file has an error.
 #   .ci/gltf-check.sh FILE.gltf|FILE.glb...
-# With no arguments: renders a small synthetic capture, estimates, fits it with both models
-# (glTF: the fitted material; Ward: converted), integrates and exports it (quad and mesh,
-# .gltf and .glb) with the debug build, then validates those.
+# With no arguments: makes the assets of .ci/gltf-assets.sh (a small synthetic capture, fitted
+# with both models, exported as quad and mesh, .gltf and .glb) with the debug build, then
+# validates those (SYMFRAME=path/to/symframe: that binary instead of the debug build).
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 root="$(dirname "$here")"
@@ -19,18 +19,13 @@ files=("$@")
 if [ ${#files[@]} -eq 0 ]; then
     work="$(mktemp -d)"
     trap 'rm -rf "$work"' EXIT
-    (cd "$root" && cargo build --locked -q -p symframe-cli)
-    sf="$root/target/debug/symframe"
-    "$sf" synth -o "$work/data" --size 48 --rig cone:200 --model ward >/dev/null
-    "$sf" estimate "$work/data" -o "$work/est" >/dev/null
-    "$sf" fit "$work/data" --frames "$work/est" -o "$work/fit" --model gltf >/dev/null
-    "$sf" fit "$work/data" --frames "$work/est" -o "$work/ward" --model ward >/dev/null
-    "$sf" integrate "$work/est" -o "$work/int" --solver poisson >/dev/null
-    "$sf" export gltf "$work/fit" -o "$work/quad.gltf" >/dev/null
-    "$sf" export gltf "$work/fit" -o "$work/quad.glb" >/dev/null
-    "$sf" export gltf "$work/ward" -o "$work/ward.glb" >/dev/null
-    "$sf" export gltf "$work/est" -o "$work/est.glb" >/dev/null
-    "$sf" export gltf "$work/fit" --mesh --depth "$work/int/depth.npy" -o "$work/mesh.glb" >/dev/null
+    if [ -n "${SYMFRAME:-}" ]; then
+        sf="$(realpath "$SYMFRAME")"
+    else
+        (cd "$root" && cargo build --locked -q -p symframe-cli)
+        sf="$root/target/debug/symframe"
+    fi
+    "$here/gltf-assets.sh" "$sf" "$work"
     files=("$work/quad.gltf" "$work/quad.glb" "$work/ward.glb" "$work/est.glb" "$work/mesh.glb")
 fi
 node "$here/gltf-validate.js" "${files[@]}"

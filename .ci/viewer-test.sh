@@ -32,18 +32,8 @@ skip() {
 }
 command -v node >/dev/null && command -v npm >/dev/null || skip "node and npm are not installed"
 
-chromium="${CHROMIUM:-$(command -v chromium || true)}"
-if [ -z "$chromium" ]; then
-    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
-        echo "viewer-test: installing Debian's chromium"
-        export DEBIAN_FRONTEND=noninteractive
-        apt-get install -y -q chromium >/dev/null 2>&1 ||
-            { apt-get update -q >/dev/null 2>&1 && apt-get install -y -q chromium >/dev/null 2>&1; } || true
-    fi
-    chromium="$(command -v chromium || true)"
-    [ -n "$chromium" ] || skip "chromium is not installed and apt-get could not install it"
-fi
-export CHROMIUM="$chromium"
+# shellcheck source=find-chromium.sh
+source "$here/find-chromium.sh"
 
 node_dir="$root/target/viewer-test-node"
 if [ ! -d "$node_dir/node_modules/playwright-core" ] || [ ! -d "$node_dir/node_modules/pngjs" ]; then
