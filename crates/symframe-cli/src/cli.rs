@@ -62,6 +62,10 @@ pub enum Command {
     /// Paper-scale benchmark: generate a synthetic stack once, time `estimate` on it.
     #[command(hide = true)]
     BenchPaper(BenchArgs),
+    /// Scaling curves: time and memory of `estimate` against image size, light count and
+    /// threads, a fitted cost model, tables and a plot.
+    #[command(hide = true)]
+    BenchScaling(ScalingArgs),
 }
 
 /// The experiments of `symframe experiment`.
@@ -392,6 +396,28 @@ pub struct BenchArgs {
     /// still built, so decoding and memory are measured at full size in a fraction of the time.
     #[arg(long, value_name = "K/N")]
     pub tiles: Option<Shard>,
+}
+
+/// Flags of `symframe bench-scaling`.
+#[derive(Debug, Clone, Args)]
+pub struct ScalingArgs {
+    /// Folder for the generated datasets (reused when they exist), the runs' outputs and the
+    /// results: scaling.json, scaling.md, scaling.png.
+    #[arg(long, default_value = "symframe-scaling")]
+    pub dir: PathBuf,
+    /// A tiny sweep (for tests): seconds instead of minutes.
+    #[arg(long)]
+    pub quick: bool,
+    /// Measure nothing: fit the model again and rewrite the tables and the plot from the runs
+    /// recorded in DIR/scaling.json.
+    #[arg(long)]
+    pub refit: bool,
+    /// Add 1024 x 1024 to the image-size sweep (about 5 GB of cache and minutes more).
+    #[arg(long)]
+    pub large: bool,
+    /// Passed to `estimate --decode-memory` (MiB per batch of decoded images).
+    #[arg(long, default_value_t = CacheOptions::default().batch_bytes >> 20, value_name = "MIB")]
+    pub decode_memory: usize,
 }
 
 /// Flags of `symframe demo`.

@@ -118,6 +118,7 @@ fn main() {
         cli::Command::Demo(args) => demo::run(&args),
         cli::Command::Merge(args) => estimate::merge(&args),
         cli::Command::BenchPaper(args) => bench::run(&args),
+        cli::Command::BenchScaling(args) => bench::scaling::run(&args),
         cli::Command::Eval(args) => eval_cmd::run(&args).map(|_| ()),
         cli::Command::Synth(args) => synth::run(&args).map(|_| ()),
         cli::Command::Experiment(args) => experiment::run(&args),

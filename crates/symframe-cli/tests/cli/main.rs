@@ -14,6 +14,7 @@ mod integrate;
 mod normal_png;
 mod outdir;
 mod reliability;
+mod scaling;
 mod synth;
 mod tiles;
 mod view;
