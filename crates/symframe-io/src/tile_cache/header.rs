@@ -179,7 +179,7 @@ pub fn check_cache_bytes(b: &[u8]) -> Option<usize> {
         return None;
     }
     let _ = read_warnings(b);
-    Some(verify(b, &h).len())
+    Some(verify(b, &h, |_, _| {}).len())
 }
 
 /// Where the input warnings are kept in the header: length (`u32`), XXH3-64, JSON.

@@ -214,8 +214,9 @@ pub(super) fn block_sum(bytes: &[u8], exponent: i32) -> u64 {
     xxhash_rust::xxh3::xxh3_64_with_seed(bytes, exponent as u32 as u64)
 }
 
-/// The blocks of a complete cache whose checksum fails: `(tile, block)` pairs.
-fn verify(map: &[u8], h: &Header) -> Vec<(usize, usize)> {
+/// The blocks of a complete cache whose checksum fails: `(tile, block)` pairs. `done(o, len)`
+/// is called with each block's byte range once summed.
+fn verify(map: &[u8], h: &Header, done: impl Fn(usize, usize) + Sync) -> Vec<(usize, usize)> {
     let grid = TileGrid::new(h.width, h.height, h.tile);
     let nb = h.n_blocks();
     let table = h.table_offset() as usize;
@@ -226,7 +227,9 @@ fn verify(map: &[u8], h: &Header) -> Vec<(usize, usize)> {
             let (o, len) = h.block_range(&grid, t, b);
             let want =
                 u64::from_le_bytes(map[table + 8 * k..table + 8 * k + 8].try_into().unwrap());
-            (block_sum(&map[o..o + len], h.scale_exponent(map, k)) != want).then_some((t, b))
+            let bad = block_sum(&map[o..o + len], h.scale_exponent(map, k)) != want;
+            done(o, len);
+            bad.then_some((t, b))
         })
         .collect()
 }
@@ -263,7 +266,19 @@ fn open_complete(path: &Path, fingerprint: u64, tile: usize, n: usize) -> Result
     }
     let map = map_file(path, len)?;
     let t = Instant::now();
-    let bad = verify(&map, &header);
+    // Each block's pages are unmapped once summed, so verifying does not hold the whole cache
+    // resident (it did: a reused 18 GB cache showed a peak RSS of 17 GiB).
+    let bad = verify(&map, &header, |o, len| {
+        #[cfg(unix)]
+        {
+            // SAFETY: a read-only shared file mapping: MADV_DONTNEED only unmaps the pages;
+            // later accesses read the same bytes back from the file (page cache).
+            let _ =
+                unsafe { map.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, o, len) };
+        }
+        #[cfg(not(unix))]
+        let _ = (o, len);
+    });
     Ok(Some(Found {
         map,
         header,
