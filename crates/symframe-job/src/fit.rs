@@ -610,6 +610,12 @@ fn encode(r: &Option<PixelOutcome>, b: &mut Vec<u8>) {
 fn decode(r: &[u8]) -> Option<Option<PixelOutcome>> {
     let f64_at = |o: usize| f64::from_le_bytes(r[o..o + 8].try_into().unwrap_or_default());
     let u64_at = |o: usize| u64::from_le_bytes(r[o..o + 8].try_into().unwrap_or_default());
+    // The held-out error sits at the same place for both models.
+    let hold = || HoldoutError {
+        sse: f64_at(96),
+        samples: u64_at(104) as usize,
+        peak: f64_at(112),
+    };
     Some(match r[0] {
         0 => None,
         1 => Some(PixelOutcome::NoFrame),
@@ -625,12 +631,7 @@ fn decode(r: &[u8]) -> Option<Option<PixelOutcome>> {
                 samples: u64_at(80) as usize,
                 iterations: u32::from_le_bytes(r[88..92].try_into().unwrap_or_default()),
             };
-            let hold = HoldoutError {
-                sse: f64_at(96),
-                samples: u64_at(104) as usize,
-                peak: f64_at(112),
-            };
-            Some(PixelOutcome::Fitted(fit, hold))
+            Some(PixelOutcome::Fitted(fit, hold()))
         }
         4 => {
             let fit = GltfFit {
@@ -643,12 +644,7 @@ fn decode(r: &[u8]) -> Option<Option<PixelOutcome>> {
                 samples: u64_at(80) as usize,
                 iterations: u32::from_le_bytes(r[88..92].try_into().unwrap_or_default()),
             };
-            let hold = HoldoutError {
-                sse: f64_at(96),
-                samples: u64_at(104) as usize,
-                peak: f64_at(112),
-            };
-            Some(PixelOutcome::FittedGltf(fit, hold))
+            Some(PixelOutcome::FittedGltf(fit, hold()))
         }
         _ => return None,
     })
