@@ -183,7 +183,10 @@ pub fn run(args: &ExperimentArgs) -> Result<()> {
                paper's cross-multiplied cosine form of the symmetry distance \
                (`CosineMode::CrossMultiplied`; the default is the per-pixel `CosineMode::Auto`, docs/method.md \"Default measure\"); \"compensated\" is our refinement \
                `CosineMode::Compensated(0.5)`. The readings below each table are generated \
-               from the numbers of this run.\n\n";
+               from the numbers of this run. The capture-to-asset figures (light calibration \
+               from a chrome sphere, intensities from a matte sphere, normal integration, \
+               relighting with cast shadows) come from commands on `symframe synth` captures, \
+               not from this run: [capture.md](capture.md).\n\n";
         for (_, body, _) in &sections {
             md += body;
             md += "\n";
