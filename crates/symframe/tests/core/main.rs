@@ -5,3 +5,4 @@ mod accuracy;
 mod baselines;
 mod fit;
 mod materials;
+mod robustness;
