@@ -52,10 +52,10 @@ impl Subset {
         ]
     }
 
-    /// Appends a sample (call [`Subset::pad`] once all are in).
+    /// Appends a sample (before [`Subset::pad`], which completes the last block once all are
+    /// in).
     pub(super) fn push(&mut self, l: DVec3, h: DVec3, y: f64) {
-        // Only whole samples are stored before the padding: drop the padding first.
-        self.truncate(self.len);
+        debug_assert_eq!(self.y.len(), self.len, "a sample pushed after the padding");
         let values = [l.x, l.y, l.z, h.x, h.y, h.z, schlick(h), y, 1.0];
         for (v, x) in self.columns().into_iter().zip(values) {
             v.push(x);
@@ -344,17 +344,14 @@ pub(super) fn sums(m: &Model, s: &Subset, lobe: &mut [f64]) -> Sums {
 }
 
 /// The residuals `y - d a - (s1 + s2 F) L` into `r` from the lobe's values `lobe` (as
-/// [`sums`] left them) and the coefficients `c`; returns their sum of squares.
-pub(super) fn residuals(m: &Model, s: &Subset, c: [f64; 3], lobe: &[f64], r: &mut [f64]) -> f64 {
+/// [`sums`] left them) and the coefficients `c`.
+pub(super) fn residuals(m: &Model, s: &Subset, c: [f64; 3], lobe: &[f64], r: &mut [f64]) {
     let n = m.normal.to_array();
-    let mut sum = 0.0;
     for i in 0..s.padded_len() {
         let nl = n[0] * s.l[0][i] + n[1] * s.l[1][i] + n[2] * s.l[2][i];
         let a = nl.max(0.0) * s.w[i];
         r[i] = s.y[i] - c[0] * a - lobe[i] * (c[1] + c[2] * s.fresnel[i]);
-        sum += r[i] * r[i];
     }
-    sum
 }
 
 /// The Gauss-Newton loop's sums at `m` with coefficients `c`: with `v_i` the derivative of the

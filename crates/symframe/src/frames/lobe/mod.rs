@@ -331,11 +331,12 @@ pub struct LobeScratch {
     chosen: Vec<u8>,
 }
 
-/// Per-sample work buffers: the lobe's values and the residuals.
+/// Per-sample work buffers: the lobe's values, the residuals, and which samples stay.
 #[derive(Debug, Clone, Default)]
 struct Buffers {
     lobe: Vec<f64>,
     r: Vec<f64>,
+    keep: Vec<bool>,
 }
 
 impl Buffers {
@@ -352,23 +353,24 @@ impl Buffers {
 /// went; `None` where fewer than eight samples would be left.
 fn trim_shadows(data: &mut Subset, model: &Model, buffers: &mut Buffers) -> Option<usize> {
     buffers.fit(data);
-    let Buffers { lobe, r } = buffers;
+    let Buffers { lobe, r, keep } = buffers;
     residuals(model, data, lobe, r);
     let max_prediction = (0..data.len())
         .map(|j| data.value(j) - r[j])
         .fold(0.0, f64::max);
-    let shadow = |j: usize| {
+    keep.clear();
+    keep.extend((0..data.len()).map(|j| {
         let prediction = data.value(j) - r[j];
-        model.normal.dot(data.light(j)) >= SHADOW_MIN_COSINE
+        let shadow = model.normal.dot(data.light(j)) >= SHADOW_MIN_COSINE
             && prediction >= SHADOW_LEVEL * max_prediction
-            && data.value(j) < SHADOW_FRACTION * prediction
-    };
-    let removed = (0..data.len()).filter(|&j| shadow(j)).count();
+            && data.value(j) < SHADOW_FRACTION * prediction;
+        !shadow
+    }));
+    let removed = keep.iter().filter(|&&k| !k).count();
     if removed > 0 && data.len() - removed < 8 {
         return None;
     }
     if removed > 0 {
-        let keep: Vec<bool> = (0..data.len()).map(|j| !shadow(j)).collect();
         data.retain(|j| keep[j]);
     }
     Some(removed)
@@ -399,11 +401,12 @@ fn project(m: &Model, samples: &Subset, lobe: &mut [f64]) -> Linear {
     linear
 }
 
-/// The model's residuals `y - d a - s1 L - s2 L F` at `m` over the samples into `r` (one per
-/// sample with the padding; `lobe`, as long, gets the lobe's values); returns the coefficients `[d, s1, s2]` and the sum of squares.
-fn residuals(m: &Model, samples: &Subset, lobe: &mut [f64], r: &mut [f64]) -> ([f64; 3], f64) {
+/// The model's residuals `y - d a - s1 L - s2 L F` at `m`, with its coefficients solved there,
+/// over the samples into `r` (one per sample with the padding; `lobe`, as long, gets the lobe's
+/// values).
+fn residuals(m: &Model, samples: &Subset, lobe: &mut [f64], r: &mut [f64]) {
     let x = project(m, samples, lobe).coefficients;
-    (x, kernel::residuals(m, samples, x, lobe, r))
+    kernel::residuals(m, samples, x, lobe, r);
 }
 
 /// The Gauss-Newton system of the reduced (variable-projection) problem at `m`, whose linear
@@ -727,8 +730,12 @@ pub fn fit_lobe(
     let syy = data.energy();
     buffers.fit(data);
     let m = Model::of(&state);
-    let ([diffuse, specular, fresnel], cost) =
-        residuals(&m, data, &mut buffers.lobe, &mut buffers.r);
+    // The coefficients and the sum of squares from the sums, as the search judged its steps.
+    let Linear {
+        coefficients: [diffuse, specular, fresnel],
+        cost,
+        ..
+    } = project(&m, data, &mut buffers.lobe);
     let a = [m.inv_a2[0].powf(-0.5), m.inv_a2[1].powf(-0.5)];
     let (tangent, alpha) = if a[0] >= a[1] {
         (m.t, a)
