@@ -711,10 +711,20 @@ fn predict(fit: &PixelFit, s: &Sample) -> [f64; 3] {
 
 /// Sum of squared errors (direct, no cancellation) and the largest measurement.
 fn sse(fit: &PixelFit, samples: &[Sample]) -> (f64, f64) {
+    squared_errors(samples, |s| (predict(fit, s), s.rgb))
+}
+
+/// Sum of squared errors of the predicted against the measured RGB radiance over `samples`
+/// (`pair(s)` gives both), and the largest measurement: the figures of either model's fit.
+pub(crate) fn squared_errors<S>(
+    samples: &[S],
+    pair: impl Fn(&S) -> ([f64; 3], [f64; 3]),
+) -> (f64, f64) {
     let mut sum = 0.0;
     let mut peak = 0.0f64;
     for s in samples {
-        for (f, &i) in predict(fit, s).iter().zip(&s.rgb) {
+        let (predicted, measured) = pair(s);
+        for (f, i) in predicted.into_iter().zip(measured) {
             sum += (f - i).powi(2);
             peak = peak.max(i);
         }

@@ -27,7 +27,7 @@
 
 use glam::DVec3;
 
-use super::fit::{FitParams, HoldoutError};
+use super::fit::{squared_errors, FitParams, HoldoutError};
 use crate::brdf::gltf::GltfPbr;
 
 /// The fitted glTF parameters of one pixel.
@@ -399,15 +399,7 @@ fn predict(fit: &GltfFit, s: &GSample, v: DVec3, e: f64) -> [f64; 3] {
 
 /// Sum of squared errors and the largest measurement.
 pub(crate) fn sse(fit: &GltfFit, samples: &[GSample], v: DVec3, e: f64) -> (f64, f64) {
-    let mut sum = 0.0;
-    let mut peak = 0.0f64;
-    for s in samples {
-        for (f, &i) in predict(fit, s, v, e).iter().zip(&s.rgb) {
-            sum += (f - i).powi(2);
-            peak = peak.max(i);
-        }
-    }
-    (sum, peak)
+    squared_errors(samples, |s| (predict(fit, s, v, e), s.rgb))
 }
 
 /// The held-out error of a fit.
