@@ -3,16 +3,63 @@
 //!
 //! Written by hand for speed (measured: the fit is ~90% of the estimator's time on dense rigs):
 //! the samples are stored as columns (one array per coordinate, padded to whole blocks with
-//! empty samples of weight 0), and every block's terms are branch-free arithmetic on four lanes
-//! ([`F4`]), so they run as vector instructions; the block loops are compiled twice, for AVX2
-//! where the processor has it and for the baseline, with the same operations in the same order
-//! (identical results).
+//! empty samples of weight 0), and every block's terms are branch-free arithmetic on
+//! [`LANES`] lanes ([`F16`]), so they run as vector instructions; the block loops are compiled
+//! three times, for AVX-512F or AVX2 with FMA where the processor has them and for the
+//! baseline, with the same operations in the same order (identical results).
 
 use glam::DVec3;
 
 #[cfg(target_arch = "x86_64")]
-use super::lanes::Avx4;
-use super::lanes::{Lanes, F4, LANES};
+use super::lanes::{Avx2, Avx512};
+use super::lanes::{Lanes, F16, LANES};
+
+/// The builds of the sample loops: the same operations in the same order (identical results),
+/// compiled for the baseline, for AVX2 with FMA and for AVX-512F.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Backend {
+    Baseline,
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
+}
+
+impl Backend {
+    /// The fastest build this processor runs.
+    pub(super) fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                return Backend::Avx512;
+            }
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                return Backend::Avx2;
+            }
+        }
+        Backend::Baseline
+    }
+
+    /// Every build this processor runs (the tests compare them).
+    #[cfg(test)]
+    fn available() -> Vec<Self> {
+        let mut all = vec![Backend::Baseline];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                all.push(Backend::Avx2);
+            }
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                all.push(Backend::Avx512);
+            }
+        }
+        all
+    }
+}
 use super::{Model, P};
 
 /// The samples of one subset of the lights, as columns: light and halfway vectors (camera
@@ -211,28 +258,33 @@ fn terms<V: Lanes, const FORESHORTENED: bool>(f: &Frame, s: &Block<V>) -> Terms<
     // Safe stand-ins where the sample is unlit (the results are masked out below).
     let nl_s = V::select(lit, nl, one);
     let hn_s = V::select(lobed, hn, one);
-    let (x, y) = (ht / hn_s, hb / hn_s);
+    // Reciprocals shared by the terms below: a division costs several multiplications.
+    let inv_hn = one / hn_s;
+    let (x, y) = (ht * inv_hn, hb * inv_hn);
     let (qt, qb) = (x * x * f.inv_a2[0], y * y * f.inv_a2[1]);
     let q = qt + qb;
     let base = q * (1.0 / f.shape) + 1.0;
     let ln_base = base.ln();
     let ln_nl = if FORESHORTENED { nl_s.ln() } else { zero };
     let root = (nl_s * nl_s * (1.0 - f.alpha2) + f.alpha2).sqrt();
+    let inv_sum = one / (nl_s + root);
     // Smith's masking of the light for a GGX surface of the lobe's mean width: microfacet
     // lobes dim towards grazing lights by this much (the view's factor is the same for all).
-    let masking = nl_s * 2.0 / (nl_s + root);
-    let hn2 = hn_s * hn_s;
+    let masking = nl_s * 2.0 * inv_sum;
+    let inv_hn2 = inv_hn * inv_hn;
     let ln_power = if FORESHORTENED {
         ln_base * -f.shape + ln_nl * f.foreshortening
     } else {
         ln_base * -f.shape
     };
-    let value = ln_power.exp() * masking / (hn2 * hn2);
+    let value = ln_power.exp() * masking * (inv_hn2 * inv_hn2);
     // d ln L / dq, and d ln L / d(n.l) through the masking and the foreshortening.
     let by_q = -(one / base);
-    let mut by_nl = one / nl_s - (nl_s * (1.0 - f.alpha2) / root + 1.0) / (nl_s + root);
+    let inv_nl = one / nl_s;
+    let inv_root = one / root;
+    let mut by_nl = inv_nl - (nl_s * (1.0 - f.alpha2) * inv_root + 1.0) * inv_sum;
     if FORESHORTENED {
-        by_nl = by_nl + one / nl_s * f.foreshortening;
+        by_nl = by_nl + inv_nl * f.foreshortening;
     }
     // A rotation w = (w_t, w_b, w_n) of the frame moves n by w x n = w_b t - w_t b,
     // t by w_n b - w_b n, and b by w_t n - w_n t.
@@ -240,7 +292,6 @@ fn terms<V: Lanes, const FORESHORTENED: bool>(f: &Frame, s: &Block<V>) -> Terms<
     let d_hn = [-hb, ht, zero];
     let d_ht = [zero, -hn_s, hb];
     let d_hb = [hn_s, zero, -ht];
-    let inv_hn = one / hn_s;
     let mut g = [zero; P];
     for k in 0..3 {
         let dx = (d_ht[k] - x * d_hn[k]) * inv_hn;
@@ -249,10 +300,10 @@ fn terms<V: Lanes, const FORESHORTENED: bool>(f: &Frame, s: &Block<V>) -> Terms<
         g[k] = by_q * dq + by_nl * d_nl[k] - d_hn[k] * inv_hn * 4.0;
     }
     // The masking reads the widths' product: d ln M / d ln a = a_t a_b d ln M / d(a_t a_b).
-    let by_width = -((one - nl_s * nl_s) / (root * 2.0 * (nl_s + root))) * f.alpha2;
+    let by_width = -((one - nl_s * nl_s) * inv_root * inv_sum) * (0.5 * f.alpha2);
     g[3] = by_q * (qt * -2.0) + by_width;
     g[4] = by_q * (qb * -2.0) + by_width;
-    g[5] = (q / base * (1.0 / f.shape) - ln_base) * f.shape;
+    g[5] = (-(q * by_q) * (1.0 / f.shape) - ln_base) * f.shape;
     g[6] = ln_nl;
     Terms {
         a: V::select(lit, nl * s.w, zero),
@@ -310,31 +361,45 @@ fn sums_kernel<V: Lanes, const M: bool>(f: &Frame, s: &Subset, lobe: &mut [f64])
 /// The basis functions' sums at `m` over the samples; the lobe's value per sample into `lobe`
 /// (one per sample with the padding).
 pub(super) fn sums(m: &Model, s: &Subset, lobe: &mut [f64]) -> Sums {
+    sums_with(Backend::detect(), m, s, lobe)
+}
+
+/// [`sums`] in the build `backend` (one the processor runs).
+fn sums_with(backend: Backend, m: &Model, s: &Subset, lobe: &mut [f64]) -> Sums {
     let f = Frame::of(m);
     let foreshortened = m.foreshortening != 0.0;
-    let v = 'done: {
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn avx2<const M: bool>(f: &Frame, s: &Subset, lobe: &mut [f64]) -> [f64; 10] {
+        sums_kernel::<Avx2, M>(f, s, lobe)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    fn avx512<const M: bool>(f: &Frame, s: &Subset, lobe: &mut [f64]) -> [f64; 10] {
+        sums_kernel::<Avx512, M>(f, s, lobe)
+    }
+    let v = match backend {
+        Backend::Baseline if foreshortened => sums_kernel::<F16, true>(&f, s, lobe),
+        Backend::Baseline => sums_kernel::<F16, false>(&f, s, lobe),
         #[cfg(target_arch = "x86_64")]
-        {
-            #[target_feature(enable = "avx2")]
-            fn avx2<const M: bool>(f: &Frame, s: &Subset, lobe: &mut [f64]) -> [f64; 10] {
-                sums_kernel::<Avx4, M>(f, s, lobe)
+        // SAFETY: `backend` is a build the processor runs (`Backend::detect`,
+        // `Backend::available`).
+        Backend::Avx2 => unsafe {
+            if foreshortened {
+                avx2::<true>(&f, s, lobe)
+            } else {
+                avx2::<false>(&f, s, lobe)
             }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the processor supports AVX2 (checked just above).
-                break 'done unsafe {
-                    if foreshortened {
-                        avx2::<true>(&f, s, lobe)
-                    } else {
-                        avx2::<false>(&f, s, lobe)
-                    }
-                };
+        },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        Backend::Avx512 => unsafe {
+            if foreshortened {
+                avx512::<true>(&f, s, lobe)
+            } else {
+                avx512::<false>(&f, s, lobe)
             }
-        }
-        if foreshortened {
-            sums_kernel::<F4, true>(&f, s, lobe)
-        } else {
-            sums_kernel::<F4, false>(&f, s, lobe)
-        }
+        },
     };
     Sums {
         gram: [[v[0], v[1], v[2]], [v[1], v[3], v[4]], [v[2], v[4], v[5]]],
@@ -426,37 +491,52 @@ fn gauss_newton_kernel<V: Lanes, const M: bool>(
 /// The Gauss-Newton loop's sums at `m` with coefficients `c` over the parameters marked
 /// `free`, in one pass over the samples.
 pub(super) fn gauss_newton(m: &Model, s: &Subset, c: [f64; 3], free: [bool; P]) -> GaussNewton {
+    gauss_newton_with(Backend::detect(), m, s, c, free)
+}
+
+/// [`gauss_newton`] in the build `backend` (one the processor runs).
+fn gauss_newton_with(
+    backend: Backend,
+    m: &Model,
+    s: &Subset,
+    c: [f64; 3],
+    free: [bool; P],
+) -> GaussNewton {
     let f = Frame::of(m);
     let foreshortened = m.foreshortening != 0.0 || free[6];
     let on = free.map(|b| if b { 1.0 } else { 0.0 });
-    let (triangle, vtr, ftv) = 'done: {
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn avx2<const M: bool>(f: &Frame, s: &Subset, c: [f64; 3], on: [f64; P]) -> GaussNewtonSums {
+        gauss_newton_kernel::<Avx2, M>(f, s, c, on)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    fn avx512<const M: bool>(f: &Frame, s: &Subset, c: [f64; 3], on: [f64; P]) -> GaussNewtonSums {
+        gauss_newton_kernel::<Avx512, M>(f, s, c, on)
+    }
+    let (triangle, vtr, ftv) = match backend {
+        Backend::Baseline if foreshortened => gauss_newton_kernel::<F16, true>(&f, s, c, on),
+        Backend::Baseline => gauss_newton_kernel::<F16, false>(&f, s, c, on),
         #[cfg(target_arch = "x86_64")]
-        {
-            #[target_feature(enable = "avx2")]
-            fn avx2<const M: bool>(
-                f: &Frame,
-                s: &Subset,
-                c: [f64; 3],
-                on: [f64; P],
-            ) -> GaussNewtonSums {
-                gauss_newton_kernel::<Avx4, M>(f, s, c, on)
+        // SAFETY: `backend` is a build the processor runs (`Backend::detect`,
+        // `Backend::available`).
+        Backend::Avx2 => unsafe {
+            if foreshortened {
+                avx2::<true>(&f, s, c, on)
+            } else {
+                avx2::<false>(&f, s, c, on)
             }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the processor supports AVX2 (checked just above).
-                break 'done unsafe {
-                    if foreshortened {
-                        avx2::<true>(&f, s, c, on)
-                    } else {
-                        avx2::<false>(&f, s, c, on)
-                    }
-                };
+        },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        Backend::Avx512 => unsafe {
+            if foreshortened {
+                avx512::<true>(&f, s, c, on)
+            } else {
+                avx512::<false>(&f, s, c, on)
             }
-        }
-        if foreshortened {
-            gauss_newton_kernel::<F4, true>(&f, s, c, on)
-        } else {
-            gauss_newton_kernel::<F4, false>(&f, s, c, on)
-        }
+        },
     };
     GaussNewton {
         vtv: mirrored(triangle),
@@ -508,20 +588,20 @@ mod tests {
         let rig = Rig::new(&uniform_cone_lights(60, 65.0), RigOptions::default()).unwrap();
         // One sample in every lane.
         let block = |l: DVec3, h: DVec3| Block {
-            l: [F4::splat(l.x), F4::splat(l.y), F4::splat(l.z)],
-            h: [F4::splat(h.x), F4::splat(h.y), F4::splat(h.z)],
-            fresnel: F4::splat(0.0),
-            y: F4::splat(0.0),
-            w: F4::splat(1.0),
+            l: [F16::splat(l.x), F16::splat(l.y), F16::splat(l.z)],
+            h: [F16::splat(h.x), F16::splat(h.y), F16::splat(h.z)],
+            fresnel: F16::splat(0.0),
+            y: F16::splat(0.0),
+            w: F16::splat(1.0),
         };
         let at = |d: [f64; P], l: DVec3, h: DVec3| {
             let f = Frame::of(&Model::of(&state.moved(&d)));
-            let t = terms::<F4, true>(&f, &block(l, h));
+            let t = terms::<F16, true>(&f, &block(l, h));
             (t.a.0[0], t.lobe.0[0])
         };
         let mut checked = 0;
         for (&l, &h) in rig.lights_in_camera().iter().zip(rig.halfway_in_camera()) {
-            let t = terms::<F4, true>(&frame, &block(l, h));
+            let t = terms::<F16, true>(&frame, &block(l, h));
             if state.normal.dot(l) < 0.1 || t.lobe.0[0] < 1e-6 {
                 continue;
             }
@@ -547,8 +627,16 @@ mod tests {
     }
 
     #[test]
-    fn the_avx2_build_and_the_baseline_build_give_identical_sums() {
-        let model = Model::of(&state());
+    fn every_build_gives_the_baseline_sums_bit_for_bit() {
+        // With and without the foreshortening (the loops compiled with and without its terms).
+        let mut microfacet = state();
+        microfacet.shape[3] = 0.0;
+        for model in [Model::of(&state()), Model::of(&microfacet)] {
+            builds_agree(&model);
+        }
+    }
+
+    fn builds_agree(model: &Model) {
         let rig = Rig::new(&uniform_cone_lights(101, 65.0), RigOptions::default()).unwrap();
         let mut s = Subset::default();
         for (k, (&l, &h)) in rig
@@ -560,21 +648,29 @@ mod tests {
             s.push(l, h, 0.1 + (k % 7) as f64);
         }
         s.pad();
-        let mut lobe = vec![0.0; s.padded_len()];
-        let dispatched = sums(&model, &s, &mut lobe);
-        let baseline = sums_kernel::<F4, true>(&Frame::of(&model), &s, &mut lobe);
-        assert_eq!(dispatched.products, [baseline[6], baseline[7], baseline[8]]);
-        assert_eq!(dispatched.gram[0], [baseline[0], baseline[1], baseline[2]]);
-        let free = [1.0; P];
-        let gn = gauss_newton(&model, &s, [0.3, 1.0, 0.5], [true; P]);
-        let (_, vtr, ftv) =
-            gauss_newton_kernel::<F4, true>(&Frame::of(&model), &s, [0.3, 1.0, 0.5], free);
-        assert_eq!(gn.vtr, vtr);
-        assert_eq!(gn.ftv, ftv);
-        assert!(
-            gn.vtr.iter().all(|v| v.is_finite() && *v != 0.0),
-            "{:?}",
-            gn.vtr
-        );
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let run = |backend: Backend, free: [bool; P]| {
+            let mut lobe = vec![0.0; s.padded_len()];
+            let sums = sums_with(backend, model, &s, &mut lobe);
+            let gn = gauss_newton_with(backend, model, &s, [0.3, 1.0, 0.5], free);
+            let mut all = lobe;
+            all.extend(sums.gram.iter().flatten());
+            all.extend(sums.products);
+            all.push(sums.energy);
+            all.extend(gn.vtv.iter().flatten());
+            all.extend(gn.vtr);
+            all.extend(gn.ftv.iter().flatten());
+            all
+        };
+        let backends = Backend::available();
+        for free in [[true; P], [true, true, true, true, true, true, false]] {
+            let baseline = run(Backend::Baseline, free);
+            assert!(baseline.iter().all(|v| v.is_finite()));
+            assert!(baseline.iter().filter(|v| **v != 0.0).count() > 100);
+            for &b in &backends[1..] {
+                assert_eq!(bits(&run(b, free)), bits(&baseline), "{b:?}");
+            }
+        }
+        assert_eq!(backends.last(), Some(&Backend::detect()));
     }
 }
