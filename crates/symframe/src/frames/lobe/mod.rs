@@ -503,12 +503,17 @@ fn solve_spd(mut a: [[f64; P]; P], mut b: [f64; P]) -> Option<[f64; P]> {
 
 /// Whether a gain in the sum of squares is too small to go on for: below [`RELATIVE_GAIN`] of
 /// the cost, or [`ABSOLUTE_GAIN`] of the samples' energy `syy`.
-fn negligible(gain: f64, cost: f64, syy: f64) -> bool {
-    gain <= RELATIVE_GAIN * cost || gain <= ABSOLUTE_GAIN * syy
+fn negligible(gain: f64, cost: f64, syy: f64, relative: f64) -> bool {
+    gain <= relative * cost || gain <= ABSOLUTE_GAIN * syy
 }
 
 /// The search stops once a step gains less than this share of the cost...
 const RELATIVE_GAIN: f64 = 1e-4;
+
+/// The search on a coarse subset stops at this share instead (the polish on the whole subset
+/// settles the rest; measured: 1e-1 moves the dense materials maps by up to 0.02 degrees mean,
+/// 1e-2 leaves them unchanged).
+const COARSE_RELATIVE_GAIN: f64 = 1e-2;
 
 /// ...or of the samples' energy (measured: 1e-9 stops near-mirror lobes early, 0.013 -> 0.029
 /// degrees mean on the dense rig).
@@ -532,6 +537,7 @@ fn levenberg_marquardt(
     samples: &Subset,
     mut state: State,
     free: [bool; P],
+    relative: f64,
     lobe: &mut [f64],
 ) -> (State, f64, u32) {
     let syy = samples.energy();
@@ -561,7 +567,9 @@ fn levenberg_marquardt(
         // Converged where even the undamped Gauss-Newton step would gain too little: no trial
         // pass is spent finding that out (measured: 5-6% fewer passes, the same maps on dense
         // and sparse rigs).
-        if undamped_gain(&jtj, &rhs, floor).is_some_and(|g| negligible(g, linear.cost, syy)) {
+        if undamped_gain(&jtj, &rhs, floor)
+            .is_some_and(|g| negligible(g, linear.cost, syy, relative))
+        {
             break;
         }
         let mut improved = false;
@@ -586,7 +594,7 @@ fn levenberg_marquardt(
                 let gain = linear.cost - trial_linear.cost;
                 (state, model, linear) = (trial, trial_model, trial_linear);
                 lambda = (lambda / 3.0).max(1e-9);
-                improved = !negligible(gain, linear.cost, syy);
+                improved = !negligible(gain, linear.cost, syy, relative);
                 break;
             }
             lambda *= 4.0;
@@ -605,6 +613,7 @@ fn levenberg_marquardt(
 fn search_subset(
     data: &mut Subset,
     starts: &[LobeStart],
+    relative: f64,
     buffers: &mut Buffers,
 ) -> Option<(State, [bool; P], u32)> {
     buffers.fit(data);
@@ -616,7 +625,7 @@ fn search_subset(
             break;
         }
         let (state, cost, e) =
-            levenberg_marquardt(data, State::new(s), MICROFACET, &mut buffers.lobe);
+            levenberg_marquardt(data, State::new(s), MICROFACET, relative, &mut buffers.lobe);
         evals += e;
         if best.is_none_or(|b| cost < b.1) {
             best = Some((state, cost));
@@ -628,7 +637,7 @@ fn search_subset(
         syy = data.energy();
         buffers.fit(data);
         let (refit, refit_cost, e) =
-            levenberg_marquardt(data, state, MICROFACET, &mut buffers.lobe);
+            levenberg_marquardt(data, state, MICROFACET, relative, &mut buffers.lobe);
         evals += e;
         (state, cost) = (refit, refit_cost);
     }
@@ -636,7 +645,8 @@ fn search_subset(
     // above lacks: free `m` (from the microfacet answer), and keep it where it explains more.
     let mut free = MICROFACET;
     if cost > FORESHORTENING_FLOOR * syy {
-        let (free_m, cost_m, e) = levenberg_marquardt(data, state, [true; P], &mut buffers.lobe);
+        let (free_m, cost_m, e) =
+            levenberg_marquardt(data, state, [true; P], relative, &mut buffers.lobe);
         evals += e;
         if cost_m < cost {
             (state, free) = (free_m, [true; P]);
@@ -747,12 +757,20 @@ pub fn fit_lobe(
     // subset (measured on 200 lights: more fits left unexplained).
     let polish = fine.len() >= 2 * coarse.len();
     let searched = if polish { &mut *coarse } else { &mut *fine };
-    let (mut state, free, mut evals) = search_subset(searched, starts, buffers)?;
+    // Where the polish follows, the search need not settle to the last digits: the polish
+    // does (measured: 17% fewer passes on the Ward sphere, the materials maps unchanged).
+    let relative = if polish {
+        COARSE_RELATIVE_GAIN
+    } else {
+        RELATIVE_GAIN
+    };
+    let (mut state, free, mut evals) = search_subset(searched, starts, relative, buffers)?;
     // The polish on the whole subset, from the coarse answer (a few iterations).
     if polish {
         trim_shadows(fine, &Model::of(&state), buffers)?;
         buffers.fit(fine);
-        let (polished, _, e) = levenberg_marquardt(fine, state, free, &mut buffers.lobe);
+        let (polished, _, e) =
+            levenberg_marquardt(fine, state, free, RELATIVE_GAIN, &mut buffers.lobe);
         evals += e;
         state = polished;
     }
