@@ -4,9 +4,10 @@
 //! Written by hand for speed (measured: the fit is ~90% of the estimator's time on dense rigs):
 //! the samples are stored as columns (one array per coordinate, padded to whole blocks with
 //! empty samples of weight 0), and every block's terms are branch-free arithmetic on
-//! [`LANES`] lanes ([`F16`]), so they run as vector instructions; the block loops are compiled
-//! three times, for AVX-512F or AVX2 with FMA where the processor has them and for the
-//! baseline, with the same operations in the same order (identical results).
+//! [`LANES`] lanes ([`F16`]), so they run as vector instructions (the Gauss-Newton loop's
+//! running sums by fused multiply-adds); the block loops are compiled three times, for AVX-512F
+//! or AVX2 with FMA where the processor has them and for the baseline, with the same operations
+//! in the same order (identical results).
 
 use glam::DVec3;
 
@@ -460,15 +461,15 @@ fn gauss_newton_kernel<V: Lanes, const M: bool>(
         let r = b.y - t.a * c[0] - lobe;
         let basis = [t.a, t.lobe, t.lobe * b.fresnel];
         for p in 0..used {
-            vtr[p] = vtr[p] + v[p] * r;
+            vtr[p] = v[p].mul_add(r, vtr[p]);
             for q in p..used {
                 let e = triangle_index(p, q);
-                vtv[e] = vtv[e] + v[p] * v[q];
+                vtv[e] = v[p].mul_add(v[q], vtv[e]);
             }
         }
         for (row, fb) in ftv.iter_mut().zip(basis) {
             for p in 0..used {
-                row[p] = row[p] + fb * v[p];
+                row[p] = fb.mul_add(v[p], row[p]);
             }
         }
     }
