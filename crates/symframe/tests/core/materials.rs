@@ -22,6 +22,8 @@ struct Figures {
     p99: f64,
     coverage: f64,
     tangent_share: f64,
+    /// Share of the estimated pixels more than 5 degrees off.
+    over_5: f64,
 }
 
 fn figures(scene: &Scene, maps: &EstimateMaps) -> Figures {
@@ -52,6 +54,7 @@ fn figures(scene: &Scene, maps: &EstimateMaps) -> Figures {
             .unwrap_or(f64::NAN),
         coverage: k as f64 / pixels.max(1) as f64,
         tangent_share: tangents as f64 / k.max(1) as f64,
+        over_5: errors.iter().filter(|&&e| e > 5.0).count() as f64 / k.max(1) as f64,
     }
 }
 
@@ -294,4 +297,26 @@ fn lobes_outside_the_microfacet_family_and_broad_lobes() {
             );
         }
     }
+}
+
+#[test]
+fn beyond_reach_a_lobe_outside_the_family_beats_the_biased_lambertian_fit() {
+    // Ashikhmin-Shirley (not a member of the lobe fit's family) under 200 lights: normals 45-60
+    // degrees from the view have their highlight beyond the rig. The lobe fit leaves 0.6-0.7%
+    // unexplained there (more than the 0.2% that makes it the answer) but much less than a
+    // diffuse term, and is 1.6-3.1 degrees off where the Lambertian fallback, biased by the
+    // highlight's tails, was 7.5-11. Measured: 0.7% of the pixels over 5 degrees (2.2% with
+    // the Lambertian fallback), mean 0.79.
+    let scene = Scene::sphere(48, TangentField::Circular);
+    let brdf = symframe::brdf::AshikhminShirley::new([0.4; 3], [0.1; 3], 100.0, 10.0);
+    let f = estimate(
+        &scene,
+        &brdf,
+        &uniform_cone_lights(200, 65.0),
+        EstimatorParams::default(),
+    );
+    assert!(
+        f.over_5 <= 0.012 && f.mean <= 0.85 && f.coverage >= 0.99,
+        "{f:?}"
+    );
 }
