@@ -626,6 +626,19 @@ impl<'a> Estimator<'a> {
             Some(s) => f.residual < LOBE_OVER_DIFFUSE * s,
             None => true,
         });
+        // Nor where it barely improves on the robust Lambertian fit alone (the lobe model
+        // holds a diffuse term too): such a lobe stands in for the diffuse light, and where its
+        // centre is off at all it is far off (measured on the shadowed satin bumps: no diffuse
+        // part, 0.5 wide, 30-35 degrees from normals the Lambertian fit finds to 2 degrees).
+        let impersonated = lobe.is_some_and(|f| {
+            fit.confidence as f64 >= DIFFUSE_CENTRE_FIT
+                && f.residual >= LOBE_OVER_DIFFUSE * (1.0 - fit.confidence as f64)
+        });
+        let (lobe, diffuse_centre) = if impersonated {
+            (None, fit.normal)
+        } else {
+            (lobe, diffuse_centre)
+        };
         let n = if let Some(f) = lobe {
             source = PixelSource::Lobe;
             evals += f.evals;
