@@ -30,5 +30,6 @@ pub fn highlight_centroid_pixel(samples: &[f32], lights: &[DVec3]) -> BaselinePi
         tangent: m.has_tangent(CENTROID_MIN_ELONGATION).then_some(m.tangent),
         confidence: m.contrast as f32,
         used: m.count,
+        considered: m.count,
     }
 }

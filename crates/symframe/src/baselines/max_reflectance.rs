@@ -51,6 +51,7 @@ pub fn max_reflectance_pixel(samples: &[f32], lights: &[DVec3]) -> BaselinePixel
         tangent: None,
         confidence,
         used,
+        considered: used,
     }
 }
 

@@ -154,6 +154,9 @@ pub struct BaselinePixel {
     pub confidence: f32,
     /// Samples the final fit used.
     pub used: u32,
+    /// Samples the fit considered before leaving out outliers ([`woodham_robust_pixel`]; the
+    /// same as `used` for the other baselines).
+    pub considered: u32,
 }
 
 impl BaselinePixel {
@@ -164,6 +167,7 @@ impl BaselinePixel {
             tangent: None,
             confidence: 0.0,
             used: 0,
+            considered: 0,
         }
     }
 

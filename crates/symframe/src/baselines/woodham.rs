@@ -126,6 +126,7 @@ fn finish(eq: &NormalEquations, g: Option<DVec3>) -> BaselinePixel {
             tangent: None,
             confidence: eq.explained(g) as f32,
             used: eq.n,
+            considered: eq.n,
         },
         _ => BaselinePixel::empty(PixelStatus::Discarded),
     }
@@ -199,7 +200,10 @@ pub fn woodham_robust_pixel(
         }
     }
     match kept.solve() {
-        Some(g2) if kept.n < eq.n => finish(&kept, Some(g2)),
+        Some(g2) if kept.n < eq.n => BaselinePixel {
+            considered: eq.n,
+            ..finish(&kept, Some(g2))
+        },
         _ => finish(&eq, Some(g1)),
     }
 }

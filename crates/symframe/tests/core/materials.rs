@@ -375,3 +375,30 @@ fn a_doubtful_search_gives_way_to_a_plausible_lobe() {
         "{f:?}"
     );
 }
+
+#[test]
+fn a_spike_the_rig_undersamples_does_not_mislead_the_search() {
+    // Sharp GGX plastic (alpha 0.02) on shadowed bumps under 200 lights: the spike falls on a
+    // few lights or none; the robust Lambertian fit explains every other sample (R^2 > 0.999)
+    // and its normal answers, where the search went 14-20 degrees off on the spike's few
+    // samples. Measured: mean 0.31, no pixel over 5 degrees (before: 0.93, 1.6%).
+    let scene = Scene::bumps(
+        48,
+        &BumpParams {
+            count: 10,
+            relief: 1.0,
+            seed: 7,
+        },
+        TangentField::Swirl(30.0),
+    );
+    let f = estimate(
+        &scene,
+        &ggx(0.5, 0.04, 0.02, 0.02),
+        &uniform_cone_lights(200, 65.0),
+        EstimatorParams::default(),
+    );
+    assert!(
+        f.mean <= 0.4 && f.over_5 <= 0.002 && f.coverage >= 0.99,
+        "{f:?}"
+    );
+}
