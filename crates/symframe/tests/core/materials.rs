@@ -79,6 +79,19 @@ fn baseline(scene: &Scene, brdf: &dyn Brdf, lights: &[DVec3], method: Baseline) 
     f
 }
 
+/// Bumps with cast shadows (48 x 48, ten bumps of relief 1, tangents swirling at 30 degrees).
+fn shadowed_bumps(seed: u64) -> Scene {
+    Scene::bumps(
+        48,
+        &BumpParams {
+            count: 10,
+            relief: 1.0,
+            seed,
+        },
+        TangentField::Swirl(30.0),
+    )
+}
+
 fn ggx(kd: f64, f0: f64, ax: f64, ay: f64) -> Ggx {
     Ggx::new([kd; 3], [f0; 3], ax, ay)
 }
@@ -328,15 +341,7 @@ fn a_lobe_that_barely_improves_on_the_diffuse_term_does_not_answer() {
     // centred 30-35 degrees from the normal, at confidence 0.9, where the robust Lambertian
     // fit (R^2 0.999) was 2 degrees off. Measured: mean 0.285, no pixel over 5 degrees (before:
     // 0.326, 0.2%).
-    let scene = Scene::bumps(
-        48,
-        &BumpParams {
-            count: 10,
-            relief: 1.0,
-            seed: 5,
-        },
-        TangentField::Swirl(30.0),
-    );
+    let scene = shadowed_bumps(5);
     let f = estimate(
         &scene,
         &ggx(0.3, 0.2, 0.4, 0.12),
@@ -354,15 +359,7 @@ fn a_doubtful_search_gives_way_to_a_plausible_lobe() {
     // Ward on shadowed bumps under 500 lights: cast shadows break the slices' symmetry, and
     // where the search's own confidence is under 0.1 a lobe fit leaving under 0.5% answers.
     // Measured: mean 0.64, 3.5% of the pixels over 5 degrees (the search alone: 0.91, 6.9%).
-    let scene = Scene::bumps(
-        48,
-        &BumpParams {
-            count: 10,
-            relief: 1.0,
-            seed: 7,
-        },
-        TangentField::Swirl(30.0),
-    );
+    let scene = shadowed_bumps(7);
     let ward = symframe::brdf::Ward::new([0.3; 3], [0.5; 3], 0.1, 0.4);
     let f = estimate(
         &scene,
@@ -382,15 +379,7 @@ fn a_spike_the_rig_undersamples_does_not_mislead_the_search() {
     // few lights or none; the robust Lambertian fit explains every other sample (R^2 > 0.999)
     // and its normal answers, where the search went 14-20 degrees off on the spike's few
     // samples. Measured: mean 0.31, no pixel over 5 degrees (before: 0.93, 1.6%).
-    let scene = Scene::bumps(
-        48,
-        &BumpParams {
-            count: 10,
-            relief: 1.0,
-            seed: 7,
-        },
-        TangentField::Swirl(30.0),
-    );
+    let scene = shadowed_bumps(7);
     let f = estimate(
         &scene,
         &ggx(0.5, 0.04, 0.02, 0.02),
