@@ -165,7 +165,8 @@ pub fn woodham_pixel(
 ///
 /// Highlights and cast shadows leave large residuals and are dropped; an exact Lambertian pixel
 /// has `s = 0` and keeps every sample. Confidence: the uncentred R^2 of the final fit over the
-/// samples it used. Allocation-free once `scratch` has grown (three passes over the samples).
+/// samples it used. Allocation-free once `scratch` has grown (one pass over the samples, three over
+/// the unshadowed ones).
 pub fn woodham_robust_pixel(
     samples: &[f32],
     lights: &[DVec3],
@@ -175,28 +176,40 @@ pub fn woodham_robust_pixel(
     let Some(threshold) = shadow_threshold(samples, params, scratch) else {
         return BaselinePixel::empty(PixelStatus::NoData);
     };
-    let eq = lit_equations(samples, lights, threshold);
+    // The unshadowed samples once, as (light index, grey value) pairs in `scratch`: the three
+    // passes below read only them, in the same order as a pass over every sample would.
+    scratch.clear();
+    for (k, s) in samples.chunks_exact(3).enumerate() {
+        if let Some(i) = grey(s).filter(|&i| i >= threshold) {
+            scratch.extend([k as f64, i]);
+        }
+    }
+    let lit = || {
+        scratch
+            .chunks_exact(2)
+            .map(|p| (lights[p[0] as usize], p[1]))
+    };
+    let mut eq = NormalEquations::default();
+    for (l, i) in lit() {
+        eq.add(l, i);
+    }
     let Some(g1) = eq.solve() else {
         return BaselinePixel::empty(PixelStatus::Discarded);
     };
     let (mut sum, mut sum2) = (0.0, 0.0);
-    for (s, &l) in samples.chunks_exact(3).zip(lights) {
-        if let Some(i) = grey(s).filter(|&i| i >= threshold) {
-            let r = i - g1.dot(l);
-            sum += r;
-            sum2 += r * r;
-        }
+    for (l, i) in lit() {
+        let r = i - g1.dot(l);
+        sum += r;
+        sum2 += r * r;
     }
     let n = eq.n as f64;
     let mean = sum / n;
     let sd = (sum2 / n - mean * mean).max(0.0).sqrt();
     let limit = params.outlier_sigmas * sd;
     let mut kept = NormalEquations::default();
-    for (s, &l) in samples.chunks_exact(3).zip(lights) {
-        if let Some(i) = grey(s).filter(|&i| i >= threshold) {
-            if (i - g1.dot(l) - mean).abs() <= limit {
-                kept.add(l, i);
-            }
+    for (l, i) in lit() {
+        if (i - g1.dot(l) - mean).abs() <= limit {
+            kept.add(l, i);
         }
     }
     match kept.solve() {

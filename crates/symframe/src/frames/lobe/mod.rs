@@ -329,6 +329,7 @@ pub struct LobeScratch {
     coarse: Subset,
     buffers: Buffers,
     chosen: Vec<u8>,
+    greys: Vec<f64>,
 }
 
 /// Per-sample work buffers: the lobe's values, the residuals, and which samples stay.
@@ -669,9 +670,23 @@ pub fn fit_lobe(
     start: LobeStart,
     scratch: &mut LobeScratch,
 ) -> Option<LobeFit> {
+    let LobeScratch {
+        fine,
+        coarse,
+        buffers,
+        chosen,
+        greys,
+    } = scratch;
+    // The grey values once (NaN where invalid): the passes below read them several times.
+    greys.clear();
+    greys.extend(
+        samples[..lights.len() * 3]
+            .chunks_exact(3)
+            .map(|s| s[0] as f64 + s[1] as f64 + s[2] as f64),
+    );
+    let greys = &*greys;
     let grey = |j: usize| {
-        let s = &samples[j * 3..j * 3 + 3];
-        let v = s[0] as f64 + s[1] as f64 + s[2] as f64;
+        let v = greys[j];
         v.is_finite().then_some(v)
     };
     let (mut max, mut brightest) = (0.0, 0);
@@ -683,12 +698,6 @@ pub fn fit_lobe(
     if max <= 0.0 {
         return None;
     }
-    let LobeScratch {
-        fine,
-        coarse,
-        buffers,
-        chosen,
-    } = scratch;
     // 0: not read; 1: the fine subset; 2: the coarse one too.
     chosen.clear();
     chosen.resize(lights.len(), 0);
