@@ -988,8 +988,9 @@ impl<'a> Estimator<'a> {
 /// below 1e-4, and shot noise of 5,000 photons at full scale about as much; a lobe outside the
 /// family fits it with a shifted centre and leaves more: Ashikhmin-Shirley's
 /// (`1 / (h.v max(n.l, n.v))` is not symmetric about the normal) leaves 0.2-1% with normals
-/// 3-15 degrees off, where the search is within 1 degree.
-const LOBE_EXPLAINS: f64 = 0.002;
+/// 3-15 degrees off, where the search is within 1 degree. The lobe fit retries its other
+/// starts until one leaves less than this.
+pub(crate) const LOBE_EXPLAINS: f64 = 0.002;
 
 /// A pixel whose Lambertian fit leaves less than this share of its energy unexplained (1%
 /// RMS noise leaves 1e-4) is diffuse: no lobe fit is tried.
