@@ -19,7 +19,7 @@
 "use strict";
 const fs = require("fs");
 const path = require("path");
-const { chromium } = require("playwright-core");
+const { launchChromium } = require("./browser");
 const { PNG } = require("pngjs");
 
 function parseArgs(argv) {
@@ -163,14 +163,7 @@ async function main() {
   const dirs = [[0, 0, 1], [s, 0, s], [-s, 0, s], [0, s, s], [0, -s, s]];
 
   const started = Date.now();
-  const browser = await chromium.launch({
-    executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
-    args: [
-      "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-      "--disable-background-networking", "--disable-component-update", "--disable-sync",
-      "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-    ],
-  });
+  const browser = await launchChromium();
   let failures = 0;
   const fail = (msg) => { failures++; console.log(`threejs-check:   FAIL ${msg}`); };
   try {

@@ -13,7 +13,7 @@
 "use strict";
 const fs = require("fs");
 const path = require("path");
-const { chromium } = require("playwright-core");
+const { launchChromium } = require("./browser");
 const { PNG } = require("pngjs");
 
 function parseArgs(argv) {
@@ -58,16 +58,7 @@ function psnr(img, ref, mask) {
 
 async function main() {
   const a = parseArgs(process.argv.slice(2));
-  const browser = await chromium.launch({
-    executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
-    args: [
-      "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-      "--disable-background-networking", "--disable-component-update", "--disable-sync",
-      // WebGL2 without a GPU: ANGLE on SwiftShader.
-      "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-    ],
-    // (Playwright starts Chromium with a new empty profile folder of its own.)
-  });
+  const browser = await launchChromium();
   let failed = false;
   try {
     const url = "file://" + a.viewer;
