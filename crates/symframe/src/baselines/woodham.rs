@@ -1,5 +1,7 @@
 //! Lambertian photometric stereo (Woodham 1980), plain and with outlier rejection.
 
+use std::cmp::Ordering;
+
 use glam::{DMat3, DVec3};
 
 use super::{brightest, grey, BaselineParams, BaselinePixel};
@@ -82,21 +84,33 @@ fn shadow_threshold(
     scratch: &mut Vec<f64>,
 ) -> Option<f64> {
     let (_, max) = brightest(samples)?;
+    scratch.clear();
+    if params.shadow_reference_quantile < 1.0 {
+        scratch.extend(samples.chunks_exact(3).filter_map(grey));
+    }
+    Some(threshold_of(scratch, max, params))
+}
+
+/// [`shadow_threshold`] from the pixel's brightest grey value `max` (> 0) and its valid grey
+/// values `valid` (reordered; unread where the reference is the maximum).
+#[inline]
+fn threshold_of(valid: &mut [f64], max: f64, params: &BaselineParams) -> f64 {
     let q = params.shadow_reference_quantile;
     let reference = if q >= 1.0 {
         max
     } else {
-        scratch.clear();
-        scratch.extend(samples.chunks_exact(3).filter_map(grey));
-        let k = ((q * (scratch.len() - 1) as f64).floor() as usize).min(scratch.len() - 1);
-        let (_, &mut v, _) = scratch.select_nth_unstable_by(k, f64::total_cmp);
+        let k = ((q * (valid.len() - 1) as f64).floor() as usize).min(valid.len() - 1);
+        // The values are finite: `<` orders them as `total_cmp` does but for the sign of zero,
+        // which the test below does not see, and costs less.
+        let (_, &mut v, _) =
+            valid.select_nth_unstable_by(k, |a, b| a.partial_cmp(b).unwrap_or(Ordering::Equal));
         if v > 0.0 {
             v
         } else {
             max
         }
     };
-    Some(params.shadow_fraction * reference)
+    params.shadow_fraction * reference
 }
 
 /// The normal equations over the samples at or above `threshold`.
@@ -166,33 +180,52 @@ pub fn woodham_pixel(
 /// Highlights and cast shadows leave large residuals and are dropped; an exact Lambertian pixel
 /// has `s = 0` and keeps every sample. Confidence: the uncentred R^2 of the final fit over the
 /// samples it used. Allocation-free once `scratch` has grown (one pass over the samples, three over
-/// the unshadowed ones).
+/// the unshadowed ones; each grey value computed once).
 pub fn woodham_robust_pixel(
     samples: &[f32],
     lights: &[DVec3],
     params: &BaselineParams,
     scratch: &mut Vec<f64>,
 ) -> BaselinePixel {
-    let Some(threshold) = shadow_threshold(samples, params, scratch) else {
-        return BaselinePixel::empty(PixelStatus::NoData);
-    };
-    // The unshadowed samples once, as (light index, grey value) pairs in `scratch`: the three
-    // passes below read only them, in the same order as a pass over every sample would.
+    // The grey values (NaN where invalid) in `scratch[..n]`, the valid ones after them for the
+    // shadow threshold's quantile; the brightest as `brightest` finds it.
+    let n = samples.len() / 3;
     scratch.clear();
-    for (k, s) in samples.chunks_exact(3).enumerate() {
-        if let Some(i) = grey(s).filter(|&i| i >= threshold) {
+    scratch.extend(samples.chunks_exact(3).map(|s| grey(s).unwrap_or(f64::NAN)));
+    let mut max = 0.0;
+    for k in 0..n {
+        let v = scratch[k];
+        if v.is_finite() {
+            if v > max {
+                max = v;
+            }
+            if params.shadow_reference_quantile < 1.0 {
+                scratch.push(v);
+            }
+        }
+    }
+    if max <= 0.0 {
+        return BaselinePixel::empty(PixelStatus::NoData);
+    }
+    let threshold = threshold_of(&mut scratch[n..], max, params);
+    // The unshadowed samples' equations, and the samples as (light index, grey value) pairs
+    // after the grey values: the two passes below read only them, in the same order as a pass
+    // over every sample would.
+    scratch.truncate(n);
+    let mut eq = NormalEquations::default();
+    for k in 0..n {
+        let i = scratch[k];
+        // NaN (invalid) is never at or above the threshold.
+        if i >= threshold {
+            eq.add(lights[k], i);
             scratch.extend([k as f64, i]);
         }
     }
     let lit = || {
-        scratch
+        scratch[n..]
             .chunks_exact(2)
             .map(|p| (lights[p[0] as usize], p[1]))
     };
-    let mut eq = NormalEquations::default();
-    for (l, i) in lit() {
-        eq.add(l, i);
-    }
     let Some(g1) = eq.solve() else {
         return BaselinePixel::empty(PixelStatus::Discarded);
     };

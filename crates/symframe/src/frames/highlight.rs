@@ -73,9 +73,18 @@ pub fn highlight_moments_by(
         return None;
     }
     let level = HIGHLIGHT_LEVEL * max;
+    // The passes below skip the samples whose channel sum is clearly below the level (the
+    // division by 3 rounds by far less than this margin) and test the others exactly: the
+    // highlight is a small share of the samples, and a division per sample is most of a
+    // pass's cost.
+    let floor = 3.0 * level * (1.0 - 1e-9);
+    let below = |s: &[f32]| !(s[0] as f64 + s[1] as f64 + s[2] as f64 >= floor);
     let mut mean = DVec3::ZERO;
     let mut n_samples = 0u32;
     for (i, s) in samples.chunks_exact(3).enumerate() {
+        if below(s) {
+            continue;
+        }
         if let (Some(v), Some(h)) = (grey(s).filter(|&v| v >= level), halfway(i)) {
             // The brightest sample has weight 1 - HIGHLIGHT_LEVEL; one at the level, 0.
             mean += (v - level).max(1e-12 * max) * h;
@@ -86,6 +95,9 @@ pub fn highlight_moments_by(
     let (u, w) = tangent_basis(normal);
     let (mut cuu, mut cuw, mut cww, mut total) = (0.0, 0.0, 0.0, 0.0);
     for (i, s) in samples.chunks_exact(3).enumerate() {
+        if below(s) {
+            continue;
+        }
         if let (Some(v), Some(h)) = (grey(s).filter(|&v| v >= level), halfway(i)) {
             let weight = (v - level).max(1e-12 * max);
             // Gnomonic chart of the tangent plane at the mean.

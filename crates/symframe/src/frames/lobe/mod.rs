@@ -30,7 +30,7 @@ use glam::{DQuat, DVec3};
 
 use crate::geometry::tangent_basis;
 
-mod kernel;
+pub mod kernel;
 mod lanes;
 
 use kernel::Subset;
@@ -351,11 +351,16 @@ impl Buffers {
 /// Leaves out the samples of `data` in cast shadow under `model`: light is taken away where
 /// the lobe and the diffuse term predict it, so samples far below a clear prediction, from
 /// lights well above the horizon, go (interreflections add light, and stay). Returns how many
-/// went; `None` where fewer than eight samples would be left.
-fn trim_shadows(data: &mut Subset, model: &Model, buffers: &mut Buffers) -> Option<usize> {
+/// went and the model's linear part over the samples as they were; `None` where fewer than
+/// eight samples would be left.
+fn trim_shadows(
+    data: &mut Subset,
+    model: &Model,
+    buffers: &mut Buffers,
+) -> Option<(usize, Linear)> {
     buffers.fit(data);
     let Buffers { lobe, r, keep } = buffers;
-    residuals(model, data, lobe, r);
+    let linear = residuals(model, data, lobe, r);
     let max_prediction = (0..data.len())
         .map(|j| data.value(j) - r[j])
         .fold(0.0, f64::max);
@@ -374,7 +379,7 @@ fn trim_shadows(data: &mut Subset, model: &Model, buffers: &mut Buffers) -> Opti
     if removed > 0 {
         data.retain(|j| keep[j]);
     }
-    Some(removed)
+    Some((removed, linear))
 }
 
 /// Widths of the broad starts tried where the highlight's own fail (slope units, along and
@@ -404,10 +409,11 @@ fn project(m: &Model, samples: &Subset, lobe: &mut [f64]) -> Linear {
 
 /// The model's residuals `y - d a - s1 L - s2 L F` at `m`, with its coefficients solved there,
 /// over the samples into `r` (one per sample with the padding; `lobe`, as long, gets the lobe's
-/// values).
-fn residuals(m: &Model, samples: &Subset, lobe: &mut [f64], r: &mut [f64]) {
-    let x = project(m, samples, lobe).coefficients;
-    kernel::residuals(m, samples, x, lobe, r);
+/// values); returns the linear part.
+fn residuals(m: &Model, samples: &Subset, lobe: &mut [f64], r: &mut [f64]) -> Linear {
+    let linear = project(m, samples, lobe);
+    kernel::residuals(m, samples, linear.coefficients, lobe, r);
+    linear
 }
 
 /// The Gauss-Newton system of the reduced (variable-projection) problem at `m`, whose linear
@@ -531,21 +537,23 @@ fn undamped_gain(jtj: &[[f64; P]; P], rhs: &[f64; P], floor: f64) -> Option<f64>
     Some(step.iter().zip(rhs).map(|(s, r)| s * r).sum())
 }
 
-/// Levenberg-Marquardt from `state` over the parameters marked `free`; returns the state,
-/// the sum of squares and the passes over the samples. `lobe` (one value per sample) is a work
-/// buffer.
+/// Levenberg-Marquardt from `state` (whose linear part over `samples` is `known`, where the
+/// caller has it: one pass fewer) over the parameters marked `free`; returns the state, its
+/// linear part (the sum of squares and the coefficients) and the passes over the samples.
+/// `lobe` (one value per sample) is a work buffer.
 fn levenberg_marquardt(
     samples: &Subset,
     mut state: State,
+    known: Option<Linear>,
     free: [bool; P],
     relative: f64,
     lobe: &mut [f64],
-) -> (State, f64, u32) {
+) -> (State, Linear, u32) {
     let syy = samples.energy();
     let mut model = Model::of(&state);
-    let mut linear = project(&model, samples, lobe);
+    let mut evals = known.is_none() as u32;
+    let mut linear = known.unwrap_or_else(|| project(&model, samples, lobe));
     let mut lambda = 1e-3;
-    let mut evals = 1u32;
     for _ in 0..MAX_ITERATIONS {
         let (mut jtj, mut rhs) = normal_equations(&model, &linear, free, samples);
         evals += 1;
@@ -604,56 +612,69 @@ fn levenberg_marquardt(
             break;
         }
     }
-    (state, linear.cost, evals)
+    (state, linear, evals)
 }
 
 /// The search on one subset: Levenberg-Marquardt from each start in turn until one explains
 /// the samples well, cast shadows trimmed and the fit repeated once without them, then the
 /// foreshortening freed where the microfacet lobe leaves a residual. Returns the state, the
-/// parameters that were free in it, and the passes over the samples.
+/// parameters that were free in it, its linear part over `data` as it is left, and the passes
+/// over the samples.
 fn search_subset(
     data: &mut Subset,
     starts: &[LobeStart],
     relative: f64,
     buffers: &mut Buffers,
-) -> Option<(State, [bool; P], u32)> {
+) -> Option<(State, [bool; P], Linear, u32)> {
     buffers.fit(data);
     let syy = data.energy();
     let mut evals = 0;
-    let mut best: Option<(State, f64)> = None;
+    let mut best: Option<(State, Linear)> = None;
     for (k, s) in starts.iter().enumerate() {
-        if k > 0 && best.is_some_and(|b| b.1 <= RETRY_RESIDUAL * syy) {
+        if k > 0 && best.is_some_and(|b| b.1.cost <= RETRY_RESIDUAL * syy) {
             break;
         }
-        let (state, cost, e) =
-            levenberg_marquardt(data, State::new(s), MICROFACET, relative, &mut buffers.lobe);
+        let (state, linear, e) = levenberg_marquardt(
+            data,
+            State::new(s),
+            None,
+            MICROFACET,
+            relative,
+            &mut buffers.lobe,
+        );
         evals += e;
-        if best.is_none_or(|b| cost < b.1) {
-            best = Some((state, cost));
+        if best.is_none_or(|b| linear.cost < b.1.cost) {
+            best = Some((state, linear));
         }
     }
-    let (mut state, mut cost) = best?;
+    let (mut state, mut linear) = best?;
     let mut syy = syy;
-    if trim_shadows(data, &Model::of(&state), buffers)? > 0 {
+    if trim_shadows(data, &Model::of(&state), buffers)?.0 > 0 {
         syy = data.energy();
         buffers.fit(data);
-        let (refit, refit_cost, e) =
-            levenberg_marquardt(data, state, MICROFACET, relative, &mut buffers.lobe);
+        let (refit, refit_linear, e) =
+            levenberg_marquardt(data, state, None, MICROFACET, relative, &mut buffers.lobe);
         evals += e;
-        (state, cost) = (refit, refit_cost);
+        (state, linear) = (refit, refit_linear);
     }
     // A lobe that is not a microfacet one (Ward's, Phong's) leaves a foreshortening the model
     // above lacks: free `m` (from the microfacet answer), and keep it where it explains more.
     let mut free = MICROFACET;
-    if cost > FORESHORTENING_FLOOR * syy {
-        let (free_m, cost_m, e) =
-            levenberg_marquardt(data, state, [true; P], relative, &mut buffers.lobe);
+    if linear.cost > FORESHORTENING_FLOOR * syy {
+        let (free_m, linear_m, e) = levenberg_marquardt(
+            data,
+            state,
+            Some(linear),
+            [true; P],
+            relative,
+            &mut buffers.lobe,
+        );
         evals += e;
-        if cost_m < cost {
-            (state, free) = (free_m, [true; P]);
+        if linear_m.cost < linear.cost {
+            (state, free, linear) = (free_m, [true; P], linear_m);
         }
     }
-    Some((state, free, evals))
+    Some((state, free, linear, evals))
 }
 
 /// Fits the symmetric lobe model to one pixel: `samples` RGB in rig order (NaN = invalid),
@@ -773,26 +794,28 @@ pub fn fit_lobe(
     } else {
         RELATIVE_GAIN
     };
-    let (mut state, free, mut evals) = search_subset(searched, starts, relative, buffers)?;
+    let (mut state, free, mut linear, mut evals) =
+        search_subset(searched, starts, relative, buffers)?;
     // The polish on the whole subset, from the coarse answer (a few iterations).
     if polish {
-        trim_shadows(fine, &Model::of(&state), buffers)?;
+        // Where no sample went, the linear part the trimming found is the polish's start.
+        let (removed, trimmed) = trim_shadows(fine, &Model::of(&state), buffers)?;
         buffers.fit(fine);
-        let (polished, _, e) =
-            levenberg_marquardt(fine, state, free, RELATIVE_GAIN, &mut buffers.lobe);
+        let known = (removed == 0).then_some(trimmed);
+        let (polished, polished_linear, e) =
+            levenberg_marquardt(fine, state, known, free, RELATIVE_GAIN, &mut buffers.lobe);
         evals += e;
-        state = polished;
+        (state, linear) = (polished, polished_linear);
     }
-    let data = &*fine;
-    let syy = data.energy();
-    buffers.fit(data);
+    let syy = fine.energy();
     let m = Model::of(&state);
-    // The coefficients and the sum of squares from the sums, as the search judged its steps.
+    // The coefficients and the sum of squares from the sums over the whole subset, as the
+    // search judged its steps (the last search ran on it).
     let Linear {
         coefficients: [diffuse, specular, fresnel],
         cost,
         ..
-    } = project(&m, data, &mut buffers.lobe);
+    } = linear;
     let a = [m.inv_a2[0].powf(-0.5), m.inv_a2[1].powf(-0.5)];
     let (tangent, alpha) = if a[0] >= a[1] {
         (m.t, a)
