@@ -78,11 +78,11 @@ pub fn highlight_moments_by(
     // highlight is a small share of the samples, and a division per sample is most of a
     // pass's cost.
     let floor = 3.0 * level * (1.0 - 1e-9);
-    let below = |s: &[f32]| !(s[0] as f64 + s[1] as f64 + s[2] as f64 >= floor);
+    let reaches = |s: &[f32]| s[0] as f64 + s[1] as f64 + s[2] as f64 >= floor;
     let mut mean = DVec3::ZERO;
     let mut n_samples = 0u32;
     for (i, s) in samples.chunks_exact(3).enumerate() {
-        if below(s) {
+        if !reaches(s) {
             continue;
         }
         if let (Some(v), Some(h)) = (grey(s).filter(|&v| v >= level), halfway(i)) {
@@ -95,7 +95,7 @@ pub fn highlight_moments_by(
     let (u, w) = tangent_basis(normal);
     let (mut cuu, mut cuw, mut cww, mut total) = (0.0, 0.0, 0.0, 0.0);
     for (i, s) in samples.chunks_exact(3).enumerate() {
-        if below(s) {
+        if !reaches(s) {
             continue;
         }
         if let (Some(v), Some(h)) = (grey(s).filter(|&v| v >= level), halfway(i)) {
