@@ -144,37 +144,48 @@ impl FastScratch {
     /// first.
     pub fn prepare<'a>(&'a mut self, rig: &'a Rig, samples: &[f32]) -> FastObjective<'a> {
         self.lanes.clear();
+        let mut all_valid = true;
         self.lanes.extend(samples.chunks_exact(3).map(|s| {
             if s[0].is_finite() {
                 Vec4::new(s[0], s[1], s[2], 0.0)
             } else {
+                all_valid = false;
                 Vec4::NAN
             }
         }));
-        self.hx.clear();
-        self.hy.clear();
-        self.hz.clear();
         self.samples.clear();
-        for &j in rig.query_order() {
-            let j = j as usize;
-            let s = &samples[j * 3..j * 3 + 3];
-            if !s[0].is_finite() {
-                continue;
+        // Every sample valid (most pixels): the halfway vectors in query order are the rig's.
+        let [hx, hy, hz] = if all_valid {
+            let lanes = &self.lanes;
+            self.samples
+                .extend(rig.query_order().iter().map(|&j| lanes[j as usize]));
+            rig.query_halfways()
+        } else {
+            self.hx.clear();
+            self.hy.clear();
+            self.hz.clear();
+            for &j in rig.query_order() {
+                let j = j as usize;
+                let s = &samples[j * 3..j * 3 + 3];
+                if !s[0].is_finite() {
+                    continue;
+                }
+                let h = rig.halfway_in_camera()[j];
+                self.hx.push(h.x as f32);
+                self.hy.push(h.y as f32);
+                self.hz.push(h.z as f32);
+                self.samples.push(Vec4::new(s[0], s[1], s[2], 0.0));
             }
-            let h = rig.halfway_in_camera()[j];
-            self.hx.push(h.x as f32);
-            self.hy.push(h.y as f32);
-            self.hz.push(h.z as f32);
-            self.samples.push(Vec4::new(s[0], s[1], s[2], 0.0));
-        }
+            [&self.hx[..], &self.hy[..], &self.hz[..]]
+        };
         self.focus.get_mut().built = false;
         FastObjective {
             locator: rig.fast(),
             coverage: rig.coverage(),
             lanes: &self.lanes,
-            hx: &self.hx,
-            hy: &self.hy,
-            hz: &self.hz,
+            hx,
+            hy,
+            hz,
             samples: &self.samples,
             cos_max: rig.cos_theta_d_max() as f32,
             focus: &self.focus,

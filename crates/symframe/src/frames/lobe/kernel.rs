@@ -77,13 +77,6 @@ pub(super) struct Subset {
 }
 
 impl Subset {
-    pub(super) fn clear(&mut self) {
-        for v in self.columns() {
-            v.clear();
-        }
-        self.len = 0;
-    }
-
     fn columns(&mut self) -> [&mut Vec<f64>; 9] {
         let [lx, ly, lz] = &mut self.l;
         let [hx, hy, hz] = &mut self.h;
@@ -100,19 +93,31 @@ impl Subset {
         ]
     }
 
-    /// Appends a sample (before [`Subset::pad`], which completes the last block once all are
-    /// in).
-    pub(super) fn push(&mut self, l: DVec3, h: DVec3, y: f64) {
-        debug_assert_eq!(self.y.len(), self.len, "a sample pushed after the padding");
-        let values = [l.x, l.y, l.z, h.x, h.y, h.z, schlick(h), y, 1.0];
-        for (v, x) in self.columns().into_iter().zip(values) {
-            v.push(x);
+    /// Makes the samples those of lights `js`, in that order: light and halfway vectors from
+    /// `lights` and `halfways`, values from `y` (all indexed by light), padded. Column by column
+    /// (measured: a third of the time of appending sample by sample to nine columns).
+    pub(super) fn gather(&mut self, js: &[u32], lights: &[DVec3], halfways: &[DVec3], y: &[f64]) {
+        fn fill(column: &mut Vec<f64>, js: &[u32], value: impl Fn(usize) -> f64) {
+            column.clear();
+            column.extend(js.iter().map(|&j| value(j as usize)));
         }
-        self.len += 1;
+        let [lx, ly, lz] = &mut self.l;
+        fill(lx, js, |j| lights[j].x);
+        fill(ly, js, |j| lights[j].y);
+        fill(lz, js, |j| lights[j].z);
+        let [hx, hy, hz] = &mut self.h;
+        fill(hx, js, |j| halfways[j].x);
+        fill(hy, js, |j| halfways[j].y);
+        fill(hz, js, |j| halfways[j].z);
+        fill(&mut self.fresnel, js, |j| schlick(halfways[j]));
+        fill(&mut self.y, js, |j| y[j]);
+        fill(&mut self.w, js, |_| 1.0);
+        self.len = js.len();
+        self.pad();
     }
 
     /// Completes the last block with empty samples.
-    pub(super) fn pad(&mut self) {
+    fn pad(&mut self) {
         let padded = self.len.div_ceil(LANES) * LANES;
         // An empty sample: weight 0, no light, behind every normal the fit can reach.
         let values = [0.0, 0.0, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0];
@@ -640,15 +645,9 @@ mod tests {
     fn builds_agree(model: &Model) {
         let rig = Rig::new(&uniform_cone_lights(101, 65.0), RigOptions::default()).unwrap();
         let mut s = Subset::default();
-        for (k, (&l, &h)) in rig
-            .lights_in_camera()
-            .iter()
-            .zip(rig.halfway_in_camera())
-            .enumerate()
-        {
-            s.push(l, h, 0.1 + (k % 7) as f64);
-        }
-        s.pad();
+        let js: Vec<u32> = (0..rig.n_used() as u32).collect();
+        let y: Vec<f64> = (0..rig.n_used()).map(|k| 0.1 + (k % 7) as f64).collect();
+        s.gather(&js, rig.lights_in_camera(), rig.halfway_in_camera(), &y);
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         let run = |backend: Backend, free: [bool; P]| {
             let mut lobe = vec![0.0; s.padded_len()];

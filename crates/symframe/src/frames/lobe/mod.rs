@@ -330,6 +330,9 @@ pub struct LobeScratch {
     buffers: Buffers,
     chosen: Vec<u8>,
     greys: Vec<f64>,
+    /// The lights of `fine` and `coarse`.
+    fine_lights: Vec<u32>,
+    coarse_lights: Vec<u32>,
 }
 
 /// Per-sample work buffers: the lobe's values, the residuals, and which samples stay.
@@ -697,6 +700,8 @@ pub fn fit_lobe(
         buffers,
         chosen,
         greys,
+        fine_lights,
+        coarse_lights,
     } = scratch;
     // The grey values once (NaN where invalid): the passes below read them several times.
     greys.clear();
@@ -739,19 +744,20 @@ pub fn fit_lobe(
         chosen[j] = if highlight < COARSE_HIGHLIGHT { 2 } else { 1 };
         highlight += 1;
     }
-    fine.clear();
-    coarse.clear();
-    for j in 0..lights.len() {
-        let Some(v) = grey(j) else { continue };
-        if chosen[j] != 0 {
-            fine.push(lights[j], halfways[j], v);
+    // The chosen valid lights, in rig order.
+    fine_lights.clear();
+    coarse_lights.clear();
+    for (j, &c) in chosen.iter().enumerate() {
+        if c == 0 || grey(j).is_none() {
+            continue;
         }
-        if chosen[j] == 2 {
-            coarse.push(lights[j], halfways[j], v);
+        fine_lights.push(j as u32);
+        if c == 2 {
+            coarse_lights.push(j as u32);
         }
     }
-    fine.pad();
-    coarse.pad();
+    fine.gather(fine_lights, lights, halfways, greys);
+    coarse.gather(coarse_lights, lights, halfways, greys);
     if coarse.len() < 8 {
         return None;
     }

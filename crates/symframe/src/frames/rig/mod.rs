@@ -58,6 +58,9 @@ pub struct Rig {
     /// every prefix of it is a subset spread evenly over the cone, and a coarse evaluation over
     /// any number of lights is a prefix of the full one.
     query_order: Vec<u32>,
+    /// The halfway vectors' coordinates in [`Rig::query_order`], single precision: the fast
+    /// objective's layout of a pixel without invalid samples.
+    query_halfways: [Vec<f32>; 3],
     /// Median angle between neighbouring halfway vectors (radians).
     halfway_spacing: f64,
 }
@@ -147,6 +150,12 @@ impl Rig {
             theta,
         );
         let query_order = bit_reversed_order(lights_in_camera.len());
+        let query_halfways = [0, 1, 2].map(|c| {
+            query_order
+                .iter()
+                .map(|&j| halfway_in_camera[j as usize][c] as f32)
+                .collect()
+        });
         let halfway_spacing = median_edge(&triangles, &halfway_in_camera);
         Ok(Self {
             lights_in_camera,
@@ -160,6 +169,7 @@ impl Rig {
             fast,
             coverage,
             query_order,
+            query_halfways,
             halfway_spacing,
         })
     }
@@ -225,6 +235,13 @@ impl Rig {
     #[inline]
     pub fn query_order(&self) -> &[u32] {
         &self.query_order
+    }
+
+    /// The halfway vectors' x, y and z in [`Rig::query_order`], single precision.
+    #[inline]
+    pub(crate) fn query_halfways(&self) -> [&[f32]; 3] {
+        let [x, y, z] = &self.query_halfways;
+        [x, y, z]
     }
 
     /// Number of lights used (inside the cone).
