@@ -9,6 +9,8 @@
 //! or AVX2 with FMA where the processor has them and for the baseline, with the same operations
 //! in the same order (identical results).
 
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use glam::DVec3;
 
 #[cfg(target_arch = "x86_64")]
@@ -74,6 +76,14 @@ pub(super) struct Subset {
     y: Vec<f64>,
     w: Vec<f64>,
     len: usize,
+    /// Which samples these are: new whenever they change (the kept terms name them).
+    id: u64,
+}
+
+/// A fresh identity for a subset's samples.
+fn next_id() -> u64 {
+    static NEXT: AtomicU64 = AtomicU64::new(1);
+    NEXT.fetch_add(1, Ordering::Relaxed)
 }
 
 impl Subset {
@@ -113,6 +123,7 @@ impl Subset {
         fill(&mut self.y, js, |j| y[j]);
         fill(&mut self.w, js, |_| 1.0);
         self.len = js.len();
+        self.id = next_id();
         self.pad();
     }
 
@@ -169,6 +180,7 @@ impl Subset {
             }
         }
         self.len = kept;
+        self.id = next_id();
         self.truncate(kept);
         self.pad();
     }
@@ -197,6 +209,19 @@ struct Frame {
 }
 
 impl Frame {
+    /// The constants' bits: equal bits, equal terms.
+    fn bits(&self) -> [u64; 14] {
+        let mut v = [0.0; 14];
+        v[..3].copy_from_slice(&self.n);
+        v[3..6].copy_from_slice(&self.t);
+        v[6..9].copy_from_slice(&self.b);
+        v[9..11].copy_from_slice(&self.inv_a2);
+        v[11] = self.alpha2;
+        v[12] = self.shape;
+        v[13] = self.foreshortening;
+        v.map(f64::to_bits)
+    }
+
     fn of(m: &Model) -> Self {
         Self {
             n: m.normal.to_array(),
@@ -220,6 +245,62 @@ struct Terms<V> {
     lobe: V,
     d_a: [V; 2],
     d_ln_lobe: [V; P],
+}
+
+/// The costly part of the terms of the last [`sums`] pass, per sample (with the padding), and
+/// what they are of: the Gauss-Newton pass at the same model over the same samples (the
+/// Levenberg-Marquardt loop's next pass after an accepted step, most of its passes) reads it
+/// instead of computing the divisions, logarithms, root and exponential again, and derives the
+/// rest as it would have. The values are the same bits either way.
+#[derive(Debug, Clone, Default)]
+pub(super) struct Kept {
+    /// The samples' identity, the model's constants' bits and whether the foreshortening was
+    /// in the terms; `None` until a pass has kept its terms.
+    key: Option<(u64, [u64; 14], bool)>,
+    /// The fields of [`Costly`], in its order.
+    columns: [Vec<f64>; 8],
+}
+
+impl Kept {
+    /// Whether the terms kept are those at `f` (with the foreshortening's terms where
+    /// `foreshortened`) over the samples `s`.
+    fn holds(&self, f: &Frame, s: &Subset, foreshortened: bool) -> bool {
+        self.key == Some((s.id, f.bits(), foreshortened))
+    }
+
+    /// Makes the columns as long as the subset's samples with the padding.
+    fn fit(&mut self, s: &Subset) {
+        for c in &mut self.columns {
+            c.resize(s.padded_len(), 0.0);
+        }
+    }
+
+    /// Keeps a block's costly part.
+    #[inline(always)]
+    fn store<V: Lanes>(&mut self, i: usize, c: &Costly<V>) {
+        let values = [
+            c.inv_hn, c.ln_base, c.ln_nl, c.inv_sum, c.value, c.by_q, c.inv_nl, c.inv_root,
+        ];
+        for (column, v) in self.columns.iter_mut().zip(values) {
+            v.store(&mut column[i..]);
+        }
+    }
+
+    /// A block's kept costly part.
+    #[inline(always)]
+    fn load<V: Lanes>(&self, i: usize) -> Costly<V> {
+        let [inv_hn, ln_base, ln_nl, inv_sum, value, by_q, inv_nl, inv_root] = &self.columns;
+        Costly {
+            inv_hn: V::load(inv_hn, i),
+            ln_base: V::load(ln_base, i),
+            ln_nl: V::load(ln_nl, i),
+            inv_sum: V::load(inv_sum, i),
+            value: V::load(value, i),
+            by_q: V::load(by_q, i),
+            inv_nl: V::load(inv_nl, i),
+            inv_root: V::load(inv_root, i),
+        }
+    }
 }
 
 #[inline(always)]
@@ -250,10 +331,22 @@ impl Subset {
     }
 }
 
-/// The terms of a block; `FORESHORTENED`: whether `m` may be non-zero (with `m = 0` the power
-/// of `n.l` is left out).
+/// The cheap part of a block's terms: the sample's projections on the frame and which samples
+/// count (with safe stand-ins where they do not).
+struct Geometry<V: Lanes> {
+    nl: V,
+    hn_s: V,
+    ht: V,
+    hb: V,
+    lt: V,
+    lb: V,
+    nl_s: V,
+    lit: V::Mask,
+    lobed: V::Mask,
+}
+
 #[inline(always)]
-fn terms<V: Lanes, const FORESHORTENED: bool>(f: &Frame, s: &Block<V>) -> Terms<V> {
+fn geometry<V: Lanes>(f: &Frame, s: &Block<V>) -> Geometry<V> {
     let zero = V::splat(0.0);
     let one = V::splat(1.0);
     let nl = dot(f.n, s.l);
@@ -262,12 +355,50 @@ fn terms<V: Lanes, const FORESHORTENED: bool>(f: &Frame, s: &Block<V>) -> Terms<
     let lit = nl.gt(zero) & s.w.gt(zero);
     let lobed = lit & hn.gt(V::splat(1e-3));
     // Safe stand-ins where the sample is unlit (the results are masked out below).
-    let nl_s = V::select(lit, nl, one);
-    let hn_s = V::select(lobed, hn, one);
-    // Reciprocals shared by the terms below: a division costs several multiplications.
-    let inv_hn = one / hn_s;
-    let (x, y) = (ht * inv_hn, hb * inv_hn);
+    Geometry {
+        nl,
+        hn_s: V::select(lobed, hn, one),
+        ht,
+        hb,
+        lt,
+        lb,
+        nl_s: V::select(lit, nl, one),
+        lit,
+        lobed,
+    }
+}
+
+/// The costly part of a block's terms (its divisions, logarithms, root and exponential):
+/// what a [`sums`] pass keeps for the Gauss-Newton pass at the same model ([`Kept`]).
+#[derive(Clone, Copy)]
+struct Costly<V> {
+    inv_hn: V,
+    ln_base: V,
+    ln_nl: V,
+    inv_sum: V,
+    value: V,
+    by_q: V,
+    inv_nl: V,
+    inv_root: V,
+}
+
+/// The slopes `x, y` of the halfway vector in the frame and their quadratic form `qt, qb`.
+#[inline(always)]
+fn slopes<V: Lanes>(f: &Frame, g: &Geometry<V>, inv_hn: V) -> (V, V, V, V) {
+    let (x, y) = (g.ht * inv_hn, g.hb * inv_hn);
     let (qt, qb) = (x * x * f.inv_a2[0], y * y * f.inv_a2[1]);
+    (x, y, qt, qb)
+}
+
+/// `FORESHORTENED`: whether `m` may be non-zero (with `m = 0` the power of `n.l` is left out).
+#[inline(always)]
+fn costly<V: Lanes, const FORESHORTENED: bool>(f: &Frame, g: &Geometry<V>) -> Costly<V> {
+    let zero = V::splat(0.0);
+    let one = V::splat(1.0);
+    let nl_s = g.nl_s;
+    // Reciprocals shared by the terms: a division costs several multiplications.
+    let inv_hn = one / g.hn_s;
+    let (_, _, qt, qb) = slopes(f, g, inv_hn);
     let q = qt + qb;
     let base = q * (1.0 / f.shape) + 1.0;
     let ln_base = base.ln();
@@ -283,14 +414,36 @@ fn terms<V: Lanes, const FORESHORTENED: bool>(f: &Frame, s: &Block<V>) -> Terms<
     } else {
         ln_base * -f.shape
     };
-    let value = ln_power.exp() * masking * (inv_hn2 * inv_hn2);
+    Costly {
+        inv_hn,
+        ln_base,
+        ln_nl,
+        inv_sum,
+        value: ln_power.exp() * masking * (inv_hn2 * inv_hn2),
+        by_q: -(one / base),
+        inv_nl: one / nl_s,
+        inv_root: one / root,
+    }
+}
+
+/// The terms of a block from its geometry and costly part.
+#[inline(always)]
+fn finish<V: Lanes, const FORESHORTENED: bool>(
+    f: &Frame,
+    s_w: V,
+    g: &Geometry<V>,
+    c: &Costly<V>,
+) -> Terms<V> {
+    let zero = V::splat(0.0);
+    let one = V::splat(1.0);
+    let (nl_s, hn_s, ht, hb, lt, lb) = (g.nl_s, g.hn_s, g.ht, g.hb, g.lt, g.lb);
+    let (inv_hn, by_q, inv_sum, inv_root) = (c.inv_hn, c.by_q, c.inv_sum, c.inv_root);
+    let (x, y, qt, qb) = slopes(f, g, inv_hn);
+    let q = qt + qb;
     // d ln L / dq, and d ln L / d(n.l) through the masking and the foreshortening.
-    let by_q = -(one / base);
-    let inv_nl = one / nl_s;
-    let inv_root = one / root;
-    let mut by_nl = inv_nl - (nl_s * (1.0 - f.alpha2) * inv_root + 1.0) * inv_sum;
+    let mut by_nl = c.inv_nl - (nl_s * (1.0 - f.alpha2) * inv_root + 1.0) * inv_sum;
     if FORESHORTENED {
-        by_nl = by_nl + inv_nl * f.foreshortening;
+        by_nl = by_nl + c.inv_nl * f.foreshortening;
     }
     // A rotation w = (w_t, w_b, w_n) of the frame moves n by w x n = w_b t - w_t b,
     // t by w_n b - w_b n, and b by w_t n - w_n t.
@@ -298,28 +451,37 @@ fn terms<V: Lanes, const FORESHORTENED: bool>(f: &Frame, s: &Block<V>) -> Terms<
     let d_hn = [-hb, ht, zero];
     let d_ht = [zero, -hn_s, hb];
     let d_hb = [hn_s, zero, -ht];
-    let mut g = [zero; P];
+    let mut d = [zero; P];
     for k in 0..3 {
         let dx = (d_ht[k] - x * d_hn[k]) * inv_hn;
         let dy = (d_hb[k] - y * d_hn[k]) * inv_hn;
         let dq = (x * dx * f.inv_a2[0] + y * dy * f.inv_a2[1]) * 2.0;
-        g[k] = by_q * dq + by_nl * d_nl[k] - d_hn[k] * inv_hn * 4.0;
+        d[k] = by_q * dq + by_nl * d_nl[k] - d_hn[k] * inv_hn * 4.0;
     }
     // The masking reads the widths' product: d ln M / d ln a = a_t a_b d ln M / d(a_t a_b).
     let by_width = -((one - nl_s * nl_s) * inv_root * inv_sum) * (0.5 * f.alpha2);
-    g[3] = by_q * (qt * -2.0) + by_width;
-    g[4] = by_q * (qb * -2.0) + by_width;
-    g[5] = (-(q * by_q) * (1.0 / f.shape) - ln_base) * f.shape;
-    g[6] = ln_nl;
+    d[3] = by_q * (qt * -2.0) + by_width;
+    d[4] = by_q * (qb * -2.0) + by_width;
+    d[5] = (-(q * by_q) * (1.0 / f.shape) - c.ln_base) * f.shape;
+    d[6] = c.ln_nl;
     Terms {
-        a: V::select(lit, nl * s.w, zero),
-        lobe: V::select(lobed, value * s.w, zero),
+        a: V::select(g.lit, g.nl * s_w, zero),
+        lobe: V::select(g.lobed, c.value * s_w, zero),
         d_a: [
-            V::select(lit, -lb * s.w, zero),
-            V::select(lit, lt * s.w, zero),
+            V::select(g.lit, -lb * s_w, zero),
+            V::select(g.lit, lt * s_w, zero),
         ],
-        d_ln_lobe: g,
+        d_ln_lobe: d,
     }
+}
+
+/// The terms of a block; `FORESHORTENED`: whether `m` may be non-zero (with `m = 0` the power
+/// of `n.l` is left out).
+#[inline(always)]
+fn terms<V: Lanes, const FORESHORTENED: bool>(f: &Frame, s: &Block<V>) -> Terms<V> {
+    let g = geometry(f, s);
+    let c = costly::<V, FORESHORTENED>(f, &g);
+    finish::<V, FORESHORTENED>(f, s.w, &g, &c)
 }
 
 /// The basis functions' sums over the samples: the Gram matrix of `(a, L, L F)`, their
@@ -331,14 +493,22 @@ pub(super) struct Sums {
 }
 
 #[inline(always)]
-fn sums_kernel<V: Lanes, const M: bool>(f: &Frame, s: &Subset, lobe: &mut [f64]) -> [f64; 10] {
+fn sums_kernel<V: Lanes, const M: bool>(
+    f: &Frame,
+    s: &Subset,
+    lobe: &mut [f64],
+    kept: &mut Kept,
+) -> [f64; 10] {
     let mut acc = [V::splat(0.0); 10];
     for (i, out) in (0..s.padded_len())
         .step_by(LANES)
         .zip(lobe.chunks_exact_mut(LANES))
     {
         let b = s.block::<V>(i);
-        let t = terms::<V, M>(f, &b);
+        let g = geometry(f, &b);
+        let costly = costly::<V, M>(f, &g);
+        kept.store(i, &costly);
+        let t = finish::<V, M>(f, b.w, &g, &costly);
         let (fa, fb, fc, y) = (t.a, t.lobe, t.lobe * b.fresnel, b.y);
         fb.store(out);
         for (slot, v) in acc.iter_mut().zip([
@@ -365,48 +535,51 @@ fn sums_kernel<V: Lanes, const M: bool>(f: &Frame, s: &Subset, lobe: &mut [f64])
 }
 
 /// The basis functions' sums at `m` over the samples; the lobe's value per sample into `lobe`
-/// (one per sample with the padding).
-pub(super) fn sums(m: &Model, s: &Subset, lobe: &mut [f64]) -> Sums {
-    sums_with(Backend::detect(), m, s, lobe)
+/// (one per sample with the padding); the terms into `kept` for the Gauss-Newton pass.
+pub(super) fn sums(m: &Model, s: &Subset, lobe: &mut [f64], kept: &mut Kept) -> Sums {
+    sums_with(Backend::detect(), m, s, lobe, kept)
 }
 
 /// [`sums`] in the build `backend` (one the processor runs).
-fn sums_with(backend: Backend, m: &Model, s: &Subset, lobe: &mut [f64]) -> Sums {
+fn sums_with(backend: Backend, m: &Model, s: &Subset, lobe: &mut [f64], kept: &mut Kept) -> Sums {
     let f = Frame::of(m);
     let foreshortened = m.foreshortening != 0.0;
+    kept.key = None;
+    kept.fit(s);
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn avx2<const M: bool>(f: &Frame, s: &Subset, lobe: &mut [f64]) -> [f64; 10] {
-        sums_kernel::<Avx2, M>(f, s, lobe)
+    fn avx2<const M: bool>(f: &Frame, s: &Subset, lobe: &mut [f64], k: &mut Kept) -> [f64; 10] {
+        sums_kernel::<Avx2, M>(f, s, lobe, k)
     }
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
-    fn avx512<const M: bool>(f: &Frame, s: &Subset, lobe: &mut [f64]) -> [f64; 10] {
-        sums_kernel::<Avx512, M>(f, s, lobe)
+    fn avx512<const M: bool>(f: &Frame, s: &Subset, lobe: &mut [f64], k: &mut Kept) -> [f64; 10] {
+        sums_kernel::<Avx512, M>(f, s, lobe, k)
     }
     let v = match backend {
-        Backend::Baseline if foreshortened => sums_kernel::<F16, true>(&f, s, lobe),
-        Backend::Baseline => sums_kernel::<F16, false>(&f, s, lobe),
+        Backend::Baseline if foreshortened => sums_kernel::<F16, true>(&f, s, lobe, kept),
+        Backend::Baseline => sums_kernel::<F16, false>(&f, s, lobe, kept),
         #[cfg(target_arch = "x86_64")]
         // SAFETY: `backend` is a build the processor runs (`Backend::detect`,
         // `Backend::available`).
         Backend::Avx2 => unsafe {
             if foreshortened {
-                avx2::<true>(&f, s, lobe)
+                avx2::<true>(&f, s, lobe, kept)
             } else {
-                avx2::<false>(&f, s, lobe)
+                avx2::<false>(&f, s, lobe, kept)
             }
         },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
         Backend::Avx512 => unsafe {
             if foreshortened {
-                avx512::<true>(&f, s, lobe)
+                avx512::<true>(&f, s, lobe, kept)
             } else {
-                avx512::<false>(&f, s, lobe)
+                avx512::<false>(&f, s, lobe, kept)
             }
         },
     };
+    kept.key = Some((s.id, f.bits(), foreshortened));
     Sums {
         gram: [[v[0], v[1], v[2]], [v[1], v[3], v[4]], [v[2], v[4], v[5]]],
         products: [v[6], v[7], v[8]],
@@ -441,11 +614,12 @@ const TRIANGLE: usize = P * (P + 1) / 2;
 type GaussNewtonSums = ([f64; TRIANGLE], [f64; P], [[f64; P]; 3]);
 
 #[inline(always)]
-fn gauss_newton_kernel<V: Lanes, const M: bool>(
+fn gauss_newton_kernel<V: Lanes, const M: bool, const KEPT: bool>(
     f: &Frame,
     s: &Subset,
     c: [f64; 3],
     free: [f64; P],
+    kept: &Kept,
 ) -> GaussNewtonSums {
     let zero = V::splat(0.0);
     // Without the foreshortening, its derivative is 0: six parameters.
@@ -455,16 +629,21 @@ fn gauss_newton_kernel<V: Lanes, const M: bool>(
     let mut ftv = [[zero; P]; 3];
     for i in (0..s.padded_len()).step_by(LANES) {
         let b = s.block::<V>(i);
-        let t = terms::<V, M>(f, &b);
-        let lobe = (b.fresnel * c[2] + c[1]) * t.lobe;
+        let t = if KEPT {
+            finish::<V, M>(f, b.w, &geometry(f, &b), &kept.load::<V>(i))
+        } else {
+            terms::<V, M>(f, &b)
+        };
+        let (fresnel, y) = (b.fresnel, b.y);
+        let lobe = (fresnel * c[2] + c[1]) * t.lobe;
         let mut v = [zero; P];
         for j in 0..used {
             v[j] = lobe * t.d_ln_lobe[j] * free[j];
         }
         v[0] = v[0] + t.d_a[0] * (c[0] * free[0]);
         v[1] = v[1] + t.d_a[1] * (c[0] * free[1]);
-        let r = b.y - t.a * c[0] - lobe;
-        let basis = [t.a, t.lobe, t.lobe * b.fresnel];
+        let r = y - t.a * c[0] - lobe;
+        let basis = [t.a, t.lobe, t.lobe * fresnel];
         for p in 0..used {
             vtr[p] = v[p].mul_add(r, vtr[p]);
             for q in p..used {
@@ -496,8 +675,15 @@ fn gauss_newton_kernel<V: Lanes, const M: bool>(
 
 /// The Gauss-Newton loop's sums at `m` with coefficients `c` over the parameters marked
 /// `free`, in one pass over the samples.
-pub(super) fn gauss_newton(m: &Model, s: &Subset, c: [f64; 3], free: [bool; P]) -> GaussNewton {
-    gauss_newton_with(Backend::detect(), m, s, c, free)
+/// The terms are read from `kept` where they are the last [`sums`] pass's at `m` over `s`.
+pub(super) fn gauss_newton(
+    m: &Model,
+    s: &Subset,
+    c: [f64; 3],
+    free: [bool; P],
+    kept: &Kept,
+) -> GaussNewton {
+    gauss_newton_with(Backend::detect(), m, s, c, free, kept)
 }
 
 /// [`gauss_newton`] in the build `backend` (one the processor runs).
@@ -507,42 +693,63 @@ fn gauss_newton_with(
     s: &Subset,
     c: [f64; 3],
     free: [bool; P],
+    kept: &Kept,
 ) -> GaussNewton {
     let f = Frame::of(m);
     let foreshortened = m.foreshortening != 0.0 || free[6];
+    let reuse = kept.holds(&f, s, foreshortened);
     let on = free.map(|b| if b { 1.0 } else { 0.0 });
+    fn baseline<const M: bool, const K: bool>(
+        f: &Frame,
+        s: &Subset,
+        c: [f64; 3],
+        on: [f64; P],
+        kept: &Kept,
+    ) -> GaussNewtonSums {
+        gauss_newton_kernel::<F16, M, K>(f, s, c, on, kept)
+    }
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn avx2<const M: bool>(f: &Frame, s: &Subset, c: [f64; 3], on: [f64; P]) -> GaussNewtonSums {
-        gauss_newton_kernel::<Avx2, M>(f, s, c, on)
+    fn avx2<const M: bool, const K: bool>(
+        f: &Frame,
+        s: &Subset,
+        c: [f64; 3],
+        on: [f64; P],
+        kept: &Kept,
+    ) -> GaussNewtonSums {
+        gauss_newton_kernel::<Avx2, M, K>(f, s, c, on, kept)
     }
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
-    fn avx512<const M: bool>(f: &Frame, s: &Subset, c: [f64; 3], on: [f64; P]) -> GaussNewtonSums {
-        gauss_newton_kernel::<Avx512, M>(f, s, c, on)
+    fn avx512<const M: bool, const K: bool>(
+        f: &Frame,
+        s: &Subset,
+        c: [f64; 3],
+        on: [f64; P],
+        kept: &Kept,
+    ) -> GaussNewtonSums {
+        gauss_newton_kernel::<Avx512, M, K>(f, s, c, on, kept)
+    }
+    // The build for the foreshortening's presence and for kept terms.
+    macro_rules! by_flags {
+        ($build:ident) => {
+            match (foreshortened, reuse) {
+                (true, true) => $build::<true, true>(&f, s, c, on, kept),
+                (true, false) => $build::<true, false>(&f, s, c, on, kept),
+                (false, true) => $build::<false, true>(&f, s, c, on, kept),
+                (false, false) => $build::<false, false>(&f, s, c, on, kept),
+            }
+        };
     }
     let (triangle, vtr, ftv) = match backend {
-        Backend::Baseline if foreshortened => gauss_newton_kernel::<F16, true>(&f, s, c, on),
-        Backend::Baseline => gauss_newton_kernel::<F16, false>(&f, s, c, on),
+        Backend::Baseline => by_flags!(baseline),
         #[cfg(target_arch = "x86_64")]
         // SAFETY: `backend` is a build the processor runs (`Backend::detect`,
         // `Backend::available`).
-        Backend::Avx2 => unsafe {
-            if foreshortened {
-                avx2::<true>(&f, s, c, on)
-            } else {
-                avx2::<false>(&f, s, c, on)
-            }
-        },
+        Backend::Avx2 => unsafe { by_flags!(avx2) },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
-        Backend::Avx512 => unsafe {
-            if foreshortened {
-                avx512::<true>(&f, s, c, on)
-            } else {
-                avx512::<false>(&f, s, c, on)
-            }
-        },
+        Backend::Avx512 => unsafe { by_flags!(avx512) },
     };
     GaussNewton {
         vtv: mirrored(triangle),
@@ -649,17 +856,31 @@ mod tests {
         let y: Vec<f64> = (0..rig.n_used()).map(|k| 0.1 + (k % 7) as f64).collect();
         s.gather(&js, rig.lights_in_camera(), rig.halfway_in_camera(), &y);
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let gn_values = |gn: &GaussNewton| {
+            let mut all: Vec<f64> = gn.vtv.iter().flatten().copied().collect();
+            all.extend(gn.vtr);
+            all.extend(gn.ftv.iter().flatten());
+            all
+        };
         let run = |backend: Backend, free: [bool; P]| {
             let mut lobe = vec![0.0; s.padded_len()];
-            let sums = sums_with(backend, model, &s, &mut lobe);
-            let gn = gauss_newton_with(backend, model, &s, [0.3, 1.0, 0.5], free);
+            let mut kept = Kept::default();
+            let sums = sums_with(backend, model, &s, &mut lobe, &mut kept);
+            let c = [0.3, 1.0, 0.5];
+            let fresh = gauss_newton_with(backend, model, &s, c, free, &Kept::default());
+            // The terms the sums pass kept give the Gauss-Newton sums bit for bit.
+            assert!(kept.holds(&Frame::of(model), &s, model.foreshortening != 0.0));
+            let reused = gauss_newton_with(backend, model, &s, c, free, &kept);
+            assert_eq!(
+                bits(&gn_values(&reused)),
+                bits(&gn_values(&fresh)),
+                "{backend:?}"
+            );
             let mut all = lobe;
             all.extend(sums.gram.iter().flatten());
             all.extend(sums.products);
             all.push(sums.energy);
-            all.extend(gn.vtv.iter().flatten());
-            all.extend(gn.vtr);
-            all.extend(gn.ftv.iter().flatten());
+            all.extend(gn_values(&fresh));
             all
         };
         let backends = Backend::available();

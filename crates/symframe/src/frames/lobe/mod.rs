@@ -341,6 +341,7 @@ struct Buffers {
     lobe: Vec<f64>,
     r: Vec<f64>,
     keep: Vec<bool>,
+    kept: kernel::Kept,
 }
 
 impl Buffers {
@@ -362,8 +363,13 @@ fn trim_shadows(
     buffers: &mut Buffers,
 ) -> Option<(usize, Linear)> {
     buffers.fit(data);
-    let Buffers { lobe, r, keep } = buffers;
-    let linear = residuals(model, data, lobe, r);
+    let Buffers {
+        lobe,
+        r,
+        keep,
+        kept,
+    } = buffers;
+    let linear = residuals(model, data, lobe, r, kept);
     let max_prediction = (0..data.len())
         .map(|j| data.value(j) - r[j])
         .fold(0.0, f64::max);
@@ -403,8 +409,8 @@ pub struct LobeStart {
 /// The linear part at `m`: the basis functions' sums over the samples and their non-negative
 /// least squares (the residual sum of squares from the sums, without a second pass); the
 /// lobe's value per sample into `lobe`.
-fn project(m: &Model, samples: &Subset, lobe: &mut [f64]) -> Linear {
-    let sums = kernel::sums(m, samples, lobe);
+fn project(m: &Model, samples: &Subset, lobe: &mut [f64], kept: &mut kernel::Kept) -> Linear {
+    let sums = kernel::sums(m, samples, lobe, kept);
     let mut linear = nnls3(sums.gram, sums.products, sums.energy);
     linear.cost = linear.cost.max(0.0);
     linear
@@ -413,8 +419,14 @@ fn project(m: &Model, samples: &Subset, lobe: &mut [f64]) -> Linear {
 /// The model's residuals `y - d a - s1 L - s2 L F` at `m`, with its coefficients solved there,
 /// over the samples into `r` (one per sample with the padding; `lobe`, as long, gets the lobe's
 /// values); returns the linear part.
-fn residuals(m: &Model, samples: &Subset, lobe: &mut [f64], r: &mut [f64]) -> Linear {
-    let linear = project(m, samples, lobe);
+fn residuals(
+    m: &Model,
+    samples: &Subset,
+    lobe: &mut [f64],
+    r: &mut [f64],
+    kept: &mut kernel::Kept,
+) -> Linear {
+    let linear = project(m, samples, lobe, kept);
     kernel::residuals(m, samples, linear.coefficients, lobe, r);
     linear
 }
@@ -432,9 +444,10 @@ fn normal_equations(
     linear: &Linear,
     free: [bool; P],
     samples: &Subset,
+    kept: &kernel::Kept,
 ) -> ([[f64; P]; P], [f64; P]) {
     let kernel::GaussNewton { vtv, vtr, ftv } =
-        kernel::gauss_newton(m, samples, linear.coefficients, free);
+        kernel::gauss_newton(m, samples, linear.coefficients, free, kept);
     // J^T J = v^T v - (F_A^T v)^T (F_A^T F_A)^-1 (F_A^T v).
     let set = ActiveSet::of(linear.set);
     let mut solved = [[0.0f64; 3]; P];
@@ -543,22 +556,23 @@ fn undamped_gain(jtj: &[[f64; P]; P], rhs: &[f64; P], floor: f64) -> Option<f64>
 /// Levenberg-Marquardt from `state` (whose linear part over `samples` is `known`, where the
 /// caller has it: one pass fewer) over the parameters marked `free`; returns the state, its
 /// linear part (the sum of squares and the coefficients) and the passes over the samples.
-/// `lobe` (one value per sample) is a work buffer.
+/// `buffers` are work buffers (fitted to `samples`).
 fn levenberg_marquardt(
     samples: &Subset,
     mut state: State,
     known: Option<Linear>,
     free: [bool; P],
     relative: f64,
-    lobe: &mut [f64],
+    buffers: &mut Buffers,
 ) -> (State, Linear, u32) {
+    let Buffers { lobe, kept, .. } = buffers;
     let syy = samples.energy();
     let mut model = Model::of(&state);
     let mut evals = known.is_none() as u32;
-    let mut linear = known.unwrap_or_else(|| project(&model, samples, lobe));
+    let mut linear = known.unwrap_or_else(|| project(&model, samples, lobe, kept));
     let mut lambda = 1e-3;
     for _ in 0..MAX_ITERATIONS {
-        let (mut jtj, mut rhs) = normal_equations(&model, &linear, free, samples);
+        let (mut jtj, mut rhs) = normal_equations(&model, &linear, free, samples, kept);
         evals += 1;
         // A shape coordinate at a bound that the descent pushes further out is held there this
         // iteration (a projected step), so the others' step does not count on it moving.
@@ -601,7 +615,7 @@ fn levenberg_marquardt(
                 lambda *= 4.0;
                 continue;
             }
-            let trial_linear = project(&trial_model, samples, lobe);
+            let trial_linear = project(&trial_model, samples, lobe, kept);
             if trial_linear.cost < linear.cost {
                 let gain = linear.cost - trial_linear.cost;
                 (state, model, linear) = (trial, trial_model, trial_linear);
@@ -637,14 +651,8 @@ fn search_subset(
         if k > 0 && best.is_some_and(|b| b.1.cost <= RETRY_RESIDUAL * syy) {
             break;
         }
-        let (state, linear, e) = levenberg_marquardt(
-            data,
-            State::new(s),
-            None,
-            MICROFACET,
-            relative,
-            &mut buffers.lobe,
-        );
+        let (state, linear, e) =
+            levenberg_marquardt(data, State::new(s), None, MICROFACET, relative, buffers);
         evals += e;
         if best.is_none_or(|b| linear.cost < b.1.cost) {
             best = Some((state, linear));
@@ -656,7 +664,7 @@ fn search_subset(
         syy = data.energy();
         buffers.fit(data);
         let (refit, refit_linear, e) =
-            levenberg_marquardt(data, state, None, MICROFACET, relative, &mut buffers.lobe);
+            levenberg_marquardt(data, state, None, MICROFACET, relative, buffers);
         evals += e;
         (state, linear) = (refit, refit_linear);
     }
@@ -664,14 +672,8 @@ fn search_subset(
     // above lacks: free `m` (from the microfacet answer), and keep it where it explains more.
     let mut free = MICROFACET;
     if linear.cost > FORESHORTENING_FLOOR * syy {
-        let (free_m, linear_m, e) = levenberg_marquardt(
-            data,
-            state,
-            Some(linear),
-            [true; P],
-            relative,
-            &mut buffers.lobe,
-        );
+        let (free_m, linear_m, e) =
+            levenberg_marquardt(data, state, Some(linear), [true; P], relative, buffers);
         evals += e;
         if linear_m.cost < linear.cost {
             (state, free, linear) = (free_m, [true; P], linear_m);
@@ -809,7 +811,7 @@ pub fn fit_lobe(
         buffers.fit(fine);
         let known = (removed == 0).then_some(trimmed);
         let (polished, polished_linear, e) =
-            levenberg_marquardt(fine, state, known, free, RELATIVE_GAIN, &mut buffers.lobe);
+            levenberg_marquardt(fine, state, known, free, RELATIVE_GAIN, buffers);
         evals += e;
         (state, linear) = (polished, polished_linear);
     }
