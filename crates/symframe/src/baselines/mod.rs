@@ -27,6 +27,7 @@ pub mod woodham;
 
 pub use highlight_centroid::highlight_centroid_pixel;
 pub use max_reflectance::{highlight_peak, max_reflectance_pixel, MAX_REFLECTANCE_NEIGHBOURS};
+pub(crate) use woodham::woodham_robust_greys;
 pub use woodham::{woodham_pixel, woodham_robust_pixel};
 
 /// Which baseline to run.
@@ -204,6 +205,13 @@ impl BaselinePixel {
 fn grey(rgb: &[f32]) -> Option<f64> {
     let v = (rgb[0] as f64 + rgb[1] as f64 + rgb[2] as f64) / 3.0;
     v.is_finite().then_some(v)
+}
+
+/// The grey values of `samples` (RGB) into `out`, NaN where invalid: for the callers that read
+/// them more than once.
+pub(crate) fn grey_values(samples: &[f32], out: &mut Vec<f64>) {
+    out.clear();
+    out.extend(samples.chunks_exact(3).map(|s| grey(s).unwrap_or(f64::NAN)));
 }
 
 /// Index and grey value of the brightest valid sample, if any is brighter than zero.

@@ -4,7 +4,7 @@ use std::cmp::Ordering;
 
 use glam::{DMat3, DVec3};
 
-use super::{brightest, grey, BaselineParams, BaselinePixel};
+use super::{brightest, grey, grey_values, BaselineParams, BaselinePixel};
 use crate::maps::PixelStatus;
 
 /// Accumulated normal equations `A g = b` of the Lambertian model `I = g . l`.
@@ -187,42 +187,57 @@ pub fn woodham_robust_pixel(
     params: &BaselineParams,
     scratch: &mut Vec<f64>,
 ) -> BaselinePixel {
-    // The grey values (NaN where invalid) in `scratch[..n]`, the valid ones after them for the
-    // shadow threshold's quantile; the brightest as `brightest` finds it.
     let n = samples.len() / 3;
-    scratch.clear();
-    scratch.extend(samples.chunks_exact(3).map(|s| grey(s).unwrap_or(f64::NAN)));
+    grey_values(samples, scratch);
+    scratch.resize(3 * n, 0.0);
+    let (greys, work) = scratch.split_at_mut(n);
+    woodham_robust_greys(greys, lights, params, work)
+}
+
+/// [`woodham_robust_pixel`] from the pixel's grey values (`(r + g + b) / 3`, NaN where invalid),
+/// with `work` at least twice as long as `greys`: for a caller that reads the grey values
+/// again.
+pub(crate) fn woodham_robust_greys(
+    greys: &[f64],
+    lights: &[DVec3],
+    params: &BaselineParams,
+    work: &mut [f64],
+) -> BaselinePixel {
+    // The valid grey values first in `work`, for the shadow threshold's quantile; the
+    // brightest as `brightest` finds it.
     let mut max = 0.0;
-    for k in 0..n {
-        let v = scratch[k];
+    let mut valid = 0;
+    for &v in greys {
         if v.is_finite() {
             if v > max {
                 max = v;
             }
             if params.shadow_reference_quantile < 1.0 {
-                scratch.push(v);
+                work[valid] = v;
+                valid += 1;
             }
         }
     }
     if max <= 0.0 {
         return BaselinePixel::empty(PixelStatus::NoData);
     }
-    let threshold = threshold_of(&mut scratch[n..], max, params);
+    let threshold = threshold_of(&mut work[..valid], max, params);
     // The unshadowed samples' equations, and the samples as (light index, grey value) pairs
-    // after the grey values: the two passes below read only them, in the same order as a pass
-    // over every sample would.
-    scratch.truncate(n);
+    // in `work`: the two passes below read only them, in the same order as a pass over every
+    // sample would.
     let mut eq = NormalEquations::default();
-    for k in 0..n {
-        let i = scratch[k];
+    let mut pairs = 0;
+    for (k, &i) in greys.iter().enumerate() {
         // NaN (invalid) is never at or above the threshold.
         if i >= threshold {
             eq.add(lights[k], i);
-            scratch.extend([k as f64, i]);
+            work[pairs] = k as f64;
+            work[pairs + 1] = i;
+            pairs += 2;
         }
     }
     let lit = || {
-        scratch[n..]
+        work[..pairs]
             .chunks_exact(2)
             .map(|p| (lights[p[0] as usize], p[1]))
     };

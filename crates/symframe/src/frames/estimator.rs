@@ -6,9 +6,11 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::baselines::{highlight_peak, woodham_robust_pixel, BaselineParams, BaselinePixel};
+use crate::baselines::{
+    grey_values, highlight_peak, woodham_robust_greys, BaselineParams, BaselinePixel,
+};
 use crate::error::{Error, Result};
-use crate::frames::highlight::{highlight_moments, HighlightMoments};
+use crate::frames::highlight::{highlight_moments_of_greys, HighlightMoments};
 use crate::frames::lobe::{fit_lobe, LobeFit, LobeScratch, LobeStart};
 use crate::frames::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::frames::optim::{nelder_mead, NelderMeadOptions};
@@ -319,12 +321,14 @@ impl<'a> Estimator<'a> {
     /// The robust Lambertian fit (Woodham with outlier rejection, default parameters) of a
     /// pixel over the rig's lights: the shadow pass, the diffuse test, the sharp-lobe rule and
     /// the fallback all read the pixel's diffuse part through it.
-    fn lambertian_fit(&self, slice: &[f32], scratch: &mut Vec<f64>) -> BaselinePixel {
-        woodham_robust_pixel(
-            slice,
+    /// `greys` are the slice's grey values (as [`grey_values`] makes them), `work` a buffer.
+    fn lambertian_fit(&self, greys: &[f64], work: &mut Vec<f64>) -> BaselinePixel {
+        work.resize(2 * greys.len(), 0.0);
+        woodham_robust_greys(
+            greys,
             self.rig.lights_in_camera(),
             &BaselineParams::default(),
-            scratch,
+            work,
         )
     }
 
@@ -406,12 +410,16 @@ impl<'a> Estimator<'a> {
             fallback,
             unshadowed,
             lobe,
+            greys,
         } = scratch;
         // The robust Lambertian fit of the slice the estimator reads (refitted once the cast
         // shadows are out): the diffuse test, the sharp-lobe rule and the fallback share it.
-        let first = self.lambertian_fit(slice, fallback);
+        // The grey values once: the Lambertian fits and the highlight's moments read them.
+        grey_values(slice, greys);
+        let first = self.lambertian_fit(greys, fallback);
         let (slice, fit) = if self.mark_cast_shadows(slice, &first, unshadowed, fallback) {
-            (&unshadowed[..], self.lambertian_fit(unshadowed, fallback))
+            grey_values(unshadowed, greys);
+            (&unshadowed[..], self.lambertian_fit(greys, fallback))
         } else {
             (slice, first)
         };
@@ -420,7 +428,7 @@ impl<'a> Estimator<'a> {
         // the normal (docs/method.md, "Lobe fit"). Where no lobe of the family explains the
         // pixel (interreflections, a BRDF outside the family), the search decides.
         let auto = self.params.cosine == CosineMode::Auto;
-        let moments = highlight_moments(slice, self.rig.halfway_in_camera());
+        let moments = highlight_moments_of_greys(greys, self.rig.halfway_in_camera());
         // Under the default measure, the share of the energy the fit's Lambertian term leaves
         // unexplained, once: the diffuse tests and the lobe-over-diffuse rules read it.
         let share = fit
@@ -1189,6 +1197,7 @@ pub struct PixelScratch {
     fallback: Vec<f64>,
     unshadowed: Vec<f32>,
     lobe: LobeScratch,
+    greys: Vec<f64>,
 }
 
 impl PixelScratch {
@@ -1199,6 +1208,7 @@ impl PixelScratch {
             fallback: Vec::with_capacity(rig.n_used()),
             unshadowed: Vec::with_capacity(rig.n_used() * 3),
             lobe: LobeScratch::default(),
+            greys: Vec::with_capacity(rig.n_used()),
         }
     }
 }

@@ -57,13 +57,46 @@ pub fn highlight_moments_by(
     samples: &[f32],
     halfway: impl Fn(usize) -> Option<DVec3>,
 ) -> Option<HighlightMoments> {
-    let grey = |s: &[f32]| {
+    let sample = |i: usize| &samples[3 * i..3 * i + 3];
+    let grey = |i: usize| {
+        let s = sample(i);
         let v = (s[0] as f64 + s[1] as f64 + s[2] as f64) / 3.0;
         v.is_finite().then_some(v)
     };
+    // Samples whose channel sum is clearly below the level are skipped before the division
+    // (the division by 3 rounds by far less than this margin; the others are tested exactly):
+    // the highlight is a small share of the samples, and a division per sample is most of a
+    // pass's cost.
+    let reaches = |i: usize, level: f64| {
+        let s = sample(i);
+        s[0] as f64 + s[1] as f64 + s[2] as f64 >= 3.0 * level * (1.0 - 1e-9)
+    };
+    moments(samples.len() / 3, grey, reaches, halfway)
+}
+
+/// [`highlight_moments`] from the pixel's grey values (`(r + g + b) / 3`, NaN where invalid):
+/// for a caller that has them.
+pub(crate) fn highlight_moments_of_greys(
+    greys: &[f64],
+    halfways: &[DVec3],
+) -> Option<HighlightMoments> {
+    let grey = |i: usize| Some(greys[i]).filter(|v| v.is_finite());
+    moments(greys.len(), grey, |_, _| true, |i| Some(halfways[i]))
+}
+
+/// The moments of `n` samples: `grey(i)` the grey value of sample `i` (`None` where invalid),
+/// `reaches(i, level)` false where it is surely below `level` (a cheaper test than `grey`),
+/// `halfway(i)` its halfway vector.
+#[inline(always)]
+fn moments(
+    n: usize,
+    grey: impl Fn(usize) -> Option<f64>,
+    reaches: impl Fn(usize, f64) -> bool,
+    halfway: impl Fn(usize) -> Option<DVec3>,
+) -> Option<HighlightMoments> {
     let (mut max, mut sum, mut count) = (0.0f64, 0.0, 0usize);
-    for s in samples.chunks_exact(3) {
-        if let Some(v) = grey(s) {
+    for i in 0..n {
+        if let Some(v) = grey(i) {
             max = max.max(v);
             sum += v;
             count += 1;
@@ -73,19 +106,13 @@ pub fn highlight_moments_by(
         return None;
     }
     let level = HIGHLIGHT_LEVEL * max;
-    // The passes below skip the samples whose channel sum is clearly below the level (the
-    // division by 3 rounds by far less than this margin) and test the others exactly: the
-    // highlight is a small share of the samples, and a division per sample is most of a
-    // pass's cost.
-    let floor = 3.0 * level * (1.0 - 1e-9);
-    let reaches = |s: &[f32]| s[0] as f64 + s[1] as f64 + s[2] as f64 >= floor;
     let mut mean = DVec3::ZERO;
     let mut n_samples = 0u32;
-    for (i, s) in samples.chunks_exact(3).enumerate() {
-        if !reaches(s) {
+    for i in 0..n {
+        if !reaches(i, level) {
             continue;
         }
-        if let (Some(v), Some(h)) = (grey(s).filter(|&v| v >= level), halfway(i)) {
+        if let (Some(v), Some(h)) = (grey(i).filter(|&v| v >= level), halfway(i)) {
             // The brightest sample has weight 1 - HIGHLIGHT_LEVEL; one at the level, 0.
             mean += (v - level).max(1e-12 * max) * h;
             n_samples += 1;
@@ -94,11 +121,11 @@ pub fn highlight_moments_by(
     let normal = mean.try_normalize()?;
     let (u, w) = tangent_basis(normal);
     let (mut cuu, mut cuw, mut cww, mut total) = (0.0, 0.0, 0.0, 0.0);
-    for (i, s) in samples.chunks_exact(3).enumerate() {
-        if !reaches(s) {
+    for i in 0..n {
+        if !reaches(i, level) {
             continue;
         }
-        if let (Some(v), Some(h)) = (grey(s).filter(|&v| v >= level), halfway(i)) {
+        if let (Some(v), Some(h)) = (grey(i).filter(|&v| v >= level), halfway(i)) {
             let weight = (v - level).max(1e-12 * max);
             // Gnomonic chart of the tangent plane at the mean.
             let d = h.dot(normal).max(1e-6);
