@@ -323,7 +323,9 @@ impl<'a> Estimator<'a> {
     /// the fallback all read the pixel's diffuse part through it.
     /// `greys` are the slice's grey values (as [`grey_values`] makes them), `work` a buffer.
     fn lambertian_fit(&self, greys: &[f64], work: &mut Vec<f64>) -> BaselinePixel {
-        work.resize(2 * greys.len(), 0.0);
+        if work.len() < 2 * greys.len() {
+            work.resize(2 * greys.len(), 0.0);
+        }
         woodham_robust_greys(
             greys,
             self.rig.lights_in_camera(),
@@ -411,15 +413,16 @@ impl<'a> Estimator<'a> {
             unshadowed,
             lobe,
             greys,
+            lambert,
         } = scratch;
         // The robust Lambertian fit of the slice the estimator reads (refitted once the cast
         // shadows are out): the diffuse test, the sharp-lobe rule and the fallback share it.
         // The grey values once: the Lambertian fits and the highlight's moments read them.
         grey_values(slice, greys);
-        let first = self.lambertian_fit(greys, fallback);
+        let first = self.lambertian_fit(greys, lambert);
         let (slice, fit) = if self.mark_cast_shadows(slice, &first, unshadowed, fallback) {
             grey_values(unshadowed, greys);
-            (&unshadowed[..], self.lambertian_fit(greys, fallback))
+            (&unshadowed[..], self.lambertian_fit(greys, lambert))
         } else {
             (slice, first)
         };
@@ -1198,6 +1201,8 @@ pub struct PixelScratch {
     unshadowed: Vec<f32>,
     lobe: LobeScratch,
     greys: Vec<f64>,
+    /// The robust Lambertian fit's work buffer (twice the lights).
+    lambert: Vec<f64>,
 }
 
 impl PixelScratch {
@@ -1209,6 +1214,7 @@ impl PixelScratch {
             unshadowed: Vec::with_capacity(rig.n_used() * 3),
             lobe: LobeScratch::default(),
             greys: Vec::with_capacity(rig.n_used()),
+            lambert: vec![0.0; 2 * rig.n_used()],
         }
     }
 }

@@ -268,10 +268,13 @@ impl Kept {
         self.key == Some((s.id, f.bits(), foreshortened))
     }
 
-    /// Makes the columns as long as the subset's samples with the padding.
+    /// Makes the columns at least as long as the subset's samples with the padding (only
+    /// grown, as the lobe fit's other buffers).
     fn fit(&mut self, s: &Subset) {
         for c in &mut self.columns {
-            c.resize(s.padded_len(), 0.0);
+            if c.len() < s.padded_len() {
+                c.resize(s.padded_len(), 0.0);
+            }
         }
     }
 

@@ -346,9 +346,15 @@ struct Buffers {
 
 impl Buffers {
     /// Makes the buffers as long as the subset's samples with the padding.
+    /// Makes the buffers at least as long as the subset's samples with the padding (only
+    /// grown: the fine and the coarse subset share them, and a shrink then a regrowth would
+    /// fill the difference with zeros every time).
     fn fit(&mut self, data: &Subset) {
-        self.lobe.resize(data.padded_len(), 0.0);
-        self.r.resize(data.padded_len(), 0.0);
+        for buffer in [&mut self.lobe, &mut self.r] {
+            if buffer.len() < data.padded_len() {
+                buffer.resize(data.padded_len(), 0.0);
+            }
+        }
     }
 }
 
