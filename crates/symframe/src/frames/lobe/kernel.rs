@@ -702,37 +702,24 @@ fn gauss_newton_with(
     let foreshortened = m.foreshortening != 0.0 || free[6];
     let reuse = kept.holds(&f, s, foreshortened);
     let on = free.map(|b| if b { 1.0 } else { 0.0 });
-    fn baseline<const M: bool, const K: bool>(
-        f: &Frame,
-        s: &Subset,
-        c: [f64; 3],
-        on: [f64; P],
-        kept: &Kept,
-    ) -> GaussNewtonSums {
-        gauss_newton_kernel::<F16, M, K>(f, s, c, on, kept)
+    // The kernel compiled for one build: its lanes and (on x86-64) its target features.
+    macro_rules! build {
+        ($name:ident, $lanes:ty $(, $features:literal)?) => {
+            $(#[cfg(target_arch = "x86_64")] #[target_feature(enable = $features)])?
+            fn $name<const M: bool, const K: bool>(
+                f: &Frame,
+                s: &Subset,
+                c: [f64; 3],
+                on: [f64; P],
+                kept: &Kept,
+            ) -> GaussNewtonSums {
+                gauss_newton_kernel::<$lanes, M, K>(f, s, c, on, kept)
+            }
+        };
     }
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn avx2<const M: bool, const K: bool>(
-        f: &Frame,
-        s: &Subset,
-        c: [f64; 3],
-        on: [f64; P],
-        kept: &Kept,
-    ) -> GaussNewtonSums {
-        gauss_newton_kernel::<Avx2, M, K>(f, s, c, on, kept)
-    }
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    fn avx512<const M: bool, const K: bool>(
-        f: &Frame,
-        s: &Subset,
-        c: [f64; 3],
-        on: [f64; P],
-        kept: &Kept,
-    ) -> GaussNewtonSums {
-        gauss_newton_kernel::<Avx512, M, K>(f, s, c, on, kept)
-    }
+    build!(baseline, F16);
+    build!(avx2, Avx2, "avx2,fma");
+    build!(avx512, Avx512, "avx512f");
     // The build for the foreshortening's presence and for kept terms.
     macro_rules! by_flags {
         ($build:ident) => {
