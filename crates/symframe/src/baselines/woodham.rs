@@ -4,7 +4,7 @@ use std::cmp::Ordering;
 
 use glam::{DMat3, DVec3};
 
-use super::{brightest, grey, grey_values, BaselineParams, BaselinePixel};
+use super::{grey_values, BaselineParams, BaselinePixel};
 use crate::maps::PixelStatus;
 
 /// Accumulated normal equations `A g = b` of the Lambertian model `I = g . l`.
@@ -75,30 +75,33 @@ impl NormalEquations {
 
 /// The pixel's shadow threshold: [`BaselineParams::shadow_fraction`] of its reference level
 /// (the [`BaselineParams::shadow_reference_quantile`] of its valid grey values, or the maximum
-/// where that is zero); `None` when no valid sample is brighter than zero. `scratch` holds the
-/// grey values for the quantile (reused: no allocation once it has grown to the light count).
+/// where that is zero); `None` when no valid sample is brighter than zero. `greys` are the
+/// pixel's grey values (NaN where invalid), `work` at least as long (it gets the valid ones for
+/// the quantile).
 #[inline]
-fn shadow_threshold(
-    samples: &[f32],
-    params: &BaselineParams,
-    scratch: &mut Vec<f64>,
-) -> Option<f64> {
-    let (_, max) = brightest(samples)?;
-    scratch.clear();
-    if params.shadow_reference_quantile < 1.0 {
-        scratch.extend(samples.chunks_exact(3).filter_map(grey));
-    }
-    Some(threshold_of(scratch, max, params))
-}
-
-/// [`shadow_threshold`] from the pixel's brightest grey value `max` (> 0) and its valid grey
-/// values `valid` (reordered; unread where the reference is the maximum).
-#[inline]
-fn threshold_of(valid: &mut [f64], max: f64, params: &BaselineParams) -> f64 {
+fn shadow_threshold(greys: &[f64], params: &BaselineParams, work: &mut [f64]) -> Option<f64> {
     let q = params.shadow_reference_quantile;
+    // The brightest as `brightest` finds it, and the valid values in order.
+    let mut max = 0.0;
+    let mut valid = 0;
+    for &v in greys {
+        if v.is_finite() {
+            if v > max {
+                max = v;
+            }
+            if q < 1.0 {
+                work[valid] = v;
+                valid += 1;
+            }
+        }
+    }
+    if max <= 0.0 {
+        return None;
+    }
     let reference = if q >= 1.0 {
         max
     } else {
+        let valid = &mut work[..valid];
         let k = ((q * (valid.len() - 1) as f64).floor() as usize).min(valid.len() - 1);
         // The values are finite: `<` orders them as `total_cmp` does but for the sign of zero,
         // which the test below does not see, and costs less.
@@ -110,21 +113,17 @@ fn threshold_of(valid: &mut [f64], max: f64, params: &BaselineParams) -> f64 {
             max
         }
     };
-    params.shadow_fraction * reference
+    Some(params.shadow_fraction * reference)
 }
 
-/// The normal equations over the samples at or above `threshold`.
-#[inline]
-fn lit_equations(samples: &[f32], lights: &[DVec3], threshold: f64) -> NormalEquations {
-    let mut eq = NormalEquations::default();
-    for (s, &l) in samples.chunks_exact(3).zip(lights) {
-        if let Some(i) = grey(s) {
-            if i >= threshold {
-                eq.add(l, i);
-            }
-        }
-    }
-    eq
+/// The pixel's grey values (NaN where invalid) in `scratch[..n]` and `scratch[n..]` a work
+/// buffer twice as long, for `n` lights.
+fn greys_and_work<'s>(samples: &[f32], scratch: &'s mut Vec<f64>) -> (&'s [f64], &'s mut [f64]) {
+    let n = samples.len() / 3;
+    grey_values(samples, scratch);
+    scratch.resize(3 * n, 0.0);
+    let (greys, work) = scratch.split_at_mut(n);
+    (greys, work)
 }
 
 /// The estimate from solved normal equations: the normal is `g / |g|`; a degenerate system or
@@ -154,17 +153,24 @@ fn finish(eq: &NormalEquations, g: Option<DVec3>) -> BaselinePixel {
 /// `samples` is the pixel's `n_lights * 3` RGB values (as [`Stack::pixel`](crate::stack::Stack::pixel)), `lights` the unit
 /// light directions in the same order, `scratch` a buffer reused between pixels. Confidence:
 /// the uncentred R^2 of the fit, `1 - sum r_i^2 / sum I_i^2` over the samples used (1 for an
-/// exact Lambertian pixel). Allocation-free once `scratch` has grown to the light count.
+/// exact Lambertian pixel). Allocation-free once `scratch` has grown (three values per light).
 pub fn woodham_pixel(
     samples: &[f32],
     lights: &[DVec3],
     params: &BaselineParams,
     scratch: &mut Vec<f64>,
 ) -> BaselinePixel {
-    let Some(threshold) = shadow_threshold(samples, params, scratch) else {
+    let (greys, work) = greys_and_work(samples, scratch);
+    let Some(threshold) = shadow_threshold(greys, params, work) else {
         return BaselinePixel::empty(PixelStatus::NoData);
     };
-    let eq = lit_equations(samples, lights, threshold);
+    // The normal equations over the samples at or above the threshold (NaN never is).
+    let mut eq = NormalEquations::default();
+    for (&i, &l) in greys.iter().zip(lights) {
+        if i >= threshold {
+            eq.add(l, i);
+        }
+    }
     finish(&eq, eq.solve())
 }
 
@@ -187,10 +193,7 @@ pub fn woodham_robust_pixel(
     params: &BaselineParams,
     scratch: &mut Vec<f64>,
 ) -> BaselinePixel {
-    let n = samples.len() / 3;
-    grey_values(samples, scratch);
-    scratch.resize(3 * n, 0.0);
-    let (greys, work) = scratch.split_at_mut(n);
+    let (greys, work) = greys_and_work(samples, scratch);
     woodham_robust_greys(greys, lights, params, work)
 }
 
@@ -203,25 +206,9 @@ pub(crate) fn woodham_robust_greys(
     params: &BaselineParams,
     work: &mut [f64],
 ) -> BaselinePixel {
-    // The valid grey values first in `work`, for the shadow threshold's quantile; the
-    // brightest as `brightest` finds it.
-    let mut max = 0.0;
-    let mut valid = 0;
-    for &v in greys {
-        if v.is_finite() {
-            if v > max {
-                max = v;
-            }
-            if params.shadow_reference_quantile < 1.0 {
-                work[valid] = v;
-                valid += 1;
-            }
-        }
-    }
-    if max <= 0.0 {
+    let Some(threshold) = shadow_threshold(greys, params, work) else {
         return BaselinePixel::empty(PixelStatus::NoData);
-    }
-    let threshold = threshold_of(&mut work[..valid], max, params);
+    };
     // The unshadowed samples' equations, and the samples as (light index, grey value) pairs
     // in `work`: the two passes below read only them, in the same order as a pass over every
     // sample would.
