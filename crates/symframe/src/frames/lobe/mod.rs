@@ -30,7 +30,7 @@ use glam::{DQuat, DVec3};
 
 use crate::geometry::tangent_basis;
 
-pub mod kernel;
+mod kernel;
 mod lanes;
 
 use kernel::Subset;
@@ -345,7 +345,6 @@ struct Buffers {
 }
 
 impl Buffers {
-    /// Makes the buffers as long as the subset's samples with the padding.
     /// Makes the buffers at least as long as the subset's samples with the padding (only
     /// grown: the fine and the coarse subset share them, and a shrink then a regrowth would
     /// fill the difference with zeros every time).
