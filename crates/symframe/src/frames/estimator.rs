@@ -409,7 +409,7 @@ impl<'a> Estimator<'a> {
     pub fn estimate_pixel_with(&self, slice: &[f32], scratch: &mut PixelScratch) -> PixelEstimate {
         let PixelScratch {
             fast,
-            fallback,
+            shadow_levels,
             unshadowed,
             lobe,
             greys,
@@ -420,7 +420,7 @@ impl<'a> Estimator<'a> {
         // The grey values once: the Lambertian fits and the highlight's moments read them.
         grey_values(slice, greys);
         let first = self.lambertian_fit(greys, lambert);
-        let (slice, fit) = if self.mark_cast_shadows(slice, &first, unshadowed, fallback) {
+        let (slice, fit) = if self.mark_cast_shadows(slice, &first, unshadowed, shadow_levels) {
             grey_values(unshadowed, greys);
             (&unshadowed[..], self.lambertian_fit(greys, lambert))
         } else {
@@ -1197,7 +1197,8 @@ fn centre_observed<O: Objective>(rig: &Rig, objective: &O, n: DVec3) -> bool {
 #[derive(Debug, Clone)]
 pub struct PixelScratch {
     fast: FastScratch,
-    fallback: Vec<f64>,
+    /// The cast-shadow pass's diffuse levels `I / (n.l)`.
+    shadow_levels: Vec<f64>,
     unshadowed: Vec<f32>,
     lobe: LobeScratch,
     greys: Vec<f64>,
@@ -1210,7 +1211,7 @@ impl PixelScratch {
     pub fn new(rig: &Rig) -> Self {
         Self {
             fast: FastScratch::new(rig),
-            fallback: Vec::with_capacity(rig.n_used()),
+            shadow_levels: Vec::with_capacity(rig.n_used()),
             unshadowed: Vec::with_capacity(rig.n_used() * 3),
             lobe: LobeScratch::default(),
             greys: Vec::with_capacity(rig.n_used()),
