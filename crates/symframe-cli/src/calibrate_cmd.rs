@@ -36,6 +36,9 @@ pub fn run(args: &CalibrateArgs) -> Result<CalibrationReport> {
             Some(nf) => anyhow::anyhow!("{nf}; give its circle with --sphere CX,CY,R"),
             None => e,
         })?;
+    if !crate::progress::chatty() {
+        return Ok(report);
+    }
     let c = &report.sphere;
     if let Some(d) = &report.detection {
         println!(

@@ -22,6 +22,24 @@ use symframe_job::{EstimateConfig, EstimateOutcome, FitConfig, RelightConfig, Vi
 use crate::cli::DemoArgs;
 use crate::progress;
 
+/// `println!` unless `--quiet`.
+macro_rules! say {
+    ($($t:tt)*) => {
+        if progress::chatty() {
+            println!($($t)*);
+        }
+    };
+}
+
+/// `eprintln!` unless `--quiet`.
+macro_rules! note {
+    ($($t:tt)*) => {
+        if progress::chatty() {
+            eprintln!($($t)*);
+        }
+    };
+}
+
 /// Runs the demo.
 pub fn run(args: &DemoArgs) -> Result<()> {
     if !(8..=2048).contains(&args.size) {
@@ -34,7 +52,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
     let scene = Scene::sphere(args.size, TangentField::Circular);
     let lights = uniform_cone_lights(args.lights, 65.0);
-    eprintln!(
+    note!(
         "symframe demo: rendering a {0}x{0} sphere of brushed material ({1}) under {2} lights",
         args.size,
         brdf.name(),
@@ -66,7 +84,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     drop(images);
 
     let estimate_dir = args.output.join("estimate");
-    eprintln!(
+    note!(
         "symframe demo: estimating normals and tangents from {}",
         lp.display()
     );
@@ -90,22 +108,22 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let eval_path = estimate_dir.join("eval.json");
     std::fs::write(&eval_path, serde_json::to_string_pretty(&e)? + "\n")
         .with_context(|| format!("{}: cannot write", eval_path.display()))?;
-    println!(
+    say!(
         "normal error (pixels within 60 deg of the view): mean {:.2} deg, median {:.2}, 90th pct {:.2}; coverage {:.1}%",
         e.normal_error.mean,
         e.normal_error.median,
         e.normal_error.p90,
         100.0 * e.coverage
     );
-    println!(
+    say!(
         "tangent axis error: mean {:.2} deg, median {:.2}, 90th pct {:.2}; t/b swapped at {:.1}% of pixels",
         e.tangent_error.mean,
         e.tangent_error.median,
         e.tangent_error.p90,
         100.0 * e.swapped_share
     );
-    println!("dataset:  {}", lp.display());
-    println!(
+    say!("dataset:  {}", lp.display());
+    say!(
         "pictures: {} and {} (also confidence.png; maps as .npy and .exr, report.json)",
         estimate_dir.join("normals.png").display(),
         estimate_dir.join("tangents.png").display()
@@ -117,16 +135,16 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     fit_config.holdout = (args.lights / 50).max(1);
     // The estimate's tile cache is read again here, then removed.
     fit_config.cache.remove_after = true;
-    eprintln!("symframe demo: fitting a Ward BRDF per pixel in the estimated frames");
+    note!("symframe demo: fitting a Ward BRDF per pixel in the estimated frames");
     let fit = symframe_job::fit(&fit_config, &ctl)?.maps;
     drop(bars);
     let errs = fit_errors(&fit.ward, &scene, &brdf);
-    println!(
+    say!(
         "Ward fit vs truth (median relative error within 60 deg): kd {:.1}%, ks {:.1}%, wide roughness {:.1}%, narrow {:.1}%",
         errs[0], errs[1], errs[2], errs[3]
     );
     if let (Some(rms), Some(psnr)) = (fit.summary.holdout_rms, fit.summary.holdout_psnr_db) {
-        println!(
+        say!(
             "Ward fit on {} held-out lights: RMS {rms:.4}, PSNR {psnr:.1} dB",
             fit_config.holdout
         );
@@ -143,14 +161,14 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     relight.rotate_tangents = Some(90.0);
     relight.region = Some(region_path.clone());
     let edited = symframe_job::relight(&relight)?.pictures;
-    println!(
+    say!(
         "relit under a new light ({}, {}, {}): {}",
         new_light[0],
         new_light[1],
         new_light[2],
         relit[0].display()
     );
-    println!(
+    say!(
         "edited (tangents turned 90 deg inside {}): {}",
         region_path.display(),
         edited[0].display()
@@ -159,11 +177,11 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let mut view = ViewConfig::new(&fit_dir);
     view.frames = Some(estimate_dir.clone());
     let viewer = symframe_job::write_viewer(&view)?;
-    println!(
+    say!(
         "viewer:   {} (open it in a browser; drag to move the light)",
         viewer.path.display()
     );
-    println!("done in {:.1} s", t0.elapsed().as_secs_f64());
+    say!("done in {:.1} s", t0.elapsed().as_secs_f64());
     Ok(())
 }
 

@@ -119,7 +119,10 @@ pub fn config(args: &EstimateArgs) -> Result<EstimateConfig> {
 /// Runs `symframe estimate`.
 pub fn run(args: &EstimateArgs) -> Result<EstimateOutcome> {
     let config = config(args)?;
-    if let Ok(ds) = symframe_io::open_dataset(&args.input) {
+    if let Some(ds) = progress::chatty()
+        .then(|| symframe_io::open_dataset(&args.input).ok())
+        .flatten()
+    {
         if let Ok(symframe_io::LpPaths::Windows) = symframe_io::lp_path_convention(&ds.source) {
             eprintln!(
                 "symframe estimate: {}: {}",

@@ -48,6 +48,9 @@ pub fn run(args: &EvalArgs) -> Result<EvalReport> {
         },
         &crate::control(&|_| {}, None),
     )?;
+    if !crate::progress::chatty() {
+        return Ok(report);
+    }
     let est = &args.estimate;
     let tangents = report.tangent_scale_max_deg.is_some();
     let e = &report.evaluation;

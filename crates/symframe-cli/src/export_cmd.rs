@@ -18,6 +18,9 @@ pub fn run(args: &ExportArgs) -> Result<Vec<PathBuf>> {
         max_jump: args.max_jump,
     };
     let done = export_gltf(&config)?;
+    if !crate::progress::chatty() {
+        return Ok(done.written);
+    }
     println!(
         "symframe export: {} ({} material{}, {} vertices, {} triangles): wrote {}",
         if args.mesh { "integrated mesh" } else { "quad" },

@@ -41,6 +41,9 @@ pub fn run(args: &IntegrateArgs) -> Result<(DepthMap, IntegrateReport)> {
         max_jump: args.max_jump,
     };
     let (depth, report) = integrate_job(&config)?;
+    if !crate::progress::chatty() {
+        return Ok((depth, report));
+    }
     println!(
         "symframe integrate: {} pixels ({} region(s)) by {} in {:.2} s ({} CG iterations{}), \
          mesh {} vertices, {} triangles ({} dropped at discontinuities), peak memory {} MiB; \
