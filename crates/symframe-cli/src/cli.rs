@@ -423,9 +423,16 @@ pub struct ScalingArgs {
 /// Flags of `symframe demo`.
 #[derive(Debug, Clone, Args)]
 pub struct DemoArgs {
-    /// Output folder for the rendered dataset and the estimated maps.
+    /// Output folder for the rendered dataset and the estimated maps (dataset/, estimate/,
+    /// fit/, relit/, relit-edited/ and region.png in it are replaced). A folder holding any of
+    /// them, not empty, must hold the `.symframe-demo` marker of an earlier demo run, else it
+    /// is refused (see --force).
     #[arg(short, long, default_value = "symframe-demo")]
     pub output: PathBuf,
+    /// Write into a folder that the demo did not write, replacing its dataset/, estimate/,
+    /// fit/, relit/, relit-edited/ and region.png.
+    #[arg(long)]
+    pub force: bool,
     /// Image size in pixels (the sphere fills it).
     #[arg(long, default_value_t = 96)]
     pub size: usize,

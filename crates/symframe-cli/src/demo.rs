@@ -5,9 +5,10 @@
 //! tangents turned by 90 degrees inside a letter-shaped region, as in the paper's Section 5.1;
 //! and writes the fit's viewer page (`fit/viewer.html`).
 
+use std::path::Path;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use symframe::brdf::ward::Ward;
 use symframe::brdf::Brdf;
@@ -48,6 +49,15 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     if !(16..=20000).contains(&args.lights) {
         anyhow::bail!("--lights must be between 16 and 20000, got {}", args.lights);
     }
+    check_target(&args.output, args.force)?;
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("{}: cannot create the folder", args.output.display()))?;
+    let marker = args.output.join(MARKER);
+    std::fs::write(
+        &marker,
+        "Written by symframe demo: a later `symframe demo -o` may replace what it wrote here.\n",
+    )
+    .with_context(|| format!("{}: cannot write", marker.display()))?;
     let t0 = Instant::now();
     let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
     let scene = Scene::sphere(args.size, TangentField::Circular);
@@ -182,6 +192,53 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         viewer.path.display()
     );
     say!("done in {:.1} s", t0.elapsed().as_secs_f64());
+    Ok(())
+}
+
+/// The file that marks a folder as the demo's: a later demo may replace what it wrote there.
+const MARKER: &str = ".symframe-demo";
+
+/// What the demo writes into its folder.
+const OUTPUTS: [&str; 6] = [
+    "dataset",
+    "estimate",
+    "fit",
+    "relit",
+    "relit-edited",
+    "region.png",
+];
+
+/// Whether the demo may write into `dir`: yes if `dir` holds the [`MARKER`] of an earlier demo,
+/// or none of the [`OUTPUTS`] is there but as an empty folder (or one holding only a job's lock
+/// file); else an error naming the first one in the way (a user's folder or file, which must
+/// not be replaced), unless `force`. The rule of `symframe synth` and its `.symframe-synth`.
+fn check_target(dir: &Path, force: bool) -> Result<()> {
+    if force || dir.join(MARKER).is_file() {
+        return Ok(());
+    }
+    if dir.exists() && !dir.is_dir() {
+        bail!("{}: exists and is not a folder", dir.display());
+    }
+    for name in OUTPUTS {
+        let p = dir.join(name);
+        let in_the_way = match std::fs::symlink_metadata(&p) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => false,
+            Err(e) => return Err(e).with_context(|| format!("{}: cannot read", p.display())),
+            Ok(m) if m.is_dir() => std::fs::read_dir(&p)
+                .with_context(|| format!("{}: cannot read", p.display()))?
+                .flatten()
+                .any(|e| e.file_name() != symframe_io::OUTPUT_LOCK_FILE),
+            Ok(_) => true,
+        };
+        if in_the_way {
+            bail!(
+                "{}: not written by symframe demo (no {MARKER} in {}) and not empty: refusing \
+                 to replace it; give a new or empty folder, or --force",
+                p.display(),
+                dir.display()
+            );
+        }
+    }
     Ok(())
 }
 

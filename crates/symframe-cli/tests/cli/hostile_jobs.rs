@@ -2,7 +2,56 @@
 //! circles that do not fit the image, exports that fail half-way or would replace their own
 //! inputs, and `--quiet` on every subcommand.
 
-use crate::common::{stderr, symframe};
+use std::fs;
+use std::path::Path;
+
+use crate::common::{assert_one_line_error, ok, s, stderr, symframe};
+
+/// `demo -o DIR` writes `DIR/dataset`, `DIR/estimate`, `DIR/fit`, `DIR/relit*` and
+/// `DIR/region.png`: a non-empty one of them that an earlier demo did not write is refused
+/// (a user's `DIR/dataset/lights.lp` is not replaced), unless `--force`; a folder the demo
+/// wrote is written again.
+#[test]
+fn demo_refuses_folders_it_did_not_write() {
+    let tmp = tempfile::tempdir().unwrap();
+    let small = ["--size", "16", "--lights", "16", "--quiet"];
+    let demo = |dir: &Path, extra: &[&str]| {
+        symframe(&[&["demo", "-o", s(dir)], &small[..], extra].concat())
+    };
+    // A user's dataset folder.
+    let dir = tmp.path().join("a");
+    fs::create_dir_all(dir.join("dataset")).unwrap();
+    fs::write(dir.join("dataset/lights.lp"), "1\nmine.png 0 0 1\n").unwrap();
+    let o = demo(&dir, &[]);
+    assert_one_line_error(&o, "dataset");
+    assert!(stderr(&o).contains("--force"), "{}", stderr(&o));
+    assert_eq!(
+        fs::read_to_string(dir.join("dataset/lights.lp")).unwrap(),
+        "1\nmine.png 0 0 1\n"
+    );
+    assert!(!dir.join("estimate").exists() && !dir.join("region.png").exists());
+    // A user's estimate folder, and a user's region.png.
+    let dir = tmp.path().join("b");
+    fs::create_dir_all(dir.join("estimate")).unwrap();
+    fs::write(dir.join("estimate/notes.txt"), "mine").unwrap();
+    assert_one_line_error(&demo(&dir, &[]), "estimate");
+    assert!(!dir.join("dataset").exists());
+    let dir = tmp.path().join("c");
+    fs::create_dir_all(&dir).unwrap();
+    fs::write(dir.join("region.png"), "mine").unwrap();
+    assert_one_line_error(&demo(&dir, &[]), "region.png");
+    assert_eq!(fs::read_to_string(dir.join("region.png")).unwrap(), "mine");
+    // --force writes anyway.
+    ok(&demo(&tmp.path().join("a"), &["--force"]));
+    assert!(fs::read_to_string(tmp.path().join("a/dataset/lights.lp"))
+        .unwrap()
+        .starts_with("16\n"));
+    // A fresh folder, then the same folder again: the demo's own.
+    let dir = tmp.path().join("d");
+    ok(&demo(&dir, &[]));
+    ok(&demo(&dir, &[]));
+    assert!(dir.join("estimate/normals.npy").is_file());
+}
 
 /// `--quiet` leaves nothing on stdout or stderr of any subcommand run on good inputs (only
 /// errors and warnings are printed with it, and these inputs give none).
