@@ -567,6 +567,9 @@ pub fn estimate(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcom
         warning: &warn,
         checkpoint: ctl.checkpoint,
     };
+    for w in out.warnings() {
+        warn(w);
+    }
     let result = run(config, &counted, &out, &warnings);
     if let Err(e) = &result {
         if !e.is::<Interrupted>() {
@@ -625,6 +628,9 @@ fn run(
     let mut ds: Dataset = symframe_io::open_dataset(&config.input)?;
     // The mask in force is checked with the cache, before the images are decoded.
     ds.mask = config.mask.clone().or(ds.mask);
+    out.guard_inputs(dataset_files(&ds), &|n| {
+        ESTIMATE_FILES.contains(&n) || n == MANIFEST
+    })?;
     let plan = Plan::new(&config.method, &ds)?;
     let rig_s = t0.elapsed().as_secs_f64();
 
@@ -822,6 +828,30 @@ pub(crate) fn assemble(
     let mut maps = EstimateMaps::empty(grid.width, grid.height);
     read_tiles(grid, job, path_of, |p, r: PixelRecord| maps.put(p, &r))?;
     Ok(maps)
+}
+
+/// The files of an estimate's output set (`write_estimate_outputs`), the report last.
+pub(crate) const ESTIMATE_FILES: [&str; 13] = [
+    "normals.npy",
+    "tangents.npy",
+    "confidence.npy",
+    "anisotropy.npy",
+    "source.npy",
+    "normals.exr",
+    "tangents.exr",
+    "normals.png",
+    "tangents.png",
+    "confidence.png",
+    "source.png",
+    "tangents_gltf.png",
+    "report.json",
+];
+
+/// Every file a dataset reads: its light file (or folder), images and mask.
+pub(crate) fn dataset_files(ds: &Dataset) -> impl Iterator<Item = &Path> {
+    std::iter::once(ds.source.as_path())
+        .chain(ds.images.iter().map(PathBuf::as_path))
+        .chain(ds.mask.iter().map(PathBuf::as_path))
 }
 
 /// Writes the maps (`.npy`, `.exr`), pictures, the source map and `report.json` (the value

@@ -266,6 +266,9 @@ pub fn fit(config: &FitConfig, ctl: &Control) -> Result<FitOutcome> {
     }
     let out = OutputDir::lock(&config.output)?;
     (ctl.checkpoint)(Checkpoint::OutputLocked);
+    for w in out.warnings() {
+        ctl.warn(w);
+    }
     let result = run(config, ctl, &out);
     if let Err(e) = &result {
         if !e.is::<Interrupted>() {
@@ -280,6 +283,11 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
     let mut ds: Dataset = symframe_io::open_dataset(&config.input)?;
     // The mask in force is checked with the cache, before the images are decoded.
     ds.mask = config.mask.clone().or(ds.mask);
+    let frames = ["normals.npy", "tangents.npy", "report.json"].map(|n| config.frames.join(n));
+    out.guard_inputs(
+        crate::estimate::dataset_files(&ds).chain(frames.iter().map(PathBuf::as_path)),
+        &fit_writes,
+    )?;
     let params = FitParams {
         holdout: holdout_lights(ds.lights.len(), config.holdout)
             .with_context(|| format!("holding out {} lights", config.holdout))?,
@@ -467,6 +475,12 @@ fn fit_owned(name: &str) -> bool {
         || name == "viewer.html"
         || WARD_MAPS.contains(&stem)
         || GLTF_MAPS.contains(&stem)
+}
+
+/// Whether a fit writes (or removes) the file `name` of its output folder.
+fn fit_writes(name: &str) -> bool {
+    let stem = name.split('.').next().unwrap_or(name);
+    fit_owned(name) || name == "fit.json" || ["normals", "tangents", "residual"].contains(&stem)
 }
 
 /// Writes every output file as one output set (staged, then switched in, `fit.json` last).

@@ -77,6 +77,9 @@ pub use estimate::{
 };
 pub use fit::{fit, FitConfig, FitLights, FitOutcome, FitReport, FitTimings};
 pub use merge::{merge, MergeOutcome, ShardManifest, MANIFEST};
+/// The parsers of files a hostile user can plant, for the fuzz targets (`fuzz/`).
+#[cfg(feature = "fuzzing")]
+pub use outdir::check_switch_plan;
 pub use outdir::{check_output_set, OutputDir, OutputSet, Staging, LOCK_FILE};
 pub use relight::{
     read_fit_maps, read_gltf_maps, read_ward_maps, relight, FittedMaps, RelightConfig,

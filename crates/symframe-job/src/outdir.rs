@@ -87,20 +87,32 @@ impl Drop for Staging {
 
 /// The lock file of an output folder, held by the job writing into it.
 pub const LOCK_FILE: &str = symframe_io::OUTPUT_LOCK_FILE;
-/// Prefix of the staging folders inside an output folder (`.symframe-staging-PID`).
+/// Prefix of the staging folders inside an output folder (`.symframe-staging-PID-TOKEN`).
 const STAGING_PREFIX: &str = ".symframe-staging-";
 /// Inside a staging folder: the switch plan, written once every file of the new set is staged.
 const READY: &str = ".ready";
+/// The most bytes a lock file or a switch plan is read to (a forged one may be a device).
+const MAX_PLAN_BYTES: u64 = 16 << 20;
 
 /// An output folder locked for one job: a second job into the same folder is refused at once
 /// (`OUT is in use by process N`) while this one runs. Taking the lock also finishes what a
 /// killed job left: a staged output set that was complete is switched in, an incomplete one
-/// removed. Remembers which of the folder and its working subfolders this job created, so a
-/// failed job removes only those, and only when they hold nothing a rerun could resume from.
+/// removed, and only when the staging folder carries the token of the job that held the lock
+/// before (so a planted folder or plan is left alone, with a warning). Nothing inside the
+/// folder is followed through a symbolic link: the lock file, the tile and cache folders and
+/// staging folders that are links are refused or left alone. Remembers which of the folder and
+/// its working subfolders this job created, so a failed job removes only those, and only when
+/// they hold nothing a rerun could resume from.
 pub struct OutputDir {
     dir: PathBuf,
     created: bool,
     existed: Vec<String>,
+    /// This job's lock token: names its staging folders and signs its switch plans.
+    token: u64,
+    /// What the recovery left alone (planted or foreign staging folders), for the job's report.
+    warnings: Vec<String>,
+    /// The run's input files (canonical paths), which no output may replace.
+    inputs: std::sync::Mutex<Vec<PathBuf>>,
     _file: fs::File,
 }
 
@@ -114,11 +126,12 @@ impl OutputDir {
         fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create folder", dir.display()))?;
         let path = dir.join(LOCK_FILE);
-        let file = match lock_file(&path) {
-            Ok(Some(f)) => f,
-            Ok(None) => {
-                let holder = fs::read_to_string(&path).unwrap_or_default();
-                let holder = holder.trim();
+        let token = new_token();
+        let (file, previous) = match lock_file(&path, token) {
+            Ok(Locked::Held(f, previous)) => (f, previous),
+            Ok(Locked::Busy) => {
+                let holder = read_bounded(&path).unwrap_or_default();
+                let holder = holder.split_whitespace().next().unwrap_or_default();
                 if holder.is_empty() {
                     anyhow::bail!("{} is in use by another process", dir.display());
                 }
@@ -131,18 +144,33 @@ impl OutputDir {
                 return Err(e);
             }
         };
-        let existed = [crate::TILES_DIR, crate::CACHE_DIR]
-            .iter()
-            .filter(|n| dir.join(n).exists())
-            .map(|n| n.to_string())
-            .collect();
-        let out = Self {
+        let mut existed = Vec::new();
+        for name in [crate::TILES_DIR, crate::CACHE_DIR] {
+            let p = dir.join(name);
+            match fs::symlink_metadata(&p) {
+                Ok(m) if m.file_type().is_symlink() => anyhow::bail!(
+                    "{}: is a symbolic link; symframe makes none inside its output folder and \
+                     follows none there: remove it (give --cache DIR to keep the cache elsewhere)",
+                    p.display()
+                ),
+                Ok(m) if !m.is_dir() => anyhow::bail!(
+                    "{}: is not a folder; symframe keeps its working files there: remove it",
+                    p.display()
+                ),
+                Ok(_) => existed.push(name.to_string()),
+                Err(_) => {}
+            }
+        }
+        let mut out = Self {
             dir: dir.to_path_buf(),
             created,
             existed,
+            token,
+            warnings: Vec::new(),
+            inputs: std::sync::Mutex::new(Vec::new()),
             _file: file,
         };
-        out.recover()?;
+        out.recover(previous)?;
         Ok(out)
     }
 
@@ -151,29 +179,101 @@ impl OutputDir {
         &self.dir
     }
 
-    /// Staging folders left by killed jobs (no other job can be writing: we hold the lock):
-    /// a complete one is switched in, an incomplete one removed.
-    fn recover(&self) -> Result<()> {
-        for e in fs::read_dir(&self.dir)
+    /// What taking the lock left alone and the user should hear of (a staging folder or plan
+    /// that no earlier holder of the lock wrote), one line each.
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
+    }
+
+    /// Records the run's input files (`inputs`: paths as given; those that do not exist are
+    /// skipped) so that no output replaces one of them, and refuses at once when a file in the
+    /// folder that the job may write or remove (`writes(name)`) is one of them: a clear
+    /// error instead of an input image overwritten by a map of the same name.
+    pub fn guard_inputs<P: AsRef<Path>>(
+        &self,
+        inputs: impl IntoIterator<Item = P>,
+        writes: &dyn Fn(&str) -> bool,
+    ) -> Result<()> {
+        let mut guarded = self.inputs.lock().unwrap_or_else(|e| e.into_inner());
+        guarded.extend(
+            inputs
+                .into_iter()
+                .filter_map(|p| p.as_ref().canonicalize().ok()),
+        );
+        guarded.sort();
+        guarded.dedup();
+        drop(guarded);
+        let names: Vec<String> = fs::read_dir(&self.dir)
             .with_context(|| format!("{}: cannot read folder", self.dir.display()))?
             .flatten()
-        {
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| writes(n))
+            .collect();
+        self.refuse_inputs(&names)
+    }
+
+    /// An error naming the first of `names` (files of this folder) that is an input of the run.
+    fn refuse_inputs(&self, names: &[String]) -> Result<()> {
+        let guarded = self.inputs.lock().unwrap_or_else(|e| e.into_inner());
+        if guarded.is_empty() {
+            return Ok(());
+        }
+        for n in names {
+            let p = self.dir.join(n);
+            if let Ok(c) = p.canonicalize() {
+                if guarded.binary_search(&c).is_ok() {
+                    anyhow::bail!(
+                        "{}: is an input of this run, and the output would replace it; write \
+                         the results into another folder (-o)",
+                        p.display()
+                    );
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Staging folders left by killed jobs (no other job can be writing: we hold the lock).
+    /// Only a folder named with the token of the lock's previous holder (`previous`, read from
+    /// the lock file it left) is this tool's: a complete one (a verified plan) is switched in,
+    /// an incomplete one removed. Anything else named like a staging folder is left alone and
+    /// reported.
+    fn recover(&mut self, previous: Option<u64>) -> Result<()> {
+        let entries: Vec<_> = fs::read_dir(&self.dir)
+            .with_context(|| format!("{}: cannot read folder", self.dir.display()))?
+            .flatten()
+            .collect();
+        for e in entries {
             let name = e.file_name().to_string_lossy().into_owned();
-            if !name.starts_with(STAGING_PREFIX) || !e.path().is_dir() {
+            let Some(rest) = name.strip_prefix(STAGING_PREFIX) else {
+                continue;
+            };
+            let staging = e.path();
+            let ours = staging_token(rest).is_some_and(|t| Some(t) == previous);
+            let real_dir = fs::symlink_metadata(&staging).is_ok_and(|m| m.is_dir());
+            if !ours || !real_dir {
+                self.warnings.push(format!(
+                    "{}: left alone: not a staging folder of the job that held this folder's \
+                     lock before",
+                    staging.display()
+                ));
                 continue;
             }
-            let staging = e.path();
-            match fs::read_to_string(staging.join(READY)) {
-                Ok(text) => {
-                    let plan: Plan = serde_json::from_str(&text).with_context(|| {
-                        format!("{}: bad switch plan", staging.join(READY).display())
-                    })?;
-                    plan.apply(&staging, &self.dir, &|_| {})?;
+            let ready = staging.join(READY);
+            if fs::symlink_metadata(&ready).is_ok() {
+                let plan = read_bounded(&ready)
+                    .map_err(anyhow::Error::from)
+                    .and_then(|text| Plan::parse(&text, previous.unwrap_or(0)))
+                    .with_context(|| format!("{}: bad switch plan", ready.display()));
+                match plan {
+                    Ok(plan) => plan.apply(&staging, &self.dir, &|_| {})?,
+                    Err(err) => {
+                        self.warnings.push(format!("{err:#}; left alone"));
+                    }
                 }
-                Err(_) => {
-                    fs::remove_dir_all(&staging)
-                        .with_context(|| format!("{}: cannot remove", staging.display()))?;
-                }
+            } else {
+                fs::remove_dir_all(&staging)
+                    .with_context(|| format!("{}: cannot remove", staging.display()))?;
             }
         }
         Ok(())
@@ -185,13 +285,13 @@ impl OutputDir {
     pub fn discard_unfinished(self) {
         let tiles = self.dir.join(crate::TILES_DIR);
         if !self.existed.iter().any(|n| n == crate::TILES_DIR) && !holds_tile_results(&tiles) {
-            let _ = fs::remove_dir_all(&tiles);
+            remove_real_dir(&tiles);
         }
         let cache = self.dir.join(crate::CACHE_DIR);
         if !self.existed.iter().any(|n| n == crate::CACHE_DIR)
             && !symframe_io::cache_holds_work(&cache)
         {
-            let _ = fs::remove_dir_all(&cache);
+            remove_real_dir(&cache);
         }
         let (dir, created) = (self.dir.clone(), self.created);
         drop(self);
@@ -199,6 +299,79 @@ impl OutputDir {
             let _ = fs::remove_dir(&dir);
         }
     }
+}
+
+/// Removes `dir` with its contents when it is a real folder (a link is left alone).
+fn remove_real_dir(dir: &Path) {
+    if fs::symlink_metadata(dir).is_ok_and(|m| m.is_dir()) {
+        let _ = fs::remove_dir_all(dir);
+    }
+}
+
+/// The token in a staging folder's name after the prefix: `PID-TOKEN` (16 hex digits).
+fn staging_token(rest: &str) -> Option<u64> {
+    let (pid, token) = rest.split_once('-')?;
+    let digits = |s: &str, hex: bool| {
+        !s.is_empty()
+            && s.bytes().all(|b| {
+                if hex {
+                    b.is_ascii_hexdigit()
+                } else {
+                    b.is_ascii_digit()
+                }
+            })
+    };
+    if !digits(pid, false) || token.len() != 16 || !digits(token, true) {
+        return None;
+    }
+    u64::from_str_radix(token, 16).ok().filter(|&t| t != 0)
+}
+
+/// A fresh lock token: 64 random bits (from the standard library's per-process random hash
+/// keys, mixed with the process id and the time), never zero.
+fn new_token() -> u64 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+    h.write_u32(std::process::id());
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap_or_default();
+    h.write_u128(now.as_nanos());
+    h.finish().max(1)
+}
+
+/// Reads a small file of this tool's (a lock file, a plan) without following a link and at
+/// most [`MAX_PLAN_BYTES`]: a forged one that is a link, a device or huge is an error.
+fn read_bounded(path: &Path) -> std::io::Result<String> {
+    use std::io::Read;
+    let meta = fs::symlink_metadata(path)?;
+    if !meta.is_file() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            "not a regular file (symframe writes only regular files there)",
+        ));
+    }
+    let mut text = String::new();
+    open_no_follow(path, false)?
+        .take(MAX_PLAN_BYTES)
+        .read_to_string(&mut text)?;
+    Ok(text)
+}
+
+/// Opens `path` for reading (and writing, creating it if missing, when `write`) without
+/// following a symbolic link at its last component.
+fn open_no_follow(path: &Path, write: bool) -> std::io::Result<fs::File> {
+    let mut o = fs::OpenOptions::new();
+    o.read(true);
+    if write {
+        o.write(true).create(true).truncate(false);
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        o.custom_flags(libc::O_NOFOLLOW);
+    }
+    o.open(path)
 }
 
 impl Drop for OutputDir {
@@ -219,83 +392,166 @@ fn holds_tile_results(dir: &Path) -> bool {
     })
 }
 
-/// Takes an exclusive `flock` on `path` without waiting: `None` when another process holds
-/// it. The holder's process id is written into the file.
+/// The outcome of trying to take the lock.
+enum Locked {
+    /// Held, with the token the previous holder left in the file (a job that was killed).
+    Held(fs::File, Option<u64>),
+    /// Another process holds it.
+    Busy,
+}
+
+/// Takes an exclusive `flock` on `path` without waiting. The lock file must be a regular file
+/// with one link (a symbolic or hard link planted there is refused, never truncated). The
+/// holder writes `PID TOKEN` into it; the token the last holder left there is returned.
 #[cfg(unix)]
-fn lock_file(path: &Path) -> Result<Option<fs::File>> {
-    use std::io::Write;
+fn lock_file(path: &Path, token: u64) -> Result<Locked> {
+    use std::io::{Read, Seek, Write};
     use std::os::unix::fs::MetadataExt;
     use std::os::unix::io::AsRawFd;
     loop {
-        let mut file = fs::OpenOptions::new()
-            .create(true)
-            .truncate(false)
-            .read(true)
-            .write(true)
-            .open(path)
+        if let Ok(m) = fs::symlink_metadata(path) {
+            if m.file_type().is_symlink() {
+                anyhow::bail!(
+                    "{}: is a symbolic link; symframe makes none there and follows none: \
+                     remove it",
+                    path.display()
+                );
+            }
+        }
+        let mut file = open_no_follow(path, true)
             .with_context(|| format!("{}: cannot create lock file", path.display()))?;
+        let held = file.metadata()?;
+        if !held.is_file() || held.nlink() != 1 {
+            anyhow::bail!(
+                "{}: is not a lock file of symframe's (not a regular file, or linked elsewhere); \
+                 remove it",
+                path.display()
+            );
+        }
         // SAFETY: flock on a file descriptor we own.
         if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
             let e = std::io::Error::last_os_error();
             match e.kind() {
                 std::io::ErrorKind::Interrupted => continue,
-                std::io::ErrorKind::WouldBlock => return Ok(None),
+                std::io::ErrorKind::WouldBlock => return Ok(Locked::Busy),
                 _ => return Err(e).with_context(|| format!("{}: cannot lock", path.display())),
             }
         }
         // The holder removes the file before releasing it: the lock counts only if the file
         // we hold is still the one at the path.
-        let held = file.metadata()?;
-        match fs::metadata(path) {
+        match fs::symlink_metadata(path) {
             Ok(now) if now.ino() == held.ino() && now.dev() == held.dev() => {}
             _ => continue,
         }
+        let mut before = String::new();
+        let _ = (&mut file).take(4096).read_to_string(&mut before);
+        let previous = before
+            .split_whitespace()
+            .nth(1)
+            .and_then(|t| u64::from_str_radix(t, 16).ok());
         file.set_len(0)?;
-        write!(file, "{}", std::process::id())
+        file.rewind()?;
+        write!(file, "{} {token:016x}", std::process::id())
             .with_context(|| format!("{}: cannot write", path.display()))?;
-        return Ok(Some(file));
+        return Ok(Locked::Held(file, previous));
     }
 }
 
 #[cfg(not(unix))]
-fn lock_file(path: &Path) -> Result<Option<fs::File>> {
-    Ok(Some(
-        fs::OpenOptions::new()
-            .create(true)
-            .truncate(true)
-            .write(true)
-            .open(path)
-            .with_context(|| format!("{}: cannot create lock file", path.display()))?,
-    ))
+fn lock_file(path: &Path, token: u64) -> Result<Locked> {
+    use std::io::Write;
+    let mut file = fs::OpenOptions::new()
+        .create(true)
+        .truncate(true)
+        .write(true)
+        .open(path)
+        .with_context(|| format!("{}: cannot create lock file", path.display()))?;
+    write!(file, "{} {token:016x}", std::process::id())
+        .with_context(|| format!("{}: cannot write", path.display()))?;
+    Ok(Locked::Held(file, None))
 }
 
 /// How a staged output set is switched in: the files in order (the report last) and the files
-/// of an earlier set that the new one does not have.
+/// of an earlier set that the new one does not have. Signed with the writer's lock token and
+/// a checksum over both lists, so a plan is carried out only by the next holder of the same
+/// folder's lock, and only as written.
 #[derive(Debug, serde::Serialize, serde::Deserialize)]
 struct Plan {
     files: Vec<String>,
     remove: Vec<String>,
+    /// The lock token of the job that wrote the plan (16 hex digits).
+    token: String,
+    /// XXH3-64 over the token and both lists (16 hex digits).
+    checksum: String,
 }
 
 impl Plan {
+    /// A signed plan of the job holding `token`.
+    fn new(files: Vec<String>, remove: Vec<String>, token: u64) -> Self {
+        let token = format!("{token:016x}");
+        let checksum = format!("{:016x}", plan_checksum(&token, &files, &remove));
+        Self {
+            files,
+            remove,
+            token,
+            checksum,
+        }
+    }
+
+    /// Parses a plan and checks it: written by the lock holder whose token is `token`, its
+    /// checksum right, and every name a plain file name (no folder part, no `..`, not hidden
+    /// but for this tool's own names), so that applying it touches only files directly in the
+    /// output folder.
+    fn parse(text: &str, token: u64) -> Result<Self> {
+        let plan: Plan = serde_json::from_str(text).context("not a switch plan")?;
+        if plan.token != format!("{token:016x}") || token == 0 {
+            anyhow::bail!("not written by the job that held this folder's lock");
+        }
+        if plan.checksum
+            != format!(
+                "{:016x}",
+                plan_checksum(&plan.token, &plan.files, &plan.remove)
+            )
+        {
+            anyhow::bail!("checksum mismatch");
+        }
+        for n in plan.files.iter().chain(&plan.remove) {
+            if !plain_name(n) {
+                anyhow::bail!("{n:?} is not a plain file name");
+            }
+        }
+        Ok(plan)
+    }
+
     /// Moves the staged files still in `staging` into `out`, removes the earlier set's extra
     /// files before the report (last) goes in, then removes the staging folder. Idempotent: a
-    /// killed switch is finished by applying the plan again.
+    /// killed switch is finished by applying the plan again. Only plain names, only regular
+    /// files are moved; a name in `out` that is a folder is never replaced or removed, and a
+    /// link there is replaced or removed itself (never what it points to).
     fn apply(&self, staging: &Path, out: &Path, after_move: &dyn Fn(usize)) -> Result<()> {
         let n = self.files.len();
         for (i, name) in self.files.iter().enumerate() {
+            if !plain_name(name) {
+                anyhow::bail!("{}: {name:?} is not a plain file name", staging.display());
+            }
             if i + 1 == n {
-                for r in &self.remove {
+                for r in self.remove.iter().filter(|r| plain_name(r)) {
                     let p = out.join(r);
-                    if p.is_file() {
+                    if fs::symlink_metadata(&p).is_ok_and(|m| !m.is_dir()) {
                         fs::remove_file(&p)
                             .with_context(|| format!("{}: cannot remove", p.display()))?;
                     }
                 }
             }
             let from = staging.join(name);
-            if from.exists() {
+            if fs::symlink_metadata(&from).is_ok_and(|m| m.is_file()) {
                 let dest = out.join(name);
+                if fs::symlink_metadata(&dest).is_ok_and(|m| m.is_dir()) {
+                    anyhow::bail!(
+                        "{}: is a folder; symframe replaces only its own files there",
+                        dest.display()
+                    );
+                }
                 fs::rename(&from, &dest)
                     .with_context(|| format!("{}: cannot move into place", dest.display()))?;
                 after_move(i + 1);
@@ -303,6 +559,40 @@ impl Plan {
         }
         fs::remove_dir_all(staging).with_context(|| format!("{}: cannot remove", staging.display()))
     }
+}
+
+/// The checksum a plan carries.
+fn plan_checksum(token: &str, files: &[String], remove: &[String]) -> u64 {
+    let mut f = symframe_io::fingerprint::Fingerprint::new();
+    f.str("symframe switch plan")
+        .str(token)
+        .u64(files.len() as u64);
+    for n in files {
+        f.str(n);
+    }
+    f.u64(remove.len() as u64);
+    for n in remove {
+        f.str(n);
+    }
+    f.finish()
+}
+
+/// Whether `name` is a file name of this folder that a plan may name: one component, not
+/// `.`/`..`, no separator or NUL.
+fn plain_name(name: &str) -> bool {
+    !name.is_empty()
+        && name != "."
+        && name != ".."
+        && !name.contains(['/', '\\', '\0'])
+        && !name.contains(':')
+        && Path::new(name).components().count() == 1
+}
+
+/// Parses and checks a switch plan as the recovery does (for the fuzz target): `Ok` only for
+/// a plan signed with `token` whose names are all plain.
+#[cfg(any(test, feature = "fuzzing"))]
+pub fn check_switch_plan(text: &str, token: u64) -> Result<(usize, usize)> {
+    Plan::parse(text, token).map(|p| (p.files.len(), p.remove.len()))
 }
 
 /// The new output set of a job, written into a staging folder inside the (locked) output
@@ -319,15 +609,16 @@ pub struct OutputSet<'a> {
 }
 
 impl<'a> OutputSet<'a> {
-    /// A fresh staging folder in `out`.
+    /// A fresh staging folder in `out`, named with the lock's token.
     pub fn new(out: &'a OutputDir, owned: fn(&str) -> bool) -> Result<Self> {
-        let staging = out
-            .path()
-            .join(format!("{STAGING_PREFIX}{}", std::process::id()));
-        if staging.exists() {
-            fs::remove_dir_all(&staging)
-                .with_context(|| format!("{}: cannot remove", staging.display()))?;
-        }
+        let staging = out.path().join(format!(
+            "{STAGING_PREFIX}{}-{:016x}",
+            std::process::id(),
+            out.token
+        ));
+        // A folder of this name can only be this job's own (the token is fresh): one left by
+        // an earlier set of the same job goes.
+        remove_real_dir(&staging);
         fs::create_dir(&staging)
             .with_context(|| format!("{}: cannot create folder", staging.display()))?;
         Ok(Self {
@@ -387,7 +678,7 @@ impl<'a> OutputSet<'a> {
         // Folders are never replaced: refuse before anything moves.
         for n in &names {
             let dest = self.out.path().join(n);
-            if dest.is_dir() {
+            if fs::symlink_metadata(&dest).is_ok_and(|m| m.is_dir()) {
                 anyhow::bail!(
                     "{}: is a folder; symframe replaces only its own files there",
                     dest.display()
@@ -400,10 +691,10 @@ impl<'a> OutputSet<'a> {
             .map(|e| e.file_name().to_string_lossy().into_owned())
             .filter(|n| (self.owned)(n) && !names.contains(n))
             .collect();
-        let plan = Plan {
-            files: names,
-            remove,
-        };
+        // No input of the run is replaced or removed.
+        self.out.refuse_inputs(&names)?;
+        self.out.refuse_inputs(&remove)?;
+        let plan = Plan::new(names, remove, self.out.token);
         let tmp = self.staging.join(".ready.tmp");
         fs::write(&tmp, serde_json::to_string(&plan)?)
             .with_context(|| format!("{}: cannot write", tmp.display()))?;
@@ -418,7 +709,7 @@ impl<'a> OutputSet<'a> {
 impl Drop for OutputSet<'_> {
     fn drop(&mut self) {
         if !self.planned {
-            let _ = fs::remove_dir_all(&self.staging);
+            remove_real_dir(&self.staging);
         }
     }
 }
@@ -447,4 +738,65 @@ pub fn check_output_set(dir: &Path, report: &str) -> Result<String> {
         }
     }
     Ok(id)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_signed_plan_naming_a_path_outside_the_folder_is_refused() {
+        let token = 0x1234_5678_9abc_def0;
+        let good = Plan::new(
+            vec!["normals.npy".into(), "report.json".into()],
+            vec![],
+            token,
+        );
+        let text = serde_json::to_string(&good).unwrap();
+        assert_eq!(check_switch_plan(&text, token).unwrap(), (2, 0));
+        assert!(
+            check_switch_plan(&text, token + 1).is_err(),
+            "another holder's plan"
+        );
+        assert!(check_switch_plan(&text, 0).is_err(), "no holder");
+        for bad in [
+            "../.bashrc",
+            "/etc/passwd",
+            "a/b",
+            "..",
+            ".",
+            "",
+            "c:x",
+            "a\\b",
+        ] {
+            let forged = Plan::new(vec![bad.into()], vec![], token);
+            let text = serde_json::to_string(&forged).unwrap();
+            assert!(check_switch_plan(&text, token).is_err(), "{bad:?} in files");
+            let forged = Plan::new(vec!["report.json".into()], vec![bad.into()], token);
+            let text = serde_json::to_string(&forged).unwrap();
+            assert!(
+                check_switch_plan(&text, token).is_err(),
+                "{bad:?} in remove"
+            );
+        }
+        // A list changed after signing.
+        let mut changed = good;
+        changed.remove.push("kd.npy".into());
+        let text = serde_json::to_string(&changed).unwrap();
+        assert!(check_switch_plan(&text, token).is_err());
+    }
+
+    #[test]
+    fn staging_folder_names_carry_a_token() {
+        assert_eq!(staging_token("12-00000000000000ff"), Some(255));
+        for bad in [
+            "12",
+            "notes",
+            "12-ff",
+            "x-00000000000000ff",
+            "12-0000000000000000",
+        ] {
+            assert_eq!(staging_token(bad), None, "{bad}");
+        }
+    }
 }

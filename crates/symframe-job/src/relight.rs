@@ -249,15 +249,20 @@ pub fn relight(config: &RelightConfig) -> Result<RelightOutcome> {
     };
 
     let out = OutputDir::lock(&config.output)?;
-    let result = write_relit(
-        config,
-        &out,
-        (w, h),
-        &relighter,
-        &lights,
-        &edits,
-        heights.as_deref(),
-    );
+    let inputs = config.region.iter().chain(&config.shadows);
+    let result = out
+        .guard_inputs(inputs, &|n| relight_owned(n) || n == "relight.json")
+        .and_then(|()| {
+            write_relit(
+                config,
+                &out,
+                (w, h),
+                &relighter,
+                &lights,
+                &edits,
+                heights.as_deref(),
+            )
+        });
     if result.is_err() {
         out.discard_unfinished();
     }

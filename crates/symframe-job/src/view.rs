@@ -121,6 +121,7 @@ struct EstimateMaps {
 /// Writes the viewer of a fit: see the module documentation. Errors name the file at fault
 /// (a fit map missing or of the wrong size, an estimate map of the wrong size, the output).
 pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
+    check_replaceable(&config.output)?;
     let fitted = read_fit_maps(&config.fit_dir)?;
     let (w, h) = fitted.size();
     let relighter = fitted
@@ -419,12 +420,41 @@ fn render_page(title: &str, data: &PageData) -> Result<String> {
     Ok(out)
 }
 
+/// The first line of the page after the doctype: how a page this tool wrote is told apart.
+const PAGE_MARK: &str = "<!-- symframe viewer:";
+
+/// Refuses `path` as the page's destination unless it is missing or a viewer page written
+/// by this tool: `view -o` never replaces a fit's map or any other file it did not write.
+fn check_replaceable(path: &Path) -> Result<()> {
+    use std::io::Read;
+    let Ok(meta) = std::fs::symlink_metadata(path) else {
+        return Ok(());
+    };
+    let mut head = Vec::new();
+    let ours = meta.is_file()
+        && std::fs::File::open(path)
+            .and_then(|f| f.take(256).read_to_end(&mut head))
+            .is_ok()
+        && String::from_utf8_lossy(&head)
+            .lines()
+            .take(2)
+            .any(|l| l.starts_with(PAGE_MARK));
+    if !ours {
+        bail!(
+            "{}: exists and is not a viewer page written by symframe view; refusing to replace              it (give another -o)",
+            path.display()
+        );
+    }
+    Ok(())
+}
+
 /// Writes `bytes` to `path` whole or not at all (a temporary file beside it, then renamed).
 fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
     if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent)
             .with_context(|| format!("{}: cannot create folder", parent.display()))?;
     }
+    check_replaceable(path)?;
     let name = path
         .file_name()
         .with_context(|| format!("{}: not a file name", path.display()))?;
@@ -433,7 +463,16 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
         name.to_string_lossy(),
         std::process::id()
     ));
-    let written = std::fs::write(&tmp, bytes)
+    // A file (or link) left at the temporary name goes; the new one is created, never opened
+    // through a link.
+    if std::fs::symlink_metadata(&tmp).is_ok_and(|m| !m.is_dir()) {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    let written = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)
+        .and_then(|mut f| std::io::Write::write_all(&mut f, bytes))
         .with_context(|| format!("{}: cannot write", tmp.display()))
         .and_then(|()| {
             std::fs::rename(&tmp, path).with_context(|| format!("{}: cannot write", path.display()))

@@ -68,7 +68,7 @@ fn a_second_job_into_a_busy_folder_is_refused_and_the_first_finishes() {
         .unwrap();
     let lock = out.join(symframe_job::LOCK_FILE);
     let t = Instant::now();
-    while fs::read_to_string(&lock).unwrap_or_default().trim() != first.id().to_string() {
+    while lock_holder(&lock) != first.id().to_string() {
         assert!(
             t.elapsed() < Duration::from_secs(20),
             "the first job never took the lock"
@@ -90,11 +90,17 @@ fn a_second_job_into_a_busy_folder_is_refused_and_the_first_finishes() {
     assert_eq!(report(&out)["method"], "woodham");
 }
 
+/// The process id in a lock file (`PID TOKEN`), empty when there is none.
+pub fn lock_holder(lock: &Path) -> String {
+    let text = fs::read_to_string(lock).unwrap_or_default();
+    text.split_whitespace().next().unwrap_or_default().to_string()
+}
+
 /// Waits until `child` holds the output lock of `dir` (its process id in the lock file).
-fn wait_for_lock(dir: &Path, child: &std::process::Child) {
+pub fn wait_for_lock(dir: &Path, child: &std::process::Child) {
     let lock = dir.join(symframe_job::LOCK_FILE);
     let t = Instant::now();
-    while fs::read_to_string(&lock).unwrap_or_default().trim() != child.id().to_string() {
+    while lock_holder(&lock) != child.id().to_string() {
         assert!(
             t.elapsed() < Duration::from_secs(20),
             "the job never took the lock"
@@ -255,8 +261,17 @@ fn a_job_killed_between_moves_is_finished_by_the_next_job_into_the_folder() {
     assert_eq!(report(&out)["method"], "symmetry");
     assert!(entries(&out, ".symframe-staging").is_empty());
 
-    // A staging folder of a job killed before its switch began is removed; the set stays.
-    let stray = out.join(".symframe-staging-4000000");
+    // A staging folder of a job killed before its switch began (named with the token that
+    // job left in the lock file) is removed; the set stays.
+    let mut held = estimate_cmd(&lp, &out, &[], &[("SYMFRAME_TEST_HOLD_LOCK_S", "20")])
+        .spawn()
+        .unwrap();
+    wait_for_lock(&out, &held);
+    held.kill().unwrap();
+    held.wait().unwrap();
+    let lock = fs::read_to_string(out.join(symframe_job::LOCK_FILE)).unwrap();
+    let token = lock.split_whitespace().nth(1).unwrap().to_string();
+    let stray = out.join(format!(".symframe-staging-{}-{token}", held.id()));
     fs::create_dir(&stray).unwrap();
     fs::write(stray.join("normals.npy"), b"half written").unwrap();
     let o = estimate(&lp, &out, &[]);

@@ -15,7 +15,7 @@ const SIZE: usize = 12;
 /// A fit folder of a `SIZE` sphere (one Ward material, the scene's frames) in `dir/fit`, with
 /// a `fit.json` naming the estimate folder `est` as given (relative, as a fit run from `dir`
 /// records it), and that estimate folder with confidence, anisotropy and source maps.
-fn fit_folder(dir: &Path) -> Scene {
+pub fn fit_folder(dir: &Path) -> Scene {
     let scene = Scene::sphere(SIZE, TangentField::Circular);
     let (fit, est) = (dir.join("fit"), dir.join("est"));
     fs::create_dir_all(&fit).unwrap();
