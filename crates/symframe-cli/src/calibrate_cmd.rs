@@ -2,7 +2,7 @@
 
 use anyhow::{bail, Result};
 use symframe_io::DecodeOptions;
-use symframe_job::calibrate::SphereNotFound;
+use symframe_job::calibrate::{CircleDoesNotFit, SphereNotFound};
 use symframe_job::{calibrate, CalibrateConfig, CalibrationReport, Control};
 
 use crate::cli::CalibrateArgs;
@@ -34,7 +34,11 @@ pub fn run(args: &CalibrateArgs) -> Result<CalibrationReport> {
     let report =
         calibrate(&config, &ctl).map_err(|e| match e.downcast_ref::<SphereNotFound>() {
             Some(nf) => anyhow::anyhow!("{nf}; give its circle with --sphere CX,CY,R"),
-            None => e,
+            None => match e.downcast_ref::<CircleDoesNotFit>() {
+                Some(c) if c.sphere == "matte" => anyhow::anyhow!("--matte-sphere: {c}"),
+                Some(c) => anyhow::anyhow!("--sphere: {c}"),
+                None => e,
+            },
         })?;
     if !crate::progress::chatty() {
         return Ok(report);

@@ -88,6 +88,32 @@ impl std::fmt::Display for SphereNotFound {
 
 impl std::error::Error for SphereNotFound {}
 
+/// A given circle (the mirror sphere's or the matte sphere's) does not fit the images.
+#[derive(Debug, Clone)]
+pub struct CircleDoesNotFit {
+    /// `mirror` or `matte`.
+    pub sphere: &'static str,
+    /// The circle.
+    pub circle: Circle,
+    /// The images' size.
+    pub size: (usize, usize),
+    /// Why not ([`Circle::check_fits`]).
+    pub reason: String,
+}
+
+impl std::fmt::Display for CircleDoesNotFit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let c = &self.circle;
+        write!(
+            f,
+            "the {} sphere's circle {},{},{} (CX,CY,R) does not fit the {}x{} image: {}",
+            self.sphere, c.cx, c.cy, c.r, self.size.0, self.size.1, self.reason
+        )
+    }
+}
+
+impl std::error::Error for CircleDoesNotFit {}
+
 /// Image file extensions read from a folder.
 const EXTENSIONS: &[&str] = &["exr", "png", "tif", "tiff", "hdr", "pfm", "jpg", "jpeg"];
 
@@ -376,6 +402,19 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
     let first = read_grey(&images[0], &opts, None)?;
     let (w, h) = (first.width, first.height);
     drop(first);
+    // Given circles, checked before anything is computed with them (a radius far beyond the
+    // image made the highlight search run without end).
+    for (sphere, circle) in [("mirror", config.sphere), ("matte", config.matte_sphere)] {
+        if let Some(c) = circle {
+            c.check_fits(w, h).map_err(|reason| CircleDoesNotFit {
+                sphere,
+                circle: c,
+                size: (w, h),
+                reason,
+            })?;
+        }
+    }
+
 
     // The sphere: given, or found in the mean image.
     let (circle, source, detection) = match config.sphere {

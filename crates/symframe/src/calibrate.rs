@@ -49,6 +49,51 @@ impl Circle {
         }
     }
 
+    /// Checks that the circle fits a `width x height` image: finite numbers, a positive radius
+    /// no larger than the image's diagonal, the centre inside the image and at least half of
+    /// the disc in the frame; else why not (the sentence after "does not fit the image").
+    pub fn check_fits(&self, width: usize, height: usize) -> Result<(), String> {
+        let (w, h) = (width as f64, height as f64);
+        let diagonal = w.hypot(h);
+        if !(self.cx.is_finite() && self.cy.is_finite() && self.r.is_finite() && self.r > 0.0) {
+            return Err("the centre and radius must be finite, the radius > 0".into());
+        }
+        if !((0.0..=w).contains(&self.cx) && (0.0..=h).contains(&self.cy)) {
+            return Err("its centre is outside the image".into());
+        }
+        if self.r > diagonal {
+            return Err(format!(
+                "its radius is larger than the image's diagonal ({diagonal:.1} px)"
+            ));
+        }
+        let inside = self.area_inside(w, h) / (std::f64::consts::PI * self.r * self.r);
+        if inside < 0.5 - 1e-3 {
+            return Err(format!(
+                "it is mostly outside the frame ({:.0}% of the disc inside)",
+                100.0 * inside
+            ));
+        }
+        Ok(())
+    }
+
+    /// The area of the disc inside the rectangle `[0, w] x [0, h]` (square pixels), by the
+    /// midpoint rule over 4096 columns of its chords.
+    fn area_inside(&self, w: f64, h: f64) -> f64 {
+        let (x0, x1) = ((self.cx - self.r).max(0.0), (self.cx + self.r).min(w));
+        if x1 <= x0 {
+            return 0.0;
+        }
+        let n = 4096;
+        let dx = (x1 - x0) / n as f64;
+        (0..n)
+            .map(|i| {
+                let x = x0 + (i as f64 + 0.5) * dx;
+                let s = (self.r * self.r - (x - self.cx).powi(2)).max(0.0).sqrt();
+                ((self.cy + s).min(h) - (self.cy - s).max(0.0)).max(0.0) * dx
+            })
+            .sum()
+    }
+
     /// The sphere's unit normal (camera frame: x right, y up, z toward the camera) seen at
     /// image point `(x, y)`, `None` outside the circle.
     pub fn normal_at(&self, x: f64, y: f64) -> Option<DVec3> {
@@ -585,6 +630,27 @@ mod tests {
             .clamp(-1.0, 1.0)
             .acos()
             .to_degrees()
+    }
+
+    #[test]
+    fn circles_are_checked_against_the_image() {
+        let c = |cx, cy, r| Circle { cx, cy, r };
+        // Inside, and with half of it in the frame at an edge.
+        assert_eq!(c(48.0, 16.0, 12.0).check_fits(96, 32), Ok(()));
+        assert_eq!(c(48.0, 0.0, 10.0).check_fits(96, 32), Ok(()));
+        assert_eq!(c(48.0, 16.0, 101.0).check_fits(96, 32).ok(), None);
+        let why = |cx, cy, r| c(cx, cy, r).check_fits(96, 32).unwrap_err();
+        assert!(why(8.0, 8.0, 1e12).contains("diagonal (101.2 px)"));
+        assert!(why(-40.0, 16.0, 10.0).contains("centre is outside"));
+        assert!(why(48.0, 100.0, 10.0).contains("centre is outside"));
+        assert!(why(0.0, 0.0, 20.0).contains("mostly outside the frame (25% of the disc"));
+        assert!(why(8.0, 8.0, f64::NAN).contains("finite"));
+        assert!(why(8.0, 8.0, 0.0).contains("> 0"));
+        // The area inside: a quarter of a disc at a corner, all of one in the middle.
+        let q = c(0.0, 0.0, 10.0).area_inside(96.0, 32.0);
+        assert!((q / (25.0 * std::f64::consts::PI) - 1.0).abs() < 1e-4, "{q}");
+        let a = c(48.0, 16.0, 12.0).area_inside(96.0, 32.0);
+        assert!((a / (144.0 * std::f64::consts::PI) - 1.0).abs() < 1e-4, "{a}");
     }
 
     #[test]

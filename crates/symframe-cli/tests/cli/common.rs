@@ -161,3 +161,25 @@ pub fn assert_fails_keeping_cache(o: &Output, needle: &str, out: &Path) {
         }
     }
 }
+
+/// Runs the `symframe` binary with `args`, killing it (and failing the test) if it has not
+/// ended within `secs` seconds.
+pub fn run_with_timeout(args: &[&str], secs: u64) -> Output {
+    use std::process::Stdio;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_symframe"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run symframe");
+    let t0 = std::time::Instant::now();
+    while child.try_wait().expect("wait for symframe").is_none() {
+        if t0.elapsed().as_secs() >= secs {
+            child.kill().ok();
+            child.wait().ok();
+            panic!("symframe {args:?} still running after {secs} s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    child.wait_with_output().expect("symframe's output")
+}

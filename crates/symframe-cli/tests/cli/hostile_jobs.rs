@@ -5,7 +5,7 @@
 use std::fs;
 use std::path::Path;
 
-use crate::common::{assert_one_line_error, ok, s, stderr, symframe};
+use crate::common::{assert_one_line_error, ok, run_with_timeout, s, stderr, symframe};
 
 /// `demo -o DIR` writes `DIR/dataset`, `DIR/estimate`, `DIR/fit`, `DIR/relit*` and
 /// `DIR/region.png`: a non-empty one of them that an earlier demo did not write is refused
@@ -51,6 +51,52 @@ fn demo_refuses_folders_it_did_not_write() {
     ok(&demo(&dir, &[]));
     ok(&demo(&dir, &[]));
     assert!(dir.join("estimate/normals.npy").is_file());
+}
+
+/// `--sphere` and `--matte-sphere` circles are checked against the image before anything is
+/// computed with them: a radius beyond the image's diagonal (before, 1e12 ran without end), a
+/// centre outside the image, a sphere mostly outside the frame are one-line errors naming the
+/// circle and the image size.
+#[test]
+fn calibrate_refuses_circles_that_do_not_fit_the_image() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    ok(&symframe(&[
+        "synth",
+        "-o",
+        s(&data),
+        "--size",
+        "32",
+        "--rig",
+        "cone:8",
+        "--chrome-sphere",
+        "--matte-sphere",
+        "--quiet",
+    ]));
+    let images = data.join("images");
+    let lp = tmp.path().join("cal.lp");
+    // The image is 96 x 32 (object, chrome and matte sphere side by side).
+    let good = "48,16,12";
+    for (flag, circle) in [
+        ("--sphere", "8,8,1e12"),
+        ("--sphere", "-40,16,10"),
+        ("--sphere", "48,100,10"),
+        ("--sphere", "0,0,20"),
+        ("--sphere", "8,8,120"),
+        ("--matte-sphere", "8,8,1e12"),
+        ("--matte-sphere", "200,16,10"),
+    ] {
+        let mut args = vec!["calibrate", s(&images), "-o", s(&lp)];
+        if flag == "--matte-sphere" {
+            args.extend(["--sphere", good]);
+        }
+        args.extend([flag, circle]);
+        let o = run_with_timeout(&args, 60);
+        assert_one_line_error(&o, "96x32");
+        let e = stderr(&o);
+        assert!(e.contains(flag), "{flag} {circle}: {e}");
+        assert!(!lp.exists());
+    }
 }
 
 /// `--quiet` leaves nothing on stdout or stderr of any subcommand run on good inputs (only
