@@ -26,6 +26,7 @@
 //! ```
 
 mod atomic;
+mod bounded;
 pub mod codecs;
 pub mod dataset;
 pub mod error;
@@ -39,6 +40,7 @@ pub mod tile_cache;
 pub mod tile_results;
 
 pub use atomic::write_bytes;
+pub use bounded::{check_regular_file, read_bounded, read_text_bounded};
 pub use codecs::{
     decode_image, linear_to_srgb, read_image, read_pfm, srgb_to_linear, write_exr_rgb, write_pfm,
     write_png16_rgb, write_png8_rgb, ColourTag, DecodeOptions, Gamma, Image, SampleKind,

@@ -13,8 +13,14 @@ use crate::error::{Error, Result};
 /// Reads a text file and returns its meaningful lines as `(1-based line number, content)`, with
 /// comments stripped and surrounding whitespace trimmed; blank lines are dropped.
 pub(crate) fn content_lines(path: &Path) -> Result<Vec<(usize, String)>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::read(path, e))?;
+    let bytes = read_text_file(path)?;
     parse_content_lines(path, &bytes)
+}
+
+/// The bytes of the text file `path` (a light file or image list), bounded
+/// ([`crate::read_bounded`], [`crate::limits::MAX_TEXT_FILE_BYTES`]).
+fn read_text_file(path: &Path) -> Result<Vec<u8>> {
+    crate::read_bounded(path, "a light file", crate::limits::MAX_TEXT_FILE_BYTES)
 }
 
 /// [`content_lines`] of a file's bytes.

@@ -12,6 +12,9 @@
 //! - Uncompressed formats (PFM, `.npy`) must hold every value they declare: the pixel data's
 //!   length is checked against the file before the buffer is allocated.
 //! - An `.npy` array has at most [`MAX_NPY_VALUES`] values.
+//! - Every file read whole must be a regular file (not a FIFO, device or folder) of at most
+//!   [`MAX_TEXT_FILE_BYTES`] (light files, image lists, JSON reports), [`MAX_IMAGE_FILE_BYTES`]
+//!   (images, masks) or [`MAX_NPY_FILE_BYTES`] (`.npy` maps); see [`crate::read_bounded`].
 
 use std::path::Path;
 
@@ -27,6 +30,14 @@ pub const PIXEL_ALLOWANCE: u64 = 1 << 20;
 pub const MAX_PIXELS_PER_BYTE: u64 = 1 << 14;
 /// Largest `.npy` array accepted, in values (a `MAX_PIXELS` image of 3 channels).
 pub const MAX_NPY_VALUES: usize = 3 * MAX_PIXELS;
+/// Largest text file read (a light file, image list or JSON report): 64 MiB, a million lights
+/// at 64 bytes a line.
+pub const MAX_TEXT_FILE_BYTES: u64 = 64 << 20;
+/// Largest image (or mask) file read: 4 GiB, a [`MAX_PIXELS`] image of four 64-bit channels
+/// uncompressed.
+pub const MAX_IMAGE_FILE_BYTES: u64 = 4 << 30;
+/// Largest `.npy` file read: [`MAX_NPY_VALUES`] float32 values and a header.
+pub const MAX_NPY_FILE_BYTES: u64 = 4 * MAX_NPY_VALUES as u64 + (1 << 20);
 /// Largest decoded buffer a decoder library may allocate for one image, in bytes (a
 /// `MAX_PIXELS` image of four 32-bit channels).
 pub const MAX_DECODED_BYTES: u64 = 16 * MAX_PIXELS as u64;

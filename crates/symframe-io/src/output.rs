@@ -37,8 +37,13 @@ pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
 /// header's shape is checked against [`crate::limits::MAX_NPY_VALUES`] and the file's length
 /// before the array is allocated.
 pub fn read_npy_f32(path: &Path) -> Result<(Vec<usize>, Vec<f32>)> {
-    let bytes = std::fs::read(path).map_err(|e| Error::read(path, e))?;
+    let bytes = read_npy_file(path)?;
     decode_npy_f32(path, &bytes)
+}
+
+/// The bytes of the `.npy` file `path`, bounded ([`crate::read_bounded`]).
+fn read_npy_file(path: &Path) -> Result<Vec<u8>> {
+    crate::read_bounded(path, "a .npy file", crate::limits::MAX_NPY_FILE_BYTES)
 }
 
 /// [`read_npy_f32`] of a file's content `bytes` (`path` names it in errors).
@@ -52,7 +57,7 @@ pub fn decode_npy_f32(path: &Path, bytes: &[u8]) -> Result<(Vec<usize>, Vec<f32>
 /// Reads a `uint8` `.npy` array (the source map): its shape and values in row-major order,
 /// with the same header checks as [`read_npy_f32`].
 pub fn read_npy_u8(path: &Path) -> Result<(Vec<usize>, Vec<u8>)> {
-    let bytes = std::fs::read(path).map_err(|e| Error::read(path, e))?;
+    let bytes = read_npy_file(path)?;
     check_npy_header(path, &bytes)?;
     let arr = ArrayD::<u8>::read_npy(std::io::Cursor::new(&bytes[..]))
         .map_err(|e| Error::decode(path, e))?;

@@ -203,8 +203,12 @@ fn image_list(input: &Path) -> Result<Vec<PathBuf>> {
     {
         return Ok(symframe_io::open_dataset(input)?.images);
     }
-    let text = std::fs::read_to_string(input)
-        .with_context(|| format!("{}: cannot read the image list", input.display()))?;
+    let text = symframe_io::read_text_bounded(
+        input,
+        "an image list",
+        symframe_io::limits::MAX_TEXT_FILE_BYTES,
+    )
+    .with_context(|| format!("{}: cannot read the image list", input.display()))?;
     let dir = input.parent().unwrap_or(Path::new(""));
     let mut v = Vec::new();
     for (k, line) in text.lines().enumerate() {

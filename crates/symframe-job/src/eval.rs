@@ -223,10 +223,14 @@ pub fn evaluate_job(config: &EvalConfig, ctl: &crate::Control) -> Result<EvalRep
     } else {
         vec![f32::NAN; normals.len()]
     };
-    let method = std::fs::read_to_string(est.join("report.json"))
-        .ok()
-        .and_then(|s| serde_json::from_str::<serde_json::Value>(&s).ok())
-        .and_then(|v| v["method"].as_str().map(String::from));
+    let method = symframe_io::read_text_bounded(
+        &est.join("report.json"),
+        "a report",
+        symframe_io::limits::MAX_TEXT_FILE_BYTES,
+    )
+    .ok()
+    .and_then(|s| serde_json::from_str::<serde_json::Value>(&s).ok())
+    .and_then(|v| v["method"].as_str().map(String::from));
 
     let evaluation = evaluate(
         &normals,

@@ -479,8 +479,11 @@ pub fn document(
     let mut image_json = Vec::new();
     for (name, path) in images {
         if embed {
-            let bytes =
-                std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+            let bytes = symframe_io::read_bounded(
+                path,
+                "an image file",
+                symframe_io::limits::MAX_IMAGE_FILE_BYTES,
+            )?;
             let v = push_view(&mut bin, &bytes, None);
             image_json.push(json!({ "bufferView": v, "mimeType": "image/png", "name": name }));
         } else {

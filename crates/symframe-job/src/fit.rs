@@ -79,9 +79,13 @@ impl FitConfig {
     pub fn cache_in_force(&self) -> (PathBuf, CacheOptions) {
         let estimate_cache = self.frames.join(CACHE_DIR);
         if self.cache.dir.is_none() && estimate_cache.is_dir() {
-            let report = std::fs::read_to_string(self.frames.join("report.json"))
-                .ok()
-                .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok());
+            let report = symframe_io::read_text_bounded(
+                &self.frames.join("report.json"),
+                "a report",
+                symframe_io::limits::MAX_TEXT_FILE_BYTES,
+            )
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok());
             let tile = report
                 .as_ref()
                 .and_then(|r| r.pointer("/tiles/size")?.as_u64());
@@ -200,9 +204,15 @@ fn check_frames_inputs(
     ctl: &Control,
 ) -> Result<()> {
     let rp = config.frames.join("report.json");
-    let text = match std::fs::read_to_string(&rp) {
+    let text = match symframe_io::read_text_bounded(
+        &rp,
+        "a report",
+        symframe_io::limits::MAX_TEXT_FILE_BYTES,
+    ) {
         Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+        Err(symframe_io::Error::Read { source, .. })
+            if source.kind() == std::io::ErrorKind::NotFound =>
+        {
             ctl.warn(&format!(
                 "{}: missing; the frames cannot be checked against {}",
                 rp.display(),
@@ -210,7 +220,7 @@ fn check_frames_inputs(
             ));
             return Ok(());
         }
-        Err(e) => return Err(e).with_context(|| format!("{}: cannot read", rp.display())),
+        Err(e) => return Err(e.into()),
     };
     let report: serde_json::Value =
         serde_json::from_str(&text).with_context(|| format!("{}: not JSON", rp.display()))?;

@@ -155,14 +155,22 @@ fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcom
         if !dir.is_dir() {
             bail!("{}: no such shard folder", dir.display());
         }
-        let text = match fs::read_to_string(&path) {
+        let text = match symframe_io::read_text_bounded(
+            &path,
+            "a shard manifest",
+            symframe_io::limits::MAX_TEXT_FILE_BYTES,
+        ) {
             Ok(t) => t,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
+            Err(symframe_io::Error::Read { source, .. })
+                if source.kind() == std::io::ErrorKind::NotFound =>
+            {
+                bail!(
                 "{}: not a finished shard (no {MANIFEST}); run its `symframe estimate ... --tiles K/N` \
                  command again to finish it",
                 dir.display()
-            ),
-            Err(e) => return Err(e).with_context(|| format!("{}: cannot read", path.display())),
+                )
+            }
+            Err(e) => return Err(e.into()),
         };
         let m: ShardManifest = serde_json::from_str(&text)
             .with_context(|| format!("{}: not a shard manifest", path.display()))?;

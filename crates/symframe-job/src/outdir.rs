@@ -719,7 +719,8 @@ impl Drop for OutputSet<'_> {
 /// set, else an error naming the first file that differs.
 pub fn check_output_set(dir: &Path, report: &str) -> Result<String> {
     let rp = dir.join(report);
-    let text = fs::read_to_string(&rp).with_context(|| format!("{}: cannot read", rp.display()))?;
+    let text =
+        symframe_io::read_text_bounded(&rp, "a report", symframe_io::limits::MAX_TEXT_FILE_BYTES)?;
     let v: serde_json::Value =
         serde_json::from_str(&text).with_context(|| format!("{}: not JSON", rp.display()))?;
     let set = v

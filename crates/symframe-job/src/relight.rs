@@ -124,7 +124,12 @@ pub fn read_gltf_maps(dir: &Path) -> Result<GltfMaps> {
         );
     };
     let report = dir.join("fit.json");
-    let text = std::fs::read_to_string(&report).with_context(|| {
+    let text = symframe_io::read_text_bounded(
+        &report,
+        "a report",
+        symframe_io::limits::MAX_TEXT_FILE_BYTES,
+    )
+    .with_context(|| {
         format!(
             "{}: cannot read (a glTF fit's exposure is recorded there)",
             report.display()

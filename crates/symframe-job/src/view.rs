@@ -263,10 +263,14 @@ fn frames_dir(config: &ViewConfig, notes: &mut Vec<String>) -> Result<Option<Pat
         return Ok(Some(dir.clone()));
     }
     let report = config.fit_dir.join("fit.json");
-    let recorded = std::fs::read_to_string(&report)
-        .ok()
-        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-        .and_then(|r| r.get("frames")?.as_str().map(PathBuf::from));
+    let recorded = symframe_io::read_text_bounded(
+        &report,
+        "a report",
+        symframe_io::limits::MAX_TEXT_FILE_BYTES,
+    )
+    .ok()
+    .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+    .and_then(|r| r.get("frames")?.as_str().map(PathBuf::from));
     let Some(recorded) = recorded else {
         notes.push(format!(
             "{}: no estimate folder recorded; the confidence, anisotropy and source views are \

@@ -715,8 +715,11 @@ fn measure(args: &ScalingArgs, jobs: &BTreeMap<Job, Vec<&str>>) -> Result<Vec<(J
 
 /// The recorded document of `--refit`.
 fn read_json(path: &Path) -> Result<Value> {
-    let text =
-        fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let text = symframe_io::read_text_bounded(
+        path,
+        "a scaling JSON",
+        symframe_io::limits::MAX_TEXT_FILE_BYTES,
+    )?;
     serde_json::from_str(&text).with_context(|| format!("{}: not scaling JSON", path.display()))
 }
 

@@ -183,3 +183,28 @@ pub fn run_with_timeout(args: &[&str], secs: u64) -> Output {
     }
     child.wait_with_output().expect("symframe's output")
 }
+
+/// Runs the `symframe` binary with `args` and its address space limited to `max_bytes`
+/// (`RLIMIT_AS`), so a run that reads without bound fails fast instead of taking the
+/// machine's memory.
+#[cfg(target_os = "linux")]
+pub fn run_with_address_space_cap(args: &[&str], max_bytes: u64) -> Output {
+    use std::os::unix::process::CommandExt;
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_symframe"));
+    cmd.args(args);
+    // SAFETY: the closure runs in the forked child before exec and only calls setrlimit,
+    // which is async-signal-safe.
+    unsafe {
+        cmd.pre_exec(move || {
+            let lim = libc::rlimit {
+                rlim_cur: max_bytes as libc::rlim_t,
+                rlim_max: max_bytes as libc::rlim_t,
+            };
+            if libc::setrlimit(libc::RLIMIT_AS, &lim) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    cmd.output().expect("run symframe")
+}

@@ -196,7 +196,7 @@ pub fn linear_to_srgb(v: f32) -> f32 {
 pub fn read_image(path: &Path, opts: &DecodeOptions) -> Result<Image> {
     // An unknown extension is named without reading the file.
     extension(path)?;
-    let bytes = std::fs::read(path).map_err(|e| Error::read(path, e))?;
+    let bytes = read_image_file(path)?;
     decode_image(path, &bytes, opts)
 }
 
@@ -209,6 +209,11 @@ pub fn decode_image(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<I
             "exr" => ((read_exr(path, bytes)?, None), false),
             "tif" | "tiff" => (read_tiff(path, bytes)?, true),
             "pfm" => ((pfm_raw(path, bytes)?, None), false),
+/// The bytes of the image file `path`, bounded ([`crate::read_bounded`]).
+pub(crate) fn read_image_file(path: &Path) -> Result<Vec<u8>> {
+    crate::read_bounded(path, "an image file", crate::limits::MAX_IMAGE_FILE_BYTES)
+}
+
             "png" => (
                 read_with_image(path, bytes, ::image::ImageFormat::Png)?,
                 true,

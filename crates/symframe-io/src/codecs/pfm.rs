@@ -110,7 +110,7 @@ pub(super) fn parse_pfm(bytes: &[u8]) -> std::result::Result<Pfm, String> {
 
 /// Reads a PFM as a raw float image.
 pub(super) fn read_pfm_raw(path: &Path) -> Result<RawImage> {
-    let bytes = std::fs::read(path).map_err(|e| Error::read(path, e))?;
+    let bytes = super::read_image_file(path)?;
     pfm_raw(path, &bytes)
 }
 
