@@ -317,15 +317,12 @@ mod tests {
         let lp = d.path().join("zero.lp");
         fs::write(&lp, "2\na.png 0 0 1\nb.png 0 0 0\n").unwrap();
         let e = err_string(open_dataset(&lp));
-        assert!(
-            e.contains("zero.lp:3: light direction is zero or not finite"),
-            "{e}"
-        );
+        assert!(e.ends_with("zero.lp:3: light direction is zero"), "{e}");
 
         fs::write(&lp, "2\na.png NaN 0 1\nb.png 0 0 1\n").unwrap();
         let e = err_string(open_dataset(&lp));
         assert!(
-            e.contains("zero.lp:2: light direction is zero or not finite"),
+            e.ends_with("zero.lp:2: light direction is not finite (NaN)"),
             "{e}"
         );
 

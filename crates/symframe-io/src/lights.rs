@@ -2,7 +2,7 @@
 //!
 //! All text files accept blank lines and `#` comments (whole-line or trailing), so a `#` can not
 //! be part of an image path. A UTF-8 byte-order mark at the start (as Windows editors write) is
-//! ignored.
+//! ignored. Lines end with LF, CR LF or a lone CR (old Mac editors, some rig software).
 
 use std::path::{Path, PathBuf};
 
@@ -28,8 +28,7 @@ pub(crate) fn parse_content_lines(path: &Path, bytes: &[u8]) -> Result<Vec<(usiz
     let text =
         std::str::from_utf8(bytes).map_err(|_| Error::decode(path, "not a UTF-8 text file"))?;
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    Ok(text
-        .lines()
+    Ok(split_lines(text)
         .enumerate()
         .filter_map(|(i, l)| {
             let l = l.split('#').next().unwrap_or("").trim();
@@ -38,12 +37,42 @@ pub(crate) fn parse_content_lines(path: &Path, bytes: &[u8]) -> Result<Vec<(usiz
         .collect())
 }
 
+/// The lines of `text`, ended by LF, CR LF or a lone CR (without the line ends).
+pub(crate) fn split_lines(text: &str) -> impl Iterator<Item = &str> {
+    let mut rest = Some(text).filter(|t| !t.is_empty());
+    std::iter::from_fn(move || {
+        let t = rest?;
+        match t.find(['\n', '\r']) {
+            Some(i) => {
+                let end = if t[i..].starts_with("\r\n") {
+                    i + 2
+                } else {
+                    i + 1
+                };
+                rest = Some(&t[end..]).filter(|r| !r.is_empty());
+                Some(&t[..i])
+            }
+            None => {
+                rest = None;
+                Some(t)
+            }
+        }
+    })
+}
+
+/// `text` as an error message quotes it: at most 60 characters, else cut with `...`.
+fn quoted(text: &str) -> String {
+    match text.char_indices().nth(60) {
+        Some((i, _)) => format!("{}...", &text[..i]),
+        None => text.to_string(),
+    }
+}
+
 /// Whether line `line` (1-based) of the text file `path` has a `#` after some content (a
 /// trailing comment: then a file name cut at it is the likely mistake).
 fn has_trailing_comment(path: &Path, line: usize) -> bool {
-    std::fs::read(path).ok().is_some_and(|b| {
-        String::from_utf8_lossy(&b)
-            .lines()
+    read_text_file(path).ok().is_some_and(|b| {
+        split_lines(&String::from_utf8_lossy(&b))
             .nth(line - 1)
             .and_then(|l| l.split_once('#'))
             .is_some_and(|(before, _)| !before.trim().is_empty())
@@ -116,24 +145,40 @@ pub(crate) fn parse_triple(
             Error::parse(
                 path,
                 line,
-                format!("{what}: cannot parse '{t}' as a number"),
+                format!("{what}: cannot parse '{}' as a number", quoted(t)),
             )
         })?;
     }
     Ok(v)
 }
 
-/// Normalises a light direction, rejecting zero and non-finite vectors with a line-level error.
+/// Normalises a light direction, rejecting zero and non-finite vectors with a line-level error
+/// that says which. Any finite vector other than zero is fine, however large or small: it is
+/// scaled by its largest component before its length is taken (`1e200 0 1e200` overflowed to
+/// an infinite length).
 pub(crate) fn unit_direction(path: &Path, line: usize, v: [f64; 3]) -> Result<DVec3> {
+    unit_light(v).map_err(|why| Error::parse(path, line, format!("light direction {why}")))
+}
+
+/// `v` as a unit vector, or why it has no direction: "is zero", "is not finite (inf)".
+pub(crate) fn unit_light(v: [f64; 3]) -> std::result::Result<DVec3, String> {
+    if let Some(bad) = v.iter().find(|x| !x.is_finite()) {
+        return Err(format!("is not finite ({bad})"));
+    }
+    let largest = v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    if largest == 0.0 {
+        return Err("is zero".into());
+    }
     let d = DVec3::from_array(v);
-    let len = d.length();
-    let n = d.normalize();
-    if !d.is_finite() || len == 0.0 || !len.is_finite() || !n.is_finite() {
-        return Err(Error::parse(
-            path,
-            line,
-            "light direction is zero or not finite",
-        ));
+    // Directly when the squares neither overflow nor lose precision (the unit vectors of all
+    // earlier versions, bit for bit), else after scaling by the largest component.
+    let n = if (1e-150..=1e150).contains(&largest) {
+        d.normalize()
+    } else {
+        (d / largest).normalize()
+    };
+    if !n.is_finite() {
+        return Err("cannot be normalised".into());
     }
     Ok(n)
 }
@@ -155,7 +200,10 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
         Error::parse(
             path,
             *count_line,
-            format!("expected the number of lights, found '{count_text}'"),
+            format!(
+                "expected the number of lights, found '{}'",
+                quoted(count_text)
+            ),
         )
     })?;
     if count == 0 {
@@ -320,7 +368,10 @@ pub fn read_light_directions(path: &Path) -> Result<Vec<DVec3>> {
         Error::parse(
             path,
             *first_line,
-            format!("expected the number of lights or 'x y z', found '{first}'"),
+            format!(
+                "expected the number of lights or 'x y z', found '{}'",
+                quoted(first)
+            ),
         )
     })?;
     let entries = &lines[1..];
@@ -479,5 +530,100 @@ mod tests {
         );
         assert_eq!(windows_file_name("C:img.png"), "img.png");
         assert!(!is_windows_path("a/b.png"));
+    }
+
+    /// `1e200 0 1e200` was "zero or not finite": its length overflowed.
+    #[test]
+    fn huge_and_tiny_finite_lights_are_normalised() {
+        let s = 0.5f64.sqrt();
+        let n = unit_light([1e200, 0.0, 1e200]).unwrap();
+        assert!((n - DVec3::new(s, 0.0, s)).length() < 1e-15, "{n}");
+        let n = unit_light([f64::MAX, -f64::MAX, 0.0]).unwrap();
+        assert!((n - DVec3::new(s, -s, 0.0)).length() < 1e-15, "{n}");
+        assert_eq!(unit_light([0.0, 5e-324, 0.0]).unwrap(), DVec3::Y);
+        assert_eq!(unit_light([0.0, -0.0, 0.0]).unwrap_err(), "is zero");
+        assert_eq!(
+            unit_light([1.0, f64::INFINITY, 0.0]).unwrap_err(),
+            "is not finite (inf)"
+        );
+        let d = tempfile::tempdir().unwrap();
+        let lp = d.path().join("big.lp");
+        std::fs::write(&lp, "2\na 1e200 0 1e200\nb 0 0 0\n").unwrap();
+        let e = read_light_directions(&lp).unwrap_err().to_string();
+        assert!(e.ends_with("big.lp:3: light direction is zero"), "{e}");
+        std::fs::write(&lp, "1\na 1e200 0 1e200\n").unwrap();
+        assert!(read_light_directions(&lp).unwrap()[0].is_finite());
+    }
+
+    /// A file with CR-only line ends was one line: errors quoted the whole file as "line 1".
+    #[test]
+    fn cr_only_line_ends_are_line_ends() {
+        assert_eq!(
+            split_lines("a\rb\r\nc\n\rd").collect::<Vec<_>>(),
+            ["a", "b", "c", "", "d"]
+        );
+        assert_eq!(split_lines("a\n").collect::<Vec<_>>(), ["a"]);
+        assert_eq!(split_lines("").count(), 0);
+        let d = tempfile::tempdir().unwrap();
+        let lp = d.path().join("mac.lp");
+        std::fs::write(&lp, "2\rnone.png 0 0 1\rx 1 0 1 # c\r").unwrap();
+        assert_eq!(read_light_directions(&lp).unwrap().len(), 2);
+        std::fs::write(&lp, "2\rnone.png 0 0 1\rx 1 zero 1\r").unwrap();
+        let e = read_light_directions(&lp).unwrap_err().to_string();
+        assert!(
+            e.ends_with("mac.lp:3: light direction: cannot parse 'zero' as a number"),
+            "{e}"
+        );
+        // What an error quotes is cut short.
+        std::fs::write(&lp, format!("{}\n", "y".repeat(5000))).unwrap();
+        let e = read_light_directions(&lp).unwrap_err().to_string();
+        assert!(e.len() < 200 && e.contains("yyy..."), "{e}");
+    }
+
+    proptest::proptest! {
+        /// Line numbers follow every line end (LF, CR LF, lone CR); no input panics.
+        #[test]
+        fn content_lines_number_every_line_end(
+            bytes in proptest::collection::vec(
+                proptest::prop_oneof![
+                    proptest::strategy::Just(b'\r'),
+                    proptest::strategy::Just(b'\n'),
+                    proptest::strategy::Just(b'#'),
+                    proptest::strategy::Just(b' '),
+                    proptest::strategy::Just(b'1'),
+                    proptest::prelude::any::<u8>(),
+                ],
+                0..64,
+            )
+        ) {
+            if let Ok(lines) = parse_content_lines(Path::new("f.lp"), &bytes) {
+                let text = String::from_utf8(bytes).unwrap();
+                let ends = text.matches('\n').count() + text.matches('\r').count()
+                    - text.matches("\r\n").count();
+                for w in lines.windows(2) {
+                    proptest::prop_assert!(w[0].0 < w[1].0);
+                }
+                for (n, l) in &lines {
+                    proptest::prop_assert!(*n <= ends + 1);
+                    proptest::prop_assert!(!l.contains(['\r', '\n']));
+                }
+            }
+        }
+
+        /// Any finite light other than zero has a unit direction.
+        #[test]
+        fn every_finite_nonzero_light_is_normalised(
+            x in proptest::prelude::any::<f64>(),
+            y in proptest::prelude::any::<f64>(),
+            z in proptest::prelude::any::<f64>(),
+        ) {
+            let v = [x, y, z];
+            match unit_light(v) {
+                Ok(n) => proptest::prop_assert!((n.length() - 1.0).abs() < 1e-12, "{n}"),
+                Err(_) => proptest::prop_assert!(
+                    v.iter().any(|c| !c.is_finite()) || v.iter().all(|&c| c == 0.0)
+                ),
+            }
+        }
     }
 }
