@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Warning};
 use crate::lights;
 
 /// Where a dataset's images are and how each was lit.
@@ -21,6 +21,10 @@ pub struct Dataset {
     pub intensities: Option<Vec<[f32; 3]>>,
     /// Optional mask image (`mask.png` beside the light file): non-zero pixels are processed.
     pub mask: Option<PathBuf>,
+    /// What the user should know about how the dataset was read (a `light_intensities.txt`
+    /// beside an `.lp` applied although another `.lp` beside it has as many lights, or not
+    /// applied because it is another one's); jobs print them and list them in their reports.
+    pub warnings: Vec<Warning>,
 }
 
 /// File names of a DiLiGenT-style folder.
@@ -138,49 +142,111 @@ fn open_folder(dir: &Path) -> Result<Dataset> {
 
 /// Opens an `.lp` dataset; `mask.png` beside it is picked up, and so is
 /// `light_intensities.txt` (one `r g b` row per light, in the `.lp`'s order, as `symframe
-/// calibrate --matte-sphere` writes it) when this is the only `.lp` file in its folder (with
-/// several, which one it belongs to is unclear, and it is not read).
+/// calibrate --matte-sphere` writes it) by the rule of [`lp_intensities`].
 fn open_lp(lp: &Path) -> Result<Dataset> {
     let (images, lights) = lights::parse_lp(lp)?;
     let dir = parent_dir(lp);
-    let int_path = dir.join(INTENSITIES);
-    let only_lp = || {
-        let listed = if dir.as_os_str().is_empty() {
-            Path::new(".")
-        } else {
-            dir.as_path()
-        };
-        std::fs::read_dir(listed).is_ok_and(|rd| {
-            rd.filter_map(|e| e.ok())
-                .filter(|e| e.path().is_file() && is_lp(&e.path()))
-                .count()
-                == 1
-        })
-    };
-    let intensities = if int_path.is_file() && only_lp() {
-        let v = lights::parse_intensities(&int_path)?;
-        if v.len() != images.len() {
-            return Err(Error::invalid(
-                &int_path,
-                format!(
-                    "{} light intensities but {} lists {} images",
-                    v.len(),
-                    lp.display(),
-                    images.len()
-                ),
-            ));
-        }
-        Some(v)
-    } else {
-        None
-    };
+    let (intensities, warnings) = lp_intensities(lp, &dir, images.len())?;
     Ok(Dataset {
         source: lp.to_path_buf(),
         lights,
         images,
         intensities,
         mask: mask_in(&dir)?,
+        warnings,
     })
+}
+
+/// Per-light RGB intensities.
+type Intensities = Vec<[f32; 3]>;
+
+/// The intensities of `lp` (`n` lights) from `light_intensities.txt` in its folder `dir`, and
+/// never silently: one that cannot be read (or is not a file) is an error; one with `n` rows
+/// is applied, with a warning when another `.lp` beside it has `n` lights too (which one it
+/// belongs to cannot be told); one with another row count is an error, unless another `.lp`
+/// beside it has that many lights (then it is that one's: not applied, with a warning).
+fn lp_intensities(
+    lp: &Path,
+    dir: &Path,
+    n: usize,
+) -> Result<(Option<Intensities>, Vec<Warning>)> {
+    let int_path = dir.join(INTENSITIES);
+    if int_path.symlink_metadata().is_err() {
+        return Ok((None, Vec::new()));
+    }
+    let v = lights::parse_intensities(&int_path)?;
+    let others = other_lp_counts(lp, dir);
+    let names = |count: usize| {
+        others
+            .iter()
+            .filter(|(_, c)| *c == count)
+            .map(|(name, _)| name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let lp_name = lp.file_name().unwrap_or(lp.as_os_str()).to_string_lossy();
+    if v.len() == n {
+        let same = names(n);
+        let warnings = if same.is_empty() {
+            Vec::new()
+        } else {
+            vec![Warning {
+                path: int_path,
+                message: format!(
+                    "applied to {lp_name} (its {n} rows match its {n} lights), but {same} \
+                     beside it has {n} lights too: if the intensities are of another light \
+                     file, move them to that one's folder"
+                ),
+            }]
+        };
+        return Ok((Some(v), warnings));
+    }
+    let theirs = names(v.len());
+    if theirs.is_empty() {
+        return Err(Error::invalid(
+            &int_path,
+            format!(
+                "{} light intensities but {} lists {n} images",
+                v.len(),
+                lp.display()
+            ),
+        ));
+    }
+    let warning = Warning {
+        path: int_path,
+        message: format!(
+            "not applied to {lp_name}: its {} rows are not {lp_name}'s {n} lights but those of \
+             {theirs} beside it (the images are used as they are, not divided by light \
+             intensities)",
+            v.len()
+        ),
+    };
+    Ok((None, vec![warning]))
+}
+
+/// The other `.lp` files in `dir` (than `lp`) and their declared light counts (those whose
+/// count cannot be read are left out).
+fn other_lp_counts(lp: &Path, dir: &Path) -> Vec<(String, usize)> {
+    let listed = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let Ok(rd) = std::fs::read_dir(listed) else {
+        return Vec::new();
+    };
+    let mut v: Vec<(String, usize)> = rd
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .filter(|p| p.is_file() && is_lp(p) && p.file_name() != lp.file_name())
+        .filter_map(|p| {
+            let lines = lights::content_lines(&p).ok()?;
+            let count = lines.first()?.1.parse().ok()?;
+            Some((p.file_name()?.to_string_lossy().into_owned(), count))
+        })
+        .collect();
+    v.sort();
+    v
 }
 
 /// Opens a DiLiGenT-style folder; `source` is what the user named (folder or one of its files).
@@ -236,6 +302,7 @@ fn open_diligent(dir: &Path, source: &Path) -> Result<Dataset> {
         images,
         intensities,
         mask: mask_in(dir)?,
+        warnings: Vec::new(),
     })
 }
 
@@ -546,5 +613,56 @@ mod tests {
         std::os::unix::fs::symlink(d.path().join("nothing.lp"), &broken).unwrap();
         let e = err_string(open_dataset(&broken));
         assert!(e.contains("broken.lp: is a broken symbolic link"), "{e}");
+    }
+
+    /// `light_intensities.txt` was silently ignored once a second `.lp` sat beside the first.
+    #[test]
+    fn intensities_beside_an_lp_are_applied_by_row_count_and_never_silently() {
+        let d = tempfile::tempdir().unwrap();
+        touch(d.path(), &["a.png", "b.png", "c.png"]);
+        let lp = d.path().join("rig.lp");
+        fs::write(&lp, "2\na.png 0 0 1\nb.png 0 1 1\n").unwrap();
+        fs::write(d.path().join(INTENSITIES), "1 1 1\n2 2 2\n").unwrap();
+        // The only .lp: applied, nothing to say.
+        let ds = open_dataset(&lp).unwrap();
+        assert_eq!(ds.intensities.as_ref().unwrap().len(), 2);
+        assert!(ds.warnings.is_empty(), "{:?}", ds.warnings);
+        // Another .lp of as many lights: applied (rows match), with a warning naming it.
+        let other = d.path().join("other.lp");
+        fs::write(&other, "2\nb.png 0 0 1\nc.png 1 0 1\n").unwrap();
+        let ds = open_dataset(&lp).unwrap();
+        assert!(ds.intensities.is_some());
+        let w = ds.warnings[0].to_string();
+        assert!(
+            w.contains("light_intensities.txt: applied to rig.lp (its 2 rows match its 2 lights), but other.lp"),
+            "{w}"
+        );
+        // Rows matching the other .lp only: not applied, with a warning.
+        fs::write(&other, "3\na.png 0 0 1\nb.png 0 1 1\nc.png 1 0 1\n").unwrap();
+        fs::write(d.path().join(INTENSITIES), "1 1 1\n2 2 2\n3 3 3\n").unwrap();
+        let ds = open_dataset(&lp).unwrap();
+        assert_eq!(ds.intensities, None);
+        let w = ds.warnings[0].to_string();
+        assert!(
+            w.contains(
+                "not applied to rig.lp: its 3 rows are not rig.lp's 2 lights but those of other.lp"
+            ),
+            "{w}"
+        );
+        // ... and applied to that one, silently.
+        let ds = open_dataset(&other).unwrap();
+        assert!(ds.intensities.is_some() && ds.warnings.is_empty());
+        // Rows matching no .lp: an error.
+        fs::write(d.path().join(INTENSITIES), "1 1 1\n").unwrap();
+        let e = err_string(open_dataset(&lp));
+        assert!(
+            e.contains("light_intensities.txt: 1 light intensities but"),
+            "{e}"
+        );
+        // A light_intensities.txt that is not a file is an error, not ignored.
+        fs::remove_file(d.path().join(INTENSITIES)).unwrap();
+        fs::create_dir(d.path().join(INTENSITIES)).unwrap();
+        let e = err_string(open_dataset(&lp));
+        assert!(e.contains("not a regular file (a folder)"), "{e}");
     }
 }

@@ -365,6 +365,7 @@ mod tests {
             images: paths,
             intensities: None,
             mask: None,
+            warnings: Vec::new(),
         }
     }
 

@@ -626,6 +626,9 @@ fn run(
 ) -> Result<EstimateOutcome> {
     let t0 = Instant::now();
     let mut ds: Dataset = symframe_io::open_dataset(&config.input)?;
+    for w in &ds.warnings {
+        ctl.warn(&w.to_string());
+    }
     // The mask in force is checked with the cache, before the images are decoded.
     ds.mask = config.mask.clone().or(ds.mask);
     out.guard_inputs(dataset_files(&ds), &|n| {

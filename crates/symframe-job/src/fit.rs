@@ -291,6 +291,9 @@ pub fn fit(config: &FitConfig, ctl: &Control) -> Result<FitOutcome> {
 fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome> {
     let t0 = Instant::now();
     let mut ds: Dataset = symframe_io::open_dataset(&config.input)?;
+    for w in &ds.warnings {
+        ctl.warn(&w.to_string());
+    }
     // The mask in force is checked with the cache, before the images are decoded.
     ds.mask = config.mask.clone().or(ds.mask);
     let frames = ["normals.npy", "tangents.npy", "report.json"].map(|n| config.frames.join(n));

@@ -5,7 +5,7 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use crate::common::{assert_one_line_error, estimate, ok, s, symframe, Truth};
+use crate::common::{assert_one_line_error, estimate, ok, report, s, stderr, symframe, Truth};
 use symframe::brdf::lambertian::Lambertian;
 use symframe_io::ImageFormat;
 
@@ -17,6 +17,57 @@ fn lambert(dir: &Path, size: usize, lights: usize) -> PathBuf {
     };
     let brdf = Lambertian::new([0.6; 3]);
     crate::common::sphere_dataset(dir, size, lights, &brdf, ImageFormat::Exr, 1.0, truth).1
+}
+
+/// The `warnings` of an output folder's report, one string each.
+fn report_warnings(out: &Path) -> Vec<String> {
+    report(out)["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w.as_str().unwrap().to_string())
+        .collect()
+}
+
+/// `light_intensities.txt` was silently ignored once a second `.lp` sat beside the first (a
+/// Lambertian test went from 0.000 to 1.34 degrees with nothing in report.json).
+#[test]
+fn light_intensities_beside_several_lp_files_are_never_silent() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let lp = lambert(&data, 16, 20);
+    let rows = "1 1 1\n".repeat(20);
+    fs::write(data.join("light_intensities.txt"), &rows).unwrap();
+    // A copy of the light file beside it: as many lights, so the rows fit both.
+    fs::copy(&lp, data.join("copy.lp")).unwrap();
+    let out = tmp.path().join("a");
+    let o = estimate(&lp, &out, &["--method", "woodham"]);
+    ok(&o);
+    let want = "applied to lights.lp (its 20 rows match its 20 lights), but copy.lp";
+    assert!(stderr(&o).contains(want), "{}", stderr(&o));
+    assert!(
+        report_warnings(&out).iter().any(|w| w.contains(want)),
+        "{:?}",
+        report_warnings(&out)
+    );
+    // Rows of another light file: not applied, said so.
+    fs::write(data.join("light_intensities.txt"), "1 1 1\n".repeat(3)).unwrap();
+    fs::write(
+        data.join("copy.lp"),
+        "3\nimages/img_0000.exr 0 0 1\nimages/img_0001.exr 0 1 1\nimages/img_0002.exr 1 0 1\n",
+    )
+    .unwrap();
+    let out = tmp.path().join("b");
+    let o = estimate(&lp, &out, &["--method", "woodham"]);
+    ok(&o);
+    let want =
+        "not applied to lights.lp: its 3 rows are not lights.lp's 20 lights but those of copy.lp";
+    assert!(stderr(&o).contains(want), "{}", stderr(&o));
+    assert!(report_warnings(&out).iter().any(|w| w.contains(want)));
+    // Rows of no light file beside it: an error.
+    fs::write(data.join("light_intensities.txt"), "1 1 1\n".repeat(7)).unwrap();
+    let o = estimate(&lp, &tmp.path().join("c"), &["--method", "woodham"]);
+    assert_one_line_error(&o, "light_intensities.txt: 7 light intensities but");
 }
 
 /// A `--mask`, `.lp` or `relight --lights` file that is `/dev/zero` grew until memory ran out.

@@ -658,6 +658,7 @@ mod tests {
             images,
             intensities: Some((0..n).map(|i| [1.0, 2.0, 0.5 + i as f32]).collect()),
             mask: None,
+            warnings: Vec::new(),
         }
     }
 
