@@ -25,6 +25,7 @@ pub fn run(args: &CalibrateArgs) -> Result<CalibrationReport> {
         decode: DecodeOptions {
             gamma: crate::cli::gamma(args.gamma, args.linear),
             saturation: args.saturation,
+            exr_layer: args.exr_layer.clone(),
         },
     };
     let ctl = Control {

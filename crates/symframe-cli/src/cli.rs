@@ -309,6 +309,10 @@ pub struct EstimateArgs {
     /// Same as `--gamma linear`.
     #[arg(long)]
     pub linear: bool,
+    /// The EXR layer holding the radiance: `beauty` for channels `beauty.R`, `beauty.G`,
+    /// `beauty.B` (default: the channels without a layer name, R, G, B or Y).
+    #[arg(long, value_name = "NAME")]
+    pub exr_layer: Option<String>,
     /// Integer samples at or above this fraction of the format's maximum are saturated and
     /// excluded.
     #[arg(long, default_value_t = DecodeOptions::default().saturation)]
@@ -588,6 +592,10 @@ pub struct FitArgs {
     /// Same as `--gamma linear`.
     #[arg(long)]
     pub linear: bool,
+    /// The EXR layer holding the radiance: `beauty` for channels `beauty.R`, `beauty.G`,
+    /// `beauty.B` (default: the channels without a layer name, R, G, B or Y).
+    #[arg(long, value_name = "NAME")]
+    pub exr_layer: Option<String>,
     /// Integer samples at or above this fraction of the format's maximum are saturated and
     /// excluded.
     #[arg(long, default_value_t = DecodeOptions::default().saturation)]
@@ -771,6 +779,10 @@ pub struct CalibrateArgs {
     /// Same as `--gamma linear`.
     #[arg(long)]
     pub linear: bool,
+    /// The EXR layer holding the radiance: `beauty` for channels `beauty.R`, `beauty.G`,
+    /// `beauty.B` (default: the channels without a layer name, R, G, B or Y).
+    #[arg(long, value_name = "NAME")]
+    pub exr_layer: Option<String>,
     /// Integer samples at or above this fraction of the format's maximum are saturated.
     #[arg(long, default_value_t = 0.995)]
     pub saturation: f32,

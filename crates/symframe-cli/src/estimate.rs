@@ -100,6 +100,7 @@ pub fn config(args: &EstimateArgs) -> Result<EstimateConfig> {
         decode: DecodeOptions {
             gamma: crate::cli::gamma(args.gamma, args.linear),
             saturation: args.saturation,
+            exr_layer: args.exr_layer.clone(),
         },
         cache: CacheConfig {
             dir: args.cache.clone(),

@@ -56,6 +56,7 @@ pub fn config(args: &FitArgs) -> Result<FitConfig> {
         decode: DecodeOptions {
             gamma: crate::cli::gamma(args.gamma, args.linear),
             saturation: args.saturation,
+            exr_layer: args.exr_layer.clone(),
         },
         cache: CacheConfig {
             dir: args.cache.clone(),

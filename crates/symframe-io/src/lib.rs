@@ -42,8 +42,9 @@ pub mod tile_results;
 pub use atomic::write_bytes;
 pub use bounded::{check_regular_file, read_bounded, read_text_bounded};
 pub use codecs::{
-    decode_image, linear_to_srgb, read_image, read_pfm, srgb_to_linear, write_exr_rgb, write_pfm,
-    write_png16_rgb, write_png8_rgb, ColourTag, DecodeOptions, Gamma, Image, SampleKind,
+    declared_size, decode_image, linear_to_srgb, read_image, read_pfm, srgb_to_linear,
+    write_exr_channels, write_exr_rgb, write_pfm, write_png16_rgb, write_png8_rgb, ColourTag,
+    DecodeOptions, Gamma, Image, SampleKind,
 };
 pub use dataset::{open_dataset, Dataset};
 pub use error::{Error, Result, Warning};

@@ -6,7 +6,9 @@ use std::sync::Mutex;
 use rayon::prelude::*;
 use symframe::Stack;
 
-use crate::codecs::{read_image, ColourTag, DecodeOptions, SampleKind};
+use crate::codecs::{
+    declared_size, decode_image, read_image_file, ColourTag, DecodeOptions, SampleKind,
+};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result, Warning};
 
@@ -14,8 +16,9 @@ use crate::error::{Error, Result, Warning};
 /// intensities when the dataset has them; saturated or non-finite pixels are `NaN`.
 ///
 /// All images must have the size of the first one (the error names the offending file and both
-/// sizes). Images are decoded in parallel chunks and scattered into the stack chunk by chunk, so
-/// only one chunk of decoded images is held beside the stack. `on_image` is called once per
+/// sizes; the size each file's header declares is compared before its pixels are decoded).
+/// The first image is decoded alone, the others in parallel chunks, scattered into the stack
+/// chunk by chunk, so only one chunk of decoded images is held beside the stack. `on_image` is called once per
 /// decoded image (from worker threads), e.g. to advance a progress bar.
 pub fn load_stack(
     ds: &Dataset,
@@ -36,40 +39,46 @@ pub fn load_stack_with_warnings(
     let n = ds.images.len();
     let notes = Notes::new(n);
     let chunk = 32.max(2 * rayon::current_num_threads());
-    let mut stack: Option<Stack> = None;
-    for start in (0..n).step_by(chunk) {
+    let (w, h, first) = decode_stack_image(ds, 0, opts, &notes, None)?;
+    on_image();
+    let mut stack = Stack::zeros(w, h, n);
+    scatter_into(&mut stack, 0, &[first]);
+    for start in (1..n).step_by(chunk) {
         let end = n.min(start + chunk);
         let decoded: Vec<Result<(usize, usize, Vec<f32>)>> = (start..end)
             .into_par_iter()
             .map(|i| {
-                let r = decode_stack_image(ds, i, opts, &notes)?;
+                let r = decode_stack_image(ds, i, opts, &notes, Some((w, h)))?;
                 on_image();
                 Ok(r)
             })
             .collect();
         let mut images = Vec::with_capacity(decoded.len());
         for (j, r) in decoded.into_iter().enumerate() {
-            let (w, h, rgb) = r?;
-            let s = stack.get_or_insert_with(|| Stack::zeros(w, h, n));
-            check_size(ds, start + j, (w, h), (s.width, s.height))?;
+            let (iw, ih, rgb) = r?;
+            check_size(ds, start + j, (iw, ih), (w, h))?;
             images.push(rgb);
         }
-        let s = stack.as_mut().expect("the first chunk created the stack");
-        let stride = n * 3;
-        s.data
-            .par_chunks_mut(stride * 256)
-            .enumerate()
-            .for_each(|(block, dst)| {
-                for (k, px) in dst.chunks_exact_mut(stride).enumerate() {
-                    let p = block * 256 + k;
-                    for (j, img) in images.iter().enumerate() {
-                        let o = (start + j) * 3;
-                        px[o..o + 3].copy_from_slice(&img[p * 3..p * 3 + 3]);
-                    }
-                }
-            });
+        scatter_into(&mut stack, start, &images);
     }
-    Ok((stack.expect("at least one image"), notes.warnings(ds)))
+    Ok((stack, notes.warnings(ds)))
+}
+
+/// Copies `images` (interleaved RGB), the stack's images `start..`, into the pixel-major stack.
+fn scatter_into(s: &mut Stack, start: usize, images: &[Vec<f32>]) {
+    let stride = s.n_lights * 3;
+    s.data
+        .par_chunks_mut(stride * 256)
+        .enumerate()
+        .for_each(|(block, dst)| {
+            for (k, px) in dst.chunks_exact_mut(stride).enumerate() {
+                let p = block * 256 + k;
+                for (j, img) in images.iter().enumerate() {
+                    let o = (start + j) * 3;
+                    px[o..o + 3].copy_from_slice(&img[p * 3..p * 3 + 3]);
+                }
+            }
+        });
 }
 
 /// What was noticed of one decoded image.
@@ -274,13 +283,26 @@ pub(crate) fn check_size(
 
 /// Decodes image `i` of `ds` as a stack stores it: interleaved RGB (grey replicated), divided
 /// by the light's intensity when the dataset has intensities. Returns width, height, samples.
+/// Given `first`, the stack's image size, the size the file's header declares is compared
+/// with it before any pixel is decoded (so an image of another size costs no more memory than
+/// its file: `--decode-memory` holds).
 pub(crate) fn decode_stack_image(
     ds: &Dataset,
     i: usize,
     opts: &DecodeOptions,
     notes: &Notes,
+    first: Option<(usize, usize)>,
 ) -> Result<(usize, usize, Vec<f32>)> {
-    let img = read_image(&ds.images[i], opts)?;
+    let path = &ds.images[i];
+    let bytes = read_image_file(path)?;
+    if let Some(first) = first {
+        // A header that cannot be read is left for the decoder to report.
+        if let Ok(size) = declared_size(path, &bytes, opts) {
+            check_size(ds, i, size, first)?;
+        }
+    }
+    let img = decode_image(path, &bytes, opts)?;
+    drop(bytes);
     let (w, h) = (img.width, img.height);
     notes.set(
         i,
@@ -303,9 +325,10 @@ pub(crate) fn decode_stack_image(
     Ok((w, h, rgb))
 }
 
-/// Reads a mask image: a pixel is inside where its first channel is non-zero (any format
-/// [`read_image`] reads; no sRGB decoding or saturation test). The mask must be
-/// `width x height` and have at least one pixel inside.
+/// Reads a mask image: a pixel is inside where any colour channel is non-zero and its alpha
+/// (if the image has alpha) is non-zero too (any format [`crate::read_image`] reads; raw
+/// samples, no sRGB decoding or saturation test). The mask must be `width x height` and have
+/// at least one pixel inside.
 pub fn read_mask(path: &Path, width: usize, height: usize) -> Result<Vec<bool>> {
     let (w, h, mask) = read_mask_any_size(path)?;
     check_mask_size(path, (w, h), (width, height))?;
@@ -315,20 +338,14 @@ pub fn read_mask(path: &Path, width: usize, height: usize) -> Result<Vec<bool>> 
 /// Reads a mask image of any size (see [`read_mask`]): width, height and the pixels inside;
 /// an error if it cannot be read or has no pixel inside.
 pub fn read_mask_any_size(path: &Path) -> Result<(usize, usize, Vec<bool>)> {
-    let opts = DecodeOptions {
-        gamma: crate::codecs::Gamma::Linear,
-        saturation: f32::INFINITY,
-    };
-    let img = read_image(path, &opts)?;
-    let mask: Vec<bool> = img
-        .data
-        .chunks_exact(img.channels)
-        .map(|px| px[0] != 0.0 && !px[0].is_nan())
-        .collect();
+    let (w, h, mask) = crate::codecs::read_mask_pixels(path)?;
     if !mask.iter().any(|&m| m) {
-        return Err(Error::invalid(path, "mask is empty (no pixel is inside)"));
+        return Err(Error::invalid(
+            path,
+            "mask is empty (no pixel is inside: every pixel is black or fully transparent)",
+        ));
     }
-    Ok((img.width, img.height, mask))
+    Ok((w, h, mask))
 }
 
 /// Checks that the mask at `path`, of `mask` (width, height), has the images' size.
@@ -446,6 +463,37 @@ mod tests {
         assert!(e.contains("test.lp: the dataset has no images"), "{e}");
     }
 
+    /// A pure blue mask was empty, a red and green one lost its green half, and alpha was
+    /// ignored (a mask transparent outside was all inside).
+    #[test]
+    fn a_mask_pixel_is_inside_by_any_colour_channel_and_its_alpha() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("m.png");
+        let rgb = ::image::ExtendedColorType::Rgb8;
+        write_png(&p, 2, 1, &[0, 0, 255, 0, 0, 0], rgb).unwrap();
+        assert_eq!(read_mask(&p, 2, 1).unwrap(), vec![true, false]);
+        write_png(&p, 3, 1, &[255, 0, 0, 0, 255, 0, 0, 0, 0], rgb).unwrap();
+        assert_eq!(read_mask(&p, 3, 1).unwrap(), vec![true, true, false]);
+        // Black and white with alpha 255 everywhere: colour decides.
+        let rgba = ::image::ExtendedColorType::Rgba8;
+        write_png(&p, 2, 1, &[255, 255, 255, 255, 0, 0, 0, 255], rgba).unwrap();
+        assert_eq!(read_mask(&p, 2, 1).unwrap(), vec![true, false]);
+        // Transparent outside, colour everywhere: alpha decides.
+        write_png(&p, 2, 1, &[90, 60, 30, 0, 90, 60, 30, 255], rgba).unwrap();
+        assert_eq!(read_mask(&p, 2, 1).unwrap(), vec![false, true]);
+        // Grey with alpha, 16-bit.
+        let la16 = ::image::ExtendedColorType::La16;
+        let px: Vec<u8> = [1u16, 0, 1, 7, 0, 7]
+            .iter()
+            .flat_map(|v| v.to_ne_bytes())
+            .collect();
+        write_png(&p, 3, 1, &px, la16).unwrap();
+        assert_eq!(read_mask(&p, 3, 1).unwrap(), vec![false, true, false]);
+        write_png(&p, 1, 1, &[255, 255, 255, 0], rgba).unwrap();
+        let e = read_mask(&p, 1, 1).unwrap_err().to_string();
+        assert!(e.contains("m.png: mask is empty"), "{e}");
+    }
+
     #[test]
     fn masks() {
         let d = tempfile::tempdir().unwrap();
@@ -457,16 +505,16 @@ mod tests {
             e.contains("mask.png: mask is 3x1 but the images are 4x2"),
             "{e}"
         );
-        // First channel decides for RGB masks.
+        // Any colour channel counts for RGB masks.
         write_png(
             &p,
-            2,
+            3,
             1,
-            &[0, 9, 9, 7, 0, 0],
+            &[0, 9, 9, 7, 0, 0, 0, 0, 0],
             ::image::ExtendedColorType::Rgb8,
         )
         .unwrap();
-        assert_eq!(read_mask(&p, 2, 1).unwrap(), vec![false, true]);
+        assert_eq!(read_mask(&p, 3, 1).unwrap(), vec![true, true, false]);
         write_png(&p, 2, 1, &[0, 0], ::image::ExtendedColorType::L8).unwrap();
         let e = read_mask(&p, 2, 1).unwrap_err().to_string();
         assert!(e.contains("mask.png: mask is empty"), "{e}");

@@ -401,7 +401,7 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
         );
     }
     let images = image_list(&config.images)?;
-    let opts = config.decode;
+    let opts = config.decode.clone();
     let stopped = || ctl.stop.load(std::sync::atomic::Ordering::SeqCst);
     let first = read_grey(&images[0], &opts, None)?;
     let (w, h) = (first.width, first.height);

@@ -308,6 +308,9 @@ pub struct BaselineParameters {
     pub gamma: Gamma,
     /// Saturation threshold (fraction of the integer maximum).
     pub saturation: f32,
+    /// The EXR layer read (absent: the default layer).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub exr_layer: Option<String>,
 }
 
 /// Symmetry-method parameters as recorded in the report.
@@ -326,6 +329,9 @@ pub struct SymmetryParameters {
     pub gamma: Gamma,
     /// Saturation threshold (fraction of the integer maximum).
     pub saturation: f32,
+    /// The EXR layer read (absent: the default layer).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub exr_layer: Option<String>,
 }
 
 /// Light counts.
@@ -699,6 +705,7 @@ fn run(
                 linear_8bit: !decode.gamma.srgb(8),
                 gamma: decode.gamma,
                 saturation: decode.saturation,
+                exr_layer: decode.exr_layer.clone(),
             }),
             LightCounts {
                 input: rig.n_input(),
@@ -712,6 +719,7 @@ fn run(
                 linear_8bit: !decode.gamma.srgb(8),
                 gamma: decode.gamma,
                 saturation: decode.saturation,
+                exr_layer: decode.exr_layer.clone(),
             }),
             LightCounts {
                 input: b.unit_lights().len(),

@@ -432,6 +432,7 @@ fn relight<'py>(
         let exr = DecodeOptions {
             gamma: symframe_io::Gamma::Linear,
             saturation: f32::INFINITY,
+            ..DecodeOptions::default()
         };
         for png in &done.pictures {
             let img = symframe_io::read_image(&png.with_extension("exr"), &exr)?;

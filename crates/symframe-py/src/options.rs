@@ -210,7 +210,11 @@ pub fn decode(o: &mut Options) -> PyResult<DecodeOptions> {
             "saturation must be in (0, 1], got {saturation}"
         )));
     }
-    Ok(DecodeOptions { gamma, saturation })
+    Ok(DecodeOptions {
+        gamma,
+        saturation,
+        ..DecodeOptions::default()
+    })
 }
 
 /// The tile cache (`cache`, `no_keep_cache`, `trust_mtime`, `tile_size`, `decode_memory`,

@@ -61,6 +61,7 @@ fn estimate_on_an_lp_dataset_writes_every_output_and_is_accurate() {
     let exact = symframe_io::DecodeOptions {
         gamma: symframe_io::Gamma::Linear,
         saturation: f32::INFINITY,
+        ..Default::default()
     };
     let png = symframe_io::read_image(&out.join("tangents_gltf.png"), &exact).unwrap();
     let mut checked = 0;

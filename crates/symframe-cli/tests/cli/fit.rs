@@ -649,6 +649,7 @@ fn gltf_fit_relight_and_export_reproduce_a_brushed_gltf_metal_at_any_exposure() 
     let linear = DecodeOptions {
         gamma: symframe_io::Gamma::Linear,
         saturation: f32::INFINITY,
+        ..DecodeOptions::default()
     };
     let mr = symframe_io::read_image(&p("out/asset_metallicroughness.png"), &linear)
         .unwrap()

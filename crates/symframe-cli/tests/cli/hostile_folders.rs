@@ -224,3 +224,26 @@ fn fit_and_view_never_replace_their_inputs() {
     ok(&common::symframe(&["view", s(&tmp.path().join("fit")), "-o", s(&page)]));
     ok(&common::symframe(&["view", s(&tmp.path().join("fit")), "-o", s(&page)]));
 }
+
+#[test]
+fn a_cache_file_that_is_a_link_is_never_written_through() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = capture(&tmp.path().join("data"));
+    let out = tmp.path().join("out");
+    ok(&estimate(&lp, &out));
+    let cache = out.join(".symframe-cache");
+    let stack = fs::read_dir(&cache)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|e| e == "stack"))
+        .expect("a cache file");
+    let (victim, _) = victims(tmp.path());
+    fs::remove_file(&stack).unwrap();
+    symlink(&victim, &stack).unwrap();
+    // The cache is rebuilt beside the link and renamed over it: the link goes, its target
+    // stays as it was.
+    ok(&estimate(&lp, &out));
+    assert_kept(&[&victim]);
+    assert!(fs::symlink_metadata(&stack).unwrap().is_file());
+}

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use crate::common::{assert_one_line_error, estimate, ok, report, s, stderr, symframe, Truth};
 use symframe::brdf::lambertian::Lambertian;
-use symframe_io::ImageFormat;
+use symframe_io::{read_image, read_npy_f32, write_exr_channels, DecodeOptions, ImageFormat};
 
 /// A small Lambertian sphere as float EXR; returns the `.lp` path.
 fn lambert(dir: &Path, size: usize, lights: usize) -> PathBuf {
@@ -68,6 +68,235 @@ fn light_intensities_beside_several_lp_files_are_never_silent() {
     fs::write(data.join("light_intensities.txt"), "1 1 1\n".repeat(7)).unwrap();
     let o = estimate(&lp, &tmp.path().join("c"), &["--method", "woodham"]);
     assert_one_line_error(&o, "light_intensities.txt: 7 light intensities but");
+}
+
+/// A layered EXR (`albedo.R/G/B`, `beauty.R/G/B`) was read from the wrong layer without a word
+/// (36 degrees off); an EXR holding only a depth channel `Z` was taken as radiance.
+#[test]
+fn layered_exr_needs_exr_layer_and_depth_alone_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let lp = lambert(&data, 16, 20);
+    let plain = tmp.path().join("plain");
+    ok(&estimate(&lp, &plain, &["--method", "woodham"]));
+    let opts = DecodeOptions::default();
+    let images: Vec<PathBuf> = (0..20)
+        .map(|i| data.join(format!("images/img_{i:04}.exr")))
+        .collect();
+    for p in &images {
+        let img = read_image(p, &opts).unwrap();
+        let plane = |c: usize| img.data.iter().skip(c).step_by(3).copied().collect();
+        let flat = vec![0.5f32; 16 * 16];
+        let ch = vec![
+            ("albedo.R", flat.clone()),
+            ("albedo.G", flat.clone()),
+            ("albedo.B", flat),
+            ("beauty.R", plane(0)),
+            ("beauty.G", plane(1)),
+            ("beauty.B", plane(2)),
+        ];
+        write_exr_channels(p, 16, 16, ch).unwrap();
+    }
+    let o = estimate(&lp, &tmp.path().join("x"), &["--method", "woodham"]);
+    assert_one_line_error(&o, "img_0000.exr: no default EXR layer");
+    assert!(stderr(&o).contains("--exr-layer NAME (one of albedo, beauty)"));
+    let picked = tmp.path().join("beauty");
+    ok(&estimate(
+        &lp,
+        &picked,
+        &["--method", "woodham", "--exr-layer", "beauty"],
+    ));
+    let bits = |dir: &Path| -> Vec<u32> {
+        let (_, v) = read_npy_f32(&dir.join("normals.npy")).unwrap();
+        v.iter().map(|x| x.to_bits()).collect()
+    };
+    assert_eq!(bits(&picked), bits(&plain));
+    assert_eq!(report(&picked)["parameters"]["exr_layer"], "beauty");
+    // The layer is part of the cache's fingerprint: another layer is decoded afresh.
+    let o = estimate(
+        &lp,
+        &picked,
+        &["--method", "woodham", "--exr-layer", "albedo"],
+    );
+    ok(&o);
+    assert_eq!(report(&picked)["cache"]["hit"], false);
+    // Depth only.
+    write_exr_channels(&images[3], 16, 16, vec![("Z", vec![1.0; 256])]).unwrap();
+    let o = estimate(&lp, &tmp.path().join("z"), &["--method", "woodham"]);
+    assert_one_line_error(
+        &o,
+        "img_0003.exr: no radiance channel (R, G, B or Y) in the EXR (channels: default layer (Z))",
+    );
+}
+
+/// Only a mask's first channel counted: a pure blue mask was "empty".
+#[test]
+fn a_blue_mask_is_not_empty() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let lp = lambert(&data, 16, 20);
+    let mask = tmp.path().join("blue.png");
+    let rgb: Vec<f32> = (0..16 * 16)
+        .flat_map(|i| {
+            if i % 16 < 8 {
+                [0.0, 0.0, 1.0]
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect();
+    symframe_io::write_png8_rgb(&mask, 16, 16, &rgb, false).unwrap();
+    let out = tmp.path().join("out");
+    ok(&estimate(
+        &lp,
+        &out,
+        &["--method", "woodham", "--mask", s(&mask)],
+    ));
+    let (_, n) = read_npy_f32(&out.join("normals.npy")).unwrap();
+    let estimated = |half: bool| {
+        (0..256)
+            .filter(|&p| (p % 16 < 8) == half && n[p * 3].is_finite())
+            .count()
+    };
+    assert!(estimated(true) > 0);
+    assert_eq!(estimated(false), 0);
+}
+
+/// Writes an 8-bit grey PNG of `w x h` black pixels, compressed as deflate does (a literal
+/// and then runs of 258 bytes): a real image of many pixels in a small file.
+fn black_png(path: &Path, w: u32, h: u32) {
+    fn crc32(data: &[u8]) -> u32 {
+        let mut c = !0u32;
+        for &b in data {
+            c ^= b as u32;
+            for _ in 0..8 {
+                c = if c & 1 != 0 {
+                    0xedb8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
+            }
+        }
+        !c
+    }
+    struct Bits(Vec<u8>, u32, u32);
+    impl Bits {
+        /// `n` bits of `v`, least significant first.
+        fn put(&mut self, v: u32, n: u32) {
+            for k in 0..n {
+                self.1 |= ((v >> k) & 1) << self.2;
+                self.2 += 1;
+                if self.2 == 8 {
+                    self.0.push(self.1 as u8);
+                    (self.1, self.2) = (0, 0);
+                }
+            }
+        }
+        /// A Huffman code of `n` bits, most significant first.
+        fn code(&mut self, v: u32, n: u32) {
+            for k in (0..n).rev() {
+                self.put((v >> k) & 1, 1);
+            }
+        }
+    }
+    let raw = (w as u64 + 1) * h as u64; // a filter byte per row, all zero
+    let mut z = Bits(vec![0x78, 0x01], 0, 0);
+    z.put(1, 1); // final block
+    z.put(1, 2); // fixed Huffman codes
+    z.code(0x30, 8); // literal 0
+    let mut left = raw - 1;
+    while left >= 258 {
+        z.code(0xc5, 8); // length 258 (code 285)
+        z.code(0, 5); // distance 1
+        left -= 258;
+    }
+    for _ in 0..left {
+        z.code(0x30, 8);
+    }
+    z.code(0, 7); // end of block
+    if z.2 > 0 {
+        z.0.push(z.1 as u8);
+    }
+    let adler = ((raw % 65521) as u32) << 16 | 1;
+    z.0.extend(adler.to_be_bytes());
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut chunk = |kind: &[u8], body: &[u8]| {
+        png.extend((body.len() as u32).to_be_bytes());
+        let mut c = kind.to_vec();
+        c.extend(body);
+        png.extend(&c);
+        png.extend(crc32(&c).to_be_bytes());
+    };
+    let mut ihdr = w.to_be_bytes().to_vec();
+    ihdr.extend(h.to_be_bytes());
+    ihdr.extend([8, 0, 0, 0, 0]);
+    chunk(b"IHDR", &ihdr);
+    chunk(b"IDAT", &z.0);
+    chunk(b"IEND", &[]);
+    fs::write(path, png).unwrap();
+}
+
+/// Runs `symframe` with `args` under `/usr/bin/time`: its output (the time line taken off
+/// stderr) and its peak resident set size in KiB.
+#[cfg(target_os = "linux")]
+fn peak_memory(args: &[&str]) -> (std::process::Output, u64) {
+    let mut o = std::process::Command::new("/usr/bin/time")
+        .args(["-f", "peak-rss-kib %M", env!("CARGO_BIN_EXE_symframe")])
+        .args(args)
+        .output()
+        .expect("run /usr/bin/time");
+    let err = stderr(&o);
+    let (rest, last) = err
+        .trim_end()
+        .rsplit_once('\n')
+        .unwrap_or(("", err.trim_end()));
+    let kib = last
+        .strip_prefix("peak-rss-kib ")
+        .and_then(|k| k.parse().ok())
+        .unwrap_or_else(|| panic!("no peak from /usr/bin/time: {err}"));
+    o.stderr = format!("{rest}\n").into_bytes();
+    (o, kib)
+}
+
+/// `--decode-memory` was ignored when an image's size disagreed with the first image's: that
+/// image was decoded whole before the comparison (four small PNGs of 8000 x 8000 pixels after
+/// a 16 x 16 one: 3.7 GB peak with `--decode-memory 16`).
+#[cfg(target_os = "linux")]
+#[test]
+fn an_image_of_another_size_is_refused_before_it_is_decoded() {
+    if !Path::new("/usr/bin/time").exists() {
+        eprintln!("skipped: no /usr/bin/time to measure the peak memory");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    black_png(&d.join("a.png"), 16, 16);
+    for i in 1..5 {
+        black_png(&d.join(format!("b{i}.png")), 8000, 8000);
+    }
+    assert!(fs::metadata(d.join("b1.png")).unwrap().len() < 1 << 20);
+    let names = ["a.png", "b1.png", "b2.png", "b3.png", "b4.png"];
+    let mut lp = "5\n".to_string();
+    for (i, n) in names.iter().enumerate() {
+        lp += &format!("{n} {} 0.3 1\n", i as f64 * 0.1);
+    }
+    let big = d.join("big.lp");
+    fs::write(&big, lp).unwrap();
+    let out = d.join("out");
+    let args = [
+        "estimate",
+        s(&big),
+        "-o",
+        s(&out),
+        "--decode-memory",
+        "16",
+        "--method",
+        "woodham",
+    ];
+    let (o, peak_kib) = peak_memory(&args);
+    assert_one_line_error(&o, "b1.png: image is 8000x8000 but the first image");
+    assert!(stderr(&o).contains("a.png) is 16x16"), "{}", stderr(&o));
+    assert!(peak_kib < 600 << 10, "peak {peak_kib} KiB");
 }
 
 /// A `--mask`, `.lp` or `relight --lights` file that is `/dev/zero` grew until memory ran out.

@@ -1,37 +1,184 @@
-//! OpenEXR: decoding the first valid layer, and writing float32 channels.
+//! OpenEXR: decoding the radiance layer, and writing float32 channels.
+//!
+//! Which channels are radiance: those of one layer, `R`, `G`, `B` (colour) or else `Y` (grey).
+//! A channel's layer is its name before the last `.` (`beauty.R` is `R` of layer `beauty`),
+//! in a multi-part file prefixed by its part's name; the unnamed default layer (`R`, `G`, `B`
+//! or `Y` of a single-part file) is read unless [`DecodeOptions::exr_layer`] names another.
+//! No default layer (only `albedo.R`, ..., `beauty.R`, ...) is an error that lists the
+//! layers; a file without any `R`, `G`, `B` or `Y` channel (only `Z`, only `A`) is an error
+//! that lists its channels.
 
 use std::path::Path;
 
-use super::{check_len, io_err, planes, Raw, RawImage};
+use super::{check_len, io_err, planes, DecodeOptions, Raw, RawImage};
 use crate::atomic::write_atomic;
 use crate::error::{Error, Result};
 use crate::limits;
 
-/// The part of an EXR channel name after the last `.` (drops a legacy layer prefix).
-pub(super) fn base_name(name: &str) -> &str {
-    name.rsplit('.').next().unwrap_or(name)
+/// One layer of an EXR file: its name (`""` for the default layer), its part and its channels
+/// (index in the part's channel list, name without the layer).
+struct ExrLayerChannels {
+    name: String,
+    part: usize,
+    channels: Vec<(usize, String)>,
 }
 
-/// Decodes an OpenEXR file's first valid (non-deep) layer at full resolution (single-threaded),
-/// after checking every part's declared size ([`crate::limits`]).
-///
-/// Reads the file's blocks with `exr`'s block API and converts each decompressed block's lines
-/// straight into the interleaved output, instead of building `exr`'s per-channel image first:
-/// no per-channel sample vectors, no second copy. Measured on one
-/// thread with float RGB ZIP files: 1.2x faster at 128x128 (5.59 -> 4.87 million instructions
-/// per image), 1.3-1.45x at 1024x1024 (docs/performance.md, "Decoding").
-pub(super) fn read_exr(path: &Path, bytes: &[u8]) -> Result<RawImage> {
-    use exr::block::reader::ChunksReader;
-    use exr::meta::attribute::SampleType;
-    use std::io::Cursor;
-    let eerr = |e: exr::error::Error| match e {
+impl ExrLayerChannels {
+    /// The radiance channels of the layer: `R`, `G`, `B` (in that order), else `Y`.
+    fn radiance(&self) -> Option<Vec<usize>> {
+        let find = |want: &str| {
+            self.channels
+                .iter()
+                .find(|(_, n)| n.eq_ignore_ascii_case(want))
+                .map(|&(i, _)| i)
+        };
+        match (find("R"), find("G"), find("B"), find("Y")) {
+            (Some(r), Some(g), Some(b), _) => Some(vec![r, g, b]),
+            (_, _, _, Some(y)) => Some(vec![y]),
+            _ => None,
+        }
+    }
+
+    /// How a message lists it: `beauty (R, G, B)`, `default layer (Z)`.
+    fn describe(&self) -> String {
+        let names: Vec<&str> = self.channels.iter().map(|(_, n)| n.as_str()).collect();
+        let name = if self.name.is_empty() {
+            "default layer"
+        } else {
+            &self.name
+        };
+        format!("{name} ({})", names.join(", "))
+    }
+}
+
+/// The layers of the non-deep parts of an EXR file, in file order (a part's name prefixes its
+/// layers when the file has several parts).
+fn exr_layers(headers: &[exr::meta::header::Header]) -> Vec<ExrLayerChannels> {
+    let multi = headers.len() > 1;
+    let mut out: Vec<ExrLayerChannels> = Vec::new();
+    for (part, h) in headers.iter().enumerate().filter(|(_, h)| !h.deep) {
+        let part_name = h
+            .own_attributes
+            .layer_name
+            .as_ref()
+            .map(|t| t.to_string())
+            .filter(|_| multi);
+        for (i, c) in h.channels.list.iter().enumerate() {
+            let full = c.name.to_string();
+            let (prefix, base) = match full.rsplit_once('.') {
+                Some((p, b)) => (p.to_string(), b.to_string()),
+                None => (String::new(), full.clone()),
+            };
+            let name = match (&part_name, prefix.is_empty()) {
+                (Some(p), true) => p.clone(),
+                (Some(p), false) => format!("{p}.{prefix}"),
+                (None, _) => prefix,
+            };
+            match out.iter_mut().find(|l| l.part == part && l.name == name) {
+                Some(l) => l.channels.push((i, base)),
+                None => out.push(ExrLayerChannels {
+                    name,
+                    part,
+                    channels: vec![(i, base)],
+                }),
+            }
+        }
+    }
+    out
+}
+
+/// The part and the channels (indices in that part's list) of the radiance to decode: the
+/// layer `opts.exr_layer` names, else the default layer (see the module's documentation).
+fn choose_layer(
+    path: &Path,
+    headers: &[exr::meta::header::Header],
+    opts: &DecodeOptions,
+) -> Result<(usize, Vec<usize>)> {
+    if headers.iter().all(|h| h.deep) {
+        return Err(Error::unsupported(path, "EXR with deep data only"));
+    }
+    let layers = exr_layers(headers);
+    let listed = || {
+        layers
+            .iter()
+            .map(ExrLayerChannels::describe)
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    if let Some(want) = &opts.exr_layer {
+        let Some(layer) = layers.iter().find(|l| &l.name == want) else {
+            return Err(Error::invalid(
+                path,
+                format!("no EXR layer '{want}' (layers: {})", listed()),
+            ));
+        };
+        return match layer.radiance() {
+            Some(c) => Ok((layer.part, c)),
+            None => Err(Error::invalid(
+                path,
+                format!(
+                    "EXR layer {} has no radiance channel (R, G, B or Y)",
+                    layer.describe()
+                ),
+            )),
+        };
+    }
+    if let Some((layer, c)) = layers
+        .iter()
+        .filter(|l| l.name.is_empty())
+        .find_map(|l| Some((l, l.radiance()?)))
+    {
+        return Ok((layer.part, c));
+    }
+    let with_radiance: Vec<&str> = layers
+        .iter()
+        .filter(|l| l.radiance().is_some())
+        .map(|l| l.name.as_str())
+        .collect();
+    if with_radiance.is_empty() {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "no radiance channel (R, G, B or Y) in the EXR (channels: {})",
+                listed()
+            ),
+        ));
+    }
+    Err(Error::invalid(
+        path,
+        format!(
+            "no default EXR layer (R, G, B or Y without a layer name); layers: {}; choose \
+             the radiance with --exr-layer NAME (one of {})",
+            listed(),
+            with_radiance.join(", ")
+        ),
+    ))
+}
+
+/// The width and height of the layer an EXR file's radiance would be decoded from, read from
+/// its headers alone (declared sizes checked as [`read_exr`] does).
+pub(super) fn exr_size(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<(usize, usize)> {
+    let meta = read_meta(path, bytes)?;
+    let (part, _) = choose_layer(path, &meta.headers, opts)?;
+    let size = meta.headers[part].layer_size;
+    Ok((size.width(), size.height()))
+}
+
+/// The errors of the `exr` crate as this crate's, naming `path`.
+fn exr_err(path: &Path, e: exr::error::Error) -> Error {
+    match e {
         exr::error::Error::Io(io) => io_err(path, io),
         exr::error::Error::NotSupported(m) => Error::unsupported(path, format!("EXR {m}")),
         other => Error::decode(path, other),
-    };
+    }
+}
+
+/// The headers of an EXR file, every part's declared size checked ([`crate::limits`]).
+fn read_meta(path: &Path, bytes: &[u8]) -> Result<exr::meta::MetaData> {
     // The declared sizes first, from the headers as written (the block reader's own
     // validation would otherwise answer a forged size with a less useful error).
-    let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(eerr)?;
+    let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(bytes), false)
+        .map_err(|e| exr_err(path, e))?;
     for h in meta.headers.iter() {
         let size = h.layer_size;
         limits::check_image_size(
@@ -42,40 +189,29 @@ pub(super) fn read_exr(path: &Path, bytes: &[u8]) -> Result<RawImage> {
             bytes.len() as u64,
         )?;
     }
+    Ok(meta)
+}
+
+/// Decodes an OpenEXR file's radiance layer (see the module's documentation) at full
+/// resolution (single-threaded), after checking every part's declared size
+/// ([`crate::limits`]).
+///
+/// Reads the file's blocks with `exr`'s block API and converts each decompressed block's lines
+/// straight into the interleaved output, instead of building `exr`'s per-channel image first:
+/// no per-channel sample vectors, no second copy. Measured on one
+/// thread with float RGB ZIP files: 1.2x faster at 128x128 (5.59 -> 4.87 million instructions
+/// per image), 1.3-1.45x at 1024x1024 (docs/performance.md, "Decoding").
+pub(super) fn read_exr(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<RawImage> {
+    use exr::block::reader::ChunksReader;
+    use exr::meta::attribute::SampleType;
+    use std::io::Cursor;
+    let eerr = |e: exr::error::Error| exr_err(path, e);
+    read_meta(path, bytes)?;
     let reader = exr::block::read(Cursor::new(bytes), false).map_err(eerr)?;
-    let Some(layer) = reader.headers().iter().position(|h| !h.deep) else {
-        return Err(Error::unsupported(path, "EXR with deep data only"));
-    };
+    let (layer, picked) = choose_layer(path, reader.headers(), opts)?;
     let header = &reader.headers()[layer];
     let (width, height) = (header.layer_size.width(), header.layer_size.height());
     let list = &header.channels.list;
-    let names: Vec<String> = list.iter().map(|c| c.name.to_string()).collect();
-    let find = |want: &str| {
-        names
-            .iter()
-            .position(|n| base_name(n).eq_ignore_ascii_case(want))
-    };
-    let picked: Vec<usize> = if let (Some(r), Some(g), Some(b)) = (find("R"), find("G"), find("B"))
-    {
-        vec![r, g, b]
-    } else if let Some(y) = find("Y") {
-        vec![y]
-    } else {
-        let non_alpha: Vec<usize> = (0..names.len())
-            .filter(|&i| !base_name(&names[i]).eq_ignore_ascii_case("A"))
-            .collect();
-        if non_alpha.len() != 1 {
-            return Err(Error::unsupported(
-                path,
-                format!(
-                    "{}-channel EXR without R,G,B channels (channels: {})",
-                    names.len(),
-                    names.join(",")
-                ),
-            ));
-        }
-        non_alpha
-    };
     // Every channel's samples per pixel of a line, in file order (all must be unsampled: the
     // line layout below assumes one sample per pixel).
     if let Some(c) = list
@@ -151,8 +287,9 @@ pub(super) fn read_exr(path: &Path, bytes: &[u8]) -> Result<RawImage> {
     })
 }
 
-/// Writes named float32 channels (each `w * h`, row-major) to an EXR file, ZIP-compressed.
-pub(crate) fn write_exr_channels(
+/// Writes named float32 channels (each `w * h`, row-major) to an EXR file, ZIP-compressed
+/// (`beauty.R` is channel `R` of layer `beauty`).
+pub fn write_exr_channels(
     path: &Path,
     width: usize,
     height: usize,

@@ -5,8 +5,11 @@
 //! its channels set to `NaN`, so the estimator simply skips that light at that pixel.
 //!
 //! Formats, chosen by extension (case-insensitive):
-//! - `.exr`: OpenEXR, half/float/uint; `R,G,B` (others such as `A` ignored), else `Y`, else the
-//!   single non-alpha channel. Linear; first valid layer, full resolution level.
+//! - `.exr`: OpenEXR, half/float/uint; `R,G,B` (others such as `A` ignored), else `Y`, of the
+//!   unnamed default layer, or of the layer [`DecodeOptions::exr_layer`] names (`beauty` for
+//!   `beauty.R`, `beauty.G`, `beauty.B`). Linear; full resolution level. A file without a
+//!   default layer, or without any radiance channel (only `Z`, only `A`), is an error listing
+//!   what it has.
 //! - `.png`, `.jpg`/`.jpeg`, `.tif`/`.tiff`: by [`DecodeOptions::gamma`], 8-bit is
 //!   sRGB-decoded and 16-bit is `value / 65535` unless told otherwise ([`Gamma`]); TIFF
 //!   16/32/64-bit float is linear. Grey or RGB, alpha dropped. Their colour tags (PNG `sRGB`,
@@ -18,8 +21,9 @@
 //! Limits (see [`crate::limits`]): every decoder reads the size a file declares first and
 //! refuses more than 65,536 pixels per side or 134 million pixels, or more pixels than the
 //! file's length can encode, before allocating; the decoder libraries run with allocation
-//! limits of their own (2 GiB per image). Not supported: deep or multi-part-only EXR data
-//! beyond the first valid layer, subsampled EXR channels, palette or 1/2/4-bit images other
+//! limits of their own (2 GiB per image). Not supported: deep EXR data, EXR radiance other
+//! than `R`, `G`, `B` or `Y` of one layer (a depth `Z` or alpha `A` alone is not radiance;
+//! the layers of a file without a default layer are not guessed), subsampled EXR channels, palette or 1/2/4-bit images other
 //! than what the PNG decoder expands to 8 bits, signed-integer or 32/64-bit integer TIFF,
 //! CMYK or other colour spaces, more than 4 channels. A file is read into memory whole, then
 //! decoded; a decoder that panics on a hostile file is caught and reported as a decode error.
@@ -42,10 +46,9 @@ mod tiff;
 
 pub use colour::ColourTag;
 use exr::read_exr;
-pub(crate) use exr::write_exr_channels;
-pub use exr::write_exr_rgb;
+pub use exr::{write_exr_channels, write_exr_rgb};
 use image_rs::read_with_image;
-use pfm::pfm_raw;
+use pfm::{pfm_raw, pfm_size};
 pub use pfm::{read_pfm, write_pfm};
 pub(crate) use png::write_png;
 pub use png::{write_png16_rgb, write_png8_rgb};
@@ -152,22 +155,28 @@ impl Gamma {
     }
 }
 
-/// How integer images are turned into linear radiance.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// How images are turned into linear radiance.
+#[derive(Debug, Clone, PartialEq)]
 pub struct DecodeOptions {
     /// The transfer curve of the integer formats.
     pub gamma: Gamma,
     /// Fraction of an integer format's maximum at or above which a raw sample counts as
     /// saturated (its pixel becomes `NaN`); a value above 1 disables the test.
     pub saturation: f32,
+    /// The EXR layer holding the radiance (`beauty` for channels `beauty.R`, `beauty.G`,
+    /// `beauty.B`; in a multi-part file its part's name first); `None`: the default layer
+    /// (channels without a layer name). Other formats ignore it.
+    pub exr_layer: Option<String>,
 }
 
 impl Default for DecodeOptions {
-    /// sRGB-decoded 8-bit, linear 16-bit, saturation at 99.5% of the format's maximum.
+    /// sRGB-decoded 8-bit, linear 16-bit, saturation at 99.5% of the format's maximum, the
+    /// default EXR layer.
     fn default() -> Self {
         Self {
             gamma: Gamma::Auto,
             saturation: 0.995,
+            exr_layer: None,
         }
     }
 }
@@ -200,33 +209,17 @@ pub fn read_image(path: &Path, opts: &DecodeOptions) -> Result<Image> {
     decode_image(path, &bytes, opts)
 }
 
-/// Decodes `bytes`, the content of the image file `path` (its extension picks the format; the
-/// path names the file in errors), as [`read_image`] does.
-pub fn decode_image(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Image> {
-    let ext = extension(path)?;
-    let run = || -> Result<Image> {
-        let ((raw, icc), integer) = match ext.as_str() {
-            "exr" => ((read_exr(path, bytes)?, None), false),
-            "tif" | "tiff" => (read_tiff(path, bytes)?, true),
-            "pfm" => ((pfm_raw(path, bytes)?, None), false),
 /// The bytes of the image file `path`, bounded ([`crate::read_bounded`]).
 pub(crate) fn read_image_file(path: &Path) -> Result<Vec<u8>> {
     crate::read_bounded(path, "an image file", crate::limits::MAX_IMAGE_FILE_BYTES)
 }
 
-            "png" => (
-                read_with_image(path, bytes, ::image::ImageFormat::Png)?,
-                true,
-            ),
-            "jpg" | "jpeg" => (
-                read_with_image(path, bytes, ::image::ImageFormat::Jpeg)?,
-                true,
-            ),
-            _ => (
-                read_with_image(path, bytes, ::image::ImageFormat::Hdr)?,
-                false,
-            ),
-        };
+/// Decodes `bytes`, the content of the image file `path` (its extension picks the format; the
+/// path names the file in errors), as [`read_image`] does.
+pub fn decode_image(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Image> {
+    let ext = extension(path)?;
+    let run = || -> Result<Image> {
+        let ((raw, icc), integer) = decode_raw(path, &ext, bytes, opts)?;
         let colour = match ext.as_str() {
             "png" => colour::png_tag(bytes, icc.as_deref()),
             _ if integer => icc.as_deref().and_then(colour::icc_tag),
@@ -239,6 +232,120 @@ pub(crate) fn read_image_file(path: &Path) -> Result<Vec<u8>> {
     // Belt and braces: a decoder bug on a hostile file must not take down a whole stack load.
     catch_unwind(AssertUnwindSafe(run))
         .unwrap_or_else(|_| Err(Error::decode(path, "decoder panicked (corrupt file?)")))
+}
+
+/// A decoded image in its file's samples, and its ICC profile when it has one.
+type Decoded = (RawImage, Option<Vec<u8>>);
+
+/// Decodes `bytes` of format `ext` into the file's own samples, every channel kept; returns
+/// them, the ICC profile (when there is one) and whether the format's integer samples may be
+/// gamma-encoded.
+fn decode_raw(
+    path: &Path,
+    ext: &str,
+    bytes: &[u8],
+    opts: &DecodeOptions,
+) -> Result<(Decoded, bool)> {
+    Ok(match ext {
+        "exr" => ((read_exr(path, bytes, opts)?, None), false),
+        "tif" | "tiff" => (read_tiff(path, bytes)?, true),
+        "pfm" => ((pfm_raw(path, bytes)?, None), false),
+        "png" => (
+            read_with_image(path, bytes, ::image::ImageFormat::Png)?,
+            true,
+        ),
+        "jpg" | "jpeg" => (
+            read_with_image(path, bytes, ::image::ImageFormat::Jpeg)?,
+            true,
+        ),
+        _ => (
+            read_with_image(path, bytes, ::image::ImageFormat::Hdr)?,
+            false,
+        ),
+    })
+}
+
+/// The width and height of the image file `path` whose content is `bytes`, from its header
+/// alone (for an EXR, of the layer `opts` picks), without decoding its pixels: how a stack
+/// compares an image's size with the first image's before decoding it. Errors as
+/// [`decode_image`] would give them for a header that cannot be read.
+pub fn declared_size(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<(usize, usize)> {
+    use std::io::Cursor;
+    let ext = extension(path)?;
+    let run = || -> Result<(usize, usize)> {
+        let fmt = match ext.as_str() {
+            "exr" => return exr::exr_size(path, bytes, opts),
+            "pfm" => return pfm_size(path, bytes),
+            "tif" | "tiff" => {
+                let mut dec = ::tiff::decoder::Decoder::new(Cursor::new(bytes))
+                    .map_err(|e| Error::decode(path, e))?;
+                let (w, h) = dec.dimensions().map_err(|e| Error::decode(path, e))?;
+                return Ok((w as usize, h as usize));
+            }
+            "png" => ::image::ImageFormat::Png,
+            "jpg" | "jpeg" => ::image::ImageFormat::Jpeg,
+            _ => ::image::ImageFormat::Hdr,
+        };
+        let (w, h) = ::image::ImageReader::with_format(Cursor::new(bytes), fmt)
+            .into_dimensions()
+            .map_err(|e| Error::decode(path, e))?;
+        Ok((w as usize, h as usize))
+    };
+    catch_unwind(AssertUnwindSafe(run))
+        .unwrap_or_else(|_| Err(Error::decode(path, "decoder panicked (corrupt file?)")))
+}
+
+/// Reads the mask image `path` (any format [`read_image`] reads): width, height and which
+/// pixels are inside. A pixel is inside when any of its colour channels (grey, or red, green
+/// and blue) is non-zero and, when the image has alpha, its alpha is non-zero too: a black and
+/// white mask, a pure blue or red and green one, and one transparent outside with colour
+/// everywhere all mean what they show. Raw samples decide: no sRGB decoding or saturation test.
+pub(crate) fn read_mask_pixels(path: &Path) -> Result<(usize, usize, Vec<bool>)> {
+    let ext = extension(path)?;
+    let bytes = read_image_file(path)?;
+    let run = || -> Result<(usize, usize, Vec<bool>)> {
+        let ((raw, _), _) = decode_raw(path, &ext, &bytes, &DecodeOptions::default())?;
+        mask_of(path, raw)
+    };
+    catch_unwind(AssertUnwindSafe(run))
+        .unwrap_or_else(|_| Err(Error::decode(path, "decoder panicked (corrupt file?)")))
+}
+
+/// The pixels inside of a decoded mask (see [`read_mask_pixels`]).
+fn mask_of(path: &Path, img: RawImage) -> Result<(usize, usize, Vec<bool>)> {
+    let ch = img.channels;
+    let (colour, alpha) = match ch {
+        1 => (1, false),
+        2 => (1, true),
+        3 => (3, false),
+        4 => (3, true),
+        _ => return Err(Error::unsupported(path, format!("{ch}-channel mask"))),
+    };
+    fn inside<T: Copy>(px: &[T], colour: usize, alpha: bool, on: impl Fn(T) -> bool) -> bool {
+        px[..colour].iter().any(|&v| on(v)) && (!alpha || on(px[colour]))
+    }
+    let n = img.width * img.height;
+    let mask: Vec<bool> = match &img.raw {
+        Raw::U8(v) => v
+            .chunks_exact(ch)
+            .map(|px| inside(px, colour, alpha, |s| s != 0))
+            .collect(),
+        Raw::U16(v) => v
+            .chunks_exact(ch)
+            .map(|px| inside(px, colour, alpha, |s| s != 0))
+            .collect(),
+        Raw::F32(v) => v
+            .chunks_exact(ch)
+            .map(|px| inside(px, colour, alpha, |s: f32| s != 0.0 && !s.is_nan()))
+            .collect(),
+    };
+    if mask.len() != n {
+        return Err(Error::decode(
+            path,
+            format!("expected {n} pixels, decoded {}", mask.len()),
+        ));
+    }
+    Ok((img.width, img.height, mask))
 }
 
 /// The lower-case extension of `path` if it is an image format this module reads.
@@ -583,17 +690,102 @@ mod tests {
         let rgb = img.into_rgb();
         assert_eq!(&rgb[3..6], &[1.5, 1.5, 1.5]);
 
-        // Any single channel is read as grey, alpha ignored.
-        write_exr_channels(&p, 2, 3, vec![("depth", v.clone()), ("A", v.clone())]).unwrap();
-        assert_eq!(read_image(&p, &opts()).unwrap().data, v);
-
-        // Two channels without R,G,B or Y cannot be interpreted.
-        write_exr_channels(&p, 2, 3, vec![("U", v.clone()), ("V", v)]).unwrap();
+        // A depth or alpha channel alone is no radiance: an error listing the channels.
+        write_exr_channels(&p, 2, 3, vec![("Z", v.clone())]).unwrap();
         let e = read_image(&p, &opts()).unwrap_err().to_string();
         assert!(
-            e.contains("y.exr: unsupported: 2-channel EXR without R,G,B"),
+            e.ends_with("y.exr: no radiance channel (R, G, B or Y) in the EXR (channels: default layer (Z))"),
             "{e}"
         );
+        write_exr_channels(&p, 2, 3, vec![("depth", v.clone()), ("A", v.clone())]).unwrap();
+        let e = read_image(&p, &opts()).unwrap_err().to_string();
+        assert!(
+            e.contains("no radiance channel") && e.contains("(A, depth)"),
+            "{e}"
+        );
+        write_exr_channels(&p, 2, 3, vec![("U", v.clone()), ("V", v)]).unwrap();
+        let e = read_image(&p, &opts()).unwrap_err().to_string();
+        assert!(e.contains("y.exr: no radiance channel"), "{e}");
+    }
+
+    /// A layered EXR (`albedo.R/G/B`, `beauty.R/G/B`) was read from its first layer without a
+    /// word, and a depth-only EXR taken as radiance.
+    #[test]
+    fn exr_layers_are_chosen_by_name_never_guessed() {
+        let d = tempfile::tempdir().unwrap();
+        let p = tmp(&d, "layers.exr");
+        let plane = |v: f32| vec![v; 4];
+        let layered = |with_default: bool| {
+            let mut ch = vec![
+                ("albedo.R", plane(0.1)),
+                ("albedo.G", plane(0.2)),
+                ("albedo.B", plane(0.3)),
+                ("beauty.R", plane(1.0)),
+                ("beauty.G", plane(2.0)),
+                ("beauty.B", plane(3.0)),
+                ("Z", plane(9.0)),
+            ];
+            if with_default {
+                ch.push(("Y", plane(5.0)));
+            }
+            write_exr_channels(&p, 2, 2, ch).unwrap();
+        };
+        layered(false);
+        let e = read_image(&p, &opts()).unwrap_err().to_string();
+        assert!(
+            e.contains("layers.exr: no default EXR layer")
+                && e.contains("albedo (B, G, R)")
+                && e.contains("--exr-layer NAME (one of albedo, beauty)"),
+            "{e}"
+        );
+        let pick = |name: &str| DecodeOptions {
+            exr_layer: Some(name.into()),
+            ..opts()
+        };
+        let img = read_image(&p, &pick("beauty")).unwrap();
+        assert_eq!((img.channels, &img.data[..3]), (3, &[1.0, 2.0, 3.0][..]));
+        assert_eq!(read_image(&p, &pick("albedo")).unwrap().data[2], 0.3);
+        let e = read_image(&p, &pick("diffuse")).unwrap_err().to_string();
+        assert!(e.contains("no EXR layer 'diffuse' (layers: "), "{e}");
+        // The default layer when there is one (here Y; Z beside it is not radiance).
+        layered(true);
+        let img = read_image(&p, &opts()).unwrap();
+        assert_eq!((img.channels, img.data[0]), (1, 5.0));
+        assert_eq!(
+            declared_size(&p, &std::fs::read(&p).unwrap(), &pick("beauty")).unwrap(),
+            (2, 2)
+        );
+    }
+
+    /// An image whose size disagrees with the stack's was decoded whole before the comparison.
+    #[test]
+    fn declared_sizes_come_from_the_headers_of_every_format() {
+        let d = tempfile::tempdir().unwrap();
+        let rgb = vec![0.25f32; 5 * 3 * 3];
+        let cases: Vec<PathBuf> = ["s.exr", "s.png", "s.pfm", "s.tif"]
+            .iter()
+            .map(|n| tmp(&d, n))
+            .collect();
+        write_exr_rgb(&cases[0], 5, 3, &rgb).unwrap();
+        write_png16_rgb(&cases[1], 5, 3, &rgb).unwrap();
+        write_pfm(&cases[2], 5, 3, 3, &rgb).unwrap();
+        {
+            use ::tiff::encoder::{colortype, TiffEncoder};
+            TiffEncoder::new(File::create(&cases[3]).unwrap())
+                .unwrap()
+                .write_image::<colortype::RGB32Float>(5, 3, &rgb)
+                .unwrap();
+        }
+        for p in &cases {
+            let b = std::fs::read(p).unwrap();
+            assert_eq!(declared_size(p, &b, &opts()).unwrap(), (5, 3), "{p:?}");
+            // The header alone is enough.
+            let head = &b[..b.len().min(200)];
+            if ["png", "pfm"].contains(&p.extension().unwrap().to_str().unwrap()) {
+                assert_eq!(declared_size(p, head, &opts()).unwrap(), (5, 3), "{p:?}");
+            }
+        }
+        assert!(declared_size(&cases[1], b"junk", &opts()).is_err());
     }
 
     #[test]
@@ -887,6 +1079,7 @@ mod tests {
         let lin = DecodeOptions {
             gamma: Gamma::Linear,
             saturation: 2.0,
+            exr_layer: None,
         };
         assert_eq!(read_image(&p, &lin).unwrap().data, vec![0.0, 1.0, 0.0]);
         let names: Vec<_> = std::fs::read_dir(d.path())

@@ -108,6 +108,24 @@ pub(super) fn parse_pfm(bytes: &[u8]) -> std::result::Result<Pfm, String> {
     Ok((width, height, channels, data))
 }
 
+/// The width and height a PFM file's header declares (header only; no pixel is read).
+pub(super) fn pfm_size(path: &Path, bytes: &[u8]) -> Result<(usize, usize)> {
+    let mut pos = 0;
+    let mut next = || pfm_token(bytes, &mut pos).map_err(|m| Error::decode(path, m));
+    if !matches!(next()?, "PF" | "Pf") {
+        return Err(Error::decode(path, "not a PFM file"));
+    }
+    let mut dim = || -> Result<usize> {
+        let t = next()?;
+        t.parse::<usize>()
+            .ok()
+            .filter(|&v| v > 0)
+            .ok_or_else(|| Error::decode(path, format!("bad size '{}'", t.escape_default())))
+    };
+    let w = dim()?;
+    Ok((w, dim()?))
+}
+
 /// Reads a PFM as a raw float image.
 pub(super) fn read_pfm_raw(path: &Path) -> Result<RawImage> {
     let bytes = super::read_image_file(path)?;

@@ -68,14 +68,16 @@ pub(super) fn build(
 ) -> Result<Built> {
     let n = ds.images.len();
     let notes = Notes::new(n);
-    let decode_one = |i: usize| -> Result<(usize, usize, Vec<f32>)> {
-        if stop.load(Ordering::Relaxed) {
-            return Err(Error::Interrupted);
-        }
-        let r = decode_stack_image(ds, i, opts, &notes)?;
-        on_image();
-        Ok(r)
-    };
+    // Given the stack's size, an image whose header declares another is refused undecoded.
+    let decode_one =
+        |i: usize, first: Option<(usize, usize)>| -> Result<(usize, usize, Vec<f32>)> {
+            if stop.load(Ordering::Relaxed) {
+                return Err(Error::Interrupted);
+            }
+            let r = decode_stack_image(ds, i, opts, &notes, first)?;
+            on_image();
+            Ok(r)
+        };
     let mut decode_s = 0.0;
     let mut first: Option<Vec<f32>> = None;
     // Resume a partial build of the same inputs, else start afresh from the first image.
@@ -96,7 +98,7 @@ pub(super) fn build(
                 fs::remove_file(partial).map_err(|e| Error::write(partial, e))?;
             }
             let t = Instant::now();
-            let (w, h, rgb) = decode_one(0)?;
+            let (w, h, rgb) = decode_one(0, None)?;
             decode_s += t.elapsed().as_secs_f64();
             if w == 0 || h == 0 {
                 return Err(Error::invalid(&ds.images[0], "image is empty"));
@@ -140,8 +142,11 @@ pub(super) fn build(
         } else {
             start
         };
-        let results: Vec<Result<(usize, usize, Vec<f32>)>> =
-            (from..end).into_par_iter().map(decode_one).collect();
+        let size = Some((header.width, header.height));
+        let results: Vec<Result<(usize, usize, Vec<f32>)>> = (from..end)
+            .into_par_iter()
+            .map(|i| decode_one(i, size))
+            .collect();
         decode_s += t.elapsed().as_secs_f64();
         let mut images = Vec::with_capacity(end - start);
         if from > start {
@@ -324,7 +329,8 @@ pub(super) fn repair(
                 if stop.load(Ordering::Relaxed) {
                     return Err(Error::Interrupted);
                 }
-                let r = decode_stack_image(ds, i, opts, &Notes::new(0))?;
+                let first = Some((h.width, h.height));
+                let r = decode_stack_image(ds, i, opts, &Notes::new(0), first)?;
                 on_image();
                 Ok(r)
             })

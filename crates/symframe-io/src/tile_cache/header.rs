@@ -289,6 +289,10 @@ pub fn dataset_fingerprints(
         .u64(opts.gamma.code())
         .f64(opts.saturation as f64)
         .u64(trust_mtime as u64);
+    // Only a layer named: caches of the default layer keep the fingerprint they had.
+    if let Some(layer) = &opts.exr_layer {
+        f.str("exr layer").str(layer);
+    }
     let kind = if trust_mtime {
         StampKind::SizeAndMtime
     } else {

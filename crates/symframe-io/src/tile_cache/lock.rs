@@ -45,12 +45,11 @@ impl CacheLock {
     }
 
     pub(super) fn open(path: &Path) -> Result<Self> {
-        let file = OpenOptions::new()
-            .create(true)
-            .truncate(false)
-            .write(true)
-            .open(path)
-            .map_err(|e| Error::write(path, e))?;
+        let file = crate::atomic::open_no_follow(
+            OpenOptions::new().create(true).truncate(false).write(true),
+            path,
+        )
+        .map_err(|e| Error::write(path, e))?;
         Ok(Self {
             file,
             path: path.to_path_buf(),
