@@ -648,9 +648,15 @@ mod tests {
         assert!(why(8.0, 8.0, 0.0).contains("> 0"));
         // The area inside: a quarter of a disc at a corner, all of one in the middle.
         let q = c(0.0, 0.0, 10.0).area_inside(96.0, 32.0);
-        assert!((q / (25.0 * std::f64::consts::PI) - 1.0).abs() < 1e-4, "{q}");
+        assert!(
+            (q / (25.0 * std::f64::consts::PI) - 1.0).abs() < 1e-4,
+            "{q}"
+        );
         let a = c(48.0, 16.0, 12.0).area_inside(96.0, 32.0);
-        assert!((a / (144.0 * std::f64::consts::PI) - 1.0).abs() < 1e-4, "{a}");
+        assert!(
+            (a / (144.0 * std::f64::consts::PI) - 1.0).abs() < 1e-4,
+            "{a}"
+        );
     }
 
     #[test]
