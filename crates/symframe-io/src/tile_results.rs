@@ -27,6 +27,11 @@ const HEADER: usize = 48;
 const HEADER_SUMMED: usize = 40;
 const RECORD: usize = 40;
 
+/// The length in bytes of the result file of a tile of `n` pixels (header and records).
+pub fn tile_result_len(n: usize) -> u64 {
+    HEADER as u64 + RECORD as u64 * n as u64
+}
+
 /// The result file of tile `t` in `dir`.
 pub fn tile_result_path(dir: &Path, t: usize) -> PathBuf {
     dir.join(format!("tile-{t:06}.bin"))
@@ -253,6 +258,7 @@ mod tests {
         assert!(tile_result_done(&p, 9, 7, 2));
         assert!(!tile_result_done(&p, 8, 7, 2));
         assert!(!tile_result_done(&p, 9, 6, 2));
+        assert_eq!(std::fs::metadata(&p).unwrap().len(), tile_result_len(2));
         let back = read_tile_result(&p, 9, 7, 2).unwrap();
         assert_eq!(back[1], recs[1]);
         assert_eq!(back[0].status, PixelStatus::Masked);

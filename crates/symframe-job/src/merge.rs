@@ -73,7 +73,9 @@ impl ShardManifest {
             )));
         }
         let (w, h) = (self.width, self.height);
-        if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE || w * h > MAX_PIXELS {
+        // In u64: no product below can overflow, whatever the numbers.
+        let pixels = w as u64 * h as u64;
+        if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE || pixels > MAX_PIXELS as u64 {
             return Err(bad(format!(
                 "image of {w}x{h} pixels (1 to {MAX_SIDE} per side, at most {MAX_PIXELS} pixels)"
             )));
@@ -81,7 +83,8 @@ impl ShardManifest {
         if self.tile_size == 0 || self.tile_size > MAX_SIDE {
             return Err(bad(format!("tile size {}", self.tile_size)));
         }
-        let n = TileGrid::new(w, h, self.tile_size).n_tiles();
+        // At most MAX_PIXELS tiles (one-pixel tiles), so the count fits any usize.
+        let n = (w.div_ceil(self.tile_size) as u64 * h.div_ceil(self.tile_size) as u64) as usize;
         if self.n_tiles != n {
             return Err(bad(format!(
                 "{} tiles recorded, {n} expected",
@@ -116,18 +119,36 @@ pub(crate) fn write_manifest(out: &Path, m: &ShardManifest) -> Result<()> {
     fs::rename(&tmp, &path).with_context(|| format!("{}: cannot write", path.display()))
 }
 
-/// A short list of tile numbers: the first few and how many more.
-fn list_tiles(tiles: &[usize]) -> String {
-    let shown: Vec<String> = tiles.iter().take(12).map(|t| t.to_string()).collect();
-    if tiles.len() > shown.len() {
-        format!(
-            "{} and {} more",
-            shown.join(", "),
-            tiles.len() - shown.len()
-        )
+/// A short list of tile numbers: the first few (`first`, at most 12 shown) of `total`, and how
+/// many more.
+fn list_tiles(first: &[usize], total: usize) -> String {
+    let shown: Vec<String> = first.iter().take(12).map(|t| t.to_string()).collect();
+    if total > shown.len() {
+        format!("{} and {} more", shown.join(", "), total - shown.len())
     } else {
         shown.join(", ")
     }
+}
+
+/// The tiles of `0..n` missing from `covered` (sorted, without repeats), without a list of
+/// them all (`n` comes from a manifest: nothing of its size is allocated): the first 12, how
+/// many in all, and the first 13 shard numbers (1-based, of `of` shards) that hold them.
+fn missing_tiles(covered: &[usize], n: usize, of: usize) -> (Vec<usize>, usize, Vec<usize>) {
+    let mut first = Vec::new();
+    let mut shards = std::collections::BTreeSet::new();
+    let mut start = 0;
+    for end in covered.iter().copied().chain([n]) {
+        // The gap start..end; its tiles' shards are t % of + 1, distinct for up to `of`
+        // consecutive tiles, so 25 of them hold 13 new ones if there are (12 seen at most).
+        first.extend((start..end).take(12 - first.len().min(12)));
+        for t in (start..end).take(of.min(25)) {
+            if shards.len() < 13 {
+                shards.insert(t % of + 1);
+            }
+        }
+        start = end + 1;
+    }
+    (first, n - covered.len(), shards.into_iter().collect())
 }
 
 /// `symframe merge`: checks the shards belong to one job and cover every tile, assembles the
@@ -227,32 +248,57 @@ fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcom
             grid.n_tiles()
         );
     }
-    // Which shard folder holds each tile.
-    let mut owner: Vec<Option<usize>> = vec![None; grid.n_tiles()];
-    for (i, (dir, m)) in manifests.iter().enumerate() {
-        for &t in &m.tiles {
-            if t >= owner.len() {
-                bail!("{}: tile {t} does not exist", dir.join(MANIFEST).display());
-            }
-            owner[t].get_or_insert(i);
+    // Nothing the size of the declared image is allocated before the tiles listed cover the
+    // grid and every tile's file is there with the length of its records: what the manifests
+    // declare is then backed by files of 40 bytes per pixel (a forged `shard.json` of a few
+    // bytes declaring 65536 x 2048 one-pixel tiles made merge allocate gigabytes first).
+    // Which shard folder holds each tile: the first that lists it (memory in proportion to the
+    // manifests' lists, already read).
+    let mut listed: Vec<(usize, usize)> = manifests
+        .iter()
+        .enumerate()
+        .flat_map(|(i, (_, m))| m.tiles.iter().map(move |&t| (t, i)))
+        .collect();
+    listed.sort_unstable();
+    listed.dedup_by_key(|&mut (t, _)| t);
+    if listed.len() < grid.n_tiles() {
+        let covered: Vec<usize> = listed.iter().map(|&(t, _)| t).collect();
+        let (shown, count, absent) = missing_tiles(&covered, grid.n_tiles(), first.of);
+        let mut shards: Vec<String> = absent
+            .iter()
+            .take(12)
+            .map(|k| format!("{k}/{}", first.of))
+            .collect();
+        if absent.len() > 12 {
+            shards.push("and others".into());
         }
-    }
-    let missing: Vec<usize> = (0..owner.len()).filter(|&t| owner[t].is_none()).collect();
-    if !missing.is_empty() {
-        let mut absent: Vec<usize> = missing.iter().map(|t| t % first.of + 1).collect();
-        absent.sort_unstable();
-        absent.dedup();
-        let shards: Vec<String> = absent.iter().map(|k| format!("{k}/{}", first.of)).collect();
         bail!(
             "missing tiles {} of {}: shard{} {} not given",
-            list_tiles(&missing),
+            list_tiles(&shown, count),
             grid.n_tiles(),
-            if shards.len() > 1 { "s" } else { "" },
+            if absent.len() > 1 { "s" } else { "" },
             shards.join(", ")
         );
     }
-    // Every tile has an owner now (the missing ones were reported above).
-    let owner: Vec<usize> = owner.into_iter().flatten().collect();
+    // Tiles are in range (validated) and without repeats: listed[t] is tile t's.
+    let owner: Vec<usize> = listed.into_iter().map(|(_, i)| i).collect();
+    for (t, &i) in owner.iter().enumerate() {
+        let path = tile_path(&manifests[i].0.join(TILES_DIR), t);
+        let len = fs::metadata(&path)
+            .map_err(|source| symframe_io::Error::Read {
+                path: path.clone(),
+                source,
+            })?
+            .len();
+        let expected = symframe_io::tile_results::tile_result_len(grid.tile_pixels(t));
+        if len != expected {
+            bail!(
+                "{}: not a result of tile {t} ({} pixels): {len} bytes, {expected} expected",
+                path.display(),
+                grid.tile_pixels(t)
+            );
+        }
+    }
     let read = AtomicU64::new(0);
     let total = grid.n_tiles() as u64;
     let maps = assemble(&grid, job, |t| {
@@ -319,4 +365,28 @@ fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcom
         maps,
         shards: manifests.len(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn missing_tiles_are_listed_from_the_gaps() {
+        // 9 tiles of 3 shards, shard 2 (tiles 1, 4, 7) not given.
+        assert_eq!(
+            missing_tiles(&[0, 2, 3, 5, 6, 8], 9, 3),
+            (vec![1, 4, 7], 3, vec![2])
+        );
+        // 134 million tiles declared, 3 covered: the first 12 and the count, no list of all.
+        let n = 1 << 27;
+        let (first, count, shards) = missing_tiles(&[0, 1, 2], n, 1);
+        assert_eq!((first, count, shards), ((3..15).collect(), n - 3, vec![1]));
+        // Many shards: the first 13 of those missing.
+        let (_, _, shards) = missing_tiles(&[], 1000, 500);
+        assert_eq!(shards, (1..=13).collect::<Vec<_>>());
+        let (_, _, shards) = missing_tiles(&[0, 1, 2, 3], 1000, usize::MAX);
+        assert_eq!(shards, (5..=17).collect::<Vec<_>>());
+        assert_eq!(missing_tiles(&[0, 1], 2, 2), (vec![], 0, vec![]));
+    }
 }

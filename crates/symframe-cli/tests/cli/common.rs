@@ -184,6 +184,43 @@ pub fn run_with_timeout(args: &[&str], secs: u64) -> Output {
     child.wait_with_output().expect("symframe's output")
 }
 
+/// Runs the `symframe` binary with `args`; returns its output and its peak resident set size
+/// in KiB (`ru_maxrss` of this one child, from `wait4`, so jobs that other tests run at the
+/// same time do not count).
+#[cfg(target_os = "linux")]
+pub fn run_measuring_rss(args: &[&str]) -> (Output, u64) {
+    use std::io::Read;
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::Stdio;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_symframe"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run symframe");
+    let (mut out, mut err) = (Vec::new(), Vec::new());
+    let mut so = child.stdout.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        so.read_to_end(&mut out).ok();
+        out
+    });
+    child.stderr.take().unwrap().read_to_end(&mut err).ok();
+    let out = reader.join().unwrap();
+    let mut status = 0;
+    // SAFETY: an all-zero `rusage` is a valid value of the plain C struct.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: waits for our own child (not waited for elsewhere: `child` is not used again),
+    // writing into the two locals.
+    let pid = unsafe { libc::wait4(child.id() as libc::pid_t, &mut status, 0, &mut usage) };
+    assert_eq!(pid, child.id() as libc::pid_t, "wait4 failed");
+    let output = Output {
+        status: std::process::ExitStatus::from_raw(status),
+        stdout: out,
+        stderr: err,
+    };
+    (output, usage.ru_maxrss as u64)
+}
+
 /// Runs the `symframe` binary with `args` and its address space limited to `max_bytes`
 /// (`RLIMIT_AS`), so a run that reads without bound fails fast instead of taking the
 /// machine's memory.

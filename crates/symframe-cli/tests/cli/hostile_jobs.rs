@@ -5,7 +5,9 @@
 use std::fs;
 use std::path::Path;
 
-use crate::common::{assert_one_line_error, ok, run_with_timeout, s, stderr, symframe};
+use crate::common::{
+    assert_one_line_error, ok, run_measuring_rss, run_with_timeout, s, stderr, symframe,
+};
 
 /// `demo -o DIR` writes `DIR/dataset`, `DIR/estimate`, `DIR/fit`, `DIR/relit*` and
 /// `DIR/region.png`: a non-empty one of them that an earlier demo did not write is refused
@@ -51,6 +53,51 @@ fn demo_refuses_folders_it_did_not_write() {
     ok(&demo(&dir, &[]));
     ok(&demo(&dir, &[]));
     assert!(dir.join("estimate/normals.npy").is_file());
+}
+
+/// A forged `shard.json` of a few bytes declaring a huge image (65536 x 2048 pixels in
+/// one-pixel tiles, or one tile of all of it beside a tiny tile file) is refused before
+/// anything the size of the declared image is allocated: the merge fails with a one-line
+/// error and its peak memory stays under 600 MB.
+#[test]
+fn merge_refuses_a_forged_manifest_before_allocating_its_size() {
+    let tmp = tempfile::tempdir().unwrap();
+    let forge = |name: &str, tile_size: usize, tiles: &[usize]| {
+        let dir = tmp.path().join(name);
+        fs::create_dir_all(dir.join(".symframe-tiles")).unwrap();
+        let (w, h) = (65536usize, 2048usize);
+        let n = w.div_ceil(tile_size) * h.div_ceil(tile_size);
+        let m = serde_json::json!({
+            "format": "symframe-shard", "version": 1, "job": "00000000deadbeef",
+            "shard": 1, "of": 1, "width": w, "height": h, "tile_size": tile_size,
+            "n_tiles": n, "tiles": tiles, "report": {},
+        });
+        fs::write(dir.join("shard.json"), m.to_string()).unwrap();
+        for &t in tiles {
+            fs::write(
+                dir.join(format!(".symframe-tiles/tile-{t:06}.bin")),
+                [0u8; 88],
+            )
+            .unwrap();
+        }
+        assert!(fs::metadata(dir.join("shard.json")).unwrap().len() < 4096);
+        dir
+    };
+    let cases = [
+        (forge("pixels", 1, &[0, 1, 2]), "missing tiles 3, 4, 5"),
+        (forge("one_tile", 65536, &[0]), "tile-000000.bin"),
+    ];
+    for (shard, needle) in cases {
+        let out = tmp.path().join("merged");
+        let (o, kib) = run_measuring_rss(&["merge", s(&shard), "-o", s(&out)]);
+        assert_one_line_error(&o, needle);
+        assert!(!out.exists());
+        assert!(
+            kib < 600 * 1024,
+            "merge of {shard:?} peaked at {} MB",
+            kib / 1024
+        );
+    }
 }
 
 /// `--sphere` and `--matte-sphere` circles are checked against the image before anything is
