@@ -787,6 +787,24 @@ mod tests {
         assert!(check_switch_plan(&text, token).is_err());
     }
 
+    /// The fuzz target's seed is a plan this code signs (kept in step with the format).
+    #[test]
+    fn the_fuzz_seed_is_a_valid_signed_plan() {
+        let token = 0x0123_4567_89ab_cdef;
+        let plan = Plan::new(
+            vec!["normals.npy".into(), "report.json".into()],
+            vec!["holdout_residual.npy".into()],
+            token,
+        );
+        let seed = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../fuzz/seeds/switch_plan/signed.json"
+        );
+        let text = std::fs::read_to_string(seed).unwrap();
+        assert_eq!(text, serde_json::to_string(&plan).unwrap());
+        assert_eq!(check_switch_plan(&text, token).unwrap(), (2, 1));
+    }
+
     #[test]
     fn staging_folder_names_carry_a_token() {
         assert_eq!(staging_token("12-00000000000000ff"), Some(255));
