@@ -77,9 +77,6 @@ pub use estimate::{
 };
 pub use fit::{fit, FitConfig, FitLights, FitOutcome, FitReport, FitTimings};
 pub use merge::{merge, MergeOutcome, ShardManifest, MANIFEST};
-/// The parsers of files a hostile user can plant, for the fuzz targets (`fuzz/`).
-#[cfg(feature = "fuzzing")]
-pub use outdir::check_switch_plan;
 pub use outdir::{check_output_set, OutputDir, OutputSet, Staging, LOCK_FILE};
 pub use relight::{
     read_fit_maps, read_gltf_maps, read_ward_maps, relight, FittedMaps, RelightConfig,
@@ -87,6 +84,9 @@ pub use relight::{
 };
 pub use tiles::{peak_rss_bytes, shard_tiles, TileCounts};
 pub use view::{write_viewer, ViewConfig, ViewOutcome};
+/// The parsers of files a hostile user can plant, for the fuzz targets (`fuzz/`).
+#[cfg(feature = "fuzzing")]
+pub use {merge::check_shard_manifest, outdir::check_switch_plan};
 
 pub use calibrate::{calibrate, CalibrateConfig, CalibrationReport};
 pub use eval::{evaluate_job, EvalConfig, EvalReport};

@@ -73,9 +73,9 @@ impl ShardManifest {
             )));
         }
         let (w, h) = (self.width, self.height);
-        // In u64: no product below can overflow, whatever the numbers.
-        let pixels = w as u64 * h as u64;
-        if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE || pixels > MAX_PIXELS as u64 {
+        // Sides checked before they are multiplied: no product below can overflow.
+        let sides_ok = (1..=MAX_SIDE).contains(&w) && (1..=MAX_SIDE).contains(&h);
+        if !sides_ok || w as u64 * h as u64 > MAX_PIXELS as u64 {
             return Err(bad(format!(
                 "image of {w}x{h} pixels (1 to {MAX_SIDE} per side, at most {MAX_PIXELS} pixels)"
             )));
@@ -103,6 +103,23 @@ impl ShardManifest {
         Ok(())
     }
 
+    /// Parses `text` (the content of `path`) as a manifest of this version and checks what it
+    /// declares ([`ShardManifest::validate`]).
+    fn parse(text: &str, path: &Path) -> Result<Self> {
+        let m: ShardManifest = serde_json::from_str(text)
+            .with_context(|| format!("{}: not a shard manifest", path.display()))?;
+        if m.format != MANIFEST_FORMAT || m.version != MANIFEST_VERSION {
+            bail!(
+                "{}: not a shard manifest of this version (format {} {})",
+                path.display(),
+                m.format,
+                m.version
+            );
+        }
+        m.validate(path)?;
+        Ok(m)
+    }
+
     /// The job fingerprint as a number.
     fn job_u64(&self, path: &Path) -> Result<u64> {
         u64::from_str_radix(&self.job, 16)
@@ -111,6 +128,13 @@ impl ShardManifest {
 }
 
 /// Writes a shard manifest atomically.
+/// Parses and checks a shard manifest as `merge` does before it reads any tile (for the fuzz
+/// target): the number of tiles it lists.
+#[cfg(any(test, feature = "fuzzing"))]
+pub fn check_shard_manifest(text: &str) -> Result<usize> {
+    ShardManifest::parse(text, Path::new(MANIFEST)).map(|m| m.tiles.len())
+}
+
 pub(crate) fn write_manifest(out: &Path, m: &ShardManifest) -> Result<()> {
     let path = out.join(MANIFEST);
     let tmp = out.join(format!(".{MANIFEST}.{}.tmp", std::process::id()));
@@ -193,18 +217,7 @@ fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcom
             }
             Err(e) => return Err(e.into()),
         };
-        let m: ShardManifest = serde_json::from_str(&text)
-            .with_context(|| format!("{}: not a shard manifest", path.display()))?;
-        if m.format != MANIFEST_FORMAT || m.version != MANIFEST_VERSION {
-            bail!(
-                "{}: not a shard manifest of this version (format {} {})",
-                path.display(),
-                m.format,
-                m.version
-            );
-        }
-        m.validate(&path)?;
-        manifests.push((dir.clone(), m));
+        manifests.push((dir.clone(), ShardManifest::parse(&text, &path)?));
     }
     let (first_dir, first) = &manifests[0];
     for (dir, m) in &manifests[1..] {
@@ -370,6 +383,34 @@ fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcom
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The fuzz target's seed passes; what a forged manifest declares beyond its own numbers
+    /// is refused before anything is sized by it.
+    #[test]
+    fn manifests_are_checked_before_they_size_anything() {
+        let seed = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../fuzz/seeds/shard_manifest/two_of_four.json"
+        );
+        let text = std::fs::read_to_string(seed).unwrap();
+        assert_eq!(check_shard_manifest(&text).unwrap(), 2);
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let forged = |key: &str, value: serde_json::Value| {
+            let mut m = v.clone();
+            m[key] = value;
+            check_shard_manifest(&m.to_string())
+        };
+        assert!(
+            forged("width", 65536.into()).is_err(),
+            "tile count no longer matches"
+        );
+        assert!(forged("width", (u64::MAX).into()).is_err());
+        assert!(forged("tile_size", 0.into()).is_err());
+        assert!(forged("shard", 3.into()).is_err());
+        assert!(forged("tiles", serde_json::json!([0, 4])).is_err());
+        assert!(forged("tiles", serde_json::json!([0, 1, 2, 3, 0])).is_err());
+        assert!(forged("version", 2.into()).is_err());
+    }
 
     #[test]
     fn missing_tiles_are_listed_from_the_gaps() {
