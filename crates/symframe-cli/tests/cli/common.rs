@@ -10,9 +10,17 @@ use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{Scene, TangentField};
 use symframe_io::{write_lp_dataset, ImageFormat};
 
+/// The `symframe` binary under test: this build's, or the one `SYMFRAME_TEST_BIN` names (to
+/// show that a regression test fails on a build from before its fix).
+pub fn bin() -> PathBuf {
+    std::env::var_os("SYMFRAME_TEST_BIN")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_symframe")))
+}
+
 /// Runs the `symframe` binary with `args`.
 pub fn symframe(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_symframe"))
+    Command::new(bin())
         .args(args)
         .output()
         .expect("run symframe")
@@ -166,7 +174,7 @@ pub fn assert_fails_keeping_cache(o: &Output, needle: &str, out: &Path) {
 /// ended within `secs` seconds.
 pub fn run_with_timeout(args: &[&str], secs: u64) -> Output {
     use std::process::Stdio;
-    let mut child = Command::new(env!("CARGO_BIN_EXE_symframe"))
+    let mut child = Command::new(bin())
         .args(args)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -192,7 +200,7 @@ pub fn run_measuring_rss(args: &[&str]) -> (Output, u64) {
     use std::io::Read;
     use std::os::unix::process::ExitStatusExt;
     use std::process::Stdio;
-    let mut child = Command::new(env!("CARGO_BIN_EXE_symframe"))
+    let mut child = Command::new(bin())
         .args(args)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -227,7 +235,7 @@ pub fn run_measuring_rss(args: &[&str]) -> (Output, u64) {
 #[cfg(target_os = "linux")]
 pub fn run_with_address_space_cap(args: &[&str], max_bytes: u64) -> Output {
     use std::os::unix::process::CommandExt;
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_symframe"));
+    let mut cmd = Command::new(bin());
     cmd.args(args);
     // SAFETY: the closure runs in the forked child before exec and only calls setrlimit,
     // which is async-signal-safe.

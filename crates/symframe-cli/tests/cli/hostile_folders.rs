@@ -73,7 +73,7 @@ fn a_planted_staging_plan_never_touches_a_file_outside_the_folder() {
     }
     // A plan in a folder named with the token the killed holder of the lock left, but not
     // the plan it wrote (the checksum is wrong): left alone too.
-    let mut held = Command::new(env!("CARGO_BIN_EXE_symframe"))
+    let mut held = Command::new(crate::common::bin())
         .args(["estimate", s(&lp), "-o", s(&out), "--method", "woodham"])
         .env("SYMFRAME_TEST_HOLD_LOCK_S", "20")
         .spawn()

@@ -27,7 +27,7 @@ fn dataset(dir: &Path) -> PathBuf {
 
 /// `symframe estimate LP -o OUT --tile-size 8 EXTRA...` with environment `env`.
 fn estimate_cmd(lp: &Path, out: &Path, extra: &[&str], env: &[(&str, &str)]) -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_symframe"));
+    let mut c = Command::new(crate::common::bin());
     c.args([
         "estimate",
         common::s(lp),
@@ -117,7 +117,7 @@ fn synth_and_eval_hold_the_output_folder_lock() {
     let tmp = tempfile::tempdir().unwrap();
     let data = tmp.path().join("data");
     let synth = |env: &[(&str, &str)]| {
-        let mut c = Command::new(env!("CARGO_BIN_EXE_symframe"));
+        let mut c = Command::new(crate::common::bin());
         c.args(["--quiet", "synth", "-o", common::s(&data)])
             .args(["--size", "16", "--rig", "cone:40"])
             .envs(env.iter().copied())
@@ -138,7 +138,7 @@ fn synth_and_eval_hold_the_output_folder_lock() {
     ok(&estimate(&lp, &est, &["--quiet"]));
 
     let eval = |env: &[(&str, &str)]| {
-        let mut c = Command::new(env!("CARGO_BIN_EXE_symframe"));
+        let mut c = Command::new(crate::common::bin());
         c.args(["eval", common::s(&data), common::s(&est)])
             .envs(env.iter().copied())
             .stdout(Stdio::piped())

@@ -284,7 +284,7 @@ fn eval_into_a_closed_pipe_ends_quietly() {
     let lp = sphere_dataset(&data, 16, 40, &brdf, ImageFormat::Exr, 1.0, truth).1;
     let out = tmp.path().join("out");
     ok(&estimate(&lp, &out, &[]));
-    let mut child = Command::new(env!("CARGO_BIN_EXE_symframe"))
+    let mut child = Command::new(crate::common::bin())
         .args(["eval", data.to_str().unwrap(), out.to_str().unwrap()])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

@@ -53,7 +53,7 @@ fn writes_one_page_with_every_map() {
     let dir = tempfile::tempdir().unwrap();
     fit_folder(dir.path());
     // Run from the folder the fit was "run" from, so fit.json's relative `est` is found.
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_symframe"))
+    let o = std::process::Command::new(crate::common::bin())
         .current_dir(dir.path())
         .args(["view", "fit"])
         .output()
