@@ -130,7 +130,7 @@ impl OutputDir {
         let (file, previous) = match lock_file(&path, token) {
             Ok(Locked::Held(f, previous)) => (f, previous),
             Ok(Locked::Busy) => {
-                let holder = read_bounded(&path).unwrap_or_default();
+                let holder = read_own_file(&path).unwrap_or_default();
                 let holder = holder.split_whitespace().next().unwrap_or_default();
                 if holder.is_empty() {
                     anyhow::bail!("{} is in use by another process", dir.display());
@@ -261,8 +261,7 @@ impl OutputDir {
             }
             let ready = staging.join(READY);
             if fs::symlink_metadata(&ready).is_ok() {
-                let plan = read_bounded(&ready)
-                    .map_err(anyhow::Error::from)
+                let plan = read_own_file(&ready)
                     .and_then(|text| Plan::parse(&text, previous.unwrap_or(0)))
                     .with_context(|| format!("{}: bad switch plan", ready.display()));
                 match plan {
@@ -340,32 +339,28 @@ fn new_token() -> u64 {
     h.finish().max(1)
 }
 
-/// Reads a small file of this tool's (a lock file, a plan) without following a link and at
-/// most [`MAX_PLAN_BYTES`]: a forged one that is a link, a device or huge is an error.
-fn read_bounded(path: &Path) -> std::io::Result<String> {
-    use std::io::Read;
-    let meta = fs::symlink_metadata(path)?;
-    if !meta.is_file() {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidData,
-            "not a regular file (symframe writes only regular files there)",
-        ));
+/// Reads a small file of this tool's (a lock file, a plan) that must not be a link, at most
+/// [`MAX_PLAN_BYTES`] (through [`symframe_io::read_text_bounded`]: a device or a huge file is
+/// an error).
+fn read_own_file(path: &Path) -> Result<String> {
+    if fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink()) {
+        anyhow::bail!(
+            "{}: is a symbolic link (symframe makes none there)",
+            path.display()
+        );
     }
-    let mut text = String::new();
-    open_no_follow(path, false)?
-        .take(MAX_PLAN_BYTES)
-        .read_to_string(&mut text)?;
-    Ok(text)
+    Ok(symframe_io::read_text_bounded(
+        path,
+        "a file of symframe's own",
+        MAX_PLAN_BYTES,
+    )?)
 }
 
-/// Opens `path` for reading (and writing, creating it if missing, when `write`) without
-/// following a symbolic link at its last component.
-fn open_no_follow(path: &Path, write: bool) -> std::io::Result<fs::File> {
+/// Opens `path` for reading and writing, creating it if missing, without following a
+/// symbolic link at its last component.
+fn open_no_follow(path: &Path) -> std::io::Result<fs::File> {
     let mut o = fs::OpenOptions::new();
-    o.read(true);
-    if write {
-        o.write(true).create(true).truncate(false);
-    }
+    o.read(true).write(true).create(true).truncate(false);
     #[cfg(unix)]
     {
         use std::os::unix::fs::OpenOptionsExt;
@@ -418,7 +413,7 @@ fn lock_file(path: &Path, token: u64) -> Result<Locked> {
                 );
             }
         }
-        let mut file = open_no_follow(path, true)
+        let mut file = open_no_follow(path)
             .with_context(|| format!("{}: cannot create lock file", path.display()))?;
         let held = file.metadata()?;
         if !held.is_file() || held.nlink() != 1 {

@@ -445,7 +445,8 @@ fn check_replaceable(path: &Path) -> Result<()> {
             .any(|l| l.starts_with(PAGE_MARK));
     if !ours {
         bail!(
-            "{}: exists and is not a viewer page written by symframe view; refusing to replace              it (give another -o)",
+            "{}: exists and is not a viewer page written by symframe view; refusing to replace \
+             it (give another -o)",
             path.display()
         );
     }
