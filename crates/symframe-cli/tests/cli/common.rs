@@ -196,6 +196,8 @@ pub fn run_with_timeout(args: &[&str], secs: u64) -> Output {
 /// in KiB (`ru_maxrss` of this one child, from `wait4`, so jobs that other tests run at the
 /// same time do not count).
 #[cfg(target_os = "linux")]
+// The child is waited for by `wait4` (for its resource usage), not by `Child::wait`.
+#[allow(clippy::zombie_processes)]
 pub fn run_measuring_rss(args: &[&str]) -> (Output, u64) {
     use std::io::Read;
     use std::os::unix::process::ExitStatusExt;
