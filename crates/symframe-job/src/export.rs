@@ -628,52 +628,81 @@ pub fn export_gltf(config: &ExportConfig) -> Result<ExportOutcome> {
         .filter(|d| !d.as_os_str().is_empty())
         .unwrap_or(Path::new("."))
         .to_path_buf();
-    std::fs::create_dir_all(&out_dir)
-        .with_context(|| format!("{}: cannot create folder", out_dir.display()))?;
     let stem = config
         .output
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_else(|| "asset".into());
-    let [base, mr, normal, aniso] = textures(&maps, !config.mesh);
     let names = ["basecolor", "metallicroughness", "normal", "anisotropy"];
-    // Embedded textures go through a temporary folder; referenced ones lie beside the .gltf.
-    let tmp = tempdir_in(&out_dir)?;
-    let tex_dir = if embed { tmp.clone() } else { out_dir.clone() };
-    let mut written = Vec::new();
+    let bin_name = format!("{stem}.bin");
+    // The asset's files, the .gltf or .glb last (the textures and buffer it names go in first).
+    let mut targets: Vec<PathBuf> = Vec::new();
+    if !embed {
+        targets.extend(
+            names
+                .iter()
+                .map(|n| out_dir.join(format!("{stem}_{n}.png"))),
+        );
+        targets.push(out_dir.join(&bin_name));
+    }
+    targets.push(config.output.clone());
+    let mut inputs = input_files(&config.input)?;
+    if config.mesh {
+        inputs.push(
+            config
+                .depth
+                .clone()
+                .unwrap_or_else(|| config.input.join("depth.npy")),
+        );
+    }
+    check_targets(&targets, &inputs)?;
+    std::fs::create_dir_all(&out_dir)
+        .with_context(|| format!("{}: cannot create folder", out_dir.display()))?;
+
+    // Every file is written into a staging folder first, then moved in (see [`switch_in`]);
+    // the folder goes in any case.
+    let staging = Staging::new(&out_dir)?;
+    let [base, mr, normal, aniso] = textures(&maps, !config.mesh);
     let mut images = Vec::new();
     for (name, bytes) in names.iter().zip([&base, &mr, &normal, &aniso]) {
-        let p = tex_dir.join(format!("{stem}_{name}.png"));
+        let p = staging.0.join(format!("{stem}_{name}.png"));
         symframe_io::write_png_rgb8(&p, w, h, bytes)?;
         images.push((*name, p));
     }
     let refs: Vec<(&str, &Path)> = images.iter().map(|(n, p)| (*n, p.as_path())).collect();
-    let bin_name = format!("{stem}.bin");
-    let result = (|| -> Result<()> {
-        let (doc, bin) = document(
-            &geometry,
-            &refs,
-            !config.mesh,
-            embed,
-            (!embed).then_some(&bin_name),
-            maps.light_intensity,
-        )?;
-        if embed {
-            std::fs::write(&config.output, glb(&doc, &bin))
-                .with_context(|| format!("{}: cannot write", config.output.display()))?;
-        } else {
-            let bp = out_dir.join(&bin_name);
-            std::fs::write(&bp, &bin).with_context(|| format!("{}: cannot write", bp.display()))?;
-            std::fs::write(&config.output, serde_json::to_string_pretty(&doc)? + "\n")
-                .with_context(|| format!("{}: cannot write", config.output.display()))?;
-            written.push(bp);
-            written.extend(images.iter().map(|(_, p)| p.clone()));
-        }
-        Ok(())
-    })();
-    std::fs::remove_dir_all(&tmp).ok();
-    result?;
-    written.insert(0, config.output.clone());
+    let (doc, bin) = document(
+        &geometry,
+        &refs,
+        !config.mesh,
+        embed,
+        (!embed).then_some(&bin_name),
+        maps.light_intensity,
+    )?;
+    let asset = staging
+        .0
+        .join(config.output.file_name().unwrap_or_default());
+    let mut staged: Vec<PathBuf> = Vec::new();
+    if embed {
+        std::fs::write(&asset, glb(&doc, &bin))
+            .with_context(|| format!("{}: cannot write", asset.display()))?;
+    } else {
+        staged.extend(images.iter().map(|(_, p)| p.clone()));
+        let bp = staging.0.join(&bin_name);
+        std::fs::write(&bp, &bin).with_context(|| format!("{}: cannot write", bp.display()))?;
+        staged.push(bp);
+        std::fs::write(&asset, serde_json::to_string_pretty(&doc)? + "\n")
+            .with_context(|| format!("{}: cannot write", asset.display()))?;
+    }
+    staged.push(asset);
+    let moves: Vec<(PathBuf, PathBuf)> = staged.into_iter().zip(targets.iter().cloned()).collect();
+    switch_in(&moves, &staging.0)?;
+    drop(staging);
+    // The asset first, then the buffer and the textures.
+    let mut written = targets;
+    written.rotate_right(1);
+    if !embed {
+        written[1..].rotate_right(1);
+    }
     Ok(ExportOutcome {
         written,
         fitted: maps.fitted,
@@ -682,19 +711,180 @@ pub fn export_gltf(config: &ExportConfig) -> Result<ExportOutcome> {
     })
 }
 
-/// A fresh hidden folder inside `dir`.
-fn tempdir_in(dir: &Path) -> Result<PathBuf> {
-    let p = dir.join(format!(".symframe-export-{}", std::process::id()));
-    if p.exists() {
-        std::fs::remove_dir_all(&p).ok();
+/// The files of the input folder an export may read (its `.npy` maps and `.json` records).
+fn input_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut v = Vec::new();
+    for e in std::fs::read_dir(dir).with_context(|| format!("{}: cannot read", dir.display()))? {
+        let p = e
+            .with_context(|| format!("{}: cannot read", dir.display()))?
+            .path();
+        if p.extension()
+            .is_some_and(|x| x.eq_ignore_ascii_case("npy") || x.eq_ignore_ascii_case("json"))
+        {
+            v.push(p);
+        }
     }
-    std::fs::create_dir(&p).with_context(|| format!("{}: cannot create", p.display()))?;
-    Ok(p)
+    Ok(v)
+}
+
+/// A path with its folder resolved (links included): the directory entry it names.
+fn entry(p: &Path) -> Option<PathBuf> {
+    let dir = p
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    Some(dir.canonicalize().ok()?.join(p.file_name()?))
+}
+
+/// Refuses, before anything is written, targets that are folders (the move would fail half-way)
+/// and targets that would replace one of the export's inputs: the same directory entry, or a
+/// link to the input.
+fn check_targets(targets: &[PathBuf], inputs: &[PathBuf]) -> Result<()> {
+    let inputs: Vec<(PathBuf, Option<PathBuf>, Option<PathBuf>)> = inputs
+        .iter()
+        .map(|p| (p.clone(), entry(p), p.canonicalize().ok()))
+        .collect();
+    for t in targets {
+        let meta = std::fs::symlink_metadata(t).ok();
+        if meta.as_ref().is_some_and(|m| m.is_dir()) {
+            bail!(
+                "{}: a folder is in the way of the exported file; move it or choose another \
+                 output name",
+                t.display()
+            );
+        }
+        let (t_entry, t_file) = (entry(t), t.canonicalize().ok());
+        for (p, p_entry, p_file) in &inputs {
+            let same_entry = t_entry.is_some() && t_entry == *p_entry;
+            let same_file = t_file.is_some() && t_file == *p_file;
+            if same_entry || same_file {
+                bail!(
+                    "{}: is {}, one of the export's inputs: refusing to replace it; write the \
+                     asset elsewhere or under another name",
+                    t.display(),
+                    p.display()
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The export's staging folder (`.symframe-export-PID` in the output's folder), removed when
+/// dropped: on success and on any error.
+struct Staging(PathBuf);
+
+impl Staging {
+    fn new(dir: &Path) -> Result<Self> {
+        let p = dir.join(format!(".symframe-export-{}", std::process::id()));
+        if p.exists() {
+            std::fs::remove_dir_all(&p).ok();
+        }
+        std::fs::create_dir(&p).with_context(|| format!("{}: cannot create", p.display()))?;
+        Ok(Self(p))
+    }
+}
+
+impl Drop for Staging {
+    fn drop(&mut self) {
+        std::fs::remove_dir_all(&self.0).ok();
+    }
+}
+
+/// Moves each staged file onto its target, in order, keeping a link to (or, where links are not
+/// supported, the moved) old file in `backup_dir`; if a move fails, the files moved so far are
+/// taken out again and the old ones put back, so the targets hold either all the old files (an
+/// error is returned) or all the new ones.
+fn switch_in(moves: &[(PathBuf, PathBuf)], backup_dir: &Path) -> Result<()> {
+    // (target, its old file's backup)
+    let mut done: Vec<(&Path, Option<PathBuf>)> = Vec::new();
+    let mut result = Ok(());
+    for (i, (from, to)) in moves.iter().enumerate() {
+        let backup = backup_dir.join(format!(".old-{i}"));
+        let old = match std::fs::symlink_metadata(to) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+            Err(e) => {
+                result = Err(e).with_context(|| format!("{}: cannot read", to.display()));
+                break;
+            }
+            Ok(m) if m.is_dir() => {
+                result = Err(anyhow::anyhow!(
+                    "{}: a folder is in the way of the exported file",
+                    to.display()
+                ));
+                break;
+            }
+            Ok(_) => {
+                match std::fs::hard_link(to, &backup).or_else(|_| std::fs::rename(to, &backup)) {
+                    Ok(()) => Some(backup),
+                    Err(e) => {
+                        result = Err(e).with_context(|| format!("{}: cannot keep", to.display()));
+                        break;
+                    }
+                }
+            }
+        };
+        if let Err(e) = std::fs::rename(from, to) {
+            result = Err(e).with_context(|| format!("{}: cannot replace", to.display()));
+            if let Some(b) = &old {
+                if std::fs::symlink_metadata(to).is_err() {
+                    std::fs::rename(b, to).ok();
+                }
+            }
+            break;
+        }
+        done.push((to, old));
+    }
+    if result.is_err() {
+        for (to, old) in done.into_iter().rev() {
+            match old {
+                Some(b) => {
+                    std::fs::rename(&b, to).ok();
+                }
+                None => {
+                    std::fs::remove_file(to).ok();
+                }
+            }
+        }
+    }
+    result
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_failed_switch_puts_every_old_file_back() {
+        let d = tempfile::tempdir().unwrap();
+        let (out, stage) = (d.path().join("out"), d.path().join("stage"));
+        std::fs::create_dir_all(&out).unwrap();
+        std::fs::create_dir_all(&stage).unwrap();
+        let names = ["a.png", "b.bin", "c.gltf"];
+        let moves: Vec<(PathBuf, PathBuf)> =
+            names.iter().map(|n| (stage.join(n), out.join(n))).collect();
+        let stage_new = || {
+            for (from, _) in &moves {
+                std::fs::write(from, "new").unwrap();
+            }
+        };
+        // The old asset: a and b (c is new); a folder in the way of the last move.
+        std::fs::write(out.join("a.png"), "old a").unwrap();
+        std::fs::write(out.join("b.bin"), "old b").unwrap();
+        std::fs::create_dir_all(out.join("c.gltf/x")).unwrap();
+        stage_new();
+        assert!(switch_in(&moves, &stage).is_err());
+        assert_eq!(std::fs::read_to_string(out.join("a.png")).unwrap(), "old a");
+        assert_eq!(std::fs::read_to_string(out.join("b.bin")).unwrap(), "old b");
+        assert!(out.join("c.gltf/x").is_dir());
+        // Cleared: every new file in.
+        std::fs::remove_dir_all(out.join("c.gltf")).unwrap();
+        stage_new();
+        switch_in(&moves, &stage).unwrap();
+        for n in names {
+            assert_eq!(std::fs::read_to_string(out.join(n)).unwrap(), "new");
+        }
+    }
 
     #[test]
     fn quad_tangent_space_is_the_camera_frame_and_anisotropy_follows_the_tangent() {

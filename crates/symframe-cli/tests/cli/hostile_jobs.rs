@@ -2,11 +2,13 @@
 //! circles that do not fit the image, exports that fail half-way or would replace their own
 //! inputs, and `--quiet` on every subcommand.
 
+use std::collections::BTreeMap;
 use std::fs;
 use std::path::Path;
 
 use crate::common::{
     assert_one_line_error, ok, run_measuring_rss, run_with_timeout, s, stderr, symframe,
+    ward_sphere,
 };
 
 /// `demo -o DIR` writes `DIR/dataset`, `DIR/estimate`, `DIR/fit`, `DIR/relit*` and
@@ -60,6 +62,7 @@ fn demo_refuses_folders_it_did_not_write() {
 /// anything the size of the declared image is allocated: the merge fails with a one-line
 /// error and its peak memory stays under 600 MB.
 #[test]
+#[cfg(target_os = "linux")]
 fn merge_refuses_a_forged_manifest_before_allocating_its_size() {
     let tmp = tempfile::tempdir().unwrap();
     let forge = |name: &str, tile_size: usize, tiles: &[usize]| {
@@ -143,6 +146,137 @@ fn calibrate_refuses_circles_that_do_not_fit_the_image() {
         let e = stderr(&o);
         assert!(e.contains(flag), "{flag} {circle}: {e}");
         assert!(!lp.exists());
+    }
+}
+
+/// Every entry directly in `dir`: its name and a hash of its bytes (`None` for a folder).
+fn snapshot(dir: &Path) -> BTreeMap<String, Option<u64>> {
+    use std::hash::{Hash, Hasher};
+    fs::read_dir(dir)
+        .unwrap()
+        .map(|e| {
+            let e = e.unwrap();
+            let p = e.path();
+            let name = e.file_name().to_string_lossy().into_owned();
+            let hash = p.is_file().then(|| {
+                let mut h = std::collections::hash_map::DefaultHasher::new();
+                fs::read(&p).unwrap().hash(&mut h);
+                h.finish()
+            });
+            (name, hash)
+        })
+        .collect()
+}
+
+/// A failed `export gltf` leaves the earlier asset as it was (before, the new textures were
+/// written beside the old `.gltf` before the failure) and no `.symframe-export-*` folder; a
+/// successful one replaces the whole asset.
+#[test]
+fn failed_export_keeps_the_old_asset_and_leaves_no_staging_folder() {
+    let tmp = tempfile::tempdir().unwrap();
+    let est_a = tmp.path().join("est_a");
+    let est_b = tmp.path().join("est_b");
+    ok(&crate::common::estimate(
+        &ward_sphere(&tmp.path().join("a"), 16, 40),
+        &est_a,
+        &["--quiet"],
+    ));
+    ok(&crate::common::estimate(
+        &ward_sphere(&tmp.path().join("b"), 20, 40),
+        &est_b,
+        &["--quiet"],
+    ));
+    let asset = tmp.path().join("asset");
+    let gltf = asset.join("x.gltf");
+    ok(&symframe(&["export", "gltf", s(&est_a), "-o", s(&gltf)]));
+    // A folder where the new export's anisotropy texture goes.
+    let tex = asset.join("x_anisotropy.png");
+    fs::remove_file(&tex).unwrap();
+    fs::create_dir(&tex).unwrap();
+    fs::write(tex.join("keep"), "mine").unwrap();
+    let before = snapshot(&asset);
+    let o = symframe(&["export", "gltf", s(&est_b), "-o", s(&gltf)]);
+    assert_one_line_error(&o, "x_anisotropy.png");
+    assert_eq!(
+        snapshot(&asset),
+        before,
+        "the old asset must be kept as it was"
+    );
+    assert_eq!(fs::read_to_string(tex.join("keep")).unwrap(), "mine");
+    // The same for a .glb: the old one kept when the export fails (a folder at the .glb).
+    let glb = asset.join("y.glb");
+    fs::create_dir(&glb).unwrap();
+    let o = symframe(&["export", "gltf", s(&est_b), "-o", s(&glb)]);
+    assert_one_line_error(&o, "y.glb");
+    fs::remove_dir(&glb).unwrap();
+    assert_eq!(snapshot(&asset), before);
+    // Once the way is clear the new asset replaces the old one as a whole.
+    fs::remove_dir_all(&tex).unwrap();
+    ok(&symframe(&["export", "gltf", s(&est_b), "-o", s(&gltf)]));
+    let after = snapshot(&asset);
+    // (The quad's buffer and document are those of any square image.)
+    for name in ["x_basecolor.png", "x_metallicroughness.png", "x_normal.png"] {
+        assert_ne!(
+            after.get(name),
+            before.get(name),
+            "{name} should be the new one"
+        );
+    }
+    let doc: serde_json::Value = serde_json::from_str(&fs::read_to_string(&gltf).unwrap()).unwrap();
+    for img in doc["images"].as_array().unwrap() {
+        assert!(asset.join(img["uri"].as_str().unwrap()).is_file());
+    }
+    assert!(after.keys().all(|n| !n.starts_with(".symframe-export")));
+}
+
+/// `export gltf` refuses an output that would replace one of its own inputs: a `.bin` that is
+/// the `--depth` file it reads, a texture that is a link to one of the maps it reads.
+#[test]
+fn export_refuses_to_replace_its_own_inputs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let est = tmp.path().join("est");
+    ok(&crate::common::estimate(
+        &ward_sphere(&tmp.path().join("a"), 16, 40),
+        &est,
+        &["--quiet"],
+    ));
+    let shape = tmp.path().join("shape");
+    ok(&symframe(&[
+        "integrate",
+        s(&est),
+        "-o",
+        s(&shape),
+        "--quiet",
+    ]));
+    // The height map copied to where the asset's buffer goes.
+    let asset = tmp.path().join("asset");
+    fs::create_dir_all(&asset).unwrap();
+    let depth = asset.join("m.bin");
+    fs::copy(shape.join("depth.npy"), &depth).unwrap();
+    let depth_bytes = fs::read(&depth).unwrap();
+    let o = symframe(&[
+        "export",
+        "gltf",
+        s(&est),
+        "--mesh",
+        "--depth",
+        s(&depth),
+        "-o",
+        s(&asset.join("m.gltf")),
+    ]);
+    assert_one_line_error(&o, "m.bin");
+    assert!(stderr(&o).contains("input"), "{}", stderr(&o));
+    assert_eq!(fs::read(&depth).unwrap(), depth_bytes);
+    assert!(!asset.join("m.gltf").exists());
+    // A texture name that is a link to the estimate's normals.
+    #[cfg(unix)]
+    {
+        let normals = fs::read(est.join("normals.npy")).unwrap();
+        std::os::unix::fs::symlink(est.join("normals.npy"), asset.join("q_normal.png")).unwrap();
+        let o = symframe(&["export", "gltf", s(&est), "-o", s(&asset.join("q.gltf"))]);
+        assert_one_line_error(&o, "normals.npy");
+        assert_eq!(fs::read(est.join("normals.npy")).unwrap(), normals);
+        assert!(!asset.join("q.gltf").exists());
     }
 }
 
