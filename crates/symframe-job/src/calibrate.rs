@@ -419,7 +419,6 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
         }
     }
 
-
     // The sphere: given, or found in the mean image.
     let (circle, source, detection) = match config.sphere {
         Some(c) => (c, "given", None),
