@@ -29,13 +29,15 @@ pub(super) struct Built {
 /// Creates `path` of `len` bytes, reserving the disk space up front where the file system can
 /// (so a full disk is an error here, not a fault while writing through the mapping).
 pub(super) fn create_sized(path: &Path, len: u64) -> Result<File> {
-    let file = OpenOptions::new()
-        .read(true)
-        .write(true)
-        .create(true)
-        .truncate(true)
-        .open(path)
-        .map_err(|e| Error::write(path, e))?;
+    let file = crate::atomic::open_no_follow(
+        OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(true),
+        path,
+    )
+    .map_err(|e| Error::write(path, e))?;
     #[cfg(target_os = "linux")]
     {
         use std::os::unix::io::AsRawFd;
@@ -86,11 +88,9 @@ pub(super) fn build(
     let (mut header, file) = match resumable {
         Some((h, _)) => {
             size_ok(h.width, h.height)?;
-            let file = OpenOptions::new()
-                .read(true)
-                .write(true)
-                .open(partial)
-                .map_err(|e| Error::write(partial, e))?;
+            let file =
+                crate::atomic::open_no_follow(OpenOptions::new().read(true).write(true), partial)
+                    .map_err(|e| Error::write(partial, e))?;
             (h, file)
         }
         None => {
@@ -313,10 +313,7 @@ pub(super) fn repair(
 ) -> Result<()> {
     let blocks: std::collections::BTreeSet<usize> = bad.iter().map(|&(_, b)| b).collect();
     info.blocks_corrupt += bad.len();
-    let file = OpenOptions::new()
-        .read(true)
-        .write(true)
-        .open(path)
+    let file = crate::atomic::open_no_follow(OpenOptions::new().read(true).write(true), path)
         .map_err(|e| Error::write(path, e))?;
     let grid = TileGrid::new(h.width, h.height, h.tile);
     let n = h.n_lights;
