@@ -159,7 +159,10 @@ fn links_at_output_names_are_replaced_not_written_through() {
     ok(&estimate(&lp, &out));
     assert_kept(&[&victim]);
     for name in ["normals.npy", "report.json", "source.png"] {
-        assert!(fs::symlink_metadata(out.join(name)).unwrap().is_file(), "{name}");
+        assert!(
+            fs::symlink_metadata(out.join(name)).unwrap().is_file(),
+            "{name}"
+        );
     }
     symframe_job::check_output_set(&out, "report.json").unwrap();
 }
@@ -201,15 +204,7 @@ fn fit_and_view_never_replace_their_inputs() {
     ok(&estimate(&lp, &est));
     let normals = fs::read(est.join("normals.npy")).unwrap();
     // `fit -o` the frames folder would replace normals.npy with the fit's.
-    let o = common::symframe(&[
-        "fit",
-        s(&lp),
-        "--frames",
-        s(&est),
-        "-o",
-        s(&est),
-        "--quiet",
-    ]);
+    let o = common::symframe(&["fit", s(&lp), "--frames", s(&est), "-o", s(&est), "--quiet"]);
     assert_one_line_error(&o, "normals.npy: is an input of this run");
     assert_eq!(fs::read(est.join("normals.npy")).unwrap(), normals);
     // `view -o` a fit's map (or any file it did not write) is refused.
@@ -221,8 +216,18 @@ fn fit_and_view_never_replace_their_inputs() {
     assert_eq!(fs::read(&kd).unwrap(), before);
     // A page it wrote is replaced.
     let page = tmp.path().join("page.html");
-    ok(&common::symframe(&["view", s(&tmp.path().join("fit")), "-o", s(&page)]));
-    ok(&common::symframe(&["view", s(&tmp.path().join("fit")), "-o", s(&page)]));
+    ok(&common::symframe(&[
+        "view",
+        s(&tmp.path().join("fit")),
+        "-o",
+        s(&page),
+    ]));
+    ok(&common::symframe(&[
+        "view",
+        s(&tmp.path().join("fit")),
+        "-o",
+        s(&page),
+    ]));
 }
 
 #[test]
