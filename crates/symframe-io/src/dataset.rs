@@ -165,11 +165,7 @@ type Intensities = Vec<[f32; 3]>;
 /// is applied, with a warning when another `.lp` beside it has `n` lights too (which one it
 /// belongs to cannot be told); one with another row count is an error, unless another `.lp`
 /// beside it has that many lights (then it is that one's: not applied, with a warning).
-fn lp_intensities(
-    lp: &Path,
-    dir: &Path,
-    n: usize,
-) -> Result<(Option<Intensities>, Vec<Warning>)> {
+fn lp_intensities(lp: &Path, dir: &Path, n: usize) -> Result<(Option<Intensities>, Vec<Warning>)> {
     let int_path = dir.join(INTENSITIES);
     if int_path.symlink_metadata().is_err() {
         return Ok((None, Vec::new()));

@@ -93,7 +93,10 @@ fn a_second_job_into_a_busy_folder_is_refused_and_the_first_finishes() {
 /// The process id in a lock file (`PID TOKEN`), empty when there is none.
 pub fn lock_holder(lock: &Path) -> String {
     let text = fs::read_to_string(lock).unwrap_or_default();
-    text.split_whitespace().next().unwrap_or_default().to_string()
+    text.split_whitespace()
+        .next()
+        .unwrap_or_default()
+        .to_string()
 }
 
 /// Waits until `child` holds the output lock of `dir` (its process id in the lock file).
