@@ -14,6 +14,7 @@ use symframe_io::{write_lp_dataset, ImageFormat};
 /// show that a regression test fails on a build from before its fix).
 pub fn bin() -> PathBuf {
     std::env::var_os("SYMFRAME_TEST_BIN")
+        .filter(|v| !v.is_empty())
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_symframe")))
 }

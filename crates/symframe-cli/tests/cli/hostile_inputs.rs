@@ -236,43 +236,12 @@ fn black_png(path: &Path, w: u32, h: u32) {
     fs::write(path, png).unwrap();
 }
 
-/// Runs `symframe` with `args` under `/usr/bin/time`: its output (the time line taken off
-/// stderr) and its peak resident set size in KiB.
-#[cfg(target_os = "linux")]
-fn peak_memory(args: &[&str]) -> (std::process::Output, u64) {
-    let mut o = std::process::Command::new("/usr/bin/time")
-        .args(["-f", "peak-rss-kib %M", env!("CARGO_BIN_EXE_symframe")])
-        .args(args)
-        .output()
-        .expect("run /usr/bin/time");
-    let err = stderr(&o);
-    let (rest, last) = err
-        .trim_end()
-        .rsplit_once('\n')
-        .unwrap_or(("", err.trim_end()));
-    let kib = last
-        .strip_prefix("peak-rss-kib ")
-        .and_then(|k| k.parse().ok())
-        .unwrap_or_else(|| panic!("no peak from /usr/bin/time: {err}"));
-    // `time`'s own note on the exit status goes too.
-    let own: Vec<&str> = rest
-        .lines()
-        .filter(|l| !l.starts_with("Command exited with non-zero status"))
-        .collect();
-    o.stderr = (own.join("\n") + "\n").into_bytes();
-    (o, kib)
-}
-
 /// `--decode-memory` was ignored when an image's size disagreed with the first image's: that
 /// image was decoded whole before the comparison (four small PNGs of 8000 x 8000 pixels after
 /// a 16 x 16 one: 3.7 GB peak with `--decode-memory 16`).
 #[cfg(target_os = "linux")]
 #[test]
 fn an_image_of_another_size_is_refused_before_it_is_decoded() {
-    if !Path::new("/usr/bin/time").exists() {
-        eprintln!("skipped: no /usr/bin/time to measure the peak memory");
-        return;
-    }
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
     black_png(&d.join("a.png"), 16, 16);
@@ -298,7 +267,7 @@ fn an_image_of_another_size_is_refused_before_it_is_decoded() {
         "--method",
         "woodham",
     ];
-    let (o, peak_kib) = peak_memory(&args);
+    let (o, peak_kib) = crate::common::run_measuring_rss(&args);
     assert_one_line_error(&o, "b1.png: image is 8000x8000 but the first image");
     assert!(stderr(&o).contains("a.png) is 16x16"), "{}", stderr(&o));
     assert!(peak_kib < 600 << 10, "peak {peak_kib} KiB");
