@@ -48,6 +48,16 @@ pub fn report(out: &Path) -> serde_json::Value {
     serde_json::from_str(&fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
 }
 
+/// The `warnings` of an output folder's report, one string each.
+pub fn report_warnings(out: &Path) -> Vec<String> {
+    report(out)["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w.as_str().unwrap().to_string())
+        .collect()
+}
+
 /// A `size` x `size` anisotropic Ward sphere under `lights` lights as float EXR (decoding is
 /// exact), without ground truth; returns the `.lp` path.
 pub fn ward_sphere(dir: &Path, size: usize, lights: usize) -> PathBuf {

@@ -62,15 +62,6 @@ fn iccp(name: &str) -> Vec<u8> {
     d
 }
 
-fn warnings(out: &Path) -> Vec<String> {
-    report(out)["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|w| w.as_str().unwrap().to_string())
-        .collect()
-}
-
 #[test]
 fn gamma_flag_rebuilds_the_cache_and_colour_tags_are_warned_about() {
     let tmp = tempfile::tempdir().unwrap();
@@ -105,7 +96,7 @@ fn gamma_flag_rebuilds_the_cache_and_colour_tags_are_warned_about() {
     let r = report(&out);
     assert_eq!(r["cache"]["hit"], false);
     assert_eq!(r["parameters"]["gamma"], "auto");
-    let w = warnings(&out);
+    let w = crate::common::report_warnings(&out);
     assert!(
         w.iter()
             .any(|l| l.contains("ICC profile 'Adobe RGB (1998)' is not sRGB")
@@ -126,14 +117,14 @@ fn gamma_flag_rebuilds_the_cache_and_colour_tags_are_warned_about() {
     // The same flags reuse the cache and report its warnings again.
     ok(&estimate(&data, &out, &["-q"]));
     assert_eq!(report(&out)["cache"]["hit"], true);
-    assert_eq!(warnings(&out).len(), w.len());
+    assert_eq!(crate::common::report_warnings(&out).len(), w.len());
 
     // --gamma srgb rebuilds it; the curve now agrees with the tags, the profile still not.
     ok(&estimate(&data, &out, &["-q", "--gamma", "srgb"]));
     let r = report(&out);
     assert_eq!(r["cache"]["hit"], false);
     assert_eq!(r["parameters"]["gamma"], "srgb");
-    let w = warnings(&out);
+    let w = crate::common::report_warnings(&out);
     assert!(w.iter().any(|l| l.contains("is not sRGB")), "{w:?}");
     assert!(!w.iter().any(|l| l.contains("taken as linear")), "{w:?}");
     let srgb = symframe_io::read_npy_f32(&out.join("normals.npy"))

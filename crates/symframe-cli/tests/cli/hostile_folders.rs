@@ -5,10 +5,8 @@
 use std::fs;
 use std::os::unix::fs::symlink;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use crate::common::{self, assert_one_line_error, ok, report, s, stderr, ward_sphere};
-use crate::outdir::wait_for_lock;
 
 /// A small capture: a 16-pixel Ward sphere under 30 lights.
 fn capture(dir: &Path) -> PathBuf {
@@ -73,17 +71,13 @@ fn a_planted_staging_plan_never_touches_a_file_outside_the_folder() {
     }
     // A plan in a folder named with the token the killed holder of the lock left, but not
     // the plan it wrote (the checksum is wrong): left alone too.
-    let mut held = Command::new(crate::common::bin())
-        .args(["estimate", s(&lp), "-o", s(&out), "--method", "woodham"])
-        .env("SYMFRAME_TEST_HOLD_LOCK_S", "20")
-        .spawn()
-        .unwrap();
-    wait_for_lock(&out, &held);
-    held.kill().unwrap();
-    held.wait().unwrap();
-    let lock = fs::read_to_string(out.join(symframe_job::LOCK_FILE)).unwrap();
-    let token = lock.split_whitespace().nth(1).unwrap().to_string();
-    let signed = out.join(format!(".symframe-staging-{}-{token}", held.id()));
+    let signed = out.join(crate::outdir::killed_holding_the_lock(&lp, &out));
+    let token = signed
+        .to_string_lossy()
+        .rsplit('-')
+        .next()
+        .unwrap()
+        .to_string();
     plant_plan(&signed, &abs, &token);
     let o = estimate(&lp, &out);
     ok(&o);

@@ -19,16 +19,6 @@ fn lambert(dir: &Path, size: usize, lights: usize) -> PathBuf {
     crate::common::sphere_dataset(dir, size, lights, &brdf, ImageFormat::Exr, 1.0, truth).1
 }
 
-/// The `warnings` of an output folder's report, one string each.
-fn report_warnings(out: &Path) -> Vec<String> {
-    report(out)["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|w| w.as_str().unwrap().to_string())
-        .collect()
-}
-
 /// `light_intensities.txt` was silently ignored once a second `.lp` sat beside the first (a
 /// Lambertian test went from 0.000 to 1.34 degrees with nothing in report.json).
 #[test]
@@ -46,9 +36,11 @@ fn light_intensities_beside_several_lp_files_are_never_silent() {
     let want = "applied to lights.lp (its 20 rows match its 20 lights), but copy.lp";
     assert!(stderr(&o).contains(want), "{}", stderr(&o));
     assert!(
-        report_warnings(&out).iter().any(|w| w.contains(want)),
+        crate::common::report_warnings(&out)
+            .iter()
+            .any(|w| w.contains(want)),
         "{:?}",
-        report_warnings(&out)
+        crate::common::report_warnings(&out)
     );
     // Rows of another light file: not applied, said so.
     fs::write(data.join("light_intensities.txt"), "1 1 1\n".repeat(3)).unwrap();
@@ -63,7 +55,9 @@ fn light_intensities_beside_several_lp_files_are_never_silent() {
     let want =
         "not applied to lights.lp: its 3 rows are not lights.lp's 20 lights but those of copy.lp";
     assert!(stderr(&o).contains(want), "{}", stderr(&o));
-    assert!(report_warnings(&out).iter().any(|w| w.contains(want)));
+    assert!(crate::common::report_warnings(&out)
+        .iter()
+        .any(|w| w.contains(want)));
     // Rows of no light file beside it: an error.
     fs::write(data.join("light_intensities.txt"), "1 1 1\n".repeat(7)).unwrap();
     let o = estimate(&lp, &tmp.path().join("c"), &["--method", "woodham"]);

@@ -99,6 +99,21 @@ pub fn lock_holder(lock: &Path) -> String {
         .to_string()
 }
 
+/// Kills (SIGKILL) an estimate into `out` while it holds the folder's lock, before it stages
+/// anything; returns the name a staging folder of that job would have
+/// (`.symframe-staging-PID-TOKEN`, the token read from the lock file it left).
+pub fn killed_holding_the_lock(lp: &Path, out: &Path) -> String {
+    let mut held = estimate_cmd(lp, out, &[], &[("SYMFRAME_TEST_HOLD_LOCK_S", "20")])
+        .spawn()
+        .unwrap();
+    wait_for_lock(out, &held);
+    held.kill().unwrap();
+    held.wait().unwrap();
+    let lock = fs::read_to_string(out.join(symframe_job::LOCK_FILE)).unwrap();
+    let token = lock.split_whitespace().nth(1).unwrap().to_string();
+    format!(".symframe-staging-{}-{token}", held.id())
+}
+
 /// Waits until `child` holds the output lock of `dir` (its process id in the lock file).
 pub fn wait_for_lock(dir: &Path, child: &std::process::Child) {
     let lock = dir.join(symframe_job::LOCK_FILE);
@@ -266,15 +281,7 @@ fn a_job_killed_between_moves_is_finished_by_the_next_job_into_the_folder() {
 
     // A staging folder of a job killed before its switch began (named with the token that
     // job left in the lock file) is removed; the set stays.
-    let mut held = estimate_cmd(&lp, &out, &[], &[("SYMFRAME_TEST_HOLD_LOCK_S", "20")])
-        .spawn()
-        .unwrap();
-    wait_for_lock(&out, &held);
-    held.kill().unwrap();
-    held.wait().unwrap();
-    let lock = fs::read_to_string(out.join(symframe_job::LOCK_FILE)).unwrap();
-    let token = lock.split_whitespace().nth(1).unwrap().to_string();
-    let stray = out.join(format!(".symframe-staging-{}-{token}", held.id()));
+    let stray = out.join(killed_holding_the_lock(&lp, &out));
     fs::create_dir(&stray).unwrap();
     fs::write(stray.join("normals.npy"), b"half written").unwrap();
     let o = estimate(&lp, &out, &[]);
