@@ -29,6 +29,9 @@ fn kind_of(ft: &std::fs::FileType) -> &'static str {
             return "a socket";
         }
     }
+    if ft.is_symlink() {
+        return "a symbolic link";
+    }
     if ft.is_dir() {
         "a folder"
     } else {
@@ -103,6 +106,54 @@ pub fn read_bounded(path: &Path, what: &str, max_bytes: u64) -> Result<Vec<u8>> 
 pub fn read_text_bounded(path: &Path, what: &str, max_bytes: u64) -> Result<String> {
     let bytes = read_bounded(path, what, max_bytes)?;
     String::from_utf8(bytes).map_err(|_| Error::decode(path, "not a UTF-8 text file"))
+}
+
+/// Opens `path`, a file this tool wrote into one of its own folders (a tile result, a tile
+/// cache), for reading: `None` if there is none; an error naming it if it is not a regular file
+/// (`PATH: not a regular file (a FIFO)`): a symbolic link, FIFO, device, socket or folder
+/// planted there is never opened (opening a FIFO waits for a writer, a device reads without
+/// end). The open does not follow a link nor wait, and the file opened is checked again.
+/// Returns the file and its length: read no more than the length its header or grid implies
+/// ([`std::io::Read::take`]).
+pub fn open_own_file(path: &Path) -> Result<Option<(File, u64)>> {
+    let not_regular = |ft: &std::fs::FileType| {
+        Error::invalid(path, format!("not a regular file ({})", kind_of(ft)))
+    };
+    let meta = match std::fs::symlink_metadata(path) {
+        Ok(m) => m,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(Error::read(path, e)),
+    };
+    if !meta.file_type().is_file() {
+        return Err(not_regular(&meta.file_type()));
+    }
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK);
+    }
+    let f = match options.open(path) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(Error::read(path, e)),
+    };
+    let meta = f.metadata().map_err(|e| Error::read(path, e))?;
+    if !meta.is_file() {
+        return Err(not_regular(&meta.file_type()));
+    }
+    Ok(Some((f, meta.len())))
+}
+
+/// The first `len` bytes of `f` (of `path`, for errors), never more; fewer if the file is
+/// shorter.
+pub fn read_at_most(f: File, path: &Path, len: u64) -> Result<Vec<u8>> {
+    let mut buf = Vec::with_capacity(len.min(1 << 20) as usize);
+    f.take(len)
+        .read_to_end(&mut buf)
+        .map_err(|e| Error::read(path, e))?;
+    Ok(buf)
 }
 
 #[cfg(test)]

@@ -40,7 +40,9 @@ pub mod tile_cache;
 pub mod tile_results;
 
 pub use atomic::write_bytes;
-pub use bounded::{check_regular_file, read_bounded, read_text_bounded};
+pub use bounded::{
+    check_regular_file, open_own_file, read_at_most, read_bounded, read_text_bounded,
+};
 pub use codecs::{
     declared_size, decode_image, linear_to_srgb, read_image, read_pfm, srgb_to_linear,
     write_exr_channels, write_exr_rgb, write_pfm, write_png16_rgb, write_png8_rgb, ColourTag,

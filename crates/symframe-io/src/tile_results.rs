@@ -121,6 +121,21 @@ enum Problem {
 
 /// Parses and verifies a tile result file's bytes as tile `t`'s `n` records of job `job`.
 fn parse(b: &[u8], job: u64, t: usize, n: usize) -> std::result::Result<Vec<PixelRecord>, Problem> {
+    check_head(b, b.len() as u64, job, t, n)?;
+    records(b)
+}
+
+/// Checks a tile result file of `len` bytes whose first bytes are `b` (the whole file, or only
+/// its header when its length is not the expected one: then the file is never read whole, and
+/// this always fails) as tile `t`'s `n` records of job `job`; the checksum is verified when `b`
+/// is the whole file.
+fn check_head(
+    b: &[u8],
+    len: u64,
+    job: u64,
+    t: usize,
+    n: usize,
+) -> std::result::Result<(), Problem> {
     use Problem::{Corrupt, Stale};
     if b.len() < 12 || &b[..8] != MAGIC {
         return Err(Corrupt("not a symframe tile result".into()));
@@ -131,21 +146,24 @@ fn parse(b: &[u8], job: u64, t: usize, n: usize) -> std::result::Result<Vec<Pixe
             "tile result of another format version ({version}, expected {TILE_RESULT_VERSION})"
         )));
     }
-    if b.len() < HEADER || (b.len() - HEADER).checked_rem(RECORD) != Some(0) {
+    if len < HEADER as u64
+        || b.len() < HEADER
+        || !(len - HEADER as u64).is_multiple_of(RECORD as u64)
+    {
         return Err(Corrupt(format!(
-            "corrupt tile result (truncated or extended: {} bytes)",
-            b.len()
+            "corrupt tile result (truncated or extended: {len} bytes)"
         )));
     }
     let u64_at = |o: usize| u64::from_le_bytes(b[o..o + 8].try_into().unwrap());
-    if checksum(&b[..HEADER_SUMMED], &b[HEADER..]) != u64_at(HEADER_SUMMED) {
+    let whole = b.len() as u64 == len;
+    if whole && checksum(&b[..HEADER_SUMMED], &b[HEADER..]) != u64_at(HEADER_SUMMED) {
         return Err(Corrupt("corrupt tile result (checksum mismatch)".into()));
     }
     let pixels = u64_at(32);
-    if pixels != ((b.len() - HEADER) / RECORD) as u64 {
+    let in_file = (len - HEADER as u64) / RECORD as u64;
+    if pixels != in_file {
         return Err(Corrupt(format!(
-            "corrupt tile result ({pixels} pixels in the header, {} in the file)",
-            (b.len() - HEADER) / RECORD
+            "corrupt tile result ({pixels} pixels in the header, {in_file} in the file)"
         )));
     }
     if u64_at(16) != job {
@@ -154,12 +172,18 @@ fn parse(b: &[u8], job: u64, t: usize, n: usize) -> std::result::Result<Vec<Pixe
             u64_at(16)
         )));
     }
-    if u64_at(24) != t as u64 || pixels != n as u64 {
+    if u64_at(24) != t as u64 || pixels != n as u64 || !whole {
         return Err(Stale(format!(
             "not the result of tile {t} ({n} pixels) but of tile {} ({pixels} pixels)",
             u64_at(24)
         )));
     }
+    Ok(())
+}
+
+/// The records of a checked tile result file's bytes.
+fn records(b: &[u8]) -> std::result::Result<Vec<PixelRecord>, Problem> {
+    use Problem::Corrupt;
     b[HEADER..]
         .chunks_exact(RECORD)
         .enumerate()
@@ -201,18 +225,39 @@ pub fn parse_tile_result_bytes(b: &[u8]) -> std::result::Result<Vec<PixelRecord>
     })
 }
 
-/// What `path` holds for tile `t` (`n` pixels) of job `job`: the whole file is read and
-/// verified (a few tens of kilobytes per tile).
-pub fn check_tile_result(path: &Path, job: u64, t: usize, n: usize) -> TileFile {
-    let b = match std::fs::read(path) {
-        Ok(b) => b,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return TileFile::Missing,
-        Err(e) => return TileFile::Corrupt(Error::read(path, e)),
+/// Reads and verifies tile `t`'s `n` records of job `job` from `path`: `None` if there is no
+/// such file. Anything but a regular file (a link, FIFO, device) is an error and never opened
+/// ([`crate::open_own_file`]); a file whose length is not that of the tile is judged by its
+/// header alone, and no more than the tile's length is ever read (a sparse 1 GB file there was
+/// read whole).
+fn load(
+    path: &Path,
+    job: u64,
+    t: usize,
+    n: usize,
+) -> Result<Option<std::result::Result<Vec<PixelRecord>, Problem>>> {
+    let Some((f, len)) = crate::open_own_file(path)? else {
+        return Ok(None);
     };
-    match parse(&b, job, t, n) {
-        Ok(_) => TileFile::Done,
-        Err(Problem::Stale(_)) => TileFile::Stale,
-        Err(Problem::Corrupt(m)) => TileFile::Corrupt(Error::invalid(path, m)),
+    let expected = tile_result_len(n);
+    if len != expected {
+        let head = crate::read_at_most(f, path, HEADER as u64)?;
+        return Ok(Some(check_head(&head, len, job, t, n).map(|_| Vec::new())));
+    }
+    let b = crate::read_at_most(f, path, expected)?;
+    Ok(Some(parse(&b, job, t, n)))
+}
+
+/// What `path` holds for tile `t` (`n` pixels) of job `job`: the file (of the tile's length, a
+/// few tens of kilobytes) is read and verified; a link, FIFO, device or folder there is
+/// [`TileFile::Corrupt`], never opened.
+pub fn check_tile_result(path: &Path, job: u64, t: usize, n: usize) -> TileFile {
+    match load(path, job, t, n) {
+        Ok(None) => TileFile::Missing,
+        Err(e) => TileFile::Corrupt(e),
+        Ok(Some(Ok(_))) => TileFile::Done,
+        Ok(Some(Err(Problem::Stale(_)))) => TileFile::Stale,
+        Ok(Some(Err(Problem::Corrupt(m)))) => TileFile::Corrupt(Error::invalid(path, m)),
     }
 }
 
@@ -226,10 +271,12 @@ pub fn tile_result_done(path: &Path, job: u64, t: usize, n: usize) -> bool {
 /// tile result, corrupt (checksum, length or a bad record), of another job (stale) or of
 /// another tile.
 pub fn read_tile_result(path: &Path, job: u64, t: usize, n: usize) -> Result<Vec<PixelRecord>> {
-    let b = std::fs::read(path).map_err(|e| Error::read(path, e))?;
-    parse(&b, job, t, n).map_err(|p| match p {
-        Problem::Stale(m) | Problem::Corrupt(m) => Error::invalid(path, m),
-    })
+    let missing = || Error::read(path, std::io::Error::from_raw_os_error(libc::ENOENT));
+    load(path, job, t, n)?
+        .ok_or_else(missing)?
+        .map_err(|p| match p {
+            Problem::Stale(m) | Problem::Corrupt(m) => Error::invalid(path, m),
+        })
 }
 
 #[cfg(test)]

@@ -688,10 +688,14 @@ impl TileRecord for Option<PixelOutcome> {
     }
 
     fn check(path: &Path, job: u64, t: usize, n: usize) -> TileFile {
-        if !path.exists() {
-            return TileFile::Missing;
-        }
-        if fit_tile_done(path, job, t, n) {
+        // A link, FIFO, device or folder there is not a file this tool wrote: never opened
+        // (a FIFO hung the resumed fit), recomputed with a warning.
+        let (f, len) = match symframe_io::open_own_file(path) {
+            Ok(Some(f)) => f,
+            Ok(None) => return TileFile::Missing,
+            Err(e) => return TileFile::Corrupt(e),
+        };
+        if fit_tile_done(f, len, job, t, n) {
             TileFile::Done
         } else {
             TileFile::Stale
@@ -702,11 +706,19 @@ impl TileRecord for Option<PixelOutcome> {
             path: path.to_path_buf(),
             msg,
         };
-        let b = std::fs::read(path).map_err(|source| symframe_io::Error::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        if b.len() != FIT_HEADER + FIT_RECORD * n || b[..FIT_HEADER] != fit_header(job, t, n) {
+        let (f, len) =
+            symframe_io::open_own_file(path)?.ok_or_else(|| symframe_io::Error::Read {
+                path: path.to_path_buf(),
+                source: std::io::Error::from_raw_os_error(libc::ENOENT),
+            })?;
+        let expected = (FIT_HEADER + FIT_RECORD * n) as u64;
+        // The length is checked before anything is read; no more than it is read.
+        let b = if len == expected {
+            symframe_io::read_at_most(f, path, expected)?
+        } else {
+            Vec::new()
+        };
+        if b.len() as u64 != expected || b[..FIT_HEADER] != fit_header(job, t, n) {
             return Err(invalid(format!(
                 "not the fit result of tile {t} ({n} pixels) of this job"
             )));
@@ -718,16 +730,13 @@ impl TileRecord for Option<PixelOutcome> {
     }
 }
 
-/// Whether `path` holds tile `t`'s `n` fit records of job `job` (length and header).
-fn fit_tile_done(path: &Path, job: u64, t: usize, n: usize) -> bool {
+/// Whether the file `f` of `len` bytes holds tile `t`'s `n` fit records of job `job` (length
+/// and header).
+fn fit_tile_done(f: std::fs::File, len: u64, job: u64, t: usize, n: usize) -> bool {
     use std::io::Read;
-    let Ok(mut f) = std::fs::File::open(path) else {
-        return false;
-    };
     let mut b = [0u8; FIT_HEADER];
-    f.metadata()
-        .is_ok_and(|m| m.len() == (FIT_HEADER + FIT_RECORD * n) as u64)
-        && f.read_exact(&mut b).is_ok()
+    len == (FIT_HEADER + FIT_RECORD * n) as u64
+        && f.take(FIT_HEADER as u64).read_exact(&mut b).is_ok()
         && b == fit_header(job, t, n)
 }
 
@@ -771,10 +780,11 @@ mod tests {
             Some(PixelOutcome::FittedGltf(gltf, hold)),
         ];
         let p = tile_path(d.path(), 3);
-        assert!(!fit_tile_done(&p, 5, 3, 5));
+        let check = |job| <Option<PixelOutcome>>::check(&p, job, 3, 5);
+        assert!(matches!(check(5), TileFile::Missing));
         <Option<PixelOutcome>>::write(&p, 5, 3, &recs).unwrap();
-        assert!(fit_tile_done(&p, 5, 3, 5));
-        assert!(!fit_tile_done(&p, 6, 3, 5));
+        assert!(matches!(check(5), TileFile::Done));
+        assert!(matches!(check(6), TileFile::Stale));
         assert_eq!(<Option<PixelOutcome>>::read(&p, 5, 3, 5).unwrap(), recs);
         let e = <Option<PixelOutcome>>::read(&p, 6, 3, 5)
             .unwrap_err()

@@ -297,12 +297,25 @@ fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcom
     let owner: Vec<usize> = listed.into_iter().map(|(_, i)| i).collect();
     for (t, &i) in owner.iter().enumerate() {
         let path = tile_path(&manifests[i].0.join(TILES_DIR), t);
-        let len = fs::metadata(&path)
-            .map_err(|source| symframe_io::Error::Read {
-                path: path.clone(),
-                source,
-            })?
-            .len();
+        // Not through a link, and only a regular file (a FIFO or device there is never opened).
+        let meta = fs::symlink_metadata(&path).map_err(|source| symframe_io::Error::Read {
+            path: path.clone(),
+            source,
+        })?;
+        if !meta.file_type().is_file() {
+            bail!(
+                "{}: not a regular file ({}), not a result of tile {t}",
+                path.display(),
+                if meta.file_type().is_symlink() {
+                    "a symbolic link"
+                } else if meta.is_dir() {
+                    "a folder"
+                } else {
+                    "a FIFO, device or socket"
+                }
+            );
+        }
+        let len = meta.len();
         let expected = symframe_io::tile_results::tile_result_len(grid.tile_pixels(t));
         if len != expected {
             bail!(

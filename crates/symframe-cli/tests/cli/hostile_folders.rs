@@ -145,20 +145,48 @@ fn links_at_output_names_are_replaced_not_written_through() {
     let tmp = tempfile::tempdir().unwrap();
     let lp = capture(&tmp.path().join("data"));
     let out = tmp.path().join("out");
-    fs::create_dir_all(&out).unwrap();
+    ok(&estimate(&lp, &out));
     let (victim, _) = victims(tmp.path());
-    for name in ["normals.npy", "report.json", "source.png"] {
+    // Files of the set the report names, replaced by links: the rerun replaces the links.
+    for name in ["normals.npy", "source.png"] {
+        fs::remove_file(out.join(name)).unwrap();
         symlink(&victim, out.join(name)).unwrap();
     }
     ok(&estimate(&lp, &out));
     assert_kept(&[&victim]);
-    for name in ["normals.npy", "report.json", "source.png"] {
-        assert!(
-            fs::symlink_metadata(out.join(name)).unwrap().is_file(),
-            "{name}"
-        );
+    for name in ["normals.npy", "source.png"] {
+        let meta = fs::symlink_metadata(out.join(name)).unwrap();
+        assert!(meta.is_file(), "{name}");
     }
     symframe_job::check_output_set(&out, "report.json").unwrap();
+}
+
+/// A file at an output's name that no report of the tool's names (a user's `report.json`, a
+/// link planted in a fresh folder) was replaced without a word.
+#[test]
+fn files_the_tool_did_not_write_are_never_replaced() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = capture(&tmp.path().join("data"));
+    let out = tmp.path().join("out");
+    fs::create_dir_all(&out).unwrap();
+    fs::write(out.join("report.json"), "keep").unwrap();
+    let o = estimate(&lp, &out);
+    assert_one_line_error(
+        &o,
+        "report.json: exists and is not a file of the output set",
+    );
+    assert_kept(&[&out.join("report.json")]);
+    fs::remove_file(out.join("report.json")).unwrap();
+    let (victim, _) = victims(tmp.path());
+    symlink(&victim, out.join("normals.npy")).unwrap();
+    let o = estimate(&lp, &out);
+    assert_one_line_error(
+        &o,
+        "normals.npy: exists and is not a file of the output set",
+    );
+    assert_kept(&[&victim]);
+    fs::remove_file(out.join("normals.npy")).unwrap();
+    ok(&estimate(&lp, &out));
 }
 
 /// A capture whose first image is named like an output (`normals.exr`).
@@ -244,5 +272,204 @@ fn a_cache_file_that_is_a_link_is_never_written_through() {
     // stays as it was.
     ok(&estimate(&lp, &out));
     assert_kept(&[&victim]);
+    assert!(fs::symlink_metadata(&stack).unwrap().is_file());
+}
+
+/// Replaces `path` by a FIFO.
+fn plant_fifo(path: &Path) {
+    let _ = fs::remove_file(path);
+    let c = std::ffi::CString::new(path.as_os_str().as_encoded_bytes()).unwrap();
+    // SAFETY: a NUL-terminated path we own.
+    let r = unsafe { libc::mkfifo(c.as_ptr(), 0o644) };
+    assert_eq!(r, 0, "mkfifo {path:?}");
+}
+
+/// Plants, as tiles 1, 2 and 3 of the folder `tiles` (created if need be), a link to
+/// `/dev/zero`, a FIFO and a sparse 1 GB file (a tile's file is under a kilobyte); returns
+/// their paths.
+fn plant_hostile_tiles(tiles: &Path) -> Vec<PathBuf> {
+    fs::create_dir_all(tiles).unwrap();
+    let planted: Vec<PathBuf> = [1, 2, 3]
+        .iter()
+        .map(|t| tiles.join(format!("tile-{t:06}.bin")))
+        .collect();
+    for (k, p) in planted.iter().enumerate() {
+        plant_hostile_tile(p, k);
+    }
+    planted
+}
+
+/// Replaces `p` by a link to `/dev/zero` (`kind` 0), a FIFO (1) or a sparse 1 GB file (2).
+fn plant_hostile_tile(p: &Path, kind: usize) {
+    let _ = fs::remove_file(p);
+    match kind {
+        0 => symlink("/dev/zero", p).unwrap(),
+        1 => plant_fifo(p),
+        _ => fs::File::create(p).unwrap().set_len(1 << 30).unwrap(),
+    }
+}
+
+/// The `.npy` maps of an output folder, by name.
+fn npy_maps(out: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut maps: Vec<(String, Vec<u8>)> = fs::read_dir(out)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.path().extension().is_some_and(|x| x == "npy"))
+        .map(|e| {
+            (
+                e.file_name().to_string_lossy().into_owned(),
+                fs::read(e.path()).unwrap(),
+            )
+        })
+        .collect();
+    maps.sort();
+    assert!(!maps.is_empty(), "no maps in {out:?}");
+    maps
+}
+
+/// A tile result that is a link to `/dev/zero`, a FIFO or a sparse 1 GB file (where a
+/// 688-byte tile belongs) was read without bound (2 GB peak) or waited forever on resume, and
+/// a merge read it too: now such a file is never opened, nor read beyond a tile's length. The
+/// resumed run recomputes those tiles with a warning naming each, its maps equal to a clean
+/// run's, peaking under 600 MB; a merge of such a shard fails naming the file.
+#[test]
+#[cfg(target_os = "linux")]
+fn tile_results_that_are_devices_fifos_or_huge_are_never_read() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = capture(&tmp.path().join("data"));
+    let flags = ["--tile-size", "8", "--method", "woodham", "--quiet"];
+    let clean = tmp.path().join("clean");
+    ok(&common::estimate(&lp, &clean, &flags));
+    let out = tmp.path().join("out");
+    ok(&common::estimate(&lp, &out, &flags));
+    // As a resumed run finds them in its tile folder (kept only while a run is unfinished).
+    let args = [&["estimate", s(&lp), "-o", s(&out)], &flags[..]].concat();
+    let planted = plant_hostile_tiles(&out.join(".symframe-tiles"));
+    // A hang would show as a test that never ends: time out instead.
+    let o = common::run_with_timeout(&args, 60);
+    ok(&o);
+    let warned = [report_warnings_of(&out), vec![stderr(&o)]]
+        .concat()
+        .join("\n");
+    for p in &planted {
+        let name = p.file_name().unwrap().to_string_lossy().into_owned();
+        assert!(warned.contains(&name), "no warning about {name}: {warned}");
+    }
+    assert_eq!(npy_maps(&out), npy_maps(&clean));
+    plant_hostile_tiles(&out.join(".symframe-tiles"));
+    let (o, kib) = common::run_measuring_rss(&args);
+    ok(&o);
+    assert!(
+        kib < 600 * 1024,
+        "the resumed run peaked at {} MB",
+        kib / 1024
+    );
+    assert_eq!(npy_maps(&out), npy_maps(&clean));
+
+    // A shard folder holding such a file: the merge names the file, never waits or reads it.
+    let shard = tmp.path().join("shard");
+    ok(&common::estimate(
+        &lp,
+        &shard,
+        &[&flags[..], &["--tiles", "1/1"]].concat(),
+    ));
+    let tiles = shard.join(".symframe-tiles");
+    let saved = tmp.path().join("saved");
+    fs::create_dir_all(&saved).unwrap();
+    for t in 1..=3 {
+        let name = format!("tile-{t:06}.bin");
+        fs::copy(tiles.join(&name), saved.join(&name)).unwrap();
+    }
+    for kind in 0..3 {
+        let name = format!("tile-{:06}.bin", kind + 1);
+        plant_hostile_tile(&tiles.join(&name), kind);
+        let merged = tmp.path().join(format!("merged-{kind}"));
+        let margs = ["merge", s(&shard), "-o", s(&merged)];
+        let o = common::run_with_timeout(&margs, 60);
+        assert_one_line_error(&o, &name);
+        let (o, kib) = common::run_measuring_rss(&margs);
+        assert_one_line_error(&o, &name);
+        assert!(!merged.exists());
+        assert!(kib < 600 * 1024, "merge peaked at {} MB", kib / 1024);
+        fs::remove_file(tiles.join(&name)).unwrap();
+        fs::copy(saved.join(&name), tiles.join(&name)).unwrap();
+    }
+    ok(&common::symframe(&[
+        "merge",
+        s(&shard),
+        "-o",
+        s(&tmp.path().join("merged")),
+    ]));
+    assert_eq!(npy_maps(&tmp.path().join("merged")), npy_maps(&clean));
+}
+
+/// The report's warnings of `out`, or none without a report.
+fn report_warnings_of(out: &Path) -> Vec<String> {
+    if out.join("report.json").is_file() {
+        common::report_warnings(out)
+    } else {
+        Vec::new()
+    }
+}
+
+/// `fit` resumes from its own tile folder: a tile file there that is a FIFO waited forever, a
+/// link to `/dev/zero` was opened. Now neither is opened: the tiles are recomputed, the fit
+/// equal to a clean one's.
+#[test]
+#[cfg(target_os = "linux")]
+fn fit_tile_results_that_are_fifos_or_devices_are_never_opened() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = capture(&tmp.path().join("data"));
+    let est = tmp.path().join("est");
+    ok(&common::estimate(
+        &lp,
+        &est,
+        &["--tile-size", "8", "--quiet"],
+    ));
+    let fit = |out: &Path| {
+        let args = ["fit", s(&lp), "--frames", s(&est), "-o", s(out), "--quiet"];
+        common::run_with_timeout(&args, 60)
+    };
+    let clean = tmp.path().join("clean");
+    ok(&fit(&clean));
+    let out = tmp.path().join("fit");
+    ok(&fit(&out));
+    // As a resumed fit finds them in its tile folder.
+    plant_hostile_tiles(&out.join(".symframe-tiles"));
+    ok(&fit(&out));
+    assert_eq!(npy_maps(&out), npy_maps(&clean));
+}
+
+/// A tile cache file (`OUT/.symframe-cache/*.stack`, or in `--cache DIR`) that is a FIFO: the
+/// run waited forever opening it. Now it is never opened, and rebuilt like a stale cache.
+#[test]
+#[cfg(target_os = "linux")]
+fn a_cache_file_that_is_a_fifo_is_rebuilt_not_waited_on() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = capture(&tmp.path().join("data"));
+    let stack_in = |cache: &Path| {
+        fs::read_dir(cache)
+            .unwrap()
+            .flatten()
+            .map(|e| e.path())
+            .find(|p| p.extension().is_some_and(|e| e == "stack"))
+            .expect("a cache file")
+    };
+    let out = tmp.path().join("out");
+    ok(&estimate(&lp, &out));
+    let stack = stack_in(&out.join(".symframe-cache"));
+    plant_fifo(&stack);
+    let args = ["estimate", s(&lp), "-o", s(&out), "--method", "woodham"];
+    ok(&common::run_with_timeout(&args, 60));
+    assert!(fs::symlink_metadata(&stack).unwrap().is_file());
+
+    let cache = tmp.path().join("cache");
+    let flags = ["--method", "woodham", "--cache", s(&cache)];
+    ok(&common::estimate(&lp, &tmp.path().join("a"), &flags));
+    let stack = stack_in(&cache);
+    plant_fifo(&stack);
+    let b = tmp.path().join("b");
+    let args = [&["estimate", s(&lp), "-o", s(&b)], &flags[..]].concat();
+    ok(&common::run_with_timeout(&args, 60));
     assert!(fs::symlink_metadata(&stack).unwrap().is_file());
 }

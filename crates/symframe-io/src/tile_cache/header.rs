@@ -375,15 +375,16 @@ pub(super) fn cache_stem(ds: &Dataset) -> String {
     )
 }
 
-/// Reads a file's header, `None` if the file is missing or too short.
+/// Reads a file's header, `None` if the file is missing, too short or not a regular file (a
+/// link, FIFO, device or folder there is not a cache this tool wrote: it is never opened, as
+/// opening a FIFO waited forever, and it is replaced like a stale cache).
 pub(super) fn read_header(path: &Path) -> Result<Option<(Header, u64)>> {
     use std::io::Read;
-    let mut f = match File::open(path) {
-        Ok(f) => f,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(Error::read(path, e)),
+    let (mut f, len) = match crate::open_own_file(path) {
+        Ok(Some(f)) => f,
+        Ok(None) | Err(Error::Invalid { .. }) => return Ok(None),
+        Err(e) => return Err(e),
     };
-    let len = f.metadata().map_err(|e| Error::read(path, e))?.len();
     let mut b = [0u8; FIELDS];
     if f.read_exact(&mut b).is_err() {
         return Ok(None);

@@ -53,7 +53,7 @@
 //! interrupted build resumes where it stopped), and is renamed to `<name>.stack` when complete.
 //! The cache must not be modified by other programs while it is mapped.
 
-use std::fs::{self, File};
+use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
@@ -245,7 +245,8 @@ struct Found {
 
 /// Maps the file at `path` read-only, checking it is `len` bytes long.
 fn map_file(path: &Path, len: u64) -> Result<Mmap> {
-    let file = File::open(path).map_err(|e| Error::read(path, e))?;
+    let (file, _) = crate::open_own_file(path)?
+        .ok_or_else(|| Error::invalid(path, "cache vanished while opening"))?;
     // SAFETY: the cache is only written by this module under the exclusive lock, which no
     // one can take while we hold the shared one (see the module docs).
     let map = unsafe { Mmap::map(&file) }.map_err(|e| Error::read(path, e))?;
@@ -899,7 +900,7 @@ mod tests {
         let mut rgb: Vec<f32> = (0..w * h * 3).map(|k| (200 + k) as f32).collect();
         rgb[7] += 1.0;
         crate::codecs::write_pfm(img, w, h, 3, &rgb).unwrap();
-        File::options()
+        fs::File::options()
             .write(true)
             .open(img)
             .unwrap()
@@ -922,7 +923,7 @@ mod tests {
         drop(cache);
         // Rewritten with the same bytes and time: still a hit.
         crate::codecs::write_pfm(img, w, h, 3, &rgb).unwrap();
-        File::options()
+        fs::File::options()
             .write(true)
             .open(img)
             .unwrap()
