@@ -53,11 +53,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("{}: cannot create the folder", args.output.display()))?;
     let marker = args.output.join(MARKER);
-    std::fs::write(
+    symframe_io::write_bytes(
         &marker,
-        "Written by symframe demo: a later `symframe demo -o` may replace what it wrote here.\n",
-    )
-    .with_context(|| format!("{}: cannot write", marker.display()))?;
+        b"Written by symframe demo: a later `symframe demo -o` may replace what it wrote here.\n",
+    )?;
     let t0 = Instant::now();
     let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
     let scene = Scene::sphere(args.size, TangentField::Circular);
@@ -116,8 +115,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         60.0,
     );
     let eval_path = estimate_dir.join("eval.json");
-    std::fs::write(&eval_path, serde_json::to_string_pretty(&e)? + "\n")
-        .with_context(|| format!("{}: cannot write", eval_path.display()))?;
+    symframe_io::write_bytes(
+        &eval_path,
+        (serde_json::to_string_pretty(&e)? + "\n").as_bytes(),
+    )?;
     say!(
         "normal error (pixels within 60 deg of the view): mean {:.2} deg, median {:.2}, 90th pct {:.2}; coverage {:.1}%",
         e.normal_error.mean,

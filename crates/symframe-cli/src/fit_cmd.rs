@@ -144,6 +144,9 @@ pub fn relight_config(args: &RelightArgs) -> Result<RelightConfig> {
 /// Runs `symframe relight`.
 pub fn relight(args: &RelightArgs) -> Result<RelightOutcome> {
     let done = symframe_job::relight(&relight_config(args)?)?;
+    for w in &done.warnings {
+        eprintln!("warning: {w}");
+    }
     if progress::chatty() {
         eprintln!(
             "symframe: {} pictures written into {}",

@@ -606,8 +606,6 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
         circle.r,
         lp_lines.join("\n")
     );
-    let tmp = lp_dir.join(format!(".{stem}.lp.partial-{}", std::process::id()));
-    std::fs::write(&tmp, lp_text).with_context(|| format!("{}: cannot write", tmp.display()))?;
     let (pw, ph, rgb) = picture(&max_image, w, h, &circle, &found, &bad);
     let pic = lp_dir.join(format!("{stem}-highlights.png"));
     symframe_io::write_png_rgb8(&pic, pw, ph, &rgb)?;
@@ -647,9 +645,12 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
         written: [config.output.clone(), pic, json_path.clone()],
         intensities_file,
     };
-    std::fs::write(&json_path, serde_json::to_string_pretty(&report)? + "\n")
-        .with_context(|| format!("{}: cannot write", json_path.display()))?;
-    std::fs::rename(&tmp, &config.output)
-        .with_context(|| format!("{}: cannot write", config.output.display()))?;
+    // Each file atomically through a temporary file created anew (never written through a
+    // link planted at its name), the `.lp` last.
+    symframe_io::write_bytes(
+        &json_path,
+        (serde_json::to_string_pretty(&report)? + "\n").as_bytes(),
+    )?;
+    symframe_io::write_bytes(&config.output, lp_text.as_bytes())?;
     Ok(report)
 }

@@ -637,9 +637,12 @@ fn run(
     }
     // The mask in force is checked with the cache, before the images are decoded.
     ds.mask = config.mask.clone().or(ds.mask);
-    out.guard_inputs(dataset_files(&ds), &|n| {
-        ESTIMATE_FILES.contains(&n) || n == MANIFEST
-    })?;
+    out.guard_inputs(
+        dataset_files(&ds),
+        "report.json",
+        &|n| ESTIMATE_FILES.contains(&n) || n == MANIFEST,
+        &|_| false,
+    )?;
     let plan = Plan::new(&config.method, &ds)?;
     let rig_s = t0.elapsed().as_secs_f64();
 

@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use serde::Serialize;
 use symframe::eval::{evaluate, normal_error_map, tangent_error_map, Evaluation};
 
@@ -156,11 +156,10 @@ fn cells(errors: &[f32], reference: &[f32], mask: Option<&[bool]>) -> Vec<Cell> 
         .collect()
 }
 
-/// Writes a small text file by a temporary sibling and a rename (never half-written).
+/// Writes a small text file by a temporary sibling created anew and a rename (never
+/// half-written, never written through a link planted at either name).
 fn write_text(path: &Path, text: &str) -> Result<()> {
-    let tmp = path.with_extension(format!("tmp-{}", std::process::id()));
-    std::fs::write(&tmp, text).with_context(|| format!("{}: cannot write", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("{}: cannot write", path.display()))
+    Ok(symframe_io::write_bytes(path, text.as_bytes())?)
 }
 
 /// Runs an evaluation: compares the estimate with the dataset's ground truth, writes

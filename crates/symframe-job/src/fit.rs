@@ -299,7 +299,10 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
     let frames = ["normals.npy", "tangents.npy", "report.json"].map(|n| config.frames.join(n));
     out.guard_inputs(
         crate::estimate::dataset_files(&ds).chain(frames.iter().map(PathBuf::as_path)),
+        "fit.json",
         &fit_writes,
+        // The page of the old maps goes (`fit_owned`); nothing is written in its place.
+        &|n| n == "viewer.html",
     )?;
     let params = FitParams {
         holdout: holdout_lights(ds.lights.len(), config.holdout)

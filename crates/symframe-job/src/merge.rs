@@ -136,11 +136,12 @@ pub fn check_shard_manifest(text: &str) -> Result<usize> {
 }
 
 pub(crate) fn write_manifest(out: &Path, m: &ShardManifest) -> Result<()> {
-    let path = out.join(MANIFEST);
-    let tmp = out.join(format!(".{MANIFEST}.{}.tmp", std::process::id()));
-    fs::write(&tmp, serde_json::to_string_pretty(m)? + "\n")
-        .with_context(|| format!("{}: cannot write", tmp.display()))?;
-    fs::rename(&tmp, &path).with_context(|| format!("{}: cannot write", path.display()))
+    // Atomic, through a temporary file created anew (never opened through a planted link).
+    let text = serde_json::to_string_pretty(m)? + "\n";
+    Ok(symframe_io::write_bytes(
+        &out.join(MANIFEST),
+        text.as_bytes(),
+    )?)
 }
 
 /// A short list of tile numbers: the first few (`first`, at most 12 shown) of `total`, and how
@@ -361,6 +362,10 @@ fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcom
     });
     report["shards"] = serde_json::Value::Array(shard_timings);
     let mut warnings: Vec<String> = Vec::new();
+    for w in out.warnings() {
+        ctl.warn(w);
+        warnings.push(w.clone());
+    }
     for (_, m) in &manifests {
         for w in m.report["warnings"].as_array().into_iter().flatten() {
             warnings.push(format!(

@@ -187,12 +187,16 @@ impl OutputDir {
 
     /// Records the run's input files (`inputs`: paths as given; those that do not exist are
     /// skipped) so that no output replaces one of them, and refuses at once when a file in the
-    /// folder that the job may write or remove (`writes(name)`) is one of them: a clear
-    /// error instead of an input image overwritten by a map of the same name.
+    /// folder that the job may write or remove (`writes(name)`) is one of them, or when a file
+    /// it replaces (`writes` but for the files it only removes, `removes_only`) is not a file
+    /// of the output set that the folder's `report` names (a user's own `report.json` or
+    /// `normals.png` there): a clear error instead of a file overwritten.
     pub fn guard_inputs<P: AsRef<Path>>(
         &self,
         inputs: impl IntoIterator<Item = P>,
+        report: &str,
         writes: &dyn Fn(&str) -> bool,
+        removes_only: &dyn Fn(&str) -> bool,
     ) -> Result<()> {
         let mut guarded = self.inputs.lock().unwrap_or_else(|e| e.into_inner());
         guarded.extend(
@@ -209,7 +213,46 @@ impl OutputDir {
             .map(|e| e.file_name().to_string_lossy().into_owned())
             .filter(|n| writes(n))
             .collect();
-        self.refuse_inputs(&names)
+        self.refuse_inputs(&names)?;
+        let replaced: Vec<String> = names.into_iter().filter(|n| !removes_only(n)).collect();
+        self.refuse_foreign(report, &replaced)
+    }
+
+    /// An error naming the first of `names` that is a file in the folder but neither `report`
+    /// (a report of this tool's: it names an output set) nor a file of the set it names:
+    /// symframe replaces only its own files. Folders are left to the folder check.
+    fn refuse_foreign(&self, report: &str, names: &[String]) -> Result<()> {
+        let present: Vec<&String> = names
+            .iter()
+            .filter(|n| fs::symlink_metadata(self.dir.join(n)).is_ok_and(|m| !m.is_dir()))
+            .collect();
+        if present.is_empty() {
+            return Ok(());
+        }
+        let listed: Option<Vec<String>> = read_own_file(&self.dir.join(report))
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .and_then(|v| {
+                let files = v.get("output_set")?.get("files")?.as_array()?.clone();
+                Some(
+                    files
+                        .iter()
+                        .filter_map(|f| f["name"].as_str().map(String::from))
+                        .collect(),
+                )
+            });
+        for n in present {
+            let ours = listed
+                .as_ref()
+                .is_some_and(|l| n.as_str() == report || l.contains(n));
+            if !ours {
+                anyhow::bail!(
+                    "{}: exists and is not a file of the output set that {report} there names                      (symframe replaces only its own files); move it away or write the results                      into another folder (-o)",
+                    self.dir.join(n).display()
+                );
+            }
+        }
+        Ok(())
     }
 
     /// An error naming the first of `names` (files of this folder) that is an input of the run.
@@ -686,8 +729,9 @@ impl<'a> OutputSet<'a> {
             .map(|e| e.file_name().to_string_lossy().into_owned())
             .filter(|n| (self.owned)(n) && !names.contains(n))
             .collect();
-        // No input of the run is replaced or removed.
+        // No input of the run is replaced or removed, nor a file this tool did not write.
         self.out.refuse_inputs(&names)?;
+        self.out.refuse_foreign(report_name, &names)?;
         self.out.refuse_inputs(&remove)?;
         let plan = Plan::new(names, remove, self.out.token);
         let tmp = self.staging.join(".ready.tmp");

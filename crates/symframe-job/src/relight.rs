@@ -45,6 +45,8 @@ pub struct RelightConfig {
 pub struct RelightOutcome {
     /// The PNG pictures, in light order.
     pub pictures: Vec<PathBuf>,
+    /// What the user should hear of (what taking the output folder's lock left alone).
+    pub warnings: Vec<String>,
 }
 
 /// What `relight.json` records about a run.
@@ -256,7 +258,12 @@ pub fn relight(config: &RelightConfig) -> Result<RelightOutcome> {
     let out = OutputDir::lock(&config.output)?;
     let inputs = config.region.iter().chain(&config.shadows);
     let result = out
-        .guard_inputs(inputs, &|n| relight_owned(n) || n == "relight.json")
+        .guard_inputs(
+            inputs,
+            "relight.json",
+            &|n| relight_owned(n) || n == "relight.json",
+            &|_| false,
+        )
         .and_then(|()| {
             write_relit(
                 config,
@@ -342,5 +349,6 @@ fn write_relit(
             .iter()
             .map(|n| config.output.join(format!("{n}.png")))
             .collect(),
+        warnings: out.warnings().to_vec(),
     })
 }

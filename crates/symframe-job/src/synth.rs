@@ -458,8 +458,7 @@ fn render_and_write(config: &SynthConfig, ctl: &Control) -> Result<SynthOutcome>
             .map(|c| format!("{:.6} {:.6} {:.6}", c[0], c[1], c[2]))
             .collect();
         let path = staging.path("gt_light_intensities.txt");
-        std::fs::write(&path, rows.join("\n") + "\n")
-            .with_context(|| format!("{}: cannot write", path.display()))?;
+        symframe_io::write_bytes(&path, (rows.join("\n") + "\n").as_bytes())?;
     }
     write_json(&staging.path("scene.json"), &description)?;
     staging.commit()?;
@@ -595,7 +594,7 @@ fn scale(img: &mut [f32], e: [f32; 3]) {
 
 fn write_json(path: &Path, v: &Value) -> Result<()> {
     let text = serde_json::to_string_pretty(v)? + "\n";
-    std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
+    Ok(symframe_io::write_bytes(path, text.as_bytes())?)
 }
 
 #[cfg(test)]
