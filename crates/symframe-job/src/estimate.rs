@@ -825,8 +825,7 @@ fn run(
         report.timings.peak_rss_bytes = peak_rss_bytes();
         Ok(serde_json::to_value(&report)?)
     })?;
-    std::fs::remove_dir_all(&tiles_dir)
-        .with_context(|| format!("{}: cannot remove", tiles_dir.display()))?;
+    crate::tiles::remove_tile_folder(&tiles_dir)?;
     if config.cache.remove_after {
         remove_cache(&cache_path, &cache_dir)?;
     }

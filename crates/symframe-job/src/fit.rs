@@ -414,8 +414,7 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
         },
     };
     write_outputs(out, &maps, &mut report, t0, ctl)?;
-    std::fs::remove_dir_all(&tiles_dir)
-        .with_context(|| format!("{}: cannot remove", tiles_dir.display()))?;
+    crate::tiles::remove_tile_folder(&tiles_dir)?;
     if config.cache.remove_after {
         remove_cache(&cache_path, &cache_dir)?;
     }

@@ -50,6 +50,26 @@ pub(crate) fn tile_path(dir: &Path, t: usize) -> PathBuf {
     symframe_io::tile_result_path(dir, t)
 }
 
+/// Removes a finished job's tile folder: its tile result files (`tile-*.bin`, and the hidden
+/// temporaries of their atomic writes), then the folder if that left it empty. Anything else
+/// in it (a user's file, a folder) is left with the folder: only this tool's files go.
+pub(crate) fn remove_tile_folder(dir: &Path) -> Result<()> {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return Ok(());
+    };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let ours = (name.starts_with("tile-") && name.ends_with(".bin"))
+            || (name.starts_with(".tile-") && name.ends_with(".tmp"));
+        if ours && e.file_type().is_ok_and(|t| !t.is_dir()) {
+            fs::remove_file(e.path())
+                .with_context(|| format!("{}: cannot remove", e.path().display()))?;
+        }
+    }
+    let _ = fs::remove_dir(dir);
+    Ok(())
+}
+
 /// The tiles of shard `k` of `n` (1-based): `t % n == k - 1`.
 pub fn shard_tiles(n_tiles: usize, k: usize, n: usize) -> Vec<usize> {
     (0..n_tiles).filter(|t| t % n == k - 1).collect()

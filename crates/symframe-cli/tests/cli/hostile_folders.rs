@@ -473,3 +473,50 @@ fn a_cache_file_that_is_a_fifo_is_rebuilt_not_waited_on() {
     ok(&common::run_with_timeout(&args, 60));
     assert!(fs::symlink_metadata(&stack).unwrap().is_file());
 }
+
+/// A finished job removed its whole tile folder, a user's file in it too: now only the tile
+/// results go, and the folder stays while anything else is in it.
+#[test]
+fn a_finished_job_removes_only_its_own_tile_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = capture(&tmp.path().join("data"));
+    let out = tmp.path().join("out");
+    let tiles = out.join(".symframe-tiles");
+    fs::create_dir_all(&tiles).unwrap();
+    fs::write(tiles.join("notes.txt"), "keep").unwrap();
+    ok(&common::estimate(
+        &lp,
+        &out,
+        &["--method", "woodham", "--tile-size", "8"],
+    ));
+    assert_kept(&[&tiles.join("notes.txt")]);
+    let left: Vec<_> = fs::read_dir(&tiles).unwrap().flatten().collect();
+    assert_eq!(left.len(), 1, "only the user's file is left");
+    // Without one, the folder goes.
+    fs::remove_file(tiles.join("notes.txt")).unwrap();
+    ok(&common::estimate(&lp, &out, &["--tile-size", "8"]));
+    assert!(!tiles.exists());
+}
+
+/// A MERL file that was /dev/zero was read until memory ran out (2 GB peak).
+#[cfg(target_os = "linux")]
+#[test]
+fn a_merl_file_that_is_a_device_is_refused_unread() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("c");
+    let (o, peak_kib) = common::run_measuring_rss(&[
+        "synth",
+        "-o",
+        s(&out),
+        "--model",
+        "merl:path=/dev/zero",
+        "--size",
+        "16",
+        "--rig",
+        "cone:10",
+        "-q",
+    ]);
+    assert_one_line_error(&o, "/dev/zero");
+    assert!(stderr(&o).contains("not a regular file"), "{}", stderr(&o));
+    assert!(peak_kib < 600 << 10, "peak {peak_kib} KiB");
+}

@@ -219,9 +219,19 @@ impl Merl {
             path: path.to_path_buf(),
             source,
         };
-        let mut file = std::fs::File::open(path).map_err(io)?;
+        // A regular file only (a FIFO would block, a device never end), and no more than one
+        // byte past the format's size is read (a longer file is then "wrong size").
+        if !std::fs::metadata(path).map_err(io)?.is_file() {
+            return Err(io(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "not a regular file",
+            )));
+        }
+        let file = std::fs::File::open(path).map_err(io)?;
         let mut bytes = Vec::with_capacity(FILE_LEN as usize);
-        file.read_to_end(&mut bytes).map_err(io)?;
+        file.take(FILE_LEN + 1)
+            .read_to_end(&mut bytes)
+            .map_err(io)?;
         let wrong_size = |actual: usize| MerlError::WrongSize {
             path: path.to_path_buf(),
             expected: FILE_LEN,
