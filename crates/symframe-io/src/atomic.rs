@@ -62,7 +62,8 @@ pub(crate) fn open_no_follow(options: &mut OpenOptions, path: &Path) -> std::io:
     #[cfg(unix)]
     {
         use std::os::unix::fs::OpenOptionsExt;
-        options.custom_flags(libc::O_NOFOLLOW);
+        // Non-blocking: a FIFO planted there fails at once instead of waiting for a peer.
+        options.custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK);
     }
     options.open(path)
 }

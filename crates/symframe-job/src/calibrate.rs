@@ -373,6 +373,40 @@ fn picture(
     (ow, oh, rgb)
 }
 
+/// Refuses a run whose `.lp`, highlights picture or JSON would replace one of its inputs (the
+/// `.lp` or list it reads, an image): `calibrate lights.lp -o lights.lp` replaced its input.
+fn refuse_inputs_as_outputs(config: &CalibrateConfig, images: &[PathBuf]) -> Result<()> {
+    let canon = |p: &Path| p.canonicalize().ok();
+    let inputs: Vec<PathBuf> = std::iter::once(config.images.as_path())
+        .chain(images.iter().map(PathBuf::as_path))
+        .filter_map(canon)
+        .collect();
+    let stem = config
+        .output
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let outputs = [
+        config.output.clone(),
+        config
+            .output
+            .with_file_name(format!("{stem}-highlights.png")),
+        config
+            .output
+            .with_file_name(format!("{stem}-calibration.json")),
+    ];
+    for o in &outputs {
+        if canon(o).is_some_and(|c| inputs.contains(&c)) {
+            bail!(
+                "{}: is an input of this run, and the output would replace it; write the .lp \
+                 elsewhere (-o)",
+                o.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Runs a calibration: finds the highlight of every image on the sphere and writes the `.lp`,
 /// the picture and the JSON report; returns the report. Dropped images are told through
 /// `ctl`'s warnings; its stop flag is polled between images.
@@ -401,6 +435,7 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
         );
     }
     let images = image_list(&config.images)?;
+    refuse_inputs_as_outputs(config, &images)?;
     let opts = config.decode.clone();
     let stopped = || ctl.stop.load(std::sync::atomic::Ordering::SeqCst);
     let first = read_grey(&images[0], &opts, None)?;

@@ -770,16 +770,18 @@ fn check_targets(targets: &[PathBuf], inputs: &[PathBuf]) -> Result<()> {
     Ok(())
 }
 
-/// The export's staging folder (`.symframe-export-PID` in the output's folder), removed when
-/// dropped: on success and on any error.
+/// The export's staging folder (`.symframe-export-PID-TOKEN` in the output's folder, a fresh
+/// name: a folder already there is never touched), removed when dropped: on success and on
+/// any error.
 struct Staging(PathBuf);
 
 impl Staging {
     fn new(dir: &Path) -> Result<Self> {
-        let p = dir.join(format!(".symframe-export-{}", std::process::id()));
-        if p.exists() {
-            std::fs::remove_dir_all(&p).ok();
-        }
+        let p = dir.join(format!(
+            ".symframe-export-{}-{:016x}",
+            std::process::id(),
+            crate::outdir::new_token()
+        ));
         std::fs::create_dir(&p).with_context(|| format!("{}: cannot create", p.display()))?;
         Ok(Self(p))
     }

@@ -27,10 +27,13 @@ impl Staging {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_else(|| "out".into());
-        let staging = parent.join(format!(".{name}.partial-{}", std::process::id()));
-        if staging.exists() {
-            fs::remove_dir_all(&staging).ok();
-        }
+        // A fresh name (the process id and a random token): a folder already there, whoever
+        // made it, is never removed or written into.
+        let staging = parent.join(format!(
+            ".{name}.partial-{}-{:016x}",
+            std::process::id(),
+            new_token()
+        ));
         fs::create_dir(&staging)
             .with_context(|| format!("{}: cannot create folder", staging.display()))?;
         Ok(Self {
@@ -371,7 +374,7 @@ fn staging_token(rest: &str) -> Option<u64> {
 
 /// A fresh lock token: 64 random bits (from the standard library's per-process random hash
 /// keys, mixed with the process id and the time), never zero.
-fn new_token() -> u64 {
+pub(crate) fn new_token() -> u64 {
     use std::hash::{BuildHasher, Hasher};
     let mut h = std::collections::hash_map::RandomState::new().build_hasher();
     h.write_u32(std::process::id());

@@ -5,6 +5,7 @@
 use std::fs;
 use std::os::unix::fs::symlink;
 use std::path::{Path, PathBuf};
+use std::process::Command;
 
 use crate::common::{self, assert_one_line_error, ok, report, s, stderr, ward_sphere};
 
@@ -519,4 +520,75 @@ fn a_merl_file_that_is_a_device_is_refused_unread() {
     assert_one_line_error(&o, "/dev/zero");
     assert!(stderr(&o).contains("not a regular file"), "{}", stderr(&o));
     assert!(peak_kib < 600 << 10, "peak {peak_kib} KiB");
+}
+
+/// `calibrate lights.lp -o lights.lp` replaced the `.lp` it read with the calibrated one.
+#[test]
+fn calibrate_never_replaces_the_lp_it_reads() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    ok(&common::symframe(&[
+        "synth",
+        "-o",
+        s(&data),
+        "--size",
+        "32",
+        "--rig",
+        "cone:8",
+        "--chrome-sphere",
+        "--quiet",
+    ]));
+    let lp = data.join("lights.lp");
+    let before = fs::read(&lp).unwrap();
+    let o = common::symframe(&["calibrate", s(&lp), "-o", s(&lp), "--quiet"]);
+    assert_one_line_error(&o, "lights.lp: is an input of this run");
+    assert_eq!(fs::read(&lp).unwrap(), before);
+}
+
+/// A FIFO planted at the tile cache's lock file made the next run wait forever.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_fifo_at_the_cache_lock_is_an_error_not_a_wait() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = capture(&tmp.path().join("data"));
+    let out = tmp.path().join("out");
+    ok(&estimate(&lp, &out));
+    let lock = fs::read_dir(out.join(".symframe-cache"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|e| e == "lock"))
+        .expect("a cache lock file");
+    fs::remove_file(&lock).unwrap();
+    let status = Command::new("mkfifo").arg(&lock).status().unwrap();
+    assert!(status.success());
+    let args = ["estimate", s(&lp), "-o", s(&out), "--method", "woodham"];
+    let o = common::run_with_timeout(&args, 60);
+    assert_one_line_error(&o, ".lock");
+}
+
+/// `integrate` (and `synth`) staged into `.NAME.partial-PID` beside the output folder and
+/// removed a folder already there by that name, outside the output folder.
+#[test]
+fn a_folder_beside_the_output_is_never_removed() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = capture(&tmp.path().join("data"));
+    let est = tmp.path().join("est");
+    ok(&estimate(&lp, &est));
+    let par = tmp.path().join("par");
+    fs::create_dir_all(&par).unwrap();
+    // The process id is the shell's, which `exec` hands to symframe.
+    let script = format!(
+        "mkdir -p {par}/.shape.partial-$$/mine && printf keep > {par}/.shape.partial-$$/mine/k \
+         && echo $$ > {par}/pid && exec {bin} integrate {est} -o {par}/shape --solver poisson -q",
+        par = s(&par),
+        bin = common::bin().display(),
+        est = s(&est),
+    );
+    let o = Command::new("bash").args(["-c", &script]).output().unwrap();
+    ok(&o);
+    let pid = fs::read_to_string(par.join("pid")).unwrap();
+    let mine = par.join(format!(".shape.partial-{}", pid.trim()));
+    assert_kept(&[&mine.join("mine").join("k")]);
+    assert!(par.join("shape").join("depth.npy").is_file());
 }
