@@ -592,3 +592,30 @@ fn a_folder_beside_the_output_is_never_removed() {
     assert_kept(&[&mine.join("mine").join("k")]);
     assert!(par.join("shape").join("depth.npy").is_file());
 }
+
+/// A corrupt cache block was repaired in place, through every hard link of the cache file (a
+/// backup made with `cp -al`, outside the output folder, changed with it).
+#[test]
+fn a_hard_linked_cache_file_is_not_repaired_in_place() {
+    use std::io::{Seek, SeekFrom, Write};
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = capture(&tmp.path().join("data"));
+    let out = tmp.path().join("out");
+    ok(&estimate(&lp, &out));
+    let stack = fs::read_dir(out.join(".symframe-cache"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|e| e == "stack"))
+        .expect("a cache file");
+    let backup = tmp.path().join("backup.stack");
+    fs::hard_link(&stack, &backup).unwrap();
+    let mut f = fs::OpenOptions::new().write(true).open(&stack).unwrap();
+    f.seek(SeekFrom::Start(5000)).unwrap();
+    f.write_all(&[0x5a; 64]).unwrap();
+    drop(f);
+    let before = fs::read(&backup).unwrap();
+    let o = estimate(&lp, &out);
+    assert_one_line_error(&o, "other hard links");
+    assert_eq!(fs::read(&backup).unwrap(), before, "the backup changed");
+}

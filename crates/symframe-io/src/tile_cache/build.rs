@@ -313,6 +313,25 @@ pub(super) fn repair(
 ) -> Result<()> {
     let blocks: std::collections::BTreeSet<usize> = bad.iter().map(|&(_, b)| b).collect();
     info.blocks_corrupt += bad.len();
+    // Repaired in place: a file with other hard links (a backup made by `cp -al`) would
+    // change under its other names too, outside this folder. Refused, not written.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        let links = std::fs::symlink_metadata(path)
+            .map_err(|e| Error::read(path, e))?
+            .nlink();
+        if links > 1 {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "has {} other hard links, so its corrupt blocks are not repaired in place; \
+                     remove it (or the other links) and run again",
+                    links - 1
+                ),
+            ));
+        }
+    }
     let file = crate::atomic::open_no_follow(OpenOptions::new().read(true).write(true), path)
         .map_err(|e| Error::write(path, e))?;
     let grid = TileGrid::new(h.width, h.height, h.tile);
