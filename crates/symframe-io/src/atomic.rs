@@ -58,7 +58,7 @@ pub fn write_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
 /// Opens `path` with `options`, never through a symbolic link at its last component (a link
 /// planted where this tool keeps a file of its own is an error, not a way to write
 /// elsewhere). Unix only; elsewhere a plain open.
-pub(crate) fn open_no_follow(options: &mut OpenOptions, path: &Path) -> std::io::Result<File> {
+pub fn open_no_follow(options: &mut OpenOptions, path: &Path) -> std::io::Result<File> {
     #[cfg(unix)]
     {
         use std::os::unix::fs::OpenOptionsExt;

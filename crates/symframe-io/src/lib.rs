@@ -39,7 +39,7 @@ pub mod synth_out;
 pub mod tile_cache;
 pub mod tile_results;
 
-pub use atomic::write_bytes;
+pub use atomic::{open_no_follow, write_bytes};
 pub use bounded::{
     check_regular_file, open_own_file, read_at_most, read_bounded, read_text_bounded,
 };

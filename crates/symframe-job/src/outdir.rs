@@ -402,19 +402,6 @@ fn read_own_file(path: &Path) -> Result<String> {
     )?)
 }
 
-/// Opens `path` for reading and writing, creating it if missing, without following a
-/// symbolic link at its last component.
-fn open_no_follow(path: &Path) -> std::io::Result<fs::File> {
-    let mut o = fs::OpenOptions::new();
-    o.read(true).write(true).create(true).truncate(false);
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::OpenOptionsExt;
-        o.custom_flags(libc::O_NOFOLLOW);
-    }
-    o.open(path)
-}
-
 impl Drop for OutputDir {
     fn drop(&mut self) {
         // Removed while still held: a process that opened it before sees a lock file that is
@@ -459,8 +446,15 @@ fn lock_file(path: &Path, token: u64) -> Result<Locked> {
                 );
             }
         }
-        let mut file = open_no_follow(path)
-            .with_context(|| format!("{}: cannot create lock file", path.display()))?;
+        let mut file = symframe_io::open_no_follow(
+            fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .create(true)
+                .truncate(false),
+            path,
+        )
+        .with_context(|| format!("{}: cannot create lock file", path.display()))?;
         let held = file.metadata()?;
         if !held.is_file() || held.nlink() != 1 {
             anyhow::bail!(

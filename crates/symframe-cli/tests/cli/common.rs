@@ -181,16 +181,33 @@ pub fn assert_fails_keeping_cache(o: &Output, needle: &str, out: &Path) {
     }
 }
 
-/// Runs the `symframe` binary with `args`, killing it (and failing the test) if it has not
-/// ended within `secs` seconds.
-pub fn run_with_timeout(args: &[&str], secs: u64) -> Output {
+/// `symframe synth` of a 32-pixel object with a chrome sphere (and, with `matte`, a matte
+/// sphere) beside it under 8 lights, into `data`.
+pub fn chrome_sphere_capture(data: &Path, matte: bool) {
+    let mut args = vec!["synth", "-o", s(data), "--size", "32", "--rig", "cone:8"];
+    args.push("--chrome-sphere");
+    if matte {
+        args.push("--matte-sphere");
+    }
+    args.push("--quiet");
+    ok(&symframe(&args));
+}
+
+/// Runs the `symframe` binary with `args`, stdout and stderr piped.
+fn spawn_piped(args: &[&str]) -> std::process::Child {
     use std::process::Stdio;
-    let mut child = Command::new(bin())
+    Command::new(bin())
         .args(args)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .expect("run symframe");
+        .expect("run symframe")
+}
+
+/// Runs the `symframe` binary with `args`, killing it (and failing the test) if it has not
+/// ended within `secs` seconds.
+pub fn run_with_timeout(args: &[&str], secs: u64) -> Output {
+    let mut child = spawn_piped(args);
     let t0 = std::time::Instant::now();
     while child.try_wait().expect("wait for symframe").is_none() {
         if t0.elapsed().as_secs() >= secs {
@@ -212,13 +229,7 @@ pub fn run_with_timeout(args: &[&str], secs: u64) -> Output {
 pub fn run_measuring_rss(args: &[&str]) -> (Output, u64) {
     use std::io::Read;
     use std::os::unix::process::ExitStatusExt;
-    use std::process::Stdio;
-    let mut child = Command::new(bin())
-        .args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("run symframe");
+    let mut child = spawn_piped(args);
     let (mut out, mut err) = (Vec::new(), Vec::new());
     let mut so = child.stdout.take().unwrap();
     let reader = std::thread::spawn(move || {

@@ -527,17 +527,7 @@ fn a_merl_file_that_is_a_device_is_refused_unread() {
 fn calibrate_never_replaces_the_lp_it_reads() {
     let tmp = tempfile::tempdir().unwrap();
     let data = tmp.path().join("data");
-    ok(&common::symframe(&[
-        "synth",
-        "-o",
-        s(&data),
-        "--size",
-        "32",
-        "--rig",
-        "cone:8",
-        "--chrome-sphere",
-        "--quiet",
-    ]));
+    common::chrome_sphere_capture(&data, false);
     let lp = data.join("lights.lp");
     let before = fs::read(&lp).unwrap();
     let o = common::symframe(&["calibrate", s(&lp), "-o", s(&lp), "--quiet"]);

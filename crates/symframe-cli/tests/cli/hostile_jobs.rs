@@ -111,18 +111,7 @@ fn merge_refuses_a_forged_manifest_before_allocating_its_size() {
 fn calibrate_refuses_circles_that_do_not_fit_the_image() {
     let tmp = tempfile::tempdir().unwrap();
     let data = tmp.path().join("data");
-    ok(&symframe(&[
-        "synth",
-        "-o",
-        s(&data),
-        "--size",
-        "32",
-        "--rig",
-        "cone:8",
-        "--chrome-sphere",
-        "--matte-sphere",
-        "--quiet",
-    ]));
+    crate::common::chrome_sphere_capture(&data, true);
     let images = data.join("images");
     let lp = tmp.path().join("cal.lp");
     // The image is 96 x 32 (object, chrome and matte sphere side by side).
