@@ -281,6 +281,30 @@ pub(crate) fn check_size(
     })
 }
 
+/// Files up to this length are read whole at once; of a longer one this much is read first for
+/// its header (image headers, EXIF and ICC profiles included, fit in a few MB).
+const HEADER_PREFIX_BYTES: u64 = 16 << 20;
+
+/// Refuses an image file longer than any encoding of its declared `size` needs: four float32
+/// channels a pixel (16 bytes), twice over for a codec's worst case, plus 16 MiB of metadata.
+/// A forged (or sparse) file of gigabytes declaring a small image is never read whole.
+fn check_file_length(path: &Path, len: u64, (w, h): (usize, usize)) -> Result<()> {
+    let most = (w as u64)
+        .saturating_mul(h as u64)
+        .saturating_mul(32)
+        .saturating_add(HEADER_PREFIX_BYTES);
+    if len > most {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "{len} bytes, more than any encoding of the {w} x {h} image its header declares \
+                 needs (at most {most}); the file is corrupt or padded: re-encode it"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Decodes image `i` of `ds` as a stack stores it: interleaved RGB (grey replicated), divided
 /// by the light's intensity when the dataset has intensities. Returns width, height, samples.
 /// Given `first`, the stack's image size, the size the file's header declares is compared
@@ -294,6 +318,19 @@ pub(crate) fn decode_stack_image(
     first: Option<(usize, usize)>,
 ) -> Result<(usize, usize, Vec<f32>)> {
     let path = &ds.images[i];
+    let len = crate::check_regular_file(path)?;
+    if len > HEADER_PREFIX_BYTES {
+        // A large file's header is read first: its declared size is compared with the stack's
+        // and bounds the file's length before the whole file is read.
+        let f = std::fs::File::open(path).map_err(|e| Error::read(path, e))?;
+        let prefix = crate::read_at_most(f, path, HEADER_PREFIX_BYTES)?;
+        if let Ok(size) = declared_size(path, &prefix, opts) {
+            if let Some(first) = first {
+                check_size(ds, i, size, first)?;
+            }
+            check_file_length(path, len, size)?;
+        }
+    }
     let bytes = read_image_file(path)?;
     if let Some(first) = first {
         // A header that cannot be read is left for the decoder to report.

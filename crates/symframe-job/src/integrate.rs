@@ -9,7 +9,7 @@ use anyhow::{bail, Context, Result};
 use serde::Serialize;
 use symframe::integrate::{integrate, mesh, shade, DepthMap, IntegrateParams, Mesh, Solver};
 
-use crate::outdir::Staging;
+use crate::outdir::{OutputDir, OutputSet};
 
 /// Everything an integrate job needs.
 #[derive(Debug, Clone, PartialEq)]
@@ -176,15 +176,77 @@ pub fn integrate_job(config: &IntegrateConfig) -> Result<(DepthMap, IntegrateRep
             config.params.cg_tolerance
         );
     }
-    let (w, h, normals, confidence) = read_inputs(&config.estimate, config.use_confidence)?;
+    check_memory(&config.estimate.join("normals.npy"))?;
+    // The output folder's lock and rules, as for every job: nothing there replaced that an
+    // earlier integrate did not write, no input of the run replaced, no folder replaced.
+    let out = OutputDir::lock(&config.output)?;
+    let inputs = [
+        config.estimate.join("normals.npy"),
+        config.estimate.join("confidence.npy"),
+    ];
+    let result = out
+        .guard_inputs(
+            &inputs,
+            "integrate.json",
+            &|n| integrate_owned(n) || n == "integrate.json",
+            &|_| false,
+        )
+        .and_then(|()| integrate_into(config, &out, t0));
+    if result.is_err() {
+        out.discard_unfinished();
+    }
+    result
+}
+
+/// The files of an integrate's output set besides `integrate.json`.
+fn integrate_owned(name: &str) -> bool {
+    matches!(name, "depth.npy" | "depth.exr" | "depth.png" | "mesh.ply")
+}
+
+/// Memory integration takes per pixel of the map, bytes: the solver's multigrid levels, the
+/// weights, the mesh and the pictures (peak resident memory over pixels at 2048 x 2048:
+/// docs/performance.md, "Integration").
+const INTEGRATE_BYTES_PER_PIXEL: u64 = 200;
+
+/// Refuses, before reading it, a normal map whose integration cannot fit in the memory this
+/// process may use (the smaller of the free memory and its address-space limit), with the
+/// figures, rather than failing an allocation half-way.
+fn check_memory(normals: &Path) -> Result<()> {
+    let Ok(meta) = std::fs::metadata(normals) else {
+        return Ok(()); // read_inputs names the missing file
+    };
+    let pixels = meta.len() / 12;
+    let need = pixels * INTEGRATE_BYTES_PER_PIXEL + 3 * meta.len();
+    if let Some(have) = crate::tiles::memory_available_bytes() {
+        if need > have {
+            bail!(
+                "{}: integrating a map of about {:.1} megapixels needs about {:.1} GiB of memory, \
+                 {:.1} GiB available; integrate a crop, or on a machine with more memory",
+                normals.display(),
+                pixels as f64 / 1e6,
+                need as f64 / (1u64 << 30) as f64,
+                have as f64 / (1u64 << 30) as f64
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Reads, integrates and writes the set into the locked folder `out`.
+fn integrate_into(
+    config: &IntegrateConfig,
+    out: &OutputDir,
+    t0: Instant,
+) -> Result<(DepthMap, IntegrateReport)> {
     let solver = config.params.solver;
+    let (w, h, normals, confidence) = read_inputs(&config.estimate, config.use_confidence)?;
     let t_int = Instant::now();
     let depth = integrate(w, h, &normals, confidence.as_deref(), &config.params)
         .with_context(|| format!("{}: cannot integrate", config.estimate.display()))?;
     let integrate_s = t_int.elapsed().as_secs_f64();
     let m = mesh(&depth, &normals, config.max_jump);
 
-    let staging = Staging::new(&config.output)?;
+    let staging = OutputSet::new(out, integrate_owned)?;
     symframe_io::write_npy_f32(&staging.path("depth.npy"), &[h, w], &depth.depth)?;
     symframe_io::write_exr_map(&staging.path("depth.exr"), w, h, 1, &depth.depth)?;
     let shaded: Vec<f32> = shade(&depth).iter().flat_map(|&v| [v; 3]).collect();
@@ -219,9 +281,6 @@ pub fn integrate_job(config: &IntegrateConfig) -> Result<(DepthMap, IntegrateRep
                       connected region's lowest point at 0, NaN outside; mesh: vertex at pixel \
                       centre (x = col + 0.5, y = H - row - 0.5, z = depth), y up",
     };
-    let json = serde_json::to_string_pretty(&report)?;
-    std::fs::write(staging.path("integrate.json"), json + "\n")
-        .context("cannot write integrate.json")?;
-    staging.commit()?;
+    staging.commit("integrate.json", serde_json::to_value(&report)?, &|_| {})?;
     Ok((depth, report))
 }

@@ -250,7 +250,9 @@ impl OutputDir {
                 .is_some_and(|l| n.as_str() == report || l.contains(n));
             if !ours {
                 anyhow::bail!(
-                    "{}: exists and is not a file of the output set that {report} there names                      (symframe replaces only its own files); move it away or write the results                      into another folder (-o)",
+                    "{}: exists and is not a file of the output set that {report} there names \
+                     (symframe replaces only its own files); move it away or write the results \
+                     into another folder (-o)",
                     self.dir.join(n).display()
                 );
             }

@@ -87,6 +87,18 @@ impl RigSpec {
         })
     }
 
+    /// The files the rig is read from (none for the built-in rigs): the light file, or every
+    /// file of the dataset folder it names.
+    pub fn input_files(&self) -> Vec<PathBuf> {
+        match self {
+            RigSpec::Lp(path) if path.is_dir() => std::fs::read_dir(path)
+                .map(|d| d.flatten().map(|e| e.path()).collect())
+                .unwrap_or_default(),
+            RigSpec::Lp(path) => vec![path.clone()],
+            _ => Vec::new(),
+        }
+    }
+
     /// What `scene.json` records about the rig.
     pub fn describe(&self, n_lights: usize) -> Value {
         match self {
@@ -303,7 +315,7 @@ pub fn synth(config: &SynthConfig, ctl: &Control) -> Result<SynthOutcome> {
     (ctl.checkpoint)(Checkpoint::OutputLocked);
     let result = symframe_io::check_synth_target(&config.output, config.force)
         .map_err(anyhow::Error::from)
-        .and_then(|()| render_and_write(config, ctl));
+        .and_then(|()| render_and_write(config, &out, ctl));
     if result.is_err() {
         out.discard_unfinished();
     }
@@ -311,7 +323,7 @@ pub fn synth(config: &SynthConfig, ctl: &Control) -> Result<SynthOutcome> {
 }
 
 /// Renders the dataset and writes it into the (locked) output folder.
-fn render_and_write(config: &SynthConfig, ctl: &Control) -> Result<SynthOutcome> {
+fn render_and_write(config: &SynthConfig, out: &OutputDir, ctl: &Control) -> Result<SynthOutcome> {
     let brdf: Box<dyn Brdf> = parse_model(&config.model).map_err(anyhow::Error::msg)?;
     let field = config
         .tangent_field
@@ -461,6 +473,17 @@ fn render_and_write(config: &SynthConfig, ctl: &Control) -> Result<SynthOutcome>
         symframe_io::write_bytes(&path, (rows.join("\n") + "\n").as_bytes())?;
     }
     write_json(&staging.path("scene.json"), &description)?;
+    // The rig's own light file (or its dataset's files) is an input: never replaced.
+    let staged: Vec<String> = std::fs::read_dir(staging.dir())?
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    out.guard_inputs(
+        rig.input_files(),
+        "scene.json",
+        &|n| staged.iter().any(|s| s == n),
+        &|_| true,
+    )?;
     staging.commit()?;
     Ok(SynthOutcome {
         lp: config.output.join("lights.lp"),

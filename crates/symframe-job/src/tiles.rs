@@ -216,3 +216,45 @@ pub fn peak_rss_bytes() -> Option<u64> {
     let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb * 1024)
 }
+
+/// The memory this process may still take, bytes: the smaller of the system's available
+/// memory (`MemAvailable`) and what its address-space limit leaves (Linux; `None` elsewhere
+/// or when neither is known).
+pub(crate) fn memory_available_bytes() -> Option<u64> {
+    let kb = |text: &str, key: &str| -> Option<u64> {
+        let line = text.lines().find(|l| l.starts_with(key))?;
+        Some(line.split_whitespace().nth(1)?.parse::<u64>().ok()? * 1024)
+    };
+    let free = fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|t| kb(&t, "MemAvailable:"));
+    let limit = address_space_left(|| {
+        fs::read_to_string("/proc/self/status")
+            .ok()
+            .and_then(|t| kb(&t, "VmSize:"))
+    });
+    match (free, limit) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
+    }
+}
+
+/// The address-space limit (`RLIMIT_AS`) less `in_use()`, when a limit is set.
+#[cfg(unix)]
+fn address_space_left(in_use: impl Fn() -> Option<u64>) -> Option<u64> {
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: getrlimit writes into the struct passed; no other memory is touched.
+    let rc = unsafe { libc::getrlimit(libc::RLIMIT_AS, &mut lim) };
+    if rc != 0 || lim.rlim_cur == libc::RLIM_INFINITY {
+        return None;
+    }
+    Some((lim.rlim_cur as u64).saturating_sub(in_use().unwrap_or(0)))
+}
+
+#[cfg(not(unix))]
+fn address_space_left(_in_use: impl Fn() -> Option<u64>) -> Option<u64> {
+    None
+}

@@ -609,3 +609,127 @@ fn a_hard_linked_cache_file_is_not_repaired_in_place() {
     assert_one_line_error(&o, "other hard links");
     assert_eq!(fs::read(&backup).unwrap(), before, "the backup changed");
 }
+
+/// `integrate -o EST` replaced a user's `depth.npy` there (integrate wrote without the output
+/// folder's rules), removed a user's folder named `depth.png`, and wrote into a folder a
+/// running estimate held.
+#[test]
+fn integrate_replaces_only_its_own_files_and_respects_the_lock() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = capture(&tmp.path().join("data"));
+    let est = tmp.path().join("est");
+    ok(&estimate(&lp, &est));
+    fs::write(est.join("depth.npy"), "keep").unwrap();
+    let integrate = |out: &Path| {
+        common::symframe(&[
+            "integrate",
+            s(&est),
+            "-o",
+            s(out),
+            "--solver",
+            "poisson",
+            "-q",
+        ])
+    };
+    let o = integrate(&est);
+    assert_one_line_error(&o, "depth.npy: exists and is not a file of the output set");
+    assert_kept(&[&est.join("depth.npy")]);
+    assert!(!est.join("mesh.ply").exists());
+    fs::remove_file(est.join("depth.npy")).unwrap();
+    // A user's folder at an output name is never replaced.
+    fs::create_dir_all(est.join("depth.png")).unwrap();
+    fs::write(est.join("depth.png").join("k"), "keep").unwrap();
+    assert_one_line_error(&integrate(&est), "depth.png: is a folder");
+    assert_kept(&[&est.join("depth.png").join("k")]);
+    fs::remove_dir_all(est.join("depth.png")).unwrap();
+    // Its own earlier set is replaced.
+    ok(&integrate(&est));
+    ok(&integrate(&est));
+    symframe_job::check_output_set(&est, "integrate.json").unwrap();
+    // A folder another job holds is refused at once.
+    let held = std::process::Command::new(common::bin())
+        .args([
+            "estimate",
+            s(&lp),
+            "-o",
+            s(&est),
+            "--method",
+            "woodham",
+            "-q",
+        ])
+        .env("SYMFRAME_TEST_HOLD_LOCK_S", "4")
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let o = integrate(&est);
+    let mut held = held;
+    held.wait().unwrap();
+    assert_one_line_error(&o, "in use by process");
+}
+
+/// `synth --rig lp:cap/lights.lp -o cap` rewrote the light file it read its rig from.
+#[test]
+fn synth_never_replaces_its_rig_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cap = tmp.path().join("cap");
+    ok(&common::symframe(&[
+        "synth",
+        "-o",
+        s(&cap),
+        "--size",
+        "16",
+        "--rig",
+        "cone:12",
+        "-q",
+    ]));
+    let lp = cap.join("lights.lp");
+    let before = fs::read(&lp).unwrap();
+    let rig = format!("lp:{}", s(&lp));
+    let o = common::symframe(&["synth", "-o", s(&cap), "--size", "16", "--rig", &rig, "-q"]);
+    assert_one_line_error(&o, "lights.lp: is an input of this run");
+    assert_eq!(fs::read(&lp).unwrap(), before);
+    // Into another folder it runs.
+    let other = tmp.path().join("other");
+    ok(&common::symframe(&[
+        "synth",
+        "-o",
+        s(&other),
+        "--size",
+        "16",
+        "--rig",
+        &rig,
+        "-q",
+    ]));
+}
+
+/// A real (sparse) 11000 x 11000 normal map aborted `integrate` on a failed allocation
+/// (exit 134) under an address-space limit, instead of a one-line error with the figures.
+#[cfg(target_os = "linux")]
+#[test]
+fn integrate_refuses_a_map_too_large_for_the_memory_it_may_use() {
+    use std::io::Write;
+    let tmp = tempfile::tempdir().unwrap();
+    let est = tmp.path().join("est");
+    fs::create_dir_all(&est).unwrap();
+    let mut header =
+        b"{'descr': '<f4', 'fortran_order': False, 'shape': (11000, 11000, 3), }".to_vec();
+    while (header.len() + 11) % 64 != 0 {
+        header.push(b' ');
+    }
+    header.push(b'\n');
+    let mut f = fs::File::create(est.join("normals.npy")).unwrap();
+    f.write_all(b"\x93NUMPY\x01\x00").unwrap();
+    f.write_all(&(header.len() as u16).to_le_bytes()).unwrap();
+    f.write_all(&header).unwrap();
+    f.set_len(10 + header.len() as u64 + 11000 * 11000 * 12)
+        .unwrap();
+    drop(f);
+    let out = tmp.path().join("shape");
+    let o =
+        common::run_with_address_space_cap(&["integrate", s(&est), "-o", s(&out), "-q"], 2 << 30);
+    assert_one_line_error(
+        &o,
+        "normals.npy: integrating a map of about 121.0 megapixels needs",
+    );
+    assert!(!out.join("depth.npy").exists());
+}

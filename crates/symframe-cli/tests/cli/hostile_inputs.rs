@@ -267,6 +267,33 @@ fn an_image_of_another_size_is_refused_before_it_is_decoded() {
     assert!(peak_kib < 600 << 10, "peak {peak_kib} KiB");
 }
 
+/// A sparse 3 GB file holding a valid 16 x 16 PNG was read whole (3.1 GB peak): a file far
+/// longer than any encoding of the image its header declares is refused from its header.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_padded_image_file_is_refused_before_it_is_read_whole() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    black_png(&d.join("a.png"), 16, 16);
+    black_png(&d.join("b.png"), 16, 16);
+    let f = fs::OpenOptions::new()
+        .write(true)
+        .open(d.join("b.png"))
+        .unwrap();
+    f.set_len(3 << 30).unwrap();
+    drop(f);
+    let lp = d.join("l.lp");
+    fs::write(&lp, "2\na.png 0.1 0.3 1\nb.png -0.2 0.1 1\n").unwrap();
+    let out = d.join("out");
+    let args = ["estimate", s(&lp), "-o", s(&out), "--method", "woodham"];
+    let (o, peak_kib) = crate::common::run_measuring_rss(&args);
+    assert_one_line_error(
+        &o,
+        "b.png: 3221225472 bytes, more than any encoding",
+    );
+    assert!(peak_kib < 600 << 10, "peak {peak_kib} KiB");
+}
+
 /// A `--mask`, `.lp` or `relight --lights` file that is `/dev/zero` grew until memory ran out.
 #[cfg(target_os = "linux")]
 #[test]
