@@ -251,7 +251,9 @@ fn address_space_left(in_use: impl Fn() -> Option<u64>) -> Option<u64> {
     if rc != 0 || lim.rlim_cur == libc::RLIM_INFINITY {
         return None;
     }
-    Some((lim.rlim_cur as u64).saturating_sub(in_use().unwrap_or(0)))
+    #[allow(clippy::unnecessary_cast)] // rlim_t is not u64 on every unix
+    let limit = lim.rlim_cur as u64;
+    Some(limit.saturating_sub(in_use().unwrap_or(0)))
 }
 
 #[cfg(not(unix))]
