@@ -713,7 +713,7 @@ fn integrate_refuses_a_map_too_large_for_the_memory_it_may_use() {
     fs::create_dir_all(&est).unwrap();
     let mut header =
         b"{'descr': '<f4', 'fortran_order': False, 'shape': (11000, 11000, 3), }".to_vec();
-    while (header.len() + 11) % 64 != 0 {
+    while !(header.len() + 11).is_multiple_of(64) {
         header.push(b' ');
     }
     header.push(b'\n');
