@@ -350,9 +350,8 @@ fn render_and_write(config: &SynthConfig, out: &OutputDir, ctl: &Control) -> Res
     let degradation = Degradation {
         exposure: config.exposure as f32,
         noise,
-        clip: None,
-        quantise_bits: None,
         seed: config.seed,
+        ..Degradation::default()
     };
     let n_lights = lights.len() as u64;
     let rendered = std::sync::atomic::AtomicU64::new(0);

@@ -6,6 +6,7 @@
 //! `all` runs every one and writes the report `<output>.md` (by default `docs/validation.md`)
 //! with the plots linked by relative path.
 
+mod capture;
 mod fig10;
 mod fig3;
 mod fig4;
@@ -85,13 +86,14 @@ pub fn estimate_and_evaluate(
 }
 
 fn experiments(which: ExperimentArg) -> Vec<(&'static str, RunFn)> {
-    let all: [(&str, RunFn); 6] = [
+    let all: [(&str, RunFn); 7] = [
         ("fig3", |c| parts(fig3::run(c)?)),
         ("fig4", |c| parts(fig4::run(c)?)),
         ("fig10", |c| parts(fig10::run(c)?)),
         ("noise", |c| parts(noise::run(c)?)),
         ("relight", |c| parts(relight::run(c)?)),
         ("materials", |c| parts(materials::run(c)?)),
+        ("capture", |c| parts(capture::run(c)?)),
     ];
     let name = match which {
         ExperimentArg::Fig3 => "fig3",
@@ -100,6 +102,7 @@ fn experiments(which: ExperimentArg) -> Vec<(&'static str, RunFn)> {
         ExperimentArg::Noise => "noise",
         ExperimentArg::Relight => "relight",
         ExperimentArg::Materials => "materials",
+        ExperimentArg::Capture => "capture",
         ExperimentArg::All => return all.to_vec(),
     };
     all.into_iter().filter(|(n, _)| *n == name).collect()

@@ -287,10 +287,7 @@ fn a_padded_image_file_is_refused_before_it_is_read_whole() {
     let out = d.join("out");
     let args = ["estimate", s(&lp), "-o", s(&out), "--method", "woodham"];
     let (o, peak_kib) = crate::common::run_measuring_rss(&args);
-    assert_one_line_error(
-        &o,
-        "b.png: 3221225472 bytes, more than any encoding",
-    );
+    assert_one_line_error(&o, "b.png: 3221225472 bytes, more than any encoding");
     assert!(peak_kib < 600 << 10, "peak {peak_kib} KiB");
 }
 

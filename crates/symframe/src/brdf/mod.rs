@@ -44,26 +44,34 @@ pub trait Brdf: Send + Sync {
 }
 
 pub mod ashikhmin_shirley;
+pub mod beckmann;
 pub mod blinn_phong;
 pub mod cook_torrance;
 pub mod ggx;
 pub mod gltf;
 pub mod lambertian;
+pub mod layered;
 pub mod merl;
 pub mod microfacet;
+pub mod sheen;
 pub mod spec;
 #[cfg(test)]
 mod testutil;
 pub mod torrance_sparrow;
 pub mod ward;
+pub mod woven;
 
 pub use ashikhmin_shirley::AshikhminShirley;
+pub use beckmann::Beckmann;
 pub use blinn_phong::BlinnPhong;
 pub use cook_torrance::CookTorrance;
 pub use ggx::Ggx;
 pub use gltf::GltfPbr;
 pub use lambertian::Lambertian;
+pub use layered::Layered;
 pub use merl::{Merl, MerlError};
+pub use sheen::Sheen;
 pub use spec::parse_model;
 pub use torrance_sparrow::TorranceSparrow;
 pub use ward::Ward;
+pub use woven::Woven;

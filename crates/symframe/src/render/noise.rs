@@ -217,8 +217,60 @@ pub fn quantise(img: &mut [f32], bits: u32) {
     }
 }
 
+/// sRGB quantisation as an 8-bit (or `bits`-bit) sRGB file stores a linear image and a reader
+/// decodes it: each sample clamped to `[0, 1]`, sRGB-encoded, rounded to `2^bits` levels and
+/// decoded back to linear (the steps are finest in the darks). NaN stays NaN.
+pub fn quantise_srgb(img: &mut [f32], bits: u32) {
+    assert!(
+        (1..=24).contains(&bits),
+        "bits must be in 1..=24, got {bits}"
+    );
+    let m = ((1u64 << bits) - 1) as f64;
+    for v in img.iter_mut().filter(|v| !v.is_nan()) {
+        let e = linear_to_srgb(v.clamp(0.0, 1.0) as f64);
+        *v = srgb_to_linear((e * m).round() / m) as f32;
+    }
+}
+
+/// The sRGB transfer function (linear in `[0, 1]` to encoded).
+fn linear_to_srgb(v: f64) -> f64 {
+    if v <= 0.003_130_8 {
+        v * 12.92
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// Its inverse (encoded in `[0, 1]` to linear).
+fn srgb_to_linear(v: f64) -> f64 {
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// Light directions as a calibration knows them: each of `lights` turned by `error_deg`
+/// degrees about a random axis perpendicular to it (deterministic in `seed`), so every
+/// direction is off by exactly that angle, each its own way.
+pub fn jitter_lights(lights: &[glam::DVec3], error_deg: f64, seed: u64) -> Vec<glam::DVec3> {
+    let mut rng = Rng::new(seed ^ 0x6c69_6768_7473);
+    let a = error_deg.to_radians();
+    lights
+        .iter()
+        .map(|&l| {
+            let l = l.normalize();
+            let (u, w) = l.any_orthonormal_pair();
+            let phi = rng.range(0.0, std::f64::consts::TAU);
+            let axis = u * phi.cos() + w * phi.sin();
+            (l * a.cos() + axis * a.sin()).normalize()
+        })
+        .collect()
+}
+
 /// A full degradation pipeline, applied in this order: multiply by `exposure`, add `noise`,
-/// clip to `[0, clip]` when set, quantise to `quantise_bits` when set.
+/// clip to `[0, clip]` when set, quantise to `quantise_bits` when set (in the sRGB domain when
+/// `srgb`), then mark saturated pixels as the dataset reader does when `saturation` is set.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Degradation {
     /// Scale applied to the rendered radiance first.
@@ -227,8 +279,13 @@ pub struct Degradation {
     pub noise: Noise,
     /// Saturation level (full-scale units), if samples are clipped.
     pub clip: Option<f32>,
-    /// Linear quantisation, if any.
+    /// Quantisation, if any (linear, or sRGB-encoded when `srgb`).
     pub quantise_bits: Option<u32>,
+    /// Quantise in the sRGB-encoded domain (as an 8-bit sRGB PNG or JPEG stores it).
+    pub srgb: bool,
+    /// The reader's saturation rule: a pixel with any channel at or above this linear level
+    /// becomes NaN in all three channels.
+    pub saturation: Option<f32>,
     /// Seed of the noise; each image draws from [`Rng::for_image`]`(seed, index)`.
     pub seed: u64,
 }
@@ -241,6 +298,8 @@ impl Default for Degradation {
             noise: Noise::None,
             clip: None,
             quantise_bits: None,
+            srgb: false,
+            saturation: None,
             seed: 0,
         }
     }
@@ -257,8 +316,13 @@ impl Degradation {
         if let Some(level) = self.clip {
             clip(img, level);
         }
-        if let Some(bits) = self.quantise_bits {
-            quantise(img, bits);
+        match (self.quantise_bits, self.srgb) {
+            (Some(bits), true) => quantise_srgb(img, bits),
+            (Some(bits), false) => quantise(img, bits),
+            (None, _) => {}
+        }
+        if let Some(level) = self.saturation {
+            mark_saturated(img, level);
         }
     }
 }
@@ -272,6 +336,25 @@ mod tests {
         let m = v.iter().map(|&x| x as f64).sum::<f64>() / n;
         let var = v.iter().map(|&x| (x as f64 - m).powi(2)).sum::<f64>() / (n - 1.0);
         (m, var.sqrt())
+    }
+
+    #[test]
+    fn srgb_quantisation_has_fine_steps_in_the_darks_and_jitter_the_asked_angle() {
+        let mut v = vec![0.001f32, 0.0011, 0.5, 0.5015, 1.2, f32::NAN];
+        quantise_srgb(&mut v, 8);
+        // Two darks 10% apart stay apart (sRGB's step there is ~0.0003 linear); near 0.5 the
+        // step is ~0.004, so 0.5 and 0.5015 fall on one level.
+        assert!(v[0] != v[1], "{v:?}");
+        assert_eq!(v[2], v[3]);
+        assert_eq!(v[4], 1.0);
+        assert!(v[5].is_nan());
+        let lights = crate::frames::rig::uniform_cone_lights(50, 65.0);
+        let moved = jitter_lights(&lights, 1.0, 3);
+        for (a, b) in lights.iter().zip(&moved) {
+            let deg = a.normalize().angle_between(*b).to_degrees();
+            assert!((deg - 1.0).abs() < 1e-9, "{deg}");
+        }
+        assert_ne!(jitter_lights(&lights, 1.0, 4), moved);
     }
 
     #[test]
