@@ -76,6 +76,7 @@ pub mod geometry;
 pub mod integrate;
 pub mod maps;
 pub mod method;
+pub mod noise;
 pub mod render;
 pub mod stack;
 
@@ -100,4 +101,5 @@ pub use frames::estimator::{
 pub use frames::rig::{Rig, RigOptions};
 pub use maps::{EstimateMaps, PixelCounts, PixelRecord, PixelSource, PixelStatus};
 pub use method::{run_stack, PixelMethod};
+pub use noise::{NoiseModel, Quantisation};
 pub use stack::Stack;

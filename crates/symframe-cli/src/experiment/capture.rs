@@ -17,7 +17,9 @@ use symframe::brdf::{Beckmann, Brdf, Ggx, Layered, Sheen, Woven};
 use symframe::eval::{evaluate, vec_at, Evaluation};
 use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{jitter_lights, rigs, Degradation, Noise, Scene, TangentField};
-use symframe::{estimate_stack, EstimateMaps, EstimatorParams, Rig, RigOptions};
+use symframe::{
+    estimate_stack, EstimateMaps, EstimatorParams, NoiseModel, Quantisation, Rig, RigOptions,
+};
 
 use super::plot::{self, md_table};
 use super::{Ctx, Section};
@@ -149,13 +151,15 @@ impl Condition {
             quantise_bits: self.bits,
             srgb: self.srgb,
             // The reader's rule for integer files: a raw value at 99.5% of the maximum.
-            saturation: integer.then(|| {
-                if self.srgb {
-                    ((0.995f32 + 0.055) / 1.055).powf(2.4)
-                } else {
-                    0.995
-                }
-            }),
+            saturation: (integer && std::env::var_os("SYMFRAME_CAPTURE_NOSAT").is_none()).then(
+                || {
+                    if self.srgb {
+                        ((0.995f32 + 0.055) / 1.055).powf(2.4)
+                    } else {
+                        0.995
+                    }
+                },
+            ),
             seed,
         }
     }
@@ -224,6 +228,8 @@ pub struct Cell {
     pub confident: usize,
     /// Share of those within 1° of the truth.
     pub confident_within_1: f64,
+    /// Share of the estimated pixels (within 60°) per source code (`source.npy`'s codes).
+    pub sources: [f64; 5],
 }
 
 /// One material under one condition and rig.
@@ -256,7 +262,14 @@ fn cell(scene: &Scene, maps: &EstimateMaps, gt_t: &[f32], anisotropic: bool) -> 
     );
     let gt = scene.gt_normals();
     let (mut confident, mut within) = (0usize, 0usize);
+    let mut sources = [0usize; 5];
     for p in 0..scene.n_pixels() {
+        if scene.mask[p]
+            && vec_at(&maps.normals, p).is_some()
+            && gt.get(3 * p + 2).is_some_and(|z| *z >= 0.5)
+        {
+            sources[(maps.source[p] as usize).min(4)] += 1;
+        }
         let (Some(n), Some(g)) = (vec_at(&maps.normals, p), vec_at(&gt, p)) else {
             continue;
         };
@@ -273,6 +286,10 @@ fn cell(scene: &Scene, maps: &EstimateMaps, gt_t: &[f32], anisotropic: bool) -> 
         tangent_mean: e.tangent_error.mean,
         confident,
         confident_within_1: within as f64 / confident.max(1) as f64,
+        sources: {
+            let n = sources.iter().sum::<usize>().max(1) as f64;
+            sources.map(|c| c as f64 / n)
+        },
     }
 }
 
@@ -334,7 +351,20 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
             };
             let rig = Rig::new(&known, RigOptions::default())?;
             let mask = Some(&scene.mask[..]);
-            let ours = estimate_stack(&stack, &rig, mask, EstimatorParams::default(), &|_| {})?;
+            // What the decoder tells the estimator: the clip level of integer files.
+            let params = EstimatorParams {
+                noise: NoiseModel {
+                    clip_level: d.saturation,
+                    quantisation: match (cond.bits, cond.srgb) {
+                        (None, _) => Quantisation::Float,
+                        (Some(b), true) => Quantisation::Srgb(b),
+                        (Some(b), false) => Quantisation::Linear(b),
+                    },
+                    ..NoiseModel::default()
+                },
+                ..EstimatorParams::default()
+            };
+            let ours = estimate_stack(&stack, &rig, mask, params, &|_| {})?;
             let mut cells = vec![cell(&scene, &ours, &gt_t, mat.anisotropic)];
             for b in [Baseline::HighlightCentroid, Baseline::MaxReflectance] {
                 let maps = estimate_stack_baseline(&stack, &known, mask, b, &|_| {})?;
@@ -386,6 +416,18 @@ fn ours(c: &Cell, anisotropic: bool) -> String {
     }
 }
 
+/// The estimator's sources as `lobe 90% · symmetry 8% · …` (those above 0.5%).
+fn sources(c: &Cell) -> String {
+    let names = ["none", "symmetry", "lambertian", "highlight", "lobe"];
+    let mut v: Vec<(f64, &str)> = c.sources.iter().copied().zip(names).collect();
+    v.sort_by(|a, b| b.0.total_cmp(&a.0));
+    v.iter()
+        .filter(|(s, _)| *s >= 0.005)
+        .map(|(s, n)| format!("{n} {:.0}%", 100.0 * s))
+        .collect::<Vec<_>>()
+        .join(" · ")
+}
+
 fn name_of(r: &Row) -> String {
     if r.held_out {
         format!("{} (held out)", r.material)
@@ -432,9 +474,15 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
     let reference: Vec<Vec<String>> = rows
         .iter()
         .filter(|r| r.sweep == "reference")
-        .map(|r| line(r, r.rig.to_string()))
+        .map(|r| {
+            let mut v = line(r, r.rig.to_string());
+            v.push(sources(&r.cells[0]));
+            v
+        })
         .collect();
-    let t = md_table(&header("rig"), &reference);
+    let mut h = header("rig");
+    h.push("estimator's sources".into());
+    let t = md_table(&h, &reference);
     println!("Reference capture ({}):\n{t}", REFERENCE.label());
     md += &format!(
         "### The reference capture\n\n{}\n\n{t}\n",

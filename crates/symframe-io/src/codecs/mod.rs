@@ -1,8 +1,10 @@
 //! Image decoders behind one interface, and the few image writers the project needs.
 //!
-//! Every decoder returns linear `f32` samples in which untrustworthy pixels are already `NaN`:
-//! a pixel with any channel saturated (integer formats) or non-finite (float formats) has all
-//! its channels set to `NaN`, so the estimator simply skips that light at that pixel.
+//! Every decoder returns linear `f32` samples in which untrustworthy pixels are already marked:
+//! a pixel with any channel saturated (integer formats) has all its channels set to `+inf`
+//! (censored: known only to be at least the white level; the estimator reads it at the clip
+//! level, every other reader skips it as it skips `NaN`), one with a non-finite channel (float
+//! formats) has all its channels `NaN`.
 //!
 //! Formats, chosen by extension (case-insensitive):
 //! - `.exr`: OpenEXR, half/float/uint; `R,G,B` (others such as `A` ignored), else `Y`, of the
@@ -63,7 +65,8 @@ pub struct Image {
     pub height: usize,
     /// Channels per pixel: 1 (grey) or 3 (RGB).
     pub channels: usize,
-    /// `width * height * channels` linear samples; `NaN` marks saturated or non-finite pixels.
+    /// `width * height * channels` linear samples; `+inf` marks saturated pixels, `NaN`
+    /// non-finite ones.
     pub data: Vec<f32>,
     /// What the file stored and how it was made linear.
     pub kind: SampleKind,
@@ -432,6 +435,7 @@ fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, integer: bool) -> Re
     };
     let mut data = Vec::with_capacity(width * height * take);
     let nan = [f32::NAN; 3];
+    let clipped = [f32::INFINITY; 3];
     let (srgb8, srgb16) = (
         integer && opts.gamma.srgb(8),
         integer && opts.gamma.srgb(16),
@@ -459,7 +463,7 @@ fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, integer: bool) -> Re
             for px in v.chunks_exact(ch) {
                 let px = &px[..take];
                 if px.iter().any(|&s| s as f32 >= sat) {
-                    data.extend_from_slice(&nan[..take]);
+                    data.extend_from_slice(&clipped[..take]);
                 } else {
                     data.extend(px.iter().map(|&s| lut[s as usize]));
                 }
@@ -478,7 +482,7 @@ fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, integer: bool) -> Re
             for px in v.chunks_exact(ch) {
                 let px = &px[..take];
                 if px.iter().any(|&s| s as f32 >= sat) {
-                    data.extend_from_slice(&nan[..take]);
+                    data.extend_from_slice(&clipped[..take]);
                 } else {
                     data.extend(px.iter().map(|&s| linear(s)));
                 }
@@ -559,6 +563,13 @@ mod tests {
     fn assert_nan_px(img: &Image, p: usize) {
         let c = img.channels;
         assert!(img.data[p * c..(p + 1) * c].iter().all(|v| v.is_nan()));
+    }
+
+    /// Asserts `pixel` (all channels) is censored (`+inf`): a saturated sample.
+    fn assert_clipped_px(img: &Image, p: usize) {
+        let c = img.channels;
+        let px = &img.data[p * c..(p + 1) * c];
+        assert!(px.iter().all(|v| *v == f32::INFINITY), "{px:?}");
     }
 
     #[test]
@@ -801,7 +812,7 @@ mod tests {
         for i in (0..6).chain(9..12) {
             assert_relative_eq!(img.data[i], rgb[i], max_relative = 1e-6);
         }
-        assert_nan_px(&img, 2);
+        assert_clipped_px(&img, 2);
         // Saturation above 1 disables the test.
         let o = DecodeOptions {
             saturation: 2.0,
@@ -821,7 +832,7 @@ mod tests {
         assert_relative_eq!(img.data[0], 0.215_860_5, max_relative = 1e-5);
         assert_eq!(img.data[1], 0.0);
         assert_relative_eq!(img.data[2], srgb_to_linear(253.0 / 255.0));
-        assert!(img.data[3].is_nan() && img.data[4].is_nan());
+        assert!(img.data[3] == f32::INFINITY && img.data[4] == f32::INFINITY);
         let lin = DecodeOptions {
             gamma: Gamma::Linear,
             ..opts()
@@ -894,7 +905,7 @@ mod tests {
             .write_image::<colortype::RGB16>(2, 1, &v16)
             .unwrap();
         let img = read_image(&p, &opts()).unwrap();
-        assert_nan_px(&img, 0);
+        assert_clipped_px(&img, 0);
         assert_relative_eq!(img.data[4], 200.0 / 65535.0);
     }
 

@@ -6,6 +6,8 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
+use crate::noise::NoiseModel;
+
 use crate::baselines::{
     grey_values, highlight_peak, woodham_robust_greys, BaselineParams, BaselinePixel,
 };
@@ -41,6 +43,10 @@ pub struct EstimatorParams {
     pub tangents: bool,
     /// Evaluation budget of the 2D normal search.
     pub max_normal_evals: u32,
+    /// The capture's noise model: its clip level censors samples (docs/method.md, "Noise
+    /// model"). The default knows nothing (float samples, nothing clipped).
+    #[serde(default)]
+    pub noise: NoiseModel,
     /// How the slice is reconstructed between samples.
     pub interpolation: Interpolation,
     /// What to do where the normal is beyond the rig's reach.
@@ -70,6 +76,7 @@ impl Default for EstimatorParams {
             min_anisotropy: DEFAULT_MIN_ANISOTROPY,
             tangents: true,
             max_normal_evals: 300,
+            noise: NoiseModel::default(),
             interpolation: Interpolation::default(),
             fallback: Fallback::default(),
         }
@@ -414,7 +421,13 @@ impl<'a> Estimator<'a> {
             lobe,
             greys,
             lambert,
+            censored,
+            lobe_input,
         } = scratch;
+        // Clipped samples read through the censoring map: the clipped top of a highlight stays
+        // in the slice, at the clip level, symmetric wherever the unclipped slice is.
+        let clipped = self.params.noise.censor(slice, censored);
+        let slice = if clipped { &censored[..] } else { slice };
         // The robust Lambertian fit of the slice the estimator reads (refitted once the cast
         // shadows are out): the diffuse test, the sharp-lobe rule and the fallback share it.
         // The grey values once: the Lambertian fits and the highlight's moments read them.
@@ -442,7 +455,19 @@ impl<'a> Estimator<'a> {
         let pure_diffuse = fit.confidence as f64 >= DIFFUSE_CENTRE_FIT
             && share.is_some_and(|s| s < PURE_DIFFUSE_SHARE);
         let fitted = if auto && !pure_diffuse {
-            moments.and_then(|m| self.lobe_fit(slice, m.normal, m.tangent, m.radius, lobe))
+            // The lobe's model has no clip: a censored sample tells it nothing it can fit.
+            let lobe_slice = match self.params.noise.clip_level.filter(|_| clipped) {
+                Some(c) => {
+                    lobe_input.clear();
+                    lobe_input.extend_from_slice(slice);
+                    for s in lobe_input.chunks_exact_mut(3).filter(|s| s[0] >= c) {
+                        s.fill(f32::NAN);
+                    }
+                    &lobe_input[..]
+                }
+                None => slice,
+            };
+            moments.and_then(|m| self.lobe_fit(lobe_slice, m.normal, m.tangent, m.radius, lobe))
         } else {
             None
         };
@@ -1204,6 +1229,10 @@ pub struct PixelScratch {
     greys: Vec<f64>,
     /// The robust Lambertian fit's work buffer (twice the lights).
     lambert: Vec<f64>,
+    /// The slice through the censoring map (pixels with clipped samples).
+    censored: Vec<f32>,
+    /// The lobe fit's samples, the censored ones left out.
+    lobe_input: Vec<f32>,
 }
 
 impl PixelScratch {
@@ -1216,6 +1245,8 @@ impl PixelScratch {
             lobe: LobeScratch::default(),
             greys: Vec::with_capacity(rig.n_used()),
             lambert: vec![0.0; 2 * rig.n_used()],
+            censored: Vec::with_capacity(rig.n_used() * 3),
+            lobe_input: Vec::with_capacity(rig.n_used() * 3),
         }
     }
 }

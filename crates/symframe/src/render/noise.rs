@@ -188,13 +188,13 @@ pub fn clip(img: &mut [f32], level: f32) {
 }
 
 /// Marks saturated pixels the way the dataset reader does: a pixel (RGB triple) with any
-/// channel at or above `level` becomes NaN in all three channels. Returns how many pixels were
-/// marked.
+/// channel at or above `level` becomes `+inf` (censored) in all three channels. Returns how
+/// many pixels were marked.
 pub fn mark_saturated(img: &mut [f32], level: f32) -> usize {
     let mut n = 0;
     for px in img.chunks_exact_mut(3) {
         if px.iter().any(|&v| v >= level) {
-            px.fill(f32::NAN);
+            px.fill(f32::INFINITY);
             n += 1;
         }
     }
@@ -454,7 +454,7 @@ mod tests {
         d.apply(&mut img, 0);
         assert_eq!(img, vec![0.4, 1.0, 0.2, 0.0, 0.6, 0.8]);
         assert_eq!(mark_saturated(&mut img, 0.995), 1);
-        assert!(img[..3].iter().all(|v| v.is_nan()));
+        assert!(img[..3].iter().all(|v| *v == f32::INFINITY));
         assert_eq!(&img[3..], &[0.0, 0.6, 0.8]);
     }
 

@@ -1,0 +1,267 @@
+//! The noise model of a capture: what its samples can and cannot tell (docs/method.md, "Noise
+//! model").
+//!
+//! A sample of an integer file is known to within its quantisation step; one at the sensor's
+//! white level is known only to be at least that level (censored); every sample carries shot
+//! noise (variance proportional to the signal) and read noise (a floor). The decoder knows the
+//! first two exactly; the last two are estimated from the data (the spread of each image's
+//! second differences between neighbouring pixels, against their level).
+//!
+//! Censored samples reach the estimator as `+inf` (the decoder's mark for a pixel with a
+//! saturated channel; every other reader skips non-finite samples). With a clip level the
+//! estimator reads every sample through the same pointwise map, `v -> c` wherever `v` is
+//! censored or any channel reaches `c`: a symmetric slice stays symmetric under it, so the
+//! clipped top of a highlight keeps its place in the symmetry measure instead of leaving a
+//! hole there.
+
+use serde::{Deserialize, Serialize};
+
+/// How the samples were stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", tag = "kind", content = "bits")]
+pub enum Quantisation {
+    /// Floating point: no quantisation to speak of.
+    #[default]
+    Float,
+    /// Integers of this many bits, linear in radiance.
+    Linear(u32),
+    /// Integers of this many bits, sRGB-encoded (steps finest in the darks).
+    Srgb(u32),
+}
+
+impl Quantisation {
+    /// The variance the rounding adds to a linear sample of value `v` (full scale 1): the
+    /// step there squared over 12.
+    pub fn variance(self, v: f64) -> f64 {
+        match self {
+            Quantisation::Float => 0.0,
+            Quantisation::Linear(bits) => {
+                let step = 1.0 / ((1u64 << bits) - 1) as f64;
+                step * step / 12.0
+            }
+            Quantisation::Srgb(bits) => {
+                // d(linear)/d(encoded) at v, times the encoded step.
+                let e = linear_to_srgb(v.clamp(0.0, 1.0));
+                let slope = if e <= 0.04045 {
+                    1.0 / 12.92
+                } else {
+                    2.4 / 1.055 * ((e + 0.055) / 1.055).powf(1.4)
+                };
+                let step = slope / ((1u64 << bits) - 1) as f64;
+                step * step / 12.0
+            }
+        }
+    }
+}
+
+fn linear_to_srgb(v: f64) -> f64 {
+    if v <= 0.003_130_8 {
+        v * 12.92
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// A capture's noise model, in the stack's units.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct NoiseModel {
+    /// How the samples were stored.
+    pub quantisation: Quantisation,
+    /// The level at and above which a sample is censored (known only to be at least this),
+    /// common to every light: the white level over the brightest light's intensity. `None`:
+    /// nothing is clipped (float captures).
+    pub clip_level: Option<f32>,
+    /// Shot noise: the variance per unit of signal (1 / electrons at full scale).
+    pub shot: f64,
+    /// Read noise: the variance floor.
+    pub read: f64,
+}
+
+impl NoiseModel {
+    /// The variance of a sample whose noise-free value is `v`.
+    pub fn variance(&self, v: f64) -> f64 {
+        self.quantisation.variance(v) + self.shot * v.max(0.0) + self.read
+    }
+
+    /// Reads `slice` (RGB samples per light) through the censoring map into `out`: a sample
+    /// that is censored (`+inf`) or has a channel at or above the clip level becomes the clip
+    /// level in every channel; NaN stays NaN. Returns whether any sample was censored; without
+    /// a clip level `out` is left empty and `false` returned.
+    pub fn censor(&self, slice: &[f32], out: &mut Vec<f32>) -> bool {
+        out.clear();
+        let Some(c) = self.clip_level else {
+            return false;
+        };
+        let hit = |s: &[f32]| s.iter().any(|&v| v >= c);
+        if !slice.chunks_exact(3).any(hit) {
+            return false;
+        }
+        out.extend_from_slice(slice);
+        for s in out.chunks_exact_mut(3) {
+            if hit(s) {
+                s.fill(c);
+            }
+        }
+        true
+    }
+
+    /// Estimates shot and read noise from images (`width x height`, RGB, linear) by the spread
+    /// of horizontal second differences `v(x) - (v(x-1) + v(x+1)) / 2` between pixels inside
+    /// `mask`, against their level: per level bin a robust variance (the median absolute
+    /// deviation's), less the quantisation's, fitted by `shot * v + read` over the bins (the
+    /// least squares fit of the lower envelope: a bin's spread only overstates the noise where
+    /// the signal curves). Keeps `quantisation` and `clip_level` as given.
+    pub fn estimate<'a>(
+        mut self,
+        images: impl Iterator<Item = &'a [f32]>,
+        width: usize,
+        mask: Option<&[bool]>,
+    ) -> Self {
+        const BINS: usize = 24;
+        // Log-spaced levels from 1e-4 to the clip level (or 1).
+        let top = self.clip_level.map_or(1.0, |c| c as f64);
+        let bin_of = |v: f64| -> Option<usize> {
+            if !(v > 1e-4 && v < 0.95 * top) {
+                return None;
+            }
+            let t = (v / 1e-4).ln() / (top / 1e-4).ln();
+            Some(((t * BINS as f64) as usize).min(BINS - 1))
+        };
+        let mut diffs: Vec<Vec<f32>> = vec![Vec::new(); BINS];
+        let mut levels: Vec<Vec<f32>> = vec![Vec::new(); BINS];
+        const PER_BIN: usize = 20_000;
+        for img in images {
+            let rows = img.len() / 3 / width.max(1);
+            for y in 0..rows {
+                for x in 1..width.saturating_sub(1) {
+                    let p = y * width + x;
+                    if let Some(m) = mask {
+                        if !(m[p - 1] && m[p] && m[p + 1]) {
+                            continue;
+                        }
+                    }
+                    for c in 0..3 {
+                        let (a, b, d) = (img[3 * p - 3 + c], img[3 * p + c], img[3 * p + 3 + c]);
+                        if !(a.is_finite() && b.is_finite() && d.is_finite()) {
+                            continue;
+                        }
+                        let Some(k) = bin_of(b as f64) else { continue };
+                        if diffs[k].len() < PER_BIN {
+                            diffs[k].push(b - 0.5 * (a + d));
+                            levels[k].push(b);
+                        }
+                    }
+                }
+            }
+        }
+        // Per bin: (level, noise variance) from the MAD of the second differences; a second
+        // difference of independent noise has 1.5 times the samples' variance.
+        let mut points: Vec<(f64, f64)> = Vec::new();
+        for (d, l) in diffs.iter_mut().zip(&mut levels) {
+            if d.len() < 200 {
+                continue;
+            }
+            let med = median(d);
+            let mut dev: Vec<f32> = d.iter().map(|v| (v - med).abs()).collect();
+            let mad = median(&mut dev) as f64;
+            let level = median(l) as f64;
+            let var = (1.4826 * mad).powi(2) / 1.5 - self.quantisation.variance(level);
+            points.push((level, var.max(0.0)));
+        }
+        if points.len() >= 2 {
+            // Least squares of var = shot * v + read, both non-negative.
+            let n = points.len() as f64;
+            let (sx, sy) = points
+                .iter()
+                .fold((0.0, 0.0), |a, p| (a.0 + p.0, a.1 + p.1));
+            let (mx, my) = (sx / n, sy / n);
+            let sxx: f64 = points.iter().map(|p| (p.0 - mx).powi(2)).sum();
+            let sxy: f64 = points.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+            let shot = if sxx > 0.0 { (sxy / sxx).max(0.0) } else { 0.0 };
+            self.shot = shot;
+            self.read = (my - shot * mx).max(0.0);
+        }
+        self
+    }
+}
+
+/// The median of `v` (reordered), 0 when empty.
+fn median(v: &mut [f32]) -> f32 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let k = v.len() / 2;
+    let (_, m, _) = v.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
+    *m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::{Degradation, Noise};
+
+    #[test]
+    fn quantisation_variance_follows_the_encoding() {
+        let q = Quantisation::Linear(8).variance(0.5);
+        assert!((q - (1.0 / 255.0f64).powi(2) / 12.0).abs() < 1e-15);
+        // sRGB: finer than linear in the darks, coarser in the brights.
+        let s = Quantisation::Srgb(8);
+        assert!(s.variance(0.01) < q && s.variance(0.9) > q);
+        assert_eq!(Quantisation::Float.variance(0.5), 0.0);
+    }
+
+    #[test]
+    fn censoring_is_one_pointwise_map() {
+        let m = NoiseModel {
+            clip_level: Some(0.9),
+            ..NoiseModel::default()
+        };
+        let slice = [
+            0.2,
+            0.3,
+            0.4,
+            f32::INFINITY,
+            f32::INFINITY,
+            f32::INFINITY,
+            0.95,
+            0.5,
+            0.1,
+        ];
+        let mut out = Vec::new();
+        assert!(m.censor(&slice, &mut out));
+        assert_eq!(out, [0.2, 0.3, 0.4, 0.9, 0.9, 0.9, 0.9, 0.9, 0.9]);
+        assert!(!m.censor(&[0.1, 0.2, 0.3], &mut out) && out.is_empty());
+        assert!(!NoiseModel::default().censor(&slice, &mut out));
+    }
+
+    #[test]
+    fn shot_noise_is_recovered_from_smooth_images() {
+        // A smooth ramp with shot noise of 4,000 electrons at full scale, float.
+        let (w, h) = (256, 64);
+        let img: Vec<f32> = (0..w * h)
+            .flat_map(|p| {
+                let v = 0.02 + 0.9 * (p % w) as f32 / w as f32;
+                [v; 3]
+            })
+            .collect();
+        let d = Degradation {
+            noise: Noise::Shot { photons: 4000.0 },
+            seed: 5,
+            ..Degradation::default()
+        };
+        let images: Vec<Vec<f32>> = (0..8)
+            .map(|i| {
+                let mut v = img.clone();
+                d.apply(&mut v, i);
+                v
+            })
+            .collect();
+        let m = NoiseModel::default().estimate(images.iter().map(|v| &v[..]), w, None);
+        assert!(
+            (m.shot * 4000.0 - 1.0).abs() < 0.15,
+            "shot {}",
+            m.shot * 4000.0
+        );
+        assert!(m.read < 2e-6, "read {}", m.read);
+    }
+}
