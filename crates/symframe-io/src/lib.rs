@@ -56,7 +56,9 @@ pub use output::{
     tangent_map_rgb8, write_exr_map, write_normal_png16, write_npy_f32, write_npy_u8,
     write_png_rgb8, NormalPng, SOURCE_PALETTE,
 };
-pub use stack::{load_stack, load_stack_with_warnings, read_mask, read_mask_any_size};
+pub use stack::{
+    capture_noise, load_stack, load_stack_with_warnings, read_mask, read_mask_any_size,
+};
 pub use synth_out::{check_synth_target, write_lp_dataset, ImageFormat, OUTPUT_LOCK_FILE};
 pub use tile_cache::{
     cache_holds_work, dataset_fingerprints, CacheFormat, CacheInfo, CacheOptions, Fingerprints,

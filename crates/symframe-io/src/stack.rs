@@ -362,6 +362,67 @@ pub(crate) fn decode_stack_image(
     Ok((w, h, rgb))
 }
 
+/// The images [`capture_noise`] reads: at most this many, spread over the stack.
+const NOISE_IMAGES: usize = 4;
+
+/// The noise model of a dataset's capture (docs/method.md, "Noise model"): the quantisation and
+/// clip level its first image's sample type implies (an integer file's white level is where
+/// `opts.saturation` puts it, over the brightest light's intensity; float files clip nothing),
+/// shot and read noise estimated from a few of its images spread over the stack.
+pub fn capture_noise(ds: &Dataset, opts: &DecodeOptions) -> Result<symframe::NoiseModel> {
+    use symframe::Quantisation;
+    let n = ds.images.len();
+    let picks: Vec<usize> = {
+        let mut v: Vec<usize> = (0..NOISE_IMAGES.min(n))
+            .map(|k| k * (n - 1) / (NOISE_IMAGES - 1).max(1))
+            .collect();
+        v.dedup();
+        v
+    };
+    let mut model = symframe::NoiseModel::default();
+    let mut images = Vec::with_capacity(picks.len());
+    let mut width = 0;
+    for (k, &i) in picks.iter().enumerate() {
+        let img = crate::read_image(&ds.images[i], opts)?;
+        if k == 0 {
+            let (q, max) = match img.kind {
+                SampleKind::Srgb8 => (Quantisation::Srgb(8), 255.0),
+                SampleKind::Linear8 => (Quantisation::Linear(8), 255.0),
+                SampleKind::U16 => (Quantisation::Linear(16), 65535.0),
+                SampleKind::Srgb16 => (Quantisation::Srgb(16), 65535.0),
+                SampleKind::Float => (Quantisation::Float, 0.0),
+            };
+            model.quantisation = q;
+            width = img.width;
+            if max > 0.0 && opts.saturation <= 1.0 {
+                // The smallest raw value the decoder counts as saturated, made linear.
+                let raw = ((opts.saturation * max).ceil() / max).min(1.0);
+                let linear = match q {
+                    Quantisation::Srgb(_) => crate::codecs::srgb_to_linear(raw),
+                    _ => raw,
+                };
+                let brightest = ds.intensities.as_ref().map_or(1.0, |int| {
+                    int.iter().flatten().fold(0.0f32, |a, &b| a.max(b))
+                });
+                model.clip_level = (brightest > 0.0).then(|| linear / brightest);
+            }
+        }
+        if img.width != width {
+            break; // the stack's loader names the image of another size
+        }
+        let mut rgb = img.into_rgb();
+        if let Some(int) = &ds.intensities {
+            for px in rgb.chunks_exact_mut(3) {
+                for c in 0..3 {
+                    px[c] /= int[i][c];
+                }
+            }
+        }
+        images.push(rgb);
+    }
+    Ok(model.estimate(images.iter().map(|v| &v[..]), width, None))
+}
+
 /// Reads a mask image: a pixel is inside where any colour channel is non-zero and its alpha
 /// (if the image has alpha) is non-zero too (any format [`crate::read_image`] reads; raw
 /// samples, no sRGB decoding or saturation test). The mask must be `width x height` and have

@@ -643,7 +643,14 @@ fn run(
         &|n| ESTIMATE_FILES.contains(&n) || n == MANIFEST,
         &|_| false,
     )?;
-    let plan = Plan::new(&config.method, &ds)?;
+    let mut plan = Plan::new(&config.method, &ds)?;
+    if let Plan::Symmetry(_, params) = &mut plan {
+        // The capture's noise model, unless the caller gave one: its clip level censors the
+        // clipped samples (docs/method.md, "Noise model"); report.json records it.
+        if params.noise == symframe::NoiseModel::default() {
+            params.noise = symframe_io::capture_noise(&ds, &config.decode)?;
+        }
+    }
     let rig_s = t0.elapsed().as_secs_f64();
 
     let t_load = Instant::now();

@@ -108,9 +108,10 @@ impl NoiseModel {
     /// Estimates shot and read noise from images (`width x height`, RGB, linear) by the spread
     /// of horizontal second differences `v(x) - (v(x-1) + v(x+1)) / 2` between pixels inside
     /// `mask`, against their level: per level bin a robust variance (the median absolute
-    /// deviation's), less the quantisation's, fitted by `shot * v + read` over the bins (the
-    /// least squares fit of the lower envelope: a bin's spread only overstates the noise where
-    /// the signal curves). Keeps `quantisation` and `clip_level` as given.
+    /// deviation's), less the
+    /// quantisation's, fitted by `shot * v + read` over the bins by least squares. On small
+    /// or strongly curved images (a highlight a few pixels wide) it still overstates the
+    /// noise. Keeps `quantisation` and `clip_level` as given.
     pub fn estimate<'a>(
         mut self,
         images: impl Iterator<Item = &'a [f32]>,
