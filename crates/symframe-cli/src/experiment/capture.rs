@@ -491,9 +491,13 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
     let clean: Vec<Vec<String>> = rows
         .iter()
         .filter(|r| r.sweep == "clean")
-        .map(|r| line(r, r.rig.to_string()))
+        .map(|r| {
+            let mut v = line(r, r.rig.to_string());
+            v.push(sources(&r.cells[0]));
+            v
+        })
         .collect();
-    let t = md_table(&header("rig"), &clean);
+    let t = md_table(&h, &clean);
     println!("Clean float renders:\n{t}");
     md += &format!("### Clean float renders (the same materials)\n\n{t}\n");
     for (sweep, title) in [

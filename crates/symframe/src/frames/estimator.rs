@@ -876,7 +876,12 @@ impl<'a> Estimator<'a> {
 
         // The symmetry anisotropy of an isotropic lobe sampled by few lights is interpolation
         // noise: a tangent also needs an elongated highlight (docs/method.md, "Anisotropy").
-        let elongated = moments.is_some_and(|m| m.has_tangent(MIN_ELONGATION));
+        // Under a sharp coat (a lobe read through one or two lights) the highlight's moments
+        // are the coat's, round; the lobe fitted to the samples is the broad base's (the coat
+        // is too narrow to pull it), and its elongation, where the rig resolves it, is the
+        // base's.
+        let elongated = moments.is_some_and(|m| m.has_tangent(MIN_ELONGATION))
+            || (sharp && fitted.is_some_and(|f| self.lobe_has_tangent(&f)));
         let tangent =
             if self.params.tangents && anisotropy >= self.params.min_anisotropy as f64 && elongated
             {
@@ -962,14 +967,7 @@ impl<'a> Estimator<'a> {
         evals: u32,
     ) -> PixelEstimate {
         let anisotropy = f.elongation();
-        // `--min-anisotropy` scales the threshold: its default asks for widths in a ratio of 2.
-        let threshold =
-            LOBE_MIN_ELONGATION * self.params.min_anisotropy as f64 / DEFAULT_MIN_ANISOTROPY as f64;
-        // The rig tells a lobe's shape only where its long axis spans several lights: a lobe
-        // narrower than that reads as elongated or round by where the lights happen to be.
-        let resolved = f.full_width().atan() >= TANGENT_MIN_SPACINGS * self.rig.halfway_spacing();
-        let tangent =
-            (self.params.tangents && anisotropy >= threshold && resolved).then_some(f.tangent);
+        let tangent = (self.params.tangents && self.lobe_has_tangent(f)).then_some(f.tangent);
         let confidence = self.confidence(slice, f.normal, term_n, f.residual);
         let status = self.status_of(confidence);
         let keep = status == PixelStatus::Estimated;
@@ -983,6 +981,17 @@ impl<'a> Estimator<'a> {
             residual: [sd_n, f.residual, 0.0],
             evals,
         }
+    }
+
+    /// Whether a fitted lobe is elongated enough for a tangent, and wide enough for the rig to
+    /// tell: `--min-anisotropy` scales the elongation threshold (its default asks for widths in
+    /// a ratio of 2); the rig tells a lobe's shape only where its long axis spans several
+    /// lights (narrower, it reads as elongated or round by where the lights happen to be).
+    fn lobe_has_tangent(&self, f: &LobeFit) -> bool {
+        let threshold =
+            LOBE_MIN_ELONGATION * self.params.min_anisotropy as f64 / DEFAULT_MIN_ANISOTROPY as f64;
+        let resolved = f.full_width().atan() >= TANGENT_MIN_SPACINGS * self.rig.halfway_spacing();
+        f.elongation() >= threshold && resolved
     }
 
     /// A pixel's status for its `confidence`: culled under the user's threshold.
