@@ -259,6 +259,31 @@ mod tests {
     }
 
     #[test]
+    fn capture_clipped_8_bit_brushed_metal_keeps_its_tangents_and_beats_the_baselines() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = capture::run(&quick(dir.path())).unwrap();
+        let row = |m: &str, sweep: &str, rig: &str| {
+            s.figures
+                .iter()
+                .find(|r| (r.material, r.sweep, r.rig) == (m, sweep, rig))
+                .unwrap()
+        };
+        let brushed = row("brushed aluminium", "reference", "sparse");
+        let ours = &brushed.cells[0];
+        assert!(
+            ours.normal_mean < 1.0 && ours.tangent_share > 0.75,
+            "{ours:?}"
+        );
+        for baseline in &brushed.cells[1..] {
+            assert!(ours.normal_mean < baseline.normal_mean, "{brushed:?}");
+        }
+        // No tangent on the isotropic plastic.
+        let plastic = row("glossy plastic", "reference", "dense");
+        assert!(plastic.cells[0].tangent_share < 0.02, "{plastic:?}");
+        assert!(s.markdown.contains("Does confidence mean something?"));
+    }
+
+    #[test]
     fn fig3_ward_is_within_a_degree_at_the_papers_operating_point() {
         let dir = tempfile::tempdir().unwrap();
         let s = fig3::run(&quick(dir.path())).unwrap();

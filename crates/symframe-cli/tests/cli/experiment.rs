@@ -15,14 +15,33 @@ fn all_quick_writes_the_report_plots_and_figures() {
         "Figure 4",
         "Figure 10",
         "Noise",
+        "Real-capture conditions",
         "validation/fig3_ward_paper_normal.png",
         "cores",
     ] {
         assert!(md.contains(s), "report lacks '{s}'");
     }
-    for name in ["fig3", "fig4", "fig10", "noise", "relight"] {
+    for name in [
+        "fig3",
+        "fig4",
+        "fig10",
+        "noise",
+        "relight",
+        "materials",
+        "capture",
+    ] {
         let json = std::fs::read_to_string(out_dir.join(format!("{name}.json"))).unwrap();
         let figures: serde_json::Value = serde_json::from_str(&json).unwrap();
-        assert!(!figures.is_null(), "{name}");
+        let non_empty = figures
+            .as_array()
+            .map_or(figures.is_object(), |a| !a.is_empty());
+        assert!(non_empty, "{name}: {figures}");
+    }
+    // The capture sweep's rows carry the estimator's and the baselines' figures.
+    let json = std::fs::read_to_string(out_dir.join("capture.json")).unwrap();
+    let rows: serde_json::Value = serde_json::from_str(&json).unwrap();
+    for r in rows.as_array().unwrap() {
+        assert_eq!(r["cells"].as_array().unwrap().len(), 3, "{r}");
+        assert!(r["cells"][0]["normal_mean"].as_f64().is_some(), "{r}");
     }
 }

@@ -3,6 +3,7 @@
 
 mod accuracy;
 mod baselines;
+mod capture;
 mod fit;
 mod materials;
 mod robustness;

@@ -1,21 +1,31 @@
-//! The estimator on arbitrary samples (NaN, infinities, negatives, huge and tiny values): never
-//! a panic, and a normal is a unit vector facing the camera hemisphere or absent.
+//! The estimator on arbitrary samples (NaN, infinities, negatives, huge and tiny values), with
+//! and without a clip level: never a panic, and a normal is a unit vector facing the camera hemisphere or absent.
 
 use proptest::prelude::*;
 use symframe::frames::rig::uniform_cone_lights;
-use symframe::{Estimator, EstimatorParams, PixelScratch, Rig, RigOptions};
+use symframe::{Estimator, EstimatorParams, NoiseModel, PixelScratch, Rig, RigOptions};
 
 fn check(n_lights: usize, slice: &[f32]) {
     let rig = Rig::new(&uniform_cone_lights(n_lights, 65.0), RigOptions::default()).unwrap();
-    let estimator = Estimator::new(&rig, EstimatorParams::default());
-    let mut scratch = PixelScratch::new(&rig);
-    let slice = &slice[..rig.n_used() * 3];
-    let e = estimator.estimate_pixel_with(slice, &mut scratch);
-    if let Some(n) = e.normal {
-        assert!((n.length() - 1.0).abs() < 1e-6, "{n:?}");
-    }
-    if let Some(t) = e.tangent {
-        assert!((t.length() - 1.0).abs() < 1e-6, "{t:?}");
+    // Without and with a clip level (censored samples read at it).
+    let clipped = EstimatorParams {
+        noise: NoiseModel {
+            clip_level: Some(0.9),
+            ..NoiseModel::default()
+        },
+        ..EstimatorParams::default()
+    };
+    for params in [EstimatorParams::default(), clipped] {
+        let estimator = Estimator::new(&rig, params);
+        let mut scratch = PixelScratch::new(&rig);
+        let slice = &slice[..rig.n_used() * 3];
+        let e = estimator.estimate_pixel_with(slice, &mut scratch);
+        if let Some(n) = e.normal {
+            assert!((n.length() - 1.0).abs() < 1e-6, "{n:?}");
+        }
+        if let Some(t) = e.tangent {
+            assert!((t.length() - 1.0).abs() < 1e-6, "{t:?}");
+        }
     }
 }
 
