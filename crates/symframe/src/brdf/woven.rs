@@ -66,11 +66,16 @@ impl Brdf for Woven {
     }
 
     fn tangent_axis(&self) -> TangentAxis {
-        let wide_x = self.along > self.across;
-        match (self.weft_weight < 1.0, self.weft_weight > 1.0, wide_x) {
-            _ if self.along == self.across => TangentAxis::None,
-            (true, _, true) | (_, true, false) => TangentAxis::X,
-            (true, _, false) | (_, true, true) => TangentAxis::Y,
+        // The stronger lobe's wide axis: the warp's unless the weft outweighs it.
+        let warp = TangentAxis::of_roughness(self.along, self.across);
+        let swapped = match warp {
+            TangentAxis::X => TangentAxis::Y,
+            TangentAxis::Y => TangentAxis::X,
+            TangentAxis::None => TangentAxis::None,
+        };
+        match self.weft_weight.partial_cmp(&1.0) {
+            Some(std::cmp::Ordering::Less) => warp,
+            Some(std::cmp::Ordering::Greater) => swapped,
             _ => TangentAxis::None,
         }
     }
