@@ -885,8 +885,25 @@ impl<'a> Estimator<'a> {
         let tangent =
             if self.params.tangents && anisotropy >= self.params.min_anisotropy as f64 && elongated
             {
-                if highlight_wider_along(objective, n, n.cross(t), t) {
-                    t = n.cross(t);
+                // Which of the two symmetry axes is the tangent (the wider highlight's): the
+                // fitted lobe's or the highlight's wide axis where they are elongated (they
+                // read every sample of the highlight, its clipped plateau included), else the
+                // slice probed along both axes.
+                let wide = fitted
+                    .filter(|f| self.lobe_has_tangent(f))
+                    .map(|f| f.tangent)
+                    .or_else(|| {
+                        moments
+                            .filter(|m| m.has_tangent(MIN_ELONGATION))
+                            .map(|m| m.tangent)
+                    });
+                let b = n.cross(t);
+                let swap = match wide {
+                    Some(w) => w.dot(b).abs() > w.dot(t).abs(),
+                    None => highlight_wider_along(objective, n, b, t),
+                };
+                if swap {
+                    t = b;
                 }
                 Some(t)
             } else {
