@@ -882,33 +882,45 @@ impl<'a> Estimator<'a> {
         // base's.
         let elongated = moments.is_some_and(|m| m.has_tangent(MIN_ELONGATION))
             || (sharp && fitted.is_some_and(|f| self.lobe_has_tangent(&f)));
-        let tangent =
-            if self.params.tangents && anisotropy >= self.params.min_anisotropy as f64 && elongated
-            {
-                // Which of the two symmetry axes is the tangent (the wider highlight's): the
-                // fitted lobe's or the highlight's wide axis where they are elongated (they
-                // read every sample of the highlight, its clipped plateau included), else the
-                // slice probed along both axes.
-                let wide = fitted
-                    .filter(|f| self.lobe_has_tangent(f))
-                    .map(|f| f.tangent)
-                    .or_else(|| {
-                        moments
-                            .filter(|m| m.has_tangent(MIN_ELONGATION))
-                            .map(|m| m.tangent)
-                    });
-                let b = n.cross(t);
-                let swap = match wide {
-                    Some(w) => w.dot(b).abs() > w.dot(t).abs(),
-                    None => highlight_wider_along(objective, n, b, t),
-                };
-                if swap {
-                    t = b;
-                }
-                Some(t)
-            } else {
-                None
+        // Where noise or light errors blur the slice, its anisotropy falls below the threshold
+        // on materials that are anisotropic, and a highlight read through three lights has no
+        // moment to show its elongation by; a fitted lobe that explains the samples nearly as
+        // well as one of its family can, is elongated, and has its wide axis along one of the
+        // two symmetry axes is independent evidence of the same frame (an isotropic slice
+        // gives a round lobe, and no axis to agree on).
+        let agrees = fitted.is_some_and(|f| {
+            let b = n.cross(t);
+            f.residual < LOBE_PLAUSIBLE
+                && self.lobe_has_tangent(&f)
+                && f.tangent.dot(t).abs().max(f.tangent.dot(b).abs()) >= AXES_AGREE_COS
+        });
+        let tangent = if self.params.tangents
+            && ((elongated && anisotropy >= self.params.min_anisotropy as f64) || agrees)
+        {
+            // Which of the two symmetry axes is the tangent (the wider highlight's): the
+            // fitted lobe's or the highlight's wide axis where they are elongated (they
+            // read every sample of the highlight, its clipped plateau included), else the
+            // slice probed along both axes.
+            let wide = fitted
+                .filter(|f| self.lobe_has_tangent(f))
+                .map(|f| f.tangent)
+                .or_else(|| {
+                    moments
+                        .filter(|m| m.has_tangent(MIN_ELONGATION))
+                        .map(|m| m.tangent)
+                });
+            let b = n.cross(t);
+            let swap = match wide {
+                Some(w) => w.dot(b).abs() > w.dot(t).abs(),
+                None => highlight_wider_along(objective, n, b, t),
             };
+            if swap {
+                t = b;
+            }
+            Some(t)
+        } else {
+            None
+        };
 
         let confidence = self.confidence(slice, n, &term_n, sd_n + sd_nt + sd_nb);
         // A search that doubts its own answer (cast shadows that break the slice's symmetry, a
@@ -1073,6 +1085,10 @@ const SEARCH_DOUBTFUL: f64 = 0.1;
 /// where the search doubts its own (measured: at 1% the lobes leaving 0.5-1% on rough metal
 /// bumps under 200 lights were 9.4 degrees off where the search was 6.1).
 const LOBE_PLAUSIBLE: f64 = 0.005;
+
+/// A fitted lobe's wide axis agrees with a symmetry axis when it is within 15 degrees of it
+/// (this is its cosine).
+const AXES_AGREE_COS: f64 = 0.965_925_826_289_068_3;
 
 /// Where a diffuse term explains a pixel too, the lobe is its answer only if it leaves less
 /// than this share of what the diffuse term leaves unexplained.
