@@ -276,7 +276,8 @@ fn cell(scene: &Scene, maps: &EstimateMaps, gt_t: &[f32], anisotropic: bool) -> 
         let (Some(n), Some(g)) = (vec_at(&maps.normals, p), vec_at(&gt, p)) else {
             continue;
         };
-        if !scene.mask[p] || g.z < 0.5 || !(maps.confidence[p] >= 0.9) {
+        let sure = maps.confidence[p] >= 0.9; // false for NaN
+        if !scene.mask[p] || g.z < 0.5 || !sure {
             continue;
         }
         confident += 1;
