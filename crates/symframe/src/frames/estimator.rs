@@ -12,7 +12,7 @@ use crate::baselines::{
     grey_values, highlight_peak, woodham_robust_greys, BaselineParams, BaselinePixel,
 };
 use crate::error::{Error, Result};
-use crate::frames::highlight::{highlight_moments_of_greys, HighlightMoments};
+use crate::frames::highlight::{highlight_moments_of_greys, HighlightMoments, HIGHLIGHT_LEVEL};
 use crate::frames::lobe::{fit_lobe, LobeFit, LobeScratch, LobeStart};
 use crate::frames::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::frames::optim::{nelder_mead, NelderMeadOptions};
@@ -423,6 +423,7 @@ impl<'a> Estimator<'a> {
             lambert,
             censored,
             lobe_input,
+            base_input,
         } = scratch;
         // Clipped samples read through the censoring map: the clipped top of a highlight stays
         // in the slice, at the clip level, symmetric wherever the unclipped slice is.
@@ -454,32 +455,54 @@ impl<'a> Estimator<'a> {
         // A pixel its Lambertian fit explains to the noise floor has no lobe to find.
         let pure_diffuse = fit.confidence as f64 >= DIFFUSE_CENTRE_FIT
             && share.is_some_and(|s| s < PURE_DIFFUSE_SHARE);
-        let fitted = if auto && !pure_diffuse {
-            // The lobe's model has no clip: a censored sample tells it nothing it can fit.
-            let lobe_slice = match self.params.noise.clip_level.filter(|_| clipped) {
-                Some(c) => {
-                    lobe_input.clear();
-                    lobe_input.extend_from_slice(slice);
-                    for s in lobe_input.chunks_exact_mut(3).filter(|s| s[0] >= c) {
-                        s.fill(f32::NAN);
-                    }
-                    &lobe_input[..]
+        // The lobe's model has no clip: a censored sample tells it nothing it can fit.
+        let lobe_slice = match self.params.noise.clip_level.filter(|_| clipped) {
+            Some(c) => {
+                lobe_input.clear();
+                lobe_input.extend_from_slice(slice);
+                for s in lobe_input.chunks_exact_mut(3).filter(|s| s[0] >= c) {
+                    s.fill(f32::NAN);
                 }
-                None => slice,
-            };
+                &lobe_input[..]
+            }
+            None => slice,
+        };
+        let fitted = if auto && !pure_diffuse {
             moments.and_then(|m| self.lobe_fit(lobe_slice, m.normal, m.tangent, m.radius, lobe))
         } else {
             None
         };
+        // Under a sharp coat one lobe cannot explain coat and base together: the base, fitted
+        // without the coat's samples (those at or above the highlight level of the brightest),
+        // is the evidence of the base's elongation and axes.
+        let base = match (fitted, moments) {
+            (Some(f), Some(m)) if m.count <= SHARP_LOBE_SAMPLES && f.residual >= LOBE_PLAUSIBLE => {
+                base_input.clear();
+                base_input.extend_from_slice(lobe_slice);
+                let max = greys
+                    .iter()
+                    .copied()
+                    .filter(|v| v.is_finite())
+                    .fold(0.0, f64::max);
+                for (s, g) in base_input.chunks_exact_mut(3).zip(greys.iter()) {
+                    if *g >= HIGHLIGHT_LEVEL * max {
+                        s.fill(f32::NAN);
+                    }
+                }
+                self.lobe_fit(base_input, f.normal, f.tangent, f.alpha[0].atan(), lobe)
+            }
+            _ => None,
+        };
+        let lobes = Lobes { fitted, base };
         match self.params.interpolation {
             Interpolation::Exact => {
                 let objective = ExactObjective::new(self.rig, slice);
-                let e = self.solve(slice, &objective, &fit, share, moments, fitted);
+                let e = self.solve(slice, &objective, &fit, share, moments, lobes);
                 self.or_fallback(e, &fit, share, moments, fitted.as_ref())
             }
             Interpolation::Fast => {
                 let objective = fast.prepare(self.rig, slice);
-                let e = self.solve(slice, &objective, &fit, share, moments, fitted);
+                let e = self.solve(slice, &objective, &fit, share, moments, lobes);
                 self.or_fallback(e, &fit, share, moments, fitted.as_ref())
             }
         }
@@ -615,8 +638,9 @@ impl<'a> Estimator<'a> {
         fit: &BaselinePixel,
         share: Option<f64>,
         moments: Option<HighlightMoments>,
-        fitted: Option<LobeFit>,
+        lobes: Lobes,
     ) -> PixelEstimate {
+        let Lobes { fitted, base } = lobes;
         let rig = self.rig;
         let lobe = fitted.filter(|f| f.residual < LOBE_EXPLAINS);
         // Start: the halfway vector of the brightest sample (docs/method.md, "The search"). The
@@ -881,17 +905,17 @@ impl<'a> Estimator<'a> {
         // is too narrow to pull it), and its elongation, where the rig resolves it, is the
         // base's.
         let elongated = moments.is_some_and(|m| m.has_tangent(MIN_ELONGATION))
-            || (sharp && fitted.is_some_and(|f| self.lobe_has_tangent(&f)));
+            || (sharp && base.or(fitted).is_some_and(|f| self.lobe_has_tangent(&f)));
         // Where noise or light errors blur the slice, its anisotropy falls below the threshold
         // on materials that are anisotropic, and a highlight read through three lights has no
         // moment to show its elongation by; a fitted lobe that explains the samples nearly as
         // well as one of its family can, is elongated, and has its wide axis along one of the
         // two symmetry axes is independent evidence of the same frame (an isotropic slice
         // gives a round lobe, and no axis to agree on).
-        let agrees = fitted.is_some_and(|f| {
+        let agrees = [fitted, base].iter().flatten().any(|f| {
             let b = n.cross(t);
             f.residual < LOBE_PLAUSIBLE
-                && self.lobe_has_tangent(&f)
+                && self.lobe_has_tangent(f)
                 && f.tangent.dot(t).abs().max(f.tangent.dot(b).abs()) >= AXES_AGREE_COS
         });
         let tangent = if self.params.tangents
@@ -901,7 +925,8 @@ impl<'a> Estimator<'a> {
             // fitted lobe's or the highlight's wide axis where they are elongated (they
             // read every sample of the highlight, its clipped plateau included), else the
             // slice probed along both axes.
-            let wide = fitted
+            let wide = base
+                .or(fitted)
                 .filter(|f| self.lobe_has_tangent(f))
                 .map(|f| f.tangent)
                 .or_else(|| {
@@ -1085,6 +1110,14 @@ const SEARCH_DOUBTFUL: f64 = 0.1;
 /// where the search doubts its own (measured: at 1% the lobes leaving 0.5-1% on rough metal
 /// bumps under 200 lights were 9.4 degrees off where the search was 6.1).
 const LOBE_PLAUSIBLE: f64 = 0.005;
+
+/// The lobes fitted to a pixel: the one of all its samples, and under a sharp coat the base's,
+/// fitted without the coat's samples.
+#[derive(Debug, Clone, Copy)]
+struct Lobes {
+    fitted: Option<LobeFit>,
+    base: Option<LobeFit>,
+}
 
 /// A fitted lobe's wide axis agrees with a symmetry axis when it is within 15 degrees of it
 /// (this is its cosine).
@@ -1275,6 +1308,8 @@ pub struct PixelScratch {
     censored: Vec<f32>,
     /// The lobe fit's samples, the censored ones left out.
     lobe_input: Vec<f32>,
+    /// The base lobe's samples under a sharp coat, the coat's left out.
+    base_input: Vec<f32>,
 }
 
 impl PixelScratch {
@@ -1289,6 +1324,7 @@ impl PixelScratch {
             lambert: vec![0.0; 2 * rig.n_used()],
             censored: Vec::with_capacity(rig.n_used() * 3),
             lobe_input: Vec::with_capacity(rig.n_used() * 3),
+            base_input: Vec::with_capacity(rig.n_used() * 3),
         }
     }
 }
