@@ -305,6 +305,29 @@ fn check_file_length(path: &Path, len: u64, (w, h): (usize, usize)) -> Result<()
     Ok(())
 }
 
+/// The image size the header of the file `path` declares, read from its first
+/// [`HEADER_PREFIX_BYTES`]: `None` when that prefix does not hold a readable header and the
+/// decoder is left to report (a small file: it is read whole anyway; a TIFF, whose directory
+/// may sit at its end). A larger file of another format with no readable header there, or one
+/// longer than any encoding of its declared image needs, is refused unread.
+fn checked_header(path: &Path, opts: &DecodeOptions) -> Result<Option<(usize, usize)>> {
+    let len = crate::check_regular_file(path)?;
+    let f = std::fs::File::open(path).map_err(|e| Error::read(path, e))?;
+    let prefix = crate::read_at_most(f, path, HEADER_PREFIX_BYTES)?;
+    let tiff = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("tif") || e.eq_ignore_ascii_case("tiff"));
+    match declared_size(path, &prefix, opts) {
+        Ok(size) => {
+            check_file_length(path, len, size)?;
+            Ok(Some(size))
+        }
+        Err(e) if len > HEADER_PREFIX_BYTES && !tiff => Err(e),
+        Err(_) => Ok(None),
+    }
+}
+
 /// Decodes image `i` of `ds` as a stack stores it: interleaved RGB (grey replicated), divided
 /// by the light's intensity when the dataset has intensities. Returns width, height, samples.
 /// Given `first`, the stack's image size, the size the file's header declares is compared
@@ -318,17 +341,11 @@ pub(crate) fn decode_stack_image(
     first: Option<(usize, usize)>,
 ) -> Result<(usize, usize, Vec<f32>)> {
     let path = &ds.images[i];
-    let len = crate::check_regular_file(path)?;
-    if len > HEADER_PREFIX_BYTES {
+    if crate::check_regular_file(path)? > HEADER_PREFIX_BYTES {
         // A large file's header is read first: its declared size is compared with the stack's
         // and bounds the file's length before the whole file is read.
-        let f = std::fs::File::open(path).map_err(|e| Error::read(path, e))?;
-        let prefix = crate::read_at_most(f, path, HEADER_PREFIX_BYTES)?;
-        if let Ok(size) = declared_size(path, &prefix, opts) {
-            if let Some(first) = first {
-                check_size(ds, i, size, first)?;
-            }
-            check_file_length(path, len, size)?;
+        if let (Some(size), Some(first)) = (checked_header(path, opts)?, first) {
+            check_size(ds, i, size, first)?;
         }
     }
     let bytes = read_image_file(path)?;
@@ -380,10 +397,19 @@ pub fn capture_noise(ds: &Dataset, opts: &DecodeOptions) -> Result<symframe::Noi
         v
     };
     let mut model = symframe::NoiseModel::default();
-    let mut images = Vec::with_capacity(picks.len());
-    let mut width = 0;
+    let mut samples: Option<symframe::noise::NoiseSamples> = None;
+    let (mut width, mut height) = (0, 0);
+    // One image in memory at a time.
     for (k, &i) in picks.iter().enumerate() {
-        let img = crate::read_image(&ds.images[i], opts)?;
+        // From the header first, as the stack's loader reads them: a file padded beyond what
+        // its image needs is refused, and an image of another size than the first (a forged
+        // header among them) is never decoded here (the loader names it).
+        match checked_header(&ds.images[i], opts)? {
+            Some(size) if k > 0 && size != (width, height) => break,
+            None if k > 0 => break,
+            _ => {}
+        }
+        let mut img = crate::read_image(&ds.images[i], opts)?;
         if k == 0 {
             let (q, max) = match img.kind {
                 SampleKind::Srgb8 => (Quantisation::Srgb(8), 255.0),
@@ -393,7 +419,7 @@ pub fn capture_noise(ds: &Dataset, opts: &DecodeOptions) -> Result<symframe::Noi
                 SampleKind::Float => (Quantisation::Float, 0.0),
             };
             model.quantisation = q;
-            width = img.width;
+            (width, height) = (img.width, img.height);
             if max > 0.0 && opts.saturation <= 1.0 {
                 // The smallest raw value the decoder counts as saturated, made linear.
                 let raw = ((opts.saturation * max).ceil() / max).min(1.0);
@@ -407,20 +433,25 @@ pub fn capture_noise(ds: &Dataset, opts: &DecodeOptions) -> Result<symframe::Noi
                 model.clip_level = (brightest > 0.0).then(|| linear / brightest);
             }
         }
-        if img.width != width {
+        if (img.width, img.height) != (width, height) {
             break; // the stack's loader names the image of another size
         }
-        let mut rgb = img.into_rgb();
+        let ch = img.channels;
         if let Some(int) = &ds.intensities {
-            for px in rgb.chunks_exact_mut(3) {
-                for c in 0..3 {
-                    px[c] /= int[i][c];
+            for px in img.data.chunks_exact_mut(ch) {
+                for (c, v) in px.iter_mut().enumerate() {
+                    *v /= int[i][c.min(2)];
                 }
             }
         }
-        images.push(rgb);
+        samples
+            .get_or_insert_with(|| symframe::noise::NoiseSamples::new(&model))
+            .add(&img.data, ch, width, None);
     }
-    Ok(model.estimate(images.iter().map(|v| &v[..]), width, None))
+    Ok(match samples.as_mut() {
+        Some(s) => model.fit(s),
+        None => model,
+    })
 }
 
 /// Reads a mask image: a pixel is inside where any colour channel is non-zero and its alpha

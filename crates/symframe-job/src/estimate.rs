@@ -680,6 +680,17 @@ fn run(
     .with_context(blame)?;
     let job = job_fingerprint(&cache, &plan, mask.as_deref())?;
     let tiles_dir = config.output.join(TILES_DIR);
+    if let Some(s) = config.shard.filter(|s| s.n > grid.n_tiles()) {
+        anyhow::bail!(
+            "--tiles {}/{}: the image has {} tiles of {} px, so at most {} shards (or a smaller \
+             --tile-size)",
+            s.k,
+            s.n,
+            grid.n_tiles(),
+            grid.tile,
+            grid.n_tiles()
+        );
+    }
     let my_tiles = match config.shard {
         Some(s) => shard_tiles(grid.n_tiles(), s.k, s.n),
         None => (0..grid.n_tiles()).collect(),

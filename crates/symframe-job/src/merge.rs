@@ -100,6 +100,17 @@ impl ShardManifest {
         if let Some(t) = self.tiles.iter().find(|&&t| t >= n) {
             return Err(bad(format!("tile {t} does not exist")));
         }
+        // A shard holds the tiles t with t % of == shard - 1, and no more shards than tiles
+        // are made: a forged count or a tile of another shard is refused.
+        if self.of > n {
+            return Err(bad(format!("{} shards of an image of {n} tiles", self.of)));
+        }
+        if let Some(t) = self.tiles.iter().find(|&&t| t % self.of != self.shard - 1) {
+            return Err(bad(format!(
+                "tile {t} is not one of shard {} of {}",
+                self.shard, self.of
+            )));
+        }
         Ok(())
     }
 
@@ -428,6 +439,10 @@ mod tests {
         assert!(forged("tiles", serde_json::json!([0, 4])).is_err());
         assert!(forged("tiles", serde_json::json!([0, 1, 2, 3, 0])).is_err());
         assert!(forged("version", 2.into()).is_err());
+        // More shards than tiles, and a tile of another shard.
+        assert!(forged("of", (u64::MAX).into()).is_err());
+        assert!(forged("of", 5.into()).is_err());
+        assert!(forged("tiles", serde_json::json!([0, 1])).is_err());
     }
 
     #[test]

@@ -101,5 +101,5 @@ pub use frames::estimator::{
 pub use frames::rig::{Rig, RigOptions};
 pub use maps::{EstimateMaps, PixelCounts, PixelRecord, PixelSource, PixelStatus};
 pub use method::{run_stack, PixelMethod};
-pub use noise::{NoiseModel, Quantisation};
+pub use noise::{NoiseModel, NoiseSamples, Quantisation};
 pub use stack::Stack;

@@ -105,60 +105,30 @@ impl NoiseModel {
         true
     }
 
-    /// Estimates shot and read noise from images (`width x height`, RGB, linear) by the spread
-    /// of horizontal second differences `v(x) - (v(x-1) + v(x+1)) / 2` between pixels inside
-    /// `mask`, against their level: per level bin a robust variance (the median absolute
-    /// deviation's), less the
-    /// quantisation's, fitted by `shot * v + read` over the bins by least squares. On small
-    /// or strongly curved images (a highlight a few pixels wide) it still overstates the
-    /// noise. Keeps `quantisation` and `clip_level` as given.
+    /// Estimates shot and read noise from images (`width x height`, RGB, linear): the images'
+    /// [`NoiseSamples`], fitted ([`NoiseModel::fit`]). Keeps `quantisation` and `clip_level`.
     pub fn estimate<'a>(
-        mut self,
+        self,
         images: impl Iterator<Item = &'a [f32]>,
         width: usize,
         mask: Option<&[bool]>,
     ) -> Self {
-        const BINS: usize = 24;
-        // Log-spaced levels from 1e-4 to the clip level (or 1).
-        let top = self.clip_level.map_or(1.0, |c| c as f64);
-        let bin_of = |v: f64| -> Option<usize> {
-            if !(v > 1e-4 && v < 0.95 * top) {
-                return None;
-            }
-            let t = (v / 1e-4).ln() / (top / 1e-4).ln();
-            Some(((t * BINS as f64) as usize).min(BINS - 1))
-        };
-        let mut diffs: Vec<Vec<f32>> = vec![Vec::new(); BINS];
-        let mut levels: Vec<Vec<f32>> = vec![Vec::new(); BINS];
-        const PER_BIN: usize = 20_000;
+        let mut samples = NoiseSamples::new(&self);
         for img in images {
-            let rows = img.len() / 3 / width.max(1);
-            for y in 0..rows {
-                for x in 1..width.saturating_sub(1) {
-                    let p = y * width + x;
-                    if let Some(m) = mask {
-                        if !(m[p - 1] && m[p] && m[p + 1]) {
-                            continue;
-                        }
-                    }
-                    for c in 0..3 {
-                        let (a, b, d) = (img[3 * p - 3 + c], img[3 * p + c], img[3 * p + 3 + c]);
-                        if !(a.is_finite() && b.is_finite() && d.is_finite()) {
-                            continue;
-                        }
-                        let Some(k) = bin_of(b as f64) else { continue };
-                        if diffs[k].len() < PER_BIN {
-                            diffs[k].push(b - 0.5 * (a + d));
-                            levels[k].push(b);
-                        }
-                    }
-                }
-            }
+            samples.add(img, 3, width, mask);
         }
+        self.fit(&mut samples)
+    }
+
+    /// Shot and read noise from `samples`: per level bin a robust variance (the median
+    /// absolute deviation's) less the quantisation's, fitted by `shot * v + read` over the
+    /// bins by least squares. On small or strongly curved images (a highlight a few pixels
+    /// wide) the signal's curvature inflates it. Keeps `quantisation` and `clip_level`.
+    pub fn fit(mut self, samples: &mut NoiseSamples) -> Self {
         // Per bin: (level, noise variance) from the MAD of the second differences; a second
         // difference of independent noise has 1.5 times the samples' variance.
         let mut points: Vec<(f64, f64)> = Vec::new();
-        for (d, l) in diffs.iter_mut().zip(&mut levels) {
+        for (d, l) in samples.diffs.iter_mut().zip(&mut samples.levels) {
             if d.len() < 200 {
                 continue;
             }
@@ -183,6 +153,74 @@ impl NoiseModel {
             self.read = (my - shot * mx).max(0.0);
         }
         self
+    }
+}
+
+/// The second differences the noise estimate reads, gathered image by image (one image in
+/// memory at a time): per level bin (24, log-spaced from 1e-4 to the clip level) at most
+/// 20,000 differences `v(x) - (v(x-1) + v(x+1)) / 2` between horizontal neighbours, and their
+/// levels.
+#[derive(Debug, Clone)]
+pub struct NoiseSamples {
+    top: f64,
+    diffs: Vec<Vec<f32>>,
+    levels: Vec<Vec<f32>>,
+}
+
+impl NoiseSamples {
+    const BINS: usize = 24;
+    const PER_BIN: usize = 20_000;
+    /// Pixels of one image visited at most (rows are skipped evenly beyond).
+    const PIXELS_PER_IMAGE: usize = 4 << 20;
+
+    /// Empty bins for a capture of `model`'s clip level.
+    pub fn new(model: &NoiseModel) -> Self {
+        Self {
+            top: model.clip_level.map_or(1.0, |c| c as f64),
+            diffs: vec![Vec::new(); Self::BINS],
+            levels: vec![Vec::new(); Self::BINS],
+        }
+    }
+
+    /// Adds the differences of one image (`channels` interleaved, `width` wide, linear), over
+    /// the pixels inside `mask` (when given, `width x height`).
+    pub fn add(&mut self, img: &[f32], channels: usize, width: usize, mask: Option<&[bool]>) {
+        let (ch, w) = (channels.max(1), width.max(1));
+        let rows = img.len() / ch / w;
+        let step = (rows * w).div_ceil(Self::PIXELS_PER_IMAGE).max(1);
+        let top = self.top;
+        let bin_of = |v: f64| -> Option<usize> {
+            if !(v > 1e-4 && v < 0.95 * top) {
+                return None;
+            }
+            let t = (v / 1e-4).ln() / (top / 1e-4).ln();
+            Some(((t * Self::BINS as f64) as usize).min(Self::BINS - 1))
+        };
+        for y in (0..rows).step_by(step) {
+            for x in 1..w.saturating_sub(1) {
+                let p = y * w + x;
+                if let Some(m) = mask {
+                    if !(m[p - 1] && m[p] && m[p + 1]) {
+                        continue;
+                    }
+                }
+                for c in 0..ch {
+                    let (a, b, d) = (
+                        img[ch * (p - 1) + c],
+                        img[ch * p + c],
+                        img[ch * (p + 1) + c],
+                    );
+                    if !(a.is_finite() && b.is_finite() && d.is_finite()) {
+                        continue;
+                    }
+                    let Some(k) = bin_of(b as f64) else { continue };
+                    if self.diffs[k].len() < Self::PER_BIN {
+                        self.diffs[k].push(b - 0.5 * (a + d));
+                        self.levels[k].push(b);
+                    }
+                }
+            }
+        }
     }
 }
 

@@ -289,6 +289,16 @@ fn a_padded_image_file_is_refused_before_it_is_read_whole() {
     let (o, peak_kib) = crate::common::run_measuring_rss(&args);
     assert_one_line_error(&o, "b.png: 3221225472 bytes, more than any encoding");
     assert!(peak_kib < 600 << 10, "peak {peak_kib} KiB");
+    // A sparse 3 GB file of zeros named like an EXR has no header where one must be: refused
+    // from its first 16 MiB, never read whole.
+    fs::remove_file(d.join("b.png")).unwrap();
+    let f = fs::File::create(d.join("b.exr")).unwrap();
+    f.set_len(3 << 30).unwrap();
+    drop(f);
+    fs::write(&lp, "2\na.png 0.1 0.3 1\nb.exr -0.2 0.1 1\n").unwrap();
+    let (o, peak_kib) = crate::common::run_measuring_rss(&args);
+    assert_one_line_error(&o, "b.exr");
+    assert!(peak_kib < 600 << 10, "peak {peak_kib} KiB");
 }
 
 /// A `--mask`, `.lp` or `relight --lights` file that is `/dev/zero` grew until memory ran out.

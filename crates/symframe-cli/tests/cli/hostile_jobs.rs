@@ -369,3 +369,18 @@ fn quiet_silences_every_subcommand() {
         assert!(seen.contains(cmd), "{cmd} not run");
     }
 }
+
+/// A forged `shard.json` claiming 2^64 - 1 shards was merged without a word when its tiles
+/// covered the grid; `estimate --tiles K/N` with more shards than tiles made empty shards.
+#[test]
+fn shard_counts_beyond_the_tile_count_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = crate::common::ward_sphere(&tmp.path().join("data"), 16, 30);
+    let out = tmp.path().join("sh");
+    let o = crate::common::estimate(
+        &lp,
+        &out,
+        &["--method", "woodham", "--tiles", "1/9", "--tile-size", "8"],
+    );
+    crate::common::assert_one_line_error(&o, "--tiles 1/9: the image has 4 tiles of 8 px");
+}
