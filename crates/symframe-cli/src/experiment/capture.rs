@@ -298,28 +298,6 @@ fn cell(scene: &Scene, maps: &EstimateMaps, gt_t: &[f32], anisotropic: bool) -> 
     }
 }
 
-/// The clip point of a clean stack: the sample (brightest channel of a pixel under one light,
-/// inside the mask) exceeded by a share `clipped` of them; the brightest when 0.
-fn clip_point(scene: &Scene, stack: &symframe::Stack, clipped: f64) -> f32 {
-    let mut v: Vec<f32> = (0..scene.n_pixels())
-        .filter(|&p| scene.mask[p])
-        .flat_map(|p| {
-            stack
-                .pixel(p)
-                .chunks_exact(3)
-                .map(|s| s[0].max(s[1]).max(s[2]))
-                .collect::<Vec<_>>()
-        })
-        .filter(|x| x.is_finite())
-        .collect();
-    if v.is_empty() {
-        return 1.0;
-    }
-    let k = ((1.0 - clipped) * (v.len() - 1) as f64).round() as usize;
-    let (_, at, _) = v.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
-    *at
-}
-
 /// Renders, degrades and estimates every set; the rows in job order.
 pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
     let mats = materials(quick);
@@ -343,7 +321,7 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
             let (sweep, cond) = conds[c];
             let lights = rig_lights(rig_name, quick);
             let clean = scene.render_stack(mat.brdf.as_ref(), &lights);
-            let at = clip_point(&scene, &clean, cond.clipped);
+            let at = symframe::render::clip_point(&clean, &scene.mask, cond.clipped);
             drop(clean);
             let seed = 17 + 1000 * m as u64 + c as u64;
             let d = cond.degradation(at, seed);

@@ -21,7 +21,7 @@ pub mod shadow;
 mod shapes;
 mod tangent;
 
-pub use noise::{jitter_lights, Degradation, Noise, Rng};
+pub use noise::{clip_point, jitter_lights, Degradation, Noise, Rng};
 pub use shapes::{plane_frame, Bump, BumpParams};
 pub use tangent::{image_position, project_to_tangent_plane, TangentField, TangentFn};
 

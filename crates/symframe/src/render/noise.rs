@@ -268,6 +268,29 @@ pub fn jitter_lights(lights: &[glam::DVec3], error_deg: f64, seed: u64) -> Vec<g
         .collect()
 }
 
+/// The clip point of a clean `stack` for a share `clipped` of its samples to clip: the sample
+/// value (the brightest channel of a pixel under one light, pixels inside `mask`) that share
+/// exceeds; the brightest when 0, 1 when there is none. An exposure of its inverse clips them.
+pub fn clip_point(stack: &crate::Stack, mask: &[bool], clipped: f64) -> f32 {
+    let mut v: Vec<f32> = (0..stack.n_pixels())
+        .filter(|&p| mask[p])
+        .flat_map(|p| {
+            stack
+                .pixel(p)
+                .chunks_exact(3)
+                .map(|s| s[0].max(s[1]).max(s[2]))
+                .collect::<Vec<_>>()
+        })
+        .filter(|x| x.is_finite())
+        .collect();
+    if v.is_empty() {
+        return 1.0;
+    }
+    let k = ((1.0 - clipped.clamp(0.0, 1.0)) * (v.len() - 1) as f64).round() as usize;
+    let (_, at, _) = v.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
+    *at
+}
+
 /// A full degradation pipeline, applied in this order: multiply by `exposure`, add `noise`,
 /// clip to `[0, clip]` when set, quantise to `quantise_bits` when set (in the sRGB domain when
 /// `srgb`), then mark saturated pixels as the dataset reader does when `saturation` is set.

@@ -7,7 +7,7 @@ use glam::DVec3;
 use symframe::brdf::{Brdf, Ggx};
 use symframe::eval::evaluate;
 use symframe::frames::rig::uniform_cone_lights;
-use symframe::render::{Degradation, Noise, Scene, TangentField};
+use symframe::render::{clip_point, Degradation, Noise, Scene, TangentField};
 use symframe::{
     estimate_stack, EstimateMaps, EstimatorParams, NoiseModel, Quantisation, Rig, RigOptions,
 };
@@ -25,18 +25,7 @@ fn clipped_capture() -> (Scene, Vec<DVec3>, symframe::Stack) {
     let lights = uniform_cone_lights(400, 65.0);
     let brdf = Ggx::new([0.02; 3], [0.91, 0.92, 0.92], 0.3, 0.08);
     let clean = scene.render_stack(&brdf as &dyn Brdf, &lights);
-    let mut v: Vec<f32> = (0..scene.n_pixels())
-        .filter(|&p| scene.mask[p])
-        .flat_map(|p| {
-            clean
-                .pixel(p)
-                .chunks_exact(3)
-                .map(|s| s[0].max(s[1]).max(s[2]))
-                .collect::<Vec<_>>()
-        })
-        .collect();
-    v.sort_by(|a, b| a.total_cmp(b));
-    let at = v[(0.995 * (v.len() - 1) as f64) as usize];
+    let at = clip_point(&clean, &scene.mask, 0.005);
     let d = Degradation {
         exposure: 1.0 / at,
         noise: Noise::Shot { photons: 4000.0 },
