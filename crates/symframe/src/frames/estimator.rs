@@ -905,10 +905,7 @@ impl<'a> Estimator<'a> {
         // is too narrow to pull it), and its elongation, where the rig resolves it, is the
         // base's.
         let elongated = moments.is_some_and(|m| m.has_tangent(MIN_ELONGATION))
-            || (sharp
-                && base
-                    .or(fitted)
-                    .is_some_and(|f| f.residual < LOBE_PLAUSIBLE && self.lobe_has_tangent(&f)));
+            || (sharp && base.or(fitted).is_some_and(|f| self.lobe_has_tangent(&f)));
         // Where noise or light errors blur the slice, its anisotropy falls below the threshold
         // on materials that are anisotropic, and a highlight read through three lights has no
         // moment to show its elongation by; a fitted lobe that explains the samples nearly as
