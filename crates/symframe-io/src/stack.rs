@@ -101,6 +101,11 @@ impl Notes {
         Self(Mutex::new(vec![None; n]))
     }
 
+    /// The sample type of image `i`, once it is decoded.
+    fn kind(&self, i: usize) -> Option<SampleKind> {
+        self.0.lock().ok()?.get(i)?.as_ref().map(|n| n.kind)
+    }
+
     fn set(&self, i: usize, note: ImageNote) {
         if let Ok(mut v) = self.0.lock() {
             if let Some(slot) = v.get_mut(i) {
@@ -341,15 +346,19 @@ pub(crate) fn decode_stack_image(
     first: Option<(usize, usize)>,
 ) -> Result<(usize, usize, Vec<f32>)> {
     let path = &ds.images[i];
-    if crate::check_regular_file(path)? > HEADER_PREFIX_BYTES {
-        // A large file's header is read first: its declared size is compared with the stack's
-        // and bounds the file's length before the whole file is read.
-        if let (Some(size), Some(first)) = (checked_header(path, opts)?, first) {
-            check_size(ds, i, size, first)?;
-        }
+    // A large file's header is read first: its declared size is compared with the stack's and
+    // bounds the file's length before the whole file is read.
+    let large = crate::check_regular_file(path)? > HEADER_PREFIX_BYTES;
+    let declared = if large {
+        checked_header(path, opts)?
+    } else {
+        None
+    };
+    if let (Some(size), Some(first)) = (declared, first) {
+        check_size(ds, i, size, first)?;
     }
     let bytes = read_image_file(path)?;
-    if let Some(first) = first {
+    if let (None, Some(first)) = (declared, first) {
         // A header that cannot be read is left for the decoder to report.
         if let Ok(size) = declared_size(path, &bytes, opts) {
             check_size(ds, i, size, first)?;
@@ -398,20 +407,20 @@ pub fn capture_noise(ds: &Dataset, opts: &DecodeOptions) -> Result<symframe::Noi
     };
     let mut model = symframe::NoiseModel::default();
     let mut samples: Option<symframe::noise::NoiseSamples> = None;
-    let (mut width, mut height) = (0, 0);
-    // One image in memory at a time.
-    for (k, &i) in picks.iter().enumerate() {
-        // From the header first, as the stack's loader reads them: a file padded beyond what
-        // its image needs is refused, and an image of another size than the first (a forged
-        // header among them) is never decoded here (the loader names it).
-        match checked_header(&ds.images[i], opts)? {
-            Some(size) if k > 0 && size != (width, height) => break,
-            None if k > 0 => break,
-            _ => {}
-        }
-        let mut img = crate::read_image(&ds.images[i], opts)?;
-        if k == 0 {
-            let (q, max) = match img.kind {
+    let notes = Notes::new(n);
+    let mut first = None;
+    // One image in memory at a time, decoded as the stack's loader decodes it (header checks,
+    // intensities); an image of another size than the first is left for the loader to name.
+    for &i in &picks {
+        let (w, h, rgb) = match decode_stack_image(ds, i, opts, &notes, first) {
+            Ok(d) => d,
+            Err(_) if first.is_some() => break,
+            Err(e) => return Err(e),
+        };
+        if first.is_none() {
+            first = Some((w, h));
+            let kind = notes.kind(i).unwrap_or(SampleKind::Float);
+            let (q, max) = match kind {
                 SampleKind::Srgb8 => (Quantisation::Srgb(8), 255.0),
                 SampleKind::Linear8 => (Quantisation::Linear(8), 255.0),
                 SampleKind::U16 => (Quantisation::Linear(16), 65535.0),
@@ -419,7 +428,6 @@ pub fn capture_noise(ds: &Dataset, opts: &DecodeOptions) -> Result<symframe::Noi
                 SampleKind::Float => (Quantisation::Float, 0.0),
             };
             model.quantisation = q;
-            (width, height) = (img.width, img.height);
             if max > 0.0 && opts.saturation <= 1.0 {
                 // The smallest raw value the decoder counts as saturated, made linear.
                 let raw = ((opts.saturation * max).ceil() / max).min(1.0);
@@ -433,20 +441,9 @@ pub fn capture_noise(ds: &Dataset, opts: &DecodeOptions) -> Result<symframe::Noi
                 model.clip_level = (brightest > 0.0).then(|| linear / brightest);
             }
         }
-        if (img.width, img.height) != (width, height) {
-            break; // the stack's loader names the image of another size
-        }
-        let ch = img.channels;
-        if let Some(int) = &ds.intensities {
-            for px in img.data.chunks_exact_mut(ch) {
-                for (c, v) in px.iter_mut().enumerate() {
-                    *v /= int[i][c.min(2)];
-                }
-            }
-        }
         samples
             .get_or_insert_with(|| symframe::noise::NoiseSamples::new(&model))
-            .add(&img.data, ch, width, None);
+            .add(&rgb, 3, w, None);
     }
     Ok(match samples.as_mut() {
         Some(s) => model.fit(s),

@@ -455,8 +455,14 @@ impl<'a> Estimator<'a> {
         // A pixel its Lambertian fit explains to the noise floor has no lobe to find.
         let pure_diffuse = fit.confidence as f64 >= DIFFUSE_CENTRE_FIT
             && share.is_some_and(|s| s < PURE_DIFFUSE_SHARE);
-        // The lobe's model has no clip: a censored sample tells it nothing it can fit.
-        let lobe_slice = match self.params.noise.clip_level.filter(|_| clipped) {
+        // The lobe's model has no clip: a censored sample tells it nothing it can fit (copied
+        // only where a lobe is fitted).
+        let lobe_slice = match self
+            .params
+            .noise
+            .clip_level
+            .filter(|_| clipped && auto && !pure_diffuse)
+        {
             Some(c) => {
                 lobe_input.clear();
                 lobe_input.extend_from_slice(slice);
@@ -912,8 +918,8 @@ impl<'a> Estimator<'a> {
         // well as one of its family can, is elongated, and has its wide axis along one of the
         // two symmetry axes is independent evidence of the same frame (an isotropic slice
         // gives a round lobe, and no axis to agree on).
+        let b = n.cross(t);
         let agrees = [fitted, base].iter().flatten().any(|f| {
-            let b = n.cross(t);
             f.residual < LOBE_PLAUSIBLE
                 && self.lobe_has_tangent(f)
                 && f.tangent.dot(t).abs().max(f.tangent.dot(b).abs()) >= AXES_AGREE_COS
@@ -934,7 +940,6 @@ impl<'a> Estimator<'a> {
                         .filter(|m| m.has_tangent(MIN_ELONGATION))
                         .map(|m| m.tangent)
                 });
-            let b = n.cross(t);
             let swap = match wide {
                 Some(w) => w.dot(b).abs() > w.dot(t).abs(),
                 None => highlight_wider_along(objective, n, b, t),
