@@ -9,7 +9,7 @@ use ndarray::{ArrayD, ArrayViewD, IxDyn};
 use ndarray_npy::{ReadNpyExt, WriteNpyExt};
 
 use crate::atomic::write_atomic;
-use crate::codecs::{check_len, planes, write_exr_channels, write_png};
+use crate::codecs::{write_png, PngLayout};
 use crate::error::{Error, Result};
 
 /// Writes `data` (row-major, C order) as a little-endian `float32` `.npy` array of `shape`,
@@ -150,9 +150,7 @@ pub fn write_exr_map(
             ))
         }
     };
-    check_len(path, width, height, channels, data.len())?;
-    let chans = names.iter().copied().zip(planes(data, channels)).collect();
-    write_exr_channels(path, width, height, chans)
+    crate::codecs::write_exr_interleaved(path, width, height, names, data)
 }
 
 /// Clamps to `[0, 1]` and scales to a byte.
@@ -180,30 +178,34 @@ pub enum NormalPng {
     DirectX,
 }
 
-/// Normal-map values in `[0, 1]`: `(n + 1) / 2` per channel, y negated for
-/// [`NormalPng::DirectX`]; `NaN` pixels 0 (black).
-pub fn normal_map_values(normals: &[f32], convention: NormalPng) -> Vec<f32> {
+/// One normal's picture value in `[0, 1]`: `(n + 1) / 2` per channel, y negated for
+/// [`NormalPng::DirectX`]; a `NaN` normal 0 (black).
+fn normal_map_value(n: [f32; 3], convention: NormalPng) -> [f32; 3] {
     let sy = match convention {
         NormalPng::OpenGl => 1.0,
         NormalPng::DirectX => -1.0,
     };
+    if n.iter().any(|v| v.is_nan()) {
+        return [0.0; 3];
+    }
+    [
+        (n[0] + 1.0) / 2.0,
+        (sy * n[1] + 1.0) / 2.0,
+        (n[2] + 1.0) / 2.0,
+    ]
+}
+
+/// Normal-map values in `[0, 1]`: `(n + 1) / 2` per channel, y negated for
+/// [`NormalPng::DirectX`]; `NaN` pixels 0 (black).
+pub fn normal_map_values(normals: &[f32], convention: NormalPng) -> Vec<f32> {
     normals
         .chunks_exact(3)
-        .flat_map(|n| {
-            if n.iter().any(|v| v.is_nan()) {
-                return [0.0; 3];
-            }
-            [
-                (n[0] + 1.0) / 2.0,
-                (sy * n[1] + 1.0) / 2.0,
-                (n[2] + 1.0) / 2.0,
-            ]
-        })
+        .flat_map(|n| normal_map_value([n[0], n[1], n[2]], convention))
         .collect()
 }
 
 /// Writes a normal map as a 16-bit PNG: `(n + 1) / 2` in each channel (see
-/// [`normal_map_values`]), black where there is no normal.
+/// [`normal_map_values`]), black where there is no normal; converted a row at a time.
 pub fn write_normal_png16(
     path: &Path,
     width: usize,
@@ -211,7 +213,9 @@ pub fn write_normal_png16(
     normals: &[f32],
     convention: NormalPng,
 ) -> Result<()> {
-    crate::codecs::write_png16_rgb(path, width, height, &normal_map_values(normals, convention))
+    crate::codecs::write_png16_rgb_with(path, width, height, normals, &|n| {
+        normal_map_value(n, convention)
+    })
 }
 
 /// HSV with saturation and value 1 to RGB bytes; `hue` in turns (`[0, 1)`, wrapped).
@@ -363,7 +367,7 @@ pub fn write_png_rgb8(path: &Path, width: usize, height: usize, rgb: &[u8]) -> R
             ),
         ));
     }
-    write_png(path, width, height, rgb, ::image::ExtendedColorType::Rgb8)
+    write_png(path, width, height, rgb, PngLayout::Rgb8)
 }
 
 #[cfg(test)]

@@ -595,20 +595,20 @@ mod tests {
     fn a_mask_pixel_is_inside_by_any_colour_channel_and_its_alpha() {
         let d = tempfile::tempdir().unwrap();
         let p = d.path().join("m.png");
-        let rgb = ::image::ExtendedColorType::Rgb8;
+        let rgb = crate::codecs::PngLayout::Rgb8;
         write_png(&p, 2, 1, &[0, 0, 255, 0, 0, 0], rgb).unwrap();
         assert_eq!(read_mask(&p, 2, 1).unwrap(), vec![true, false]);
         write_png(&p, 3, 1, &[255, 0, 0, 0, 255, 0, 0, 0, 0], rgb).unwrap();
         assert_eq!(read_mask(&p, 3, 1).unwrap(), vec![true, true, false]);
         // Black and white with alpha 255 everywhere: colour decides.
-        let rgba = ::image::ExtendedColorType::Rgba8;
+        let rgba = crate::codecs::PngLayout::Rgba8;
         write_png(&p, 2, 1, &[255, 255, 255, 255, 0, 0, 0, 255], rgba).unwrap();
         assert_eq!(read_mask(&p, 2, 1).unwrap(), vec![true, false]);
         // Transparent outside, colour everywhere: alpha decides.
         write_png(&p, 2, 1, &[90, 60, 30, 0, 90, 60, 30, 255], rgba).unwrap();
         assert_eq!(read_mask(&p, 2, 1).unwrap(), vec![false, true]);
         // Grey with alpha, 16-bit.
-        let la16 = ::image::ExtendedColorType::La16;
+        let la16 = crate::codecs::PngLayout::La16;
         let px: Vec<u8> = [1u16, 0, 1, 7, 0, 7]
             .iter()
             .flat_map(|v| v.to_ne_bytes())
@@ -624,7 +624,7 @@ mod tests {
     fn masks() {
         let d = tempfile::tempdir().unwrap();
         let p = d.path().join("mask.png");
-        write_png(&p, 3, 1, &[0, 255, 1], ::image::ExtendedColorType::L8).unwrap();
+        write_png(&p, 3, 1, &[0, 255, 1], crate::codecs::PngLayout::L8).unwrap();
         assert_eq!(read_mask(&p, 3, 1).unwrap(), vec![false, true, true]);
         let e = read_mask(&p, 4, 2).unwrap_err().to_string();
         assert!(
@@ -637,11 +637,11 @@ mod tests {
             3,
             1,
             &[0, 9, 9, 7, 0, 0, 0, 0, 0],
-            ::image::ExtendedColorType::Rgb8,
+            crate::codecs::PngLayout::Rgb8,
         )
         .unwrap();
         assert_eq!(read_mask(&p, 3, 1).unwrap(), vec![true, true, false]);
-        write_png(&p, 2, 1, &[0, 0], ::image::ExtendedColorType::L8).unwrap();
+        write_png(&p, 2, 1, &[0, 0], crate::codecs::PngLayout::L8).unwrap();
         let e = read_mask(&p, 2, 1).unwrap_err().to_string();
         assert!(e.contains("mask.png: mask is empty"), "{e}");
     }
@@ -655,7 +655,7 @@ mod tests {
         for n in ["a.png", "b.png", "d.png"] {
             write_png16_rgb(&p(n), 2, 1, &[0.25; 6]).unwrap();
         }
-        write_png(&p("c.png"), 2, 1, &[10, 20], ::image::ExtendedColorType::L8).unwrap();
+        write_png(&p("c.png"), 2, 1, &[10, 20], crate::codecs::PngLayout::L8).unwrap();
         let set = ds(["a.png", "b.png", "c.png", "d.png"].map(p).to_vec());
         let (_, w) = load_stack_with_warnings(&set, &DecodeOptions::default(), &|| {}).unwrap();
         let w: Vec<String> = w.iter().map(|w| w.to_string()).collect();

@@ -91,7 +91,7 @@ pub fn write_lp_dataset(
             ));
         }
         let bytes: Vec<u8> = m.iter().map(|&b| if b { 255 } else { 0 }).collect();
-        write_png(&p, width, height, &bytes, ::image::ExtendedColorType::L8)?;
+        write_png(&p, width, height, &bytes, crate::codecs::PngLayout::L8)?;
     }
     let lp = dir.join("lights.lp");
     let mut text = format!("{}\n", lights.len());

@@ -10,7 +10,7 @@
 
 use std::path::Path;
 
-use super::{check_len, io_err, planes, DecodeOptions, Raw, RawImage};
+use super::{check_len, io_err, DecodeOptions, Raw, RawImage};
 use crate::atomic::write_atomic;
 use crate::error::{Error, Result};
 use crate::limits;
@@ -325,8 +325,57 @@ pub fn write_exr_channels(
 /// Writes interleaved linear RGB (`width * height * 3` values) as a float32 OpenEXR file with
 /// channels R, G, B; `NaN` and infinities are kept as they are.
 pub fn write_exr_rgb(path: &Path, width: usize, height: usize, rgb: &[f32]) -> Result<()> {
-    check_len(path, width, height, 3, rgb.len())?;
-    let mut p = planes(rgb, 3).into_iter();
-    let (r, g, b) = (p.next().unwrap(), p.next().unwrap(), p.next().unwrap());
-    write_exr_channels(path, width, height, vec![("R", r), ("G", g), ("B", b)])
+    write_exr_interleaved(path, width, height, &["R", "G", "B"], rgb)
+}
+
+/// Writes interleaved float32 samples, `names.len()` (1 or 3) per pixel and named by `names`,
+/// as a ZIP-compressed EXR. The encoder reads each pixel from `data` where it is: no planar
+/// copy of the map is made (a 4096 x 4096 RGB map would take 200 MB more).
+pub(crate) fn write_exr_interleaved(
+    path: &Path,
+    width: usize,
+    height: usize,
+    names: &[&str],
+    data: &[f32],
+) -> Result<()> {
+    use exr::prelude::{
+        Encoding, Image as ExrImage, Layer, LayerAttributes, SpecificChannels, Vec2, WritableImage,
+    };
+    check_len(path, width, height, names.len(), data.len())?;
+    let map_err = |e: exr::error::Error| match e {
+        exr::error::Error::Io(io) => Error::write(path, io),
+        other => Error::encode(path, other),
+    };
+    // One layer of the given channels, written through `write_atomic`.
+    macro_rules! write_layer {
+        ($channels:expr) => {{
+            let layer = Layer::new(
+                (width, height),
+                LayerAttributes::default(),
+                Encoding::SMALL_LOSSLESS,
+                $channels,
+            );
+            let image = ExrImage::from_layer(layer);
+            write_atomic(path, |w| {
+                image.write().non_parallel().to_buffered(w).map_err(map_err)
+            })
+        }};
+    }
+    match *names {
+        [a] => write_layer!(SpecificChannels::build()
+            .with_channel(a)
+            .with_pixel_fn(|p: Vec2<usize>| (data[p.y() * width + p.x()],))),
+        [a, b, c] => write_layer!(SpecificChannels::build()
+            .with_channel(a)
+            .with_channel(b)
+            .with_channel(c)
+            .with_pixel_fn(|p: Vec2<usize>| {
+                let i = 3 * (p.y() * width + p.x());
+                (data[i], data[i + 1], data[i + 2])
+            })),
+        _ => Err(Error::invalid(
+            path,
+            format!("EXR maps have 1 or 3 channels, not {}", names.len()),
+        )),
+    }
 }

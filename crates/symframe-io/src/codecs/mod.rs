@@ -48,11 +48,12 @@ mod tiff;
 
 pub use colour::ColourTag;
 use exr::read_exr;
+pub(crate) use exr::write_exr_interleaved;
 pub use exr::{write_exr_channels, write_exr_rgb};
 use image_rs::read_with_image;
 use pfm::{pfm_raw, pfm_size};
 pub use pfm::{read_pfm, write_pfm};
-pub(crate) use png::write_png;
+pub(crate) use png::{write_png, write_png16_rgb_with, PngLayout};
 pub use png::{write_png16_rgb, write_png8_rgb};
 use tiff::read_tiff;
 
@@ -535,13 +536,6 @@ pub(crate) fn check_len(
     Ok(())
 }
 
-/// Splits interleaved samples into planes.
-pub(crate) fn planes(data: &[f32], channels: usize) -> Vec<Vec<f32>> {
-    (0..channels)
-        .map(|c| data.iter().skip(c).step_by(channels).copied().collect())
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -826,7 +820,7 @@ mod tests {
         let d = tempfile::tempdir().unwrap();
         let p = tmp(&d, "g.png");
         let bytes = [128u8, 0, 253, 254, 255, 64];
-        write_png(&p, 3, 2, &bytes, ::image::ExtendedColorType::L8).unwrap();
+        write_png(&p, 3, 2, &bytes, crate::codecs::PngLayout::L8).unwrap();
         let img = read_image(&p, &opts()).unwrap();
         assert_eq!((img.width, img.height, img.channels), (3, 2, 1));
         assert_relative_eq!(img.data[0], 0.215_860_5, max_relative = 1e-5);
@@ -859,7 +853,7 @@ mod tests {
             1,
             1,
             &[10, 20, 30, 255],
-            ::image::ExtendedColorType::Rgba8,
+            crate::codecs::PngLayout::Rgba8,
         )
         .unwrap();
         let lin = DecodeOptions {

@@ -6,26 +6,105 @@ use super::{check_len, linear_to_srgb};
 use crate::atomic::write_atomic;
 use crate::error::{Error, Result};
 
-/// Encodes raw pixel bytes as PNG (`bytes` native-endian for 16-bit types).
+/// The PNG pixel layouts symframe writes: channels and bits per channel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum PngLayout {
+    /// 8-bit grey.
+    L8,
+    /// 8-bit RGB.
+    Rgb8,
+    /// 8-bit RGBA (the tests' masks).
+    #[cfg_attr(not(test), allow(dead_code))]
+    Rgba8,
+    /// 16-bit grey and alpha (the tests' masks).
+    #[cfg_attr(not(test), allow(dead_code))]
+    La16,
+    /// 16-bit RGB.
+    Rgb16,
+}
+
+impl PngLayout {
+    fn png(self) -> (::png::ColorType, ::png::BitDepth) {
+        use ::png::{BitDepth::*, ColorType::*};
+        match self {
+            PngLayout::L8 => (Grayscale, Eight),
+            PngLayout::Rgb8 => (Rgb, Eight),
+            PngLayout::Rgba8 => (Rgba, Eight),
+            PngLayout::La16 => (GrayscaleAlpha, Sixteen),
+            PngLayout::Rgb16 => (Rgb, Sixteen),
+        }
+    }
+
+    /// Bytes per pixel.
+    fn pixel_bytes(self) -> usize {
+        match self {
+            PngLayout::L8 => 1,
+            PngLayout::Rgb8 => 3,
+            PngLayout::Rgba8 | PngLayout::La16 => 4,
+            PngLayout::Rgb16 => 6,
+        }
+    }
+}
+
+/// Encodes a PNG row by row: `fill(y, row)` writes row `y`'s bytes (big-endian for 16-bit
+/// layouts) into a buffer of one row, so no copy of the whole image is ever made (a 4096 x
+/// 4096 16-bit map would need 100 MB twice over through `image`'s encoder, which converts the
+/// whole buffer to big-endian and filters it in one go). Settings as `image`'s default
+/// encoder: fast deflate, adaptive filtering.
+pub(crate) fn write_png_rows(
+    path: &Path,
+    width: usize,
+    height: usize,
+    layout: PngLayout,
+    fill: &mut dyn FnMut(usize, &mut [u8]),
+) -> Result<()> {
+    let (w, h) = (
+        u32::try_from(width).map_err(|_| Error::invalid(path, "image too wide for PNG"))?,
+        u32::try_from(height).map_err(|_| Error::invalid(path, "image too tall for PNG"))?,
+    );
+    let encode = |e: ::png::EncodingError| match e {
+        ::png::EncodingError::IoError(io) => Error::write(path, io),
+        other => Error::encode(path, other),
+    };
+    write_atomic(path, |out| {
+        let mut encoder = ::png::Encoder::new(out, w, h);
+        let (colour, depth) = layout.png();
+        encoder.set_color(colour);
+        encoder.set_depth(depth);
+        encoder.set_compression(::png::Compression::Fast);
+        encoder.set_filter(::png::Filter::Adaptive);
+        let mut writer = encoder.write_header().map_err(encode)?;
+        let mut stream = writer.stream_writer().map_err(encode)?;
+        let mut row = vec![0u8; width * layout.pixel_bytes()];
+        for y in 0..height {
+            fill(y, &mut row);
+            std::io::Write::write_all(&mut stream, &row).map_err(|e| Error::write(path, e))?;
+        }
+        stream.finish().map_err(encode)?;
+        writer.finish().map_err(encode)
+    })
+}
+
+/// Encodes raw pixel bytes as PNG (`bytes` native-endian for 16-bit layouts).
 pub(crate) fn write_png(
     path: &Path,
     width: usize,
     height: usize,
     bytes: &[u8],
-    color: ::image::ExtendedColorType,
+    layout: PngLayout,
 ) -> Result<()> {
-    use ::image::ImageEncoder;
-    let (w, h) = (
-        u32::try_from(width).map_err(|_| Error::invalid(path, "image too wide for PNG"))?,
-        u32::try_from(height).map_err(|_| Error::invalid(path, "image too tall for PNG"))?,
-    );
-    write_atomic(path, |out| {
-        ::image::codecs::png::PngEncoder::new(out)
-            .write_image(bytes, w, h, color)
-            .map_err(|e| match e {
-                ::image::ImageError::IoError(io) => Error::write(path, io),
-                other => Error::encode(path, other),
-            })
+    let row = width * layout.pixel_bytes();
+    check_len(path, width, height, layout.pixel_bytes(), bytes.len())?;
+    let sixteen = matches!(layout, PngLayout::La16 | PngLayout::Rgb16);
+    write_png_rows(path, width, height, layout, &mut |y, out| {
+        let src = &bytes[y * row..(y + 1) * row];
+        if sixteen {
+            for (o, i) in out.chunks_exact_mut(2).zip(src.chunks_exact(2)) {
+                o.copy_from_slice(&u16::from_ne_bytes([i[0], i[1]]).to_be_bytes());
+            }
+        } else {
+            out.copy_from_slice(src);
+        }
     })
 }
 
@@ -40,18 +119,29 @@ fn quantise(v: f32, max: f32) -> f32 {
 
 /// Writes interleaved linear RGB in `[0, 1]` (clamped; `NaN` as 0) as a 16-bit linear PNG.
 pub fn write_png16_rgb(path: &Path, width: usize, height: usize, rgb: &[f32]) -> Result<()> {
+    write_png16_rgb_with(path, width, height, rgb, &|v| v)
+}
+
+/// Writes interleaved RGB as a 16-bit linear PNG of `value(rgb)` per pixel (clamped to
+/// `[0, 1]`; `NaN` as 0), converted a row at a time.
+pub(crate) fn write_png16_rgb_with(
+    path: &Path,
+    width: usize,
+    height: usize,
+    rgb: &[f32],
+    value: &dyn Fn([f32; 3]) -> [f32; 3],
+) -> Result<()> {
     check_len(path, width, height, 3, rgb.len())?;
-    let bytes: Vec<u8> = rgb
-        .iter()
-        .flat_map(|&v| (quantise(v, 65535.0) as u16).to_ne_bytes())
-        .collect();
-    write_png(
-        path,
-        width,
-        height,
-        &bytes,
-        ::image::ExtendedColorType::Rgb16,
-    )
+    write_png_rows(path, width, height, PngLayout::Rgb16, &mut |y, row| {
+        let src = &rgb[y * width * 3..(y + 1) * width * 3];
+        for (o, p) in row.chunks_exact_mut(6).zip(src.chunks_exact(3)) {
+            let v = value([p[0], p[1], p[2]]);
+            for c in 0..3 {
+                let q = quantise(v[c], 65535.0) as u16;
+                o[2 * c..2 * c + 2].copy_from_slice(&q.to_be_bytes());
+            }
+        }
+    })
 }
 
 /// Writes interleaved RGB in `[0, 1]` (clamped; `NaN` as 0) as an 8-bit PNG, sRGB-encoding
@@ -64,22 +154,15 @@ pub fn write_png8_rgb(
     srgb_encode: bool,
 ) -> Result<()> {
     check_len(path, width, height, 3, rgb.len())?;
-    let bytes: Vec<u8> = rgb
-        .iter()
-        .map(|&v| {
+    write_png_rows(path, width, height, PngLayout::Rgb8, &mut |y, row| {
+        let src = &rgb[y * width * 3..(y + 1) * width * 3];
+        for (o, &v) in row.iter_mut().zip(src) {
             let v = if srgb_encode && !v.is_nan() {
                 linear_to_srgb(v.clamp(0.0, 1.0))
             } else {
                 v
             };
-            quantise(v, 255.0) as u8
-        })
-        .collect();
-    write_png(
-        path,
-        width,
-        height,
-        &bytes,
-        ::image::ExtendedColorType::Rgb8,
-    )
+            *o = quantise(v, 255.0) as u8;
+        }
+    })
 }
