@@ -3,9 +3,9 @@
 //! tiles, whatever interrupted the run.
 //!
 //! File `tile-NNNNNN.bin`: a 48-byte header (magic `SYMFTILE`, format version, the job's
-//! fingerprint, the tile index, the pixel count, a checksum), then 40 bytes per pixel in tile
+//! fingerprint, the tile index, the pixel count, a checksum), then 44 bytes per pixel in tile
 //! order (little-endian): status (1 byte), source (1 byte, a [`PixelSource`] code), 2 padding,
-//! normal (3 x f32), tangent (3 x f32), confidence, anisotropy (f32), objective evaluations
+//! normal (3 x f32), tangent (3 x f32), confidence, anisotropy, tangent confidence (f32), objective evaluations
 //! (u32). The job fingerprint covers everything the results depend on (inputs, mask,
 //! parameters, tile size): a file of another job is stale. The checksum (XXH3-64 of the
 //! header's first 40 bytes and the records) catches a file changed after it was written (disk
@@ -20,12 +20,13 @@ use crate::atomic::write_bytes;
 use crate::error::{Error, Result};
 
 const MAGIC: &[u8; 8] = b"SYMFTILE";
-/// Format version of tile result files (1 had neither a source byte nor a checksum).
-pub const TILE_RESULT_VERSION: u32 = 3;
+/// Format version of tile result files (1 had neither a source byte nor a checksum, 3 no
+/// tangent confidence).
+pub const TILE_RESULT_VERSION: u32 = 4;
 const HEADER: usize = 48;
 /// Bytes of the header the checksum covers (all but the checksum itself).
 const HEADER_SUMMED: usize = 40;
-const RECORD: usize = 40;
+const RECORD: usize = 44;
 
 /// The length in bytes of the result file of a tile of `n` pixels (header and records).
 pub fn tile_result_len(n: usize) -> u64 {
@@ -83,12 +84,11 @@ pub fn write_tile_result(path: &Path, job: u64, t: usize, records: &[PixelRecord
     b.extend_from_slice(&[0u8; 8]);
     for r in records {
         b.extend_from_slice(&[status_code(r.status), r.source as u8, 0, 0]);
-        for v in r
-            .normal
-            .iter()
-            .chain(&r.tangent)
-            .chain([&r.confidence, &r.anisotropy])
-        {
+        for v in r.normal.iter().chain(&r.tangent).chain([
+            &r.confidence,
+            &r.anisotropy,
+            &r.tangent_confidence,
+        ]) {
             b.extend_from_slice(&v.to_le_bytes());
         }
         b.extend_from_slice(&r.evals.to_le_bytes());
@@ -206,7 +206,8 @@ fn records(b: &[u8]) -> std::result::Result<Vec<PixelRecord>, Problem> {
                 tangent: [f(3), f(4), f(5)],
                 confidence: f(6),
                 anisotropy: f(7),
-                evals: u32::from_le_bytes(r[36..40].try_into().unwrap()),
+                tangent_confidence: f(8),
+                evals: u32::from_le_bytes(r[40..44].try_into().unwrap()),
             })
         })
         .collect()
@@ -295,6 +296,7 @@ mod tests {
                 tangent: [1.0, 0.0, -0.0],
                 confidence: 0.5,
                 anisotropy: 0.25,
+                tangent_confidence: 0.75,
                 evals: 123,
             },
         ];
@@ -336,6 +338,7 @@ mod tests {
                 tangent: [1.0, 0.0, 0.0],
                 confidence: 0.5,
                 anisotropy: k as f32 / n as f32,
+                tangent_confidence: 0.5,
                 evals: k as u32,
             })
             .collect()

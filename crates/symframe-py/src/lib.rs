@@ -61,6 +61,10 @@ fn put_maps<'py>(py: Python<'py>, dict: &Bound<'py, PyDict>, maps: EstimateMaps)
         PyArray1::from_vec(py, maps.anisotropy).reshape([h, w])?,
     )?;
     dict.set_item(
+        "tangent_confidence",
+        PyArray1::from_vec(py, maps.tangent_confidence).reshape([h, w])?,
+    )?;
+    dict.set_item(
         "source",
         PyArray1::from_vec(py, maps.source).reshape([h, w])?,
     )?;

@@ -122,6 +122,9 @@ pub struct EstimateMaps {
     pub confidence: Vec<f32>,
     /// Anisotropy, `H x W`, NaN where nothing was estimated.
     pub anisotropy: Vec<f32>,
+    /// Tangent confidence, `H x W`: how clearly the data single out the tangent's axes, in
+    /// [0, 1], 0 where the pixel has no tangent, NaN where nothing was estimated.
+    pub tangent_confidence: Vec<f32>,
     /// Per-pixel status.
     pub status: Vec<PixelStatus>,
     /// Per-pixel [`PixelSource`] code, `H x W`.
@@ -164,6 +167,9 @@ pub struct PixelRecord {
     pub confidence: f32,
     /// Anisotropy (`NaN` unless estimated or culled).
     pub anisotropy: f32,
+    /// How clearly the data single out the tangent's axes, in [0, 1] (0 without a tangent;
+    /// `NaN` unless estimated or culled).
+    pub tangent_confidence: f32,
     /// Objective evaluations spent.
     pub evals: u32,
 }
@@ -177,6 +183,7 @@ impl PixelRecord {
         tangent: [f32::NAN; 3],
         confidence: f32::NAN,
         anisotropy: f32::NAN,
+        tangent_confidence: f32::NAN,
         evals: 0,
     };
 
@@ -198,6 +205,7 @@ impl EstimateMaps {
             tangents: vec![f32::NAN; n * 3],
             confidence: vec![f32::NAN; n],
             anisotropy: vec![f32::NAN; n],
+            tangent_confidence: vec![f32::NAN; n],
             status: vec![PixelStatus::Masked; n],
             source: vec![PixelSource::None as u8; n],
             counts: PixelCounts::default(),
@@ -213,6 +221,7 @@ impl EstimateMaps {
         self.counts.add(r.status, r.has_tangent());
         self.confidence[p] = r.confidence;
         self.anisotropy[p] = r.anisotropy;
+        self.tangent_confidence[p] = r.tangent_confidence;
         self.normals[p * 3..p * 3 + 3].copy_from_slice(&r.normal);
         self.tangents[p * 3..p * 3 + 3].copy_from_slice(&r.tangent);
     }

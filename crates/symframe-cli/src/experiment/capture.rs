@@ -59,6 +59,18 @@ fn materials(quick: bool) -> Vec<Material> {
             anisotropic: true,
             held_out: false,
         },
+        // The isotropic control of the two-lobe rules: the same sharp coat over a base with no
+        // preferred direction; a tangent there is a false one.
+        Material {
+            name: "clear-coated plastic",
+            brdf: Box::new(Layered::new(
+                0.03,
+                1.5,
+                Box::new(Ggx::isotropic([0.3, 0.12, 0.05], [0.3, 0.3, 0.3], 0.2)),
+            )),
+            anisotropic: false,
+            held_out: false,
+        },
         Material {
             name: "woven satin",
             brdf: Box::new(Woven::new([0.25, 0.08, 0.08], [0.05; 3], 0.35, 0.08, 0.5)),
@@ -78,6 +90,13 @@ fn materials(quick: bool) -> Vec<Material> {
                 name: "brushed gold (Beckmann)",
                 brdf: Box::new(Beckmann::new([0.0; 3], [1.0, 0.71, 0.29], 0.25, 0.06)),
                 anisotropic: true,
+                held_out: true,
+            },
+            // The held-out isotropic control: a rough metal of another distribution.
+            Material {
+                name: "rough steel (Beckmann)",
+                brdf: Box::new(Beckmann::new([0.0; 3], [0.56, 0.57, 0.58], 0.18, 0.18)),
+                anisotropic: false,
                 held_out: true,
             },
             Material {
@@ -314,6 +333,26 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
             };
             jobs.extend(rigs.iter().map(|&r| (m, c, r)));
         }
+    }
+    // A development aid: `SYMFRAME_CAPTURE_ONLY=car,woven/clean,reference/sparse` keeps the
+    // sets whose material, sweep and rig contain one of the comma-separated words of each
+    // slash-separated part (an empty or missing part keeps all).
+    if let Ok(only) = std::env::var("SYMFRAME_CAPTURE_ONLY") {
+        let parts: Vec<Vec<String>> = only
+            .split('/')
+            .map(|p| {
+                p.split(',')
+                    .filter(|w| !w.is_empty())
+                    .map(String::from)
+                    .collect()
+            })
+            .collect();
+        let keeps = |i: usize, name: &str| {
+            parts
+                .get(i)
+                .is_none_or(|ws| ws.is_empty() || ws.iter().any(|w| name.contains(w.as_str())))
+        };
+        jobs.retain(|&(m, c, r)| keeps(0, mats[m].name) && keeps(1, conds[c].0) && keeps(2, r));
     }
     jobs.par_iter()
         .map(|&(m, c, rig_name)| {

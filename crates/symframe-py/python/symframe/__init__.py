@@ -116,8 +116,9 @@ def estimate(
     ``threads`` (worker threads, default all cores).
 
     Returns a dict: ``normals``, ``tangents`` (``H x W x 3`` float32, NaN where none),
-    ``confidence``, ``anisotropy`` (``H x W`` float32), ``source`` (``H x W`` uint8: 0 none,
-    1 symmetry, 2 Lambertian, 3 highlight) and ``report`` (method, parameters, light and pixel
+    ``confidence``, ``anisotropy``, ``tangent_confidence`` (``H x W`` float32; the last 0 where
+    there is no tangent), ``source`` (``H x W`` uint8: 0 none, 1 symmetry, 2 Lambertian,
+    3 highlight, 4 lobe) and ``report`` (method, parameters, light and pixel
     counts). The maps equal those of :func:`estimate_path` on the same data bit for bit.
     """
     images = _float_array("images", images, 4, 3, np.float32)

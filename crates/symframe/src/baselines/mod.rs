@@ -173,7 +173,7 @@ impl BaselinePixel {
     }
 
     /// What the maps hold at this pixel, whose normal comes from `source`: the normal and,
-    /// where there is one, the confidence; no tangent or anisotropy (`NaN`), no objective
+    /// where there is one, the confidence; no anisotropy or tangent confidence (`NaN`), no objective
     /// evaluations.
     pub fn record(&self, source: PixelSource) -> PixelRecord {
         PixelRecord {
@@ -195,6 +195,7 @@ impl BaselinePixel {
                 f32::NAN
             },
             anisotropy: f32::NAN,
+            tangent_confidence: f32::NAN,
             evals: 0,
         }
     }

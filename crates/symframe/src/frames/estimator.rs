@@ -16,6 +16,9 @@ use crate::frames::highlight::{highlight_moments_of_greys, HighlightMoments, HIG
 use crate::frames::lobe::{fit_lobe, LobeFit, LobeScratch, LobeStart};
 use crate::frames::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::frames::optim::{nelder_mead, NelderMeadOptions};
+use crate::frames::policy::{
+    has_tangent, tangent_confidence, LobeAxis, TangentEvidence, TangentSettings,
+};
 use crate::frames::rig::Rig;
 use crate::frames::symmetry::{
     default_min_domain, CosineMode, Frame, SymmetryTerm, EMPTY_DISTANCE,
@@ -111,6 +114,9 @@ pub struct PixelEstimate {
     /// Anisotropy in [0, 1]: how much the tangent objective varies with the tangent's angle
     /// (for the lobe fit: its elongation).
     pub anisotropy: f32,
+    /// How clearly the data single out the tangent's axes, in [0, 1] (0 where there is no
+    /// tangent; [`crate::frames::policy::tangent_confidence`]).
+    pub tangent_confidence: f32,
     /// Symmetry distances at the solution: `[SD_n, SD_nt, SD_nb]` (for the lobe fit: `[SD_n,
     /// unexplained share, 0]`).
     pub residual: [f64; 3],
@@ -127,6 +133,7 @@ impl PixelEstimate {
             tangent: None,
             confidence: 0.0,
             anisotropy: f32::NAN,
+            tangent_confidence: 0.0,
             residual: [f64::NAN; 3],
             evals: 0,
         }
@@ -147,6 +154,8 @@ pub struct Estimator<'a> {
     rig: &'a Rig,
     params: EstimatorParams,
     min_domain: u32,
+    /// The tangent decision's settings, `min_anisotropy` from the parameters.
+    tangent_policy: TangentSettings,
 }
 
 impl<'a> Estimator<'a> {
@@ -159,6 +168,10 @@ impl<'a> Estimator<'a> {
             rig,
             params,
             min_domain,
+            tangent_policy: TangentSettings {
+                min_anisotropy: params.min_anisotropy as f64,
+                ..TangentSettings::default()
+            },
         }
     }
 
@@ -812,7 +825,11 @@ impl<'a> Estimator<'a> {
         }
         let sd_n = term_n.numerator / term_n.denominator;
         if let Some(f) = lobe {
-            return self.lobe_estimate(slice, &f, &term_n, sd_n, evals);
+            let e = self.lobe_estimate(slice, objective, cosine, &f, &term_n, sd_n);
+            return PixelEstimate {
+                evals: e.evals + evals,
+                ..e
+            };
         }
 
         // Tangent: scan the objective over its 90-degree period on a coarse level, refine the
@@ -904,29 +921,22 @@ impl<'a> Estimator<'a> {
         evals += 2;
         let anisotropy = ((f_max - f_min) / (f_max + f_min + ANISOTROPY_FLOOR)).clamp(0.0, 1.0);
 
-        // The symmetry anisotropy of an isotropic lobe sampled by few lights is interpolation
-        // noise: a tangent also needs an elongated highlight (docs/method.md, "Anisotropy").
-        // Under a sharp coat (a lobe read through one or two lights) the highlight's moments
-        // are the coat's, round; the lobe fitted to the samples is the broad base's (the coat
-        // is too narrow to pull it), and its elongation, where the rig resolves it, is the
-        // base's.
-        let elongated = moments.is_some_and(|m| m.has_tangent(MIN_ELONGATION))
+        // The tangent where the data determine one (`frames::policy`, docs/method.md,
+        // "Tangents by evidence"): the slice's symmetry anisotropy and an independent reading
+        // of the highlight's wide axis. Under a sharp coat (a lobe read through one or two
+        // lights) the highlight's moments are the coat's, round; the lobe fitted to the
+        // samples is the broad base's (the coat is too narrow to pull it), and its elongation,
+        // where the rig resolves it, is the base's.
+        let moments_elongated = moments.is_some_and(|m| m.has_tangent(MIN_ELONGATION))
             || (sharp && base.or(fitted).is_some_and(|f| self.lobe_has_tangent(&f)));
-        // Where noise or light errors blur the slice, its anisotropy falls below the threshold
-        // on materials that are anisotropic, and a highlight read through three lights has no
-        // moment to show its elongation by; a fitted lobe that explains the samples nearly as
-        // well as one of its family can, is elongated, and has its wide axis along one of the
-        // two symmetry axes is independent evidence of the same frame (an isotropic slice
-        // gives a round lobe, and no axis to agree on).
         let b = n.cross(t);
-        let agrees = [fitted, base].iter().flatten().any(|f| {
-            f.residual < LOBE_PLAUSIBLE
-                && self.lobe_has_tangent(f)
-                && f.tangent.dot(t).abs().max(f.tangent.dot(b).abs()) >= AXES_AGREE_COS
-        });
-        let tangent = if self.params.tangents
-            && ((elongated && anisotropy >= self.params.min_anisotropy as f64) || agrees)
-        {
+        let evidence = TangentEvidence {
+            anisotropy,
+            moments_elongated,
+            axes: [t, b],
+            lobes: [fitted, base].map(|f| f.map(|f| self.lobe_axis(&f))),
+        };
+        let tangent = if self.params.tangents && has_tangent(&self.tangent_policy, &evidence) {
             // Which of the two symmetry axes is the tangent (the wider highlight's): the
             // fitted lobe's or the highlight's wide axis where they are elongated (they
             // read every sample of the highlight, its clipped plateau included), else the
@@ -970,7 +980,12 @@ impl<'a> Estimator<'a> {
                     objective.normal_term(f.normal, CosineMode::CrossMultiplied, Level::Full);
                 if term.count >= self.min_domain && term.denominator > 0.0 {
                     let sd = term.numerator / term.denominator;
-                    return self.lobe_estimate(slice, &f, &term, sd, evals + f.evals);
+                    let cross = CosineMode::CrossMultiplied;
+                    let e = self.lobe_estimate(slice, objective, cross, &f, &term, sd);
+                    return PixelEstimate {
+                        evals: e.evals + evals + f.evals,
+                        ..e
+                    };
                 }
             }
         }
@@ -983,6 +998,12 @@ impl<'a> Estimator<'a> {
             tangent: if keep { tangent } else { None },
             confidence,
             anisotropy: anisotropy as f32,
+            tangent_confidence: match tangent {
+                Some(_) if keep => {
+                    tangent_confidence(&self.tangent_policy, &evidence, f_min, f_max)
+                }
+                _ => 0.0,
+            },
             residual: [sd_n, sd_nt, sd_nb],
             evals,
         }
@@ -1017,19 +1038,45 @@ impl<'a> Estimator<'a> {
 
     /// The estimate of a pixel the lobe `f` explains (its normal within the rig's reach): the
     /// lobe's frame, its elongation as the anisotropy, a tangent where the lobe is elongated.
-    fn lobe_estimate(
+    fn lobe_estimate<O: Objective>(
         &self,
         slice: &[f32],
+        objective: &O,
+        cosine: CosineMode,
         f: &LobeFit,
         term_n: &SymmetryTerm,
         sd_n: f64,
-        evals: u32,
     ) -> PixelEstimate {
         let anisotropy = f.elongation();
         let tangent = (self.params.tangents && self.lobe_has_tangent(f)).then_some(f.tangent);
         let confidence = self.confidence(slice, f.normal, term_n, f.residual);
         let status = self.status_of(confidence);
         let keep = status == PixelStatus::Estimated;
+        // The tangent's confidence is the data's, as for the search: how much more symmetric
+        // the slice is about the lobe's axes than about the pair 45 degrees away.
+        let (tangent_confidence, evals) = match tangent {
+            Some(t) if keep => {
+                let b = f.normal.cross(t);
+                let at = |a: DVec3| {
+                    self.tangent_distance(objective, f.normal, a, cosine, Level::Full)
+                        .0
+                };
+                let evidence = TangentEvidence {
+                    anisotropy,
+                    moments_elongated: false,
+                    axes: [t, b],
+                    lobes: [Some(self.lobe_axis(f)), None],
+                };
+                let c = tangent_confidence(
+                    &self.tangent_policy,
+                    &evidence,
+                    at(t),
+                    at((t + b).normalize()),
+                );
+                (c, 2)
+            }
+            _ => (0.0, 0),
+        };
         PixelEstimate {
             status,
             source: PixelSource::Lobe,
@@ -1037,6 +1084,7 @@ impl<'a> Estimator<'a> {
             tangent: if keep { tangent } else { None },
             confidence,
             anisotropy: anisotropy as f32,
+            tangent_confidence,
             residual: [sd_n, f.residual, 0.0],
             evals,
         }
@@ -1051,6 +1099,15 @@ impl<'a> Estimator<'a> {
             LOBE_MIN_ELONGATION * self.params.min_anisotropy as f64 / DEFAULT_MIN_ANISOTROPY as f64;
         let resolved = f.full_width().atan() >= TANGENT_MIN_SPACINGS * self.rig.halfway_spacing();
         f.elongation() >= threshold && resolved
+    }
+
+    /// A fitted lobe's reading of the highlight's axes, for the tangent decision.
+    fn lobe_axis(&self, f: &LobeFit) -> LobeAxis {
+        LobeAxis {
+            tangent: f.tangent,
+            residual: f.residual,
+            elongated: self.lobe_has_tangent(f),
+        }
     }
 
     /// A pixel's status for its `confidence`: culled under the user's threshold.
@@ -1114,7 +1171,7 @@ const SEARCH_DOUBTFUL: f64 = 0.1;
 /// A lobe fit that leaves less than this share of the energy unexplained is a plausible answer
 /// where the search doubts its own (measured: at 1% the lobes leaving 0.5-1% on rough metal
 /// bumps under 200 lights were 9.4 degrees off where the search was 6.1).
-const LOBE_PLAUSIBLE: f64 = 0.005;
+pub(crate) const LOBE_PLAUSIBLE: f64 = 0.005;
 
 /// The lobes fitted to a pixel: the one of all its samples, and under a sharp coat the base's,
 /// fitted without the coat's samples.
@@ -1123,10 +1180,6 @@ struct Lobes {
     fitted: Option<LobeFit>,
     base: Option<LobeFit>,
 }
-
-/// A fitted lobe's wide axis agrees with a symmetry axis when it is within 15 degrees of it
-/// (this is its cosine).
-const AXES_AGREE_COS: f64 = 0.965_925_826_289_068_3;
 
 /// Where a diffuse term explains a pixel too, the lobe is its answer only if it leaves less
 /// than this share of what the diffuse term leaves unexplained.
@@ -1345,6 +1398,11 @@ impl PixelRecord {
             tangent: e.tangent.map_or([f32::NAN; 3], |t| t.as_vec3().to_array()),
             confidence: if scored { e.confidence } else { f32::NAN },
             anisotropy: if scored { e.anisotropy } else { f32::NAN },
+            tangent_confidence: if scored {
+                e.tangent_confidence
+            } else {
+                f32::NAN
+            },
             evals: e.evals,
         }
     }

@@ -4,14 +4,16 @@
 //! point location), [`slice`](mod@slice) (a pixel's measured BRDF slice, interpolated between
 //! the samples), [`symmetry`] (the symmetry distances), [`objective`] (their reference and fast
 //! implementations), [`highlight`] (the highlight's moments: a start for the search),
-//! [`optim`] (Nelder-Mead) and [`estimator`] (the per-pixel search, confidence, anisotropy and
-//! fallbacks, and the whole-stack pipeline).
+//! [`optim`] (Nelder-Mead), [`policy`] (whether the data determine a tangent, and how surely)
+//! and [`estimator`] (the per-pixel search, confidence, anisotropy and fallbacks, and the
+//! whole-stack pipeline).
 
 pub mod estimator;
 pub mod highlight;
 pub mod lobe;
 pub mod objective;
 pub mod optim;
+pub mod policy;
 pub mod rig;
 pub mod slice;
 pub mod symmetry;
