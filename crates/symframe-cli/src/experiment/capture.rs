@@ -610,8 +610,8 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
          `image` crate's encoder (4:4:4, no chroma subsampling) and decoded by symframe's \
          reader, the reader's saturation rule (a pixel with a raw value at 99.5% of the \
          maximum is unknown under that light), and light directions given to every method \
-         each off by the stated angle in a random direction. The reference capture is {}, stored losslessly (as a PNG). \
-         Rigs: dense = {} lights uniform over the 65-degree cone (a 130-degree cap), sparse = \
+         each off by the stated angle in a random direction. The reference capture is {}, \
+         stored losslessly (as a PNG). Rigs: dense = {} lights uniform over the 65-degree cone (a 130-degree cap), sparse = \
          200, narrow = the DiLiGenT-like 96-light grid within 45 degrees. The estimator runs \
          with its defaults. Cells: mean normal error in degrees over pixels within 60 degrees \
          of the view; for the estimator also the share of estimated pixels with a tangent (t), \
