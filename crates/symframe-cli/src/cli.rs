@@ -85,8 +85,9 @@ pub enum ExperimentArg {
     /// Every BRDF family over roughness and diffuse fraction, spheres and shadowed bumps, dense,
     /// sparse and narrow rigs: the estimator against every baseline.
     Materials,
-    /// Real-capture conditions: bit depth, clipping, shot noise and light-direction error swept
-    /// over one-lobe, two-lobe, woven, sheen and off-family materials, against the baselines.
+    /// Real-capture conditions: bit depth, JPEG quality, clipping, shot noise and
+    /// light-direction error swept over one-lobe, two-lobe, woven, sheen and off-family
+    /// materials, against the baselines.
     Capture,
     /// Every experiment, then the report `<output>.md` (e.g. docs/validation.md).
     All,

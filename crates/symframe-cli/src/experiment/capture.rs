@@ -1,15 +1,24 @@
 //! Real-capture conditions: the estimator and every baseline on renders degraded the way
-//! cameras and calibrations degrade them (8- to 16-bit quantisation in sRGB or linear, a
-//! share of clipped samples, shot noise of a given full well, light directions off by a given
-//! angle), over one-lobe, two-lobe, woven, sheen and off-family materials, under a dense, a
-//! sparse and a narrow rig. Each axis is swept about the reference capture (8-bit sRGB, 0.5%
-//! clipped, 4,000-electron full well, 1° light error).
+//! cameras and calibrations degrade them (8- to 16-bit quantisation in sRGB or linear, JPEG
+//! compression of the 8-bit images at a given quality, a share of clipped samples, shot noise
+//! of a given full well, light directions off by a given angle), over one-lobe, two-lobe,
+//! woven, sheen and off-family materials, under a dense, a sparse and a narrow rig. Each axis
+//! is swept about the reference capture (8-bit sRGB stored losslessly, 0.5% clipped,
+//! 4,000-electron full well, 1° light error).
+//!
+//! A JPEG capture is a real round trip: each degraded 8-bit sRGB image is encoded by the
+//! `image` crate's encoder and decoded by symframe-io's reader, the one `symframe estimate`
+//! reads a `.jpg` with (its sRGB decoding and saturation rule).
 //!
 //! Materials marked held out were not looked at while the estimator's rules were chosen:
 //! their figures check the rules, they did not shape them.
 
-use anyhow::Result;
+use std::path::Path;
+
+use anyhow::{ensure, Context, Result};
 use glam::DVec3;
+use image::codecs::jpeg::JpegEncoder;
+use image::ExtendedColorType;
 use rayon::prelude::*;
 use serde::Serialize;
 use symframe::baselines::{estimate_stack_baseline, Baseline};
@@ -18,8 +27,9 @@ use symframe::eval::{evaluate, vec_at, Evaluation};
 use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{jitter_lights, rigs, Degradation, Noise, Scene, TangentField};
 use symframe::{
-    estimate_stack, EstimateMaps, EstimatorParams, NoiseModel, Quantisation, Rig, RigOptions,
+    estimate_stack, EstimateMaps, EstimatorParams, NoiseModel, Quantisation, Rig, RigOptions, Stack,
 };
+use symframe_io::{decode_image, linear_to_srgb, DecodeOptions};
 
 use super::plot::{self, md_table};
 use super::{Ctx, Section};
@@ -128,6 +138,9 @@ pub struct Condition {
     pub full_well: Option<f64>,
     /// Angle each light direction is off by in the calibration given to the methods, degrees.
     pub light_error_deg: f64,
+    /// Quality the 8-bit sRGB images are saved at as JPEG (`None`: stored losslessly, as a
+    /// PNG). Only with 8-bit sRGB.
+    pub jpeg_quality: Option<u8>,
 }
 
 /// The reference capture: 8-bit sRGB, 0.5% clipped, 4,000 electrons, 1 degree.
@@ -137,15 +150,17 @@ pub const REFERENCE: Condition = Condition {
     clipped: 0.005,
     full_well: Some(4000.0),
     light_error_deg: 1.0,
+    jpeg_quality: None,
 };
 
 impl Condition {
     /// A short label for tables.
     pub fn label(&self) -> String {
-        let fmt = match (self.bits, self.srgb) {
-            (None, _) => "float".to_string(),
-            (Some(b), true) => format!("{b}-bit sRGB"),
-            (Some(b), false) => format!("{b}-bit linear"),
+        let fmt = match (self.bits, self.srgb, self.jpeg_quality) {
+            (None, _, _) => "float".to_string(),
+            (Some(b), true, Some(q)) => format!("{b}-bit sRGB JPEG q{q}"),
+            (Some(b), true, None) => format!("{b}-bit sRGB"),
+            (Some(b), false, _) => format!("{b}-bit linear"),
         };
         let noise = self
             .full_well
@@ -157,7 +172,9 @@ impl Condition {
         )
     }
 
-    /// The degradation, for images whose `quantile`-th sample (the clip point) is `at`.
+    /// The degradation, for images whose `quantile`-th sample (the clip point) is `at`. A JPEG
+    /// capture is quantised and marked by its round trip ([`render_stack_jpeg`]) instead: its
+    /// `quantise_bits` and `saturation` say what that round trip does.
     fn degradation(&self, at: f32, seed: u64) -> Degradation {
         let exposure = 1.0 / at.max(1e-9);
         let integer = self.bits.is_some();
@@ -193,9 +210,18 @@ fn conditions(quick: bool) -> Vec<(&'static str, Condition)> {
         clipped: 0.0,
         full_well: None,
         light_error_deg: 0.0,
+        jpeg_quality: None,
     };
     let mut v = vec![("reference", r), ("clean", clean)];
     if quick {
+        // One JPEG condition, so that the quick run goes through the round trip.
+        v.push((
+            "jpeg",
+            Condition {
+                jpeg_quality: Some(90),
+                ..r
+            },
+        ));
         return v;
     }
     for (bits, srgb) in [(None, false), (Some(16), false), (Some(12), false)] {
@@ -216,7 +242,78 @@ fn conditions(quick: bool) -> Vec<(&'static str, Condition)> {
             },
         ));
     }
+    for q in [75, 90, 100] {
+        v.push((
+            "jpeg",
+            Condition {
+                jpeg_quality: Some(q),
+                ..r
+            },
+        ));
+    }
     v
+}
+
+/// One degraded image as a camera's JPEG reaches the tool: `linear` (exposed, noisy and
+/// clipped, not yet quantised) quantised to 8-bit sRGB, encoded as JPEG at `quality`, and
+/// decoded as `symframe estimate` decodes a `.jpg` (sRGB to linear; a pixel with a channel at
+/// or above `opts.saturation` of 255 censored, `+inf` in all three channels).
+fn jpeg_round_trip(
+    linear: &[f32],
+    width: usize,
+    height: usize,
+    quality: u8,
+    opts: &DecodeOptions,
+) -> Result<Vec<f32>> {
+    // Quantised as `render::quantise_srgb` quantises an 8-bit sRGB (PNG) capture.
+    let bytes: Vec<u8> = linear
+        .iter()
+        .map(|&v| (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0).round() as u8)
+        .collect();
+    let mut jpeg = Vec::new();
+    // The encoder has no subsampling option: it writes every component at full resolution
+    // (4:4:4, whatever its doc says), so its chroma loses less than a camera's 4:2:0.
+    JpegEncoder::new_with_quality(&mut jpeg, quality)
+        .encode(&bytes, width as u32, height as u32, ExtendedColorType::Rgb8)
+        .context("JPEG encoding")?;
+    drop(bytes);
+    let img = decode_image(Path::new("capture.jpg"), &jpeg, opts)?;
+    ensure!(
+        (img.width, img.height) == (width, height),
+        "JPEG round trip changed the size"
+    );
+    Ok(img.into_rgb())
+}
+
+/// Images per batch of [`render_stack_jpeg`]: those in memory besides the stack.
+const JPEG_BATCH: usize = 32;
+
+/// The stack of a JPEG capture: each image rendered and degraded by `camera` (exposure, noise,
+/// clip; no quantisation), then through [`jpeg_round_trip`]. Images go into the stack a batch
+/// at a time, so that the whole stack is not held twice.
+fn render_stack_jpeg(
+    scene: &Scene,
+    brdf: &dyn Brdf,
+    lights: &[DVec3],
+    camera: &Degradation,
+    quality: u8,
+    opts: &DecodeOptions,
+) -> Result<Stack> {
+    let mut stack = Stack::zeros(scene.width, scene.height, lights.len());
+    for start in (0..lights.len()).step_by(JPEG_BATCH) {
+        let end = (start + JPEG_BATCH).min(lights.len());
+        let images: Vec<Vec<f32>> = (start..end)
+            .into_par_iter()
+            .map(|i| {
+                let img = scene.render_degraded(brdf, lights[i], i, camera);
+                jpeg_round_trip(&img, scene.width, scene.height, quality, opts)
+            })
+            .collect::<Result<_>>()?;
+        for (i, img) in (start..end).zip(&images) {
+            stack.set_image(i, img);
+        }
+    }
+    Ok(stack)
 }
 
 /// The rigs: dense (1,000 lights over a 130-degree cap), sparse (200), narrow (the DiLiGenT-like
@@ -364,7 +461,29 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
             drop(clean);
             let seed = 17 + 1000 * m as u64 + c as u64;
             let d = cond.degradation(at, seed);
-            let stack = scene.render_stack_degraded(mat.brdf.as_ref(), &lights, &d);
+            let stack = match cond.jpeg_quality {
+                None => scene.render_stack_degraded(mat.brdf.as_ref(), &lights, &d),
+                Some(q) => {
+                    ensure!(
+                        (cond.bits, cond.srgb) == (Some(8), true),
+                        "a JPEG capture is 8-bit sRGB: {}",
+                        cond.label()
+                    );
+                    // Quantisation and the saturation rule are the round trip's.
+                    let camera = Degradation {
+                        quantise_bits: None,
+                        saturation: None,
+                        ..d
+                    };
+                    // The reader's defaults (its saturation rule is the one `degradation`
+                    // copies); above 1 where that rule is off: no sample counts as saturated.
+                    let mut opts = DecodeOptions::default();
+                    if d.saturation.is_none() {
+                        opts.saturation = 2.0;
+                    }
+                    render_stack_jpeg(&scene, mat.brdf.as_ref(), &lights, &camera, q, &opts)?
+                }
+            };
             // The methods get the lights as a calibration knows them.
             let known = if cond.light_error_deg > 0.0 {
                 jitter_lights(&lights, cond.light_error_deg, seed)
@@ -373,7 +492,8 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
             };
             let rig = Rig::new(&known, RigOptions::default())?;
             let mask = Some(&scene.mask[..]);
-            // What the decoder tells the estimator: the clip level of integer files.
+            // What the decoder tells the estimator: the clip level of integer files, and for
+            // a JPEG its 8-bit sRGB samples (the compression is not known to it).
             let params = EstimatorParams {
                 noise: NoiseModel {
                     clip_level: d.saturation,
@@ -516,18 +636,21 @@ fn reading(rows: &[Row]) -> String {
 pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
     let size = if ctx.quick { 20 } else { 48 };
     let rows = compute(ctx.quick, size)?;
-    let mut md =
-        String::from("## Real-capture conditions: quantisation, clipping, noise, light error\n\n");
+    let mut md = String::from(
+        "## Real-capture conditions: quantisation, JPEG, clipping, noise, light error\n\n",
+    );
     md += &format!(
         "Set-up: a {size} x {size} sphere (circular tangents) of each material, rendered by \
          symframe's renderer and degraded as a camera and a calibration degrade it: the \
          exposure set so that the given share of the object's samples reach the white level \
          and clip there, shot noise of the given full well (electrons at the white level), \
          quantisation (8-bit in the sRGB-encoded domain as a PNG or JPEG stores it, 12 and 16 \
-         bits linear), the reader's saturation rule (a pixel with a raw value at 99.5% of the \
+         bits linear), for JPEG captures the 8-bit image encoded at the given quality by the \
+         `image` crate's encoder (4:4:4, no chroma subsampling) and decoded by symframe's \
+         reader, the reader's saturation rule (a pixel with a raw value at 99.5% of the \
          maximum is unknown under that light), and light directions given to every method \
-         each off by the stated angle in a random direction. The reference capture is {}. \
-         Rigs: dense = {} lights uniform over the 65-degree cone (a 130-degree cap), sparse = \
+         each off by the stated angle in a random direction. The reference capture is {}, \
+         stored losslessly (as a PNG). Rigs: dense = {} lights uniform over the 65-degree cone (a 130-degree cap), sparse = \
          200, narrow = the DiLiGenT-like 96-light grid within 45 degrees. The estimator runs \
          with its defaults. Cells: mean normal error in degrees over pixels within 60 degrees \
          of the view; for the estimator also the share of estimated pixels with a tangent (t), \
@@ -582,6 +705,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
         ("noise", "Shot noise"),
         ("clipped", "Clipped share"),
         ("lights", "Light-direction error"),
+        ("jpeg", "JPEG quality"),
     ] {
         let mut set: Vec<&Row> = rows
             .iter()
@@ -611,6 +735,10 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
                         .full_well
                         .map_or("none".into(), |e| format!("{e:.0} e-")),
                     "clipped" => format!("{:.1}%", 100.0 * r.condition.clipped),
+                    "jpeg" => r
+                        .condition
+                        .jpeg_quality
+                        .map_or("lossless".into(), |q| format!("q{q}")),
                     _ => format!("{}°", r.condition.light_error_deg),
                 });
             }
@@ -688,4 +816,121 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
         markdown: md,
         figures: rows,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Side of the test image.
+    const N: usize = 64;
+
+    /// Whether pixel `p` of the test image is near a highlight: within 8 of the disc or in
+    /// the quarter holding the square.
+    fn near_highlight(p: usize) -> bool {
+        let (x, y) = ((p % N) as f32, (p / N) as f32);
+        (x - 12.0).hypot(y - 12.0) <= 8.0 || (x >= 32.0 && y >= 32.0)
+    }
+
+    /// A smooth colour image (linear, within `[0.02, 0.8]`) with two clipped highlights: a
+    /// disc of radius 3 about `(12, 12)` and the square `[40, 56)²`, whole JPEG blocks.
+    fn smooth_with_highlights() -> Vec<f32> {
+        let mut img = Vec::with_capacity(N * N * 3);
+        for y in 0..N {
+            for x in 0..N {
+                let (u, v) = (x as f32 / N as f32, y as f32 / N as f32);
+                let base = 0.02 + 0.5 * (0.5 + 0.5 * (6.0 * u).sin() * (4.0 * v).cos());
+                let disc = (x as f32 - 12.0).hypot(y as f32 - 12.0) <= 3.0;
+                let square = (40..56).contains(&x) && (40..56).contains(&y);
+                if disc || square {
+                    img.extend([1.0f32; 3]);
+                } else {
+                    img.extend([base, 0.8 * base + 0.1 * v, 0.6 * base + 0.2 * u]);
+                }
+            }
+        }
+        img
+    }
+
+    /// Max and mean absolute difference, in 8-bit sRGB steps, away from the highlights.
+    fn steps(a: &[f32], b: &[f32]) -> (f32, f32) {
+        let d: Vec<f32> = (0..N * N)
+            .filter(|&p| !near_highlight(p))
+            .flat_map(|p| 3 * p..3 * p + 3)
+            .map(|i| 255.0 * (linear_to_srgb(a[i]) - linear_to_srgb(b[i])).abs())
+            .collect();
+        let max = d.iter().fold(0.0f32, |m, &v| m.max(v));
+        (max, d.iter().sum::<f32>() / d.len() as f32)
+    }
+
+    #[test]
+    fn jpeg_round_trip_is_close_at_q100_lossy_at_q75_and_keeps_highlights_censored() {
+        let img = smooth_with_highlights();
+        let opts = DecodeOptions::default();
+        let trip = |q| jpeg_round_trip(&img, N, N, q, &opts).unwrap();
+        let (q100, q75) = (trip(100), trip(75));
+        let (max100, mean100) = steps(&img, &q100);
+        let (max75, mean75) = steps(&img, &q75);
+        // Measured: q100 at most 2.6 steps off the unquantised input (half a step of it the
+        // 8-bit rounding), 0.56 on average; q75 7.2 and 1.0.
+        assert!(max100 <= 3.0 && mean100 <= 0.75, "q100: {max100} {mean100}");
+        assert!(
+            max75 >= 4.0 && mean75 >= 1.5 * mean100,
+            "q75: {max75} {mean75}"
+        );
+        let in_square = |p: usize| (40..56).contains(&(p % N)) && (40..56).contains(&(p / N));
+        let in_disc = |p: usize| ((p % N) as f32 - 12.0).hypot((p / N) as f32 - 12.0) <= 3.0;
+        for (q, out) in [(100, &q100), (90, &trip(90)), (75, &q75)] {
+            let px = |p: usize| &out[3 * p..3 * p + 3];
+            // The square's pixels are censored in all three channels, as the reader marks
+            // them; away from the highlights nothing is.
+            for p in (0..N * N).filter(|&p| in_square(p)) {
+                assert!(px(p).iter().all(|&v| v == f32::INFINITY), "q{q} {p}");
+            }
+            for p in (0..N * N).filter(|&p| !near_highlight(p)) {
+                assert!(px(p).iter().all(|v| v.is_finite()), "q{q} {p}");
+            }
+            // The small disc's sharp edge rings: at q75 (measured: 8 of its 29 pixels; 5 at
+            // q90, none at q100) some of its clipped pixels come back below the saturation
+            // level, where the estimator takes them as measured.
+            let lost = (0..N * N)
+                .filter(|&p| in_disc(p) && px(p)[0].is_finite())
+                .count();
+            match q {
+                100 => assert_eq!(lost, 0),
+                75 => assert!(lost > 0),
+                _ => {}
+            }
+        }
+        // With the saturation rule off the square decodes to white.
+        let off = DecodeOptions {
+            saturation: 2.0,
+            ..DecodeOptions::default()
+        };
+        let q90 = jpeg_round_trip(&img, N, N, 90, &off).unwrap();
+        assert!(q90.iter().all(|v| v.is_finite()));
+        assert!(q90[3 * (48 * N + 48)] > 0.99);
+    }
+
+    #[test]
+    fn jpeg_conditions_are_labelled_and_swept_about_the_reference() {
+        let c = Condition {
+            jpeg_quality: Some(90),
+            ..REFERENCE
+        };
+        assert!(
+            c.label().starts_with("8-bit sRGB JPEG q90, 0.5% clipped"),
+            "{}",
+            c.label()
+        );
+        let qualities: Vec<Option<u8>> = conditions(false)
+            .iter()
+            .filter(|(s, _)| *s == "jpeg")
+            .map(|(_, c)| c.jpeg_quality)
+            .collect();
+        assert_eq!(qualities, [Some(75), Some(90), Some(100)]);
+        assert!(conditions(false)
+            .iter()
+            .all(|(s, c)| (*s == "jpeg") == c.jpeg_quality.is_some()));
+    }
 }
