@@ -347,6 +347,13 @@ pub struct Cell {
     pub confident: usize,
     /// Share of those within 1° of the truth.
     pub confident_within_1: f64,
+    /// Pixels with a tangent whose tangent confidence is at least 0.9 (the estimator on
+    /// anisotropic materials only).
+    pub tangent_confident: usize,
+    /// Share of those whose tangent's axes are within [`TANGENT_WITHIN_DEG`] of the truth's
+    /// (tangent and binormal may swap: the confidence measures how clearly the axes stand
+    /// out, not which of them is the wider).
+    pub tangent_confident_within: f64,
     /// Share of the estimated pixels (within 60°) per source code (`source.npy`'s codes).
     pub sources: [f64; 5],
 }
@@ -370,6 +377,9 @@ pub struct Row {
     pub cells: Vec<Cell>,
 }
 
+/// A confident tangent counts as right within this many degrees.
+pub const TANGENT_WITHIN_DEG: f64 = 2.5;
+
 fn cell(scene: &Scene, maps: &EstimateMaps, gt_t: &[f32], anisotropic: bool) -> Cell {
     let e: Evaluation = evaluate(
         &maps.normals,
@@ -381,8 +391,23 @@ fn cell(scene: &Scene, maps: &EstimateMaps, gt_t: &[f32], anisotropic: bool) -> 
     );
     let gt = scene.gt_normals();
     let (mut confident, mut within) = (0usize, 0usize);
+    let (mut t_confident, mut t_within) = (0usize, 0usize);
     let mut sources = [0usize; 5];
     for p in 0..scene.n_pixels() {
+        if let (true, Some(t), Some(g), Some(gn)) = (
+            anisotropic && scene.mask[p] && maps.tangent_confidence[p] >= 0.9,
+            vec_at(&maps.tangents, p),
+            vec_at(gt_t, p),
+            vec_at(&gt, p),
+        ) {
+            if gn.z >= 0.5 {
+                // The axes' error: the tangent against the true tangent or binormal.
+                let b = gn.cross(g).normalize_or_zero();
+                let cos = t.dot(g).abs().max(t.dot(b).abs()).min(1.0);
+                t_confident += 1;
+                t_within += (cos.acos().to_degrees() <= TANGENT_WITHIN_DEG) as usize;
+            }
+        }
         if scene.mask[p]
             && vec_at(&maps.normals, p).is_some()
             && gt.get(3 * p + 2).is_some_and(|z| *z >= 0.5)
@@ -407,6 +432,8 @@ fn cell(scene: &Scene, maps: &EstimateMaps, gt_t: &[f32], anisotropic: bool) -> 
         tangent_swap_free: e.tangent_error_swap_free.mean,
         confident,
         confident_within_1: within as f64 / confident.max(1) as f64,
+        tangent_confident: t_confident,
+        tangent_confident_within: t_within as f64 / t_confident.max(1) as f64,
         sources: {
             let n = sources.iter().sum::<usize>().max(1) as f64;
             sources.map(|c| c as f64 / n)
@@ -513,6 +540,8 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
                 let mut c = cell(&scene, &maps, &gt_t, mat.anisotropic);
                 c.confident = 0;
                 c.confident_within_1 = f64::NAN;
+                c.tangent_confident = 0;
+                c.tangent_confident_within = f64::NAN;
                 cells.push(c);
             }
             Ok(Row {
@@ -775,10 +804,13 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
     // Calibrated confidence: per set, the share of confident pixels within 1 degree.
     let mut conf_rows = Vec::new();
     let (mut all_confident, mut all_within) = (0usize, 0.0f64);
+    let (mut all_t, mut all_t_within) = (0usize, 0.0f64);
     for r in &rows {
         let c = &r.cells[0];
         all_confident += c.confident;
         all_within += c.confident_within_1 * c.confident as f64;
+        all_t += c.tangent_confident;
+        all_t_within += c.tangent_confident_within * c.tangent_confident as f64;
         conf_rows.push(vec![
             name_of(r),
             r.condition.label(),
@@ -786,6 +818,16 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
             c.confident.to_string(),
             pct(if c.confident > 0 {
                 c.confident_within_1
+            } else {
+                f64::NAN
+            }),
+            if r.anisotropic {
+                c.tangent_confident.to_string()
+            } else {
+                "–".into()
+            },
+            pct(if c.tangent_confident > 0 {
+                c.tangent_confident_within
             } else {
                 f64::NAN
             }),
@@ -798,19 +840,27 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
             "rig",
             "pixels with confidence ≥ 0.9",
             "of those within 1°",
+            "tangents with tangent confidence ≥ 0.9",
+            "of those within 2.5° (axes)",
         ]
         .map(String::from),
         &conf_rows,
     );
     md += &format!(
         "### Does confidence mean something?\n\nOver every set above: {} pixels with \
-         confidence ≥ 0.9, {} of them within 1° of the truth.\n\n{t}\n",
+         confidence ≥ 0.9, {} of them within 1° of the truth; {} tangents (anisotropic \
+         materials) with tangent confidence ≥ 0.9 (`tangent_confidence.npy`), {} of them with \
+         their axes within {TANGENT_WITHIN_DEG}° of the truth's.\n\n{t}\n",
         all_confident,
-        pct(all_within / all_confident.max(1) as f64)
+        pct(all_within / all_confident.max(1) as f64),
+        all_t,
+        pct(all_t_within / all_t.max(1) as f64)
     );
     println!(
-        "confidence >= 0.9: {all_confident} pixels, {} within 1 degree",
-        pct(all_within / all_confident.max(1) as f64)
+        "confidence >= 0.9: {all_confident} pixels, {} within 1 degree; tangent confidence >= \
+         0.9: {all_t} tangents, {} within {TANGENT_WITHIN_DEG} degrees",
+        pct(all_within / all_confident.max(1) as f64),
+        pct(all_t_within / all_t.max(1) as f64)
     );
     Ok(Section {
         markdown: md,
