@@ -47,7 +47,8 @@
 //! let EstimateOutcome::Maps(done) = estimate(&config, &Control::default())? else {
 //!     unreachable!("no shard was asked for");
 //! };
-//! assert!(done.maps.counts.estimated > 50);
+//! assert!(done.report.pixels.estimated > 50);
+//! assert!(done.maps.is_some(), "kept by default");
 //! assert!(out.join("normals.npy").is_file() && out.join("source.npy").is_file());
 //! # Ok(())
 //! # }
@@ -59,6 +60,7 @@ mod estimate;
 pub mod eval;
 pub mod export;
 mod fit;
+mod maps_out;
 pub mod integrate;
 mod merge;
 mod outdir;
@@ -70,7 +72,7 @@ mod view;
 use std::sync::atomic::AtomicBool;
 
 pub use estimate::{
-    estimate, write_estimate_outputs, BaselineParameters, CacheConfig, CacheReport, Done,
+    estimate, BaselineParameters, CacheConfig, CacheReport, Done,
     EstimateConfig, EstimateOutcome, InputsRecord, LightCounts, MethodConfig, MethodParameters,
     Report, Shard, SourceCount, Sources, SymmetryParameters, TileReport, Timings, CACHE_DIR,
     TILES_DIR,

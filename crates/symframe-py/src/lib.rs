@@ -42,7 +42,12 @@ fn to_python<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<
 }
 
 /// The maps as numpy arrays in `dict`.
-fn put_maps<'py>(py: Python<'py>, dict: &Bound<'py, PyDict>, maps: EstimateMaps) -> PyResult<()> {
+fn put_maps<'py>(
+    py: Python<'py>,
+    dict: &Bound<'py, PyDict>,
+    maps: Option<EstimateMaps>,
+) -> PyResult<()> {
+    let maps = maps.ok_or_else(|| SymframeError::new_err("the job kept no maps in memory"))?;
     let (h, w) = (maps.height, maps.width);
     dict.set_item(
         "normals",
@@ -239,6 +244,7 @@ fn estimate_path<'py>(
         cache: options::cache(&mut o)?,
         shard: options::shard(&mut o)?,
         normal_png: symframe_io::NormalPng::OpenGl,
+        keep_maps: true,
     };
     o.finish()?;
     let outcome = run_job(py, progress, threads, |ctl| {
@@ -788,7 +794,7 @@ fn merge<'py>(
     threads: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let done = run_job(py, progress, threads, |ctl| {
-        symframe_job::merge(&shards, &out, ctl)
+        symframe_job::merge(&shards, &out, true, ctl)
     })?;
     let path = out.join("report.json");
     let text = std::fs::read_to_string(&path)
