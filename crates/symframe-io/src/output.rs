@@ -73,7 +73,10 @@ impl<T: ndarray_npy::WritableElement> NpyRows<T> {
     /// Appends `values`, the next ones in row-major order.
     pub fn push(&mut self, values: &[T]) -> Result<()> {
         if values.len() > self.left {
-            return Err(Error::invalid(&self.path, "more values than the array's shape"));
+            return Err(Error::invalid(
+                &self.path,
+                "more values than the array's shape",
+            ));
         }
         T::write_slice(values, &mut self.w).map_err(|e| Error::encode(&self.path, e))?;
         self.left -= values.len();

@@ -20,8 +20,8 @@ use symframe_io::{
     TileCache, TileGrid,
 };
 
-use crate::merge::{write_manifest, ShardManifest, MANIFEST, MANIFEST_FORMAT, MANIFEST_VERSION};
 use crate::maps_out::{write_estimate_outputs, TileResults, WriteOptions};
+use crate::merge::{write_manifest, ShardManifest, MANIFEST, MANIFEST_FORMAT, MANIFEST_VERSION};
 use crate::outdir::OutputDir;
 use crate::tiles::{peak_rss_bytes, run_tiles, shard_tiles, tile_path};
 use crate::{Checkpoint, Control, Interrupted, Progress, Stage};

@@ -60,8 +60,8 @@ mod estimate;
 pub mod eval;
 pub mod export;
 mod fit;
-mod maps_out;
 pub mod integrate;
+mod maps_out;
 mod merge;
 mod outdir;
 mod relight;
@@ -72,10 +72,9 @@ mod view;
 use std::sync::atomic::AtomicBool;
 
 pub use estimate::{
-    estimate, BaselineParameters, CacheConfig, CacheReport, Done,
-    EstimateConfig, EstimateOutcome, InputsRecord, LightCounts, MethodConfig, MethodParameters,
-    Report, Shard, SourceCount, Sources, SymmetryParameters, TileReport, Timings, CACHE_DIR,
-    TILES_DIR,
+    estimate, BaselineParameters, CacheConfig, CacheReport, Done, EstimateConfig, EstimateOutcome,
+    InputsRecord, LightCounts, MethodConfig, MethodParameters, Report, Shard, SourceCount, Sources,
+    SymmetryParameters, TileReport, Timings, CACHE_DIR, TILES_DIR,
 };
 pub use fit::{fit, FitConfig, FitLights, FitOutcome, FitReport, FitTimings};
 pub use merge::{merge, MergeOutcome, ShardManifest, MANIFEST};

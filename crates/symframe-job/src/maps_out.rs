@@ -40,17 +40,18 @@ impl TileResults<'_> {
     pub(crate) fn band(&self, row: usize) -> Result<Band> {
         let g = &self.grid;
         let y0 = row * g.tile;
-        let mut maps = EstimateMaps::empty(g.width, g.tile.min(g.height.saturating_sub(y0)));
         let tiles: Vec<usize> = (row * g.tiles_x()..(row + 1) * g.tiles_x()).collect();
-        let records: Vec<_> = tiles
+        let records = tiles
             .par_iter()
             .map(|&t| {
                 symframe_io::read_tile_result(&(self.path_of)(t), self.job, t, g.tile_pixels(t))
             })
-            .collect();
+            .collect::<symframe_io::Result<Vec<_>>>()?;
+        // Sized once the files are read and verified (a forged one is refused first).
+        let mut maps = EstimateMaps::empty(g.width, g.tile.min(g.height.saturating_sub(y0)));
         let offset = y0 * g.width;
         for (&t, r) in tiles.iter().zip(records) {
-            for (p, rec) in g.pixels(t).zip(r?) {
+            for (p, rec) in g.pixels(t).zip(r) {
                 maps.put(p - offset, &rec);
             }
         }
@@ -149,9 +150,10 @@ impl RowWriters {
             )))?;
             self.source_png
                 .push(copy(symframe_io::source_map_rgb8(&m.source[n1])))?;
-            self.gltf_png.push(copy(crate::export::gltf_anisotropy_rgb8(
-                tangents, strength,
-            )))?;
+            self.gltf_png
+                .push(copy(crate::export::gltf_anisotropy_rgb8(
+                    tangents, strength,
+                )))?;
         }
         Ok(())
     }

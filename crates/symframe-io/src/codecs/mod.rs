@@ -48,8 +48,8 @@ mod tiff;
 
 pub use colour::ColourTag;
 use exr::read_exr;
-pub(crate) use exr::{write_exr_interleaved, write_exr_pixels};
 pub use exr::{write_exr_channels, write_exr_rgb};
+pub(crate) use exr::{write_exr_interleaved, write_exr_pixels};
 use image_rs::read_with_image;
 use pfm::{pfm_raw, pfm_size};
 pub use pfm::{read_pfm, write_pfm};

@@ -186,7 +186,10 @@ impl PngRows {
     /// row's).
     pub fn push(&mut self, fill: impl FnOnce(&mut [u8])) -> Result<()> {
         let Some(stream) = self.stream.as_mut().filter(|_| self.rows_left > 0) else {
-            return Err(Error::invalid(&self.path, "more rows than the PNG's height"));
+            return Err(Error::invalid(
+                &self.path,
+                "more rows than the PNG's height",
+            ));
         };
         fill(&mut self.row);
         stream
