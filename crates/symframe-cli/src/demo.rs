@@ -105,7 +105,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     else {
         unreachable!("the demo does not run shards");
     };
-    let maps = done.maps;
+    let maps = done
+        .maps
+        .context("the demo's estimate kept no maps in memory")?;
     let e = evaluate(
         &maps.normals,
         &maps.tangents,

@@ -113,6 +113,7 @@ pub fn config(args: &EstimateArgs) -> Result<EstimateConfig> {
             },
         },
         shard: args.tiles,
+        keep_maps: false,
         normal_png: args.normal_png.into(),
     })
 }
@@ -140,7 +141,7 @@ pub fn run(args: &EstimateArgs) -> Result<EstimateOutcome> {
     if progress::chatty() {
         match &outcome {
             EstimateOutcome::Maps(done) => {
-                let (c, r) = (&done.maps.counts, &done.report);
+                let (c, r) = (&done.report.pixels, &done.report);
                 eprintln!(
                     "symframe ({}): {} pixels estimated ({} with a tangent), {} discarded, {} \
                      culled, {} without data; {} of {} lights used; {:.1} s",
@@ -182,10 +183,15 @@ fn flag_hint(e: anyhow::Error) -> anyhow::Error {
 pub fn merge(args: &MergeArgs) -> Result<()> {
     let bars = progress::Bars::default();
     let show = |p| bars.update(p);
-    let done = symframe_job::merge(&args.shards, &args.output, &crate::control(&show, None))?;
+    let done = symframe_job::merge(
+        &args.shards,
+        &args.output,
+        false,
+        &crate::control(&show, None),
+    )?;
     drop(bars);
     if progress::chatty() {
-        let c = &done.maps.counts;
+        let c = &done.pixels;
         eprintln!(
             "symframe: merged {} shards into {}: {} pixels estimated ({} with a tangent)",
             done.shards,

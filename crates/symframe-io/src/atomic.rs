@@ -21,6 +21,48 @@ fn temp_path(path: &Path) -> PathBuf {
     path.with_file_name(format!(".{name}.{}.{n}.tmp", std::process::id()))
 }
 
+/// A temporary sibling of a destination file, renamed over it by [`TempFile::commit`] and
+/// removed if dropped uncommitted: the atomic write of a file filled piece by piece.
+pub(crate) struct TempFile {
+    path: PathBuf,
+    tmp: PathBuf,
+    armed: bool,
+}
+
+impl TempFile {
+    /// Creates the temporary file for `path` (created anew, never through a planted link):
+    /// the guard and the file to write into.
+    pub(crate) fn create(path: &Path) -> Result<(Self, File)> {
+        let tmp = temp_path(path);
+        let file = OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&tmp)
+            .map_err(|e| Error::write(path, e))?;
+        let guard = Self {
+            path: path.to_path_buf(),
+            tmp,
+            armed: true,
+        };
+        Ok((guard, file))
+    }
+
+    /// Renames the temporary file (written and closed by now) to the destination.
+    pub(crate) fn commit(mut self) -> Result<()> {
+        std::fs::rename(&self.tmp, &self.path).map_err(|e| Error::write(&self.path, e))?;
+        self.armed = false;
+        Ok(())
+    }
+}
+
+impl Drop for TempFile {
+    fn drop(&mut self) {
+        if self.armed {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
 /// Writes `path` atomically: `fill` writes the content into a buffered temporary file, which
 /// is flushed and renamed to `path`. On any error the temporary file is removed. (No fsync:
 /// this guards against failed or interrupted writes, not against power loss.)
@@ -28,24 +70,14 @@ pub(crate) fn write_atomic<F>(path: &Path, fill: F) -> Result<()>
 where
     F: FnOnce(&mut BufWriter<File>) -> Result<()>,
 {
-    let tmp = temp_path(path);
-    let file = OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&tmp)
-        .map_err(|e| Error::write(path, e))?;
+    let (guard, file) = TempFile::create(path)?;
     let mut w = BufWriter::new(file);
-    let result = fill(&mut w).and_then(|()| {
-        let file = w
-            .into_inner()
-            .map_err(|e| Error::write(path, e.into_error()))?;
-        drop(file);
-        std::fs::rename(&tmp, path).map_err(|e| Error::write(path, e))
-    });
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+    fill(&mut w)?;
+    let file = w
+        .into_inner()
+        .map_err(|e| Error::write(path, e.into_error()))?;
+    drop(file);
+    guard.commit()
 }
 
 /// Writes `bytes` to `path` atomically.

@@ -46,15 +46,15 @@ pub use bounded::{
 pub use codecs::{
     declared_size, decode_image, linear_to_srgb, read_image, read_pfm, srgb_to_linear,
     write_exr_channels, write_exr_rgb, write_pfm, write_png16_rgb, write_png8_rgb, ColourTag,
-    DecodeOptions, Gamma, Image, SampleKind,
+    DecodeOptions, Gamma, Image, PngRows, SampleKind,
 };
 pub use dataset::{open_dataset, Dataset};
 pub use error::{Error, Result, Warning};
 pub use lights::{lp_path_convention, read_light_directions, LpPaths};
 pub use output::{
-    gray_map_rgb8, normal_map_rgb8, normal_map_values, read_npy_f32, read_npy_u8, source_map_rgb8,
-    tangent_map_rgb8, write_exr_map, write_normal_png16, write_npy_f32, write_npy_u8,
-    write_png_rgb8, NormalPng, SOURCE_PALETTE,
+    gray_map_rgb8, normal_map_rgb8, normal_map_values, normal_png16_row, read_npy_f32, read_npy_u8,
+    source_map_rgb8, tangent_map_rgb8, write_exr_map, write_exr_map_with, write_normal_png16,
+    write_npy_f32, write_npy_u8, write_png_rgb8, NormalPng, NpyRows, SOURCE_PALETTE,
 };
 pub use stack::{
     capture_noise, load_stack, load_stack_with_warnings, read_mask, read_mask_any_size,

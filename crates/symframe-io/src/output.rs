@@ -8,7 +8,7 @@ use std::path::Path;
 use ndarray::{ArrayD, ArrayViewD, IxDyn};
 use ndarray_npy::{ReadNpyExt, WriteNpyExt};
 
-use crate::atomic::write_atomic;
+use crate::atomic::{write_atomic, TempFile};
 use crate::codecs::{write_png, PngLayout};
 use crate::error::{Error, Result};
 
@@ -31,6 +31,73 @@ pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
     write_atomic(path, |w| {
         view.write_npy(w).map_err(|e| Error::encode(path, e))
     })
+}
+
+/// An `.npy` array written a piece at a time in row-major order (`T`: `f32` or `u8`), renamed
+/// into place by [`NpyRows::finish`] once every value is in (dropped unfinished, nothing is
+/// left behind): the same bytes as [`write_npy_f32`] and [`write_npy_u8`] write.
+pub struct NpyRows<T> {
+    path: std::path::PathBuf,
+    guard: TempFile,
+    w: std::io::BufWriter<std::fs::File>,
+    left: usize,
+    item: std::marker::PhantomData<T>,
+}
+
+impl<T: ndarray_npy::WritableElement> NpyRows<T> {
+    /// Starts the array of `shape` (its header written).
+    pub fn create(path: &Path, shape: &[usize]) -> Result<Self> {
+        let left = shape
+            .iter()
+            .try_fold(1usize, |a, &b| a.checked_mul(b))
+            .ok_or_else(|| Error::invalid(path, format!("shape {shape:?} too large")))?;
+        let header = ndarray_npy::npy::header::Header {
+            type_descriptor: T::type_descriptor(),
+            layout: ndarray_npy::npy::header::Layout::Standard,
+            shape: shape.to_vec(),
+        }
+        .to_bytes()
+        .map_err(|e| Error::encode(path, e))?;
+        let (guard, file) = TempFile::create(path)?;
+        let mut w = std::io::BufWriter::new(file);
+        std::io::Write::write_all(&mut w, &header).map_err(|e| Error::write(path, e))?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            guard,
+            w,
+            left,
+            item: std::marker::PhantomData,
+        })
+    }
+
+    /// Appends `values`, the next ones in row-major order.
+    pub fn push(&mut self, values: &[T]) -> Result<()> {
+        if values.len() > self.left {
+            return Err(Error::invalid(
+                &self.path,
+                "more values than the array's shape",
+            ));
+        }
+        T::write_slice(values, &mut self.w).map_err(|e| Error::encode(&self.path, e))?;
+        self.left -= values.len();
+        Ok(())
+    }
+
+    /// Ends the array (every value written) and renames it into place.
+    pub fn finish(self) -> Result<()> {
+        if self.left > 0 {
+            return Err(Error::invalid(
+                &self.path,
+                format!("{} values of the array not written", self.left),
+            ));
+        }
+        let file = self
+            .w
+            .into_inner()
+            .map_err(|e| Error::write(&self.path, e.into_error()))?;
+        drop(file);
+        self.guard.commit()
+    }
 }
 
 /// Reads a `float32` `.npy` array: its shape and its values in row-major (C) order. The
@@ -153,6 +220,29 @@ pub fn write_exr_map(
     crate::codecs::write_exr_interleaved(path, width, height, names, data)
 }
 
+/// Writes a float32 OpenEXR map of `channels` (1: Y, 3: R, G, B) values per pixel, pixel
+/// `(x, y)` being the first `channels` values of `pixel(x, y)`, asked for in increasing `y`
+/// (a map produced a band of rows at a time); the same bytes as [`write_exr_map`] writes.
+pub fn write_exr_map_with(
+    path: &Path,
+    width: usize,
+    height: usize,
+    channels: usize,
+    pixel: &(dyn Fn(usize, usize) -> [f32; 3] + Sync),
+) -> Result<()> {
+    let names: &[&str] = match channels {
+        1 => &["Y"],
+        3 => &["R", "G", "B"],
+        _ => {
+            return Err(Error::invalid(
+                path,
+                format!("EXR maps have 1 or 3 channels, not {channels}"),
+            ))
+        }
+    };
+    crate::codecs::write_exr_pixels(path, width, height, names, pixel)
+}
+
 /// Clamps to `[0, 1]` and scales to a byte.
 fn byte(v: f64) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0).round() as u8
@@ -216,6 +306,12 @@ pub fn write_normal_png16(
     crate::codecs::write_png16_rgb_with(path, width, height, normals, &|n| {
         normal_map_value(n, convention)
     })
+}
+
+/// One row of the 16-bit normal map [`write_normal_png16`] writes (big-endian RGB, 6 bytes
+/// per pixel) from that row's normals.
+pub fn normal_png16_row(normals: &[f32], convention: NormalPng, row: &mut [u8]) {
+    crate::codecs::rgb16_row(normals, &|n| normal_map_value(n, convention), row)
 }
 
 /// HSV with saturation and value 1 to RGB bytes; `hue` in turns (`[0, 1)`, wrapped).

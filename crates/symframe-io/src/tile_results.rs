@@ -12,6 +12,7 @@
 //! or copy errors, a stray edit): such a file is [`TileFile::Corrupt`], recomputed by a resumed
 //! run and named by a merge, never trusted.
 
+use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use symframe::{PixelRecord, PixelSource, PixelStatus};
@@ -136,6 +137,20 @@ fn check_head(
     t: usize,
     n: usize,
 ) -> std::result::Result<(), Problem> {
+    check_header(b, len, job, t, n, b.len() as u64 == len)
+}
+
+/// [`check_head`] of `b`, the whole file when `whole` (its checksum then verified), else its
+/// header alone (judged without the records: read before them, so that a file of the right
+/// length that is not the tile's result is refused unread).
+fn check_header(
+    b: &[u8],
+    len: u64,
+    job: u64,
+    t: usize,
+    n: usize,
+    whole: bool,
+) -> std::result::Result<(), Problem> {
     use Problem::{Corrupt, Stale};
     if b.len() < 12 || &b[..8] != MAGIC {
         return Err(Corrupt("not a symframe tile result".into()));
@@ -155,7 +170,6 @@ fn check_head(
         )));
     }
     let u64_at = |o: usize| u64::from_le_bytes(b[o..o + 8].try_into().unwrap());
-    let whole = b.len() as u64 == len;
     if whole && checksum(&b[..HEADER_SUMMED], &b[HEADER..]) != u64_at(HEADER_SUMMED) {
         return Err(Corrupt("corrupt tile result (checksum mismatch)".into()));
     }
@@ -172,7 +186,9 @@ fn check_head(
             u64_at(16)
         )));
     }
-    if u64_at(24) != t as u64 || pixels != n as u64 || !whole {
+    // (A file of another length than the tile's fails here: its header's pixels are those of
+    // its length.)
+    if u64_at(24) != t as u64 || pixels != n as u64 {
         return Err(Stale(format!(
             "not the result of tile {t} ({n} pixels) but of tile {} ({pixels} pixels)",
             u64_at(24)
@@ -241,11 +257,22 @@ fn load(
         return Ok(None);
     };
     let expected = tile_result_len(n);
+    let mut b = Vec::new();
+    (&f).take(HEADER as u64)
+        .read_to_end(&mut b)
+        .map_err(|e| Error::read(path, e))?;
     if len != expected {
-        let head = crate::read_at_most(f, path, HEADER as u64)?;
-        return Ok(Some(check_head(&head, len, job, t, n).map(|_| Vec::new())));
+        return Ok(Some(check_head(&b, len, job, t, n).map(|_| Vec::new())));
     }
-    let b = crate::read_at_most(f, path, expected)?;
+    // The header first: a file of the tile's length that is not its result (a sparse forged
+    // one of 670 MB) is refused before its records are read.
+    if let Err(p) = check_header(&b, len, job, t, n, false) {
+        return Ok(Some(Err(p)));
+    }
+    b.reserve_exact((expected - HEADER as u64) as usize);
+    f.take(expected - HEADER as u64)
+        .read_to_end(&mut b)
+        .map_err(|e| Error::read(path, e))?;
     Ok(Some(parse(&b, job, t, n)))
 }
 

@@ -183,13 +183,18 @@ fn image_list(input: &Path) -> Result<Vec<PathBuf>> {
             .with_context(|| format!("{}: cannot read folder", input.display()))?
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| {
-                p.is_file()
+                !p.is_dir()
                     && p.extension()
                         .and_then(|e| e.to_str())
                         .is_some_and(|e| EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
                     && p.file_stem().and_then(|s| s.to_str()) != Some("mask")
             })
             .collect();
+        // An image that is not a regular file (a FIFO, a device, a dangling link) is an error
+        // naming it, not left out unsaid.
+        for p in &v {
+            symframe_io::check_regular_file(p)?;
+        }
         v.sort();
         if v.is_empty() {
             bail!("{}: no image files in the folder", input.display());
@@ -217,13 +222,19 @@ fn image_list(input: &Path) -> Result<Vec<PathBuf>> {
             continue;
         }
         let p = dir.join(line);
-        if !p.is_file() {
-            bail!(
-                "{}: line {}: image {} does not exist",
-                input.display(),
-                k + 1,
-                p.display()
-            );
+        match symframe_io::check_regular_file(&p) {
+            Ok(_) => {}
+            Err(symframe_io::Error::Read { source, .. })
+                if source.kind() == std::io::ErrorKind::NotFound =>
+            {
+                bail!(
+                    "{}: line {}: image {} does not exist",
+                    input.display(),
+                    k + 1,
+                    p.display()
+                );
+            }
+            Err(e) => bail!("{}: line {}: {e}", input.display(), k + 1),
         }
         v.push(p);
     }

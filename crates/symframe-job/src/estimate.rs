@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 use symframe::baselines::{Baseline, BaselineMethod, BaselineParams};
 use symframe::frames::estimator::check_inputs;
 use symframe::maps::PixelCounts;
-use symframe::{EstimateMaps, Estimator, EstimatorParams, PixelRecord, PixelSource};
+use symframe::{EstimateMaps, Estimator, EstimatorParams, PixelSource};
 use symframe::{Rig, RigOptions};
 use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{
@@ -20,9 +20,10 @@ use symframe_io::{
     TileCache, TileGrid,
 };
 
+use crate::maps_out::{write_estimate_outputs, TileResults, WriteOptions};
 use crate::merge::{write_manifest, ShardManifest, MANIFEST, MANIFEST_FORMAT, MANIFEST_VERSION};
-use crate::outdir::{OutputDir, OutputSet};
-use crate::tiles::{peak_rss_bytes, read_tiles, run_tiles, shard_tiles, tile_path};
+use crate::outdir::OutputDir;
+use crate::tiles::{peak_rss_bytes, run_tiles, shard_tiles, tile_path};
 use crate::{Checkpoint, Control, Interrupted, Progress, Stage};
 
 /// Folder of the per-tile result files inside an output folder.
@@ -132,6 +133,10 @@ pub struct EstimateConfig {
     pub shard: Option<Shard>,
     /// The y convention of `normals.png` (16-bit, `(n + 1) / 2` per channel).
     pub normal_png: NormalPng,
+    /// Return the whole maps in memory ([`Done::maps`]) as well as writing them (34 bytes per
+    /// pixel); off, the outputs are written a band of tiles at a time and memory stays bounded
+    /// whatever the image size (the CLI).
+    pub keep_maps: bool,
 }
 
 impl EstimateConfig {
@@ -146,6 +151,7 @@ impl EstimateConfig {
             cache: CacheConfig::default(),
             shard: None,
             normal_png: NormalPng::OpenGl,
+            keep_maps: true,
         }
     }
 
@@ -244,6 +250,11 @@ impl Sources {
                 *n += 1;
             }
         }
+        Self::from_counts(&counts)
+    }
+
+    /// The legend with `counts[code]` pixels per code (codes without a count: 0).
+    pub fn from_counts(counts: &[usize]) -> Self {
         Sources(
             PixelSource::legend()
                 .iter()
@@ -251,7 +262,7 @@ impl Sources {
                     code,
                     name,
                     description,
-                    pixels: counts[code as usize],
+                    pixels: counts.get(code as usize).copied().unwrap_or(0),
                 })
                 .collect(),
         )
@@ -365,8 +376,9 @@ pub struct Timings {
 /// A finished job's maps and report.
 #[derive(Debug, Clone)]
 pub struct Done {
-    /// The maps written.
-    pub maps: EstimateMaps,
+    /// The maps written, when [`EstimateConfig::keep_maps`] asked for them (the report has
+    /// the counts either way).
+    pub maps: Option<EstimateMaps>,
     /// The report written.
     pub report: Report,
 }
@@ -554,8 +566,8 @@ pub(crate) fn remove_cache(cache_path: &Path, dir: &Path) -> Result<()> {
 }
 
 /// Runs an estimation job: decodes the images once into the tile cache (or reuses it),
-/// estimates tile by tile into result files, then assembles and writes the maps (or, for a
-/// shard, its manifest). The output folder is locked for the whole job (a second job into it
+/// estimates tile by tile into result files, then writes the maps from them a row of tiles at
+/// a time (or, for a shard, its manifest). The output folder is locked for the whole job (a second job into it
 /// is refused). On an error the finished tiles and the cache are kept, so the same call
 /// resumes; only what this job created and holds nothing to resume from is removed again.
 pub fn estimate(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcome> {
@@ -609,19 +621,6 @@ pub(crate) fn result_warnings(counts: &PixelCounts, beyond: Option<usize>) -> Ve
         ));
     }
     w
-}
-
-/// How many normals of `maps` lie beyond `rig`'s reach (their halfway vector `h = n` is not
-/// covered by the rig's halfway vectors).
-fn beyond_reach(maps: &EstimateMaps, rig: &Rig) -> usize {
-    maps.normals
-        .chunks_exact(3)
-        .filter(|n| n[0].is_finite())
-        .filter(|n| {
-            let n = glam::DVec3::new(n[0] as f64, n[1] as f64, n[2] as f64);
-            !rig.covered(n)
-        })
-        .count()
 }
 
 fn run(
@@ -825,19 +824,31 @@ fn run(
         return Ok(EstimateOutcome::Shard(Box::new(report)));
     }
 
-    let maps = assemble(&grid, job, |t| tile_path(&tiles_dir, t))?;
-    report.pixels = maps.counts;
-    report.sources = Sources::of(&maps.source);
-    report.evals_per_pixel = maps.evals as f64 / maps.counts.estimated.max(1) as f64;
-    let beyond = match &plan {
-        Plan::Symmetry(rig, _) => Some(beyond_reach(&maps, rig)),
-        Plan::Baseline(_) => None,
+    let path_of = |t| tile_path(&tiles_dir, t);
+    let covered = |n: DVec3| match &plan {
+        Plan::Symmetry(rig, _) => rig.covered(n),
+        Plan::Baseline(_) => true,
     };
-    for w in result_warnings(&report.pixels, beyond) {
-        ctl.warn(&w);
-    }
-    report.warnings = lock_warnings(warnings).clone();
-    write_estimate_outputs(out, &maps, config.normal_png, ctl, |write_s| {
+    let opts = WriteOptions {
+        normal_png: config.normal_png,
+        keep_maps: config.keep_maps,
+        covered: matches!(plan, Plan::Symmetry(..))
+            .then_some(&covered as &(dyn Fn(DVec3) -> bool + Sync)),
+        on_tiles: &|_| {},
+    };
+    let tiles = TileResults {
+        grid,
+        job,
+        path_of: &path_of,
+    };
+    let (_, maps) = write_estimate_outputs(out, &tiles, &opts, ctl, |write_s, summary| {
+        report.pixels = summary.counts;
+        report.sources = summary.sources.clone();
+        report.evals_per_pixel = summary.evals as f64 / summary.counts.estimated.max(1) as f64;
+        for w in result_warnings(&report.pixels, summary.beyond_reach) {
+            ctl.warn(&w);
+        }
+        report.warnings = lock_warnings(warnings).clone();
         report.timings.write_s = write_s;
         report.timings.total_s = t0.elapsed().as_secs_f64();
         report.timings.peak_rss_bytes = peak_rss_bytes();
@@ -848,17 +859,6 @@ fn run(
         remove_cache(&cache_path, &cache_dir)?;
     }
     Ok(EstimateOutcome::Maps(Box::new(Done { maps, report })))
-}
-
-/// Assembles full maps from the result files of every tile (`path_of(t)` gives tile `t`'s file).
-pub(crate) fn assemble(
-    grid: &TileGrid,
-    job: u64,
-    path_of: impl Fn(usize) -> PathBuf + Sync,
-) -> Result<EstimateMaps> {
-    let mut maps = EstimateMaps::empty(grid.width, grid.height);
-    read_tiles(grid, job, path_of, |p, r: PixelRecord| maps.put(p, &r))?;
-    Ok(maps)
 }
 
 /// The files of an estimate's output set (`write_estimate_outputs`), the report last.
@@ -883,55 +883,4 @@ pub(crate) fn dataset_files(ds: &Dataset) -> impl Iterator<Item = &Path> {
     std::iter::once(ds.source.as_path())
         .chain(ds.images.iter().map(PathBuf::as_path))
         .chain(ds.mask.iter().map(PathBuf::as_path))
-}
-
-/// Writes the maps (`.npy`, `.exr`), pictures, the source map and `report.json` (the value
-/// `report` returns, given the seconds spent writing the rest) as one output set: staged inside
-/// the locked folder `out`, then switched in with the report last (see [`OutputSet`]).
-pub fn write_estimate_outputs(
-    out: &OutputDir,
-    maps: &EstimateMaps,
-    normal_png: NormalPng,
-    ctl: &Control,
-    report: impl FnOnce(f64) -> Result<serde_json::Value>,
-) -> Result<()> {
-    let t_write = Instant::now();
-    let (w, h) = (maps.width, maps.height);
-    let staging = OutputSet::new(out, |_| false)?;
-    symframe_io::write_npy_f32(&staging.path("normals.npy"), &[h, w, 3], &maps.normals)?;
-    symframe_io::write_npy_f32(&staging.path("tangents.npy"), &[h, w, 3], &maps.tangents)?;
-    symframe_io::write_npy_f32(&staging.path("confidence.npy"), &[h, w], &maps.confidence)?;
-    symframe_io::write_npy_f32(&staging.path("anisotropy.npy"), &[h, w], &maps.anisotropy)?;
-    symframe_io::write_npy_u8(&staging.path("source.npy"), &[h, w], &maps.source)?;
-    symframe_io::write_exr_map(&staging.path("normals.exr"), w, h, 3, &maps.normals)?;
-    symframe_io::write_exr_map(&staging.path("tangents.exr"), w, h, 3, &maps.tangents)?;
-    symframe_io::write_normal_png16(
-        &staging.path("normals.png"),
-        w,
-        h,
-        &maps.normals,
-        normal_png,
-    )?;
-    let pictures = [
-        (
-            "tangents.png",
-            symframe_io::tangent_map_rgb8(&maps.tangents),
-        ),
-        (
-            "confidence.png",
-            symframe_io::gray_map_rgb8(&maps.confidence, 0.0, 1.0),
-        ),
-        ("source.png", symframe_io::source_map_rgb8(&maps.source)),
-        (
-            "tangents_gltf.png",
-            crate::export::gltf_anisotropy_rgb8(&maps.tangents, &maps.anisotropy),
-        ),
-    ];
-    for (name, rgb) in pictures {
-        symframe_io::write_png_rgb8(&staging.path(name), w, h, &rgb)?;
-    }
-    let json = report(t_write.elapsed().as_secs_f64())?;
-    staging.commit("report.json", json, &|n| {
-        (ctl.checkpoint)(Checkpoint::Moved(n))
-    })
 }

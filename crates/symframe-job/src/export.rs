@@ -736,13 +736,27 @@ fn entry(p: &Path) -> Option<PathBuf> {
     Some(dir.canonicalize().ok()?.join(p.file_name()?))
 }
 
+/// The device and inode of the file `p` names (links followed), where the platform has them.
+fn file_id(p: &Path) -> Option<(u64, u64)> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        std::fs::metadata(p).ok().map(|m| (m.dev(), m.ino()))
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = p;
+        None
+    }
+}
+
 /// Refuses, before anything is written, targets that are folders (the move would fail half-way)
-/// and targets that would replace one of the export's inputs: the same directory entry, or a
-/// link to the input.
+/// and targets that would replace one of the export's inputs: the same directory entry, a
+/// symbolic link to the input, or a hard link to it (the same file under another name).
 fn check_targets(targets: &[PathBuf], inputs: &[PathBuf]) -> Result<()> {
-    let inputs: Vec<(PathBuf, Option<PathBuf>, Option<PathBuf>)> = inputs
+    let inputs: Vec<_> = inputs
         .iter()
-        .map(|p| (p.clone(), entry(p), p.canonicalize().ok()))
+        .map(|p| (p.clone(), entry(p), p.canonicalize().ok(), file_id(p)))
         .collect();
     for t in targets {
         let meta = std::fs::symlink_metadata(t).ok();
@@ -753,11 +767,12 @@ fn check_targets(targets: &[PathBuf], inputs: &[PathBuf]) -> Result<()> {
                 t.display()
             );
         }
-        let (t_entry, t_file) = (entry(t), t.canonicalize().ok());
-        for (p, p_entry, p_file) in &inputs {
+        let (t_entry, t_file, t_id) = (entry(t), t.canonicalize().ok(), file_id(t));
+        for (p, p_entry, p_file, p_id) in &inputs {
             let same_entry = t_entry.is_some() && t_entry == *p_entry;
             let same_file = t_file.is_some() && t_file == *p_file;
-            if same_entry || same_file {
+            let same_inode = t_id.is_some() && t_id == *p_id;
+            if same_entry || same_file || same_inode {
                 bail!(
                     "{}: is {}, one of the export's inputs: refusing to replace it; write the \
                      asset elsewhere or under another name",

@@ -4,6 +4,7 @@
 //! an interrupted fit resumes.
 
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
@@ -19,8 +20,8 @@ use symframe_io::{
 };
 
 use crate::estimate::{
-    cache_dir, fingerprint_lights, fingerprint_mask, open_cache, read_mask, remove_cache,
-    CacheConfig, CacheReport, InputsRecord, CACHE_DIR, TILES_DIR,
+    cache_dir, fingerprint_lights, fingerprint_mask, lock_warnings, open_cache, read_mask,
+    remove_cache, CacheConfig, CacheReport, InputsRecord, CACHE_DIR, TILES_DIR,
 };
 use crate::outdir::{OutputDir, OutputSet};
 use crate::tiles::{read_tiles, run_tiles, tile_path, TileCounts, TileRecord};
@@ -147,6 +148,9 @@ pub struct FitReport {
     pub cache: CacheReport,
     /// Wall-clock seconds per stage.
     pub timings: FitTimings,
+    /// Every warning of the run, as printed (taking the output folder's lock, the inputs,
+    /// recomputed tiles), as `report.json` of an estimate records them.
+    pub warnings: Vec<String>,
 }
 
 /// Light counts of a fit.
@@ -276,10 +280,19 @@ pub fn fit(config: &FitConfig, ctl: &Control) -> Result<FitOutcome> {
     }
     let out = OutputDir::lock(&config.output)?;
     (ctl.checkpoint)(Checkpoint::OutputLocked);
+    let warnings = Mutex::new(Vec::new());
+    let warn = |line: &str| {
+        lock_warnings(&warnings).push(line.to_string());
+        ctl.warn(line);
+    };
+    let counted = Control {
+        warning: &warn,
+        ..*ctl
+    };
     for w in out.warnings() {
-        ctl.warn(w);
+        warn(w);
     }
-    let result = run(config, ctl, &out);
+    let result = run(config, &counted, &out, &warnings);
     if let Err(e) = &result {
         if !e.is::<Interrupted>() {
             out.discard_unfinished();
@@ -288,7 +301,12 @@ pub fn fit(config: &FitConfig, ctl: &Control) -> Result<FitOutcome> {
     result
 }
 
-fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome> {
+fn run(
+    config: &FitConfig,
+    ctl: &Control,
+    out: &OutputDir,
+    warnings: &Mutex<Vec<String>>,
+) -> Result<FitOutcome> {
     let t0 = Instant::now();
     let mut ds: Dataset = symframe_io::open_dataset(&config.input)?;
     for w in &ds.warnings {
@@ -412,7 +430,9 @@ fn run(config: &FitConfig, ctl: &Control, out: &OutputDir) -> Result<FitOutcome>
             write_s: 0.0,
             total_s: 0.0,
         },
+        warnings: Vec::new(),
     };
+    report.warnings = lock_warnings(warnings).clone();
     write_outputs(out, &maps, &mut report, t0, ctl)?;
     crate::tiles::remove_tile_folder(&tiles_dir)?;
     if config.cache.remove_after {

@@ -5,8 +5,8 @@
 //! ([`symframe_io::TileCache`]), runs a per-pixel method ([`symframe::PixelMethod`]: the
 //! symmetry estimator, a baseline or the Ward fitter) tile by tile into result files (so memory
 //! stays bounded, an interrupted run resumes, and a shard does a share of the tiles), then
-//! assembles the tiles into maps and writes them with a JSON report, all at once into the
-//! output folder. The caller owns interruption (a stop flag, polled between images and tiles)
+//! writes the maps from the tiles a row of tiles at a time, with a JSON report, all at once
+//! into the output folder. The caller owns interruption (a stop flag, polled between images and tiles)
 //! and progress display (a callback).
 //!
 //! - [`estimate`] with an [`EstimateConfig`]: normals, tangents, confidence, anisotropy and the
@@ -47,7 +47,8 @@
 //! let EstimateOutcome::Maps(done) = estimate(&config, &Control::default())? else {
 //!     unreachable!("no shard was asked for");
 //! };
-//! assert!(done.maps.counts.estimated > 50);
+//! assert!(done.report.pixels.estimated > 50);
+//! assert!(done.maps.is_some(), "kept by default");
 //! assert!(out.join("normals.npy").is_file() && out.join("source.npy").is_file());
 //! # Ok(())
 //! # }
@@ -60,6 +61,7 @@ pub mod eval;
 pub mod export;
 mod fit;
 pub mod integrate;
+mod maps_out;
 mod merge;
 mod outdir;
 mod relight;
@@ -70,10 +72,9 @@ mod view;
 use std::sync::atomic::AtomicBool;
 
 pub use estimate::{
-    estimate, write_estimate_outputs, BaselineParameters, CacheConfig, CacheReport, Done,
-    EstimateConfig, EstimateOutcome, InputsRecord, LightCounts, MethodConfig, MethodParameters,
-    Report, Shard, SourceCount, Sources, SymmetryParameters, TileReport, Timings, CACHE_DIR,
-    TILES_DIR,
+    estimate, BaselineParameters, CacheConfig, CacheReport, Done, EstimateConfig, EstimateOutcome,
+    InputsRecord, LightCounts, MethodConfig, MethodParameters, Report, Shard, SourceCount, Sources,
+    SymmetryParameters, TileReport, Timings, CACHE_DIR, TILES_DIR,
 };
 pub use fit::{fit, FitConfig, FitLights, FitOutcome, FitReport, FitTimings};
 pub use merge::{merge, MergeOutcome, ShardManifest, MANIFEST};

@@ -3,15 +3,16 @@
 
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
+use symframe::maps::PixelCounts;
 use symframe::EstimateMaps;
 use symframe_io::TileGrid;
 
-use crate::estimate::{assemble, result_warnings, write_estimate_outputs, Sources, TILES_DIR};
+use crate::estimate::{result_warnings, TILES_DIR};
+use crate::maps_out::{write_estimate_outputs, TileResults, WriteOptions};
 use crate::outdir::OutputDir;
 use crate::tiles::{peak_rss_bytes, tile_path};
 use crate::{Checkpoint, Control, Interrupted, Progress, Stage};
@@ -21,11 +22,13 @@ pub const MANIFEST: &str = "shard.json";
 pub(crate) const MANIFEST_FORMAT: &str = "symframe-shard";
 pub(crate) const MANIFEST_VERSION: u32 = 1;
 
-/// What a merge produced.
+/// What a merge produced (the maps are written, never held whole).
 #[derive(Debug, Clone)]
 pub struct MergeOutcome {
-    /// The maps written.
-    pub maps: EstimateMaps,
+    /// What happened to the pixels of the maps written.
+    pub pixels: PixelCounts,
+    /// The maps written, when the caller asked to keep them (34 bytes per pixel).
+    pub maps: Option<EstimateMaps>,
     /// How many shards were merged.
     pub shards: usize,
 }
@@ -187,12 +190,18 @@ fn missing_tiles(covered: &[usize], n: usize, of: usize) -> (Vec<usize>, usize, 
     (first, n - covered.len(), shards.into_iter().collect())
 }
 
-/// `symframe merge`: checks the shards belong to one job and cover every tile, assembles the
-/// maps and writes the usual outputs.
-pub fn merge(shards: &[PathBuf], output: &Path, ctl: &Control) -> Result<MergeOutcome> {
+/// `symframe merge`: checks the shards belong to one job and cover every tile, then writes the
+/// usual outputs from the shards' tiles a band at a time (the maps are returned whole only if
+/// `keep_maps` asks for them).
+pub fn merge(
+    shards: &[PathBuf],
+    output: &Path,
+    keep_maps: bool,
+    ctl: &Control,
+) -> Result<MergeOutcome> {
     let out = OutputDir::lock(output)?;
     (ctl.checkpoint)(Checkpoint::OutputLocked);
-    let result = run(shards, &out, ctl);
+    let result = run(shards, &out, keep_maps, ctl);
     if let Err(e) = &result {
         if !e.is::<Interrupted>() {
             out.discard_unfinished();
@@ -201,7 +210,12 @@ pub fn merge(shards: &[PathBuf], output: &Path, ctl: &Control) -> Result<MergeOu
     result
 }
 
-fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcome> {
+fn run(
+    shards: &[PathBuf],
+    out: &OutputDir,
+    keep_maps: bool,
+    ctl: &Control,
+) -> Result<MergeOutcome> {
     let t0 = Instant::now();
     if shards.is_empty() {
         bail!("no shard folders given");
@@ -337,14 +351,6 @@ fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcom
             );
         }
     }
-    let read = AtomicU64::new(0);
-    let total = grid.n_tiles() as u64;
-    let maps = assemble(&grid, job, |t| {
-        let n = read.fetch_add(1, Ordering::SeqCst) + 1;
-        ctl.report(Progress::new(Stage::Merging, n, total));
-        tile_path(&manifests[owner[t]].0.join(TILES_DIR), t)
-    })?;
-
     // The report: the first shard's, with the whole image's counts and the shards' timings.
     let mut report = first.report.clone();
     let shard_timings: Vec<serde_json::Value> = manifests
@@ -362,10 +368,6 @@ fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcom
         .iter()
         .filter_map(|(_, m)| m.report.pointer("/timings/estimate_s")?.as_f64())
         .sum();
-    report["pixels"] = serde_json::to_value(maps.counts)?;
-    report["sources"] = serde_json::to_value(Sources::of(&maps.source))?;
-    report["evals_per_pixel"] =
-        serde_json::json!(maps.evals as f64 / maps.counts.estimated.max(1) as f64);
     report["tiles"] = serde_json::json!({
         "size": grid.tile,
         "count": grid.n_tiles(),
@@ -387,13 +389,30 @@ fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcom
             ));
         }
     }
-    // The reach warning needs the rig: each shard's own warnings (above) carry it.
-    for w in result_warnings(&maps.counts, None) {
-        ctl.warn(&w);
-        warnings.push(w);
-    }
-    report["warnings"] = serde_json::json!(warnings);
-    write_estimate_outputs(out, &maps, symframe_io::NormalPng::OpenGl, ctl, |write_s| {
+    let total = grid.n_tiles() as u64;
+    let path_of = |t: usize| tile_path(&manifests[owner[t]].0.join(TILES_DIR), t);
+    let tiles = TileResults {
+        grid,
+        job,
+        path_of: &path_of,
+    };
+    let opts = WriteOptions {
+        normal_png: symframe_io::NormalPng::OpenGl,
+        keep_maps,
+        covered: None,
+        on_tiles: &|n| ctl.report(Progress::new(Stage::Merging, n as u64, total)),
+    };
+    let (summary, maps) = write_estimate_outputs(out, &tiles, &opts, ctl, |write_s, summary| {
+        report["pixels"] = serde_json::to_value(summary.counts)?;
+        report["sources"] = serde_json::to_value(&summary.sources)?;
+        report["evals_per_pixel"] =
+            serde_json::json!(summary.evals as f64 / summary.counts.estimated.max(1) as f64);
+        // The reach warning needs the rig: each shard's own warnings (above) carry it.
+        for w in result_warnings(&summary.counts, None) {
+            ctl.warn(&w);
+            warnings.push(w);
+        }
+        report["warnings"] = serde_json::json!(warnings);
         report["timings"] = serde_json::json!({
             "estimate_s_all_shards": estimate_s,
             "merge_s": t0.elapsed().as_secs_f64() - write_s,
@@ -404,6 +423,7 @@ fn run(shards: &[PathBuf], out: &OutputDir, ctl: &Control) -> Result<MergeOutcom
         Ok(report)
     })?;
     Ok(MergeOutcome {
+        pixels: summary.counts,
         maps,
         shards: manifests.len(),
     })

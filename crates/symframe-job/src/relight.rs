@@ -67,6 +67,8 @@ struct RelightReport<'a> {
     /// The height map whose cast shadows were applied.
     #[serde(skip_serializing_if = "Option::is_none")]
     shadows: Option<&'a Path>,
+    /// Every warning of the run, as printed (what taking the output folder's lock left alone).
+    warnings: &'a [String],
 }
 
 /// The maps of a fit folder, of either model.
@@ -342,6 +344,7 @@ fn write_relit(
         region: config.region.as_deref(),
         exposure_stops: config.exposure,
         shadows: config.shadows.as_deref(),
+        warnings: out.warnings(),
     };
     staging.commit("relight.json", serde_json::to_value(&report)?, &|_| {})?;
     Ok(RelightOutcome {

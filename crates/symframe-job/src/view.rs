@@ -263,14 +263,24 @@ fn frames_dir(config: &ViewConfig, notes: &mut Vec<String>) -> Result<Option<Pat
         return Ok(Some(dir.clone()));
     }
     let report = config.fit_dir.join("fit.json");
-    let recorded = symframe_io::read_text_bounded(
+    // Missing, it is a note; there but not a regular file (a FIFO, a device) or too large, an
+    // error: never opened, never read past the cap.
+    let text = match symframe_io::read_text_bounded(
         &report,
         "a report",
         symframe_io::limits::MAX_TEXT_FILE_BYTES,
-    )
-    .ok()
-    .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-    .and_then(|r| r.get("frames")?.as_str().map(PathBuf::from));
+    ) {
+        Ok(t) => Some(t),
+        Err(symframe_io::Error::Read { source, .. })
+            if source.kind() == std::io::ErrorKind::NotFound =>
+        {
+            None
+        }
+        Err(e) => return Err(e.into()),
+    };
+    let recorded = text
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .and_then(|r| r.get("frames")?.as_str().map(PathBuf::from));
     let Some(recorded) = recorded else {
         notes.push(format!(
             "{}: no estimate folder recorded; the confidence, anisotropy and source views are \

@@ -68,7 +68,7 @@ fn the_tiled_fit_equals_the_in_memory_fit_and_resumes_after_a_stop() {
         holdout: holdout_lights(300, 6).unwrap(),
         ..FitParams::default()
     };
-    let maps = &done.maps;
+    let maps = done.maps.as_ref().expect("kept by default");
     let memory = fit_stack(
         &stack,
         &ds.lights,

@@ -41,6 +41,11 @@ fn to_python<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<
     json_to_py(py, &text)
 }
 
+/// The maps a job kept in memory (it was asked to), else an error.
+fn kept(maps: Option<EstimateMaps>) -> PyResult<EstimateMaps> {
+    maps.ok_or_else(|| SymframeError::new_err("the job kept no maps in memory"))
+}
+
 /// The maps as numpy arrays in `dict`.
 fn put_maps<'py>(py: Python<'py>, dict: &Bound<'py, PyDict>, maps: EstimateMaps) -> PyResult<()> {
     let (h, w) = (maps.height, maps.width);
@@ -243,6 +248,7 @@ fn estimate_path<'py>(
         cache: options::cache(&mut o)?,
         shard: options::shard(&mut o)?,
         normal_png: symframe_io::NormalPng::OpenGl,
+        keep_maps: true,
     };
     o.finish()?;
     let outcome = run_job(py, progress, threads, |ctl| {
@@ -258,7 +264,7 @@ fn estimate_path<'py>(
                 SymframeError::new_err(format!("{}: cannot read: {e}", path.display()))
             })?;
             dict.set_item("report", json_to_py(py, &text)?)?;
-            put_maps(py, &dict, done.maps)?;
+            put_maps(py, &dict, kept(done.maps)?)?;
         }
         EstimateOutcome::Shard(report) => {
             dict.set_item("report", to_python(py, &*report)?)?;
@@ -792,14 +798,14 @@ fn merge<'py>(
     threads: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let done = run_job(py, progress, threads, |ctl| {
-        symframe_job::merge(&shards, &out, ctl)
+        symframe_job::merge(&shards, &out, true, ctl)
     })?;
     let path = out.join("report.json");
     let text = std::fs::read_to_string(&path)
         .map_err(|e| SymframeError::new_err(format!("{}: cannot read: {e}", path.display())))?;
     let dict = PyDict::new(py);
     dict.set_item("report", json_to_py(py, &text)?)?;
-    put_maps(py, &dict, done.maps)?;
+    put_maps(py, &dict, kept(done.maps)?)?;
     Ok(dict)
 }
 

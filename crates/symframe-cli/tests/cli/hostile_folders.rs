@@ -733,3 +733,72 @@ fn integrate_refuses_a_map_too_large_for_the_memory_it_may_use() {
     );
     assert!(!out.join("depth.npy").exists());
 }
+
+/// What taking the output folder's lock left alone (a user's folder named like a staging
+/// folder) was printed by `fit` and `relight` but not recorded: `fit.json` and `relight.json`
+/// carry it in `warnings`, as `report.json` of an estimate does.
+#[test]
+fn fit_and_relight_record_what_the_lock_left_alone() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = capture(&tmp.path().join("data"));
+    let est = tmp.path().join("est");
+    ok(&estimate(&lp, &est));
+    let plant = |out: &Path| {
+        let notes = out.join(".symframe-staging-notes");
+        fs::create_dir_all(&notes).unwrap();
+        fs::write(notes.join("notes.txt"), "keep").unwrap();
+        notes.join("notes.txt")
+    };
+    let recorded = |report: &Path| -> String {
+        let v: serde_json::Value =
+            serde_json::from_str(&fs::read_to_string(report).unwrap()).unwrap();
+        v["warnings"].to_string()
+    };
+    let fit = tmp.path().join("fit");
+    let kept = plant(&fit);
+    let o = common::symframe(&[
+        "fit",
+        s(&lp),
+        "--frames",
+        s(&est),
+        "-o",
+        s(&fit),
+        "--model",
+        "ward",
+        "--holdout",
+        "3",
+    ]);
+    ok(&o);
+    assert!(stderr(&o).contains("left alone"), "{}", stderr(&o));
+    assert!(
+        recorded(&fit.join("fit.json")).contains("left alone"),
+        "{}",
+        recorded(&fit.join("fit.json"))
+    );
+    assert_kept(&[&kept]);
+    // Without anything left alone, the record is there and empty.
+    let clean = tmp.path().join("fit2");
+    ok(&common::symframe(&[
+        "fit",
+        s(&lp),
+        "--frames",
+        s(&est),
+        "-o",
+        s(&clean),
+        "--model",
+        "ward",
+        "--holdout",
+        "3",
+        "--quiet",
+    ]));
+    assert_eq!(recorded(&clean.join("fit.json")), "[]");
+
+    let relit = tmp.path().join("relit");
+    let kept = plant(&relit);
+    let o = common::symframe(&["relight", s(&fit), "-o", s(&relit), "--light", "0,0,1"]);
+    ok(&o);
+    assert!(stderr(&o).contains("left alone"), "{}", stderr(&o));
+    let r = recorded(&relit.join("relight.json"));
+    assert!(r.contains("left alone"), "{r}");
+    assert_kept(&[&kept]);
+}

@@ -372,3 +372,167 @@ fn huge_finite_lights_and_cr_only_line_ends_are_read() {
         "lights.lp:4: light direction: cannot parse 'zero' as a number",
     );
 }
+
+/// Replaces `path` by a FIFO (opening it would wait for a writer).
+#[cfg(unix)]
+fn make_fifo(path: &Path) {
+    let _ = fs::remove_file(path);
+    let c = std::ffi::CString::new(path.as_os_str().as_encoded_bytes()).unwrap();
+    // SAFETY: a NUL-terminated path we own.
+    let r = unsafe { libc::mkfifo(c.as_ptr(), 0o644) };
+    assert_eq!(r, 0, "mkfifo {path:?}");
+}
+
+/// A capture of a few kilobytes (four 4096 x 4096 black PNGs of 16 KB) made `estimate` hold
+/// whole maps and four whole pictures (773 MB at its peak), and `merge` of a forged shard
+/// with one sparse 670 MB tile assemble maps first (1,173 MB): the outputs are written from
+/// the tile results a band of tiles at a time, and a tile file's header is checked before
+/// its records are read.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_forged_4096_square_capture_is_estimated_and_merged_in_bounded_memory() {
+    use crate::common::run_measuring_rss;
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    for n in ["a", "b", "c", "d"] {
+        black_png(&d.join(format!("{n}.png")), 4096, 4096);
+    }
+    let lp = d.join("lights.lp");
+    fs::write(
+        &lp,
+        "4\na.png 0 0 1\nb.png 0.5 0 0.866\nc.png 0 0.5 0.866\nd.png -0.5 0 0.866\n",
+    )
+    .unwrap();
+    let limit_kib = 600 << 10;
+    let out = d.join("out");
+    let (o, peak) = run_measuring_rss(&[
+        "estimate",
+        s(&lp),
+        "-o",
+        s(&out),
+        "--decode-memory",
+        "16",
+        "--quiet",
+    ]);
+    ok(&o);
+    assert!(peak < limit_kib, "estimate: peak {peak} KiB");
+    assert_eq!(report(&out)["pixels"]["no_data"], 4096 * 4096);
+    assert_eq!(
+        fs::metadata(out.join("normals.npy")).unwrap().len(),
+        128 + 4096 * 4096 * 12
+    );
+
+    // A shard of the same job (the cache reused), merged.
+    let shard = d.join("shard");
+    let cache = out.join(".symframe-cache");
+    ok(&symframe(&[
+        "estimate",
+        s(&lp),
+        "-o",
+        s(&shard),
+        "--cache",
+        s(&cache),
+        "--tiles",
+        "1/1",
+        "--quiet",
+    ]));
+    let merged = d.join("merged");
+    let (o, peak) = run_measuring_rss(&["merge", s(&shard), "-o", s(&merged), "--quiet"]);
+    ok(&o);
+    assert!(peak < limit_kib, "merge: peak {peak} KiB");
+    assert_eq!(
+        fs::read(merged.join("source.npy")).unwrap(),
+        fs::read(out.join("source.npy")).unwrap()
+    );
+
+    // A forged shard: one tile of the whole image, a sparse file of its length.
+    let forged = d.join("forged");
+    let tiles = forged.join(".symframe-tiles");
+    fs::create_dir_all(&tiles).unwrap();
+    let manifest = serde_json::json!({
+        "format": "symframe-shard", "version": 1, "job": "0123456789abcdef",
+        "shard": 1, "of": 1, "width": 4096, "height": 4096, "tile_size": 4096,
+        "n_tiles": 1, "tiles": [0], "report": {},
+    });
+    fs::write(forged.join("shard.json"), manifest.to_string()).unwrap();
+    let tile = tiles.join("tile-000000.bin");
+    let len = symframe_io::tile_results::tile_result_len(4096 * 4096);
+    assert!(len > 600 << 20);
+    fs::File::create(&tile).unwrap().set_len(len).unwrap();
+    let (o, peak) = run_measuring_rss(&["merge", s(&forged), "-o", s(&d.join("m2"))]);
+    assert_one_line_error(&o, "tile-000000.bin: not a symframe tile result");
+    assert!(peak < limit_kib, "forged merge: peak {peak} KiB");
+}
+
+/// `calibrate` left an image of its folder that is a FIFO out without a word: an error
+/// naming it, before anything is opened.
+#[cfg(unix)]
+#[test]
+fn calibrate_refuses_an_image_that_is_a_fifo() {
+    let tmp = tempfile::tempdir().unwrap();
+    let images = tmp.path().join("images");
+    fs::create_dir_all(&images).unwrap();
+    black_png(&images.join("a.png"), 16, 16);
+    make_fifo(&images.join("b.png"));
+    let cal = tmp.path().join("cal.lp");
+    let o = crate::common::run_with_timeout(&["calibrate", s(&images), "-o", s(&cal)], 60);
+    assert_one_line_error(&o, "b.png: not a regular file (a FIFO)");
+    assert!(!cal.exists());
+    // Named in a list file, the same.
+    let list = tmp.path().join("list.txt");
+    fs::write(&list, "images/a.png\nimages/b.png\n").unwrap();
+    let o = crate::common::run_with_timeout(&["calibrate", s(&list), "-o", s(&cal)], 60);
+    assert_one_line_error(&o, "b.png: not a regular file (a FIFO)");
+}
+
+/// `relight` (of a glTF fit, which reads the exposure there) and `view` (which reads the
+/// estimate folder there) given a `fit.json` that is a FIFO or `/dev/zero`: refused naming
+/// it, never opened.
+#[cfg(unix)]
+#[test]
+fn relight_and_view_refuse_a_fit_json_that_is_not_a_regular_file() {
+    use crate::common::run_with_timeout;
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    crate::view::fit_folder(d);
+    let ward = d.join("fit");
+    // A glTF fit folder of the same frames.
+    let gltf = d.join("gltf");
+    fs::create_dir_all(&gltf).unwrap();
+    let n = 12 * 12;
+    let grey = |v: f32| vec![v; n];
+    let rgb = |v: [f32; 3]| (0..n).flat_map(|_| v).collect::<Vec<f32>>();
+    let write = |name: &str, shape: &[usize], v: &[f32]| {
+        symframe_io::write_npy_f32(&gltf.join(name), shape, v).unwrap()
+    };
+    write("base_color.npy", &[12, 12, 3], &rgb([0.5; 3]));
+    write("metallic.npy", &[12, 12], &grey(0.0));
+    write("roughness.npy", &[12, 12], &grey(0.5));
+    write("anisotropy_strength.npy", &[12, 12], &grey(0.0));
+    write("normals.npy", &[12, 12, 3], &rgb([0.0, 0.0, 1.0]));
+    write("tangents.npy", &[12, 12, 3], &rgb([1.0, 0.0, 0.0]));
+    fs::write(gltf.join("fit.json"), r#"{"exposure": 1.0}"#).unwrap();
+    let relight = |fit: &Path, out: &str| {
+        run_with_timeout(
+            &["relight", s(fit), "-o", s(&d.join(out)), "--light", "0,0,1"],
+            60,
+        )
+    };
+    ok(&relight(&gltf, "r0"));
+    let view =
+        |fit: &Path| run_with_timeout(&["view", s(fit), "-o", s(&d.join("v.html")), "--quiet"], 60);
+    for (planted, what) in [(true, "a FIFO"), (false, "a character device")] {
+        for fit in [&gltf, &ward] {
+            let report = fit.join("fit.json");
+            fs::remove_file(&report).unwrap();
+            if planted {
+                make_fifo(&report);
+            } else {
+                std::os::unix::fs::symlink("/dev/zero", &report).unwrap();
+            }
+        }
+        let needle = format!("fit.json: not a regular file ({what})");
+        assert_one_line_error(&relight(&gltf, "r1"), &needle);
+        assert_one_line_error(&view(&ward), &needle);
+    }
+}

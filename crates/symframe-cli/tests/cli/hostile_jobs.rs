@@ -384,3 +384,33 @@ fn shard_counts_beyond_the_tile_count_are_refused() {
     );
     crate::common::assert_one_line_error(&o, "--tiles 1/9: the image has 4 tiles of 8 px");
 }
+
+/// A texture name of the asset that is a hard link to a map the export reads (the same file
+/// under another name) was replaced, through the switch's backup link: refused with a
+/// one-line error naming the map, the map untouched.
+#[cfg(unix)]
+#[test]
+fn export_refuses_a_texture_name_hard_linked_to_a_map() {
+    let tmp = tempfile::tempdir().unwrap();
+    let est = tmp.path().join("est");
+    ok(&crate::common::estimate(
+        &ward_sphere(&tmp.path().join("a"), 16, 30),
+        &est,
+        &["--method", "woodham", "--quiet"],
+    ));
+    let asset = tmp.path().join("asset");
+    fs::create_dir_all(&asset).unwrap();
+    let normals = fs::read(est.join("normals.npy")).unwrap();
+    fs::hard_link(est.join("normals.npy"), asset.join("h_normal.png")).unwrap();
+    let gltf = asset.join("h.gltf");
+    let o = symframe(&["export", "gltf", s(&est), "-o", s(&gltf)]);
+    assert_one_line_error(&o, "normals.npy");
+    assert!(stderr(&o).contains("h_normal.png"), "{}", stderr(&o));
+    assert_eq!(fs::read(est.join("normals.npy")).unwrap(), normals);
+    assert!(!gltf.exists());
+    assert!(fs::read_dir(&asset).unwrap().all(|e| !e
+        .unwrap()
+        .file_name()
+        .to_string_lossy()
+        .starts_with(".symframe")));
+}

@@ -338,10 +338,30 @@ pub(crate) fn write_exr_interleaved(
     names: &[&str],
     data: &[f32],
 ) -> Result<()> {
+    check_len(path, width, height, names.len(), data.len())?;
+    let k = names.len();
+    write_exr_pixels(path, width, height, names, &|x, y| {
+        let i = k * (y * width + x);
+        let mut v = [0.0; 3];
+        v[..k].copy_from_slice(&data[i..i + k]);
+        v
+    })
+}
+
+/// Writes a ZIP-compressed float32 EXR of `names.len()` (1 or 3) channels named by `names`,
+/// pixel `(x, y)` of which is `pixel(x, y)` (its first `names.len()` values). The encoder
+/// runs on this thread and asks for the pixels block by block in increasing `y`, so a caller
+/// can produce them a band of rows at a time.
+pub(crate) fn write_exr_pixels(
+    path: &Path,
+    width: usize,
+    height: usize,
+    names: &[&str],
+    pixel: &(dyn Fn(usize, usize) -> [f32; 3] + Sync),
+) -> Result<()> {
     use exr::prelude::{
         Encoding, Image as ExrImage, Layer, LayerAttributes, SpecificChannels, Vec2, WritableImage,
     };
-    check_len(path, width, height, names.len(), data.len())?;
     let map_err = |e: exr::error::Error| match e {
         exr::error::Error::Io(io) => Error::write(path, io),
         other => Error::encode(path, other),
@@ -364,14 +384,14 @@ pub(crate) fn write_exr_interleaved(
     match *names {
         [a] => write_layer!(SpecificChannels::build()
             .with_channel(a)
-            .with_pixel_fn(|p: Vec2<usize>| (data[p.y() * width + p.x()],))),
+            .with_pixel_fn(|p: Vec2<usize>| (pixel(p.x(), p.y())[0],))),
         [a, b, c] => write_layer!(SpecificChannels::build()
             .with_channel(a)
             .with_channel(b)
             .with_channel(c)
             .with_pixel_fn(|p: Vec2<usize>| {
-                let i = 3 * (p.y() * width + p.x());
-                (data[i], data[i + 1], data[i + 2])
+                let v = pixel(p.x(), p.y());
+                (v[0], v[1], v[2])
             })),
         _ => Err(Error::invalid(
             path,

@@ -48,13 +48,13 @@ mod tiff;
 
 pub use colour::ColourTag;
 use exr::read_exr;
-pub(crate) use exr::write_exr_interleaved;
 pub use exr::{write_exr_channels, write_exr_rgb};
+pub(crate) use exr::{write_exr_interleaved, write_exr_pixels};
 use image_rs::read_with_image;
 use pfm::{pfm_raw, pfm_size};
 pub use pfm::{read_pfm, write_pfm};
-pub(crate) use png::{write_png, write_png16_rgb_with, PngLayout};
-pub use png::{write_png16_rgb, write_png8_rgb};
+pub(crate) use png::{rgb16_row, write_png, write_png16_rgb_with, PngLayout};
+pub use png::{write_png16_rgb, write_png8_rgb, PngRows};
 use tiff::read_tiff;
 
 /// A decoded image: linear samples, row-major (row 0 at the top), channels interleaved.
