@@ -566,8 +566,8 @@ pub(crate) fn remove_cache(cache_path: &Path, dir: &Path) -> Result<()> {
 }
 
 /// Runs an estimation job: decodes the images once into the tile cache (or reuses it),
-/// estimates tile by tile into result files, then assembles and writes the maps (or, for a
-/// shard, its manifest). The output folder is locked for the whole job (a second job into it
+/// estimates tile by tile into result files, then writes the maps from them a row of tiles at
+/// a time (or, for a shard, its manifest). The output folder is locked for the whole job (a second job into it
 /// is refused). On an error the finished tiles and the cache are kept, so the same call
 /// resumes; only what this job created and holds nothing to resume from is removed again.
 pub fn estimate(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcome> {

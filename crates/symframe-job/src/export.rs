@@ -754,12 +754,7 @@ fn file_id(p: &Path) -> Option<(u64, u64)> {
 /// and targets that would replace one of the export's inputs: the same directory entry, a
 /// symbolic link to the input, or a hard link to it (the same file under another name).
 fn check_targets(targets: &[PathBuf], inputs: &[PathBuf]) -> Result<()> {
-    let inputs: Vec<(
-        PathBuf,
-        Option<PathBuf>,
-        Option<PathBuf>,
-        Option<(u64, u64)>,
-    )> = inputs
+    let inputs: Vec<_> = inputs
         .iter()
         .map(|p| (p.clone(), entry(p), p.canonicalize().ok(), file_id(p)))
         .collect();

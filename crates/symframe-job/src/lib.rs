@@ -5,8 +5,8 @@
 //! ([`symframe_io::TileCache`]), runs a per-pixel method ([`symframe::PixelMethod`]: the
 //! symmetry estimator, a baseline or the Ward fitter) tile by tile into result files (so memory
 //! stays bounded, an interrupted run resumes, and a shard does a share of the tiles), then
-//! assembles the tiles into maps and writes them with a JSON report, all at once into the
-//! output folder. The caller owns interruption (a stop flag, polled between images and tiles)
+//! writes the maps from the tiles a row of tiles at a time, with a JSON report, all at once
+//! into the output folder. The caller owns interruption (a stop flag, polled between images and tiles)
 //! and progress display (a callback).
 //!
 //! - [`estimate`] with an [`EstimateConfig`]: normals, tangents, confidence, anisotropy and the

@@ -321,7 +321,7 @@ mod tests {
             };
         }
         let n = DVec3::new(f(0) as f64, f(1) as f64, 1.0).normalize();
-        let tangent = if p % 4 == 0 {
+        let tangent = if p.is_multiple_of(4) {
             [f32::NAN; 3]
         } else {
             [f(2), f(3), f(4)]

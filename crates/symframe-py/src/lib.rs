@@ -41,13 +41,13 @@ fn to_python<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<
     json_to_py(py, &text)
 }
 
+/// The maps a job kept in memory (it was asked to), else an error.
+fn kept(maps: Option<EstimateMaps>) -> PyResult<EstimateMaps> {
+    maps.ok_or_else(|| SymframeError::new_err("the job kept no maps in memory"))
+}
+
 /// The maps as numpy arrays in `dict`.
-fn put_maps<'py>(
-    py: Python<'py>,
-    dict: &Bound<'py, PyDict>,
-    maps: Option<EstimateMaps>,
-) -> PyResult<()> {
-    let maps = maps.ok_or_else(|| SymframeError::new_err("the job kept no maps in memory"))?;
+fn put_maps<'py>(py: Python<'py>, dict: &Bound<'py, PyDict>, maps: EstimateMaps) -> PyResult<()> {
     let (h, w) = (maps.height, maps.width);
     dict.set_item(
         "normals",
@@ -260,7 +260,7 @@ fn estimate_path<'py>(
                 SymframeError::new_err(format!("{}: cannot read: {e}", path.display()))
             })?;
             dict.set_item("report", json_to_py(py, &text)?)?;
-            put_maps(py, &dict, done.maps)?;
+            put_maps(py, &dict, kept(done.maps)?)?;
         }
         EstimateOutcome::Shard(report) => {
             dict.set_item("report", to_python(py, &*report)?)?;
@@ -801,7 +801,7 @@ fn merge<'py>(
         .map_err(|e| SymframeError::new_err(format!("{}: cannot read: {e}", path.display())))?;
     let dict = PyDict::new(py);
     dict.set_item("report", json_to_py(py, &text)?)?;
-    put_maps(py, &dict, done.maps)?;
+    put_maps(py, &dict, kept(done.maps)?)?;
     Ok(dict)
 }
 
