@@ -862,11 +862,12 @@ fn run(
 }
 
 /// The files of an estimate's output set (`write_estimate_outputs`), the report last.
-pub(crate) const ESTIMATE_FILES: [&str; 13] = [
+pub(crate) const ESTIMATE_FILES: [&str; 14] = [
     "normals.npy",
     "tangents.npy",
     "confidence.npy",
     "anisotropy.npy",
+    "tangent_confidence.npy",
     "source.npy",
     "normals.exr",
     "tangents.exr",

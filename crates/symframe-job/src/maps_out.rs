@@ -101,6 +101,7 @@ struct RowWriters {
     tangents: NpyRows<f32>,
     confidence: NpyRows<f32>,
     anisotropy: NpyRows<f32>,
+    tangent_confidence: NpyRows<f32>,
     source: NpyRows<u8>,
     normals_png: PngRows,
     tangents_png: PngRows,
@@ -117,6 +118,7 @@ impl RowWriters {
             tangents: NpyRows::create(&p("tangents.npy"), &[h, w, 3])?,
             confidence: NpyRows::create(&p("confidence.npy"), &[h, w])?,
             anisotropy: NpyRows::create(&p("anisotropy.npy"), &[h, w])?,
+            tangent_confidence: NpyRows::create(&p("tangent_confidence.npy"), &[h, w])?,
             source: NpyRows::create(&p("source.npy"), &[h, w])?,
             normals_png: PngRows::rgb16(&p("normals.png"), w, h)?,
             tangents_png: PngRows::rgb8(&p("tangents.png"), w, h)?,
@@ -132,6 +134,7 @@ impl RowWriters {
         self.tangents.push(&m.tangents)?;
         self.confidence.push(&m.confidence)?;
         self.anisotropy.push(&m.anisotropy)?;
+        self.tangent_confidence.push(&m.tangent_confidence)?;
         self.source.push(&m.source)?;
         let w = m.width;
         for r in 0..m.height {
@@ -163,6 +166,7 @@ impl RowWriters {
         self.tangents.finish()?;
         self.confidence.finish()?;
         self.anisotropy.finish()?;
+        self.tangent_confidence.finish()?;
         self.source.finish()?;
         self.normals_png.finish()?;
         self.tangents_png.finish()?;
@@ -268,6 +272,7 @@ pub(crate) fn write_estimate_outputs(
             f.tangents[3 * a..3 * b].copy_from_slice(&m.tangents);
             f.confidence[a..b].copy_from_slice(&m.confidence);
             f.anisotropy[a..b].copy_from_slice(&m.anisotropy);
+            f.tangent_confidence[a..b].copy_from_slice(&m.tangent_confidence);
             f.status[a..b].copy_from_slice(&m.status);
             f.source[a..b].copy_from_slice(&m.source);
         }
@@ -333,6 +338,7 @@ mod tests {
             tangent,
             confidence: f(5) * 1.5,
             anisotropy: f(6) + 0.5,
+            tangent_confidence: f(7),
             evals: (p % 97) as u32,
         }
     }
@@ -346,6 +352,7 @@ mod tests {
         write_npy_f32(&p("tangents.npy"), &[h, w, 3], &m.tangents).unwrap();
         write_npy_f32(&p("confidence.npy"), &[h, w], &m.confidence).unwrap();
         write_npy_f32(&p("anisotropy.npy"), &[h, w], &m.anisotropy).unwrap();
+        write_npy_f32(&p("tangent_confidence.npy"), &[h, w], &m.tangent_confidence).unwrap();
         write_npy_u8(&p("source.npy"), &[h, w], &m.source).unwrap();
         write_exr_map(&p("normals.exr"), w, h, 3, &m.normals).unwrap();
         write_exr_map(&p("tangents.exr"), w, h, 3, &m.tangents).unwrap();
@@ -425,6 +432,10 @@ mod tests {
             assert_eq!(bits(&kept.tangents), bits(&whole.tangents));
             assert_eq!(bits(&kept.confidence), bits(&whole.confidence));
             assert_eq!(bits(&kept.anisotropy), bits(&whole.anisotropy));
+            assert_eq!(
+                bits(&kept.tangent_confidence),
+                bits(&whole.tangent_confidence)
+            );
             assert_eq!(
                 (&kept.status, &kept.source, kept.counts, kept.evals),
                 (&whole.status, &whole.source, whole.counts, whole.evals)

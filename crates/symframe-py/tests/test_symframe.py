@@ -12,7 +12,7 @@ import pytest
 
 import symframe
 
-MAPS = ["normals", "tangents", "confidence", "anisotropy", "source"]
+MAPS = ["normals", "tangents", "confidence", "anisotropy", "tangent_confidence", "source"]
 
 
 def bits(a):

@@ -44,6 +44,7 @@ fn estimate_on_an_lp_dataset_writes_every_output_and_is_accurate() {
         "tangents.npy",
         "confidence.npy",
         "anisotropy.npy",
+        "tangent_confidence.npy",
         "normals.exr",
         "tangents.exr",
         "normals.png",
@@ -54,6 +55,25 @@ fn estimate_on_an_lp_dataset_writes_every_output_and_is_accurate() {
     ] {
         assert!(out.join(f).is_file(), "missing {f}");
     }
+    // tangent_confidence.npy: in [0, 1] where there is a tangent, 0 where a normal has none,
+    // NaN where there is no normal; most of the tangents of this brushed sphere stand out.
+    let (shape, tc) = read_npy_f32(&out.join("tangent_confidence.npy")).unwrap();
+    assert_eq!(shape, vec![28, 28]);
+    let (_, normals) = read_npy_f32(&out.join("normals.npy")).unwrap();
+    let (_, tangents) = read_npy_f32(&out.join("tangents.npy")).unwrap();
+    let (mut with, mut sure) = (0, 0);
+    for (p, c) in tc.iter().enumerate() {
+        match (normals[3 * p].is_finite(), tangents[3 * p].is_finite()) {
+            (false, _) => assert!(c.is_nan(), "pixel {p}: {c} without a normal"),
+            (true, false) => assert_eq!(*c, 0.0, "pixel {p}: no tangent"),
+            (true, true) => {
+                assert!((0.0..=1.0).contains(c), "pixel {p}: {c}");
+                with += 1;
+                sure += (*c >= 0.5) as usize;
+            }
+        }
+    }
+    assert!(with > 100 && sure * 10 >= with * 8, "{sure} of {with} tangents >= 0.5");
     // tangents_gltf.png: red/green the tangent's image-plane direction as (d + 1) / 2, blue
     // the anisotropy, at every pixel with a tangent.
     let (_, tan) = read_npy_f32(&out.join("tangents.npy")).unwrap();

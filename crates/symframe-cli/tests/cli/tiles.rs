@@ -22,11 +22,12 @@ fn dataset(dir: &Path) -> PathBuf {
     ward_sphere(dir, SIZE, LIGHTS)
 }
 
-const MAPS: [&str; 4] = [
+const MAPS: [&str; 5] = [
     "normals.npy",
     "tangents.npy",
     "confidence.npy",
     "anisotropy.npy",
+    "tangent_confidence.npy",
 ];
 
 /// Bitwise equality (NaN equals NaN).
@@ -34,7 +35,7 @@ fn same_bits(a: &[f32], b: &[f32]) -> bool {
     a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
-/// The four maps of two output folders are identical.
+/// The float maps of two output folders are identical.
 fn same_maps(a: &Path, b: &Path) {
     for m in MAPS {
         let (sa, va) = read_npy_f32(&a.join(m)).unwrap();
