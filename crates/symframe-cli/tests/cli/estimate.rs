@@ -73,7 +73,10 @@ fn estimate_on_an_lp_dataset_writes_every_output_and_is_accurate() {
             }
         }
     }
-    assert!(with > 100 && sure * 10 >= with * 8, "{sure} of {with} tangents >= 0.5");
+    assert!(
+        with > 100 && sure * 10 >= with * 8,
+        "{sure} of {with} tangents >= 0.5"
+    );
     // tangents_gltf.png: red/green the tangent's image-plane direction as (d + 1) / 2, blue
     // the anisotropy, at every pixel with a tangent.
     let (_, tan) = read_npy_f32(&out.join("tangents.npy")).unwrap();
