@@ -198,6 +198,18 @@ fn check_npy_header(path: &Path, b: &[u8]) -> Result<()> {
     Ok(())
 }
 
+/// The channel names of an EXR map of `channels` values per pixel: 1 is Y, 3 are R, G, B.
+fn exr_map_channels(path: &Path, channels: usize) -> Result<&'static [&'static str]> {
+    match channels {
+        1 => Ok(&["Y"]),
+        3 => Ok(&["R", "G", "B"]),
+        _ => Err(Error::invalid(
+            path,
+            format!("EXR maps have 1 or 3 channels, not {channels}"),
+        )),
+    }
+}
+
 /// Writes a float32 OpenEXR map of `channels` interleaved values per pixel: 3 channels are
 /// named R, G, B and 1 channel Y. `NaN` is kept, marking pixels without a result.
 pub fn write_exr_map(
@@ -207,16 +219,7 @@ pub fn write_exr_map(
     channels: usize,
     data: &[f32],
 ) -> Result<()> {
-    let names: &[&str] = match channels {
-        1 => &["Y"],
-        3 => &["R", "G", "B"],
-        _ => {
-            return Err(Error::invalid(
-                path,
-                format!("EXR maps have 1 or 3 channels, not {channels}"),
-            ))
-        }
-    };
+    let names = exr_map_channels(path, channels)?;
     crate::codecs::write_exr_interleaved(path, width, height, names, data)
 }
 
@@ -230,16 +233,7 @@ pub fn write_exr_map_with(
     channels: usize,
     pixel: &(dyn Fn(usize, usize) -> [f32; 3] + Sync),
 ) -> Result<()> {
-    let names: &[&str] = match channels {
-        1 => &["Y"],
-        3 => &["R", "G", "B"],
-        _ => {
-            return Err(Error::invalid(
-                path,
-                format!("EXR maps have 1 or 3 channels, not {channels}"),
-            ))
-        }
-    };
+    let names = exr_map_channels(path, channels)?;
     crate::codecs::write_exr_pixels(path, width, height, names, pixel)
 }
 

@@ -343,6 +343,23 @@ mod tests {
         }
     }
 
+    /// Writes the tile result files of [`record`]'s pixels into `dir/tiles`; returns the
+    /// folder and the maps they make.
+    fn tile_files(dir: &std::path::Path, grid: &TileGrid, job: u64) -> (PathBuf, EstimateMaps) {
+        let tiles_dir = dir.join("tiles");
+        std::fs::create_dir_all(&tiles_dir).unwrap();
+        let mut whole = EstimateMaps::empty(grid.width, grid.height);
+        for t in 0..grid.n_tiles() {
+            let records: Vec<PixelRecord> = grid.pixels(t).map(record).collect();
+            for (p, r) in grid.pixels(t).zip(&records) {
+                whole.put(p, r);
+            }
+            let path = symframe_io::tile_result_path(&tiles_dir, t);
+            symframe_io::write_tile_result(&path, job, t, &records).unwrap();
+        }
+        (tiles_dir, whole)
+    }
+
     /// The output set as written from whole maps before the maps were streamed.
     fn write_whole(dir: &std::path::Path, m: &EstimateMaps, normal_png: NormalPng) {
         use symframe_io::*;
@@ -379,17 +396,7 @@ mod tests {
         let tmp = tempfile::tempdir().unwrap();
         let (w, h, job) = (37, 23, 0x5eed);
         let grid = TileGrid::new(w, h, 8);
-        let tiles_dir = tmp.path().join("tiles");
-        std::fs::create_dir_all(&tiles_dir).unwrap();
-        let mut whole = EstimateMaps::empty(w, h);
-        for t in 0..grid.n_tiles() {
-            let records: Vec<PixelRecord> = grid.pixels(t).map(record).collect();
-            for (p, r) in grid.pixels(t).zip(&records) {
-                whole.put(p, r);
-            }
-            let path = symframe_io::tile_result_path(&tiles_dir, t);
-            symframe_io::write_tile_result(&path, job, t, &records).unwrap();
-        }
+        let (tiles_dir, whole) = tile_files(tmp.path(), &grid, job);
         for normal_png in [NormalPng::OpenGl, NormalPng::DirectX] {
             let reference = tmp.path().join("reference");
             std::fs::create_dir_all(&reference).unwrap();
@@ -463,13 +470,7 @@ mod tests {
         let tmp = tempfile::tempdir().unwrap();
         let (w, h, job) = (20, 20, 7);
         let grid = TileGrid::new(w, h, 8);
-        let tiles_dir = tmp.path().join("tiles");
-        std::fs::create_dir_all(&tiles_dir).unwrap();
-        for t in 0..grid.n_tiles() {
-            let records: Vec<PixelRecord> = grid.pixels(t).map(record).collect();
-            let path = symframe_io::tile_result_path(&tiles_dir, t);
-            symframe_io::write_tile_result(&path, job, t, &records).unwrap();
-        }
+        let (tiles_dir, _) = tile_files(tmp.path(), &grid, job);
         let streamed = tmp.path().join("streamed");
         let out = OutputDir::lock(&streamed).unwrap();
         let path_of = |t| symframe_io::tile_result_path(&tiles_dir, t);
