@@ -89,3 +89,41 @@ fn clipped_highlights_keep_their_normals_and_tangents() {
     assert!(censored.tangent_error.mean < 1.0, "{censored:?}");
     assert!(dropped.tangent_coverage < censored.tangent_coverage);
 }
+
+/// The mean normal error of the default estimator on a noise-free float sphere of `brdf`
+/// under 500 lights over the 130-degree cap.
+fn float_sphere_error(brdf: &dyn Brdf) -> f64 {
+    let scene = Scene::sphere(24, TangentField::Circular);
+    let lights = uniform_cone_lights(500, 65.0);
+    let stack = scene.render_stack(brdf, &lights);
+    let maps = run(&scene, &lights, &stack, NoiseModel::default());
+    evaluate(
+        &maps.normals,
+        &maps.tangents,
+        &scene.gt_normals(),
+        None,
+        Some(&scene.mask),
+        60.0,
+    )
+    .normal_error
+    .mean
+}
+
+#[test]
+fn a_lobe_outside_the_family_gives_the_data_symmetry_centre_not_its_bias() {
+    use symframe::brdf::Beckmann;
+    // A rough Beckmann copper: the lobe model (GGX-like shape, Smith-GGX masking, Schlick
+    // Fresnel) fits it with a residual above what noise-free samples leave, and its normal
+    // parameter is pulled off by the shape it lacks; the reconstruction it gives is
+    // symmetric about the true normal all the same.
+    let copper = Beckmann::new([0.01; 3], [0.95, 0.64, 0.54], 0.25, 0.25);
+    let off_family = float_sphere_error(&copper);
+    // A lobe of the family stays where its parameters put it (its reconstruction's symmetry
+    // centre is off by the Fresnel term's asymmetry).
+    let plastic = Ggx::isotropic([0.3, 0.4, 0.5], [0.04; 3], 0.12);
+    let in_family = float_sphere_error(&plastic);
+    println!("Beckmann copper {off_family:.3} degrees, GGX plastic {in_family:.3}");
+    // Measured: copper 0.033 (the lobe's own normal parameter: 2.79), plastic 0.003.
+    assert!(off_family < 0.3, "{off_family}");
+    assert!(in_family < 0.05, "{in_family}");
+}
