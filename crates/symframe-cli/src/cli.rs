@@ -290,11 +290,6 @@ pub struct EstimateArgs {
     /// Pixels with anisotropy below this get no tangent (NaN): the slice is isotropic.
     #[arg(long, default_value_t = EstimatorParams::default().min_anisotropy)]
     pub min_anisotropy: f32,
-    /// How far off the light directions may be, in degrees (RMS, as the calibration reports
-    /// it): residuals a lobe leaves within what this explains (with the images' own noise)
-    /// count as noise, not as a material outside the lobe's family. 0: the lights are exact.
-    #[arg(long, default_value_t = 0.0)]
-    pub light_error: f64,
     /// Smallest symmetry domain, in lights, that counts as non-empty (default: 1.5% of the
     /// lights used, at least 6).
     #[arg(long)]

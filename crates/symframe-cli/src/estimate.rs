@@ -36,12 +36,6 @@ fn validate(args: &EstimateArgs) -> Result<()> {
             args.cosine_power
         );
     }
-    if !(0.0..=10.0).contains(&args.light_error) {
-        bail!(
-            "--light-error must be in [0, 10] degrees, got {}",
-            args.light_error
-        );
-    }
     if args.min_domain == Some(0) {
         bail!("--min-domain must be at least 1");
     }
@@ -80,10 +74,6 @@ pub fn config(args: &EstimateArgs) -> Result<EstimateConfig> {
                 min_confidence: args.min_confidence,
                 min_anisotropy: args.min_anisotropy,
                 tangents: !args.no_tangents,
-                noise: symframe::NoiseModel {
-                    light_error: args.light_error.to_radians(),
-                    ..Default::default()
-                },
                 interpolation: if args.reference {
                     Interpolation::Exact
                 } else {

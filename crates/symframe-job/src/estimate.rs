@@ -644,19 +644,10 @@ fn run(
     )?;
     let mut plan = Plan::new(&config.method, &ds)?;
     if let Plan::Symmetry(_, params) = &mut plan {
-        // The capture's noise model, unless the caller gave one (beyond the lights'
-        // accuracy, which the images cannot tell): its clip level censors the clipped samples
-        // (docs/method.md, "Noise model"); report.json records it.
-        let light_error = params.noise.light_error;
-        let told = symframe::NoiseModel {
-            light_error,
-            ..Default::default()
-        };
-        if params.noise == told {
-            params.noise = symframe::NoiseModel {
-                light_error,
-                ..symframe_io::capture_noise(&ds, &config.decode)?
-            };
+        // The capture's noise model, unless the caller gave one: its clip level censors the
+        // clipped samples (docs/method.md, "Noise model"); report.json records it.
+        if params.noise == symframe::NoiseModel::default() {
+            params.noise = symframe_io::capture_noise(&ds, &config.decode)?;
         }
     }
     let rig_s = t0.elapsed().as_secs_f64();

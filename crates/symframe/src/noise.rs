@@ -75,22 +75,12 @@ pub struct NoiseModel {
     pub shot: f64,
     /// Read noise: the variance floor.
     pub read: f64,
-    /// The light directions' uncertainty: the RMS angle (radians) between a light as given
-    /// and as it was. A sample moves with its light by the slice's gradient times this.
-    #[serde(default)]
-    pub light_error: f64,
 }
 
 impl NoiseModel {
     /// The variance of a sample whose noise-free value is `v`.
     pub fn variance(&self, v: f64) -> f64 {
         self.quantisation.variance(v) + self.shot * v.max(0.0) + self.read
-    }
-
-    /// The variance of a grey value (the sum of three channels, each about a third of it)
-    /// whose noise-free value is `v`, the channels' noise independent.
-    pub fn grey_variance(&self, v: f64) -> f64 {
-        3.0 * self.variance(v / 3.0)
     }
 
     /// Reads `slice` (RGB samples per light) through the censoring map into `out`: a sample

@@ -521,10 +521,6 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
             let mask = Some(&scene.mask[..]);
             // What the decoder tells the estimator: the clip level of integer files, and for
             // a JPEG its 8-bit sRGB samples (the compression is not known to it).
-            // What a calibrated rig knows of itself: how its files store samples, its
-            // sensor's full well (images exposed so that the white level is 1) and its
-            // lights' accuracy (`symframe estimate` estimates the shot and read noise from the
-            // images, and takes the lights' accuracy from `--light-error`).
             let params = EstimatorParams {
                 noise: NoiseModel {
                     clip_level: d.saturation,
@@ -533,8 +529,6 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
                         (Some(b), true) => Quantisation::Srgb(b),
                         (Some(b), false) => Quantisation::Linear(b),
                     },
-                    shot: cond.full_well.map_or(0.0, |e| 1.0 / e),
-                    light_error: cond.light_error_deg.to_radians(),
                     ..NoiseModel::default()
                 },
                 ..EstimatorParams::default()

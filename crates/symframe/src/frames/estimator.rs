@@ -13,7 +13,7 @@ use crate::baselines::{
 };
 use crate::error::{Error, Result};
 use crate::frames::highlight::{highlight_moments_of_greys, HighlightMoments, HIGHLIGHT_LEVEL};
-use crate::frames::lobe::{fit_lobe, noise_share, LobeFit, LobeScratch, LobeStart};
+use crate::frames::lobe::{fit_lobe, LobeFit, LobeScratch, LobeStart};
 use crate::frames::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::frames::optim::{nelder_mead, NelderMeadOptions};
 use crate::frames::policy::{
@@ -316,117 +316,26 @@ impl<'a> Estimator<'a> {
                 }
             }
         }
-        if let Some((x, y)) = quadratic_minimum(&f, r) {
+        if f.iter().flatten().any(|v| *v >= EMPTY_DISTANCE) {
+            return (chart(best.1, best.2), 9);
+        }
+        // Least-squares quadratic on the symmetric 3x3 stencil (orthogonal basis: closed form).
+        let col = |i: usize| f[i][0] + f[i][1] + f[i][2];
+        let row = |j: usize| f[0][j] + f[1][j] + f[2][j];
+        let gx = (col(2) - col(0)) / (6.0 * r);
+        let gy = (row(2) - row(0)) / (6.0 * r);
+        let hxx = (col(2) - 2.0 * col(1) + col(0)) / (3.0 * r * r);
+        let hyy = (row(2) - 2.0 * row(1) + row(0)) / (3.0 * r * r);
+        let hxy = (f[2][2] - f[2][0] - f[0][2] + f[0][0]) / (4.0 * r * r);
+        let det = hxx * hyy - hxy * hxy;
+        if hxx > 0.0 && det > 0.0 {
+            let x = -(hyy * gx - hxy * gy) / det;
+            let y = -(hxx * gy - hxy * gx) / det;
             if x.abs() <= 1.5 * r && y.abs() <= 1.5 * r {
                 return (chart(x, y), 9);
             }
         }
         (chart(best.1, best.2), 9)
-    }
-
-    /// Whether the lobe `f` (just fitted with `scratch`) describes the pixel to the noise: its
-    /// residual within what the noise model alone leaves ([`noise_share`]), at the
-    /// significance [`MISFIT_SIGMAS`], above the fit's own precision [`FIT_PRECISION`].
-    fn lobe_describes(&self, f: &LobeFit, scratch: &LobeScratch) -> bool {
-        if f.residual <= FIT_PRECISION {
-            return true;
-        }
-        let (share, n) = noise_share(f, scratch, &self.params.noise);
-        let dof = (n as f64 - LOBE_PARAMETERS).max(1.0);
-        f.residual <= share * (1.0 + MISFIT_SIGMAS * (2.0 / dof).sqrt()) + FIT_PRECISION
-    }
-
-    /// The lobe `f` with its normal moved to the reconstruction's centre of symmetry and its
-    /// tangent made perpendicular to it.
-    fn centred(&self, f: LobeFit) -> LobeFit {
-        let (n, evals) = self.lobe_symmetry_centre(&f);
-        let t = f.tangent - n * n.dot(f.tangent);
-        LobeFit {
-            normal: n,
-            tangent: t.try_normalize().unwrap_or(f.tangent),
-            evals: f.evals + evals,
-            ..f
-        }
-    }
-
-    /// The centre of symmetry of the fitted lobe itself: the normal `n` minimising
-    /// `sum (L(l) - L(G(l)))^2 / sum L(l)^2` (the raw form, which the default measure's
-    /// compensated form reduces to without a diffuse term) over up to [`CENTRE_LIGHTS`]
-    /// lights (evenly spread) where the lobe part `L` of the fit is at least a thousandth of
-    /// its peak, `G` the reflection about `n`, the reflected value read from the model (no
-    /// interpolation). Nelder-Mead from the lobe's normal parameter.
-    fn lobe_symmetry_centre(&self, f: &LobeFit) -> (DVec3, u32) {
-        let rig = self.rig;
-        let lobe = LobeFit { diffuse: 0.0, ..*f };
-        let n0 = f.normal;
-        // L / its peak >= 1e-3 where the slope form q <= k (1000^(1/k) - 1), the widths'
-        // larger bounding it (cheap: no power per light).
-        let q_max = f.shape * (1e3f64.powf(1.0 / f.shape) - 1.0);
-        let a2 = f.alpha[0] * f.alpha[0];
-        let mut chosen = [0u32; CENTRE_LIGHTS];
-        let mut values = [0.0f64; CENTRE_LIGHTS];
-        let mut count = 0;
-        for &j in rig.query_order() {
-            let h = rig.halfway_in_camera()[j as usize];
-            let hn = h.dot(n0);
-            if hn <= 1e-3 || (1.0 - hn * hn) / (hn * hn) > q_max * a2 {
-                continue;
-            }
-            let l = rig.lights_in_camera()[j as usize];
-            let v = lobe.value(l, h);
-            if v > 0.0 {
-                chosen[count] = j;
-                values[count] = v;
-                count += 1;
-                if count == CENTRE_LIGHTS {
-                    break;
-                }
-            }
-        }
-        let peak = values[..count].iter().fold(0.0f64, |m, &v| m.max(v));
-        let distance = |n: DVec3| -> f64 {
-            let (mut num, mut den) = (0.0, 0.0);
-            for (&j, &a) in chosen[..count].iter().zip(&values[..count]) {
-                let (l, h) = (
-                    rig.lights_in_camera()[j as usize],
-                    rig.halfway_in_camera()[j as usize],
-                );
-                let nl = n.dot(l);
-                if nl <= 0.0 || a < 1e-3 * peak {
-                    continue;
-                }
-                let hr = 2.0 * h.dot(n) * n - h;
-                if !rig.in_cone(hr) {
-                    continue;
-                }
-                let lr = crate::geometry::light_from_halfway(hr);
-                let nlr = n.dot(lr);
-                if nlr <= 0.0 {
-                    continue;
-                }
-                let d = a - lobe.value(lr, hr);
-                num += d * d;
-                den += a * a;
-            }
-            if den > 0.0 {
-                num / den
-            } else {
-                EMPTY_DISTANCE
-            }
-        };
-        let (u, w) = tangent_basis(n0);
-        let chart = |x: &[f64; 2]| (n0 + x[0] * u + x[1] * w).normalize();
-        let found = nelder_mead(
-            |x: &[f64; 2]| distance(chart(x)),
-            [0.0, 0.0],
-            [CENTRE_STEP, CENTRE_STEP],
-            NelderMeadOptions {
-                max_evals: CENTRE_EVALS,
-                x_tolerance: 1e-4,
-                f_tolerance: f64::INFINITY,
-            },
-        );
-        (chart(&found.x), found.evals)
     }
 
     /// The robust Lambertian fit (Woodham with outlier rejection, default parameters) of a
@@ -582,17 +491,6 @@ impl<'a> Estimator<'a> {
         } else {
             None
         };
-        // Where the lobe leaves more than the noise explains, it does not describe the
-        // material and its normal parameter carries the family's bias: the normal is then
-        // the centre of symmetry of the reconstruction it gives (docs/method.md, "The
-        // data's symmetry as the judge").
-        let fitted = fitted.map(|f| {
-            if f.residual < LOBE_EXPLAINS && f.normal.z > 0.0 && !self.lobe_describes(&f, lobe) {
-                self.centred(f)
-            } else {
-                f
-            }
-        });
         // Under a sharp coat one lobe cannot explain coat and base together: the base, fitted
         // without the coat's samples (those at or above the highlight level of the brightest),
         // is the evidence of the base's elongation and axes.
@@ -1248,47 +1146,6 @@ impl<'a> Estimator<'a> {
         (coverage * fit) as f32
     }
 }
-
-/// The lights the lobe's centre of symmetry is read over, at most.
-const CENTRE_LIGHTS: usize = 32;
-
-/// The first step of the search for the lobe's centre of symmetry (radians: 0.6 degrees).
-const CENTRE_STEP: f64 = 0.01;
-
-/// The search for the lobe's centre of symmetry evaluates at most this many normals.
-const CENTRE_EVALS: u32 = 60;
-
-/// The minimum of the least-squares quadratic through a 3x3 stencil `f` of spacing `r` on a
-/// tangent-plane chart (offsets from the centre), `None` where the quadratic has none or a
-/// value is empty.
-fn quadratic_minimum(f: &[[f64; 3]; 3], r: f64) -> Option<(f64, f64)> {
-    if f.iter().flatten().any(|v| *v >= EMPTY_DISTANCE) {
-        return None;
-    }
-    let col = |i: usize| f[i][0] + f[i][1] + f[i][2];
-    let row = |j: usize| f[0][j] + f[1][j] + f[2][j];
-    let gx = (col(2) - col(0)) / (6.0 * r);
-    let gy = (row(2) - row(0)) / (6.0 * r);
-    let hxx = (col(2) - 2.0 * col(1) + col(0)) / (3.0 * r * r);
-    let hyy = (row(2) - 2.0 * row(1) + row(0)) / (3.0 * r * r);
-    let hxy = (f[2][2] - f[2][0] - f[0][2] + f[0][0]) / (4.0 * r * r);
-    let det = hxx * hyy - hxy * hxy;
-    (hxx > 0.0 && det > 0.0).then(|| (-(hyy * gx - hxy * gy) / det, -(hxx * gy - hxy * gx) / det))
-}
-
-/// A lobe fit's residual counts as more than the noise explains beyond this many standard
-/// deviations of a chi-square's share (`sqrt(2 / dof)` relative): one false alarm in about
-/// 700 pixels where the lobe does describe the material.
-const MISFIT_SIGMAS: f64 = 3.0;
-
-/// The lobe fit's own precision, as a share of the energy: noise-free samples of lobes in the
-/// family are fitted to 1e-9-1e-7 (measured on the capture experiment's float renders); a
-/// residual below this says nothing about the model.
-const FIT_PRECISION: f64 = 1e-6;
-
-/// The lobe model's parameters (frame 3, shape 4, linear 3): what a fit takes from the
-/// samples' degrees of freedom.
-const LOBE_PARAMETERS: f64 = 10.0;
 
 /// A lobe fit that leaves less than this share of the pixel's energy unexplained is the
 /// pixel's answer ([`PixelSource::Lobe`]); one that leaves more is no evidence, and the

@@ -358,7 +358,10 @@ fn a_lobe_that_barely_improves_on_the_diffuse_term_does_not_answer() {
 fn a_doubtful_search_gives_way_to_a_plausible_lobe() {
     // Ward on shadowed bumps under 500 lights: cast shadows break the slices' symmetry, and
     // where the search's own confidence is under 0.1 a lobe fit leaving under 0.5% answers.
-    // Measured: mean 0.64, 3.5% of the pixels over 5 degrees (the search alone: 0.91, 6.9%).
+    // Measured: mean 0.82, 4.4% of the pixels over 5 degrees (the search alone: 0.91, 6.9%;
+    // 0.64 and 3.5% while the lobe's shape exponent stopped at 40, before Beckmann's
+    // distribution, Ward's too, was inside the family: docs/method.md, "Beckmann inside the
+    // family").
     let scene = shadowed_bumps(7);
     let ward = symframe::brdf::Ward::new([0.3; 3], [0.5; 3], 0.1, 0.4);
     let f = estimate(
@@ -368,7 +371,7 @@ fn a_doubtful_search_gives_way_to_a_plausible_lobe() {
         EstimatorParams::default(),
     );
     assert!(
-        f.mean <= 0.7 && f.over_5 <= 0.045 && f.coverage >= 0.99,
+        f.mean <= 0.85 && f.over_5 <= 0.045 && f.coverage >= 0.99,
         "{f:?}"
     );
 }
