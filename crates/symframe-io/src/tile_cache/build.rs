@@ -366,3 +366,73 @@ pub(super) fn repair(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::codecs::Gamma;
+    use crate::stack::fixture;
+
+    /// The cache of a stack of every kind of image, light blocks of 3, tiles of 8, as the
+    /// decoders and the scatter of version 0.1 (whole images decoded, then scattered) wrote it:
+    /// the bytes after the header (samples, checksums, half-float exponents) are pinned by
+    /// their XXH3-64, and the warnings about the inputs by their text.
+    #[test]
+    fn the_cache_of_every_kind_of_image_is_pinned() {
+        let d = tempfile::tempdir().unwrap();
+        let ds = fixture::every_kind(d.path());
+        let pinned = [
+            (Gamma::Auto, CacheFormat::F32, 178420, 0x1223e85790a591f5),
+            (Gamma::Auto, CacheFormat::F16, 91978, 0x1f13c32aeed2ab5d),
+            (Gamma::Srgb, CacheFormat::F32, 178420, 0x8b964c96b0aacfda),
+            (Gamma::Linear, CacheFormat::F16, 91978, 0x76a305c19569a9b2),
+        ];
+        for (gamma, format, len, hash) in pinned {
+            let opts = DecodeOptions {
+                gamma,
+                ..Default::default()
+            };
+            let partial = d.path().join(format!("{gamma:?}-{format:?}.partial"));
+            let copts = CacheOptions {
+                tile: 8,
+                batch_bytes: 3 * fixture::W * fixture::H * 12,
+                trust_mtime: false,
+                format,
+            };
+            let stop = AtomicBool::new(false);
+            let built = build(
+                &ds,
+                &opts,
+                &partial,
+                0,
+                copts,
+                &|_, _| Ok(()),
+                &stop,
+                &|| {},
+            )
+            .unwrap();
+            let bytes = std::fs::read(&partial).unwrap();
+            let (h, _) = read_header(&partial).unwrap().unwrap();
+            assert_eq!(h.light_block, 3);
+            assert_eq!(bytes.len(), len, "{gamma:?} {format:?}");
+            let sum = xxhash_rust::xxh3::xxh3_64(&bytes[HEADER_BYTES..]);
+            assert_eq!(sum, hash, "{gamma:?} {format:?}: {sum:#018x}");
+            let warnings: Vec<String> = built
+                .warnings
+                .iter()
+                .map(|w| w.to_string().replace(d.path().to_str().unwrap(), "DIR"))
+                .collect();
+            assert!(
+                warnings[0].starts_with("DIR/rgb16.png: 16-bit")
+                    && warnings[1].starts_with("DIR/rgb.pfm: float (linear) image among")
+                    && warnings[2].starts_with("DIR/grey8.png: grey image among RGB ones (6 such")
+                    && warnings[3].starts_with("DIR/rgb.pfm: 120 negative samples in 3 images"),
+                "{warnings:?}"
+            );
+            let tagged = warnings
+                .iter()
+                .any(|w| w.starts_with("DIR/srgb16.png: its PNG sRGB chunk"));
+            assert_eq!(tagged, gamma != Gamma::Srgb, "{warnings:?}");
+        }
+    }
+}
