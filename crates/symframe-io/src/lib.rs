@@ -41,7 +41,7 @@ pub mod tile_results;
 
 pub use atomic::{open_no_follow, write_bytes};
 pub use bounded::{
-    check_regular_file, open_own_file, read_at_most, read_bounded, read_text_bounded,
+    check_regular_file, open_bounded, open_own_file, read_at_most, read_bounded, read_text_bounded,
 };
 pub use codecs::{
     declared_size, decode_image, linear_to_srgb, read_image, read_pfm, srgb_to_linear,
