@@ -6,9 +6,7 @@ use std::sync::Mutex;
 use rayon::prelude::*;
 use symframe::Stack;
 
-use crate::codecs::{
-    declared_size, decode_image, read_image_file, ColourTag, DecodeOptions, SampleKind,
-};
+use crate::codecs::{declared_size, ColourTag, DecodeOptions, Rows, SampleKind};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result, Warning};
 
@@ -99,11 +97,6 @@ impl Notes {
     /// Room for `n` images, none noted yet.
     pub(crate) fn new(n: usize) -> Self {
         Self(Mutex::new(vec![None; n]))
-    }
-
-    /// The sample type of image `i`, once it is decoded.
-    fn kind(&self, i: usize) -> Option<SampleKind> {
-        self.0.lock().ok()?.get(i)?.as_ref().map(|n| n.kind)
     }
 
     fn set(&self, i: usize, note: ImageNote) {
@@ -333,11 +326,94 @@ fn checked_header(path: &Path, opts: &DecodeOptions) -> Result<Option<(usize, us
     }
 }
 
-/// Decodes image `i` of `ds` as a stack stores it: interleaved RGB (grey replicated), divided
-/// by the light's intensity when the dataset has intensities. Returns width, height, samples.
-/// Given `first`, the stack's image size, the size the file's header declares is compared
-/// with it before any pixel is decoded (so an image of another size costs no more memory than
-/// its file: `--decode-memory` holds).
+/// Image `i` of a dataset opened to be read a band of rows at a time as a stack stores it:
+/// interleaved RGB (grey replicated), divided by the light's intensity when the dataset has
+/// intensities.
+pub(crate) struct StackImage {
+    i: usize,
+    rows: Rows,
+    /// The light's intensity, when the dataset has intensities.
+    intensity: Option<[f32; 3]>,
+}
+
+/// Opens image `i` of `ds` (see [`StackImage`]). Given `first`, the stack's image size, the
+/// size the file's header declares is compared with it before any pixel is decoded (so an
+/// image of another size costs no more memory than its file: `--decode-memory` holds).
+pub(crate) fn open_stack_image(
+    ds: &Dataset,
+    i: usize,
+    opts: &DecodeOptions,
+    first: Option<(usize, usize)>,
+) -> Result<StackImage> {
+    let path = &ds.images[i];
+    // A large file's header is read first: its declared size is compared with the stack's and
+    // bounds the file's length before the whole file is read.
+    if crate::check_regular_file(path)? > HEADER_PREFIX_BYTES {
+        if let (Some(size), Some(first)) = (checked_header(path, opts)?, first) {
+            check_size(ds, i, size, first)?;
+        }
+    }
+    let rows = Rows::open(path, opts, &|size| match first {
+        Some(first) => check_size(ds, i, size, first),
+        None => Ok(()),
+    })?;
+    if let Some(first) = first {
+        check_size(ds, i, rows.size(), first)?;
+    }
+    Ok(StackImage {
+        i,
+        rows,
+        intensity: ds.intensities.as_ref().map(|int| int[i]),
+    })
+}
+
+impl StackImage {
+    /// Width and height.
+    pub(crate) fn size(&self) -> (usize, usize) {
+        self.rows.size()
+    }
+
+    /// What the file stores and how it is made linear.
+    pub(crate) fn kind(&self) -> SampleKind {
+        self.rows.kind()
+    }
+
+    /// What the reader holds besides its band of `band_rows` rows (see [`Rows`]).
+    pub(crate) fn resident_bytes(&self, band_rows: usize) -> usize {
+        self.rows.resident_bytes(band_rows)
+    }
+
+    /// Reads the next `out.len() / (3 * width)` rows into `out`, as interleaved RGB.
+    pub(crate) fn read_rgb(&mut self, out: &mut [f32]) -> Result<()> {
+        self.rows.read(out, 3)?;
+        if let Some(k) = self.intensity {
+            for px in out.chunks_exact_mut(3) {
+                for c in 0..3 {
+                    px[c] /= k[c];
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Ends the reading (every row read; see [`Rows::finish`]) and notes the image.
+    pub(crate) fn finish(&mut self, notes: &Notes) -> Result<()> {
+        self.rows.finish()?;
+        notes.set(
+            self.i,
+            ImageNote {
+                kind: self.rows.kind(),
+                grey: self.rows.grey(),
+                negative: self.rows.negative(),
+                colour: self.rows.colour().cloned(),
+            },
+        );
+        Ok(())
+    }
+}
+
+/// Decodes image `i` of `ds` whole, as a stack stores it (see [`open_stack_image`]). Returns
+/// width, height, samples.
 pub(crate) fn decode_stack_image(
     ds: &Dataset,
     i: usize,
@@ -345,46 +421,11 @@ pub(crate) fn decode_stack_image(
     notes: &Notes,
     first: Option<(usize, usize)>,
 ) -> Result<(usize, usize, Vec<f32>)> {
-    let path = &ds.images[i];
-    // A large file's header is read first: its declared size is compared with the stack's and
-    // bounds the file's length before the whole file is read.
-    let large = crate::check_regular_file(path)? > HEADER_PREFIX_BYTES;
-    let declared = if large {
-        checked_header(path, opts)?
-    } else {
-        None
-    };
-    if let (Some(size), Some(first)) = (declared, first) {
-        check_size(ds, i, size, first)?;
-    }
-    let bytes = read_image_file(path)?;
-    if let (None, Some(first)) = (declared, first) {
-        // A header that cannot be read is left for the decoder to report.
-        if let Ok(size) = declared_size(path, &bytes, opts) {
-            check_size(ds, i, size, first)?;
-        }
-    }
-    let img = decode_image(path, &bytes, opts)?;
-    drop(bytes);
-    let (w, h) = (img.width, img.height);
-    notes.set(
-        i,
-        ImageNote {
-            kind: img.kind,
-            grey: img.channels == 1,
-            negative: img.data.iter().filter(|&&v| v < 0.0).count(),
-            colour: img.colour.clone(),
-        },
-    );
-    let mut rgb = img.into_rgb();
-    if let Some(int) = &ds.intensities {
-        let k = int[i];
-        for px in rgb.chunks_exact_mut(3) {
-            for c in 0..3 {
-                px[c] /= k[c];
-            }
-        }
-    }
+    let mut img = open_stack_image(ds, i, opts, first)?;
+    let (w, h) = img.size();
+    let mut rgb = vec![0.0; w * h * 3];
+    img.read_rgb(&mut rgb)?;
+    img.finish(notes)?;
     Ok((w, h, rgb))
 }
 
@@ -407,20 +448,21 @@ pub fn capture_noise(ds: &Dataset, opts: &DecodeOptions) -> Result<symframe::Noi
     };
     let mut model = symframe::NoiseModel::default();
     let mut samples: Option<symframe::noise::NoiseSamples> = None;
-    let notes = Notes::new(n);
     let mut first = None;
-    // One image in memory at a time, decoded as the stack's loader decodes it (header checks,
-    // intensities); an image of another size than the first is left for the loader to name.
+    // One row in memory at a time, read as the stack's loader reads it (header checks,
+    // intensities); an image of another size than the first, or one that fails to decode
+    // part way, ends the sampling (the loader names it).
+    let mut row = Vec::new();
     for &i in &picks {
-        let (w, h, rgb) = match decode_stack_image(ds, i, opts, &notes, first) {
+        let mut img = match open_stack_image(ds, i, opts, first) {
             Ok(d) => d,
             Err(_) if first.is_some() => break,
             Err(e) => return Err(e),
         };
+        let (w, h) = img.size();
         if first.is_none() {
             first = Some((w, h));
-            let kind = notes.kind(i).unwrap_or(SampleKind::Float);
-            let (q, max) = match kind {
+            let (q, max) = match img.kind() {
                 SampleKind::Srgb8 => (Quantisation::Srgb(8), 255.0),
                 SampleKind::Linear8 => (Quantisation::Linear(8), 255.0),
                 SampleKind::U16 => (Quantisation::Linear(16), 65535.0),
@@ -441,9 +483,26 @@ pub fn capture_noise(ds: &Dataset, opts: &DecodeOptions) -> Result<symframe::Noi
                 model.clip_level = (brightest > 0.0).then(|| linear / brightest);
             }
         }
-        samples
-            .get_or_insert_with(|| symframe::noise::NoiseSamples::new(&model))
-            .add(&rgb, 3, w, None);
+        let samples = samples.get_or_insert_with(|| symframe::noise::NoiseSamples::new(&model));
+        let step = symframe::noise::NoiseSamples::row_step(w, h);
+        row.resize(w * 3, 0.0);
+        // Rows are decoded in order; those after the last one sampled are not read.
+        let last = if h == 0 { 0 } else { (h - 1) / step * step + 1 };
+        let mut failed = None;
+        for y in 0..last {
+            if let Err(e) = img.read_rgb(&mut row) {
+                failed = Some(e);
+                break;
+            }
+            if y % step == 0 {
+                samples.add_row(&row, 3, None);
+            }
+        }
+        match failed {
+            Some(e) if i == picks[0] => return Err(e),
+            Some(_) => break,
+            None => {}
+        }
     }
     Ok(match samples.as_mut() {
         Some(s) => model.fit(s),

@@ -713,7 +713,7 @@ mod tests {
         let dir = d.path().join("cache");
         let opts = DecodeOptions::default();
         // Batches of 2 images: 5 batches.
-        let copts = copts_batches_of_2(w, h);
+        let copts = copts_batches_of_2(&ds);
         let go = AtomicBool::new(false);
         let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
         assert!(!info.hit);
@@ -788,12 +788,20 @@ mod tests {
             .unwrap()
     }
 
-    fn copts_batches_of_2(w: usize, h: usize) -> CacheOptions {
-        CacheOptions {
-            tile: 4,
-            batch_bytes: 2 * w * h * 12 + 5,
+    /// Tiles of `tile` pixels, the decoding memory of `k` of `ds`'s images a batch.
+    fn batches_of(k: usize, ds: &Dataset, format: CacheFormat, tile: usize) -> CacheOptions {
+        let mut copts = CacheOptions {
+            tile,
+            format,
             ..CacheOptions::default()
-        }
+        };
+        let first = crate::stack::open_stack_image(ds, 0, &DecodeOptions::default(), None).unwrap();
+        copts.batch_bytes = k * build::image_cost(&first, &copts) + 5;
+        copts
+    }
+
+    fn copts_batches_of_2(ds: &Dataset) -> CacheOptions {
+        batches_of(2, ds, CacheFormat::F32, 4)
     }
 
     /// A changed light-block field in the header was trusted (wrong samples, `hit: true`).
@@ -805,7 +813,7 @@ mod tests {
         let dir = d.path().join("cache");
         let (opts, copts, go) = (
             DecodeOptions::default(),
-            copts_batches_of_2(w, h),
+            copts_batches_of_2(&ds),
             AtomicBool::new(false),
         );
         drop(TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap());
@@ -830,10 +838,7 @@ mod tests {
         let ds = dataset(d.path(), w, h, n);
         let dir = d.path().join("cache");
         let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
-        let copts = CacheOptions {
-            tile: 8,
-            ..copts_batches_of_2(w, h)
-        };
+        let copts = batches_of(2, &ds, CacheFormat::F32, 8);
         drop(TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap());
         let file = stack_file(&dir);
         let mut b = fs::read(&file).unwrap();
@@ -890,7 +895,7 @@ mod tests {
         }
         let dir = d.path().join("cache");
         let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
-        let copts = copts_batches_of_2(w, h);
+        let copts = copts_batches_of_2(&ds);
         drop(TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap());
         let img = &ds.images[2];
         let (len, mtime) = {
@@ -939,11 +944,7 @@ mod tests {
         let ds = dataset(d.path(), 9, 7, 12);
         let dir = d.path().join("cache");
         let opts = DecodeOptions::default();
-        let copts = CacheOptions {
-            tile: 4,
-            batch_bytes: 3 * 9 * 7 * 12,
-            ..CacheOptions::default()
-        };
+        let copts = batches_of(3, &ds, CacheFormat::F32, 4);
         let go = AtomicBool::new(false);
         let infos: Vec<CacheInfo> = std::thread::scope(|s| {
             let handles: Vec<_> = (0..3)
@@ -1081,11 +1082,8 @@ mod tests {
         }
     }
 
-    fn f16_options(w: usize, h: usize) -> CacheOptions {
-        CacheOptions {
-            format: CacheFormat::F16,
-            ..copts_batches_of_2(w, h)
-        }
+    fn f16_options(ds: &Dataset) -> CacheOptions {
+        batches_of(2, ds, CacheFormat::F16, 4)
     }
 
     #[test]
@@ -1095,8 +1093,8 @@ mod tests {
         let ds = dataset(d.path(), w, h, n);
         let dir = d.path().join("cache");
         let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
-        let f32s = copts_batches_of_2(w, h);
-        let f16s = f16_options(w, h);
+        let f32s = copts_batches_of_2(&ds);
+        let f16s = f16_options(&ds);
         drop(TileCache::open_or_build(&ds, &opts, &dir, f32s, &go, &|| {}).unwrap());
         let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, f16s, &go, &|| {}).unwrap();
         assert!(!info.hit && info.images_decoded == n, "{info:?}");
@@ -1144,7 +1142,7 @@ mod tests {
         }
         let small = dataset(&d.path().join("a"), w, h, n);
         let big = dataset_scaled(&d.path().join("b"), w, h, n, 1048576.0);
-        let f16s = f16_options(w, h);
+        let f16s = f16_options(&small);
         let (c1, _) =
             TileCache::open_or_build(&small, &opts, &d.path().join("c1"), f16s, &go, &|| {})
                 .unwrap();
@@ -1173,10 +1171,7 @@ mod tests {
         let ds = dataset(d.path(), w, h, n);
         let dir = d.path().join("cache");
         let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
-        let copts = CacheOptions {
-            tile: 8,
-            ..f16_options(w, h)
-        };
+        let copts = batches_of(2, &ds, CacheFormat::F16, 8);
         drop(TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap());
         let file = stack_file(&dir);
         let clean = fs::read(&file).unwrap();
