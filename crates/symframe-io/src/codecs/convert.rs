@@ -142,6 +142,17 @@ impl Convert {
                 });
                 0
             }
+            // Nothing dropped or replicated: one copy, then a check that is vectorised
+            // while every sample is finite (the usual case).
+            RawRun::F32(v) if out_ch == self.ch => {
+                let n = v.len().min(out.len());
+                let out = &mut out[..n];
+                out.copy_from_slice(&v[..n]);
+                if out.iter().all(|s| s.is_finite()) {
+                    return out.iter().filter(|&&s| s < 0.0).count();
+                }
+                out.chunks_exact_mut(out_ch).map(mark_non_finite).sum()
+            }
             RawRun::F32(v) => {
                 let mut negative = 0;
                 self.each(v, out, out_ch, |px, o| {
