@@ -54,7 +54,7 @@ pub fn check_regular_file(path: &Path) -> Result<u64> {
 }
 
 /// The cap as a message gives it: "64 MiB", "4 GiB", "1.5 KiB".
-fn show_size(bytes: u64) -> String {
+pub(crate) fn show_size(bytes: u64) -> String {
     let units = [(1u64 << 30, "GiB"), (1 << 20, "MiB"), (1 << 10, "KiB")];
     for (unit, name) in units {
         if bytes >= unit {

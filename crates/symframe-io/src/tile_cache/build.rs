@@ -81,17 +81,17 @@ fn check_band(first: &Path, w: usize, h: usize, copts: &CacheOptions) -> Result<
     if band <= copts.batch_bytes || copts.tile <= CacheOptions::default().tile {
         return Ok(());
     }
-    let mib = |b: usize| b as f64 / (1u64 << 20) as f64;
+    let size = |b: usize| crate::bounded::show_size(b as u64);
     Err(Error::invalid(
         first,
         format!(
             "tiles of {} pixels are decoded a row of tiles at a time, {} rows of this \
-             {w}-pixel-wide image: {:.1} MiB, more than the {:.1} MiB of decoding memory; \
-             use a smaller --tile-size or a larger --decode-memory",
+             {w}-pixel-wide image: {}, more than the {} of decoding memory; use a smaller \
+             --tile-size or a larger --decode-memory",
             copts.tile,
             copts.tile.min(h),
-            mib(band),
-            mib(copts.batch_bytes)
+            size(band),
+            size(copts.batch_bytes)
         ),
     ))
 }

@@ -6,8 +6,9 @@
 //! estimation maps one tile at a time). Inside a tile the lights come in blocks of `light_block`
 //! lights (the decoding batch; the last block shorter), each block pixel-major: the tile's pixels
 //! row-major, each pixel's RGB under the block's lights contiguous. When one batch holds every
-//! image (up to 1 GiB of decoded images by default: 1,365 images of 256x256, 85 of 1024x1024) there
-//! is one block and a tile is exactly a [`symframe::Stack`] of its pixels.
+//! image (see Memory below: by default, on 2 threads, 1,180 float EXR images of 256x256, 82 of
+//! 1024x1024, and far more PNGs) there is one block and a tile is exactly a [`symframe::Stack`]
+//! of its pixels.
 //!
 //! Why blocks: a batch then fills one contiguous range per tile, written with one positioned
 //! write, so every page of the file is written once. With each pixel's samples under all lights
@@ -37,10 +38,15 @@
 //! the blocks that fail are decoded again and rewritten in place (one decoding batch per bad
 //! block), and [`CacheInfo::blocks_repaired`] says how many.
 //!
-//! Memory: images are decoded in parallel in batches of `batch_bytes / (width * height * 12)`
-//! images (at least one), and each batch is written into the file tile by tile with positioned
-//! writes from a small per-thread buffer (the file is not mapped while it is built). So the
-//! resident set holds one batch of decoded images, whatever the stack's size. Readers map the
+//! Memory: a batch of images is read in lockstep, one band of tile rows at a time (each image its
+//! band, in parallel: a PNG decoded row by row from its file's bytes, a PFM read a band at a time
+//! from its file, other formats decoded whole but kept in their file's sample type), and each
+//! band's tiles are written into the file with positioned writes from a small per-thread buffer
+//! (the file is not mapped while it is built). A batch holds `batch_bytes` over what one image
+//! costs (its reader, its band of `width x tile` decoded pixels, its share of the per-thread
+//! buffers; at least one image), so the resident set is about `batch_bytes` whatever the stack's
+//! size or the size the images declare; a tile size whose band alone exceeds it is refused
+//! (beyond the default tile size). Readers map the
 //! complete file and release each tile's pages once read ([`TileCache::release`],
 //! `madvise(MADV_DONTNEED)`: for a shared file mapping the data stays in the page cache), so
 //! mapped pages do not accumulate either.
@@ -134,7 +140,10 @@ impl CacheFormat {
 pub struct CacheOptions {
     /// Tile side in pixels.
     pub tile: usize,
-    /// Memory budget of one batch of decoded images, in bytes (at least one image per batch).
+    /// Memory for decoding, in bytes: a batch of images is read in lockstep a band of tile rows
+    /// at a time, as many as this holds, each costing its reader (a PNG's file and decoder, a
+    /// PFM's band, a whole-decoded format's samples in its own type) and its band of decoded
+    /// rows; at least one image per batch.
     pub batch_bytes: usize,
     /// Fingerprint the images by path, size and modification time only, not by content
     /// (skips reading every image on a rerun; an image changed with its size and time kept,
@@ -1204,5 +1213,66 @@ mod tests {
                 "repaired in place, byte {at}"
             );
         }
+    }
+
+    /// A tile size as large as the image made one band the whole decoded image, whatever
+    /// the decoding memory: a band larger than it is refused beyond the default tile size.
+    #[test]
+    fn a_tile_band_larger_than_the_decoding_memory_is_refused() {
+        let d = tempfile::tempdir().unwrap();
+        let ds = dataset(d.path(), 100, 70, 3);
+        let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
+        let copts = |tile, batch_bytes| CacheOptions {
+            tile,
+            batch_bytes,
+            ..CacheOptions::default()
+        };
+        // 64 rows of 100 pixels: 75 KiB a band.
+        let e = TileCache::open_or_build(
+            &ds,
+            &opts,
+            &d.path().join("a"),
+            copts(64, 50_000),
+            &go,
+            &|| {},
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains(
+                "0.exr: tiles of 64 pixels are decoded a row of tiles at a time, 64 rows of \
+                 this 100-pixel-wide image: 75 KiB, more than the 48.8 KiB of decoding memory; use \
+                 a smaller --tile-size or a larger --decode-memory"
+            ),
+            "{e}"
+        );
+        assert!(!d.path().join("a").read_dir().unwrap().any(|e| e
+            .unwrap()
+            .path()
+            .to_string_lossy()
+            .contains(".stack")));
+        let (cache, info) = TileCache::open_or_build(
+            &ds,
+            &opts,
+            &d.path().join("b"),
+            copts(64, 80_000),
+            &go,
+            &|| {},
+        )
+        .unwrap();
+        assert_eq!(info.batch_images, 1);
+        same_as_stack(&cache, &ds);
+        // The default tile size is always accepted: batches of one image.
+        let (cache, info) = TileCache::open_or_build(
+            &ds,
+            &opts,
+            &d.path().join("c"),
+            copts(32, 1000),
+            &go,
+            &|| {},
+        )
+        .unwrap();
+        assert_eq!(info.batch_images, 1);
+        same_as_stack(&cache, &ds);
     }
 }
