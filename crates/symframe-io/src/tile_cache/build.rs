@@ -416,6 +416,21 @@ fn half_exponent(v: &[f32]) -> i32 {
     e
 }
 
+/// How many other hard links the file `path` has (0 off Unix).
+pub(super) fn other_links(path: &Path) -> Result<u64> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        let meta = std::fs::symlink_metadata(path).map_err(|e| Error::read(path, e))?;
+        Ok(meta.nlink().saturating_sub(1))
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = path;
+        Ok(0)
+    }
+}
+
 /// Decodes the lights of the light blocks that hold a failed `(tile, block)` of the complete
 /// cache at `path` again and rewrites those blocks (in every tile) with their checksums, in
 /// place. Called under the exclusive lock. An interruption leaves the cache complete with some
@@ -434,23 +449,17 @@ pub(super) fn repair(
     let blocks: std::collections::BTreeSet<usize> = bad.iter().map(|&(_, b)| b).collect();
     info.blocks_corrupt += bad.len();
     // Repaired in place: a file with other hard links (a backup made by `cp -al`) would
-    // change under its other names too, outside this folder. Refused, not written.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::MetadataExt;
-        let links = std::fs::symlink_metadata(path)
-            .map_err(|e| Error::read(path, e))?
-            .nlink();
-        if links > 1 {
-            return Err(Error::invalid(
-                path,
-                format!(
-                    "has {} other hard links, so its corrupt blocks are not repaired in place; \
-                     remove it (or the other links) and run again",
-                    links - 1
-                ),
-            ));
-        }
+    // change under its other names too, outside this folder. The caller builds such a cache
+    // anew; here it is refused, never written.
+    let links = other_links(path)?;
+    if links > 0 {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "has {links} other hard links, so its corrupt blocks are not repaired in \
+                 place; remove it (or the other links) and run again"
+            ),
+        ));
     }
     let file = crate::atomic::open_no_follow(OpenOptions::new().read(true).write(true), path)
         .map_err(|e| Error::write(path, e))?;

@@ -36,7 +36,9 @@
 //! complete cache is verified before every reuse, every block of every tile against the table
 //! (one pass over the file at memory or disk speed, next to decoding every image); the lights of
 //! the blocks that fail are decoded again and rewritten in place (one decoding batch per bad
-//! block), and [`CacheInfo::blocks_repaired`] says how many.
+//! block), and [`CacheInfo::blocks_repaired`] says how many. A file with other hard links is
+//! never written in place: it is built anew as a new file (the other links keep the old one),
+//! with a warning in [`CacheInfo::warnings`].
 //!
 //! Memory: a batch of images is read in lockstep, one band of tile rows at a time (each image its
 //! band, in parallel: a PNG decoded row by row from its file's bytes, a PFM read a band at a time
@@ -408,6 +410,8 @@ impl TileCache {
         }
         // Someone may have finished building (or repairing) between our check and the
         // exclusive lock.
+        let mut rebuilt = None;
+        let mut build_anew = true;
         if let Some(found) = open_complete(&path, fingerprint, copts.tile, n)? {
             fits_mask(found.header.width, found.header.height)?;
             info.verify_s += found.verify_s;
@@ -422,9 +426,28 @@ impl TileCache {
             } = found;
             info.warnings = read_warnings(&map);
             drop(map);
-            repair(ds, opts, &path, &header, &bad, stop, on_image, &mut info)?;
-        } else {
-            if path.exists() {
+            let links = build::other_links(&path)?;
+            if links == 0 {
+                repair(ds, opts, &path, &header, &bad, stop, on_image, &mut info)?;
+                build_anew = false;
+            } else {
+                // Repairing in place would change the file under its other names too (a backup
+                // made by `cp -al`): a new file is built instead, the other links keep the old.
+                info.blocks_corrupt += bad.len();
+                rebuilt = Some(Warning {
+                    path: path.clone(),
+                    message: format!(
+                        "{} corrupt blocks, and {links} other hard links to the file: rebuilt \
+                         as a new file rather than repaired in place (the other links keep \
+                         the old content)",
+                        bad.len()
+                    ),
+                });
+            }
+        }
+        if build_anew {
+            // Unlinked, not truncated: other hard links keep their content.
+            if path.symlink_metadata().is_ok() {
                 fs::remove_file(&path).map_err(|e| Error::write(&path, e))?;
             }
             let built = build(
@@ -444,6 +467,7 @@ impl TileCache {
             info.decode_s = built.decode_s;
             info.scatter_s = built.scatter_s;
             info.warnings = built.warnings;
+            info.warnings.extend(rebuilt);
             // What an earlier, interrupted build wrote is verified like a reused cache.
             if built.resumed > 0 {
                 if let Some(found) = open_complete(&path, fingerprint, copts.tile, n)? {
