@@ -50,7 +50,7 @@ pub use codecs::{
 };
 pub use dataset::{open_dataset, Dataset};
 pub use error::{Error, Result, Warning};
-pub use lights::{lp_path_convention, read_light_directions, LpPaths};
+pub use lights::{lp_path_convention, read_light_directions, read_list, LpPaths};
 pub use output::{
     gray_map_rgb8, normal_map_rgb8, normal_map_values, normal_png16_row, read_npy_f32, read_npy_u8,
     source_map_rgb8, tangent_map_rgb8, write_exr_map, write_exr_map_with, write_normal_png16,

@@ -29,12 +29,42 @@ pub(crate) struct TextLines<R> {
 }
 
 impl TextLines<std::io::BufReader<std::io::Take<std::fs::File>>> {
-    /// The lines of the text file `path` (a light file or image list), bounded
-    /// ([`crate::open_bounded`], [`crate::limits::MAX_TEXT_FILE_BYTES`]).
+    /// The lines of the light file `path`, bounded ([`crate::open_bounded`],
+    /// [`crate::limits::MAX_TEXT_FILE_BYTES`]).
     pub(crate) fn open(path: &Path) -> Result<Self> {
-        let reader = crate::open_bounded(path, "a light file", crate::limits::MAX_TEXT_FILE_BYTES)?;
+        Self::open_as(path, "a light file")
+    }
+
+    /// The lines of the text file `path`, `what` ("an image list": named by the size cap's
+    /// error), bounded as [`Self::open`].
+    fn open_as(path: &Path, what: &str) -> Result<Self> {
+        let reader = crate::open_bounded(path, what, crate::limits::MAX_TEXT_FILE_BYTES)?;
         Ok(Self::new(path, reader))
     }
+}
+
+/// Reads the list file `path` (`what`: "an image list"), one entry a line, a line at a time
+/// and bounded as light files are: `each(line, entry)` is called for every meaningful line
+/// (comments stripped, trimmed, blank lines skipped); more than [`MAX_LIGHTS`] entries
+/// (`entries`: "image filenames") are refused at the line that passes the cap.
+pub fn read_list<E: From<Error>>(
+    path: &Path,
+    what: &str,
+    entries: &str,
+    mut each: impl FnMut(usize, &str) -> std::result::Result<(), E>,
+) -> std::result::Result<(), E> {
+    let mut lines = TextLines::open_as(path, what)?;
+    let mut count = 0;
+    while let Some((line, text)) = lines.next_content()? {
+        if count == MAX_LIGHTS {
+            let why =
+                format!("more than {MAX_LIGHTS} {entries}: {what} holds at most {MAX_LIGHTS}");
+            return Err(Error::parse(path, line, why).into());
+        }
+        count += 1;
+        each(line, text)?;
+    }
+    Ok(())
 }
 
 impl<R: BufRead> TextLines<R> {
@@ -551,18 +581,15 @@ pub fn read_light_directions(path: &Path) -> Result<Vec<DVec3>> {
 
 /// Parses a DiLiGenT `filenames.txt`: one image filename per line, relative to `dir`.
 pub(crate) fn parse_filenames(path: &Path, dir: &Path) -> Result<Vec<PathBuf>> {
-    let mut lines = TextLines::open(path)?;
     let mut images = Vec::new();
-    while let Some((line, text)) = lines.next_content()? {
-        if images.len() == MAX_LIGHTS {
-            return Err(too_many(path, line, "image filenames"));
-        }
+    read_list(path, "a light file", "image filenames", |line, text| {
         let img = dir.join(text);
         if let Some(why) = not_a_file(&img) {
             return Err(image_problem(path, line, why));
         }
         images.push(img);
-    }
+        Ok(())
+    })?;
     if images.is_empty() {
         return Err(Error::invalid(path, "no image filenames"));
     }
