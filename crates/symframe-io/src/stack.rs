@@ -776,6 +776,29 @@ mod tests {
         );
     }
 
+    /// The noise model from images read a row at a time is the one from whole images.
+    #[test]
+    fn capture_noise_reads_rows_as_whole_images_read() {
+        let d = tempfile::tempdir().unwrap();
+        let ds = fixture::every_kind(d.path());
+        let opts = DecodeOptions::default();
+        let model = capture_noise(&ds, &opts).unwrap();
+        let n = ds.images.len();
+        let notes = Notes::new(n);
+        let images: Vec<Vec<f32>> = [0, 5, 10, 16]
+            .iter()
+            .map(|&i| decode_stack_image(&ds, i, &opts, &notes, None).unwrap().2)
+            .collect();
+        let whole = symframe::NoiseModel {
+            shot: 0.0,
+            read: 0.0,
+            ..model
+        }
+        .estimate(images.iter().map(|v| &v[..]), fixture::W, None);
+        assert_eq!(model, whole);
+        assert!(model.shot > 0.0 || model.read > 0.0, "{model:?}");
+    }
+
     /// Every kind of image the decoders read, decoded as version 0.1 decoded it (whole, through
     /// `image`, `tiff`, `exr` and the PFM parser), for each transfer curve: size, channels,
     /// sample kind, colour tag and the XXH3-64 of the samples' bits are pinned.
