@@ -418,13 +418,17 @@ fn check_declared(path: &Path, line: usize, count: usize) -> Result<()> {
     Ok(())
 }
 
+/// A line number and text: a meaningful line of a light file, or the line of the first extra
+/// entry and how many there are.
+type Entry = (usize, String);
+
 /// The meaningful lines after a declared light count `count` (at most [`MAX_LIGHTS`]), at
 /// most `count` of them kept; when there are more, the line of the first extra one and how
 /// many there are in all (`"7"`, or `"more than 100000"`: counting stops at the cap).
 fn declared_entries<R: BufRead>(
     lines: &mut TextLines<R>,
     count: usize,
-) -> Result<(Vec<(usize, String)>, Option<(usize, String)>)> {
+) -> Result<(Vec<Entry>, Option<Entry>)> {
     let mut entries = Vec::with_capacity(count);
     while let Some((line, text)) = lines.next_content()? {
         if entries.len() < count {
