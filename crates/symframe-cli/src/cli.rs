@@ -348,7 +348,10 @@ pub struct EstimateArgs {
     /// Tile side in pixels (the unit of work, of resumption and of the cache layout).
     #[arg(long, default_value_t = CacheOptions::default().tile)]
     pub tile_size: usize,
-    /// Memory for one batch of decoded images while the cache is built, in MiB.
+    /// Memory for decoding images while the cache is built, in MiB: a batch of images is read
+    /// in lockstep a band of tile rows at a time, as many as fit (each costs its reader and its
+    /// band of decoded rows; at least one). A --tile-size above the default whose band of one
+    /// image exceeds it is refused.
     #[arg(long, default_value_t = CacheOptions::default().batch_bytes >> 20, value_name = "MIB")]
     pub decode_memory: usize,
     /// Sample type of the tile cache: f32 (12 bytes per pixel per light; tiled results equal
@@ -394,7 +397,7 @@ pub struct BenchArgs {
     /// Delete the tile cache first, so the run decodes every image (default: reuse it).
     #[arg(long)]
     pub cold: bool,
-    /// Passed to `estimate --decode-memory` (MiB per batch of decoded images).
+    /// Passed to `estimate --decode-memory` (MiB for a batch of images decoded a band at a time).
     #[arg(long, default_value_t = CacheOptions::default().batch_bytes >> 20, value_name = "MIB")]
     pub decode_memory: usize,
     /// Passed to `estimate --cache-format`.
@@ -423,7 +426,7 @@ pub struct ScalingArgs {
     /// Add 1024 x 1024 to the image-size sweep (about 5 GB of cache and minutes more).
     #[arg(long)]
     pub large: bool,
-    /// Passed to `estimate --decode-memory` (MiB per batch of decoded images).
+    /// Passed to `estimate --decode-memory` (MiB for a batch of images decoded a band at a time).
     #[arg(long, default_value_t = CacheOptions::default().batch_bytes >> 20, value_name = "MIB")]
     pub decode_memory: usize,
 }

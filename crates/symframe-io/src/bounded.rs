@@ -6,7 +6,7 @@
 //! `take()`, so a file that grows while it is read stops at the cap too.
 
 use std::fs::File;
-use std::io::Read;
+use std::io::{BufReader, Read, Take};
 use std::path::Path;
 
 use crate::error::{Error, Result};
@@ -54,7 +54,7 @@ pub fn check_regular_file(path: &Path) -> Result<u64> {
 }
 
 /// The cap as a message gives it: "64 MiB", "4 GiB", "1.5 KiB".
-fn show_size(bytes: u64) -> String {
+pub(crate) fn show_size(bytes: u64) -> String {
     let units = [(1u64 << 30, "GiB"), (1 << 20, "MiB"), (1 << 10, "KiB")];
     for (unit, name) in units {
         if bytes >= unit {
@@ -69,19 +69,13 @@ fn show_size(bytes: u64) -> String {
     format!("{bytes} bytes")
 }
 
-/// Reads the whole of `path`, `what` (e.g. "a light file": it names the cap in the error), of
-/// at most `max_bytes` bytes: a regular file ([`check_regular_file`]) no longer than the cap,
-/// else `PATH: larger than the 64 MiB a light file can be`.
-pub fn read_bounded(path: &Path, what: &str, max_bytes: u64) -> Result<Vec<u8>> {
-    let too_large = || {
-        Error::invalid(
-            path,
-            format!("larger than the {} {what} can be", show_size(max_bytes)),
-        )
-    };
+/// Opens `path`, `what` (e.g. "a light file": it names the cap in the error), of at most
+/// `max_bytes` bytes: a regular file ([`check_regular_file`]) no longer than the cap, else
+/// `PATH: larger than the 64 MiB a light file can be`; the file opened is checked again.
+fn open_checked(path: &Path, what: &str, max_bytes: u64) -> Result<File> {
     let len = check_regular_file(path)?;
     if len > max_bytes {
-        return Err(too_large());
+        return Err(too_large(path, what, max_bytes));
     }
     let f = File::open(path).map_err(|e| Error::read(path, e))?;
     // The file opened may not be the one checked (replaced in between): check it again.
@@ -92,12 +86,38 @@ pub fn read_bounded(path: &Path, what: &str, max_bytes: u64) -> Result<Vec<u8>> 
             format!("not a regular file ({})", kind_of(&meta.file_type())),
         ));
     }
-    let mut buf = Vec::with_capacity(meta.len().min(max_bytes) as usize);
+    Ok(f)
+}
+
+/// `PATH: larger than the 64 MiB a light file can be`.
+fn too_large(path: &Path, what: &str, max_bytes: u64) -> Error {
+    Error::invalid(
+        path,
+        format!("larger than the {} {what} can be", show_size(max_bytes)),
+    )
+}
+
+/// Opens `path` to be read a line (or a record) at a time, bounded as [`read_bounded`] is: a
+/// regular file no longer than `max_bytes`, read through a buffer and never past the cap (a
+/// file that grows while it is read ends there), so nothing but the buffer is held.
+pub fn open_bounded(path: &Path, what: &str, max_bytes: u64) -> Result<BufReader<Take<File>>> {
+    Ok(BufReader::new(
+        open_checked(path, what, max_bytes)?.take(max_bytes),
+    ))
+}
+
+/// Reads the whole of `path`, `what` (e.g. "a light file": it names the cap in the error), of
+/// at most `max_bytes` bytes: a regular file ([`check_regular_file`]) no longer than the cap,
+/// else `PATH: larger than the 64 MiB a light file can be`.
+pub fn read_bounded(path: &Path, what: &str, max_bytes: u64) -> Result<Vec<u8>> {
+    let f = open_checked(path, what, max_bytes)?;
+    let len = f.metadata().map_err(|e| Error::read(path, e))?.len();
+    let mut buf = Vec::with_capacity(len.min(max_bytes) as usize);
     f.take(max_bytes.saturating_add(1))
         .read_to_end(&mut buf)
         .map_err(|e| Error::read(path, e))?;
     if buf.len() as u64 > max_bytes {
-        return Err(too_large());
+        return Err(too_large(path, what, max_bytes));
     }
     Ok(buf)
 }

@@ -236,8 +236,9 @@ fn other_lp_counts(lp: &Path, dir: &Path) -> Vec<(String, usize)> {
         .map(|e| e.path())
         .filter(|p| p.is_file() && is_lp(p) && p.file_name() != lp.file_name())
         .filter_map(|p| {
-            let lines = lights::content_lines(&p).ok()?;
-            let count = lines.first()?.1.parse().ok()?;
+            // The first meaningful line alone: the rest is never read.
+            let mut lines = lights::TextLines::open(&p).ok()?;
+            let count = lines.next_content().ok()??.1.parse().ok()?;
             Some((p.file_name()?.to_string_lossy().into_owned(), count))
         })
         .collect();

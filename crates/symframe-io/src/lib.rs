@@ -41,7 +41,7 @@ pub mod tile_results;
 
 pub use atomic::{open_no_follow, write_bytes};
 pub use bounded::{
-    check_regular_file, open_own_file, read_at_most, read_bounded, read_text_bounded,
+    check_regular_file, open_bounded, open_own_file, read_at_most, read_bounded, read_text_bounded,
 };
 pub use codecs::{
     declared_size, decode_image, linear_to_srgb, read_image, read_pfm, srgb_to_linear,
@@ -50,7 +50,7 @@ pub use codecs::{
 };
 pub use dataset::{open_dataset, Dataset};
 pub use error::{Error, Result, Warning};
-pub use lights::{lp_path_convention, read_light_directions, LpPaths};
+pub use lights::{lp_path_convention, read_light_directions, read_list, LpPaths};
 pub use output::{
     gray_map_rgb8, normal_map_rgb8, normal_map_values, normal_png16_row, read_npy_f32, read_npy_u8,
     source_map_rgb8, tangent_map_rgb8, write_exr_map, write_exr_map_with, write_normal_png16,

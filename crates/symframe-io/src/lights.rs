@@ -3,61 +3,189 @@
 //! All text files accept blank lines and `#` comments (whole-line or trailing), so a `#` can not
 //! be part of an image path. A UTF-8 byte-order mark at the start (as Windows editors write) is
 //! ignored. Lines end with LF, CR LF or a lone CR (old Mac editors, some rig software).
+//!
+//! Files are read a line at a time ([`TextLines`]), never whole, and hold at most
+//! [`MAX_LIGHTS`] lights (rows, images): a longer one is refused at the line that passes the
+//! cap, before storage for its lights grows past it.
 
+use std::io::BufRead;
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
 use crate::error::{Error, Result};
+use crate::limits::MAX_LIGHTS;
 
-/// Reads a text file and returns its meaningful lines as `(1-based line number, content)`, with
-/// comments stripped and surrounding whitespace trimmed; blank lines are dropped.
-pub(crate) fn content_lines(path: &Path) -> Result<Vec<(usize, String)>> {
-    let bytes = read_text_file(path)?;
-    parse_content_lines(path, &bytes)
+/// The lines of a text file, read one at a time through a buffer (the file is never held
+/// whole): each without its line end (LF, CR LF or a lone CR), numbered from 1, a byte-order
+/// mark at the start dropped. Lines must be UTF-8.
+pub(crate) struct TextLines<R> {
+    path: PathBuf,
+    reader: R,
+    line: Vec<u8>,
+    number: usize,
+    /// The last line ended with a CR: an LF right after it belongs to that line end.
+    after_cr: bool,
 }
 
-/// The bytes of the text file `path` (a light file or image list), bounded
-/// ([`crate::read_bounded`], [`crate::limits::MAX_TEXT_FILE_BYTES`]).
-fn read_text_file(path: &Path) -> Result<Vec<u8>> {
-    crate::read_bounded(path, "a light file", crate::limits::MAX_TEXT_FILE_BYTES)
+impl TextLines<std::io::BufReader<std::io::Take<std::fs::File>>> {
+    /// The lines of the light file `path`, bounded ([`crate::open_bounded`],
+    /// [`crate::limits::MAX_TEXT_FILE_BYTES`]).
+    pub(crate) fn open(path: &Path) -> Result<Self> {
+        Self::open_as(path, "a light file")
+    }
+
+    /// The lines of the text file `path`, `what` ("an image list": named by the size cap's
+    /// error), bounded as [`Self::open`].
+    fn open_as(path: &Path, what: &str) -> Result<Self> {
+        let reader = crate::open_bounded(path, what, crate::limits::MAX_TEXT_FILE_BYTES)?;
+        Ok(Self::new(path, reader))
+    }
 }
 
-/// [`content_lines`] of a file's bytes.
-pub(crate) fn parse_content_lines(path: &Path, bytes: &[u8]) -> Result<Vec<(usize, String)>> {
-    let text =
-        std::str::from_utf8(bytes).map_err(|_| Error::decode(path, "not a UTF-8 text file"))?;
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    Ok(split_lines(text)
-        .enumerate()
-        .filter_map(|(i, l)| {
-            let l = l.split('#').next().unwrap_or("").trim();
-            (!l.is_empty()).then(|| (i + 1, l.to_string()))
-        })
-        .collect())
+/// Reads the list file `path` (`what`: "an image list"), one entry a line, a line at a time
+/// and bounded as light files are: `each(line, entry)` is called for every meaningful line
+/// (comments stripped, trimmed, blank lines skipped); more than [`MAX_LIGHTS`] entries
+/// (`entries`: "image filenames") are refused at the line that passes the cap.
+pub fn read_list<E: From<Error>>(
+    path: &Path,
+    what: &str,
+    entries: &str,
+    mut each: impl FnMut(usize, &str) -> std::result::Result<(), E>,
+) -> std::result::Result<(), E> {
+    let mut lines = TextLines::open_as(path, what)?;
+    let mut count = 0;
+    while let Some((line, text)) = lines.next_content()? {
+        if count == MAX_LIGHTS {
+            let why =
+                format!("more than {MAX_LIGHTS} {entries}: {what} holds at most {MAX_LIGHTS}");
+            return Err(Error::parse(path, line, why).into());
+        }
+        count += 1;
+        each(line, text)?;
+    }
+    Ok(())
 }
 
-/// The lines of `text`, ended by LF, CR LF or a lone CR (without the line ends).
-pub(crate) fn split_lines(text: &str) -> impl Iterator<Item = &str> {
-    let mut rest = Some(text).filter(|t| !t.is_empty());
-    std::iter::from_fn(move || {
-        let t = rest?;
-        match t.find(['\n', '\r']) {
-            Some(i) => {
-                let end = if t[i..].starts_with("\r\n") {
-                    i + 2
-                } else {
-                    i + 1
-                };
-                rest = Some(&t[end..]).filter(|r| !r.is_empty());
-                Some(&t[..i])
+impl<R: BufRead> TextLines<R> {
+    /// The lines `reader` gives, of the file `path` (for messages).
+    pub(crate) fn new(path: &Path, reader: R) -> Self {
+        Self {
+            path: path.to_path_buf(),
+            reader,
+            line: Vec::new(),
+            number: 0,
+            after_cr: false,
+        }
+    }
+
+    /// Reads the next line into `self.line` (a byte-order mark at the start of the file
+    /// dropped; checked to be UTF-8); `false` after the last.
+    fn advance(&mut self) -> Result<bool> {
+        self.line.clear();
+        let mut any = false;
+        loop {
+            let buf = self
+                .reader
+                .fill_buf()
+                .map_err(|e| Error::read(&self.path, e))?;
+            if buf.is_empty() {
+                if !any {
+                    return Ok(false);
+                }
+                break;
             }
-            None => {
-                rest = None;
-                Some(t)
+            if std::mem::take(&mut self.after_cr) && buf[0] == b'\n' {
+                self.reader.consume(1);
+                continue;
+            }
+            any = true;
+            match buf.iter().position(|&b| b == b'\n' || b == b'\r') {
+                Some(i) => {
+                    self.after_cr = buf[i] == b'\r';
+                    self.line.extend_from_slice(&buf[..i]);
+                    self.reader.consume(i + 1);
+                    break;
+                }
+                None => {
+                    let n = buf.len();
+                    self.line.extend_from_slice(buf);
+                    self.reader.consume(n);
+                }
             }
         }
-    })
+        self.number += 1;
+        if self.number == 1 && self.line.starts_with("\u{feff}".as_bytes()) {
+            self.line.drain(..3);
+        }
+        if std::str::from_utf8(&self.line).is_err() {
+            return Err(Error::decode(&self.path, "not a UTF-8 text file"));
+        }
+        Ok(true)
+    }
+
+    /// The line last read (checked to be UTF-8 by [`Self::advance`]).
+    fn text(&self) -> &str {
+        std::str::from_utf8(&self.line).unwrap_or("")
+    }
+
+    /// The next line: its number and text; `None` after the last.
+    pub(crate) fn next_line(&mut self) -> Result<Option<(usize, &str)>> {
+        Ok(self.advance()?.then(|| (self.number, self.text())))
+    }
+
+    /// The next meaningful line: comments stripped, surrounding whitespace trimmed, blank lines
+    /// skipped; `None` after the last.
+    pub(crate) fn next_content(&mut self) -> Result<Option<(usize, &str)>> {
+        loop {
+            if !self.advance()? {
+                return Ok(None);
+            }
+            if !content(self.text()).is_empty() {
+                return Ok(Some((self.number, content(self.text()))));
+            }
+        }
+    }
+}
+
+/// A line's content: before any `#`, trimmed.
+fn content(line: &str) -> &str {
+    line.split('#').next().unwrap_or("").trim()
+}
+
+/// The error for a file with more than [`MAX_LIGHTS`] `what` (lights, light directions,
+/// image filenames), at `line`, where the cap was passed.
+fn too_many(path: &Path, line: usize, what: &str) -> Error {
+    Error::parse(
+        path,
+        line,
+        format!("more than {MAX_LIGHTS} {what}: a light file holds at most {MAX_LIGHTS} lights"),
+    )
+}
+
+/// The whitespace-separated fields of `text`: the first `N` in `out`, and how many there are
+/// in all (no allocation per line).
+fn fields<'a, const N: usize>(text: &'a str, out: &mut [&'a str; N]) -> usize {
+    let mut count = 0;
+    for (i, f) in text.split_whitespace().enumerate() {
+        if i < N {
+            out[i] = f;
+        }
+        count += 1;
+    }
+    count
+}
+
+/// The meaningful lines of `bytes`, the content of the text file `path`, as `(1-based line
+/// number, content)` (what the parsers see).
+#[cfg(test)]
+pub(crate) fn parse_content_lines(path: &Path, bytes: &[u8]) -> Result<Vec<(usize, String)>> {
+    let mut lines = TextLines::new(path, bytes);
+    let mut out = Vec::new();
+    while let Some((n, l)) = lines.next_content()? {
+        out.push((n, l.to_string()));
+    }
+    Ok(out)
 }
 
 /// `text` as an error message quotes it: at most 60 characters, else cut with `...`.
@@ -71,12 +199,17 @@ fn quoted(text: &str) -> String {
 /// Whether line `line` (1-based) of the text file `path` has a `#` after some content (a
 /// trailing comment: then a file name cut at it is the likely mistake).
 fn has_trailing_comment(path: &Path, line: usize) -> bool {
-    read_text_file(path).ok().is_some_and(|b| {
-        split_lines(&String::from_utf8_lossy(&b))
-            .nth(line - 1)
-            .and_then(|l| l.split_once('#'))
-            .is_some_and(|(before, _)| !before.trim().is_empty())
-    })
+    let Ok(mut lines) = TextLines::open(path) else {
+        return false;
+    };
+    while let Ok(Some((n, text))) = lines.next_line() {
+        if n == line {
+            return text
+                .split_once('#')
+                .is_some_and(|(before, _)| !before.trim().is_empty());
+        }
+    }
+    false
 }
 
 /// Why `p`, listed as an image, is not a readable image file: missing, a broken symbolic link,
@@ -125,18 +258,20 @@ fn image_problem(list: &Path, line: usize, why: String) -> Error {
     Error::parse(list, line, format!("image {why}{hint}"))
 }
 
-/// Parses three whitespace-separated numbers of `what` at `line` of `path`.
-pub(crate) fn parse_triple(
+/// Parses three numbers of `what` at `line` of `path`: `count` fields were found, the first
+/// (up to three) in `tokens`.
+fn parse_triple(
     path: &Path,
     line: usize,
+    count: usize,
     tokens: &[&str],
     what: &str,
 ) -> Result<[f64; 3]> {
-    if tokens.len() != 3 {
+    if count != 3 {
         return Err(Error::parse(
             path,
             line,
-            format!("expected 3 numbers for the {what}, found {}", tokens.len()),
+            format!("expected 3 numbers for the {what}, found {count}"),
         ));
     }
     let mut v = [0.0; 3];
@@ -188,9 +323,9 @@ pub(crate) fn unit_light(v: [f64; 3]) -> std::result::Result<DVec3, String> {
 /// Image paths are relative to the `.lp` file's folder (absolute paths are kept) and may not
 /// contain spaces or `#`. Returns the resolved image paths and unit light directions.
 pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
-    let lines = content_lines(path)?;
+    let mut lines = TextLines::open(path)?;
     let dir = path.parent().unwrap_or(Path::new(""));
-    let Some((count_line, count_text)) = lines.first() else {
+    let Some((count_line, count_text)) = lines.next_content()? else {
         return Err(Error::invalid(
             path,
             "empty light file: expected the number of lights on the first line",
@@ -199,7 +334,7 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
     let count: usize = count_text.parse().map_err(|_| {
         Error::parse(
             path,
-            *count_line,
+            count_line,
             format!(
                 "expected the number of lights, found '{}'",
                 quoted(count_text)
@@ -207,17 +342,17 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
         )
     })?;
     if count == 0 {
-        return Err(Error::parse(path, *count_line, "the light count is zero"));
+        return Err(Error::parse(path, count_line, "the light count is zero"));
     }
-    let entries = &lines[1..];
-    if entries.len() > count {
-        let (extra_line, _) = entries[count];
+    check_declared(path, count_line, count)?;
+    let (entries, extra) = declared_entries(&mut lines, count)?;
+    if let Some((extra_line, found)) = extra {
         return Err(Error::parse(
             path,
             extra_line,
             format!(
-                "more entries than the {count} lights declared on line {count_line} ({} found)",
-                entries.len()
+                "more entries than the {count} lights declared on line {count_line} ({found} \
+                 found)"
             ),
         ));
     }
@@ -232,9 +367,10 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
     }
     let mut images = Vec::with_capacity(count);
     let mut lights = Vec::with_capacity(count);
-    for (line, text) in entries {
-        let tokens: Vec<&str> = text.split_whitespace().collect();
-        if tokens.len() != 4 {
+    for (line, text) in &entries {
+        let mut tokens = [""; 4];
+        let n = fields(text, &mut tokens);
+        if n != 4 {
             let why = if has_trailing_comment(path, *line) {
                 "'#' starts a comment, so image paths may not contain '#'"
             } else {
@@ -243,13 +379,10 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
             return Err(Error::parse(
                 path,
                 *line,
-                format!(
-                    "expected '<image> <lx> <ly> <lz>' ({why}), found {} fields",
-                    tokens.len()
-                ),
+                format!("expected '<image> <lx> <ly> <lz>' ({why}), found {n} fields"),
             ));
         }
-        let v = parse_triple(path, *line, &tokens[1..], "light direction")?;
+        let v = parse_triple(path, *line, 3, &tokens[1..], "light direction")?;
         lights.push(unit_direction(path, *line, v)?);
         let Some((img, _)) = resolve_lp_image(dir, tokens[0]) else {
             if is_windows_path(tokens[0]) {
@@ -271,6 +404,49 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
         images.push(img);
     }
     Ok((images, lights))
+}
+
+/// Refuses a light count `count` (declared at `line` of `path`) above [`MAX_LIGHTS`].
+fn check_declared(path: &Path, line: usize, count: usize) -> Result<()> {
+    if count > MAX_LIGHTS {
+        return Err(Error::parse(
+            path,
+            line,
+            format!("{count} lights declared: a light file holds at most {MAX_LIGHTS} lights"),
+        ));
+    }
+    Ok(())
+}
+
+/// A line number and text: a meaningful line of a light file, or the line of the first extra
+/// entry and how many there are.
+type Entry = (usize, String);
+
+/// The meaningful lines after a declared light count `count` (at most [`MAX_LIGHTS`]), at
+/// most `count` of them kept; when there are more, the line of the first extra one and how
+/// many there are in all (`"7"`, or `"more than 100000"`: counting stops at the cap).
+fn declared_entries<R: BufRead>(
+    lines: &mut TextLines<R>,
+    count: usize,
+) -> Result<(Vec<Entry>, Option<Entry>)> {
+    let mut entries = Vec::with_capacity(count);
+    while let Some((line, text)) = lines.next_content()? {
+        if entries.len() < count {
+            entries.push((line, text.to_string()));
+            continue;
+        }
+        let mut found = count + 1;
+        while found <= MAX_LIGHTS && lines.next_content()?.is_some() {
+            found += 1;
+        }
+        let found = if found > MAX_LIGHTS {
+            format!("more than {MAX_LIGHTS}")
+        } else {
+            found.to_string()
+        };
+        return Ok((entries, Some((line, found))));
+    }
+    Ok((entries, None))
 }
 
 /// How the image paths of an `.lp` file were read.
@@ -336,13 +512,19 @@ fn resolve_lp_image(dir: &Path, token: &str) -> Option<(PathBuf, LpPaths)> {
 pub fn lp_path_convention(path: &Path) -> Result<LpPaths> {
     parse_lp(path)?;
     let dir = path.parent().unwrap_or(Path::new(""));
-    let lines = content_lines(path)?;
-    let windows = lines.iter().skip(1).any(|(_, text)| {
-        text.split_whitespace()
+    let mut lines = TextLines::open(path)?;
+    lines.next_content()?;
+    let mut windows = false;
+    while let Some((_, text)) = lines.next_content()? {
+        let found = text
+            .split_whitespace()
             .next()
-            .and_then(|t| resolve_lp_image(dir, t))
-            .is_some_and(|(_, c)| c == LpPaths::Windows)
-    });
+            .and_then(|t| resolve_lp_image(dir, t));
+        if found.is_some_and(|(_, c)| c == LpPaths::Windows) {
+            windows = true;
+            break;
+        }
+    }
     Ok(if windows {
         LpPaths::Windows
     } else {
@@ -356,49 +538,46 @@ pub fn lp_path_convention(path: &Path) -> Result<LpPaths> {
 /// The form is told by the first meaningful line: one integer means `.lp`. Directions are
 /// normalised; errors name the file and line.
 pub fn read_light_directions(path: &Path) -> Result<Vec<DVec3>> {
-    let lines = content_lines(path)?;
-    let Some((first_line, first)) = lines.first() else {
+    let mut lines = TextLines::open(path)?;
+    let Some((first_line, first)) = lines.next_content()? else {
         return Err(Error::invalid(path, "no light directions in the file"));
     };
-    let tokens: Vec<&str> = first.split_whitespace().collect();
-    if tokens.len() != 1 {
+    let mut tokens = [""; 1];
+    if fields(first, &mut tokens) != 1 {
         return parse_directions(path);
     }
     let count: usize = tokens[0].parse().map_err(|_| {
         Error::parse(
             path,
-            *first_line,
+            first_line,
             format!(
                 "expected the number of lights or 'x y z', found '{}'",
                 quoted(first)
             ),
         )
     })?;
-    let entries = &lines[1..];
-    if entries.len() != count || count == 0 {
+    check_declared(path, first_line, count)?;
+    let (entries, extra) = declared_entries(&mut lines, count)?;
+    if extra.is_some() || entries.len() != count || count == 0 {
+        let found = extra.map_or(entries.len().to_string(), |(_, f)| f);
         return Err(Error::invalid(
             path,
-            format!(
-                "{count} lights declared on line {first_line} but {} entries found",
-                entries.len()
-            ),
+            format!("{count} lights declared on line {first_line} but {found} entries found"),
         ));
     }
     entries
         .iter()
         .map(|(line, text)| {
-            let tokens: Vec<&str> = text.split_whitespace().collect();
-            if tokens.len() != 4 {
+            let mut tokens = [""; 4];
+            let n = fields(text, &mut tokens);
+            if n != 4 {
                 return Err(Error::parse(
                     path,
                     *line,
-                    format!(
-                        "expected '<name> <lx> <ly> <lz>', found {} fields",
-                        tokens.len()
-                    ),
+                    format!("expected '<name> <lx> <ly> <lz>', found {n} fields"),
                 ));
             }
-            let v = parse_triple(path, *line, &tokens[1..], "light direction")?;
+            let v = parse_triple(path, *line, 3, &tokens[1..], "light direction")?;
             unit_direction(path, *line, v)
         })
         .collect()
@@ -406,53 +585,63 @@ pub fn read_light_directions(path: &Path) -> Result<Vec<DVec3>> {
 
 /// Parses a DiLiGenT `filenames.txt`: one image filename per line, relative to `dir`.
 pub(crate) fn parse_filenames(path: &Path, dir: &Path) -> Result<Vec<PathBuf>> {
-    let lines = content_lines(path)?;
-    if lines.is_empty() {
+    let mut images = Vec::new();
+    read_list(path, "a light file", "image filenames", |line, text| {
+        let img = dir.join(text);
+        if let Some(why) = not_a_file(&img) {
+            return Err(image_problem(path, line, why));
+        }
+        images.push(img);
+        Ok(())
+    })?;
+    if images.is_empty() {
         return Err(Error::invalid(path, "no image filenames"));
     }
-    lines
-        .into_iter()
-        .map(|(line, text)| {
-            let img = dir.join(&text);
-            match not_a_file(&img) {
-                None => Ok(img),
-                Some(why) => Err(image_problem(path, line, why)),
-            }
-        })
-        .collect()
+    Ok(images)
 }
 
 /// Parses a table of `x y z` light directions (DiLiGenT `light_directions.txt`), normalised.
 pub(crate) fn parse_directions(path: &Path) -> Result<Vec<DVec3>> {
-    content_lines(path)?
-        .into_iter()
-        .map(|(line, text)| {
-            let tokens: Vec<&str> = text.split_whitespace().collect();
-            let v = parse_triple(path, line, &tokens, "light direction")?;
-            unit_direction(path, line, v)
-        })
-        .collect()
+    parse_rows(path, ["light directions", "light direction"], |line, v| {
+        unit_direction(path, line, v)
+    })
 }
 
 /// Parses a table of `r g b` light intensities (DiLiGenT `light_intensities.txt`); each must be
 /// finite and positive since images are divided by them.
 pub(crate) fn parse_intensities(path: &Path) -> Result<Vec<[f32; 3]>> {
-    content_lines(path)?
-        .into_iter()
-        .map(|(line, text)| {
-            let tokens: Vec<&str> = text.split_whitespace().collect();
-            let v = parse_triple(path, line, &tokens, "light intensity")?;
-            let out = v.map(|x| x as f32);
-            if out.iter().any(|x| !x.is_finite() || *x <= 0.0) {
-                return Err(Error::parse(
-                    path,
-                    line,
-                    "light intensity must be finite and greater than zero",
-                ));
-            }
-            Ok(out)
-        })
-        .collect()
+    parse_rows(path, ["light intensities", "light intensity"], |line, v| {
+        let out = v.map(|x| x as f32);
+        if out.iter().any(|x| !x.is_finite() || *x <= 0.0) {
+            return Err(Error::parse(
+                path,
+                line,
+                "light intensity must be finite and greater than zero",
+            ));
+        }
+        Ok(out)
+    })
+}
+
+/// The rows of a table of three numbers a line (`[rows, row]`: "light directions", "light
+/// direction"), each made a value by `row(line, numbers)`; at most [`MAX_LIGHTS`] rows.
+fn parse_rows<T>(
+    path: &Path,
+    [what, one]: [&str; 2],
+    row: impl Fn(usize, [f64; 3]) -> Result<T>,
+) -> Result<Vec<T>> {
+    let mut lines = TextLines::open(path)?;
+    let mut out = Vec::new();
+    while let Some((line, text)) = lines.next_content()? {
+        if out.len() == MAX_LIGHTS {
+            return Err(too_many(path, line, what));
+        }
+        let mut tokens = [""; 3];
+        let n = fields(text, &mut tokens);
+        let v = parse_triple(path, line, n, &tokens[..n.min(3)], one)?;
+        out.push(row(line, v)?);
+    }
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -558,12 +747,31 @@ mod tests {
     /// A file with CR-only line ends was one line: errors quoted the whole file as "line 1".
     #[test]
     fn cr_only_line_ends_are_line_ends() {
+        let lines = |text: &str| {
+            let mut l = TextLines::new(Path::new("t"), text.as_bytes());
+            let mut v = Vec::new();
+            while let Some((n, t)) = l.next_line().unwrap() {
+                v.push((n, t.to_string()));
+            }
+            v
+        };
+        let s = |v: &[(usize, &str)]| -> Vec<(usize, String)> {
+            v.iter().map(|&(n, t)| (n, t.to_string())).collect()
+        };
         assert_eq!(
-            split_lines("a\rb\r\nc\n\rd").collect::<Vec<_>>(),
-            ["a", "b", "c", "", "d"]
+            lines("a\rb\r\nc\n\rd"),
+            s(&[(1, "a"), (2, "b"), (3, "c"), (4, ""), (5, "d")])
         );
-        assert_eq!(split_lines("a\n").collect::<Vec<_>>(), ["a"]);
-        assert_eq!(split_lines("").count(), 0);
+        assert_eq!(lines("a\n"), s(&[(1, "a")]));
+        assert_eq!(lines(""), s(&[]));
+        // A CR at the end of one buffer and the LF at the start of the next are one line end.
+        let mut l = TextLines::new(
+            Path::new("t"),
+            std::io::BufReader::with_capacity(2, "ab\r\ncd\r".as_bytes()),
+        );
+        assert_eq!(l.next_line().unwrap(), Some((1, "ab")));
+        assert_eq!(l.next_line().unwrap(), Some((2, "cd")));
+        assert_eq!(l.next_line().unwrap(), None);
         let d = tempfile::tempdir().unwrap();
         let lp = d.path().join("mac.lp");
         std::fs::write(&lp, "2\rnone.png 0 0 1\rx 1 0 1 # c\r").unwrap();
@@ -578,6 +786,101 @@ mod tests {
         std::fs::write(&lp, format!("{}\n", "y".repeat(5000))).unwrap();
         let e = read_light_directions(&lp).unwrap_err().to_string();
         assert!(e.len() < 200 && e.contains("yyy..."), "{e}");
+    }
+
+    /// A `light_directions.txt` of ten million rows was read whole (690 MB, 3.8 s): a table
+    /// of exactly [`MAX_LIGHTS`] rows is read, one more is refused at the row that passes the
+    /// cap; so are the other tables, and an `.lp` that declares more lights.
+    #[test]
+    fn light_files_hold_at_most_max_lights() {
+        let d = tempfile::tempdir().unwrap();
+        let table = d.path().join("light_directions.txt");
+        let rows = "0 0 1\n".repeat(MAX_LIGHTS);
+        std::fs::write(&table, format!("# lights\n{rows}")).unwrap();
+        assert_eq!(parse_directions(&table).unwrap().len(), MAX_LIGHTS);
+        assert_eq!(read_light_directions(&table).unwrap().len(), MAX_LIGHTS);
+        std::fs::write(&table, format!("# lights\n{rows}\n0 1 1\n0 0 1\n")).unwrap();
+        let over = MAX_LIGHTS + 3;
+        let want = format!(
+            "light_directions.txt:{over}: more than 100000 light directions: a light file \
+             holds at most 100000 lights"
+        );
+        let e = parse_directions(&table).unwrap_err().to_string();
+        assert!(e.ends_with(&want), "{e}");
+        let e = read_light_directions(&table).unwrap_err().to_string();
+        assert!(e.ends_with(&want), "{e}");
+        let int = d.path().join("light_intensities.txt");
+        std::fs::write(&int, "1 1 1\n".repeat(MAX_LIGHTS + 1)).unwrap();
+        let e = parse_intensities(&int).unwrap_err().to_string();
+        assert!(
+            e.ends_with(
+                "light_intensities.txt:100001: more than 100000 light intensities: a \
+                 light file holds at most 100000 lights"
+            ),
+            "{e}"
+        );
+        std::fs::write(d.path().join("a.png"), b"x").unwrap();
+        let names = d.path().join("filenames.txt");
+        std::fs::write(&names, "a.png\n".repeat(MAX_LIGHTS + 1)).unwrap();
+        let e = parse_filenames(&names, d.path()).unwrap_err().to_string();
+        assert!(
+            e.contains("filenames.txt:100001: more than 100000 image filenames"),
+            "{e}"
+        );
+
+        // An .lp: a count above the cap is refused at its line, before any entry is read.
+        let lp = d.path().join("many.lp");
+        std::fs::write(&lp, format!("\n{}\na.png 0 0 1\n", MAX_LIGHTS + 1)).unwrap();
+        for e in [
+            parse_lp(&lp).unwrap_err().to_string(),
+            read_light_directions(&lp).unwrap_err().to_string(),
+        ] {
+            assert!(
+                e.ends_with(
+                    "many.lp:2: 100001 lights declared: a light file holds at most \
+                     100000 lights"
+                ),
+                "{e}"
+            );
+        }
+        // Exactly the cap, names not checked: read.
+        let entries = "a.png 0 0 1\n".repeat(MAX_LIGHTS);
+        std::fs::write(&lp, format!("{MAX_LIGHTS}\n{entries}")).unwrap();
+        assert_eq!(read_light_directions(&lp).unwrap().len(), MAX_LIGHTS);
+        // More entries than declared: the extra ones are counted up to the cap, not kept.
+        std::fs::write(&lp, format!("2\n{entries}a.png 0 0 1\n")).unwrap();
+        let e = parse_lp(&lp).unwrap_err().to_string();
+        assert!(
+            e.ends_with(
+                "many.lp:4: more entries than the 2 lights declared on line 1 (more \
+                 than 100000 found)"
+            ),
+            "{e}"
+        );
+        let e = read_light_directions(&lp).unwrap_err().to_string();
+        assert!(
+            e.ends_with("many.lp: 2 lights declared on line 1 but more than 100000 entries found"),
+            "{e}"
+        );
+        std::fs::write(&lp, "1\na.png 0 0 1\na.png 0 1 1\n").unwrap();
+        let e = parse_lp(&lp).unwrap_err().to_string();
+        assert!(e.ends_with("(2 found)"), "{e}");
+    }
+
+    /// A line that is not UTF-8 is refused, wherever it is; a byte-order mark is dropped from
+    /// the first line only.
+    #[test]
+    fn lines_are_utf8_and_a_bom_starts_only_the_file() {
+        let d = tempfile::tempdir().unwrap();
+        let table = d.path().join("dirs.txt");
+        std::fs::write(&table, b"0 0 1\n0 1 1\n\xff\xfe 1\n").unwrap();
+        let e = parse_directions(&table).unwrap_err();
+        assert!(e.to_string().ends_with("dirs.txt: cannot decode"), "{e}");
+        let cause = std::error::Error::source(&e).map(|c| c.to_string());
+        assert_eq!(cause.as_deref(), Some("not a UTF-8 text file"));
+        let mut l = TextLines::new(Path::new("t"), "\u{feff}# c\n\u{feff}x".as_bytes());
+        assert_eq!(l.next_line().unwrap(), Some((1, "# c")));
+        assert_eq!(l.next_line().unwrap(), Some((2, "\u{feff}x")));
     }
 
     proptest::proptest! {

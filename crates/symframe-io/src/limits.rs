@@ -12,9 +12,14 @@
 //! - Uncompressed formats (PFM, `.npy`) must hold every value they declare: the pixel data's
 //!   length is checked against the file before the buffer is allocated.
 //! - An `.npy` array has at most [`MAX_NPY_VALUES`] values.
+//! - A light file (`.lp`, `light_directions.txt`, `light_intensities.txt`, `filenames.txt`, a
+//!   `relight --lights` file, an image list) holds at most [`MAX_LIGHTS`] lights (rows, images),
+//!   read a line at a time: a longer one is refused at the line that passes the cap, before
+//!   anything per light is allocated beyond it.
 //! - Every file read whole must be a regular file (not a FIFO, device or folder) of at most
 //!   [`MAX_TEXT_FILE_BYTES`] (light files, image lists, JSON reports), [`MAX_IMAGE_FILE_BYTES`]
-//!   (images, masks) or [`MAX_NPY_FILE_BYTES`] (`.npy` maps); see [`crate::read_bounded`].
+//!   (images, masks) or [`MAX_NPY_FILE_BYTES`] (`.npy` maps); see [`crate::read_bounded`]
+//!   (light files and image lists are read a line at a time, [`crate::open_bounded`]).
 
 use std::path::Path;
 
@@ -30,6 +35,9 @@ pub const PIXEL_ALLOWANCE: u64 = 1 << 20;
 pub const MAX_PIXELS_PER_BYTE: u64 = 1 << 14;
 /// Largest `.npy` array accepted, in values (a `MAX_PIXELS` image of 3 channels).
 pub const MAX_NPY_VALUES: usize = 3 * MAX_PIXELS;
+/// Most lights (images, rows of a light table) a dataset or light file may have: far more than
+/// any capture has (DiLiGenT's 96, the 1,512 of the paper's renders), and little memory.
+pub const MAX_LIGHTS: usize = 100_000;
 /// Largest text file read (a light file, image list or JSON report): 64 MiB, a million lights
 /// at 64 bytes a line.
 pub const MAX_TEXT_FILE_BYTES: u64 = 64 << 20;

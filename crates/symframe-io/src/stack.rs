@@ -6,9 +6,7 @@ use std::sync::Mutex;
 use rayon::prelude::*;
 use symframe::Stack;
 
-use crate::codecs::{
-    declared_size, decode_image, read_image_file, ColourTag, DecodeOptions, SampleKind,
-};
+use crate::codecs::{declared_size, ColourTag, DecodeOptions, Rows, SampleKind};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result, Warning};
 
@@ -99,11 +97,6 @@ impl Notes {
     /// Room for `n` images, none noted yet.
     pub(crate) fn new(n: usize) -> Self {
         Self(Mutex::new(vec![None; n]))
-    }
-
-    /// The sample type of image `i`, once it is decoded.
-    fn kind(&self, i: usize) -> Option<SampleKind> {
-        self.0.lock().ok()?.get(i)?.as_ref().map(|n| n.kind)
     }
 
     fn set(&self, i: usize, note: ImageNote) {
@@ -333,11 +326,94 @@ fn checked_header(path: &Path, opts: &DecodeOptions) -> Result<Option<(usize, us
     }
 }
 
-/// Decodes image `i` of `ds` as a stack stores it: interleaved RGB (grey replicated), divided
-/// by the light's intensity when the dataset has intensities. Returns width, height, samples.
-/// Given `first`, the stack's image size, the size the file's header declares is compared
-/// with it before any pixel is decoded (so an image of another size costs no more memory than
-/// its file: `--decode-memory` holds).
+/// Image `i` of a dataset opened to be read a band of rows at a time as a stack stores it:
+/// interleaved RGB (grey replicated), divided by the light's intensity when the dataset has
+/// intensities.
+pub(crate) struct StackImage {
+    i: usize,
+    rows: Rows,
+    /// The light's intensity, when the dataset has intensities.
+    intensity: Option<[f32; 3]>,
+}
+
+/// Opens image `i` of `ds` (see [`StackImage`]). Given `first`, the stack's image size, the
+/// size the file's header declares is compared with it before any pixel is decoded (so an
+/// image of another size costs no more memory than its file: `--decode-memory` holds).
+pub(crate) fn open_stack_image(
+    ds: &Dataset,
+    i: usize,
+    opts: &DecodeOptions,
+    first: Option<(usize, usize)>,
+) -> Result<StackImage> {
+    let path = &ds.images[i];
+    // A large file's header is read first: its declared size is compared with the stack's and
+    // bounds the file's length before the whole file is read.
+    if crate::check_regular_file(path)? > HEADER_PREFIX_BYTES {
+        if let (Some(size), Some(first)) = (checked_header(path, opts)?, first) {
+            check_size(ds, i, size, first)?;
+        }
+    }
+    let rows = Rows::open(path, opts, &|size| match first {
+        Some(first) => check_size(ds, i, size, first),
+        None => Ok(()),
+    })?;
+    if let Some(first) = first {
+        check_size(ds, i, rows.size(), first)?;
+    }
+    Ok(StackImage {
+        i,
+        rows,
+        intensity: ds.intensities.as_ref().map(|int| int[i]),
+    })
+}
+
+impl StackImage {
+    /// Width and height.
+    pub(crate) fn size(&self) -> (usize, usize) {
+        self.rows.size()
+    }
+
+    /// What the file stores and how it is made linear.
+    pub(crate) fn kind(&self) -> SampleKind {
+        self.rows.kind()
+    }
+
+    /// What the reader holds besides its band of `band_rows` rows (see [`Rows`]).
+    pub(crate) fn resident_bytes(&self, band_rows: usize) -> usize {
+        self.rows.resident_bytes(band_rows)
+    }
+
+    /// Reads the next `out.len() / (3 * width)` rows into `out`, as interleaved RGB.
+    pub(crate) fn read_rgb(&mut self, out: &mut [f32]) -> Result<()> {
+        self.rows.read(out, 3)?;
+        if let Some(k) = self.intensity {
+            for px in out.chunks_exact_mut(3) {
+                for c in 0..3 {
+                    px[c] /= k[c];
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Ends the reading (every row read; see [`Rows::finish`]) and notes the image.
+    pub(crate) fn finish(&mut self, notes: &Notes) -> Result<()> {
+        self.rows.finish()?;
+        notes.set(
+            self.i,
+            ImageNote {
+                kind: self.rows.kind(),
+                grey: self.rows.grey(),
+                negative: self.rows.negative(),
+                colour: self.rows.colour().cloned(),
+            },
+        );
+        Ok(())
+    }
+}
+
+/// Decodes image `i` of `ds` whole, as a stack stores it (see [`open_stack_image`]). Returns
+/// width, height, samples.
 pub(crate) fn decode_stack_image(
     ds: &Dataset,
     i: usize,
@@ -345,46 +421,11 @@ pub(crate) fn decode_stack_image(
     notes: &Notes,
     first: Option<(usize, usize)>,
 ) -> Result<(usize, usize, Vec<f32>)> {
-    let path = &ds.images[i];
-    // A large file's header is read first: its declared size is compared with the stack's and
-    // bounds the file's length before the whole file is read.
-    let large = crate::check_regular_file(path)? > HEADER_PREFIX_BYTES;
-    let declared = if large {
-        checked_header(path, opts)?
-    } else {
-        None
-    };
-    if let (Some(size), Some(first)) = (declared, first) {
-        check_size(ds, i, size, first)?;
-    }
-    let bytes = read_image_file(path)?;
-    if let (None, Some(first)) = (declared, first) {
-        // A header that cannot be read is left for the decoder to report.
-        if let Ok(size) = declared_size(path, &bytes, opts) {
-            check_size(ds, i, size, first)?;
-        }
-    }
-    let img = decode_image(path, &bytes, opts)?;
-    drop(bytes);
-    let (w, h) = (img.width, img.height);
-    notes.set(
-        i,
-        ImageNote {
-            kind: img.kind,
-            grey: img.channels == 1,
-            negative: img.data.iter().filter(|&&v| v < 0.0).count(),
-            colour: img.colour.clone(),
-        },
-    );
-    let mut rgb = img.into_rgb();
-    if let Some(int) = &ds.intensities {
-        let k = int[i];
-        for px in rgb.chunks_exact_mut(3) {
-            for c in 0..3 {
-                px[c] /= k[c];
-            }
-        }
-    }
+    let mut img = open_stack_image(ds, i, opts, first)?;
+    let (w, h) = img.size();
+    let mut rgb = vec![0.0; w * h * 3];
+    img.read_rgb(&mut rgb)?;
+    img.finish(notes)?;
     Ok((w, h, rgb))
 }
 
@@ -407,20 +448,21 @@ pub fn capture_noise(ds: &Dataset, opts: &DecodeOptions) -> Result<symframe::Noi
     };
     let mut model = symframe::NoiseModel::default();
     let mut samples: Option<symframe::noise::NoiseSamples> = None;
-    let notes = Notes::new(n);
     let mut first = None;
-    // One image in memory at a time, decoded as the stack's loader decodes it (header checks,
-    // intensities); an image of another size than the first is left for the loader to name.
+    // One row in memory at a time, read as the stack's loader reads it (header checks,
+    // intensities); an image of another size than the first, or one that fails to decode
+    // part way, ends the sampling (the loader names it).
+    let mut row = Vec::new();
     for &i in &picks {
-        let (w, h, rgb) = match decode_stack_image(ds, i, opts, &notes, first) {
+        let mut img = match open_stack_image(ds, i, opts, first) {
             Ok(d) => d,
             Err(_) if first.is_some() => break,
             Err(e) => return Err(e),
         };
+        let (w, h) = img.size();
         if first.is_none() {
             first = Some((w, h));
-            let kind = notes.kind(i).unwrap_or(SampleKind::Float);
-            let (q, max) = match kind {
+            let (q, max) = match img.kind() {
                 SampleKind::Srgb8 => (Quantisation::Srgb(8), 255.0),
                 SampleKind::Linear8 => (Quantisation::Linear(8), 255.0),
                 SampleKind::U16 => (Quantisation::Linear(16), 65535.0),
@@ -441,9 +483,26 @@ pub fn capture_noise(ds: &Dataset, opts: &DecodeOptions) -> Result<symframe::Noi
                 model.clip_level = (brightest > 0.0).then(|| linear / brightest);
             }
         }
-        samples
-            .get_or_insert_with(|| symframe::noise::NoiseSamples::new(&model))
-            .add(&rgb, 3, w, None);
+        let samples = samples.get_or_insert_with(|| symframe::noise::NoiseSamples::new(&model));
+        let step = symframe::noise::NoiseSamples::row_step(w, h);
+        row.resize(w * 3, 0.0);
+        // Rows are decoded in order; those after the last one sampled are not read.
+        let last = if h == 0 { 0 } else { (h - 1) / step * step + 1 };
+        let mut failed = None;
+        for y in 0..last {
+            if let Err(e) = img.read_rgb(&mut row) {
+                failed = Some(e);
+                break;
+            }
+            if y % step == 0 {
+                samples.add_row(&row, 3, None);
+            }
+        }
+        match failed {
+            Some(e) if i == picks[0] => return Err(e),
+            Some(_) => break,
+            None => {}
+        }
     }
     Ok(match samples.as_mut() {
         Some(s) => model.fit(s),
@@ -715,5 +774,607 @@ mod tests {
                 .contains("f.pfm: 1 negative samples in 1 images"),
             "{w:?}"
         );
+    }
+
+    /// The noise model from images read a row at a time is the one from whole images.
+    #[test]
+    fn capture_noise_reads_rows_as_whole_images_read() {
+        let d = tempfile::tempdir().unwrap();
+        let ds = fixture::every_kind(d.path());
+        let opts = DecodeOptions::default();
+        let model = capture_noise(&ds, &opts).unwrap();
+        let n = ds.images.len();
+        let notes = Notes::new(n);
+        let images: Vec<Vec<f32>> = [0, 5, 10, 16]
+            .iter()
+            .map(|&i| decode_stack_image(&ds, i, &opts, &notes, None).unwrap().2)
+            .collect();
+        let whole = symframe::NoiseModel {
+            shot: 0.0,
+            read: 0.0,
+            ..model
+        }
+        .estimate(images.iter().map(|v| &v[..]), fixture::W, None);
+        assert_eq!(model, whole);
+        assert!(model.shot > 0.0 || model.read > 0.0, "{model:?}");
+    }
+
+    /// Every kind of image the decoders read, decoded as version 0.1 decoded it (whole, through
+    /// `image`, `tiff`, `exr` and the PFM parser), for each transfer curve: size, channels,
+    /// sample kind, colour tag and the XXH3-64 of the samples' bits are pinned.
+    #[test]
+    fn every_kind_of_image_decodes_as_pinned() {
+        use crate::codecs::Gamma;
+        let d = tempfile::tempdir().unwrap();
+        let ds = fixture::every_kind(d.path());
+        let pinned = [
+            ("rgb8.png", Gamma::Auto, "37x23x3 Srgb8", 0x8fd51bc69b7784fb),
+            ("rgb8.png", Gamma::Srgb, "37x23x3 Srgb8", 0x8fd51bc69b7784fb),
+            (
+                "rgb8.png",
+                Gamma::Linear,
+                "37x23x3 Linear8",
+                0x3e0c60ed0cbad7f5,
+            ),
+            (
+                "grey8.png",
+                Gamma::Auto,
+                "37x23x1 Srgb8",
+                0x5b8e6b0ba352e3ba,
+            ),
+            (
+                "grey8.png",
+                Gamma::Srgb,
+                "37x23x1 Srgb8",
+                0x5b8e6b0ba352e3ba,
+            ),
+            (
+                "grey8.png",
+                Gamma::Linear,
+                "37x23x1 Linear8",
+                0x494312a77c89b7c1,
+            ),
+            ("rgb16.png", Gamma::Auto, "37x23x3 U16", 0x8e626d3efacb299b),
+            (
+                "rgb16.png",
+                Gamma::Srgb,
+                "37x23x3 Srgb16",
+                0xe96237066e2f1d18,
+            ),
+            (
+                "rgb16.png",
+                Gamma::Linear,
+                "37x23x3 U16",
+                0x8e626d3efacb299b,
+            ),
+            (
+                "rgba8.png",
+                Gamma::Auto,
+                "37x23x3 Srgb8",
+                0xd8997f51c050e2b4,
+            ),
+            (
+                "rgba8.png",
+                Gamma::Srgb,
+                "37x23x3 Srgb8",
+                0xd8997f51c050e2b4,
+            ),
+            (
+                "rgba8.png",
+                Gamma::Linear,
+                "37x23x3 Linear8",
+                0x905fcbcf60974540,
+            ),
+            ("la16.png", Gamma::Auto, "37x23x1 U16", 0x0f423ce62f3edfe8),
+            (
+                "la16.png",
+                Gamma::Srgb,
+                "37x23x1 Srgb16",
+                0x68366c40b16c70b2,
+            ),
+            ("la16.png", Gamma::Linear, "37x23x1 U16", 0x0f423ce62f3edfe8),
+            (
+                "grey1.png",
+                Gamma::Auto,
+                "37x23x1 Srgb8",
+                0x9ac6ac20e9fb11a0,
+            ),
+            (
+                "grey1.png",
+                Gamma::Srgb,
+                "37x23x1 Srgb8",
+                0x9ac6ac20e9fb11a0,
+            ),
+            (
+                "grey1.png",
+                Gamma::Linear,
+                "37x23x1 Linear8",
+                0x9ac6ac20e9fb11a0,
+            ),
+            (
+                "grey4.png",
+                Gamma::Auto,
+                "37x23x1 Srgb8",
+                0xa94d678d937ba9eb,
+            ),
+            (
+                "grey4.png",
+                Gamma::Srgb,
+                "37x23x1 Srgb8",
+                0xa94d678d937ba9eb,
+            ),
+            (
+                "grey4.png",
+                Gamma::Linear,
+                "37x23x1 Linear8",
+                0x03bee95d79ce911f,
+            ),
+            (
+                "palette2.png",
+                Gamma::Auto,
+                "37x23x3 Srgb8",
+                0x18f60e50a003ac95,
+            ),
+            (
+                "palette2.png",
+                Gamma::Srgb,
+                "37x23x3 Srgb8",
+                0x18f60e50a003ac95,
+            ),
+            (
+                "palette2.png",
+                Gamma::Linear,
+                "37x23x3 Linear8",
+                0x2ba6b817b11a3172,
+            ),
+            (
+                "palette8.png",
+                Gamma::Auto,
+                "37x23x3 Srgb8",
+                0x8a226d456d8fe85d,
+            ),
+            (
+                "palette8.png",
+                Gamma::Srgb,
+                "37x23x3 Srgb8",
+                0x8a226d456d8fe85d,
+            ),
+            (
+                "palette8.png",
+                Gamma::Linear,
+                "37x23x3 Linear8",
+                0x140d1867268a7e41,
+            ),
+            (
+                "grey_trns.png",
+                Gamma::Auto,
+                "37x23x1 Srgb8",
+                0xc0da97f10ecd322f,
+            ),
+            (
+                "grey_trns.png",
+                Gamma::Srgb,
+                "37x23x1 Srgb8",
+                0xc0da97f10ecd322f,
+            ),
+            (
+                "grey_trns.png",
+                Gamma::Linear,
+                "37x23x1 Linear8",
+                0x0154ab0754ccd427,
+            ),
+            (
+                "adam7.png",
+                Gamma::Auto,
+                "37x23x3 Srgb8",
+                0xa889a891e01d406a,
+            ),
+            (
+                "adam7.png",
+                Gamma::Srgb,
+                "37x23x3 Srgb8",
+                0xa889a891e01d406a,
+            ),
+            (
+                "adam7.png",
+                Gamma::Linear,
+                "37x23x3 Linear8",
+                0xc55430948f6e668f,
+            ),
+            (
+                "srgb16.png",
+                Gamma::Auto,
+                "37x23x3 U16 sRGB",
+                0x84485d2435c33a08,
+            ),
+            (
+                "srgb16.png",
+                Gamma::Srgb,
+                "37x23x3 Srgb16 sRGB",
+                0x3666dceee0bd4882,
+            ),
+            (
+                "srgb16.png",
+                Gamma::Linear,
+                "37x23x3 U16 sRGB",
+                0x84485d2435c33a08,
+            ),
+            ("rgb.pfm", Gamma::Auto, "37x23x3 Float", 0x8b4ba516dcd69e6c),
+            ("rgb.pfm", Gamma::Srgb, "37x23x3 Float", 0x8b4ba516dcd69e6c),
+            (
+                "rgb.pfm",
+                Gamma::Linear,
+                "37x23x3 Float",
+                0x8b4ba516dcd69e6c,
+            ),
+            ("grey.pfm", Gamma::Auto, "37x23x1 Float", 0x75b8d589aa881178),
+            ("grey.pfm", Gamma::Srgb, "37x23x1 Float", 0x75b8d589aa881178),
+            (
+                "grey.pfm",
+                Gamma::Linear,
+                "37x23x1 Float",
+                0x75b8d589aa881178,
+            ),
+            ("rgb.exr", Gamma::Auto, "37x23x3 Float", 0xf037bd41f37978fd),
+            ("rgb.exr", Gamma::Srgb, "37x23x3 Float", 0xf037bd41f37978fd),
+            (
+                "rgb.exr",
+                Gamma::Linear,
+                "37x23x3 Float",
+                0xf037bd41f37978fd,
+            ),
+            ("rgb.jpg", Gamma::Auto, "37x23x3 Srgb8", 0x6a5b199e3066d470),
+            ("rgb.jpg", Gamma::Srgb, "37x23x3 Srgb8", 0x6a5b199e3066d470),
+            (
+                "rgb.jpg",
+                Gamma::Linear,
+                "37x23x3 Linear8",
+                0xbc07fd2f191896b8,
+            ),
+            ("rgb16.tif", Gamma::Auto, "37x23x3 U16", 0xdcf33ea13e201396),
+            (
+                "rgb16.tif",
+                Gamma::Srgb,
+                "37x23x3 Srgb16",
+                0x0feca2402a73ecc9,
+            ),
+            (
+                "rgb16.tif",
+                Gamma::Linear,
+                "37x23x3 U16",
+                0xdcf33ea13e201396,
+            ),
+        ];
+        assert_eq!(pinned.len(), ds.images.len() * 3);
+        for (name, gamma, what, hash) in pinned {
+            let opts = DecodeOptions {
+                gamma,
+                ..Default::default()
+            };
+            let img = crate::read_image(&d.path().join(name), &opts).unwrap();
+            let colour = img.colour.as_ref().map_or("", |c| c.name.as_str());
+            let got = format!(
+                "{}x{}x{} {:?} {colour}",
+                img.width, img.height, img.channels, img.kind
+            );
+            assert_eq!(got.trim_end(), what.trim_end(), "{name} {gamma:?}");
+            let bits: Vec<u8> = img
+                .data
+                .iter()
+                .flat_map(|v| v.to_bits().to_le_bytes())
+                .collect();
+            let sum = xxhash_rust::xxh3::xxh3_64(&bits);
+            assert_eq!(sum, hash, "{name} {gamma:?}: {sum:#018x}");
+        }
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod fixture {
+    //! A stack of every kind of image the decoders read (PNG of every bit depth and colour
+    //! type, palette, transparency and interlacing; PFM, EXR, JPEG, TIFF), for tests that pin
+    //! the decoded samples and the cache layout bit for bit.
+
+    use std::path::{Path, PathBuf};
+
+    use glam::DVec3;
+
+    use crate::codecs::{write_exr_rgb, write_pfm};
+    use crate::dataset::Dataset;
+
+    /// Width and height of the fixture's images (tiles of 8 are cropped on both sides).
+    pub(crate) const W: usize = 37;
+    /// See [`W`].
+    pub(crate) const H: usize = 23;
+
+    /// A small deterministic generator (xorshift64*).
+    pub(crate) struct Rng(pub(crate) u64);
+
+    impl Rng {
+        pub(crate) fn next(&mut self) -> u64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+        }
+        fn bytes(&mut self, n: usize) -> Vec<u8> {
+            (0..n).map(|_| (self.next() >> 32) as u8).collect()
+        }
+    }
+
+    /// Writes a PNG of packed, big-endian rows `data` with the `png` crate.
+    #[allow(clippy::too_many_arguments)]
+    fn png_raw(
+        path: &Path,
+        colour: png::ColorType,
+        depth: png::BitDepth,
+        data: &[u8],
+        palette: Option<Vec<u8>>,
+        trns: Option<Vec<u8>>,
+        srgb: bool,
+    ) {
+        let f = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+        let mut e = png::Encoder::new(f, W as u32, H as u32);
+        e.set_color(colour);
+        e.set_depth(depth);
+        if let Some(p) = palette {
+            e.set_palette(p);
+        }
+        if let Some(t) = trns {
+            e.set_trns(t);
+        }
+        if srgb {
+            e.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+        }
+        let mut w = e.write_header().unwrap();
+        w.write_image_data(data).unwrap();
+        w.finish().unwrap();
+    }
+
+    /// The CRC-32 of PNG chunks.
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut c = !0u32;
+        for &b in bytes {
+            c ^= b as u32;
+            for _ in 0..8 {
+                c = if c & 1 != 0 {
+                    0xedb8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
+            }
+        }
+        !c
+    }
+
+    /// An Adam7-interlaced 8-bit RGB PNG of `rgb`, made by hand (the `png` encoder writes no
+    /// interlaced files): each pass's rows unfiltered, in stored deflate blocks.
+    fn interlaced_png(path: &Path, rgb: &[u8]) {
+        const PASSES: [(usize, usize, usize, usize); 7] = [
+            (0, 0, 8, 8),
+            (4, 0, 8, 8),
+            (0, 4, 4, 8),
+            (2, 0, 4, 4),
+            (0, 2, 2, 4),
+            (1, 0, 2, 2),
+            (0, 1, 1, 2),
+        ];
+        let mut raw = Vec::new();
+        for (x0, y0, dx, dy) in PASSES {
+            if x0 >= W || y0 >= H {
+                continue;
+            }
+            for y in (y0..H).step_by(dy) {
+                raw.push(0);
+                for x in (x0..W).step_by(dx) {
+                    raw.extend_from_slice(&rgb[(y * W + x) * 3..(y * W + x) * 3 + 3]);
+                }
+            }
+        }
+        let mut z = vec![0x78, 0x01];
+        let blocks: Vec<&[u8]> = raw.chunks(65535).collect();
+        for (i, b) in blocks.iter().enumerate() {
+            z.push((i + 1 == blocks.len()) as u8);
+            z.extend((b.len() as u16).to_le_bytes());
+            z.extend((!(b.len() as u16)).to_le_bytes());
+            z.extend_from_slice(b);
+        }
+        let (mut a, mut b) = (1u32, 0u32);
+        for &v in &raw {
+            a = (a + v as u32) % 65521;
+            b = (b + a) % 65521;
+        }
+        z.extend(((b << 16) | a).to_be_bytes());
+        let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+        let mut chunk = |kind: &[u8], body: &[u8]| {
+            png.extend((body.len() as u32).to_be_bytes());
+            let mut c = kind.to_vec();
+            c.extend_from_slice(body);
+            png.extend(&c);
+            png.extend(crc32(&c).to_be_bytes());
+        };
+        let mut ihdr = (W as u32).to_be_bytes().to_vec();
+        ihdr.extend((H as u32).to_be_bytes());
+        ihdr.extend([8, 2, 0, 0, 1]);
+        chunk(b"IHDR", &ihdr);
+        chunk(b"IDAT", &z);
+        chunk(b"IEND", &[]);
+        std::fs::write(path, png).unwrap();
+    }
+
+    /// Packs samples of `bits` (1, 2 or 4) into rows, most significant bits first.
+    fn pack(v: &[u8], bits: usize) -> Vec<u8> {
+        let per = 8 / bits;
+        let row = W.div_ceil(per);
+        let mut out = vec![0u8; row * H];
+        for y in 0..H {
+            for x in 0..W {
+                let s = v[y * W + x] & ((1 << bits) - 1) as u8;
+                out[y * row + x / per] |= s << (8 - bits * (x % per + 1));
+            }
+        }
+        out
+    }
+
+    /// Writes the fixture's images into `dir`: the stack, all `W x H`, with light intensities.
+    pub(crate) fn every_kind(dir: &Path) -> Dataset {
+        use png::{BitDepth as D, ColorType as C};
+        let mut rng = Rng(0x5eed_1234_abcd_0001);
+        let n = W * H;
+        let mut images: Vec<PathBuf> = Vec::new();
+        let mut add = |name: &str| {
+            let p = dir.join(name);
+            images.push(p.clone());
+            p
+        };
+        // 8-bit RGB: random, so some samples are saturated.
+        png_raw(
+            &add("rgb8.png"),
+            C::Rgb,
+            D::Eight,
+            &rng.bytes(n * 3),
+            None,
+            None,
+            false,
+        );
+        png_raw(
+            &add("grey8.png"),
+            C::Grayscale,
+            D::Eight,
+            &rng.bytes(n),
+            None,
+            None,
+            false,
+        );
+        png_raw(
+            &add("rgb16.png"),
+            C::Rgb,
+            D::Sixteen,
+            &rng.bytes(n * 6),
+            None,
+            None,
+            false,
+        );
+        png_raw(
+            &add("rgba8.png"),
+            C::Rgba,
+            D::Eight,
+            &rng.bytes(n * 4),
+            None,
+            None,
+            false,
+        );
+        png_raw(
+            &add("la16.png"),
+            C::GrayscaleAlpha,
+            D::Sixteen,
+            &rng.bytes(n * 4),
+            None,
+            None,
+            false,
+        );
+        png_raw(
+            &add("grey1.png"),
+            C::Grayscale,
+            D::One,
+            &pack(&rng.bytes(n), 1),
+            None,
+            None,
+            false,
+        );
+        png_raw(
+            &add("grey4.png"),
+            C::Grayscale,
+            D::Four,
+            &pack(&rng.bytes(n), 4),
+            None,
+            None,
+            false,
+        );
+        let palette = rng.bytes(4 * 3);
+        png_raw(
+            &add("palette2.png"),
+            C::Indexed,
+            D::Two,
+            &pack(&rng.bytes(n), 2),
+            Some(palette),
+            Some(vec![255, 0, 128]),
+            false,
+        );
+        let palette = rng.bytes(256 * 3);
+        png_raw(
+            &add("palette8.png"),
+            C::Indexed,
+            D::Eight,
+            &rng.bytes(n),
+            Some(palette),
+            None,
+            false,
+        );
+        png_raw(
+            &add("grey_trns.png"),
+            C::Grayscale,
+            D::Eight,
+            &rng.bytes(n),
+            None,
+            Some(vec![0, 77]),
+            false,
+        );
+        interlaced_png(&add("adam7.png"), &rng.bytes(n * 3));
+        png_raw(
+            &add("srgb16.png"),
+            C::Rgb,
+            D::Sixteen,
+            &rng.bytes(n * 6),
+            None,
+            None,
+            true,
+        );
+        // Floats with negative, infinite and NaN samples.
+        let floats = |rng: &mut Rng, len: usize| -> Vec<f32> {
+            (0..len)
+                .map(|_| match rng.next() % 50 {
+                    0 => f32::NAN,
+                    1 => f32::INFINITY,
+                    2 => -0.25,
+                    k => (rng.next() % 100_000) as f32 / 1e4 + k as f32,
+                })
+                .collect()
+        };
+        write_pfm(&add("rgb.pfm"), W, H, 3, &floats(&mut rng, n * 3)).unwrap();
+        write_pfm(&add("grey.pfm"), W, H, 1, &floats(&mut rng, n)).unwrap();
+        write_exr_rgb(&add("rgb.exr"), W, H, &floats(&mut rng, n * 3)).unwrap();
+        {
+            let f = std::io::BufWriter::new(std::fs::File::create(add("rgb.jpg")).unwrap());
+            image::ImageEncoder::write_image(
+                image::codecs::jpeg::JpegEncoder::new_with_quality(f, 90),
+                &rng.bytes(n * 3),
+                W as u32,
+                H as u32,
+                image::ExtendedColorType::Rgb8,
+            )
+            .unwrap();
+        }
+        {
+            use tiff::encoder::{colortype, TiffEncoder};
+            let v: Vec<u16> = (0..n * 3).map(|_| (rng.next() >> 48) as u16).collect();
+            TiffEncoder::new(std::fs::File::create(add("rgb16.tif")).unwrap())
+                .unwrap()
+                .write_image::<colortype::RGB16>(W as u32, H as u32, &v)
+                .unwrap();
+        }
+        let k = images.len();
+        Dataset {
+            source: dir.join("fixture.lp"),
+            lights: vec![DVec3::Z; k],
+            images,
+            intensities: Some(
+                (0..k)
+                    .map(|i| [1.0, 0.5 + i as f32 * 0.25, 3.0 / (i + 1) as f32])
+                    .collect(),
+            ),
+            mask: None,
+            warnings: Vec::new(),
+        }
     }
 }

@@ -208,36 +208,26 @@ fn image_list(input: &Path) -> Result<Vec<PathBuf>> {
     {
         return Ok(symframe_io::open_dataset(input)?.images);
     }
-    let text = symframe_io::read_text_bounded(
-        input,
-        "an image list",
-        symframe_io::limits::MAX_TEXT_FILE_BYTES,
-    )
-    .with_context(|| format!("{}: cannot read the image list", input.display()))?;
     let dir = input.parent().unwrap_or(Path::new(""));
     let mut v = Vec::new();
-    for (k, line) in text.lines().enumerate() {
-        let line = line.split('#').next().unwrap_or("").trim();
-        if line.is_empty() {
-            continue;
-        }
-        let p = dir.join(line);
+    symframe_io::read_list(input, "an image list", "images", |line, entry| {
+        let p = dir.join(entry);
         match symframe_io::check_regular_file(&p) {
             Ok(_) => {}
             Err(symframe_io::Error::Read { source, .. })
                 if source.kind() == std::io::ErrorKind::NotFound =>
             {
                 bail!(
-                    "{}: line {}: image {} does not exist",
+                    "{}: line {line}: image {} does not exist",
                     input.display(),
-                    k + 1,
                     p.display()
                 );
             }
-            Err(e) => bail!("{}: line {}: {e}", input.display(), k + 1),
+            Err(e) => bail!("{}: line {line}: {e}", input.display()),
         }
         v.push(p);
-    }
+        Ok(())
+    })?;
     if v.is_empty() {
         bail!("{}: the image list is empty", input.display());
     }
@@ -699,4 +689,33 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
     )?;
     symframe_io::write_bytes(&config.output, lp_text.as_bytes())?;
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An image list was read whole; it is read a line at a time (any line end, comments),
+    /// its errors naming the line, and holds at most `MAX_LIGHTS` images.
+    #[test]
+    fn an_image_list_is_read_a_line_at_a_time() {
+        let d = tempfile::tempdir().unwrap();
+        std::fs::write(d.path().join("a.png"), b"x").unwrap();
+        let list = d.path().join("images.txt");
+        std::fs::write(&list, "# shots\ra.png\r\n\ra.png # again\r").unwrap();
+        let v = image_list(&list).unwrap();
+        assert_eq!(v, vec![d.path().join("a.png"); 2]);
+        std::fs::write(&list, "a.png\n\nb.png\n").unwrap();
+        let e = format!("{:#}", image_list(&list).unwrap_err());
+        assert!(e.contains("images.txt: line 3: image") && e.ends_with("b.png does not exist"));
+        let many = "a.png\n".repeat(symframe_io::limits::MAX_LIGHTS + 1);
+        std::fs::write(&list, many).unwrap();
+        let e = format!("{:#}", image_list(&list).unwrap_err());
+        assert!(
+            e.ends_with(
+                "images.txt:100001: more than 100000 images: an image list holds at most 100000"
+            ),
+            "{e}"
+        );
+    }
 }

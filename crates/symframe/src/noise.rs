@@ -183,11 +183,31 @@ impl NoiseSamples {
     }
 
     /// Adds the differences of one image (`channels` interleaved, `width` wide, linear), over
-    /// the pixels inside `mask` (when given, `width x height`).
+    /// the pixels inside `mask` (when given, `width x height`): the rows [`Self::row_step`]
+    /// picks, each as [`Self::add_row`] adds it.
     pub fn add(&mut self, img: &[f32], channels: usize, width: usize, mask: Option<&[bool]>) {
         let (ch, w) = (channels.max(1), width.max(1));
         let rows = img.len() / ch / w;
-        let step = (rows * w).div_ceil(Self::PIXELS_PER_IMAGE).max(1);
+        for y in (0..rows).step_by(Self::row_step(w, rows)) {
+            let row = &img[y * w * ch..(y + 1) * w * ch];
+            self.add_row(row, ch, mask.map(|m| &m[y * w..(y + 1) * w]));
+        }
+    }
+
+    /// Which rows of a `width x rows` image are visited: every `row_step`-th from the first
+    /// (so that at most [`Self::PIXELS_PER_IMAGE`] pixels are).
+    pub fn row_step(width: usize, rows: usize) -> usize {
+        (rows * width.max(1))
+            .div_ceil(Self::PIXELS_PER_IMAGE)
+            .max(1)
+    }
+
+    /// Adds the differences along one image row (`channels` interleaved, linear), over the
+    /// pixels inside `mask` (the row's, when given): a reader of rows adds the rows
+    /// [`Self::row_step`] picks, one at a time, as [`Self::add`] adds a whole image.
+    pub fn add_row(&mut self, row: &[f32], channels: usize, mask: Option<&[bool]>) {
+        let ch = channels.max(1);
+        let w = row.len() / ch;
         let top = self.top;
         let bin_of = |v: f64| -> Option<usize> {
             if !(v > 1e-4 && v < 0.95 * top) {
@@ -196,28 +216,25 @@ impl NoiseSamples {
             let t = (v / 1e-4).ln() / (top / 1e-4).ln();
             Some(((t * Self::BINS as f64) as usize).min(Self::BINS - 1))
         };
-        for y in (0..rows).step_by(step) {
-            for x in 1..w.saturating_sub(1) {
-                let p = y * w + x;
-                if let Some(m) = mask {
-                    if !(m[p - 1] && m[p] && m[p + 1]) {
-                        continue;
-                    }
+        for p in 1..w.saturating_sub(1) {
+            if let Some(m) = mask {
+                if !(m[p - 1] && m[p] && m[p + 1]) {
+                    continue;
                 }
-                for c in 0..ch {
-                    let (a, b, d) = (
-                        img[ch * (p - 1) + c],
-                        img[ch * p + c],
-                        img[ch * (p + 1) + c],
-                    );
-                    if !(a.is_finite() && b.is_finite() && d.is_finite()) {
-                        continue;
-                    }
-                    let Some(k) = bin_of(b as f64) else { continue };
-                    if self.diffs[k].len() < Self::PER_BIN {
-                        self.diffs[k].push(b - 0.5 * (a + d));
-                        self.levels[k].push(b);
-                    }
+            }
+            for c in 0..ch {
+                let (a, b, d) = (
+                    row[ch * (p - 1) + c],
+                    row[ch * p + c],
+                    row[ch * (p + 1) + c],
+                );
+                if !(a.is_finite() && b.is_finite() && d.is_finite()) {
+                    continue;
+                }
+                let Some(k) = bin_of(b as f64) else { continue };
+                if self.diffs[k].len() < Self::PER_BIN {
+                    self.diffs[k].push(b - 0.5 * (a + d));
+                    self.levels[k].push(b);
                 }
             }
         }

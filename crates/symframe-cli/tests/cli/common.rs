@@ -253,6 +253,16 @@ pub fn run_measuring_rss(args: &[&str]) -> (Output, u64) {
     (output, usage.ru_maxrss as u64)
 }
 
+/// This test process's own peak resident set size in KiB (`VmHWM`). A child started by
+/// [`run_measuring_rss`] reports at least it: `exec` carries the peak of the memory it
+/// replaces (here, the test process's, shared by `vfork`) into the child's `ru_maxrss`.
+#[cfg(target_os = "linux")]
+pub fn own_peak_kib() -> u64 {
+    let s = fs::read_to_string("/proc/self/status").unwrap();
+    let line = s.lines().find(|l| l.starts_with("VmHWM:")).unwrap();
+    line.split_whitespace().nth(1).unwrap().parse().unwrap()
+}
+
 /// Runs the `symframe` binary with `args` and its address space limited to `max_bytes`
 /// (`RLIMIT_AS`), so a run that reads without bound fails fast instead of taking the
 /// machine's memory.

@@ -584,7 +584,9 @@ fn a_folder_beside_the_output_is_never_removed() {
 }
 
 /// A corrupt cache block was repaired in place, through every hard link of the cache file (a
-/// backup made with `cp -al`, outside the output folder, changed with it).
+/// backup made with `cp -al`, outside the output folder, changed with it); then such a cache
+/// failed the run. Now it is rebuilt as a new file, with a warning, and the other link keeps
+/// its bytes.
 #[test]
 fn a_hard_linked_cache_file_is_not_repaired_in_place() {
     use std::io::{Seek, SeekFrom, Write};
@@ -592,6 +594,7 @@ fn a_hard_linked_cache_file_is_not_repaired_in_place() {
     let lp = capture(&tmp.path().join("data"));
     let out = tmp.path().join("out");
     ok(&estimate(&lp, &out));
+    let normals = fs::read(out.join("normals.npy")).unwrap();
     let stack = fs::read_dir(out.join(".symframe-cache"))
         .unwrap()
         .flatten()
@@ -606,8 +609,31 @@ fn a_hard_linked_cache_file_is_not_repaired_in_place() {
     drop(f);
     let before = fs::read(&backup).unwrap();
     let o = estimate(&lp, &out);
-    assert_one_line_error(&o, "other hard links");
+    ok(&o);
+    let warning = "other hard links to the file: rebuilt as a new file rather than repaired in \
+                   place (the other links keep the old content)";
+    assert!(
+        stderr(&o)
+            .lines()
+            .any(|l| l.starts_with("warning: ") && l.contains(warning)),
+        "{}",
+        stderr(&o)
+    );
     assert_eq!(fs::read(&backup).unwrap(), before, "the backup changed");
+    assert_ne!(fs::read(&stack).unwrap(), before);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        assert_eq!(fs::metadata(&stack).unwrap().nlink(), 1);
+        assert_eq!(fs::metadata(&backup).unwrap().nlink(), 1);
+    }
+    assert_eq!(fs::read(out.join("normals.npy")).unwrap(), normals);
+    let report = common::report(&out);
+    assert_eq!(report["cache"]["hit"], false, "{report}");
+    assert!(
+        report["cache"]["blocks_corrupt"].as_u64().unwrap() > 0,
+        "{report}"
+    );
 }
 
 /// `integrate -o EST` replaced a user's `depth.npy` there (integrate wrote without the output

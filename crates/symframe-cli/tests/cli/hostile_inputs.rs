@@ -159,6 +159,19 @@ fn a_blue_mask_is_not_empty() {
 /// Writes an 8-bit grey PNG of `w x h` black pixels, compressed as deflate does (a literal
 /// and then runs of 258 bytes): a real image of many pixels in a small file.
 fn black_png(path: &Path, w: u32, h: u32) {
+    black_png_of(path, w, h, Layout::Grey8);
+}
+
+/// The sample layouts of [`black_png_of`].
+#[derive(Clone, Copy)]
+enum Layout {
+    Grey8,
+    Rgb8,
+    Grey1,
+}
+
+/// [`black_png`] of another sample layout.
+fn black_png_of(path: &Path, w: u32, h: u32, layout: Layout) {
     fn crc32(data: &[u8]) -> u32 {
         let mut c = !0u32;
         for &b in data {
@@ -193,7 +206,12 @@ fn black_png(path: &Path, w: u32, h: u32) {
             }
         }
     }
-    let raw = (w as u64 + 1) * h as u64; // a filter byte per row, all zero
+    let (row, ihdr_tail) = match layout {
+        Layout::Grey8 => (w as u64, [8, 0]),
+        Layout::Rgb8 => (3 * w as u64, [8, 2]),
+        Layout::Grey1 => ((w as u64).div_ceil(8), [1, 0]),
+    };
+    let raw = (row + 1) * h as u64; // a filter byte per row, all zero
     let mut z = Bits(vec![0x78, 0x01], 0, 0);
     z.put(1, 1); // final block
     z.put(1, 2); // fixed Huffman codes
@@ -223,7 +241,8 @@ fn black_png(path: &Path, w: u32, h: u32) {
     };
     let mut ihdr = w.to_be_bytes().to_vec();
     ihdr.extend(h.to_be_bytes());
-    ihdr.extend([8, 0, 0, 0, 0]);
+    ihdr.extend(ihdr_tail);
+    ihdr.extend([0, 0, 0]);
     chunk(b"IHDR", &ihdr);
     chunk(b"IDAT", &z.0);
     chunk(b"IEND", &[]);
@@ -535,4 +554,108 @@ fn relight_and_view_refuse_a_fit_json_that_is_not_a_regular_file() {
         assert_one_line_error(&relight(&gltf, "r1"), &needle);
         assert_one_line_error(&view(&ward), &needle);
     }
+}
+
+/// A DiLiGenT `light_directions.txt` of ten million rows (60 MB) was read whole and parsed
+/// (690 MB peak, 3.8 s), and an `.lp` declaring seven million lights, each naming an existing
+/// image, had every name checked: light files are read a line at a time and refused at the
+/// line that passes the cap of 100,000 lights. The files are written a line at a time, so this
+/// process's own peak (which the child's measure includes, see `own_peak_kib`) stays low.
+#[cfg(target_os = "linux")]
+#[test]
+fn ten_million_light_directions_are_refused_in_bounded_memory() {
+    use crate::common::{own_peak_kib, run_measuring_rss};
+    use std::io::Write;
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let write_lines = |path: &Path, first: &str, line: &str, n: usize| {
+        let mut f = std::io::BufWriter::new(fs::File::create(path).unwrap());
+        f.write_all(first.as_bytes()).unwrap();
+        for _ in 0..n {
+            f.write_all(line.as_bytes()).unwrap();
+        }
+        f.flush().unwrap();
+    };
+    black_png(&d.join("a.png"), 4, 4);
+    fs::write(d.join("filenames.txt"), "a.png\na.png\n").unwrap();
+    write_lines(&d.join("light_directions.txt"), "", "0 0 1\n", 10_000_000);
+    // 100 MB, or this process's own peak and 30 MB when that is higher (other tests).
+    let limit_kib = |floor: u64| (100 << 10).max(floor + (30 << 10));
+    let t = std::time::Instant::now();
+    let floor = own_peak_kib();
+    let (o, peak_kib) = run_measuring_rss(&["estimate", s(d), "-o", s(&d.join("out"))]);
+    assert_one_line_error(
+        &o,
+        "light_directions.txt:100001: more than 100000 light directions: a light file holds \
+         at most 100000 lights",
+    );
+    assert!(
+        peak_kib < limit_kib(floor),
+        "peak {peak_kib} KiB (own {floor})"
+    );
+    assert!(t.elapsed().as_secs() < 10, "{:?}", t.elapsed());
+
+    let lp = d.join("many.lp");
+    write_lines(&lp, "7000000\n", "a.png 0 0 1\n", 5_000_000);
+    let t = std::time::Instant::now();
+    let floor = own_peak_kib();
+    let (o, peak_kib) = run_measuring_rss(&["estimate", s(&lp), "-o", s(&d.join("out"))]);
+    assert_one_line_error(
+        &o,
+        "many.lp:1: 7000000 lights declared: a light file holds at most 100000 lights",
+    );
+    assert!(
+        peak_kib < limit_kib(floor),
+        "peak {peak_kib} KiB (own {floor})"
+    );
+    assert!(t.elapsed().as_secs() < 10, "{:?}", t.elapsed());
+}
+
+/// Four PNGs of a few KB declaring 8000 x 8000 pixels each were decoded whole into the cache
+/// builder's batch, `f32` RGB (768 MB an image) beside their raw samples: 1.01 GB peak with
+/// `--decode-memory 16`. Images are now read a band of tile rows at a time (a PNG row by row),
+/// so what is held is a band of each image of the batch, whatever the size they declare.
+#[cfg(target_os = "linux")]
+#[test]
+fn large_declared_images_are_decoded_a_band_at_a_time() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    black_png_of(&d.join("rgb.png"), 8000, 8000, Layout::Rgb8);
+    black_png_of(&d.join("bits.png"), 8000, 8000, Layout::Grey1);
+    for n in ["rgb.png", "bits.png"] {
+        assert!(fs::metadata(d.join(n)).unwrap().len() < 2 << 20);
+    }
+    fs::copy(d.join("bits.png"), d.join("bits2.png")).unwrap();
+    let lp = d.join("lights.lp");
+    fs::write(
+        &lp,
+        "3\nrgb.png 0 0 1\nbits.png 0.5 0 0.866\nbits2.png 0 0.5 0.866\n",
+    )
+    .unwrap();
+    let out = d.join("out");
+    // The cache alone is what is measured: the run stops after its first tile.
+    let args = [
+        "estimate",
+        s(&lp),
+        "-o",
+        s(&out),
+        "--decode-memory",
+        "16",
+        "--cache-format",
+        "f16",
+        "--stop-after-tiles",
+        "1",
+        "--quiet",
+    ];
+    let (o, peak_kib) = crate::common::run_measuring_rss(&args);
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    assert!(peak_kib < 600 << 10, "peak {peak_kib} KiB");
+    let cache: Vec<PathBuf> = fs::read_dir(out.join(".symframe-cache"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "stack"))
+        .collect();
+    assert_eq!(cache.len(), 1, "{cache:?}");
+    let len = fs::metadata(&cache[0]).unwrap().len();
+    assert!(len > 8000 * 8000 * 3 * 6, "{len}");
 }

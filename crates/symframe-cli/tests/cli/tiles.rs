@@ -81,7 +81,8 @@ fn tiled_result_equals_the_in_memory_result_exactly() {
     .enumerate()
     {
         let out = tmp.path().join(format!("out{k}"));
-        // The second run builds its cache in batches of 54 images (1 MiB): two light blocks.
+        // The second run builds its cache in batches of what 1 MiB holds (some tens of images,
+        // fewer with more threads' buffers): several light blocks.
         let mut flags = flags;
         if k == 1 {
             flags.extend(["--decode-memory", "1"]);
@@ -102,7 +103,12 @@ fn tiled_result_equals_the_in_memory_result_exactly() {
         assert_eq!(r["tiles"]["size"], 8);
         assert_eq!(r["tiles"]["count"], TILES);
         assert_eq!(r["tiles"]["computed"], TILES);
-        assert_eq!(r["cache"]["batch_images"], [LIGHTS, 54][k]);
+        let batch = r["cache"]["batch_images"].as_u64().unwrap() as usize;
+        if k == 0 {
+            assert_eq!(batch, LIGHTS);
+        } else {
+            assert!((2..LIGHTS).contains(&batch), "{batch}");
+        }
         assert!(r["timings"]["peak_rss_bytes"].as_u64().unwrap() > 0, "{r}");
         if k == 1 {
             assert!(

@@ -29,18 +29,53 @@ impl ColourTag {
     }
 }
 
-/// The colour tag of a PNG file: its `sRGB` chunk, else its ICC profile (`iCCP`, decompressed
-/// by the decoder: `icc`), else its `gAMA` chunk; `None` without any. The chunks before the
-/// image data are walked without decoding anything.
-pub(super) fn png_tag(bytes: &[u8], icc: Option<&[u8]>) -> Option<ColourTag> {
-    let mut gama = None;
-    let mut pos = 8;
-    while pos + 8 <= bytes.len() {
-        let len = u32::from_be_bytes(bytes[pos..pos + 4].try_into().ok()?) as usize;
-        let kind = &bytes[pos + 4..pos + 8];
-        let data = bytes.get(pos + 8..pos.checked_add(8)?.checked_add(len)?)?;
-        match kind {
-            b"sRGB" => {
+/// What the chunks of a PNG file before its image data say about its colour: an `sRGB`
+/// chunk, else the exponent of a `gAMA` chunk (the ICC profile comes from the decoder).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) enum PngChunks {
+    /// An `sRGB` chunk.
+    Srgb,
+    /// No `sRGB` chunk; a `gAMA` chunk's exponent, if any.
+    Gamma(Option<f32>),
+    /// A chunk's length runs past the end of the file: no tag is read.
+    Cut,
+}
+
+impl PngChunks {
+    /// Walks the chunks of the PNG file `bytes` before its image data, decoding nothing.
+    pub(super) fn read(bytes: &[u8]) -> Self {
+        Self::walk(bytes).unwrap_or(PngChunks::Cut)
+    }
+
+    fn walk(bytes: &[u8]) -> Option<Self> {
+        let mut gama = None;
+        let mut pos = 8;
+        while pos + 8 <= bytes.len() {
+            let len = u32::from_be_bytes(bytes[pos..pos + 4].try_into().ok()?) as usize;
+            let kind = &bytes[pos + 4..pos + 8];
+            let data = bytes.get(pos + 8..pos.checked_add(8)?.checked_add(len)?)?;
+            match kind {
+                b"sRGB" => return Some(PngChunks::Srgb),
+                b"gAMA" if data.len() == 4 => {
+                    let v = u32::from_be_bytes(data.try_into().ok()?);
+                    if v > 0 {
+                        // The chunk stores the encoding exponent times 100000 (45455 for 1/2.2).
+                        gama = Some(100_000.0 / v as f32);
+                    }
+                }
+                b"IDAT" | b"IEND" => break,
+                _ => {}
+            }
+            pos = pos.checked_add(12)?.checked_add(len)?;
+        }
+        Some(PngChunks::Gamma(gama))
+    }
+
+    /// The file's colour tag: its `sRGB` chunk, else its ICC profile (`iCCP`, decompressed by
+    /// the decoder: `icc`), else its `gAMA` chunk; `None` without any.
+    pub(super) fn tag(self, icc: Option<&[u8]>) -> Option<ColourTag> {
+        let gama = match self {
+            PngChunks::Srgb => {
                 return Some(ColourTag {
                     source: "PNG sRGB chunk".into(),
                     name: "sRGB".into(),
@@ -48,27 +83,25 @@ pub(super) fn png_tag(bytes: &[u8], icc: Option<&[u8]>) -> Option<ColourTag> {
                     gamma: None,
                 })
             }
-            b"gAMA" if data.len() == 4 => {
-                let v = u32::from_be_bytes(data.try_into().ok()?);
-                if v > 0 {
-                    // The chunk stores the encoding exponent times 100000 (45455 for 1/2.2).
-                    gama = Some(100_000.0 / v as f32);
-                }
-            }
-            b"IDAT" | b"IEND" => break,
-            _ => {}
+            PngChunks::Cut => return None,
+            PngChunks::Gamma(g) => g,
+        };
+        if let Some(tag) = icc.and_then(icc_tag) {
+            return Some(tag);
         }
-        pos = pos.checked_add(12)?.checked_add(len)?;
+        gama.map(|g| ColourTag {
+            source: "PNG gAMA chunk".into(),
+            name: format!("gamma {g:.2}"),
+            srgb: false,
+            gamma: Some(g),
+        })
     }
-    if let Some(tag) = icc.and_then(icc_tag) {
-        return Some(tag);
-    }
-    gama.map(|g| ColourTag {
-        source: "PNG gAMA chunk".into(),
-        name: format!("gamma {g:.2}"),
-        srgb: false,
-        gamma: Some(g),
-    })
+}
+
+/// The colour tag of the PNG file `bytes` whose decompressed ICC profile is `icc` (see
+/// [`PngChunks::tag`]).
+pub(super) fn png_tag(bytes: &[u8], icc: Option<&[u8]>) -> Option<ColourTag> {
+    PngChunks::read(bytes).tag(icc)
 }
 
 /// Reads an ICC profile's description (`desc` tag, v2 `desc` or v4 `mluc` type) and red

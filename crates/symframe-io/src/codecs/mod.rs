@@ -29,6 +29,9 @@
 //! than what the PNG decoder expands to 8 bits, signed-integer or 32/64-bit integer TIFF,
 //! CMYK or other colour spaces, more than 4 channels. A file is read into memory whole, then
 //! decoded; a decoder that panics on a hostile file is caught and reported as a decode error.
+//! A stack's images are read a band of rows at a time instead (`rows`: PNG row by row, PFM a
+//! band from its file, other formats decoded whole in their own sample type), converted by the
+//! same code (`convert`), to the same samples.
 //!
 //! One module per codec: `exr`, `tiff`, `pfm`, `png` (writing), and `image_rs` (PNG, JPEG and
 //! Radiance HDR decoding through the `image` crate); this one holds the common types, the
@@ -40,13 +43,16 @@ use std::path::Path;
 use crate::error::{Error, Result};
 
 mod colour;
+mod convert;
 mod exr;
 mod image_rs;
 mod pfm;
 mod png;
+mod rows;
 mod tiff;
 
 pub use colour::ColourTag;
+pub(crate) use convert::{Convert, RawRun, SampleType};
 use exr::read_exr;
 pub use exr::{write_exr_channels, write_exr_rgb};
 pub(crate) use exr::{write_exr_interleaved, write_exr_pixels};
@@ -55,6 +61,7 @@ use pfm::{pfm_raw, pfm_size};
 pub use pfm::{read_pfm, write_pfm};
 pub(crate) use png::{rgb16_row, write_png, write_png16_rgb_with, PngLayout};
 pub use png::{write_png16_rgb, write_png8_rgb, PngRows};
+pub(crate) use rows::Rows;
 use tiff::read_tiff;
 
 /// A decoded image: linear samples, row-major (row 0 at the top), channels interleaved.
@@ -223,12 +230,7 @@ pub(crate) fn read_image_file(path: &Path) -> Result<Vec<u8>> {
 pub fn decode_image(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<Image> {
     let ext = extension(path)?;
     let run = || -> Result<Image> {
-        let ((raw, icc), integer) = decode_raw(path, &ext, bytes, opts)?;
-        let colour = match ext.as_str() {
-            "png" => colour::png_tag(bytes, icc.as_deref()),
-            _ if integer => icc.as_deref().and_then(colour::icc_tag),
-            _ => None,
-        };
+        let (raw, colour, integer) = decode_tagged(path, &ext, bytes, opts)?;
         let mut img = finish(path, raw, opts, integer)?;
         img.colour = colour;
         Ok(img)
@@ -236,6 +238,24 @@ pub fn decode_image(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<I
     // Belt and braces: a decoder bug on a hostile file must not take down a whole stack load.
     catch_unwind(AssertUnwindSafe(run))
         .unwrap_or_else(|_| Err(Error::decode(path, "decoder panicked (corrupt file?)")))
+}
+
+/// Decodes `bytes` of format `ext` into the file's own samples ([`decode_raw`]); returns them,
+/// the file's colour tag (integer formats) and whether its integer samples may be
+/// gamma-encoded.
+fn decode_tagged(
+    path: &Path,
+    ext: &str,
+    bytes: &[u8],
+    opts: &DecodeOptions,
+) -> Result<(RawImage, Option<ColourTag>, bool)> {
+    let ((raw, icc), integer) = decode_raw(path, ext, bytes, opts)?;
+    let colour = match ext {
+        "png" => colour::png_tag(bytes, icc.as_deref()),
+        _ if integer => icc.as_deref().and_then(colour::icc_tag),
+        _ => None,
+    };
+    Ok((raw, colour, integer))
 }
 
 /// A decoded image in its file's samples, and its ICC profile when it has one.
@@ -386,126 +406,96 @@ struct RawImage {
     raw: Raw,
 }
 
+impl Raw {
+    /// The sample type.
+    fn sample_type(&self) -> SampleType {
+        match self {
+            Raw::U8(_) => SampleType::U8,
+            Raw::U16(_) => SampleType::U16,
+            Raw::F32(_) => SampleType::F32,
+        }
+    }
+
+    /// Samples held.
+    fn len(&self) -> usize {
+        match self {
+            Raw::U8(v) => v.len(),
+            Raw::U16(v) => v.len(),
+            Raw::F32(v) => v.len(),
+        }
+    }
+
+    /// Bytes held.
+    fn bytes(&self) -> usize {
+        match self {
+            Raw::U8(v) => v.len(),
+            Raw::U16(v) => 2 * v.len(),
+            Raw::F32(v) => 4 * v.len(),
+        }
+    }
+
+    /// Samples `range` as a run to convert.
+    fn run(&self, range: std::ops::Range<usize>) -> RawRun<'_> {
+        match self {
+            Raw::U8(v) => RawRun::U8(&v[range]),
+            Raw::U16(v) => RawRun::U16(&v[range]),
+            Raw::F32(v) => RawRun::F32(&v[range]),
+        }
+    }
+}
+
+impl RawImage {
+    /// Checks that the image holds `width * height * channels` samples.
+    fn check_len(&self, path: &Path) -> Result<()> {
+        let (width, height, ch) = (self.width, self.height, self.channels);
+        let n = width
+            .checked_mul(height)
+            .and_then(|p| p.checked_mul(ch))
+            .ok_or_else(|| Error::decode(path, "image dimensions overflow"))?;
+        let len = self.raw.len();
+        if len != n {
+            return Err(Error::decode(
+                path,
+                format!("expected {n} samples for {width}x{height}x{ch}, decoded {len}"),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Keeps grey or RGB (dropping alpha), converts to linear (`integer`: a format whose integer
-/// samples may be gamma-encoded, decoded by `opts.gamma`) and marks bad pixels `NaN`.
+/// samples may be gamma-encoded, decoded by `opts.gamma`) and marks bad pixels (see
+/// [`Convert`]).
 fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, integer: bool) -> Result<Image> {
+    let conv = Convert::new(path, img.channels, img.raw.sample_type(), integer, opts)?;
+    img.check_len(path)?;
+    let take = conv.take();
     let RawImage {
         width,
         height,
-        channels: ch,
+        channels,
         raw,
     } = img;
-    let take = match ch {
-        1 | 2 => 1,
-        3 | 4 => 3,
-        _ => return Err(Error::unsupported(path, format!("{ch}-channel image"))),
-    };
-    let n = width
-        .checked_mul(height)
-        .and_then(|p| p.checked_mul(ch))
-        .ok_or_else(|| Error::decode(path, "image dimensions overflow"))?;
-    let len = match &raw {
-        Raw::U8(v) => v.len(),
-        Raw::U16(v) => v.len(),
-        Raw::F32(v) => v.len(),
-    };
-    if len != n {
-        return Err(Error::decode(
-            path,
-            format!("expected {n} samples for {width}x{height}x{ch}, decoded {len}"),
-        ));
-    }
-    // Float samples with no channel to drop are marked in place: no second buffer, no copy.
-    let raw = match raw {
-        Raw::F32(mut v) if take == ch => {
-            for px in v.chunks_exact_mut(ch) {
-                if !px.iter().all(|s| s.is_finite()) {
-                    px.fill(f32::NAN);
-                }
+    let data = match raw {
+        // Float samples with no channel to drop are marked in place: no second buffer.
+        Raw::F32(mut v) if take == channels => {
+            for px in v.chunks_exact_mut(take) {
+                convert::mark_non_finite(px);
             }
-            return Ok(Image {
-                width,
-                height,
-                channels: take,
-                data: v,
-                kind: SampleKind::Float,
-                colour: None,
-            });
+            v
         }
-        other => other,
+        raw => {
+            let mut data = vec![0.0; width * height * take];
+            conv.run(raw.run(0..raw.len()), &mut data, take);
+            data
+        }
     };
-    let mut data = Vec::with_capacity(width * height * take);
-    let nan = [f32::NAN; 3];
-    let clipped = [f32::INFINITY; 3];
-    let (srgb8, srgb16) = (
-        integer && opts.gamma.srgb(8),
-        integer && opts.gamma.srgb(16),
-    );
-    let kind = match &raw {
-        Raw::U8(_) if srgb8 => SampleKind::Srgb8,
-        Raw::U8(_) => SampleKind::Linear8,
-        Raw::U16(_) if srgb16 => SampleKind::Srgb16,
-        Raw::U16(_) => SampleKind::U16,
-        Raw::F32(_) => SampleKind::Float,
-    };
-    match raw {
-        Raw::U8(v) => {
-            let lut: Vec<f32> = (0..256)
-                .map(|i| {
-                    let x = i as f32 / 255.0;
-                    if srgb8 {
-                        srgb_to_linear(x)
-                    } else {
-                        x
-                    }
-                })
-                .collect();
-            let sat = opts.saturation * 255.0;
-            for px in v.chunks_exact(ch) {
-                let px = &px[..take];
-                if px.iter().any(|&s| s as f32 >= sat) {
-                    data.extend_from_slice(&clipped[..take]);
-                } else {
-                    data.extend(px.iter().map(|&s| lut[s as usize]));
-                }
-            }
-        }
-        Raw::U16(v) => {
-            let sat = opts.saturation * 65535.0;
-            let linear = |s: u16| {
-                let x = s as f32 / 65535.0;
-                if srgb16 {
-                    srgb_to_linear(x)
-                } else {
-                    x
-                }
-            };
-            for px in v.chunks_exact(ch) {
-                let px = &px[..take];
-                if px.iter().any(|&s| s as f32 >= sat) {
-                    data.extend_from_slice(&clipped[..take]);
-                } else {
-                    data.extend(px.iter().map(|&s| linear(s)));
-                }
-            }
-        }
-        Raw::F32(v) => {
-            for px in v.chunks_exact(ch) {
-                let px = &px[..take];
-                if px.iter().any(|s| !s.is_finite()) {
-                    data.extend_from_slice(&nan[..take]);
-                } else {
-                    data.extend_from_slice(px);
-                }
-            }
-        }
-    }
     Ok(Image {
         width,
         height,
         channels: take,
         data,
-        kind,
+        kind: conv.kind(),
         colour: None,
     })
 }

@@ -32,80 +32,129 @@ pub(super) fn pfm_token<'a>(
     std::str::from_utf8(&bytes[start..*pos]).map_err(|_| "header is not ASCII".to_string())
 }
 
-/// Parses a whole PFM file from memory. Header: `PF` (RGB) or `Pf` (grey), width, height and
-/// scale (negative: little-endian; its magnitude is ignored), one whitespace byte, then rows
-/// of 32-bit floats stored bottom to top.
-pub(super) fn parse_pfm(bytes: &[u8]) -> std::result::Result<Pfm, String> {
-    let mut pos = 0;
-    let channels = match pfm_token(bytes, &mut pos)? {
-        "PF" => 3,
-        "Pf" => 1,
-        other => {
+/// A PFM header: size, channels (1 or 3), byte order, and where the pixel data starts.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct PfmHeader {
+    pub(super) width: usize,
+    pub(super) height: usize,
+    pub(super) channels: usize,
+    pub(super) little: bool,
+    pub(super) data_at: usize,
+}
+
+impl PfmHeader {
+    /// Parses the header at the start of `bytes`: `PF` (RGB) or `Pf` (grey), width, height and
+    /// scale (negative: little-endian; its magnitude is ignored), then one whitespace byte.
+    pub(super) fn parse(bytes: &[u8]) -> std::result::Result<Self, String> {
+        let mut pos = 0;
+        let channels = match pfm_token(bytes, &mut pos)? {
+            "PF" => 3,
+            "Pf" => 1,
+            other => {
+                return Err(format!(
+                    "not a PFM file: magic '{}' (expected PF or Pf)",
+                    other.escape_default()
+                ))
+            }
+        };
+        let dim = |pos: &mut usize, what: &str| -> std::result::Result<usize, String> {
+            let t = pfm_token(bytes, pos)?;
+            match t.parse::<usize>() {
+                Ok(v) if v > 0 => Ok(v),
+                _ => Err(format!("bad {what} '{}'", t.escape_default())),
+            }
+        };
+        let width = dim(&mut pos, "width")?;
+        let height = dim(&mut pos, "height")?;
+        if width > limits::MAX_SIDE
+            || height > limits::MAX_SIDE
+            || width * height > limits::MAX_PIXELS
+        {
             return Err(format!(
-                "not a PFM file: magic '{}' (expected PF or Pf)",
-                other.escape_default()
-            ))
+                "exceeds limits: PFM header declares {width}x{height} pixels (at most {} per \
+                 side, {} in all)",
+                limits::MAX_SIDE,
+                limits::MAX_PIXELS
+            ));
         }
-    };
-    let dim = |pos: &mut usize, what: &str| -> std::result::Result<usize, String> {
-        let t = pfm_token(bytes, pos)?;
-        match t.parse::<usize>() {
-            Ok(v) if v > 0 => Ok(v),
-            _ => Err(format!("bad {what} '{}'", t.escape_default())),
+        let t = pfm_token(bytes, &mut pos)?;
+        let scale: f32 = t
+            .parse()
+            .map_err(|_| format!("bad scale '{}'", t.escape_default()))?;
+        if !scale.is_finite() || scale == 0.0 {
+            return Err(format!("bad scale {scale} (must be finite and non-zero)"));
         }
-    };
-    let width = dim(&mut pos, "width")?;
-    let height = dim(&mut pos, "height")?;
-    if width > limits::MAX_SIDE || height > limits::MAX_SIDE || width * height > limits::MAX_PIXELS
-    {
-        return Err(format!(
-            "exceeds limits: PFM header declares {width}x{height} pixels (at most {} per \
-             side, {} in all)",
-            limits::MAX_SIDE,
-            limits::MAX_PIXELS
-        ));
+        if pos >= bytes.len() {
+            return Err("truncated header".into());
+        }
+        Ok(Self {
+            width,
+            height,
+            channels,
+            little: scale < 0.0,
+            // The single whitespace byte after the scale.
+            data_at: pos + 1,
+        })
     }
-    let t = pfm_token(bytes, &mut pos)?;
-    let scale: f32 = t
-        .parse()
-        .map_err(|_| format!("bad scale '{}'", t.escape_default()))?;
-    if !scale.is_finite() || scale == 0.0 {
-        return Err(format!("bad scale {scale} (must be finite and non-zero)"));
+
+    /// Samples of the image.
+    pub(super) fn samples(&self) -> std::result::Result<usize, String> {
+        self.width
+            .checked_mul(self.height)
+            .and_then(|n| n.checked_mul(self.channels))
+            .ok_or_else(|| "image dimensions overflow".to_string())
     }
-    if pos >= bytes.len() {
-        return Err("truncated header".into());
+
+    /// Checks that `body` bytes of pixel data hold every sample.
+    pub(super) fn check_body(&self, body: u64) -> std::result::Result<(), String> {
+        let count = self.samples()?;
+        let truncated = match count.checked_mul(4) {
+            Some(need) => body < need as u64,
+            None => true,
+        };
+        if truncated {
+            let (w, h, c) = (self.width, self.height, self.channels);
+            return Err(format!(
+                "truncated: {w}x{h}x{c} needs {} bytes of pixels, file has {body}",
+                count.saturating_mul(4),
+            ));
+        }
+        Ok(())
     }
-    pos += 1; // the single whitespace byte after the scale
-    let little = scale < 0.0;
-    let count = width
-        .checked_mul(height)
-        .and_then(|n| n.checked_mul(channels))
-        .ok_or("image dimensions overflow")?;
-    let body = &bytes[pos..];
-    let truncated = match count.checked_mul(4) {
-        Some(need) => body.len() < need,
-        None => true,
-    };
-    if truncated {
-        return Err(format!(
-            "truncated: {width}x{height}x{channels} needs {} bytes of pixels, file has {}",
-            count.saturating_mul(4),
-            body.len()
-        ));
-    }
-    let row = width * channels;
-    let mut data = vec![0.0f32; count];
-    for (i, b) in body[..count * 4].chunks_exact(4).enumerate() {
+
+    /// A stored sample's value.
+    pub(super) fn value(&self, b: &[u8]) -> f32 {
         let b = [b[0], b[1], b[2], b[3]];
-        let v = if little {
+        if self.little {
             f32::from_le_bytes(b)
         } else {
             f32::from_be_bytes(b)
-        };
-        let (file_row, col) = (i / row, i % row);
-        data[(height - 1 - file_row) * row + col] = v;
+        }
     }
-    Ok((width, height, channels, data))
+}
+
+/// Parses a whole PFM file from memory ([`PfmHeader`], then rows of 32-bit floats stored
+/// bottom to top).
+pub(super) fn parse_pfm(bytes: &[u8]) -> std::result::Result<Pfm, String> {
+    let hd = PfmHeader::parse(bytes)?;
+    let count = hd.samples()?;
+    let body = &bytes[hd.data_at..];
+    hd.check_body(body.len() as u64)?;
+    let (height, row) = (hd.height, hd.width * hd.channels);
+    let mut data = vec![0.0f32; count];
+    for (i, b) in body[..count * 4].chunks_exact(4).enumerate() {
+        let (file_row, col) = (i / row, i % row);
+        data[(height - 1 - file_row) * row + col] = hd.value(b);
+    }
+    Ok((hd.width, height, hd.channels, data))
+}
+
+/// A PFM message as this crate's error: "exceeds limits: ..." a limits error, others decoding.
+pub(super) fn pfm_error(path: &Path, m: String) -> Error {
+    match m.strip_prefix("exceeds limits: ") {
+        Some(m) => Error::limits(path, m),
+        None => Error::decode(path, m),
+    }
 }
 
 /// The width and height a PFM file's header declares (header only; no pixel is read).
@@ -134,11 +183,7 @@ pub(super) fn read_pfm_raw(path: &Path) -> Result<RawImage> {
 
 /// Decodes a PFM file's bytes as a raw float image.
 pub(super) fn pfm_raw(path: &Path, bytes: &[u8]) -> Result<RawImage> {
-    let (width, height, channels, data) =
-        parse_pfm(bytes).map_err(|m| match m.strip_prefix("exceeds limits: ") {
-            Some(m) => Error::limits(path, m),
-            None => Error::decode(path, m),
-        })?;
+    let (width, height, channels, data) = parse_pfm(bytes).map_err(|m| pfm_error(path, m))?;
     Ok(RawImage {
         width,
         height,

@@ -1,5 +1,6 @@
-//! Building the cache: decoding the images in batches and scattering each batch into the
-//! file with positioned writes; repairing the blocks that fail their checksum.
+//! Building the cache: reading a batch of images in lockstep, a band of tile rows at a time,
+//! and scattering each band's tiles into the file with positioned writes; repairing the blocks
+//! that fail their checksum.
 
 use std::fs::{self, File, OpenOptions};
 use std::path::Path;
@@ -13,7 +14,7 @@ use super::{block_sum, pow2, CacheFormat, CacheInfo, CacheOptions, TileGrid};
 use crate::codecs::DecodeOptions;
 use crate::dataset::Dataset;
 use crate::error::{Error, Result, Warning};
-use crate::stack::{check_size, decode_stack_image, Notes};
+use crate::stack::{open_stack_image, Notes, StackImage};
 
 /// What a build did.
 pub(super) struct Built {
@@ -54,9 +55,50 @@ pub(super) fn create_sized(path: &Path, len: u64) -> Result<File> {
     Ok(file)
 }
 
+/// What one image of a decoding batch holds in memory while the cache is built: its reader
+/// (a PNG's file and decoder, a PFM's band of stored bytes, or the samples of a format decoded
+/// whole, in the file's type), its band of decoded rows (`width x tile` RGB `f32`), and its
+/// share of the per-thread buffers that assemble a tile's block. `--decode-memory` divided by
+/// it is the batch, so a small file declaring a large image costs its band, not its image.
+pub(super) fn image_cost(img: &StackImage, copts: &CacheOptions) -> usize {
+    let (w, h) = img.size();
+    let rows = copts.tile.min(h);
+    let tile_pixels = copts.tile.min(w) * rows;
+    let assemble = 12
+        + if copts.format == CacheFormat::F16 {
+            6
+        } else {
+            0
+        };
+    img.resident_bytes(rows) + w * rows * 12 + rayon::current_num_threads() * tile_pixels * assemble
+}
+
+/// Refuses a tile size whose band of rows (one row of tiles of one image, decoded) is larger
+/// than the decoding memory, `--tile-size` at least as large as the image making the band the
+/// whole image; the default tile size is always accepted (one band of it is at most 25 MB).
+fn check_band(first: &Path, w: usize, h: usize, copts: &CacheOptions) -> Result<()> {
+    let band = w * copts.tile.min(h) * 12;
+    if band <= copts.batch_bytes || copts.tile <= CacheOptions::default().tile {
+        return Ok(());
+    }
+    let size = |b: usize| crate::bounded::show_size(b as u64);
+    Err(Error::invalid(
+        first,
+        format!(
+            "tiles of {} pixels are decoded a row of tiles at a time, {} rows of this \
+             {w}-pixel-wide image: {}, more than the {} of decoding memory; use a smaller \
+             --tile-size or a larger --decode-memory",
+            copts.tile,
+            copts.tile.min(h),
+            size(band),
+            size(copts.batch_bytes)
+        ),
+    ))
+}
+
 /// Builds (or resumes building) the partial cache at `partial`; on success it is complete.
 /// `size_ok` checks the images' size (against the mask) once it is known: from a resumed
-/// header, or from the first image before the file is created and any other image decoded.
+/// header, or from the first image's header before the file is created and any pixel decoded.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn build(
     ds: &Dataset,
@@ -70,18 +112,8 @@ pub(super) fn build(
 ) -> Result<Built> {
     let n = ds.images.len();
     let notes = Notes::new(n);
-    // Given the stack's size, an image whose header declares another is refused undecoded.
-    let decode_one =
-        |i: usize, first: Option<(usize, usize)>| -> Result<(usize, usize, Vec<f32>)> {
-            if stop.load(Ordering::Relaxed) {
-                return Err(Error::Interrupted);
-            }
-            let r = decode_stack_image(ds, i, opts, &notes, first)?;
-            on_image();
-            Ok(r)
-        };
-    let mut decode_s = 0.0;
-    let mut first: Option<Vec<f32>> = None;
+    let mut times = Times::default();
+    let mut first: Option<StackImage> = None;
     // Resume a partial build of the same inputs, else start afresh from the first image.
     let resumable = read_header(partial)?
         .filter(|(h, len)| !h.complete && matches(h, *len, fingerprint, copts.tile, n));
@@ -97,14 +129,20 @@ pub(super) fn build(
             if partial.exists() {
                 fs::remove_file(partial).map_err(|e| Error::write(partial, e))?;
             }
+            if stop.load(Ordering::Relaxed) {
+                return Err(Error::Interrupted);
+            }
             let t = Instant::now();
-            let (w, h, rgb) = decode_one(0, None)?;
-            decode_s += t.elapsed().as_secs_f64();
+            let img = open_stack_image(ds, 0, opts, None)?;
+            times.decode += t.elapsed().as_secs_f64();
+            let (w, h) = img.size();
             if w == 0 || h == 0 {
                 return Err(Error::invalid(&ds.images[0], "image is empty"));
             }
             size_ok(w, h)?;
-            first = Some(rgb);
+            check_band(&ds.images[0], w, h, &copts)?;
+            let light_block = (copts.batch_bytes / image_cost(&img, &copts)).clamp(1, n);
+            first = Some(img);
             let header = Header {
                 width: w,
                 height: h,
@@ -113,7 +151,7 @@ pub(super) fn build(
                 fingerprint,
                 images_done: 0,
                 complete: false,
-                light_block: (copts.batch_bytes / (w * h * 12)).clamp(1, n),
+                light_block,
                 format: copts.format,
             };
             let file = create_sized(partial, header.file_len())?;
@@ -128,41 +166,28 @@ pub(super) fn build(
     // One batch fills one block of lights in every tile (a resumed build keeps its blocks).
     let batch = header.light_block;
     let resumed = header.images_done;
-    let mut decoded = first.is_some() as usize;
-    let mut scatter_s = 0.0;
+    let mut decoded = 0;
     let mut start = header.images_done;
     while start < n {
         if stop.load(Ordering::Relaxed) {
             return Err(Error::Interrupted);
         }
         let end = n.min(start + batch);
-        let t = Instant::now();
-        let from = if start == 0 && first.is_some() {
-            1
-        } else {
-            start
+        let target = Target {
+            file: &file,
+            path: partial,
+            grid: &grid,
+            header: &header,
         };
-        let size = Some((header.width, header.height));
-        let results: Vec<Result<(usize, usize, Vec<f32>)>> = (from..end)
-            .into_par_iter()
-            .map(|i| decode_one(i, size))
-            .collect();
-        decode_s += t.elapsed().as_secs_f64();
-        let mut images = Vec::with_capacity(end - start);
-        if from > start {
-            images.extend(first.take());
-        }
-        // The first error in image order, as the in-memory loader reports it.
-        for (j, r) in results.into_iter().enumerate() {
-            let (w, h, rgb) = r?;
-            check_size(ds, from + j, (w, h), (header.width, header.height))?;
-            images.push(rgb);
-        }
-        decoded += end - from;
-        let t = Instant::now();
-        scatter(&file, partial, &grid, &header, start, &images)?;
-        drop(images);
-        scatter_s += t.elapsed().as_secs_f64();
+        let batch = Batch {
+            ds,
+            opts,
+            notes: &notes,
+            stop,
+            on_image,
+        };
+        batch.fill(&target, start..end, first.take(), &mut times)?;
+        decoded += end - start;
         header.images_done = end;
         write_header(&header)?;
         start = end;
@@ -177,9 +202,103 @@ pub(super) fn build(
         decoded,
         resumed,
         batch,
-        decode_s,
-        scatter_s,
+        decode_s: times.decode,
+        scatter_s: times.scatter,
     })
+}
+
+/// Seconds spent decoding and scattering.
+#[derive(Debug, Default)]
+struct Times {
+    decode: f64,
+    scatter: f64,
+}
+
+/// The cache file being written and its layout.
+struct Target<'a> {
+    file: &'a File,
+    path: &'a Path,
+    grid: &'a TileGrid,
+    header: &'a Header,
+}
+
+/// What a batch of images is read with.
+struct Batch<'a> {
+    ds: &'a Dataset,
+    opts: &'a DecodeOptions,
+    notes: &'a Notes,
+    stop: &'a AtomicBool,
+    on_image: &'a (dyn Fn() + Sync),
+}
+
+impl Batch<'_> {
+    /// Reads images `lights` (one block of lights; `first`: its first image, already opened)
+    /// in lockstep, a band of tile rows at a time (each image its band, in parallel), and
+    /// writes each band's tiles into `to` ([`scatter`]): what is held is the images' readers
+    /// and one band of each, never a whole decoded image. An image whose header declares
+    /// another size than the stack's is refused before it is decoded. `on_image` is called
+    /// once per image, spread over the bands.
+    fn fill(
+        &self,
+        to: &Target,
+        lights: std::ops::Range<usize>,
+        first: Option<StackImage>,
+        times: &mut Times,
+    ) -> Result<()> {
+        let (grid, size) = (to.grid, (to.header.width, to.header.height));
+        let t = Instant::now();
+        let from = lights.start + first.is_some() as usize;
+        let opened: Vec<Result<StackImage>> = (from..lights.end)
+            .into_par_iter()
+            .map(|i| {
+                if self.stop.load(Ordering::Relaxed) {
+                    return Err(Error::Interrupted);
+                }
+                open_stack_image(self.ds, i, self.opts, Some(size))
+            })
+            .collect();
+        let mut images: Vec<StackImage> = Vec::with_capacity(lights.len());
+        images.extend(first);
+        // The first error in image order, as the in-memory loader reports it.
+        for r in opened {
+            images.push(r?);
+        }
+        times.decode += t.elapsed().as_secs_f64();
+        let band_len = grid.width * grid.tile.min(grid.height) * 3;
+        let mut bands = vec![0.0f32; images.len() * band_len];
+        let bands_y = grid.tiles_y();
+        let mut reported = 0;
+        for band in 0..bands_y {
+            if self.stop.load(Ordering::Relaxed) {
+                return Err(Error::Interrupted);
+            }
+            let t = Instant::now();
+            let rows = grid.tile.min(grid.height - band * grid.tile);
+            let last = band + 1 == bands_y;
+            let read: Vec<Result<()>> = images
+                .par_iter_mut()
+                .zip(bands.par_chunks_mut(band_len))
+                .map(|(img, buf)| {
+                    img.read_rgb(&mut buf[..rows * grid.width * 3])?;
+                    if last {
+                        img.finish(self.notes)?;
+                    }
+                    Ok(())
+                })
+                .collect();
+            read.into_iter().collect::<Result<()>>()?;
+            times.decode += t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            scatter(to, lights.start, band, &bands, band_len)?;
+            times.scatter += t.elapsed().as_secs_f64();
+            let done = images.len() * (band + 1) / bands_y;
+            while reported < done {
+                (self.on_image)();
+                reported += 1;
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Writes `buf` at `offset` of `file` (positioned write; the file's cursor is not used, so
@@ -210,24 +329,23 @@ pub(super) fn write_all_at(file: &File, buf: &[u8], offset: u64) -> std::io::Res
     }
 }
 
-/// Writes images `start..start + images.len()` (interleaved RGB, row-major; one block of
-/// lights, every block before it full) into every tile of the cache file, and the block's
-/// checksums (and, for half floats, scale exponents) into the tables: per tile, the block is
-/// assembled in a per-thread buffer (`pixels * images * 12` bytes, 1 MB for a 32-pixel tile and
-/// 85 images; converted to half floats in a second one for that format) and written with one
-/// positioned write, so every page of the file is written once, by one batch, and nothing of
-/// the file is mapped while building.
-pub(super) fn scatter(
-    file: &File,
-    path: &Path,
-    grid: &TileGrid,
-    h: &Header,
-    start: usize,
-    images: &[Vec<f32>],
-) -> Result<()> {
-    let b = images.len();
+/// Writes one band of tile rows (`band`: a row of tiles) of images `start..` (one block of
+/// lights, every block before it full) into each of the band's tiles, and the blocks'
+/// checksums (and, for half floats, scale exponents) into the tables: `bands` holds each
+/// image's band (interleaved RGB, row-major, `band_len` samples apart). Per tile, the block is
+/// assembled in a per-thread buffer (`pixels * images * 12` bytes, 1 MB for a 32-pixel tile
+/// and 85 images; converted to half floats in a second one for that format) and written with
+/// one positioned write, so every page of the file is written once, by one batch, and nothing
+/// of the file is mapped while building.
+fn scatter(to: &Target, start: usize, band: usize, bands: &[f32], band_len: usize) -> Result<()> {
+    let (grid, h) = (to.grid, to.header);
+    let b = bands.len() / band_len;
     let px = h.format.pixel_bytes();
-    let sums: Vec<(u64, i32)> = (0..grid.n_tiles())
+    // Image pixel index of the band's first pixel; the band's tiles, a run of tile numbers.
+    let offset = band * grid.tile * grid.width;
+    let tiles = band * grid.tiles_x()..(band + 1) * grid.tiles_x();
+    let sums: Vec<(u64, i32)> = tiles
+        .clone()
         .into_par_iter()
         .map_init(
             || (Vec::new(), Vec::new()),
@@ -236,8 +354,9 @@ pub(super) fn scatter(
                 buf.clear();
                 buf.reserve(np * b * 3);
                 for p in grid.pixels(t) {
-                    for img in images {
-                        buf.extend_from_slice(&img[p * 3..p * 3 + 3]);
+                    let q = (p - offset) * 3;
+                    for img in bands.chunks_exact(band_len) {
+                        buf.extend_from_slice(&img[q..q + 3]);
                     }
                 }
                 let (bytes, e): (&[u8], i32) = match h.format {
@@ -259,19 +378,20 @@ pub(super) fn scatter(
                     }
                 };
                 let at = HEADER_BYTES + grid.first_pixel(t) * h.n_lights * px + start * np * px;
-                write_all_at(file, bytes, at as u64).map_err(|e| Error::write(path, e))?;
+                write_all_at(to.file, bytes, at as u64).map_err(|e| Error::write(to.path, e))?;
                 Ok((block_sum(bytes, e), e))
             },
         )
         .collect::<Result<_>>()?;
-    let block = start / h.light_block;
+    // Block-major tables: the band's tiles of this block are one run.
+    let k = start / h.light_block * grid.n_tiles() + tiles.start;
     let table: Vec<u8> = sums.iter().flat_map(|v| v.0.to_le_bytes()).collect();
-    let at = h.table_offset() + (block * grid.n_tiles() * 8) as u64;
-    write_all_at(file, &table, at).map_err(|e| Error::write(path, e))?;
+    write_all_at(to.file, &table, h.table_offset() + (k * 8) as u64)
+        .map_err(|e| Error::write(to.path, e))?;
     if h.format == CacheFormat::F16 {
         let scales: Vec<u8> = sums.iter().flat_map(|v| v.1.to_le_bytes()).collect();
-        let at = h.scales_offset() + (block * grid.n_tiles() * 4) as u64;
-        write_all_at(file, &scales, at).map_err(|e| Error::write(path, e))?;
+        write_all_at(to.file, &scales, h.scales_offset() + (k * 4) as u64)
+            .map_err(|e| Error::write(to.path, e))?;
     }
     Ok(())
 }
@@ -296,6 +416,21 @@ fn half_exponent(v: &[f32]) -> i32 {
     e
 }
 
+/// How many other hard links the file `path` has (0 off Unix).
+pub(super) fn other_links(path: &Path) -> Result<u64> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        let meta = std::fs::symlink_metadata(path).map_err(|e| Error::read(path, e))?;
+        Ok(meta.nlink().saturating_sub(1))
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = path;
+        Ok(0)
+    }
+}
+
 /// Decodes the lights of the light blocks that hold a failed `(tile, block)` of the complete
 /// cache at `path` again and rewrites those blocks (in every tile) with their checksums, in
 /// place. Called under the exclusive lock. An interruption leaves the cache complete with some
@@ -314,55 +449,116 @@ pub(super) fn repair(
     let blocks: std::collections::BTreeSet<usize> = bad.iter().map(|&(_, b)| b).collect();
     info.blocks_corrupt += bad.len();
     // Repaired in place: a file with other hard links (a backup made by `cp -al`) would
-    // change under its other names too, outside this folder. Refused, not written.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::MetadataExt;
-        let links = std::fs::symlink_metadata(path)
-            .map_err(|e| Error::read(path, e))?
-            .nlink();
-        if links > 1 {
-            return Err(Error::invalid(
-                path,
-                format!(
-                    "has {} other hard links, so its corrupt blocks are not repaired in place; \
-                     remove it (or the other links) and run again",
-                    links - 1
-                ),
-            ));
-        }
+    // change under its other names too, outside this folder. The caller builds such a cache
+    // anew; here it is refused, never written.
+    let links = other_links(path)?;
+    if links > 0 {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "has {links} other hard links, so its corrupt blocks are not repaired in \
+                 place; remove it (or the other links) and run again"
+            ),
+        ));
     }
     let file = crate::atomic::open_no_follow(OpenOptions::new().read(true).write(true), path)
         .map_err(|e| Error::write(path, e))?;
     let grid = TileGrid::new(h.width, h.height, h.tile);
-    let n = h.n_lights;
+    let target = Target {
+        file: &file,
+        path,
+        grid: &grid,
+        header: h,
+    };
+    let notes = Notes::new(0);
+    let batch = Batch {
+        ds,
+        opts,
+        notes: &notes,
+        stop,
+        on_image,
+    };
     for b in blocks {
-        let (start, end) = (b * h.light_block, n.min((b + 1) * h.light_block));
-        let t = Instant::now();
-        let results: Vec<Result<(usize, usize, Vec<f32>)>> = (start..end)
-            .into_par_iter()
-            .map(|i| {
-                if stop.load(Ordering::Relaxed) {
-                    return Err(Error::Interrupted);
-                }
-                let first = Some((h.width, h.height));
-                let r = decode_stack_image(ds, i, opts, &Notes::new(0), first)?;
-                on_image();
-                Ok(r)
-            })
-            .collect();
-        info.decode_s += t.elapsed().as_secs_f64();
-        let mut images = Vec::with_capacity(end - start);
-        for (j, r) in results.into_iter().enumerate() {
-            let (w, hh, rgb) = r?;
-            check_size(ds, start + j, (w, hh), (h.width, h.height))?;
-            images.push(rgb);
-        }
-        let t = Instant::now();
-        scatter(&file, path, &grid, h, start, &images)?;
-        info.scatter_s += t.elapsed().as_secs_f64();
-        info.images_decoded += end - start;
+        let lights = b * h.light_block..h.n_lights.min((b + 1) * h.light_block);
+        let mut times = Times::default();
+        batch.fill(&target, lights.clone(), None, &mut times)?;
+        info.decode_s += times.decode;
+        info.scatter_s += times.scatter;
+        info.images_decoded += lights.len();
         info.blocks_repaired += 1;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::codecs::Gamma;
+    use crate::stack::fixture;
+
+    /// The cache of a stack of every kind of image, light blocks of 3, tiles of 8, as the
+    /// decoders and the scatter of version 0.1 (whole images decoded, then scattered) wrote it
+    /// (now read a band at a time, PNG and PFM row by row):
+    /// the bytes after the header (samples, checksums, half-float exponents) are pinned by
+    /// their XXH3-64, and the warnings about the inputs by their text.
+    #[test]
+    fn the_cache_of_every_kind_of_image_is_pinned() {
+        let d = tempfile::tempdir().unwrap();
+        let ds = fixture::every_kind(d.path());
+        let pinned = [
+            (Gamma::Auto, CacheFormat::F32, 178420, 0x1223e85790a591f5),
+            (Gamma::Auto, CacheFormat::F16, 91978, 0x1f13c32aeed2ab5d),
+            (Gamma::Srgb, CacheFormat::F32, 178420, 0x8b964c96b0aacfda),
+            (Gamma::Linear, CacheFormat::F16, 91978, 0x76a305c19569a9b2),
+        ];
+        for (gamma, format, len, hash) in pinned {
+            let opts = DecodeOptions {
+                gamma,
+                ..Default::default()
+            };
+            let partial = d.path().join(format!("{gamma:?}-{format:?}.partial"));
+            let mut copts = CacheOptions {
+                tile: 8,
+                batch_bytes: 0,
+                trust_mtime: false,
+                format,
+            };
+            copts.batch_bytes =
+                3 * image_cost(&open_stack_image(&ds, 0, &opts, None).unwrap(), &copts);
+            let stop = AtomicBool::new(false);
+            let built = build(
+                &ds,
+                &opts,
+                &partial,
+                0,
+                copts,
+                &|_, _| Ok(()),
+                &stop,
+                &|| {},
+            )
+            .unwrap();
+            let bytes = std::fs::read(&partial).unwrap();
+            let (h, _) = read_header(&partial).unwrap().unwrap();
+            assert_eq!(h.light_block, 3);
+            assert_eq!(bytes.len(), len, "{gamma:?} {format:?}");
+            let sum = xxhash_rust::xxh3::xxh3_64(&bytes[HEADER_BYTES..]);
+            assert_eq!(sum, hash, "{gamma:?} {format:?}: {sum:#018x}");
+            let warnings: Vec<String> = built
+                .warnings
+                .iter()
+                .map(|w| w.to_string().replace(d.path().to_str().unwrap(), "DIR"))
+                .collect();
+            assert!(
+                warnings[0].starts_with("DIR/rgb16.png: 16-bit")
+                    && warnings[1].starts_with("DIR/rgb.pfm: float (linear) image among")
+                    && warnings[2].starts_with("DIR/grey8.png: grey image among RGB ones (6 such")
+                    && warnings[3].starts_with("DIR/rgb.pfm: 120 negative samples in 3 images"),
+                "{warnings:?}"
+            );
+            let tagged = warnings
+                .iter()
+                .any(|w| w.starts_with("DIR/srgb16.png: its PNG sRGB chunk"));
+            assert_eq!(tagged, gamma != Gamma::Srgb, "{warnings:?}");
+        }
+    }
 }

@@ -6,8 +6,9 @@
 //! estimation maps one tile at a time). Inside a tile the lights come in blocks of `light_block`
 //! lights (the decoding batch; the last block shorter), each block pixel-major: the tile's pixels
 //! row-major, each pixel's RGB under the block's lights contiguous. When one batch holds every
-//! image (up to 1 GiB of decoded images by default: 1,365 images of 256x256, 85 of 1024x1024) there
-//! is one block and a tile is exactly a [`symframe::Stack`] of its pixels.
+//! image (see Memory below: by default, on 2 threads, 1,180 float EXR images of 256x256, 82 of
+//! 1024x1024, and far more PNGs) there is one block and a tile is exactly a [`symframe::Stack`]
+//! of its pixels.
 //!
 //! Why blocks: a batch then fills one contiguous range per tile, written with one positioned
 //! write, so every page of the file is written once. With each pixel's samples under all lights
@@ -35,12 +36,19 @@
 //! complete cache is verified before every reuse, every block of every tile against the table
 //! (one pass over the file at memory or disk speed, next to decoding every image); the lights of
 //! the blocks that fail are decoded again and rewritten in place (one decoding batch per bad
-//! block), and [`CacheInfo::blocks_repaired`] says how many.
+//! block), and [`CacheInfo::blocks_repaired`] says how many. A file with other hard links is
+//! never written in place: it is built anew as a new file (the other links keep the old one),
+//! with a warning in [`CacheInfo::warnings`].
 //!
-//! Memory: images are decoded in parallel in batches of `batch_bytes / (width * height * 12)`
-//! images (at least one), and each batch is written into the file tile by tile with positioned
-//! writes from a small per-thread buffer (the file is not mapped while it is built). So the
-//! resident set holds one batch of decoded images, whatever the stack's size. Readers map the
+//! Memory: a batch of images is read in lockstep, one band of tile rows at a time (each image its
+//! band, in parallel: a PNG decoded row by row from its file's bytes, a PFM read a band at a time
+//! from its file, other formats decoded whole but kept in their file's sample type), and each
+//! band's tiles are written into the file with positioned writes from a small per-thread buffer
+//! (the file is not mapped while it is built). A batch holds `batch_bytes` over what one image
+//! costs (its reader, its band of `width x tile` decoded pixels, its share of the per-thread
+//! buffers; at least one image), so the resident set is about `batch_bytes` whatever the stack's
+//! size or the size the images declare; a tile size whose band alone exceeds it is refused
+//! (beyond the default tile size). Readers map the
 //! complete file and release each tile's pages once read ([`TileCache::release`],
 //! `madvise(MADV_DONTNEED)`: for a shared file mapping the data stays in the page cache), so
 //! mapped pages do not accumulate either.
@@ -134,7 +142,10 @@ impl CacheFormat {
 pub struct CacheOptions {
     /// Tile side in pixels.
     pub tile: usize,
-    /// Memory budget of one batch of decoded images, in bytes (at least one image per batch).
+    /// Memory for decoding, in bytes: a batch of images is read in lockstep a band of tile rows
+    /// at a time, as many as this holds, each costing its reader (a PNG's file and decoder, a
+    /// PFM's band, a whole-decoded format's samples in its own type) and its band of decoded
+    /// rows; at least one image per batch.
     pub batch_bytes: usize,
     /// Fingerprint the images by path, size and modification time only, not by content
     /// (skips reading every image on a rerun; an image changed with its size and time kept,
@@ -399,6 +410,8 @@ impl TileCache {
         }
         // Someone may have finished building (or repairing) between our check and the
         // exclusive lock.
+        let mut rebuilt = None;
+        let mut build_anew = true;
         if let Some(found) = open_complete(&path, fingerprint, copts.tile, n)? {
             fits_mask(found.header.width, found.header.height)?;
             info.verify_s += found.verify_s;
@@ -413,9 +426,28 @@ impl TileCache {
             } = found;
             info.warnings = read_warnings(&map);
             drop(map);
-            repair(ds, opts, &path, &header, &bad, stop, on_image, &mut info)?;
-        } else {
-            if path.exists() {
+            let links = build::other_links(&path)?;
+            if links == 0 {
+                repair(ds, opts, &path, &header, &bad, stop, on_image, &mut info)?;
+                build_anew = false;
+            } else {
+                // Repairing in place would change the file under its other names too (a backup
+                // made by `cp -al`): a new file is built instead, the other links keep the old.
+                info.blocks_corrupt += bad.len();
+                rebuilt = Some(Warning {
+                    path: path.clone(),
+                    message: format!(
+                        "{} corrupt blocks, and {links} other hard links to the file: rebuilt \
+                         as a new file rather than repaired in place (the other links keep \
+                         the old content)",
+                        bad.len()
+                    ),
+                });
+            }
+        }
+        if build_anew {
+            // Unlinked, not truncated: other hard links keep their content.
+            if path.symlink_metadata().is_ok() {
                 fs::remove_file(&path).map_err(|e| Error::write(&path, e))?;
             }
             let built = build(
@@ -435,6 +467,7 @@ impl TileCache {
             info.decode_s = built.decode_s;
             info.scatter_s = built.scatter_s;
             info.warnings = built.warnings;
+            info.warnings.extend(rebuilt);
             // What an earlier, interrupted build wrote is verified like a reused cache.
             if built.resumed > 0 {
                 if let Some(found) = open_complete(&path, fingerprint, copts.tile, n)? {
@@ -713,7 +746,7 @@ mod tests {
         let dir = d.path().join("cache");
         let opts = DecodeOptions::default();
         // Batches of 2 images: 5 batches.
-        let copts = copts_batches_of_2(w, h);
+        let copts = copts_batches_of_2(&ds);
         let go = AtomicBool::new(false);
         let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
         assert!(!info.hit);
@@ -788,12 +821,20 @@ mod tests {
             .unwrap()
     }
 
-    fn copts_batches_of_2(w: usize, h: usize) -> CacheOptions {
-        CacheOptions {
-            tile: 4,
-            batch_bytes: 2 * w * h * 12 + 5,
+    /// Tiles of `tile` pixels, the decoding memory of `k` of `ds`'s images a batch.
+    fn batches_of(k: usize, ds: &Dataset, format: CacheFormat, tile: usize) -> CacheOptions {
+        let mut copts = CacheOptions {
+            tile,
+            format,
             ..CacheOptions::default()
-        }
+        };
+        let first = crate::stack::open_stack_image(ds, 0, &DecodeOptions::default(), None).unwrap();
+        copts.batch_bytes = k * build::image_cost(&first, &copts) + 5;
+        copts
+    }
+
+    fn copts_batches_of_2(ds: &Dataset) -> CacheOptions {
+        batches_of(2, ds, CacheFormat::F32, 4)
     }
 
     /// A changed light-block field in the header was trusted (wrong samples, `hit: true`).
@@ -805,7 +846,7 @@ mod tests {
         let dir = d.path().join("cache");
         let (opts, copts, go) = (
             DecodeOptions::default(),
-            copts_batches_of_2(w, h),
+            copts_batches_of_2(&ds),
             AtomicBool::new(false),
         );
         drop(TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap());
@@ -830,10 +871,7 @@ mod tests {
         let ds = dataset(d.path(), w, h, n);
         let dir = d.path().join("cache");
         let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
-        let copts = CacheOptions {
-            tile: 8,
-            ..copts_batches_of_2(w, h)
-        };
+        let copts = batches_of(2, &ds, CacheFormat::F32, 8);
         drop(TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap());
         let file = stack_file(&dir);
         let mut b = fs::read(&file).unwrap();
@@ -890,7 +928,7 @@ mod tests {
         }
         let dir = d.path().join("cache");
         let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
-        let copts = copts_batches_of_2(w, h);
+        let copts = copts_batches_of_2(&ds);
         drop(TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap());
         let img = &ds.images[2];
         let (len, mtime) = {
@@ -939,11 +977,7 @@ mod tests {
         let ds = dataset(d.path(), 9, 7, 12);
         let dir = d.path().join("cache");
         let opts = DecodeOptions::default();
-        let copts = CacheOptions {
-            tile: 4,
-            batch_bytes: 3 * 9 * 7 * 12,
-            ..CacheOptions::default()
-        };
+        let copts = batches_of(3, &ds, CacheFormat::F32, 4);
         let go = AtomicBool::new(false);
         let infos: Vec<CacheInfo> = std::thread::scope(|s| {
             let handles: Vec<_> = (0..3)
@@ -1081,11 +1115,8 @@ mod tests {
         }
     }
 
-    fn f16_options(w: usize, h: usize) -> CacheOptions {
-        CacheOptions {
-            format: CacheFormat::F16,
-            ..copts_batches_of_2(w, h)
-        }
+    fn f16_options(ds: &Dataset) -> CacheOptions {
+        batches_of(2, ds, CacheFormat::F16, 4)
     }
 
     #[test]
@@ -1095,8 +1126,8 @@ mod tests {
         let ds = dataset(d.path(), w, h, n);
         let dir = d.path().join("cache");
         let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
-        let f32s = copts_batches_of_2(w, h);
-        let f16s = f16_options(w, h);
+        let f32s = copts_batches_of_2(&ds);
+        let f16s = f16_options(&ds);
         drop(TileCache::open_or_build(&ds, &opts, &dir, f32s, &go, &|| {}).unwrap());
         let (cache, info) = TileCache::open_or_build(&ds, &opts, &dir, f16s, &go, &|| {}).unwrap();
         assert!(!info.hit && info.images_decoded == n, "{info:?}");
@@ -1144,7 +1175,7 @@ mod tests {
         }
         let small = dataset(&d.path().join("a"), w, h, n);
         let big = dataset_scaled(&d.path().join("b"), w, h, n, 1048576.0);
-        let f16s = f16_options(w, h);
+        let f16s = f16_options(&small);
         let (c1, _) =
             TileCache::open_or_build(&small, &opts, &d.path().join("c1"), f16s, &go, &|| {})
                 .unwrap();
@@ -1173,10 +1204,7 @@ mod tests {
         let ds = dataset(d.path(), w, h, n);
         let dir = d.path().join("cache");
         let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
-        let copts = CacheOptions {
-            tile: 8,
-            ..f16_options(w, h)
-        };
+        let copts = batches_of(2, &ds, CacheFormat::F16, 8);
         drop(TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap());
         let file = stack_file(&dir);
         let clean = fs::read(&file).unwrap();
@@ -1209,5 +1237,66 @@ mod tests {
                 "repaired in place, byte {at}"
             );
         }
+    }
+
+    /// A tile size as large as the image made one band the whole decoded image, whatever
+    /// the decoding memory: a band larger than it is refused beyond the default tile size.
+    #[test]
+    fn a_tile_band_larger_than_the_decoding_memory_is_refused() {
+        let d = tempfile::tempdir().unwrap();
+        let ds = dataset(d.path(), 100, 70, 3);
+        let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
+        let copts = |tile, batch_bytes| CacheOptions {
+            tile,
+            batch_bytes,
+            ..CacheOptions::default()
+        };
+        // 64 rows of 100 pixels: 75 KiB a band.
+        let e = TileCache::open_or_build(
+            &ds,
+            &opts,
+            &d.path().join("a"),
+            copts(64, 50_000),
+            &go,
+            &|| {},
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains(
+                "0.exr: tiles of 64 pixels are decoded a row of tiles at a time, 64 rows of \
+                 this 100-pixel-wide image: 75 KiB, more than the 48.8 KiB of decoding memory; use \
+                 a smaller --tile-size or a larger --decode-memory"
+            ),
+            "{e}"
+        );
+        assert!(!d.path().join("a").read_dir().unwrap().any(|e| e
+            .unwrap()
+            .path()
+            .to_string_lossy()
+            .contains(".stack")));
+        let (cache, info) = TileCache::open_or_build(
+            &ds,
+            &opts,
+            &d.path().join("b"),
+            copts(64, 80_000),
+            &go,
+            &|| {},
+        )
+        .unwrap();
+        assert_eq!(info.batch_images, 1);
+        same_as_stack(&cache, &ds);
+        // The default tile size is always accepted: batches of one image.
+        let (cache, info) = TileCache::open_or_build(
+            &ds,
+            &opts,
+            &d.path().join("c"),
+            copts(32, 1000),
+            &go,
+            &|| {},
+        )
+        .unwrap();
+        assert_eq!(info.batch_images, 1);
+        same_as_stack(&cache, &ds);
     }
 }
