@@ -52,6 +52,8 @@ enum Source {
     },
     /// A PFM, read from its file a band at a time (stored bottom to top).
     Pfm {
+        /// The file, opened once.
+        file: std::fs::File,
         header: PfmHeader,
         /// The band's stored bytes, and one row of its samples.
         bytes: Vec<u8>,
@@ -192,7 +194,8 @@ impl Rows {
         check: &dyn Fn((usize, usize)) -> Result<()>,
     ) -> Result<Option<Rows>> {
         let len = crate::check_regular_file(path)?;
-        let f = std::fs::File::open(path).map_err(|e| Error::read(path, e))?;
+        let file = std::fs::File::open(path).map_err(|e| Error::read(path, e))?;
+        let f = file.try_clone().map_err(|e| Error::read(path, e))?;
         let prefix = crate::read_at_most(f, path, PFM_HEADER_BYTES)?;
         if let Ok(size) = pfm_size(path, &prefix) {
             check(size)?;
@@ -213,6 +216,7 @@ impl Rows {
             next: 0,
             negative: 0,
             source: Source::Pfm {
+                file,
                 header,
                 bytes: Vec::new(),
                 row: Vec::new(),
@@ -314,11 +318,16 @@ impl Rows {
                     self.negative += self.conv.run(run, o, out_ch);
                 }
             }
-            Source::Pfm { header, bytes, row } => {
+            Source::Pfm {
+                file,
+                header,
+                bytes,
+                row,
+            } => {
                 // Stored bottom to top: the band's rows are one range, the last row first.
                 let stored = 4 * w * ch;
                 let first = self.height - y0 - rows;
-                let mut f = std::fs::File::open(path).map_err(|e| Error::read(path, e))?;
+                let f = file;
                 f.seek(SeekFrom::Start((header.data_at + first * stored) as u64))
                     .map_err(|e| Error::read(path, e))?;
                 bytes.resize(rows * stored, 0);

@@ -168,6 +168,13 @@ pub(super) fn build(
     let resumed = header.images_done;
     let mut decoded = 0;
     let mut start = header.images_done;
+    let reader = Batch {
+        ds,
+        opts,
+        notes: &notes,
+        stop,
+        on_image,
+    };
     while start < n {
         if stop.load(Ordering::Relaxed) {
             return Err(Error::Interrupted);
@@ -179,14 +186,7 @@ pub(super) fn build(
             grid: &grid,
             header: &header,
         };
-        let batch = Batch {
-            ds,
-            opts,
-            notes: &notes,
-            stop,
-            on_image,
-        };
-        batch.fill(&target, start..end, first.take(), &mut times)?;
+        reader.fill(&target, start..end, first.take(), &mut times)?;
         decoded += end - start;
         header.images_done = end;
         write_header(&header)?;
