@@ -13,7 +13,7 @@ use crate::baselines::{
 };
 use crate::error::{Error, Result};
 use crate::frames::highlight::{highlight_moments_of_greys, HighlightMoments, HIGHLIGHT_LEVEL};
-use crate::frames::lobe::{fit_lobe, LobeFit, LobeScratch, LobeStart};
+use crate::frames::lobe::{fit_lobe, fit_lobe_pair, LobeFit, LobeScratch, LobeStart};
 use crate::frames::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::frames::optim::{nelder_mead, NelderMeadOptions};
 use crate::frames::policy::{
@@ -490,6 +490,22 @@ impl<'a> Estimator<'a> {
             moments.and_then(|m| self.lobe_fit(lobe_slice, m.normal, m.tangent, m.radius, lobe))
         } else {
             None
+        };
+        // Where one lobe leaves the samples unexplained, two sharing its frame may explain them
+        // (a coat over a base, a woven cross): the pair then stands for the lobe, with the axis
+        // of the lobe that has one (docs/method.md, "Two lobes").
+        let fitted = match fitted {
+            Some(f) if f.residual >= LOBE_EXPLAINS => match fit_lobe_pair(&f, lobe) {
+                Some(p) if p.residual < LOBE_EXPLAINS && p.significant_over(&f) => {
+                    let l = p.as_lobe(|l| self.lobe_has_tangent(l));
+                    Some(LobeFit {
+                        evals: f.evals + p.evals,
+                        ..l
+                    })
+                }
+                _ => Some(f),
+            },
+            other => other,
         };
         // Under a sharp coat one lobe cannot explain coat and base together: the base, fitted
         // without the coat's samples (those at or above the highlight level of the brightest),

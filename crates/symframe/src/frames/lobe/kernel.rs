@@ -158,6 +158,16 @@ impl Subset {
         DVec3::new(self.l[0][i], self.l[1][i], self.l[2][i])
     }
 
+    /// Halfway vector of sample `i`.
+    pub(super) fn halfway(&self, i: usize) -> DVec3 {
+        DVec3::new(self.h[0][i], self.h[1][i], self.h[2][i])
+    }
+
+    /// Schlick's Fresnel weight of sample `i` ([`schlick`] of its halfway vector).
+    pub(super) fn fresnel(&self, i: usize) -> f64 {
+        self.fresnel[i]
+    }
+
     /// Grey value of sample `i`.
     pub(super) fn value(&self, i: usize) -> f64 {
         self.y[i]

@@ -32,6 +32,9 @@ use crate::geometry::tangent_basis;
 
 mod kernel;
 mod lanes;
+mod pair;
+
+pub use pair::{fit_lobe_pair, LobePair};
 
 use kernel::Subset;
 
@@ -496,8 +499,8 @@ const FORESHORTENING_FLOOR: f64 = 1e-6;
 /// Solves `a x = b` for a symmetric positive definite `a` (Cholesky); `None` if it is not.
 // Index loops: the triangular recurrences read clearer as the textbook's indices.
 #[allow(clippy::needless_range_loop)]
-fn solve_spd(mut a: [[f64; P]; P], mut b: [f64; P]) -> Option<[f64; P]> {
-    for j in 0..P {
+fn solve_spd<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
+    for j in 0..N {
         let mut d = a[j][j];
         for k in 0..j {
             d -= a[j][k] * a[j][k];
@@ -507,7 +510,7 @@ fn solve_spd(mut a: [[f64; P]; P], mut b: [f64; P]) -> Option<[f64; P]> {
         }
         let d = d.sqrt();
         a[j][j] = d;
-        for i in j + 1..P {
+        for i in j + 1..N {
             let mut v = a[i][j];
             for k in 0..j {
                 v -= a[i][k] * a[j][k];
@@ -515,16 +518,16 @@ fn solve_spd(mut a: [[f64; P]; P], mut b: [f64; P]) -> Option<[f64; P]> {
             a[i][j] = v / d;
         }
     }
-    for i in 0..P {
+    for i in 0..N {
         let mut v = b[i];
         for k in 0..i {
             v -= a[i][k] * b[k];
         }
         b[i] = v / a[i][i];
     }
-    for i in (0..P).rev() {
+    for i in (0..N).rev() {
         let mut v = b[i];
-        for k in i + 1..P {
+        for k in i + 1..N {
             v -= a[k][i] * b[k];
         }
         b[i] = v / a[i][i];

@@ -1,0 +1,664 @@
+//! Two lobes sharing one frame, fitted to a pixel's samples where one lobe leaves them
+//! unexplained: a sharp coat over a broad anisotropic base (car paint, lacquered brushed metal),
+//! the two perpendicular lobes of a woven fabric's warp and weft (docs/method.md, "Two lobes").
+//!
+//! `I(l) = d (n.l)+ + sum over X in {A, B} of (s1X + s2X (1 - h.v)^5) L_X(l)`, each `L_X` the
+//! one-lobe model's lobe (`lobe/mod.rs`) with its own widths `a_tX`, `a_bX` along the shared
+//! axes `(t, b)`, a shared shape `k` and no foreshortening. Both lobes are
+//! mirror-symmetric about the planes `(n, t)` and `(n, b)`, so the frame that lets the pair
+//! explain the samples is the frame about which the samples are most symmetric, as for one lobe.
+//! The five linear coefficients are solved by non-negative least squares at every step
+//! (variable projection), the eight others (the frame's rotations about its axes, the four
+//! `ln a`, `ln k`) by Levenberg-Marquardt with Kaufman's Jacobian, over the samples the one-lobe fit
+//! read. Scalar code: it runs only at pixels one lobe does not explain.
+
+use glam::{DQuat, DVec3};
+
+use super::kernel::Subset;
+use super::{
+    negligible, solve_spd, LobeFit, LobeScratch, ALPHA_RANGE, MAX_ITERATIONS, RELATIVE_GAIN,
+    SHAPE_RANGE,
+};
+
+/// Number of linear coefficients: the diffuse term and each lobe's two Fresnel terms.
+const C: usize = 5;
+
+/// Number of nonlinear parameters: the frame's three rotations, the four `ln a`, `ln k`.
+const P: usize = 8;
+
+/// Two lobes sharing one frame, fitted to one pixel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LobePair {
+    /// Unit normal: the shared centre.
+    pub normal: DVec3,
+    /// Unit tangent of the shared frame (the first axis of both lobes' widths).
+    pub tangent: DVec3,
+    /// The lobes' widths along `tangent` and along `normal x tangent` (slope units).
+    pub alpha: [[f64; 2]; 2],
+    /// The share of the samples' modelled energy each lobe carries.
+    pub share: [f64; 2],
+    /// The shape exponent `k` both lobes share.
+    pub shape: f64,
+    /// Share of the samples' energy the pair leaves unexplained, in [0, 1].
+    pub residual: f64,
+    /// Samples the pair (and the one lobe before it) was fitted to.
+    pub samples: usize,
+    /// Model evaluations used.
+    pub evals: u32,
+}
+
+/// Parameters the pair has beyond one lobe's: a second lobe's two widths and two Fresnel
+/// coefficients, the shape shared (the one-lobe fit's foreshortening counted as its own).
+const EXTRA_PARAMETERS: f64 = 3.0;
+
+/// The upper 0.1% point of the chi-square distribution with [`EXTRA_PARAMETERS`] degrees of
+/// freedom: the F test's level (one pixel in a thousand takes a second lobe it does not need).
+const CHI2_3_999: f64 = 16.27;
+
+impl LobePair {
+    /// Whether the second lobe explains significantly more than `single` (fitted to the same
+    /// samples) can: the F test of the nested fits, with the pair's own residual as the noise
+    /// (no noise model needed: where the pair describes the material its residual is the
+    /// noise; where it does not, the test is the stricter for it). The level's quantile for
+    /// the residual's degrees of freedom `q` is `chi2 / 3 + 50 / q` (within 2% of F(3, q)'s
+    /// 0.1% point for q >= 30).
+    pub fn significant_over(&self, single: &LobeFit) -> bool {
+        let dof = self.samples as f64 - 13.0;
+        if dof < 8.0 {
+            return false;
+        }
+        let gain = (single.residual - self.residual).max(0.0) / EXTRA_PARAMETERS;
+        let noise = self.residual / dof;
+        gain > (CHI2_3_999 / EXTRA_PARAMETERS + 50.0 / dof) * noise
+    }
+
+    /// The pair read as one lobe for the estimator's rules: its frame, with the widths and the
+    /// wide axis of the lobe that gives the tangent (the stronger of those `elongated` accepts,
+    /// the stronger lobe where neither is), and the pair's residual.
+    pub fn as_lobe(&self, elongated: impl Fn(&LobeFit) -> bool) -> LobeFit {
+        let b = self.normal.cross(self.tangent);
+        let lobe = |x: usize| {
+            let [at, ab] = self.alpha[x];
+            let (tangent, alpha) = if at >= ab {
+                (self.tangent, [at, ab])
+            } else {
+                (b, [ab, at])
+            };
+            LobeFit {
+                normal: self.normal,
+                tangent,
+                alpha,
+                shape: self.shape,
+                foreshortening: 0.0,
+                diffuse: 0.0,
+                specular: 0.0,
+                fresnel: 0.0,
+                residual: self.residual,
+                evals: self.evals,
+            }
+        };
+        let order = if self.share[0] >= self.share[1] {
+            [0, 1]
+        } else {
+            [1, 0]
+        };
+        let [stronger, weaker] = order.map(lobe);
+        if !elongated(&stronger) && elongated(&weaker) {
+            weaker
+        } else {
+            stronger
+        }
+    }
+}
+
+/// A point of the search: the frame, the four `ln a` (`[a_tA, a_bA, a_tB, a_bB]`) and `ln k`.
+#[derive(Debug, Clone, Copy)]
+struct State {
+    normal: DVec3,
+    tangent: DVec3,
+    ln_alpha: [f64; 4],
+    ln_shape: f64,
+}
+
+impl State {
+    /// The state moved by `d`: the frame turned by `(d0, d1, d2)` about `(t, b, n)`, the
+    /// widths' and the shape's logarithms shifted by `d3..d7` (and kept in range).
+    fn moved(&self, d: &[f64; P]) -> Self {
+        let b = self.normal.cross(self.tangent);
+        let turn = DQuat::from_scaled_axis(d[0] * self.tangent + d[1] * b + d[2] * self.normal);
+        let normal = (turn * self.normal).normalize();
+        let t = turn * self.tangent;
+        let tangent = (t - normal * normal.dot(t)).normalize();
+        let mut ln_alpha = self.ln_alpha;
+        for (v, s) in ln_alpha.iter_mut().zip(&d[3..7]) {
+            *v = (*v + s).clamp(ALPHA_RANGE.0.ln(), ALPHA_RANGE.1.ln());
+        }
+        Self {
+            normal,
+            tangent,
+            ln_alpha,
+            ln_shape: (self.ln_shape + d[7]).clamp(SHAPE_RANGE.0.ln(), SHAPE_RANGE.1.ln()),
+        }
+    }
+}
+
+/// One lobe's constants at a state.
+#[derive(Clone, Copy)]
+struct Widths {
+    inv_a2: [f64; 2],
+    alpha2: f64,
+}
+
+impl Widths {
+    fn of(ln_at: f64, ln_ab: f64) -> Self {
+        let (at, ab) = (ln_at.exp(), ln_ab.exp());
+        Self {
+            inv_a2: [at.powi(-2), ab.powi(-2)],
+            alpha2: at * ab,
+        }
+    }
+}
+
+/// A sample's projections on the frame.
+struct Geometry {
+    nl: f64,
+    hn: f64,
+    ht: f64,
+    hb: f64,
+    lt: f64,
+    lb: f64,
+}
+
+/// A lobe's value at a lit sample and the derivatives of its logarithm with respect to the
+/// frame's rotations about `(t, b, n)`, its `ln a_t`, `ln a_b` and `ln k`; zero where the
+/// halfway vector is (nearly) behind the normal. The one-lobe model's formulas
+/// (`lobe/kernel.rs`).
+fn lobe(g: &Geometry, w: &Widths, k: f64) -> (f64, [f64; 6]) {
+    if g.hn <= 1e-3 {
+        return (0.0, [0.0; 6]);
+    }
+    let inv_hn = 1.0 / g.hn;
+    let (x, y) = (g.ht * inv_hn, g.hb * inv_hn);
+    let (qt, qb) = (x * x * w.inv_a2[0], y * y * w.inv_a2[1]);
+    let q = qt + qb;
+    let base = 1.0 + q / k;
+    let ln_base = base.ln();
+    let by_q = -1.0 / base;
+    let nl = g.nl;
+    let root = (nl * nl * (1.0 - w.alpha2) + w.alpha2).sqrt();
+    let inv_sum = 1.0 / (nl + root);
+    let masking = 2.0 * nl * inv_sum;
+    let value = (-k * ln_base).exp() * masking * inv_hn.powi(4);
+    let by_nl = 1.0 / nl - (nl * (1.0 - w.alpha2) / root + 1.0) * inv_sum;
+    let d_nl = [-g.lb, g.lt, 0.0];
+    let d_hn = [-g.hb, g.ht, 0.0];
+    let d_ht = [0.0, -g.hn, g.hb];
+    let d_hb = [g.hn, 0.0, -g.ht];
+    let mut d = [0.0; 6];
+    for r in 0..3 {
+        let dx = (d_ht[r] - x * d_hn[r]) * inv_hn;
+        let dy = (d_hb[r] - y * d_hn[r]) * inv_hn;
+        let dq = 2.0 * (x * dx * w.inv_a2[0] + y * dy * w.inv_a2[1]);
+        d[r] = by_q * dq + by_nl * d_nl[r] - 4.0 * d_hn[r] * inv_hn;
+    }
+    let by_width = -(1.0 - nl * nl) / root * inv_sum * 0.5 * w.alpha2;
+    d[3] = by_q * (-2.0 * qt) + by_width;
+    d[4] = by_q * (-2.0 * qb) + by_width;
+    d[5] = q / base - k * ln_base;
+    (value, d)
+}
+
+/// The model at a state, as the passes read it.
+struct Model {
+    normal: DVec3,
+    t: DVec3,
+    b: DVec3,
+    lobes: [Widths; 2],
+    shape: f64,
+}
+
+impl Model {
+    fn of(s: &State) -> Self {
+        Self {
+            normal: s.normal,
+            t: s.tangent,
+            b: s.normal.cross(s.tangent),
+            lobes: [
+                Widths::of(s.ln_alpha[0], s.ln_alpha[1]),
+                Widths::of(s.ln_alpha[2], s.ln_alpha[3]),
+            ],
+            shape: s.ln_shape.exp(),
+        }
+    }
+
+    /// Sample `i`'s basis functions `(n.l, L_A, L_A F, L_B, L_B F)` and, for the Jacobian, the
+    /// derivatives of `n.l` and of `ln L_A`, `ln L_B`; `None` where the light is behind.
+    #[allow(clippy::type_complexity)]
+    fn terms(&self, s: &Subset, i: usize) -> Option<([f64; C], [f64; 2], [[f64; 6]; 2])> {
+        let l = s.light(i);
+        let h = s.halfway(i);
+        let nl = self.normal.dot(l);
+        if nl <= 0.0 {
+            return None;
+        }
+        let g = Geometry {
+            nl,
+            hn: self.normal.dot(h),
+            ht: self.t.dot(h),
+            hb: self.b.dot(h),
+            lt: self.t.dot(l),
+            lb: self.b.dot(l),
+        };
+        let f = s.fresnel(i);
+        let (la, da) = lobe(&g, &self.lobes[0], self.shape);
+        let (lb, db) = lobe(&g, &self.lobes[1], self.shape);
+        Some((
+            [nl, la, la * f, lb, lb * f],
+            [-g.lb, g.lt],
+            [da, db],
+        ))
+    }
+}
+
+/// The linear part at a state: coefficients, residual sum of squares, active set (bit `k`:
+/// coefficient `k` free) and the Gram matrix of the basis functions.
+#[derive(Debug, Clone, Copy)]
+struct Linear {
+    coefficients: [f64; C],
+    cost: f64,
+    set: u8,
+    gram: [[f64; C]; C],
+}
+
+/// Solves the Gram block of the `members` of `g` against `p` by Cholesky; `None` where the
+/// block is (nearly) singular or a value is not finite.
+fn solve_members(g: &[[f64; C]; C], p: &[f64; C], members: &[usize]) -> Option<[f64; C]> {
+    let n = members.len();
+    let mut a = [[0.0; C]; C];
+    let mut x = [0.0; C];
+    for (r, &i) in members.iter().enumerate() {
+        for (c, &j) in members.iter().enumerate() {
+            a[r][c] = g[i][j];
+        }
+        x[r] = p[i];
+    }
+    for j in 0..n {
+        let mut d = a[j][j];
+        for k in 0..j {
+            d -= a[j][k] * a[j][k];
+        }
+        if !(d > 1e-12 * g[members[j]][members[j]]) {
+            return None;
+        }
+        let d = d.sqrt();
+        a[j][j] = d;
+        for i in j + 1..n {
+            let mut v = a[i][j];
+            for k in 0..j {
+                v -= a[i][k] * a[j][k];
+            }
+            a[i][j] = v / d;
+        }
+    }
+    for i in 0..n {
+        for k in 0..i {
+            x[i] -= a[i][k] * x[k];
+        }
+        x[i] /= a[i][i];
+    }
+    for i in (0..n).rev() {
+        for k in i + 1..n {
+            x[i] -= a[k][i] * x[k];
+        }
+        x[i] /= a[i][i];
+    }
+    let mut out = [0.0; C];
+    for (r, &i) in members.iter().enumerate() {
+        out[i] = x[r];
+    }
+    out.iter().all(|v| v.is_finite()).then_some(out)
+}
+
+/// The members of active set `mask`.
+fn members(mask: u8) -> ([usize; C], usize) {
+    let mut m = [0; C];
+    let mut n = 0;
+    for k in 0..C {
+        if mask & (1 << k) != 0 {
+            m[n] = k;
+            n += 1;
+        }
+    }
+    (m, n)
+}
+
+/// Non-negative least squares over the five basis functions from their Gram matrix, products
+/// with the values and the values' energy: every active set is tried (31 small solves), exact.
+fn nnls(gram: [[f64; C]; C], p: [f64; C], syy: f64) -> Linear {
+    let cost = |x: &[f64; C]| {
+        let mut r = syy;
+        for a in 0..C {
+            r -= 2.0 * x[a] * p[a];
+            for b in 0..C {
+                r += x[a] * gram[a][b] * x[b];
+            }
+        }
+        r.max(0.0)
+    };
+    let mut best = Linear {
+        coefficients: [0.0; C],
+        cost: syy,
+        set: 0,
+        gram,
+    };
+    for set in 1u8..(1 << C) {
+        let (m, n) = members(set);
+        let Some(x) = solve_members(&gram, &p, &m[..n]) else {
+            continue;
+        };
+        if x.iter().all(|&v| v >= 0.0) {
+            let c = cost(&x);
+            if c < best.cost {
+                best = Linear {
+                    coefficients: x,
+                    cost: c,
+                    set,
+                    gram,
+                };
+            }
+        }
+    }
+    best
+}
+
+/// The linear part at `m` over the samples (one pass).
+fn project(m: &Model, s: &Subset, syy: f64) -> Linear {
+    let mut gram = [[0.0; C]; C];
+    let mut p = [0.0; C];
+    for i in 0..s.len() {
+        let Some((f, _, _)) = m.terms(s, i) else {
+            continue;
+        };
+        let y = s.value(i);
+        for a in 0..C {
+            p[a] += f[a] * y;
+            for b in a..C {
+                gram[a][b] += f[a] * f[b];
+            }
+        }
+    }
+    for a in 0..C {
+        for b in 0..a {
+            gram[a][b] = gram[b][a];
+        }
+    }
+    nnls(gram, p, syy)
+}
+
+/// The reduced problem's Gauss-Newton system at `m` with linear part `lin` (Kaufman's
+/// Jacobian, as the one-lobe fit's `normal_equations`): `J^T J` and `v^T r`.
+fn normal_equations(m: &Model, lin: &Linear, s: &Subset) -> ([[f64; P]; P], [f64; P]) {
+    let c = lin.coefficients;
+    let mut vtv = [[0.0; P]; P];
+    let mut vtr = [0.0; P];
+    let mut ftv = [[0.0; P]; C];
+    for i in 0..s.len() {
+        let Some((f, d_a, [da, db])) = m.terms(s, i) else {
+            continue;
+        };
+        let fr = s.fresnel(i);
+        let pa = (c[1] + c[2] * fr) * f[1];
+        let pb = (c[3] + c[4] * fr) * f[3];
+        let mut v = [0.0; P];
+        for r in 0..3 {
+            let diffuse = if r < 2 { c[0] * d_a[r] } else { 0.0 };
+            v[r] = diffuse + pa * da[r] + pb * db[r];
+        }
+        v[3] = pa * da[3];
+        v[4] = pa * da[4];
+        v[5] = pb * db[3];
+        v[6] = pb * db[4];
+        v[7] = pa * da[5] + pb * db[5];
+        let prediction: f64 = f.iter().zip(&c).map(|(f, c)| f * c).sum();
+        let r = s.value(i) - prediction;
+        for a in 0..P {
+            vtr[a] += v[a] * r;
+            for b in a..P {
+                vtv[a][b] += v[a] * v[b];
+            }
+            for k in 0..C {
+                ftv[k][a] += f[k] * v[a];
+            }
+        }
+    }
+    // J^T J = v^T v - (F_A^T v)^T (F_A^T F_A)^-1 (F_A^T v).
+    let (mm, n) = members(lin.set);
+    let mut solved = [[0.0; C]; P];
+    for (a, w) in solved.iter_mut().enumerate() {
+        if n > 0 {
+            let u: [f64; C] = std::array::from_fn(|k| ftv[k][a]);
+            *w = solve_members(&lin.gram, &u, &mm[..n]).unwrap_or([0.0; C]);
+        }
+    }
+    let mut jtj = [[0.0; P]; P];
+    for a in 0..P {
+        for b in a..P {
+            let correction: f64 = (0..C).map(|k| ftv[k][a] * solved[b][k]).sum();
+            jtj[a][b] = vtv[a][b] - correction;
+            jtj[b][a] = jtj[a][b];
+        }
+    }
+    (jtj, vtr)
+}
+
+/// Levenberg-Marquardt from `state`: the state, its linear part and the passes used.
+fn levenberg_marquardt(s: &Subset, mut state: State, syy: f64) -> (State, Linear, u32) {
+    let mut model = Model::of(&state);
+    let mut linear = project(&model, s, syy);
+    let mut evals = 1;
+    let mut lambda = 1e-3;
+    let (lo, hi) = (ALPHA_RANGE.0.ln(), ALPHA_RANGE.1.ln());
+    for _ in 0..MAX_ITERATIONS {
+        let (mut jtj, mut rhs) = normal_equations(&model, &linear, s);
+        evals += 1;
+        // A width or the shape at its bound that the descent pushes further out is held this
+        // iteration.
+        for k in 0..5 {
+            let i = 3 + k;
+            let (v, lo, hi) = if k < 4 {
+                (state.ln_alpha[k], lo, hi)
+            } else {
+                (state.ln_shape, SHAPE_RANGE.0.ln(), SHAPE_RANGE.1.ln())
+            };
+            if (v <= lo && rhs[i] < 0.0) || (v >= hi && rhs[i] > 0.0) {
+                rhs[i] = 0.0;
+                jtj[i] = [0.0; P];
+                for row in jtj.iter_mut() {
+                    row[i] = 0.0;
+                }
+            }
+        }
+        let floor = 1e-9 * (0..P).map(|k| jtj[k][k]).sum::<f64>().max(1e-300);
+        let mut improved = false;
+        for _ in 0..10 {
+            let mut a = jtj;
+            for (k, row) in a.iter_mut().enumerate() {
+                row[k] += lambda * jtj[k][k] + floor;
+            }
+            let Some(step) = solve_spd(a, rhs) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let trial = state.moved(&step);
+            if trial.normal.z <= 0.0 {
+                lambda *= 4.0;
+                continue;
+            }
+            let trial_model = Model::of(&trial);
+            let trial_linear = project(&trial_model, s, syy);
+            evals += 1;
+            if trial_linear.cost < linear.cost {
+                let gain = linear.cost - trial_linear.cost;
+                (state, model, linear) = (trial, trial_model, trial_linear);
+                lambda = (lambda / 3.0).max(1e-9);
+                improved = !negligible(gain, linear.cost, syy, RELATIVE_GAIN);
+                break;
+            }
+            lambda *= 4.0;
+        }
+        if !improved {
+            break;
+        }
+    }
+    (state, linear, evals)
+}
+
+/// Widths of the second lobe's starts besides the crossed one: a sharp coat at this share of
+/// the one lobe's narrower width, and a broad round lobe of this width (slope units).
+const COAT_START_SHARE: f64 = 0.3;
+const BROAD_START: f64 = 0.3;
+
+/// Fits two lobes sharing one frame to the samples the last [`super::fit_lobe`] on `scratch`
+/// read (call it right after, for the same pixel), from the one lobe `single` it fitted: the
+/// second lobe starts crossed (the first's widths swapped: a woven cross), as a sharp round
+/// coat, and as a broad round lobe; the best fit is kept. `None` where the samples are too few.
+pub fn fit_lobe_pair(single: &LobeFit, scratch: &mut LobeScratch) -> Option<LobePair> {
+    let s = &scratch.fine;
+    if s.len() < 12 {
+        return None;
+    }
+    let syy = s.energy();
+    if syy <= 0.0 {
+        return None;
+    }
+    let ln_shape = single.shape.clamp(SHAPE_RANGE.0, SHAPE_RANGE.1).ln();
+    let ln = |a: f64| a.clamp(ALPHA_RANGE.0, ALPHA_RANGE.1).ln();
+    let [a0, a1] = single.alpha;
+    let coat = (COAT_START_SHARE * a1).max(ALPHA_RANGE.0 * 2.0);
+    let starts = [
+        [ln(a0), ln(a1), ln(a1), ln(a0)],
+        [ln(a0), ln(a1), ln(coat), ln(coat)],
+        [ln(a0), ln(a1), ln(BROAD_START), ln(BROAD_START)],
+    ];
+    let mut evals = 0;
+    let mut best: Option<(State, Linear)> = None;
+    for ln_alpha in starts {
+        let start = State {
+            normal: single.normal,
+            tangent: single.tangent,
+            ln_alpha,
+            ln_shape,
+        };
+        let (state, linear, e) = levenberg_marquardt(s, start, syy);
+        evals += e;
+        if best.is_none_or(|b| linear.cost < b.1.cost) {
+            best = Some((state, linear));
+        }
+    }
+    let (state, linear) = best?;
+    // Each lobe's share of the modelled energy.
+    let model = Model::of(&state);
+    let c = linear.coefficients;
+    let mut energy = [0.0f64; 2];
+    for i in 0..s.len() {
+        if let Some((f, _, _)) = model.terms(s, i) {
+            energy[0] += (c[1] * f[1] + c[2] * f[2]).powi(2);
+            energy[1] += (c[3] * f[3] + c[4] * f[4]).powi(2);
+        }
+    }
+    let total = (energy[0] + energy[1]).max(f64::MIN_POSITIVE);
+    let alpha = |k: usize| [state.ln_alpha[k].exp(), state.ln_alpha[k + 1].exp()];
+    Some(LobePair {
+        normal: state.normal,
+        tangent: state.tangent,
+        alpha: [alpha(0), alpha(2)],
+        share: [energy[0] / total, energy[1] / total],
+        shape: model.shape,
+        residual: (linear.cost / syy).clamp(0.0, 1.0),
+        samples: s.len(),
+        evals,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::brdf::{Brdf, Ggx, Layered, Woven};
+    use crate::frames::lobe::{fit_lobe, LobeStart};
+    use crate::frames::rig::{uniform_cone_lights, Rig, RigOptions};
+    use crate::geometry::tangent_basis;
+
+    /// The slice of `brdf` at a pixel of frame `(n, t)` under `rig` (view `+z`), RGB.
+    fn slice(rig: &Rig, brdf: &dyn Brdf, n: DVec3, t: DVec3) -> Vec<f32> {
+        let b = n.cross(t);
+        let to_local = |v: DVec3| DVec3::new(v.dot(t), v.dot(b), v.dot(n));
+        let view = to_local(DVec3::Z);
+        rig.lights_in_camera()
+            .iter()
+            .flat_map(|&l| {
+                let nl = l.dot(n);
+                let v = if nl > 0.0 {
+                    brdf.eval(to_local(l), view).map(|c| (c * nl) as f32)
+                } else {
+                    [0.0; 3]
+                };
+                v
+            })
+            .collect()
+    }
+
+    fn fits(rig: &Rig, brdf: &dyn Brdf, n: DVec3, t: DVec3) -> (LobeFit, LobePair) {
+        let samples = slice(rig, brdf, n, t);
+        let mut scratch = LobeScratch::default();
+        let (u, _) = tangent_basis(n);
+        let start = LobeStart {
+            normal: (n + 0.03 * u).normalize(),
+            tangent: t,
+            alpha: [0.2, 0.1],
+        };
+        let single = fit_lobe(
+            &samples,
+            rig.lights_in_camera(),
+            rig.halfway_in_camera(),
+            rig.query_order(),
+            start,
+            &mut scratch,
+        )
+        .unwrap();
+        let pair = fit_lobe_pair(&single, &mut scratch).unwrap();
+        (single, pair)
+    }
+
+    fn frame() -> (DVec3, DVec3) {
+        let n = DVec3::new(0.3, -0.25, 1.0).normalize();
+        let (u, w) = tangent_basis(n);
+        (n, (u + 0.6 * w).normalize())
+    }
+
+    #[test]
+    fn a_woven_cross_is_explained_by_two_crossed_lobes() {
+        let rig = Rig::new(&uniform_cone_lights(200, 65.0), RigOptions::default()).unwrap();
+        let (n, t) = frame();
+        let woven = Woven::new([0.25, 0.08, 0.08], [0.05; 3], 0.35, 0.08, 0.5);
+        let (single, pair) = fits(&rig, &woven, n, t);
+        assert!(single.residual > 1e-3, "{single:?}");
+        assert!(pair.residual < 1e-4, "{pair:?}");
+        assert!(pair.normal.angle_between(n).to_degrees() < 0.1, "{pair:?}");
+        // The tangent is the stronger (warp) lobe's wide axis.
+        let lobe = pair.as_lobe(|f| f.elongation() > 0.3);
+        assert!(lobe.tangent.dot(t).abs() > 0.999, "{lobe:?}");
+    }
+
+    #[test]
+    fn a_clear_coat_over_brushed_metal_gives_the_base_s_axis() {
+        let rig = Rig::new(&uniform_cone_lights(1000, 65.0), RigOptions::default()).unwrap();
+        let (n, t) = frame();
+        let base = Ggx::new([0.05, 0.1, 0.2], [0.5, 0.45, 0.6], 0.3, 0.1);
+        let car = Layered::new(0.03, 1.5, Box::new(base));
+        let (_, pair) = fits(&rig, &car, n, t);
+        assert!(pair.residual < 2e-3, "{pair:?}");
+        assert!(pair.normal.angle_between(n).to_degrees() < 0.2, "{pair:?}");
+        let lobe = pair.as_lobe(|f| f.elongation() > 0.3);
+        assert!(lobe.tangent.dot(t).abs() > 0.99, "{lobe:?}");
+    }
+}
