@@ -38,8 +38,9 @@ pub enum PixelSource {
     /// peak) and its fallback beyond the reach (centroid), or the max-reflectance and
     /// highlight-centroid baselines.
     Highlight = 3,
-    /// A symmetric lobe fitted to the samples: the estimator's smooth reconstruction of the
-    /// slice, its answer wherever the lobe explains the pixel (docs/method.md, "Lobe fit").
+    /// A symmetric lobe, or two sharing one frame, fitted to the samples: the estimator's
+    /// smooth reconstruction of the slice, its answer wherever it explains the pixel
+    /// (docs/method.md, "Lobe fit", "Two lobes").
     Lobe = 4,
 }
 

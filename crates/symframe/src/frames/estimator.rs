@@ -496,7 +496,7 @@ impl<'a> Estimator<'a> {
         // of the lobe that has one (docs/method.md, "Two lobes").
         let fitted = match fitted {
             Some(f) if f.residual >= LOBE_EXPLAINS => match fit_lobe_pair(&f, lobe) {
-                Some(p) if p.residual < LOBE_EXPLAINS && p.significant_over(&f) => {
+                Some(p) if p.residual < LOBE_EXPLAINS && p.significant() => {
                     let l = p.as_lobe(|l| self.lobe_has_tangent(l));
                     Some(LobeFit {
                         evals: f.evals + p.evals,

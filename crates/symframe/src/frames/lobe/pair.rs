@@ -41,7 +41,10 @@ pub struct LobePair {
     pub shape: f64,
     /// Share of the samples' energy the pair leaves unexplained, in [0, 1].
     pub residual: f64,
-    /// Samples the pair (and the one lobe before it) was fitted to.
+    /// Share of the same samples' energy the one lobe the pair started from leaves
+    /// unexplained.
+    pub single_residual: f64,
+    /// Samples the pair was fitted to.
     pub samples: usize,
     /// Model evaluations used.
     pub evals: u32,
@@ -56,18 +59,18 @@ const EXTRA_PARAMETERS: f64 = 3.0;
 const CHI2_3_999: f64 = 16.27;
 
 impl LobePair {
-    /// Whether the second lobe explains significantly more than `single` (fitted to the same
-    /// samples) can: the F test of the nested fits, with the pair's own residual as the noise
+    /// Whether the second lobe explains significantly more than the one lobe the pair started
+    /// from: the F test of the nested fits, with the pair's own residual as the noise
     /// (no noise model needed: where the pair describes the material its residual is the
     /// noise; where it does not, the test is the stricter for it). The level's quantile for
     /// the residual's degrees of freedom `q` is `chi2 / 3 + 50 / q` (within 2% of F(3, q)'s
     /// 0.1% point for q >= 30).
-    pub fn significant_over(&self, single: &LobeFit) -> bool {
+    pub fn significant(&self) -> bool {
         let dof = self.samples as f64 - 13.0;
         if dof < 8.0 {
             return false;
         }
-        let gain = (single.residual - self.residual).max(0.0) / EXTRA_PARAMETERS;
+        let gain = (self.single_residual - self.residual).max(0.0) / EXTRA_PARAMETERS;
         let noise = self.residual / dof;
         gain > (CHI2_3_999 / EXTRA_PARAMETERS + 50.0 / dof) * noise
     }
@@ -451,8 +454,14 @@ fn normal_equations(m: &Model, lin: &Linear, s: &Subset) -> ([[f64; P]; P], [f64
     (jtj, vtr)
 }
 
-/// Levenberg-Marquardt from `state`: the state, its linear part and the passes used.
-fn levenberg_marquardt(s: &Subset, mut state: State, syy: f64) -> (State, Linear, u32) {
+/// Levenberg-Marquardt from `state` until a step gains less than `relative` of the cost: the
+/// state, its linear part and the passes used.
+fn levenberg_marquardt(
+    s: &Subset,
+    mut state: State,
+    syy: f64,
+    relative: f64,
+) -> (State, Linear, u32) {
     let mut model = Model::of(&state);
     let mut linear = project(&model, s, syy);
     let mut evals = 1;
@@ -501,7 +510,7 @@ fn levenberg_marquardt(s: &Subset, mut state: State, syy: f64) -> (State, Linear
                 let gain = linear.cost - trial_linear.cost;
                 (state, model, linear) = (trial, trial_model, trial_linear);
                 lambda = (lambda / 3.0).max(1e-9);
-                improved = !negligible(gain, linear.cost, syy, RELATIVE_GAIN);
+                improved = !negligible(gain, linear.cost, syy, relative);
                 break;
             }
             lambda *= 4.0;
@@ -519,16 +528,26 @@ const COAT_START_SHARE: f64 = 0.3;
 const BROAD_START: f64 = 0.3;
 
 /// Fits two lobes sharing one frame to the samples the last [`super::fit_lobe`] on `scratch`
-/// read (call it right after, for the same pixel), from the one lobe `single` it fitted: the
+/// searched (call it right after, for the same pixel), from the one lobe `single` it fitted: the
 /// second lobe starts crossed (the first's widths swapped: a woven cross), as a sharp round
 /// coat, and as a broad round lobe; the best fit is kept. `None` where the samples are too few.
 pub fn fit_lobe_pair(single: &LobeFit, scratch: &mut LobeScratch) -> Option<LobePair> {
-    let s = &scratch.fine;
-    if s.len() < 12 {
+    let LobeScratch { fine, coarse, .. } = scratch;
+    // As for one lobe: where the whole subset is at least twice the coarse one (dense rigs),
+    // the starts are searched on the coarse subset to a looser tolerance and the best is
+    // polished on the whole.
+    let polish = fine.len() >= 2 * coarse.len();
+    let (searched, relative): (&Subset, f64) = if polish {
+        (coarse, super::COARSE_RELATIVE_GAIN)
+    } else {
+        (fine, RELATIVE_GAIN)
+    };
+    if fine.len() < 12 || searched.len() < 12 {
         return None;
     }
-    let syy = s.energy();
-    if syy <= 0.0 {
+    let syy = fine.energy();
+    let searched_syy = searched.energy();
+    if syy <= 0.0 || searched_syy <= 0.0 {
         return None;
     }
     let ln_shape = single.shape.clamp(SHAPE_RANGE.0, SHAPE_RANGE.1).ln();
@@ -549,13 +568,24 @@ pub fn fit_lobe_pair(single: &LobeFit, scratch: &mut LobeScratch) -> Option<Lobe
             ln_alpha,
             ln_shape,
         };
-        let (state, linear, e) = levenberg_marquardt(s, start, syy);
+        let (state, linear, e) = levenberg_marquardt(searched, start, searched_syy, relative);
         evals += e;
         if best.is_none_or(|b| linear.cost < b.1.cost) {
             best = Some((state, linear));
         }
+        // As for one lobe, the starts are tried until one explains the samples.
+        if best.is_some_and(|b| b.1.cost <= super::RETRY_RESIDUAL * searched_syy) {
+            break;
+        }
     }
-    let (state, linear) = best?;
+    let (mut state, mut linear) = best?;
+    if polish {
+        let (polished, polished_linear, e) =
+            levenberg_marquardt(fine, state, syy, RELATIVE_GAIN);
+        evals += e;
+        (state, linear) = (polished, polished_linear);
+    }
+    let s: &Subset = fine;
     // Each lobe's share of the modelled energy.
     let model = Model::of(&state);
     let c = linear.coefficients;
@@ -575,6 +605,7 @@ pub fn fit_lobe_pair(single: &LobeFit, scratch: &mut LobeScratch) -> Option<Lobe
         share: [energy[0] / total, energy[1] / total],
         shape: model.shape,
         residual: (linear.cost / syy).clamp(0.0, 1.0),
+        single_residual: single.residual,
         samples: s.len(),
         evals,
     })
