@@ -339,6 +339,8 @@ pub struct LobeScratch {
     /// The lights of `fine` and `coarse`.
     fine_lights: Vec<u32>,
     coarse_lights: Vec<u32>,
+    /// The two-lobe fit's per-sample terms, at the current state and at a trial step.
+    pair: [Vec<pair::Terms>; 2],
 }
 
 /// Per-sample work buffers: the lobe's values, the residuals, and which samples stay.
@@ -715,6 +717,7 @@ pub fn fit_lobe(
         greys,
         fine_lights,
         coarse_lights,
+        ..
     } = scratch;
     // The grey values once (NaN where invalid): the passes below read them several times.
     greys.clear();

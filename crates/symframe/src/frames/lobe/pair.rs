@@ -374,14 +374,29 @@ fn nnls(gram: [[f64; C]; C], p: [f64; C], syy: f64) -> Linear {
     best
 }
 
-/// The linear part at `m` over the samples (one pass).
-fn project(m: &Model, s: &Subset, syy: f64) -> Linear {
+/// A sample's terms at a model: the basis functions, the derivatives of `n.l` and of the
+/// lobes' logarithms (zero for a light behind the surface).
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct Terms {
+    f: [f64; C],
+    d_a: [f64; 2],
+    d: [[f64; 6]; 2],
+}
+
+/// The linear part at `m` over the samples (one pass), the samples' terms into `terms`: the
+/// Gauss-Newton system at the same model reads them (an accepted step's pass is the next
+/// system's).
+fn project(m: &Model, s: &Subset, syy: f64, terms: &mut Vec<Terms>) -> Linear {
     let mut gram = [[0.0; C]; C];
     let mut p = [0.0; C];
+    terms.clear();
     for i in 0..s.len() {
-        let Some((f, _, _)) = m.terms(s, i) else {
-            continue;
+        let t = match m.terms(s, i) {
+            Some((f, d_a, d)) => Terms { f, d_a, d },
+            None => Terms::default(),
         };
+        terms.push(t);
+        let f = t.f;
         let y = s.value(i);
         for a in 0..C {
             p[a] += f[a] * y;
@@ -399,16 +414,22 @@ fn project(m: &Model, s: &Subset, syy: f64) -> Linear {
 }
 
 /// The reduced problem's Gauss-Newton system at `m` with linear part `lin` (Kaufman's
-/// Jacobian, as the one-lobe fit's `normal_equations`): `J^T J` and `v^T r`.
-fn normal_equations(m: &Model, lin: &Linear, s: &Subset) -> ([[f64; P]; P], [f64; P]) {
+/// Jacobian, as the one-lobe fit's `normal_equations`): `J^T J` and `v^T r`, from the samples'
+/// `terms` at `m` (as [`project`] left them).
+fn normal_equations(lin: &Linear, s: &Subset, terms: &[Terms]) -> ([[f64; P]; P], [f64; P]) {
     let c = lin.coefficients;
     let mut vtv = [[0.0; P]; P];
     let mut vtr = [0.0; P];
     let mut ftv = [[0.0; P]; C];
     for i in 0..s.len() {
-        let Some((f, d_a, [da, db])) = m.terms(s, i) else {
+        let Terms {
+            f,
+            d_a,
+            d: [da, db],
+        } = terms[i];
+        if f[0] <= 0.0 {
             continue;
-        };
+        }
         let fr = s.fresnel(i);
         let pa = (c[1] + c[2] * fr) * f[1];
         let pb = (c[3] + c[4] * fr) * f[3];
@@ -461,14 +482,15 @@ fn levenberg_marquardt(
     mut state: State,
     syy: f64,
     relative: f64,
+    buffers: &mut [Vec<Terms>; 2],
 ) -> (State, Linear, u32) {
-    let mut model = Model::of(&state);
-    let mut linear = project(&model, s, syy);
+    let [terms, trial_terms] = buffers;
+    let mut linear = project(&Model::of(&state), s, syy, terms);
     let mut evals = 1;
     let mut lambda = 1e-3;
     let (lo, hi) = (ALPHA_RANGE.0.ln(), ALPHA_RANGE.1.ln());
     for _ in 0..MAX_ITERATIONS {
-        let (mut jtj, mut rhs) = normal_equations(&model, &linear, s);
+        let (mut jtj, mut rhs) = normal_equations(&linear, s, terms);
         evals += 1;
         // A width or the shape at its bound that the descent pushes further out is held this
         // iteration.
@@ -504,11 +526,12 @@ fn levenberg_marquardt(
                 continue;
             }
             let trial_model = Model::of(&trial);
-            let trial_linear = project(&trial_model, s, syy);
+            let trial_linear = project(&trial_model, s, syy, trial_terms);
             evals += 1;
             if trial_linear.cost < linear.cost {
                 let gain = linear.cost - trial_linear.cost;
-                (state, model, linear) = (trial, trial_model, trial_linear);
+                (state, linear) = (trial, trial_linear);
+                std::mem::swap(terms, trial_terms);
                 lambda = (lambda / 3.0).max(1e-9);
                 improved = !negligible(gain, linear.cost, syy, relative);
                 break;
@@ -532,7 +555,9 @@ const BROAD_START: f64 = 0.3;
 /// second lobe starts crossed (the first's widths swapped: a woven cross), as a sharp round
 /// coat, and as a broad round lobe; the best fit is kept. `None` where the samples are too few.
 pub fn fit_lobe_pair(single: &LobeFit, scratch: &mut LobeScratch) -> Option<LobePair> {
-    let LobeScratch { fine, coarse, .. } = scratch;
+    let LobeScratch {
+        fine, coarse, pair, ..
+    } = scratch;
     // As for one lobe: where the whole subset is at least twice the coarse one (dense rigs),
     // the starts are searched on the coarse subset to a looser tolerance and the best is
     // polished on the whole.
@@ -568,7 +593,8 @@ pub fn fit_lobe_pair(single: &LobeFit, scratch: &mut LobeScratch) -> Option<Lobe
             ln_alpha,
             ln_shape,
         };
-        let (state, linear, e) = levenberg_marquardt(searched, start, searched_syy, relative);
+        let (state, linear, e) =
+            levenberg_marquardt(searched, start, searched_syy, relative, pair);
         evals += e;
         if best.is_none_or(|b| linear.cost < b.1.cost) {
             best = Some((state, linear));
@@ -581,7 +607,7 @@ pub fn fit_lobe_pair(single: &LobeFit, scratch: &mut LobeScratch) -> Option<Lobe
     let (mut state, mut linear) = best?;
     if polish {
         let (polished, polished_linear, e) =
-            levenberg_marquardt(fine, state, syy, RELATIVE_GAIN);
+            levenberg_marquardt(fine, state, syy, RELATIVE_GAIN, pair);
         evals += e;
         (state, linear) = (polished, polished_linear);
     }
