@@ -13,7 +13,7 @@ use crate::baselines::{
 };
 use crate::error::{Error, Result};
 use crate::frames::highlight::{highlight_moments_of_greys, HighlightMoments, HIGHLIGHT_LEVEL};
-use crate::frames::lobe::{fit_lobe, fit_lobe_pair, LobeFit, LobeScratch, LobeStart};
+use crate::frames::lobe::{fit_lobe, fit_lobe_pair, LobeFit, LobePair, LobeScratch, LobeStart};
 use crate::frames::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::frames::optim::{nelder_mead, NelderMeadOptions};
 use crate::frames::policy::{
@@ -495,8 +495,8 @@ impl<'a> Estimator<'a> {
         // (a coat over a base, a woven cross): the pair then stands for the lobe, with the axis
         // of the lobe that has one (docs/method.md, "Two lobes").
         let fitted = match fitted {
-            Some(f) if f.residual >= LOBE_EXPLAINS => match fit_lobe_pair(&f, lobe) {
-                Some(p) if p.residual < LOBE_EXPLAINS && p.significant() => {
+            Some(f) if f.residual >= LOBE_EXPLAINS => match fit_lobe_pair(&f, self.rig, lobe) {
+                Some(p) if self.pair_explains(&p) => {
                     let l = p.as_lobe(|l| self.lobe_has_tangent(l));
                     Some(LobeFit {
                         evals: f.evals + p.evals,
@@ -1110,6 +1110,16 @@ impl<'a> Estimator<'a> {
         }
     }
 
+    /// Whether two lobes sharing a frame explain a pixel one lobe does not (docs/method.md,
+    /// "Two lobes"): they leave less than [`LOBE_EXPLAINS`], the second lobe is significant
+    /// (an F test), and what they leave is at the model floor ([`MODEL_FLOOR`]) or looks like
+    /// independent noise ([`NOISE_LIKE_Z`]), not like a material they do not describe.
+    fn pair_explains(&self, p: &LobePair) -> bool {
+        p.residual < LOBE_EXPLAINS
+            && p.significant()
+            && (p.residual < MODEL_FLOOR || p.structure < NOISE_LIKE_Z)
+    }
+
     /// Whether a fitted lobe is elongated enough for a tangent, and wide enough for the rig to
     /// tell: `--min-anisotropy` scales the elongation threshold (its default asks for widths in
     /// a ratio of 2); the rig tells a lobe's shape only where its long axis spans several
@@ -1172,6 +1182,16 @@ impl<'a> Estimator<'a> {
 /// 3-15 degrees off, where the search is within 1 degree. The lobe fit retries its other
 /// starts until one leaves less than this.
 pub(crate) const LOBE_EXPLAINS: f64 = 0.002;
+
+/// What a fit of lobes that describe a noise-free material leaves (share of the energy):
+/// noise-free fits of lobes in the family leave below 1e-4 (docs/method.md, "Lobe fit"). Above
+/// it, two lobes explain a pixel only where their residuals look like independent noise.
+const MODEL_FLOOR: f64 = 1e-4;
+
+/// The z score of the neighbouring lights' residual correlation ([`LobePair::structure`]) up
+/// to which the residuals look like independent noise: the one-sided 0.1% point of the normal
+/// distribution. Higher: more pixels whose residuals keep a smooth misfit are explained.
+const NOISE_LIKE_Z: f64 = 3.09;
 
 /// A pixel whose Lambertian fit leaves less than this share of its energy unexplained (1%
 /// RMS noise leaves 1e-4) is diffuse: no lobe fit is tried.

@@ -341,6 +341,8 @@ pub struct LobeScratch {
     coarse_lights: Vec<u32>,
     /// The two-lobe fit's per-sample terms, at the current state and at a trial step.
     pair: [Vec<pair::Terms>; 2],
+    /// The two-lobe fit's residual at every light.
+    residuals: Vec<f64>,
 }
 
 /// Per-sample work buffers: the lobe's values, the residuals, and which samples stay.

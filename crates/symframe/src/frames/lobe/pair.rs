@@ -14,6 +14,8 @@
 
 use glam::{DQuat, DVec3};
 
+use crate::frames::rig::Rig;
+
 use super::kernel::Subset;
 use super::{
     negligible, solve_spd, LobeFit, LobeScratch, ALPHA_RANGE, MAX_ITERATIONS, RELATIVE_GAIN,
@@ -46,6 +48,13 @@ pub struct LobePair {
     pub single_residual: f64,
     /// Samples the pair was fitted to.
     pub samples: usize,
+    /// How much what the pair leaves over every valid light looks like structure rather than
+    /// independent noise: the z score `sum r_i r_j / sqrt(sum r_i^2 r_j^2)` of the residuals
+    /// of neighbouring lights (the triangulation's edges). About standard normal where the
+    /// residuals are independent noise (shot and read noise, quantisation, each light's own
+    /// calibration error); large where a smooth misfit is left (a material the pair does not
+    /// describe, a cast shadow).
+    pub structure: f64,
     /// Model evaluations used.
     pub evals: u32,
 }
@@ -255,11 +264,7 @@ impl Model {
         let f = s.fresnel(i);
         let (la, da) = lobe(&g, &self.lobes[0], self.shape);
         let (lb, db) = lobe(&g, &self.lobes[1], self.shape);
-        Some((
-            [nl, la, la * f, lb, lb * f],
-            [-g.lb, g.lt],
-            [da, db],
-        ))
+        Some(([nl, la, la * f, lb, lb * f], [-g.lb, g.lt], [da, db]))
     }
 }
 
@@ -551,12 +556,18 @@ const COAT_START_SHARE: f64 = 0.3;
 const BROAD_START: f64 = 0.3;
 
 /// Fits two lobes sharing one frame to the samples the last [`super::fit_lobe`] on `scratch`
-/// searched (call it right after, for the same pixel), from the one lobe `single` it fitted: the
+/// searched (call it right after, for the same pixel and `rig`), from the one lobe `single` it fitted: the
 /// second lobe starts crossed (the first's widths swapped: a woven cross), as a sharp round
 /// coat, and as a broad round lobe; the best fit is kept. `None` where the samples are too few.
-pub fn fit_lobe_pair(single: &LobeFit, scratch: &mut LobeScratch) -> Option<LobePair> {
+pub fn fit_lobe_pair(single: &LobeFit, rig: &Rig, scratch: &mut LobeScratch) -> Option<LobePair> {
+    let (lights, halfways) = (rig.lights_in_camera(), rig.halfway_in_camera());
     let LobeScratch {
-        fine, coarse, pair, ..
+        fine,
+        coarse,
+        pair,
+        greys,
+        residuals,
+        ..
     } = scratch;
     // As for one lobe: where the whole subset is at least twice the coarse one (dense rigs),
     // the starts are searched on the coarse subset to a looser tolerance and the best is
@@ -593,8 +604,7 @@ pub fn fit_lobe_pair(single: &LobeFit, scratch: &mut LobeScratch) -> Option<Lobe
             ln_alpha,
             ln_shape,
         };
-        let (state, linear, e) =
-            levenberg_marquardt(searched, start, searched_syy, relative, pair);
+        let (state, linear, e) = levenberg_marquardt(searched, start, searched_syy, relative, pair);
         evals += e;
         if best.is_none_or(|b| linear.cost < b.1.cost) {
             best = Some((state, linear));
@@ -623,6 +633,15 @@ pub fn fit_lobe_pair(single: &LobeFit, scratch: &mut LobeScratch) -> Option<Lobe
         }
     }
     let total = (energy[0] + energy[1]).max(f64::MIN_POSITIVE);
+    let structure = residual_structure(
+        &model,
+        c,
+        lights,
+        halfways,
+        greys,
+        rig.halfway_edges(),
+        residuals,
+    );
     let alpha = |k: usize| [state.ln_alpha[k].exp(), state.ln_alpha[k + 1].exp()];
     Some(LobePair {
         normal: state.normal,
@@ -633,8 +652,64 @@ pub fn fit_lobe_pair(single: &LobeFit, scratch: &mut LobeScratch) -> Option<Lobe
         residual: (linear.cost / syy).clamp(0.0, 1.0),
         single_residual: single.residual,
         samples: s.len(),
+        structure,
         evals,
     })
+}
+
+/// The z score of the correlation of neighbouring lights' residuals under `model` with
+/// coefficients `c` (see [`LobePair::structure`]): every light with a valid grey value (NaN:
+/// invalid or censored) in front of the surface, every edge between two such lights. Edges'
+/// products of independent zero-mean residuals are uncorrelated (two edges share at most one
+/// light), so their sum over the root of their summed squares is about standard normal, whatever
+/// each light's noise level.
+fn residual_structure(
+    model: &Model,
+    c: [f64; C],
+    lights: &[DVec3],
+    halfways: &[DVec3],
+    greys: &[f64],
+    edges: &[[u32; 2]],
+    residuals: &mut Vec<f64>,
+) -> f64 {
+    residuals.clear();
+    residuals.extend(
+        lights
+            .iter()
+            .zip(halfways)
+            .zip(greys)
+            .map(|((&l, &h), &y)| {
+                let nl = model.normal.dot(l);
+                if !y.is_finite() || nl <= 0.0 {
+                    return f64::NAN;
+                }
+                let g = Geometry {
+                    nl,
+                    hn: model.normal.dot(h),
+                    ht: model.t.dot(h),
+                    hb: model.b.dot(h),
+                    lt: model.t.dot(l),
+                    lb: model.b.dot(l),
+                };
+                let fr = super::kernel::schlick(h);
+                let la = lobe(&g, &model.lobes[0], model.shape).0;
+                let lb = lobe(&g, &model.lobes[1], model.shape).0;
+                y - (c[0] * nl + (c[1] + c[2] * fr) * la + (c[3] + c[4] * fr) * lb)
+            }),
+    );
+    let (mut sum, mut squares) = (0.0, 0.0);
+    for &[i, j] in edges {
+        let (a, b) = (residuals[i as usize], residuals[j as usize]);
+        if a.is_finite() && b.is_finite() {
+            sum += a * b;
+            squares += (a * b) * (a * b);
+        }
+    }
+    if squares > 0.0 {
+        sum / squares.sqrt()
+    } else {
+        0.0
+    }
 }
 
 #[cfg(test)]
@@ -682,7 +757,7 @@ mod tests {
             &mut scratch,
         )
         .unwrap();
-        let pair = fit_lobe_pair(&single, &mut scratch).unwrap();
+        let pair = fit_lobe_pair(&single, rig, &mut scratch).unwrap();
         (single, pair)
     }
 

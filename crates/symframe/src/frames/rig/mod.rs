@@ -63,6 +63,22 @@ pub struct Rig {
     query_halfways: [Vec<f32>; 3],
     /// Median angle between neighbouring halfway vectors (radians).
     halfway_spacing: f64,
+    /// The triangulation's edges (rig light indices, each once).
+    halfway_edges: Vec<[u32; 2]>,
+}
+
+/// The triangulation's edges, each once (smaller index first).
+fn edges_of(triangles: &[Triangle]) -> Vec<[u32; 2]> {
+    let mut edges: Vec<[u32; 2]> = triangles
+        .iter()
+        .flat_map(|t| {
+            let [a, b, c] = t.vertices;
+            [[a, b], [b, c], [c, a]].map(|[x, y]| [x.min(y), x.max(y)])
+        })
+        .collect();
+    edges.sort_unstable();
+    edges.dedup();
+    edges
 }
 
 /// The median angle of the triangulation's edges between halfway vectors (radians).
@@ -157,6 +173,7 @@ impl Rig {
                 .collect()
         });
         let halfway_spacing = median_edge(&triangles, &halfway_in_camera);
+        let halfway_edges = edges_of(&triangles);
         Ok(Self {
             lights_in_camera,
             halfway_in_camera,
@@ -171,7 +188,14 @@ impl Rig {
             query_order,
             query_halfways,
             halfway_spacing,
+            halfway_edges,
         })
+    }
+
+    /// The edges of the triangulation of the halfway vectors (rig light indices, each edge
+    /// once): which lights are neighbours.
+    pub fn halfway_edges(&self) -> &[[u32; 2]] {
+        &self.halfway_edges
     }
 
     /// The median angle between neighbouring halfway vectors (radians, along the edges of the
