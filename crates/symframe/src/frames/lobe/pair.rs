@@ -12,6 +12,9 @@
 //! `ln a`, `ln k`) by Levenberg-Marquardt with Kaufman's Jacobian, over the samples the one-lobe fit
 //! read. Scalar code: it runs only at pixels one lobe does not explain.
 
+// Index loops: the small dense solves and sums read clearer as the textbook's indices.
+#![allow(clippy::needless_range_loop)]
+
 use glam::{DQuat, DVec3};
 
 use crate::frames::rig::Rig;
@@ -295,7 +298,7 @@ fn solve_members(g: &[[f64; C]; C], p: &[f64; C], members: &[usize]) -> Option<[
         for k in 0..j {
             d -= a[j][k] * a[j][k];
         }
-        if !(d > 1e-12 * g[members[j]][members[j]]) {
+        if d.is_nan() || d <= 1e-12 * g[members[j]][members[j]] {
             return None;
         }
         let d = d.sqrt();
@@ -729,12 +732,11 @@ mod tests {
             .iter()
             .flat_map(|&l| {
                 let nl = l.dot(n);
-                let v = if nl > 0.0 {
+                if nl > 0.0 {
                     brdf.eval(to_local(l), view).map(|c| (c * nl) as f32)
                 } else {
                     [0.0; 3]
-                };
-                v
+                }
             })
             .collect()
     }
