@@ -495,16 +495,20 @@ impl<'a> Estimator<'a> {
         // (a coat over a base, a woven cross): the pair then stands for the lobe, with the axis
         // of the lobe that has one (docs/method.md, "Two lobes").
         let fitted = match fitted {
-            Some(f) if f.residual >= LOBE_EXPLAINS => match fit_lobe_pair(&f, self.rig, lobe) {
-                Some(p) if self.pair_explains(&p) => {
-                    let l = p.as_lobe(|l| self.lobe_has_tangent(l));
-                    Some(LobeFit {
-                        evals: f.evals + p.evals,
-                        ..l
-                    })
+            // A pixel the Lambertian fit explains but for a spike the rig undersamples is left
+            // to it, as with one lobe.
+            Some(f) if f.residual >= LOBE_EXPLAINS && self.spiked_diffuse(&fit, None).is_none() => {
+                match fit_lobe_pair(&f, self.rig, lobe) {
+                    Some(p) if self.pair_explains(&p, f.trimmed > 0) => {
+                        let l = p.as_lobe(|l| self.lobe_has_tangent(l));
+                        Some(LobeFit {
+                            evals: f.evals + p.evals,
+                            ..l
+                        })
+                    }
+                    _ => Some(f),
                 }
-                _ => Some(f),
-            },
+            }
             other => other,
         };
         // Under a sharp coat one lobe cannot explain coat and base together: the base, fitted
@@ -1112,12 +1116,14 @@ impl<'a> Estimator<'a> {
 
     /// Whether two lobes sharing a frame explain a pixel one lobe does not (docs/method.md,
     /// "Two lobes"): they leave less than [`LOBE_EXPLAINS`], the second lobe is significant
-    /// (an F test), and what they leave is at the model floor ([`MODEL_FLOOR`]) or looks like
-    /// independent noise ([`NOISE_LIKE_Z`]), not like a material they do not describe.
-    fn pair_explains(&self, p: &LobePair) -> bool {
+    /// (an F test), and what they leave at every light (cast shadows included) is at the model
+    /// floor ([`MODEL_FLOOR`]) or looks like independent noise ([`NOISE_LIKE_Z`]), not like a
+    /// material they do not describe; where the lobe fit left cast shadows out (`shadowed`),
+    /// only the floor counts (the shadow's edge, not the material, would be what is left).
+    fn pair_explains(&self, p: &LobePair, shadowed: bool) -> bool {
         p.residual < LOBE_EXPLAINS
             && p.significant()
-            && (p.residual < MODEL_FLOOR || p.structure < NOISE_LIKE_Z)
+            && (p.residual_everywhere < MODEL_FLOOR || (p.structure < NOISE_LIKE_Z && !shadowed))
     }
 
     /// Whether a fitted lobe is elongated enough for a tangent, and wide enough for the rig to

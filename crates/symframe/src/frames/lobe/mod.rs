@@ -75,6 +75,8 @@ pub struct LobeFit {
     pub fresnel: f64,
     /// Share of the samples' energy the model leaves unexplained, in [0, 1].
     pub residual: f64,
+    /// Samples left out as cast shadows.
+    pub trimmed: usize,
     /// Model evaluations used.
     pub evals: u32,
 }
@@ -856,6 +858,7 @@ pub fn fit_lobe(
         specular,
         fresnel,
         residual: (cost / syy).clamp(0.0, 1.0),
+        trimmed: fine_lights.len() - fine.len(),
         evals,
     })
 }

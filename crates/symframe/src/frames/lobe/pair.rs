@@ -58,6 +58,10 @@ pub struct LobePair {
     /// calibration error); large where a smooth misfit is left (a material the pair does not
     /// describe, a cast shadow).
     pub structure: f64,
+    /// Share of the energy of every valid light in front of the surface the pair leaves
+    /// unexplained: unlike [`LobePair::residual`] (over the fitted samples, cast shadows
+    /// trimmed) it counts the samples the fit left out.
+    pub residual_everywhere: f64,
     /// Model evaluations used.
     pub evals: u32,
 }
@@ -109,6 +113,7 @@ impl LobePair {
                 specular: 0.0,
                 fresnel: 0.0,
                 residual: self.residual,
+                trimmed: 0,
                 evals: self.evals,
             }
         };
@@ -636,7 +641,7 @@ pub fn fit_lobe_pair(single: &LobeFit, rig: &Rig, scratch: &mut LobeScratch) -> 
         }
     }
     let total = (energy[0] + energy[1]).max(f64::MIN_POSITIVE);
-    let structure = residual_structure(
+    let (structure, residual_everywhere) = residual_structure(
         &model,
         c,
         lights,
@@ -656,12 +661,14 @@ pub fn fit_lobe_pair(single: &LobeFit, rig: &Rig, scratch: &mut LobeScratch) -> 
         single_residual: single.residual,
         samples: s.len(),
         structure,
+        residual_everywhere,
         evals,
     })
 }
 
 /// The z score of the correlation of neighbouring lights' residuals under `model` with
-/// coefficients `c` (see [`LobePair::structure`]): every light with a valid grey value (NaN:
+/// coefficients `c` (see [`LobePair::structure`]) and the share of their energy the residuals
+/// hold ([`LobePair::residual_everywhere`]): every light with a valid grey value (NaN:
 /// invalid or censored) in front of the surface, every edge between two such lights. Edges'
 /// products of independent zero-mean residuals are uncorrelated (two edges share at most one
 /// light), so their sum over the root of their summed squares is about standard normal, whatever
@@ -674,7 +681,7 @@ fn residual_structure(
     greys: &[f64],
     edges: &[[u32; 2]],
     residuals: &mut Vec<f64>,
-) -> f64 {
+) -> (f64, f64) {
     residuals.clear();
     residuals.extend(
         lights
@@ -708,11 +715,19 @@ fn residual_structure(
             squares += (a * b) * (a * b);
         }
     }
-    if squares > 0.0 {
+    let (mut left, mut energy) = (0.0, 0.0);
+    for (r, y) in residuals.iter().zip(greys) {
+        if r.is_finite() {
+            left += r * r;
+            energy += y * y;
+        }
+    }
+    let z = if squares > 0.0 {
         sum / squares.sqrt()
     } else {
         0.0
-    }
+    };
+    (z, if energy > 0.0 { left / energy } else { 0.0 })
 }
 
 #[cfg(test)]
