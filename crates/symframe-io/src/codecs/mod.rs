@@ -45,6 +45,7 @@ use crate::error::{Error, Result};
 mod colour;
 mod convert;
 mod exr;
+mod hdr;
 mod image_rs;
 mod pfm;
 mod png;
@@ -223,6 +224,15 @@ pub fn read_image(path: &Path, opts: &DecodeOptions) -> Result<Image> {
 /// The bytes of the image file `path`, bounded ([`crate::read_bounded`]).
 pub(crate) fn read_image_file(path: &Path) -> Result<Vec<u8>> {
     crate::read_bounded(path, "an image file", crate::limits::MAX_IMAGE_FILE_BYTES)
+}
+
+/// The image file `path` opened to be read in parts, checked as [`read_image_file`] checks it
+/// (a regular file of at most the image cap); returns it and its length.
+pub(crate) fn open_image_file(path: &Path) -> Result<(std::fs::File, u64)> {
+    let f =
+        crate::bounded::open_checked(path, "an image file", crate::limits::MAX_IMAGE_FILE_BYTES)?;
+    let len = f.metadata().map_err(|e| Error::read(path, e))?.len();
+    Ok((f, len))
 }
 
 /// Decodes `bytes`, the content of the image file `path` (its extension picks the format; the
