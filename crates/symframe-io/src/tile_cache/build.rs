@@ -73,6 +73,31 @@ pub(super) fn image_cost(img: &StackImage, copts: &CacheOptions) -> usize {
     img.resident_bytes(rows) + w * rows * 12 + rayon::current_num_threads() * tile_pixels * assemble
 }
 
+/// How many images a decoding batch may hold open at once: most images (PFM, EXR, TIFF, HDR)
+/// are read from their open file a band at a time, so a batch is at most the process's limit
+/// on open files (`RLIMIT_NOFILE`, the soft one) less 128 for everything else, at least 16 (a
+/// batch of 1,512 EXR images failed with "Too many open files" under the common limit of
+/// 1,024).
+fn open_file_budget() -> usize {
+    #[cfg(unix)]
+    {
+        let mut lim = libc::rlimit {
+            rlim_cur: 0,
+            rlim_max: 0,
+        };
+        // SAFETY: getrlimit writes into the struct we own.
+        if unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) } == 0
+            && lim.rlim_cur != libc::RLIM_INFINITY
+        {
+            return usize::try_from(lim.rlim_cur)
+                .unwrap_or(usize::MAX)
+                .saturating_sub(128)
+                .max(16);
+        }
+    }
+    usize::MAX
+}
+
 /// Refuses a tile size whose band of rows (one row of tiles of one image, decoded) is larger
 /// than the decoding memory, `--tile-size` at least as large as the image making the band the
 /// whole image; the default tile size is always accepted (one band of it is at most 25 MB).
@@ -141,7 +166,9 @@ pub(super) fn build(
             }
             size_ok(w, h)?;
             check_band(&ds.images[0], w, h, &copts)?;
-            let light_block = (copts.batch_bytes / image_cost(&img, &copts)).clamp(1, n);
+            let light_block = (copts.batch_bytes / image_cost(&img, &copts))
+                .min(open_file_budget())
+                .clamp(1, n);
             first = Some(img);
             let header = Header {
                 width: w,
