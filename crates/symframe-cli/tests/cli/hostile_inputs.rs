@@ -714,3 +714,48 @@ fn large_declared_float_images_are_read_a_band_at_a_time() {
     let len = fs::metadata(&cache[0]).unwrap().len();
     assert!(len > 8000 * 8000 * 3 * 6, "{len}");
 }
+/// Read a band at a time, every image of a decoding batch holds its file open: a batch of 300
+/// EXR images failed with "Too many open files" under a limit of 200 open files (the common
+/// default is 1,024, and a batch of 1,512 fits in the default `--decode-memory`). A batch holds
+/// at most the limit less a margin.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_decoding_batch_holds_no_more_files_open_than_the_process_may() {
+    use std::os::unix::process::CommandExt;
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = lambert(&tmp.path().join("data"), 8, 300);
+    let out = tmp.path().join("out");
+    let mut cmd = std::process::Command::new(crate::common::bin());
+    cmd.args([
+        "estimate",
+        s(&lp),
+        "-o",
+        s(&out),
+        "--method",
+        "woodham",
+        "--quiet",
+    ]);
+    // SAFETY: the closure runs in the forked child before exec and only calls setrlimit,
+    // which is async-signal-safe.
+    unsafe {
+        cmd.pre_exec(|| {
+            let lim = libc::rlimit {
+                rlim_cur: 200,
+                rlim_max: 200,
+            };
+            if libc::setrlimit(libc::RLIMIT_NOFILE, &lim) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    let o = cmd.output().unwrap();
+    ok(&o);
+    let r = report(&out);
+    assert_eq!(
+        r["cache"]["batch_images"].as_u64(),
+        Some(72),
+        "{}",
+        r["cache"]
+    );
+}
