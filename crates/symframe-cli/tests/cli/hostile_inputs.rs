@@ -714,6 +714,7 @@ fn large_declared_float_images_are_read_a_band_at_a_time() {
     let len = fs::metadata(&cache[0]).unwrap().len();
     assert!(len > 8000 * 8000 * 3 * 6, "{len}");
 }
+
 /// Read a band at a time, every image of a decoding batch holds its file open: a batch of 300
 /// EXR images failed with "Too many open files" under a limit of 200 open files (the common
 /// default is 1,024, and a batch of 1,512 fits in the default `--decode-memory`). A batch holds
