@@ -29,13 +29,14 @@
 //! than what the PNG decoder expands to 8 bits, signed-integer or 32/64-bit integer TIFF,
 //! CMYK or other colour spaces, more than 4 channels. A file is read into memory whole, then
 //! decoded; a decoder that panics on a hostile file is caught and reported as a decode error.
-//! A stack's images are read a band of rows at a time instead (`rows`: PNG row by row, PFM a
-//! band from its file, other formats decoded whole in their own sample type), converted by the
-//! same code (`convert`), to the same samples.
+//! A stack's images are read a band of rows at a time instead (`rows`: PNG row by row; PFM, EXR,
+//! TIFF and HDR from their files a row of their own blocks at a time; JPEG decoded whole in its
+//! 8-bit samples), converted by the same code (`convert`), to the same samples.
 //!
-//! One module per codec: `exr`, `tiff`, `pfm`, `png` (writing), and `image_rs` (PNG, JPEG and
-//! Radiance HDR decoding through the `image` crate); this one holds the common types, the
-//! dispatch by extension and the conversion to linear samples.
+//! One module per codec: `exr`, `tiff`, `pfm`, `png` (writing), `hdr` (Radiance scan lines read
+//! one at a time), and `image_rs` (PNG, JPEG and Radiance HDR decoding through the `image`
+//! crate); this one holds the common types, the dispatch by extension and the conversion to
+//! linear samples.
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;

@@ -56,8 +56,8 @@ pub(super) fn create_sized(path: &Path, len: u64) -> Result<File> {
 }
 
 /// What one image of a decoding batch holds in memory while the cache is built: its reader
-/// (a PNG's file and decoder, a PFM's band of stored bytes, or the samples of a format decoded
-/// whole, in the file's type), its band of decoded rows (`width x tile` RGB `f32`), and its
+/// (a PNG's file and decoder, a PFM's band of stored bytes, a row of an EXR's or TIFF's blocks,
+/// an HDR scan line, or a JPEG's samples decoded whole, in the file's type), its band of decoded rows (`width x tile` RGB `f32`), and its
 /// share of the per-thread buffers that assemble a tile's block. `--decode-memory` divided by
 /// it is the batch, so a small file declaring a large image costs its band, not its image.
 pub(super) fn image_cost(img: &StackImage, copts: &CacheOptions) -> usize {

@@ -41,8 +41,9 @@
 //! with a warning in [`CacheInfo::warnings`].
 //!
 //! Memory: a batch of images is read in lockstep, one band of tile rows at a time (each image its
-//! band, in parallel: a PNG decoded row by row from its file's bytes, a PFM read a band at a time
-//! from its file, other formats decoded whole but kept in their file's sample type), and each
+//! band, in parallel: a PNG decoded row by row from its file's bytes; a PFM, EXR, TIFF or HDR read
+//! from its file a row of its own blocks at a time; a JPEG decoded whole but kept in its 8-bit
+//! samples), and each
 //! band's tiles are written into the file with positioned writes from a small per-thread buffer
 //! (the file is not mapped while it is built). A batch holds `batch_bytes` over what one image
 //! costs (its reader, its band of `width x tile` decoded pixels, its share of the per-thread
