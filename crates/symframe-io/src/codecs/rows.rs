@@ -517,7 +517,7 @@ mod tests {
                 2 => -0.25,
                 k => (rng.next() % 100_000) as f32 / 1e4 + k as f32,
             };
-            let run = if rng.next() % 5 == 0 {
+            let run = if rng.next().is_multiple_of(5) {
                 1 + rng.next() % 9
             } else {
                 1
