@@ -43,6 +43,7 @@ pub use atomic::{open_no_follow, write_bytes};
 pub use bounded::{
     check_regular_file, open_bounded, open_own_file, read_at_most, read_bounded, read_text_bounded,
 };
+pub use codecs::read_image_grey;
 pub use codecs::{
     declared_size, decode_image, linear_to_srgb, read_image, read_pfm, srgb_to_linear,
     write_exr_channels, write_exr_rgb, write_pfm, write_png16_rgb, write_png8_rgb, ColourTag,
@@ -57,7 +58,8 @@ pub use output::{
     write_npy_f32, write_npy_u8, write_png_rgb8, NormalPng, NpyRows, SOURCE_PALETTE,
 };
 pub use stack::{
-    capture_noise, load_stack, load_stack_with_warnings, read_mask, read_mask_any_size,
+    capture_noise, load_stack, load_stack_with_warnings, read_image_size, read_mask,
+    read_mask_any_size,
 };
 pub use synth_out::{check_synth_target, write_lp_dataset, ImageFormat, OUTPUT_LOCK_FILE};
 pub use tile_cache::{

@@ -760,3 +760,33 @@ fn a_decoding_batch_holds_no_more_files_open_than_the_process_may() {
         r["cache"]
     );
 }
+
+/// A mask was decoded whole before its size was compared with the images': a 415 KB EXR
+/// declaring 8000 x 8000 float pixels as the mask of 16 x 16 images took 800 MB. The sizes
+/// their headers declare are compared first.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_mask_of_another_size_is_refused_before_it_is_decoded() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = lambert(&tmp.path().join("data"), 16, 12);
+    let mask = tmp.path().join("mask.exr");
+    crate::forged::exr_zeros(&mask, 8000, 8000);
+    let out = tmp.path().join("out");
+    let (o, peak_kib) = crate::common::run_measuring_rss(&[
+        "estimate",
+        s(&lp),
+        "-o",
+        s(&out),
+        "--mask",
+        s(&mask),
+        "--method",
+        "woodham",
+    ]);
+    assert_one_line_error(&o, "mask.exr");
+    assert!(
+        stderr(&o).contains("mask is 8000x8000 but the images are 16x16"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(peak_kib < 100 << 10, "peak {peak_kib} KiB");
+}

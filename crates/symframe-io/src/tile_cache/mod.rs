@@ -337,9 +337,18 @@ impl TileCache {
         if copts.tile == 0 {
             return Err(Error::invalid(dir, "tile size must be positive"));
         }
-        // The mask is one image: a bad one fails here, not after decoding the stack.
+        // The mask is one image: a bad one fails here, not after decoding the stack. Its size
+        // and the first image's are compared from their headers first, so a mask of another
+        // size is never decoded (one declaring 8000 x 8000 float pixels cost 800 MB).
         let mask = match &ds.mask {
             Some(p) => {
+                let header = |q: &Path, o: &DecodeOptions| crate::stack::read_image_size(q, o);
+                if let (Ok(m), Ok(i)) = (
+                    header(p, &DecodeOptions::default()),
+                    header(&ds.images[0], opts),
+                ) {
+                    check_mask_size(p, m, i)?;
+                }
                 let (w, h, _) = read_mask_any_size(p)?;
                 Some((p.as_path(), (w, h)))
             }
