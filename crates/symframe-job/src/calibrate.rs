@@ -234,42 +234,58 @@ fn image_list(input: &Path) -> Result<Vec<PathBuf>> {
     Ok(v)
 }
 
-/// The image's grey values (mean of the channels; `NaN` where any is saturated).
-fn grey(img: &Image) -> Vec<f32> {
-    img.data
-        .chunks_exact(img.channels)
-        .map(|p| p.iter().sum::<f32>() / p.len() as f32)
-        .collect()
-}
+/// The most pixels an image given to calibrate may have (8192 x 8192): it holds the brightest
+/// of all images and one image's grey values (4 bytes a pixel each) and the rows of the matte
+/// sphere in RGB, so a file of a few KB declaring a larger image is refused from its header.
+pub const MAX_CALIBRATE_PIXELS: usize = 1 << 26;
 
-/// Decodes one image as grey values, checking its size against the first one's.
-fn read_grey(path: &Path, opts: &DecodeOptions, size: Option<(usize, usize)>) -> Result<Image> {
-    let img = read_sized(path, opts, size)?;
-    let g = grey(&img);
-    Ok(Image {
-        width: img.width,
-        height: img.height,
-        channels: 1,
-        data: g,
-        kind: img.kind,
-        colour: img.colour,
-    })
-}
+/// The memory for the images decoded at once (grey values and the matte sphere's rows): as
+/// many in parallel as fit, at least one.
+const DECODE_MEMORY: usize = 256 << 20;
 
-/// Decodes one image, checking its size against the first one's.
-fn read_sized(path: &Path, opts: &DecodeOptions, size: Option<(usize, usize)>) -> Result<Image> {
-    let img = symframe_io::read_image(path, opts)?;
-    if let Some((w, h)) = size {
-        if (img.width, img.height) != (w, h) {
-            bail!(
-                "{}: {}x{} pixels, but the first image is {w}x{h}",
-                path.display(),
-                img.width,
-                img.height
-            );
-        }
+/// Checks the size image `path` declares (read from its header, undecoded) against the first
+/// image's.
+fn check_declared(path: &Path, opts: &DecodeOptions, (w, h): (usize, usize)) -> Result<()> {
+    let (iw, ih) = symframe_io::read_image_size(path, opts)?;
+    if (iw, ih) != (w, h) {
+        bail!(
+            "{}: {iw}x{ih} pixels, but the first image is {w}x{h}",
+            path.display()
+        );
     }
-    Ok(img)
+    Ok(())
+}
+
+/// Decodes one image as grey values (the mean of its channels; `NaN` where any is
+/// saturated), a band of rows at a time, its declared size checked against the first image's
+/// before anything is decoded; with the RGB samples of its rows `rgb_rows`.
+fn read_grey(
+    path: &Path,
+    opts: &DecodeOptions,
+    size: (usize, usize),
+    rgb_rows: std::ops::Range<usize>,
+) -> Result<(Image, Vec<f32>)> {
+    check_declared(path, opts, size)?;
+    let (img, rgb) = symframe_io::read_image_grey(path, opts, rgb_rows)?;
+    if (img.width, img.height) != size {
+        bail!(
+            "{}: {}x{} pixels, but the first image is {}x{}",
+            path.display(),
+            img.width,
+            img.height,
+            size.0,
+            size.1
+        );
+    }
+    Ok((img, rgb))
+}
+
+/// The rows a circle's pixels lie in, clipped to an image of `height` rows (as
+/// [`matte_intensity`] bounds its pixels).
+fn circle_rows(c: &Circle, height: usize) -> std::ops::Range<usize> {
+    let y0 = (c.cy - c.r).floor().max(0.0) as usize;
+    let y1 = ((c.cy + c.r).ceil().max(0.0) as usize).min(height);
+    y0.min(y1)..y1
 }
 
 /// `path` relative to folder `base` when it lies below it (else absolute).
@@ -439,9 +455,19 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
     refuse_inputs_as_outputs(config, &images)?;
     let opts = config.decode.clone();
     let stopped = || ctl.stop.load(std::sync::atomic::Ordering::SeqCst);
-    let first = read_grey(&images[0], &opts, None)?;
-    let (w, h) = (first.width, first.height);
-    drop(first);
+    // The size from the first image's header: nothing is decoded before it is checked (a few
+    // KB declaring 8000 x 8000 pixels were decoded whole, two images at a time: 2.2 GB).
+    let (w, h) = symframe_io::read_image_size(&images[0], &opts)?;
+    if w == 0 || h == 0 {
+        bail!("{}: the image is empty", images[0].display());
+    }
+    if w.saturating_mul(h) > MAX_CALIBRATE_PIXELS {
+        bail!(
+            "{}: {w}x{h} pixels, more than the {MAX_CALIBRATE_PIXELS} (8192 x 8192) calibrate \
+             reads; crop the images to the spheres",
+            images[0].display()
+        );
+    }
     // Given circles, checked before anything is computed with them (a radius far beyond the
     // image made the highlight search run without end).
     for (sphere, circle) in [("mirror", config.sphere), ("matte", config.matte_sphere)] {
@@ -455,38 +481,46 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
         }
     }
 
+    // Images are decoded as many at a time as fit in DECODE_MEMORY: their grey values and, with
+    // a matte sphere, its rows in RGB.
+    let matte_rows = config.matte_sphere.map_or(0..0, |c| circle_rows(&c, h));
+    let per_image = 4 * w * h + 12 * w * matte_rows.len();
+    let at_once = (DECODE_MEMORY / per_image.max(1)).max(1);
+
     // The sphere: given, or found in the mean image.
     let (circle, source, detection) = match config.sphere {
         Some(c) => (c, "given", None),
         None => {
-            let (sum, brightest) = images
-                .par_iter()
-                .map(|p| -> Result<(Vec<f32>, Vec<usize>)> {
-                    if stopped() {
-                        return Err(Interrupted.into());
-                    }
-                    let g = read_grey(p, &opts, Some((w, h)))?.data;
-                    let best = g
-                        .iter()
-                        .enumerate()
-                        .max_by(|a, b| {
-                            let key = |v: f32| if v.is_finite() { v } else { f32::INFINITY };
-                            key(*a.1).total_cmp(&key(*b.1))
-                        })
-                        .map(|(i, _)| i)
-                        .unwrap_or(0);
-                    Ok((g, vec![best]))
-                })
-                .try_reduce(
-                    || (vec![0.0f32; w * h], Vec::new()),
-                    |(mut a, mut ba), (b, bb)| {
-                        a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
-                        ba.extend(bb);
-                        Ok((a, ba))
-                    },
-                )?;
+            let mut sum = vec![0.0f32; w * h];
+            let mut brightest = Vec::with_capacity(images.len());
+            for batch in images.chunks(at_once) {
+                let greys = batch
+                    .par_iter()
+                    .map(|p| -> Result<(Vec<f32>, usize)> {
+                        if stopped() {
+                            return Err(Interrupted.into());
+                        }
+                        let g = read_grey(p, &opts, (w, h), 0..0)?.0.data;
+                        let best = g
+                            .iter()
+                            .enumerate()
+                            .max_by(|a, b| {
+                                let key = |v: f32| if v.is_finite() { v } else { f32::INFINITY };
+                                key(*a.1).total_cmp(&key(*b.1))
+                            })
+                            .map(|(i, _)| i)
+                            .unwrap_or(0);
+                        Ok((g, best))
+                    })
+                    .collect::<Result<Vec<_>>>()?;
+                for (g, best) in greys {
+                    sum.iter_mut().zip(&g).for_each(|(x, y)| *x += y);
+                    brightest.push(best);
+                }
+            }
             let n = images.len() as f32;
-            let mean: Vec<f32> = sum.iter().map(|v| v / n).collect();
+            let mut mean = sum;
+            mean.iter_mut().for_each(|v| *v /= n);
             let d = detect_sphere(w, h, &mean, &brightest).map_err(|e| SphereNotFound {
                 images: config.images.clone(),
                 reason: e.to_string(),
@@ -511,37 +545,46 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
         Result<Highlight, HighlightError>,
         Option<Result<[f64; 3], MatteError>>,
     );
-    let results: Vec<Outcome> = images
-        .par_iter()
-        .map(|p| -> Result<_> {
-            if stopped() {
-                return Err(Interrupted.into());
-            }
-            let img = read_sized(p, &opts, Some((w, h)))?;
-            let g = grey(&img);
-            let res = find_highlight(w, h, &g, &circle, &params);
-            let matte = match (&res, &config.matte_sphere) {
-                (Ok(hl), Some(c)) => Some(matte_intensity(
-                    w,
-                    h,
-                    &img.into_rgb(),
-                    c,
-                    hl.light,
-                    &MatteParams::default(),
-                )),
-                _ => None,
-            };
-            let mut m = max_image.lock().unwrap_or_else(|e| e.into_inner());
-            for (m, v) in m.iter_mut().zip(&g) {
-                if !v.is_finite() {
-                    *m = f32::NAN;
-                } else if m.is_finite() {
-                    *m = m.max(*v);
+    let mut results: Vec<Outcome> = Vec::with_capacity(images.len());
+    for batch in images.chunks(at_once) {
+        let done = batch
+            .par_iter()
+            .map(|p| -> Result<_> {
+                if stopped() {
+                    return Err(Interrupted.into());
                 }
-            }
-            Ok((res, matte))
-        })
-        .collect::<Result<Vec<_>>>()?;
+                let (img, rgb) = read_grey(p, &opts, (w, h), matte_rows.clone())?;
+                let g = img.data;
+                let res = find_highlight(w, h, &g, &circle, &params);
+                // The matte sphere from its rows alone: its circle moved up by their first
+                // (a whole number of rows: every pixel's offset from the centre is the same).
+                let matte = match (&res, &config.matte_sphere) {
+                    (Ok(hl), Some(c)) => Some(matte_intensity(
+                        w,
+                        matte_rows.len(),
+                        &rgb,
+                        &Circle {
+                            cy: c.cy - matte_rows.start as f64,
+                            ..*c
+                        },
+                        hl.light,
+                        &MatteParams::default(),
+                    )),
+                    _ => None,
+                };
+                let mut m = max_image.lock().unwrap_or_else(|e| e.into_inner());
+                for (m, v) in m.iter_mut().zip(&g) {
+                    if !v.is_finite() {
+                        *m = f32::NAN;
+                    } else if m.is_finite() {
+                        *m = m.max(*v);
+                    }
+                }
+                Ok((res, matte))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        results.extend(done);
+    }
     let max_image = max_image.into_inner().unwrap_or_else(|e| e.into_inner());
     let mut records = Vec::with_capacity(images.len());
     let (mut found, mut bad) = (Vec::new(), Vec::new());
