@@ -472,9 +472,9 @@ fn export_never_replaces_files_it_did_not_write() {
 }
 
 /// `calibrate` decoded each image whole, two at a time: three HDR files of 96 KB declaring
-/// 8000 x 8000 pixels took 2.2 GB. It reads them a band at a time as grey values, as many at
-/// once as fit in 256 MiB, and refuses images of more than 8192 x 8192 pixels from their
-/// header.
+/// 8000 x 8000 pixels took 2.2 GB (2.2 GB also to look for the sphere). It reads them a band
+/// at a time as grey values, keeping the sum or the brightest of all images and each image's
+/// spheres' rows, and refuses images of more than 8192 x 8192 pixels from their header.
 #[cfg(target_os = "linux")]
 #[test]
 fn calibrate_reads_large_declared_images_in_bounded_memory() {
@@ -499,6 +499,15 @@ fn calibrate_reads_large_declared_images_in_bounded_memory() {
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     assert!(
         stderr(&o).contains("big: only 0 of 3 images have a usable highlight"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(peak_kib < 600 << 10, "peak {peak_kib} KiB");
+    // The sphere looked for in the mean image: the sum of the images, a band at a time.
+    let (o, peak_kib) = run_measuring_rss(&["calibrate", s(&d), "-o", s(&lp), "--quiet"]);
+    assert_one_line_error(&o, "big");
+    assert!(
+        stderr(&o).contains("nothing in the images is brighter than their border"),
         "{}",
         stderr(&o)
     );

@@ -450,49 +450,37 @@ impl Rows {
     }
 }
 
-/// Decodes the image at `path` as [`super::read_image`] does, but read a band of rows at a time
-/// and kept as one grey value a pixel, the mean of its channels (`NaN` or `+inf` where a
-/// channel is): 4 bytes a pixel, never the image's samples whole (what calibration needs of
-/// a possibly large picture). Returns it (its kind and colour tag kept, one channel) and the
-/// interleaved RGB samples (grey replicated) of its rows `rgb_rows` (clipped to the image).
+/// Decodes the image at `path` as [`super::read_image`] does, but a band of rows at a time,
+/// giving each band to `band(y, grey, rgb)`: its first row `y`, one grey value a pixel (the
+/// mean of the image's channels, as a whole decode's samples give it: `NaN` or `+inf` where a
+/// channel is) and its interleaved RGB samples (grey replicated). Nothing the size of the
+/// image is held but what its format's reader holds (see [`Rows`]): what calibration needs of
+/// a possibly large picture. Returns the image's width and height.
 pub fn read_image_grey(
     path: &Path,
     opts: &DecodeOptions,
-    rgb_rows: std::ops::Range<usize>,
-) -> Result<(super::Image, Vec<f32>)> {
+    band: &mut dyn FnMut(usize, &[f32], &[f32]),
+) -> Result<(usize, usize)> {
     let mut rows = Rows::open(path, opts, &|_| Ok(()))?;
     let (w, h) = rows.size();
-    let grey = rows.grey();
-    let band = ((1 << 16) / (3 * w).max(1)).clamp(1, h.max(1));
-    let mut buf = vec![0.0f32; band * w * 3];
-    let mut data = Vec::with_capacity(w * h);
-    let keep = rgb_rows.start.min(h)..rgb_rows.end.min(h);
-    let mut rgb = Vec::with_capacity(keep.len() * w * 3);
+    // The mean of the image's own channels (the one of a grey image).
+    let k = if rows.grey() { 1 } else { 3 };
+    let n_rows = ((1 << 16) / (3 * w).max(1)).clamp(1, h.max(1));
+    let mut rgb = vec![0.0f32; n_rows * w * 3];
+    let mut grey = vec![0.0f32; n_rows * w];
     let mut y = 0;
     while y < h {
-        let n = band.min(h - y);
-        let part = &mut buf[..n * w * 3];
-        rows.read(part, 3)?;
-        // As from a whole decode: the mean of the image's own channels (one of a grey image).
-        let k = if grey { 1 } else { 3 };
-        data.extend(
-            part.chunks_exact(3)
-                .map(|p| p[..k].iter().sum::<f32>() / k as f32),
-        );
-        let (a, b) = (keep.start.clamp(y, y + n), keep.end.clamp(y, y + n));
-        rgb.extend_from_slice(&part[(a - y) * w * 3..(b - y) * w * 3]);
+        let n = n_rows.min(h - y);
+        let (rgb, grey) = (&mut rgb[..n * w * 3], &mut grey[..n * w]);
+        rows.read(rgb, 3)?;
+        for (g, p) in grey.iter_mut().zip(rgb.chunks_exact(3)) {
+            *g = p[..k].iter().sum::<f32>() / k as f32;
+        }
+        band(y, grey, rgb);
         y += n;
     }
     rows.finish()?;
-    let img = super::Image {
-        width: w,
-        height: h,
-        channels: 1,
-        data,
-        kind: rows.kind(),
-        colour: rows.colour().cloned(),
-    };
-    Ok((img, rgb))
+    Ok((w, h))
 }
 
 /// Whether the PNG file `bytes` is interlaced (Adam7: its rows come in seven passes, so it is
