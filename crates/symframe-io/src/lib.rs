@@ -43,12 +43,12 @@ pub use atomic::{open_no_follow, write_bytes};
 pub use bounded::{
     check_regular_file, open_bounded, open_own_file, read_at_most, read_bounded, read_text_bounded,
 };
-pub use codecs::read_image_grey;
 pub use codecs::{
     declared_size, decode_image, linear_to_srgb, read_image, read_pfm, srgb_to_linear,
     write_exr_channels, write_exr_rgb, write_pfm, write_png16_rgb, write_png8_rgb, ColourTag,
     DecodeOptions, Gamma, Image, PngRows, SampleKind,
 };
+pub use codecs::{read_image_grey, GreyBand};
 pub use dataset::{open_dataset, Dataset};
 pub use error::{Error, Result, Warning};
 pub use lights::{lp_path_convention, read_light_directions, read_list, LpPaths};

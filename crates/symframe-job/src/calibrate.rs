@@ -264,7 +264,7 @@ fn read_grey(
     path: &Path,
     opts: &DecodeOptions,
     size: (usize, usize),
-    band: &mut dyn FnMut(usize, &[f32], &[f32]),
+    band: &mut symframe_io::GreyBand<'_>,
 ) -> Result<()> {
     check_declared(path, opts, size)?;
     let (iw, ih) = symframe_io::read_image_grey(path, opts, band)?;

@@ -63,8 +63,8 @@ use pfm::{pfm_raw, pfm_size};
 pub use pfm::{read_pfm, write_pfm};
 pub(crate) use png::{rgb16_row, write_png, write_png16_rgb_with, PngLayout};
 pub use png::{write_png16_rgb, write_png8_rgb, PngRows};
-pub use rows::read_image_grey;
 pub(crate) use rows::Rows;
+pub use rows::{read_image_grey, GreyBand};
 use tiff::read_tiff;
 
 /// A decoded image: linear samples, row-major (row 0 at the top), channels interleaved.

@@ -450,6 +450,9 @@ impl Rows {
     }
 }
 
+/// What [`read_image_grey`] gives each band to: its first row, grey values and RGB samples.
+pub type GreyBand<'a> = dyn FnMut(usize, &[f32], &[f32]) + 'a;
+
 /// Decodes the image at `path` as [`super::read_image`] does, but a band of rows at a time,
 /// giving each band to `band(y, grey, rgb)`: its first row `y`, one grey value a pixel (the
 /// mean of the image's channels, as a whole decode's samples give it: `NaN` or `+inf` where a
@@ -459,7 +462,7 @@ impl Rows {
 pub fn read_image_grey(
     path: &Path,
     opts: &DecodeOptions,
-    band: &mut dyn FnMut(usize, &[f32], &[f32]),
+    band: &mut GreyBand<'_>,
 ) -> Result<(usize, usize)> {
     let mut rows = Rows::open(path, opts, &|_| Ok(()))?;
     let (w, h) = rows.size();
