@@ -72,7 +72,7 @@ pub(crate) fn show_size(bytes: u64) -> String {
 /// Opens `path`, `what` (e.g. "a light file": it names the cap in the error), of at most
 /// `max_bytes` bytes: a regular file ([`check_regular_file`]) no longer than the cap, else
 /// `PATH: larger than the 64 MiB a light file can be`; the file opened is checked again.
-fn open_checked(path: &Path, what: &str, max_bytes: u64) -> Result<File> {
+pub(crate) fn open_checked(path: &Path, what: &str, max_bytes: u64) -> Result<File> {
     let len = check_regular_file(path)?;
     if len > max_bytes {
         return Err(too_large(path, what, max_bytes));

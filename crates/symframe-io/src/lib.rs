@@ -48,6 +48,7 @@ pub use codecs::{
     write_exr_channels, write_exr_rgb, write_pfm, write_png16_rgb, write_png8_rgb, ColourTag,
     DecodeOptions, Gamma, Image, PngRows, SampleKind,
 };
+pub use codecs::{read_image_grey, GreyBand};
 pub use dataset::{open_dataset, Dataset};
 pub use error::{Error, Result, Warning};
 pub use lights::{lp_path_convention, read_light_directions, read_list, LpPaths};
@@ -57,7 +58,8 @@ pub use output::{
     write_npy_f32, write_npy_u8, write_png_rgb8, NormalPng, NpyRows, SOURCE_PALETTE,
 };
 pub use stack::{
-    capture_noise, load_stack, load_stack_with_warnings, read_mask, read_mask_any_size,
+    capture_noise, load_stack, load_stack_with_warnings, read_image_size, read_mask,
+    read_mask_any_size,
 };
 pub use synth_out::{check_synth_target, write_lp_dataset, ImageFormat, OUTPUT_LOCK_FILE};
 pub use tile_cache::{

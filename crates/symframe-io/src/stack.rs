@@ -326,6 +326,21 @@ fn checked_header(path: &Path, opts: &DecodeOptions) -> Result<Option<(usize, us
     }
 }
 
+/// The width and height the image file `path` declares (for an EXR, of the layer `opts`
+/// picks), from its header, without decoding its pixels: its first 16 MiB, or the whole file
+/// when the header is not there (a TIFF whose directory sits at its end). The errors of a
+/// decode for a header that cannot be read; a file far longer than its image needs is
+/// refused unread.
+pub fn read_image_size(path: &Path, opts: &DecodeOptions) -> Result<(usize, usize)> {
+    match checked_header(path, opts)? {
+        Some(size) => Ok(size),
+        None => {
+            let bytes = crate::codecs::read_image_file(path)?;
+            declared_size(path, &bytes, opts)
+        }
+    }
+}
+
 /// Image `i` of a dataset opened to be read a band of rows at a time as a stack stores it:
 /// interleaved RGB (grey replicated), divided by the light's intensity when the dataset has
 /// intensities.
@@ -515,6 +530,10 @@ pub fn capture_noise(ds: &Dataset, opts: &DecodeOptions) -> Result<symframe::Noi
 /// samples, no sRGB decoding or saturation test). The mask must be `width x height` and have
 /// at least one pixel inside.
 pub fn read_mask(path: &Path, width: usize, height: usize) -> Result<Vec<bool>> {
+    // The size its header declares first: a mask of another size is refused undecoded.
+    if let Ok(size) = read_image_size(path, &DecodeOptions::default()) {
+        check_mask_size(path, size, (width, height))?;
+    }
     let (w, h, mask) = read_mask_any_size(path)?;
     check_mask_size(path, (w, h), (width, height))?;
     Ok(mask)

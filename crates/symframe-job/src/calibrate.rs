@@ -12,7 +12,7 @@ use symframe::calibrate::{
     detect_sphere, find_highlight, matte_intensity, Circle, Highlight, HighlightError,
     HighlightParams, MatteError, MatteParams,
 };
-use symframe_io::{DecodeOptions, Image};
+use symframe_io::DecodeOptions;
 
 use crate::{Control, Interrupted};
 
@@ -234,42 +234,68 @@ fn image_list(input: &Path) -> Result<Vec<PathBuf>> {
     Ok(v)
 }
 
-/// The image's grey values (mean of the channels; `NaN` where any is saturated).
-fn grey(img: &Image) -> Vec<f32> {
-    img.data
-        .chunks_exact(img.channels)
-        .map(|p| p.iter().sum::<f32>() / p.len() as f32)
-        .collect()
-}
+/// The most pixels an image given to calibrate may have (8192 x 8192): it holds the brightest
+/// (or the sum) of all images, 4 bytes a pixel, and of each image it reads the sphere's rows
+/// and the matte sphere's (in RGB), so a file of a few KB declaring a larger image is refused
+/// from its header.
+pub const MAX_CALIBRATE_PIXELS: usize = 1 << 26;
 
-/// Decodes one image as grey values, checking its size against the first one's.
-fn read_grey(path: &Path, opts: &DecodeOptions, size: Option<(usize, usize)>) -> Result<Image> {
-    let img = read_sized(path, opts, size)?;
-    let g = grey(&img);
-    Ok(Image {
-        width: img.width,
-        height: img.height,
-        channels: 1,
-        data: g,
-        kind: img.kind,
-        colour: img.colour,
-    })
-}
+/// The memory for the images read at once (the spheres' rows): as many in parallel as fit, at
+/// least one.
+const DECODE_MEMORY: usize = 256 << 20;
 
-/// Decodes one image, checking its size against the first one's.
-fn read_sized(path: &Path, opts: &DecodeOptions, size: Option<(usize, usize)>) -> Result<Image> {
-    let img = symframe_io::read_image(path, opts)?;
-    if let Some((w, h)) = size {
-        if (img.width, img.height) != (w, h) {
-            bail!(
-                "{}: {}x{} pixels, but the first image is {w}x{h}",
-                path.display(),
-                img.width,
-                img.height
-            );
-        }
+/// Checks the size image `path` declares (read from its header, undecoded) against the first
+/// image's.
+fn check_declared(path: &Path, opts: &DecodeOptions, (w, h): (usize, usize)) -> Result<()> {
+    let (iw, ih) = symframe_io::read_image_size(path, opts)?;
+    if (iw, ih) != (w, h) {
+        bail!(
+            "{}: {iw}x{ih} pixels, but the first image is {w}x{h}",
+            path.display()
+        );
     }
-    Ok(img)
+    Ok(())
+}
+
+/// Reads one image a band of rows at a time (its declared size checked against the first
+/// image's before anything is decoded), giving `band(y, grey, rgb)` each band: its first row,
+/// its grey values (the mean of the channels; `NaN` where any is saturated) and its RGB.
+fn read_grey(
+    path: &Path,
+    opts: &DecodeOptions,
+    size: (usize, usize),
+    band: &mut symframe_io::GreyBand<'_>,
+) -> Result<()> {
+    check_declared(path, opts, size)?;
+    let (iw, ih) = symframe_io::read_image_grey(path, opts, band)?;
+    if (iw, ih) != size {
+        bail!(
+            "{}: {iw}x{ih} pixels, but the first image is {}x{}",
+            path.display(),
+            size.0,
+            size.1
+        );
+    }
+    Ok(())
+}
+
+/// The rows a circle's pixels lie in, clipped to an image of `height` rows (as
+/// [`matte_intensity`] and [`find_highlight`] bound their pixels).
+fn circle_rows(c: &Circle, height: usize) -> std::ops::Range<usize> {
+    let y0 = (c.cy - c.r).floor().max(0.0) as usize;
+    let y1 = ((c.cy + c.r).ceil().max(0.0) as usize).min(height);
+    y0.min(y1)..y1
+}
+
+/// Copies the rows of `band` (of `width` samples a row, starting at row `y`) that fall in
+/// `rows` to `out`, which holds those rows from its start (`rows.start` is its row 0).
+fn keep_rows(band: &[f32], y: usize, width: usize, rows: &std::ops::Range<usize>, out: &mut [f32]) {
+    let n = band.len() / width.max(1);
+    let (a, b) = (rows.start.clamp(y, y + n), rows.end.clamp(y, y + n));
+    if a < b {
+        out[(a - rows.start) * width..(b - rows.start) * width]
+            .copy_from_slice(&band[(a - y) * width..(b - y) * width]);
+    }
 }
 
 /// `path` relative to folder `base` when it lies below it (else absolute).
@@ -439,9 +465,19 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
     refuse_inputs_as_outputs(config, &images)?;
     let opts = config.decode.clone();
     let stopped = || ctl.stop.load(std::sync::atomic::Ordering::SeqCst);
-    let first = read_grey(&images[0], &opts, None)?;
-    let (w, h) = (first.width, first.height);
-    drop(first);
+    // The size from the first image's header: nothing is decoded before it is checked (a few
+    // KB declaring 8000 x 8000 pixels were decoded whole, two images at a time: 2.2 GB).
+    let (w, h) = symframe_io::read_image_size(&images[0], &opts)?;
+    if w == 0 || h == 0 {
+        bail!("{}: the image is empty", images[0].display());
+    }
+    if w.saturating_mul(h) > MAX_CALIBRATE_PIXELS {
+        bail!(
+            "{}: {w}x{h} pixels, more than the {MAX_CALIBRATE_PIXELS} (8192 x 8192) calibrate \
+             reads; crop the images to the spheres",
+            images[0].display()
+        );
+    }
     // Given circles, checked before anything is computed with them (a radius far beyond the
     // image made the highlight search run without end).
     for (sphere, circle) in [("mirror", config.sphere), ("matte", config.matte_sphere)] {
@@ -455,38 +491,68 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
         }
     }
 
+    // Images are read a band of rows at a time, as many at once as fit in DECODE_MEMORY
+    // (their grey values, 4 bytes a pixel, and the matte sphere's rows in RGB); a large one
+    // alone, keeping only what it needs.
+    let matte_rows = config.matte_sphere.map_or(0..0, |c| circle_rows(&c, h));
+    let at_once = (DECODE_MEMORY / (4 * w * h + 12 * w * matte_rows.len())).max(1);
+    let key = |v: f32| if v.is_finite() { v } else { f32::INFINITY };
+    // The index of the brightest of `g`'s values (starting at pixel `at`) if brighter than or
+    // as bright as `best` (the last of equals, as `max_by` picks it).
+    let brighter = |best: &mut Option<(usize, f32)>, at: usize, g: &[f32]| {
+        for (k, &v) in g.iter().enumerate() {
+            if best.is_none_or(|(_, b)| key(v).total_cmp(&key(b)) != std::cmp::Ordering::Less) {
+                *best = Some((at + k, v));
+            }
+        }
+    };
+
     // The sphere: given, or found in the mean image.
     let (circle, source, detection) = match config.sphere {
         Some(c) => (c, "given", None),
         None => {
-            let (sum, brightest) = images
-                .par_iter()
-                .map(|p| -> Result<(Vec<f32>, Vec<usize>)> {
-                    if stopped() {
-                        return Err(Interrupted.into());
-                    }
-                    let g = read_grey(p, &opts, Some((w, h)))?.data;
-                    let best = g
-                        .iter()
-                        .enumerate()
-                        .max_by(|a, b| {
-                            let key = |v: f32| if v.is_finite() { v } else { f32::INFINITY };
-                            key(*a.1).total_cmp(&key(*b.1))
-                        })
-                        .map(|(i, _)| i)
-                        .unwrap_or(0);
-                    Ok((g, vec![best]))
-                })
-                .try_reduce(
-                    || (vec![0.0f32; w * h], Vec::new()),
-                    |(mut a, mut ba), (b, bb)| {
-                        a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
-                        ba.extend(bb);
-                        Ok((a, ba))
-                    },
-                )?;
+            // The images summed in order, each band as it is read when one is read at a
+            // time, else each image's grey values once its batch is read.
+            let mut sum = vec![0.0f32; w * h];
+            let mut brightest = Vec::with_capacity(images.len());
+            for batch in images.chunks(at_once) {
+                if stopped() {
+                    return Err(Interrupted.into());
+                }
+                if let [p] = batch {
+                    let mut best = None;
+                    read_grey(p, &opts, (w, h), &mut |y, g, _| {
+                        brighter(&mut best, y * w, g);
+                        for (s, v) in sum[y * w..].iter_mut().zip(g) {
+                            *s += v;
+                        }
+                    })?;
+                    brightest.push(best.map_or(0, |b| b.0));
+                    continue;
+                }
+                let greys = batch
+                    .par_iter()
+                    .map(|p| -> Result<(Vec<f32>, usize)> {
+                        if stopped() {
+                            return Err(Interrupted.into());
+                        }
+                        let mut best = None;
+                        let mut own = Vec::with_capacity(w * h);
+                        read_grey(p, &opts, (w, h), &mut |y, g, _| {
+                            brighter(&mut best, y * w, g);
+                            own.extend_from_slice(g);
+                        })?;
+                        Ok((own, best.map_or(0, |b| b.0)))
+                    })
+                    .collect::<Result<Vec<_>>>()?;
+                for (g, best) in greys {
+                    sum.iter_mut().zip(&g).for_each(|(x, y)| *x += y);
+                    brightest.push(best);
+                }
+            }
             let n = images.len() as f32;
-            let mean: Vec<f32> = sum.iter().map(|v| v / n).collect();
+            let mut mean = sum;
+            mean.iter_mut().for_each(|v| *v /= n);
             let d = detect_sphere(w, h, &mean, &brightest).map_err(|e| SphereNotFound {
                 images: config.images.clone(),
                 reason: e.to_string(),
@@ -511,37 +577,55 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
         Result<Highlight, HighlightError>,
         Option<Result<[f64; 3], MatteError>>,
     );
-    let results: Vec<Outcome> = images
-        .par_iter()
-        .map(|p| -> Result<_> {
-            if stopped() {
-                return Err(Interrupted.into());
-            }
-            let img = read_sized(p, &opts, Some((w, h)))?;
-            let g = grey(&img);
-            let res = find_highlight(w, h, &g, &circle, &params);
-            let matte = match (&res, &config.matte_sphere) {
-                (Ok(hl), Some(c)) => Some(matte_intensity(
-                    w,
-                    h,
-                    &img.into_rgb(),
-                    c,
-                    hl.light,
-                    &MatteParams::default(),
-                )),
-                _ => None,
-            };
-            let mut m = max_image.lock().unwrap_or_else(|e| e.into_inner());
-            for (m, v) in m.iter_mut().zip(&g) {
-                if !v.is_finite() {
-                    *m = f32::NAN;
-                } else if m.is_finite() {
-                    *m = m.max(*v);
+    let sphere_rows = circle_rows(&circle, h);
+    let mut results: Vec<Outcome> = Vec::with_capacity(images.len());
+    for batch in images.chunks(at_once) {
+        let done = batch
+            .par_iter()
+            .map(|p| -> Result<_> {
+                if stopped() {
+                    return Err(Interrupted.into());
                 }
-            }
-            Ok((res, matte))
-        })
-        .collect::<Result<Vec<_>>>()?;
+                // The image's grey values where the highlight is looked for, the sphere's
+                // rows: the others are never written, so a large image's are never resident
+                // (a zeroed allocation is mapped lazily).
+                let mut g = vec![0.0f32; w * h];
+                let mut rgb = vec![0.0f32; 3 * w * matte_rows.len()];
+                read_grey(p, &opts, (w, h), &mut |y, band, band_rgb| {
+                    let sphere = &mut g[sphere_rows.start * w..sphere_rows.end * w];
+                    keep_rows(band, y, w, &sphere_rows, sphere);
+                    keep_rows(band_rgb, y, 3 * w, &matte_rows, &mut rgb);
+                    let mut m = max_image.lock().unwrap_or_else(|e| e.into_inner());
+                    for (m, v) in m[y * w..].iter_mut().zip(band) {
+                        if !v.is_finite() {
+                            *m = f32::NAN;
+                        } else if m.is_finite() {
+                            *m = m.max(*v);
+                        }
+                    }
+                })?;
+                let res = find_highlight(w, h, &g, &circle, &params);
+                // The matte sphere from its rows alone: its circle moved up by their first
+                // (a whole number of rows: every pixel's offset from the centre is the same).
+                let matte = match (&res, &config.matte_sphere) {
+                    (Ok(hl), Some(c)) => Some(matte_intensity(
+                        w,
+                        matte_rows.len(),
+                        &rgb,
+                        &Circle {
+                            cy: c.cy - matte_rows.start as f64,
+                            ..*c
+                        },
+                        hl.light,
+                        &MatteParams::default(),
+                    )),
+                    _ => None,
+                };
+                Ok((res, matte))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        results.extend(done);
+    }
     let max_image = max_image.into_inner().unwrap_or_else(|e| e.into_inner());
     let mut records = Vec::with_capacity(images.len());
     let (mut found, mut bad) = (Vec::new(), Vec::new());

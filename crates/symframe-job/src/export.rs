@@ -656,6 +656,7 @@ pub fn export_gltf(config: &ExportConfig) -> Result<ExportOutcome> {
         );
     }
     check_targets(&targets, &inputs)?;
+    check_own_files(&targets, &config.output)?;
     std::fs::create_dir_all(&out_dir)
         .with_context(|| format!("{}: cannot create folder", out_dir.display()))?;
 
@@ -780,6 +781,73 @@ fn check_targets(targets: &[PathBuf], inputs: &[PathBuf]) -> Result<()> {
                     p.display()
                 );
             }
+        }
+    }
+    Ok(())
+}
+
+/// The JSON of the glTF asset at `path` (a `.gltf`, or a `.glb`'s JSON chunk), read no
+/// further than its first 64 MiB; `None` when it is not one (not a regular file, not JSON).
+fn asset_json(path: &Path) -> Option<Value> {
+    use std::io::Read;
+    let meta = std::fs::symlink_metadata(path).ok()?;
+    if !meta.is_file() {
+        return None;
+    }
+    let cap = symframe_io::limits::MAX_TEXT_FILE_BYTES;
+    let mut f = std::fs::File::open(path).ok()?;
+    let mut head = [0u8; 20];
+    let glb = f.read_exact(&mut head).is_ok() && &head[..4] == b"glTF" && &head[16..20] == b"JSON";
+    let bytes = if glb {
+        let len = u32::from_le_bytes([head[12], head[13], head[14], head[15]]) as u64;
+        symframe_io::read_at_most(f, path, len.min(cap)).ok()?
+    } else {
+        symframe_io::read_bounded(path, "a glTF file", cap).ok()?
+    };
+    serde_json::from_slice(&bytes).ok()
+}
+
+/// Refuses, before anything is written, to replace a file that this tool did not write: the
+/// asset at `output` must be absent or a glTF asset symframe wrote (its `asset.generator`), and
+/// each of its companion files there (the `.bin` and textures) absent or named by that asset.
+/// A user's `scene.gltf`, or a `scene.bin` beside a new asset, was replaced without a word.
+fn check_own_files(targets: &[PathBuf], output: &Path) -> Result<()> {
+    let exists = |p: &Path| std::fs::symlink_metadata(p).is_ok();
+    let ours = asset_json(output).filter(|doc| {
+        doc["asset"]["generator"]
+            .as_str()
+            .is_some_and(|g| g.starts_with("symframe"))
+    });
+    if exists(output) && ours.is_none() {
+        bail!(
+            "{}: exists and is not a glTF asset written by symframe export (symframe replaces \
+             only its own files); remove it or choose another output name",
+            output.display()
+        );
+    }
+    let named: Vec<String> = ours
+        .iter()
+        .flat_map(|doc| {
+            ["buffers", "images"]
+                .iter()
+                .flat_map(|k| doc[*k].as_array().cloned().unwrap_or_default())
+                .filter_map(|e| e["uri"].as_str().map(str::to_string))
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    for t in targets
+        .iter()
+        .filter(|t| t.as_path() != output && exists(t))
+    {
+        let name = t.file_name().map(|n| n.to_string_lossy().into_owned());
+        if !name.is_some_and(|n| named.contains(&n)) {
+            bail!(
+                "{}: exists and is not a file of a glTF asset symframe export wrote at {} \
+                 (symframe replaces only its own files); remove it or choose another output \
+                 name",
+                t.display(),
+                output.display()
+            );
         }
     }
     Ok(())

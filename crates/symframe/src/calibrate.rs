@@ -363,6 +363,9 @@ pub fn detect_sphere(
     if width < 3 || height < 3 || mean.len() != width * height {
         return Err("the images are too small to find a sphere in".into());
     }
+    if mean.len() >= u32::MAX as usize {
+        return Err("the images are too large to find a sphere in".into());
+    }
     let top = mean
         .iter()
         .filter(|v| v.is_finite())
@@ -387,24 +390,27 @@ pub fn detect_sphere(
     let level = border[border.len() / 2];
     let threshold = level + 1e-3 * (top - level).max(0.0) + 1e-9 * top;
     let on = |i: usize| value(i) > threshold;
-    // Label the regions (4-neighbours).
-    let mut label = vec![usize::MAX; width * height];
+    // Label the regions (4-neighbours), pixels and labels as 32-bit indices: 4 bytes a pixel
+    // (8000 x 8000 images took 512 MB for the labels alone).
+    const NONE: u32 = u32::MAX;
+    let mut label = vec![NONE; width * height];
     let mut sizes = Vec::new();
     for start in 0..width * height {
-        if !on(start) || label[start] != usize::MAX {
+        if !on(start) || label[start] != NONE {
             continue;
         }
-        let id = sizes.len();
+        let id = u32::try_from(sizes.len()).map_err(|_| "too many bright regions")?;
         label[start] = id;
-        let mut stack = vec![start];
+        let mut stack = vec![start as u32];
         let mut n = 0usize;
         while let Some(i) = stack.pop() {
+            let i = i as usize;
             n += 1;
             let (r, c) = (i / width, i % width);
             let mut push = |j: usize| {
-                if on(j) && label[j] == usize::MAX {
+                if on(j) && label[j] == NONE {
                     label[j] = id;
-                    stack.push(j);
+                    stack.push(j as u32);
                 }
             };
             if c + 1 < width {
@@ -428,8 +434,8 @@ pub fn detect_sphere(
     let mut votes = vec![0usize; sizes.len()];
     for &b in brightest {
         if let Some(&l) = label.get(b) {
-            if l != usize::MAX {
-                votes[l] += 1;
+            if l != NONE {
+                votes[l as usize] += 1;
             }
         }
     }
@@ -443,6 +449,7 @@ pub fn detect_sphere(
         return Err("no bright region holds the images' brightest spots".into());
     }
     let (mut sx, mut sy, mut n) = (0.0, 0.0, 0usize);
+    let best = best as u32;
     for (i, &l) in label.iter().enumerate() {
         if l == best {
             sx += (i % width) as f64 + 0.5;

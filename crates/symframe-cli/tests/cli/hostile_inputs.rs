@@ -659,3 +659,134 @@ fn large_declared_images_are_decoded_a_band_at_a_time() {
     let len = fs::metadata(&cache[0]).unwrap().len();
     assert!(len > 8000 * 8000 * 3 * 6, "{len}");
 }
+
+/// EXR, TIFF and Radiance HDR images were decoded whole: 415 KB of EXR, 6 KB of TIFF
+/// and 96 KB of HDR declaring 8000 x 8000 float RGB pixels cost 768 MB each as `f32`. They are
+/// read from the file a row of blocks (a scan line) at a time; with `--decode-memory 16` the
+/// run's peak memory stays under 600 MB.
+#[cfg(target_os = "linux")]
+#[test]
+fn large_declared_float_images_are_read_a_band_at_a_time() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    crate::forged::exr_zeros(&d.join("a.exr"), 8000, 8000);
+    crate::forged::tiff_zeros(&d.join("b.tif"), 8000, 8000);
+    crate::forged::hdr_zeros(&d.join("c.hdr"), 8000, 8000);
+    for (n, max) in [
+        ("a.exr", 450 << 10),
+        ("b.tif", 8 << 10),
+        ("c.hdr", 100 << 10),
+    ] {
+        let len = fs::metadata(d.join(n)).unwrap().len();
+        assert!(len < max, "{n}: {len} bytes");
+    }
+    let lp = d.join("lights.lp");
+    fs::write(
+        &lp,
+        "3\na.exr 0 0 1\nb.tif 0.5 0 0.866\nc.hdr 0 0.5 0.866\n",
+    )
+    .unwrap();
+    let out = d.join("out");
+    // The cache alone is what is measured: the run stops after its first tile, every image
+    // decoded. (Nothing is decoded here: this process's peak would count in the child's.)
+    let args = [
+        "estimate",
+        s(&lp),
+        "-o",
+        s(&out),
+        "--decode-memory",
+        "16",
+        "--cache-format",
+        "f16",
+        "--stop-after-tiles",
+        "1",
+        "--quiet",
+    ];
+    let (o, peak_kib) = crate::common::run_measuring_rss(&args);
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    assert!(peak_kib < 600 << 10, "peak {peak_kib} KiB");
+    let cache: Vec<PathBuf> = fs::read_dir(out.join(".symframe-cache"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "stack"))
+        .collect();
+    assert_eq!(cache.len(), 1, "{cache:?}");
+    let len = fs::metadata(&cache[0]).unwrap().len();
+    assert!(len > 8000 * 8000 * 3 * 6, "{len}");
+}
+
+/// Read a band at a time, every image of a decoding batch holds its file open: a batch of 300
+/// EXR images failed with "Too many open files" under a limit of 200 open files (the common
+/// default is 1,024, and a batch of 1,512 fits in the default `--decode-memory`). A batch holds
+/// at most the limit less a margin.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_decoding_batch_holds_no_more_files_open_than_the_process_may() {
+    use std::os::unix::process::CommandExt;
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = lambert(&tmp.path().join("data"), 8, 300);
+    let out = tmp.path().join("out");
+    let mut cmd = std::process::Command::new(crate::common::bin());
+    cmd.args([
+        "estimate",
+        s(&lp),
+        "-o",
+        s(&out),
+        "--method",
+        "woodham",
+        "--quiet",
+    ]);
+    // SAFETY: the closure runs in the forked child before exec and only calls setrlimit,
+    // which is async-signal-safe.
+    unsafe {
+        cmd.pre_exec(|| {
+            let lim = libc::rlimit {
+                rlim_cur: 200,
+                rlim_max: 200,
+            };
+            if libc::setrlimit(libc::RLIMIT_NOFILE, &lim) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    let o = cmd.output().unwrap();
+    ok(&o);
+    let r = report(&out);
+    assert_eq!(
+        r["cache"]["batch_images"].as_u64(),
+        Some(72),
+        "{}",
+        r["cache"]
+    );
+}
+
+/// A mask was decoded whole before its size was compared with the images': a 415 KB EXR
+/// declaring 8000 x 8000 float pixels as the mask of 16 x 16 images took 800 MB. The sizes
+/// their headers declare are compared first.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_mask_of_another_size_is_refused_before_it_is_decoded() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = lambert(&tmp.path().join("data"), 16, 12);
+    let mask = tmp.path().join("mask.exr");
+    crate::forged::exr_zeros(&mask, 8000, 8000);
+    let out = tmp.path().join("out");
+    let (o, peak_kib) = crate::common::run_measuring_rss(&[
+        "estimate",
+        s(&lp),
+        "-o",
+        s(&out),
+        "--mask",
+        s(&mask),
+        "--method",
+        "woodham",
+    ]);
+    assert_one_line_error(&o, "mask.exr");
+    assert!(
+        stderr(&o).contains("mask is 8000x8000 but the images are 16x16"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(peak_kib < 100 << 10, "peak {peak_kib} KiB");
+}

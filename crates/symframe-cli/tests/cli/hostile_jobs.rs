@@ -414,3 +414,124 @@ fn export_refuses_a_texture_name_hard_linked_to_a_map() {
         .to_string_lossy()
         .starts_with(".symframe")));
 }
+
+/// `export gltf -o FILE` replaced a user's `scene.gltf`, and a user's `scene.bin` beside a new
+/// asset, without a word. It replaces only an asset symframe wrote (its `asset.generator`)
+/// and the files that asset names; anything else is refused before a file is written.
+#[test]
+fn export_never_replaces_files_it_did_not_write() {
+    let tmp = tempfile::tempdir().unwrap();
+    let est = tmp.path().join("est");
+    ok(&crate::common::estimate(
+        &ward_sphere(&tmp.path().join("a"), 16, 40),
+        &est,
+        &["--quiet"],
+    ));
+    let out = tmp.path().join("out");
+    fs::create_dir_all(&out).unwrap();
+    let export = |name: &str| symframe(&["export", "gltf", s(&est), "-o", s(&out.join(name))]);
+    // Its own asset, written and written again.
+    ok(&export("own.gltf"));
+    ok(&export("own.gltf"));
+    ok(&export("own.glb"));
+    ok(&export("own.glb"));
+    let before = snapshot(&out);
+    // A user's glTF and GLB files at the output's name.
+    let user = r#"{"asset": {"version": "2.0", "generator": "Blender 4.2"}}"#;
+    fs::write(out.join("scene.gltf"), user).unwrap();
+    fs::write(out.join("scene.glb"), b"glTF\x02\0\0\0junk").unwrap();
+    fs::write(out.join("notes.gltf"), "my notes").unwrap();
+    for name in ["scene.gltf", "scene.glb", "notes.gltf"] {
+        let o = export(name);
+        assert_one_line_error(&o, name);
+        assert!(
+            stderr(&o).contains("is not a glTF asset written by symframe export"),
+            "{}",
+            stderr(&o)
+        );
+    }
+    assert_eq!(fs::read_to_string(out.join("scene.gltf")).unwrap(), user);
+    // A user's buffer where a new asset's would go: nothing of the asset is written.
+    fs::write(out.join("new.bin"), "my buffer").unwrap();
+    let o = export("new.gltf");
+    assert_one_line_error(&o, "new.bin");
+    assert!(
+        stderr(&o).contains("is not a file of a glTF asset symframe export wrote"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(
+        fs::read_to_string(out.join("new.bin")).unwrap(),
+        "my buffer"
+    );
+    assert!(!out.join("new.gltf").exists() && !out.join("new_basecolor.png").exists());
+    let after = snapshot(&out);
+    for (name, hash) in &before {
+        assert_eq!(after.get(name), Some(hash), "{name}");
+    }
+}
+
+/// `calibrate` decoded each image whole, two at a time: three HDR files of 96 KB declaring
+/// 8000 x 8000 pixels took 2.2 GB (2.2 GB also to look for the sphere). It reads them a band
+/// at a time as grey values, keeping the sum or the brightest of all images and each image's
+/// spheres' rows, and refuses images of more than 8192 x 8192 pixels from their header.
+#[cfg(target_os = "linux")]
+#[test]
+fn calibrate_reads_large_declared_images_in_bounded_memory() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path().join("big");
+    fs::create_dir_all(&d).unwrap();
+    for i in 0..3 {
+        crate::forged::hdr_zeros(&d.join(format!("{i}.hdr")), 8000, 8000);
+    }
+    let lp = tmp.path().join("cal/lights.lp");
+    let args = [
+        "calibrate",
+        s(&d),
+        "-o",
+        s(&lp),
+        "--sphere",
+        "4000,4000,1000",
+        "--quiet",
+    ];
+    let (o, peak_kib) = run_measuring_rss(&args);
+    // Each image dropped with a warning (black), then the error.
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("big: only 0 of 3 images have a usable highlight"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(peak_kib < 600 << 10, "peak {peak_kib} KiB");
+    // The sphere looked for in the mean image: the sum of the images, a band at a time.
+    let (o, peak_kib) = run_measuring_rss(&["calibrate", s(&d), "-o", s(&lp), "--quiet"]);
+    assert_one_line_error(&o, "big");
+    assert!(
+        stderr(&o).contains("nothing in the images is brighter than their border"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(peak_kib < 600 << 10, "peak {peak_kib} KiB");
+    // Larger than 8192 x 8192: refused from the header.
+    let huge = tmp.path().join("huge");
+    fs::create_dir_all(&huge).unwrap();
+    for i in 0..3 {
+        crate::forged::hdr_zeros(&huge.join(format!("{i}.hdr")), 16384, 8192);
+    }
+    let (o, peak_kib) = run_measuring_rss(&[
+        "calibrate",
+        s(&huge),
+        "-o",
+        s(&lp),
+        "--sphere",
+        "8000,4000,1000",
+    ]);
+    assert_one_line_error(&o, "0.hdr");
+    assert!(
+        stderr(&o).contains("16384x8192 pixels, more than the 67108864 (8192 x 8192)"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(peak_kib < 100 << 10, "peak {peak_kib} KiB");
+    assert!(!lp.exists());
+}

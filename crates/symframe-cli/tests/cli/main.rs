@@ -9,6 +9,7 @@ mod eval;
 mod experiment;
 mod export;
 mod fit;
+mod forged;
 mod gamma;
 mod hostile_folders;
 mod hostile_inputs;

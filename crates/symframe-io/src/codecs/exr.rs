@@ -179,17 +179,119 @@ fn read_meta(path: &Path, bytes: &[u8]) -> Result<exr::meta::MetaData> {
     // validation would otherwise answer a forged size with a less useful error).
     let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(bytes), false)
         .map_err(|e| exr_err(path, e))?;
-    for h in meta.headers.iter() {
+    check_sizes(path, &meta.headers, bytes.len() as u64)?;
+    Ok(meta)
+}
+
+/// Checks every part's declared size against the limits and the file's length `len`.
+fn check_sizes(path: &Path, headers: &[exr::meta::header::Header], len: u64) -> Result<()> {
+    for h in headers.iter() {
         let size = h.layer_size;
         limits::check_image_size(
             path,
             "EXR header",
             size.width() as u64,
             size.height() as u64,
-            bytes.len() as u64,
+            len,
         )?;
     }
-    Ok(meta)
+    Ok(())
+}
+
+/// How the lines of a decompressed EXR block are laid out: every channel's sample type and
+/// size, in the part's channel order, and the radiance channels picked from them.
+struct BlockLayout {
+    picked: Vec<usize>,
+    sizes: Vec<usize>,
+    types: Vec<exr::meta::attribute::SampleType>,
+    pixel_bytes: usize,
+}
+
+impl BlockLayout {
+    /// The layout of `header`'s blocks with `picked` channels read; subsampled channels are
+    /// refused (the line layout assumes one sample per pixel).
+    fn new(path: &Path, header: &exr::meta::header::Header, picked: Vec<usize>) -> Result<Self> {
+        let list = &header.channels.list;
+        if let Some(c) = list
+            .iter()
+            .find(|c| c.sampling.x() != 1 || c.sampling.y() != 1)
+        {
+            return Err(Error::unsupported(
+                path,
+                format!("subsampled EXR channel {}", c.name),
+            ));
+        }
+        let sizes: Vec<usize> = list
+            .iter()
+            .map(|c| c.sample_type.bytes_per_sample())
+            .collect();
+        let pixel_bytes = sizes.iter().sum();
+        Ok(Self {
+            picked,
+            sizes,
+            types: list.iter().map(|c| c.sample_type).collect(),
+            pixel_bytes,
+        })
+    }
+
+    /// Converts the lines of `block` (its data in native order, every channel's samples of a
+    /// line one after the other) into `out`, interleaved rows of `out_width` pixels of the
+    /// picked channels, with row `block_y0 - out_y0` of `out` the block's first line;
+    /// `(width, height)`: the layer's size, which the block must lie inside.
+    fn copy(
+        &self,
+        block: &exr::block::UncompressedBlock,
+        (width, height): (usize, usize),
+        out: &mut [f32],
+        out_y0: usize,
+    ) -> exr::error::Result<()> {
+        use exr::meta::attribute::SampleType;
+        let k = self.picked.len();
+        let (x0, y0) = (
+            block.index.pixel_position.x(),
+            block.index.pixel_position.y(),
+        );
+        let (bw, bh) = (
+            block.index.pixel_size.width(),
+            block.index.pixel_size.height(),
+        );
+        let line = bw * self.pixel_bytes;
+        if x0 + bw > width
+            || y0 + bh > height
+            || y0 < out_y0
+            || block.data.len() != line * bh
+            || (y0 - out_y0 + bh) * width * k > out.len()
+        {
+            return Err(exr::error::Error::Invalid("block size".into()));
+        }
+        for (dy, row) in block.data.chunks_exact(line).enumerate() {
+            let at = (y0 - out_y0 + dy) * width + x0;
+            let out = &mut out[at * k..(at + bw) * k];
+            for (j, &ci) in self.picked.iter().enumerate() {
+                let at = bw * self.sizes[..ci].iter().sum::<usize>();
+                let src = &row[at..at + bw * self.sizes[ci]];
+                let dst = out.iter_mut().skip(j).step_by(k);
+                match self.types[ci] {
+                    SampleType::F32 => {
+                        for (o, s) in dst.zip(src.chunks_exact(4)) {
+                            *o = f32::from_ne_bytes([s[0], s[1], s[2], s[3]]);
+                        }
+                    }
+                    SampleType::F16 => {
+                        for (o, s) in dst.zip(src.chunks_exact(2)) {
+                            *o = exr::prelude::f16::from_ne_bytes([s[0], s[1]]).to_f32();
+                        }
+                    }
+                    SampleType::U32 => {
+                        for (o, s) in dst.zip(src.chunks_exact(4)) {
+                            *o = u32::from_ne_bytes([s[0], s[1], s[2], s[3]]) as f32;
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Decodes an OpenEXR file's radiance layer (see the module's documentation) at full
@@ -203,7 +305,6 @@ fn read_meta(path: &Path, bytes: &[u8]) -> Result<exr::meta::MetaData> {
 /// per image), 1.3-1.45x at 1024x1024 (docs/performance.md, "Decoding").
 pub(super) fn read_exr(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<RawImage> {
     use exr::block::reader::ChunksReader;
-    use exr::meta::attribute::SampleType;
     use std::io::Cursor;
     let eerr = |e: exr::error::Error| exr_err(path, e);
     read_meta(path, bytes)?;
@@ -211,25 +312,8 @@ pub(super) fn read_exr(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Resul
     let (layer, picked) = choose_layer(path, reader.headers(), opts)?;
     let header = &reader.headers()[layer];
     let (width, height) = (header.layer_size.width(), header.layer_size.height());
-    let list = &header.channels.list;
-    // Every channel's samples per pixel of a line, in file order (all must be unsampled: the
-    // line layout below assumes one sample per pixel).
-    if let Some(c) = list
-        .iter()
-        .find(|c| c.sampling.x() != 1 || c.sampling.y() != 1)
-    {
-        return Err(Error::unsupported(
-            path,
-            format!("subsampled EXR channel {}", c.name),
-        ));
-    }
-    let sizes: Vec<usize> = list
-        .iter()
-        .map(|c| c.sample_type.bytes_per_sample())
-        .collect();
-    let types: Vec<SampleType> = list.iter().map(|c| c.sample_type).collect();
-    let pixel_bytes: usize = sizes.iter().sum();
-    let k = picked.len();
+    let lines = BlockLayout::new(path, header, picked)?;
+    let k = lines.picked.len();
     let mut data = vec![0.0f32; width * height * k];
     let chunks = reader
         .filter_chunks(false, |_, tile, block| {
@@ -238,45 +322,7 @@ pub(super) fn read_exr(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Resul
         .map_err(eerr)?;
     chunks
         .decompress_sequential(false, |_, block| {
-            let (x0, y0) = (
-                block.index.pixel_position.x(),
-                block.index.pixel_position.y(),
-            );
-            let (bw, bh) = (
-                block.index.pixel_size.width(),
-                block.index.pixel_size.height(),
-            );
-            let line = bw * pixel_bytes;
-            if x0 + bw > width || y0 + bh > height || block.data.len() != line * bh {
-                return Err(exr::error::Error::Invalid("block size".into()));
-            }
-            for (dy, row) in block.data.chunks_exact(line).enumerate() {
-                let out =
-                    &mut data[((y0 + dy) * width + x0) * k..((y0 + dy) * width + x0 + bw) * k];
-                for (j, &ci) in picked.iter().enumerate() {
-                    let at = bw * sizes[..ci].iter().sum::<usize>();
-                    let src = &row[at..at + bw * sizes[ci]];
-                    let dst = out.iter_mut().skip(j).step_by(k);
-                    match types[ci] {
-                        SampleType::F32 => {
-                            for (o, s) in dst.zip(src.chunks_exact(4)) {
-                                *o = f32::from_ne_bytes([s[0], s[1], s[2], s[3]]);
-                            }
-                        }
-                        SampleType::F16 => {
-                            for (o, s) in dst.zip(src.chunks_exact(2)) {
-                                *o = exr::prelude::f16::from_ne_bytes([s[0], s[1]]).to_f32();
-                            }
-                        }
-                        SampleType::U32 => {
-                            for (o, s) in dst.zip(src.chunks_exact(4)) {
-                                *o = u32::from_ne_bytes([s[0], s[1], s[2], s[3]]) as f32;
-                            }
-                        }
-                    }
-                }
-            }
-            Ok(())
+            lines.copy(&block, (width, height), &mut data, 0)
         })
         .map_err(eerr)?;
     Ok(RawImage {
@@ -285,6 +331,219 @@ pub(super) fn read_exr(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Resul
         channels: k,
         raw: Raw::F32(data),
     })
+}
+
+/// An OpenEXR file's radiance layer read a row of blocks at a time from the file: a block of
+/// scan lines (1 to 32 lines, by compression; 256 for DWAB) or a row of tiles. Each block is
+/// found through the file's offset table (any line order), decompressed and converted as
+/// [`read_exr`] converts it, and must be the block the table says it is. What it holds: the
+/// part's offset table, one block as stored and decompressed, and the decoded row of blocks
+/// ([`ExrRows::resident_bytes`]); a file of a few KB declaring a large image costs that, not
+/// the image.
+pub(crate) struct ExrRows {
+    file: Positioned,
+    meta: exr::meta::MetaData,
+    part: usize,
+    width: usize,
+    height: usize,
+    layout: BlockLayout,
+    /// The part's offset table (level 0 first, in increasing y).
+    offsets: Vec<u64>,
+    /// Block width and height (the tile's; a scan-line block is the layer's width).
+    block: (usize, usize),
+    /// The decoded rows `[y0, y0 + rows)`, interleaved picked channels.
+    rows: Vec<f32>,
+    y0: usize,
+    held: usize,
+}
+
+impl ExrRows {
+    /// Opens the EXR file `path` (`len` bytes); `check(width, height)` is called with the
+    /// chosen layer's size before any block is read. The same checks and errors as
+    /// [`read_exr`] (declared sizes, layer choice, subsampled channels).
+    pub(crate) fn open(
+        path: &Path,
+        file: std::fs::File,
+        len: u64,
+        opts: &DecodeOptions,
+        check: &dyn Fn((usize, usize)) -> Result<()>,
+    ) -> Result<Self> {
+        use exr::meta::BlockDescription;
+        use std::io::{BufReader, Seek, SeekFrom};
+        let eerr = |e: exr::error::Error| exr_err(path, e);
+        let mut file = BufReader::new(file);
+        // The declared sizes first, as `read_meta` checks them.
+        let meta = exr::meta::MetaData::read_from_buffered(&mut file, false).map_err(eerr)?;
+        check_sizes(path, &meta.headers, len)?;
+        let (part, picked) = choose_layer(path, &meta.headers, opts)?;
+        let size = meta.headers[part].layer_size;
+        check((size.width(), size.height()))?;
+        // Then as `exr::block::read` reads them (validated), and the offset tables after them.
+        file.seek(SeekFrom::Start(0))
+            .map_err(|e| Error::read(path, e))?;
+        let mut peek = exr::io::PeekRead::new(exr::io::Tracking::new(&mut file));
+        let meta = exr::meta::MetaData::read_from_buffered(&mut peek, true).map_err(eerr)?;
+        exr::meta::MetaData::validate(&meta.headers, false).map_err(eerr)?;
+        let mut tables =
+            exr::meta::MetaData::read_offset_tables(&mut peek, &meta.headers).map_err(eerr)?;
+        let (part, picked) = match choose_layer(path, &meta.headers, opts)? {
+            (p, c) if p == part && c == picked => (p, c),
+            _ => return Err(Error::decode(path, "EXR headers read differently twice")),
+        };
+        let header = &meta.headers[part];
+        let layout = BlockLayout::new(path, header, picked)?;
+        let (width, height) = (header.layer_size.width(), header.layer_size.height());
+        let block = match header.blocks {
+            BlockDescription::ScanLines => (width, header.compression.scan_lines_per_block()),
+            BlockDescription::Tiles(t) => (t.tile_size.width(), t.tile_size.height()),
+        };
+        if block.0 == 0 || block.1 == 0 {
+            return Err(Error::decode(path, "EXR tiles of zero size"));
+        }
+        let offsets = std::mem::take(&mut tables[part]);
+        let across = width.div_ceil(block.0);
+        if offsets.len() < across * height.div_ceil(block.1) {
+            return Err(Error::decode(
+                path,
+                "EXR offset table shorter than its blocks",
+            ));
+        }
+        Ok(Self {
+            file: Positioned {
+                inner: file,
+                pos: None,
+            },
+            meta,
+            part,
+            width,
+            height,
+            layout,
+            offsets,
+            block,
+            rows: Vec::new(),
+            y0: 0,
+            held: 0,
+        })
+    }
+
+    /// Width and height of the layer read.
+    pub(crate) fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    /// Samples a pixel (3 or 1).
+    pub(crate) fn channels(&self) -> usize {
+        self.layout.picked.len()
+    }
+
+    /// What the reader holds: the offset table, one block stored and decompressed (every
+    /// channel), and the decoded row of blocks.
+    pub(crate) fn resident_bytes(&self) -> usize {
+        let (bw, bh) = self.block;
+        8 * self.offsets.len()
+            + 2 * bw * bh * self.layout.pixel_bytes
+            + 4 * self.width * bh * self.channels()
+            + (8 << 10)
+    }
+
+    /// Row `y` (rows are asked for in increasing order): `width * channels` samples.
+    pub(crate) fn row(&mut self, path: &Path, y: usize) -> Result<&[f32]> {
+        if y >= self.y0 + self.held || y < self.y0 {
+            self.read_block_row(path, y / self.block.1)?;
+        }
+        let n = self.width * self.channels();
+        let at = (y - self.y0) * n;
+        Ok(&self.rows[at..at + n])
+    }
+
+    /// Reads and decodes the blocks of block row `r`.
+    fn read_block_row(&mut self, path: &Path, r: usize) -> Result<()> {
+        let eerr = |e: exr::error::Error| exr_err(path, e);
+        let (bw, bh) = self.block;
+        let y0 = r * bh;
+        let held = bh.min(self.height - y0);
+        let k = self.channels();
+        self.rows.clear();
+        self.rows.resize(self.width * held * k, 0.0);
+        let across = self.width.div_ceil(bw);
+        for x in 0..across {
+            self.file
+                .seek_to(self.offsets[r * across + x])
+                .map_err(|e| Error::read(path, e))?;
+            let chunk = exr::block::chunk::Chunk::read(&mut self.file, &self.meta).map_err(eerr)?;
+            let block = exr::block::UncompressedBlock::decompress_chunk(chunk, &self.meta, false)
+                .map_err(eerr)?;
+            let want = (x * bw, y0, bw.min(self.width - x * bw), held);
+            let got = &block.index;
+            if got.layer != self.part
+                || got.level.x() != 0
+                || got.level.y() != 0
+                || (
+                    got.pixel_position.x(),
+                    got.pixel_position.y(),
+                    got.pixel_size.width(),
+                    got.pixel_size.height(),
+                ) != want
+            {
+                return Err(Error::decode(
+                    path,
+                    format!(
+                        "the EXR offset table's block at ({}, {y0}) points at another block",
+                        x * bw
+                    ),
+                ));
+            }
+            self.layout
+                .copy(&block, (self.width, self.height), &mut self.rows, y0)
+                .map_err(eerr)?;
+        }
+        self.y0 = y0;
+        self.held = held;
+        Ok(())
+    }
+}
+
+/// A buffered file that knows its position, so that reading blocks stored one after the
+/// other (as most files store them) costs no seek.
+struct Positioned {
+    inner: std::io::BufReader<std::fs::File>,
+    /// The position, once known.
+    pos: Option<u64>,
+}
+
+impl Positioned {
+    /// Moves to byte `offset`: within the buffer or not at all when it can.
+    fn seek_to(&mut self, offset: u64) -> std::io::Result<()> {
+        use std::io::Seek;
+        match self.pos {
+            Some(p) if p == offset => {}
+            Some(p) if offset > p && offset - p < (1 << 20) => {
+                self.inner.seek_relative((offset - p) as i64)?
+            }
+            _ => {
+                self.inner.seek(std::io::SeekFrom::Start(offset))?;
+            }
+        }
+        self.pos = Some(offset);
+        Ok(())
+    }
+}
+
+impl std::io::Read for Positioned {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        match self.inner.read(buf) {
+            Ok(n) => {
+                if let Some(p) = &mut self.pos {
+                    *p += n as u64;
+                }
+                Ok(n)
+            }
+            Err(e) => {
+                self.pos = None;
+                Err(e)
+            }
+        }
+    }
 }
 
 /// Writes named float32 channels (each `w * h`, row-major) to an EXR file, ZIP-compressed

@@ -29,13 +29,14 @@
 //! than what the PNG decoder expands to 8 bits, signed-integer or 32/64-bit integer TIFF,
 //! CMYK or other colour spaces, more than 4 channels. A file is read into memory whole, then
 //! decoded; a decoder that panics on a hostile file is caught and reported as a decode error.
-//! A stack's images are read a band of rows at a time instead (`rows`: PNG row by row, PFM a
-//! band from its file, other formats decoded whole in their own sample type), converted by the
-//! same code (`convert`), to the same samples.
+//! A stack's images are read a band of rows at a time instead (`rows`: PNG row by row; PFM, EXR,
+//! TIFF and HDR from their files a row of their own blocks at a time; JPEG decoded whole in its
+//! 8-bit samples), converted by the same code (`convert`), to the same samples.
 //!
-//! One module per codec: `exr`, `tiff`, `pfm`, `png` (writing), and `image_rs` (PNG, JPEG and
-//! Radiance HDR decoding through the `image` crate); this one holds the common types, the
-//! dispatch by extension and the conversion to linear samples.
+//! One module per codec: `exr`, `tiff`, `pfm`, `png` (writing), `hdr` (Radiance scan lines read
+//! one at a time), and `image_rs` (PNG, JPEG and Radiance HDR decoding through the `image`
+//! crate); this one holds the common types, the dispatch by extension and the conversion to
+//! linear samples.
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
@@ -45,6 +46,7 @@ use crate::error::{Error, Result};
 mod colour;
 mod convert;
 mod exr;
+mod hdr;
 mod image_rs;
 mod pfm;
 mod png;
@@ -62,6 +64,7 @@ pub use pfm::{read_pfm, write_pfm};
 pub(crate) use png::{rgb16_row, write_png, write_png16_rgb_with, PngLayout};
 pub use png::{write_png16_rgb, write_png8_rgb, PngRows};
 pub(crate) use rows::Rows;
+pub use rows::{read_image_grey, GreyBand};
 use tiff::read_tiff;
 
 /// A decoded image: linear samples, row-major (row 0 at the top), channels interleaved.
@@ -223,6 +226,15 @@ pub fn read_image(path: &Path, opts: &DecodeOptions) -> Result<Image> {
 /// The bytes of the image file `path`, bounded ([`crate::read_bounded`]).
 pub(crate) fn read_image_file(path: &Path) -> Result<Vec<u8>> {
     crate::read_bounded(path, "an image file", crate::limits::MAX_IMAGE_FILE_BYTES)
+}
+
+/// The image file `path` opened to be read in parts, checked as [`read_image_file`] checks it
+/// (a regular file of at most the image cap); returns it and its length.
+pub(crate) fn open_image_file(path: &Path) -> Result<(std::fs::File, u64)> {
+    let f =
+        crate::bounded::open_checked(path, "an image file", crate::limits::MAX_IMAGE_FILE_BYTES)?;
+    let len = f.metadata().map_err(|e| Error::read(path, e))?.len();
+    Ok((f, len))
 }
 
 /// Decodes `bytes`, the content of the image file `path` (its extension picks the format; the

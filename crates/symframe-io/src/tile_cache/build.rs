@@ -56,8 +56,8 @@ pub(super) fn create_sized(path: &Path, len: u64) -> Result<File> {
 }
 
 /// What one image of a decoding batch holds in memory while the cache is built: its reader
-/// (a PNG's file and decoder, a PFM's band of stored bytes, or the samples of a format decoded
-/// whole, in the file's type), its band of decoded rows (`width x tile` RGB `f32`), and its
+/// (a PNG's file and decoder, a PFM's band of stored bytes, a row of an EXR's or TIFF's blocks,
+/// an HDR scan line, or a JPEG's samples decoded whole, in the file's type), its band of decoded rows (`width x tile` RGB `f32`), and its
 /// share of the per-thread buffers that assemble a tile's block. `--decode-memory` divided by
 /// it is the batch, so a small file declaring a large image costs its band, not its image.
 pub(super) fn image_cost(img: &StackImage, copts: &CacheOptions) -> usize {
@@ -71,6 +71,31 @@ pub(super) fn image_cost(img: &StackImage, copts: &CacheOptions) -> usize {
             0
         };
     img.resident_bytes(rows) + w * rows * 12 + rayon::current_num_threads() * tile_pixels * assemble
+}
+
+/// How many images a decoding batch may hold open at once: most images (PFM, EXR, TIFF, HDR)
+/// are read from their open file a band at a time, so a batch is at most the process's limit
+/// on open files (`RLIMIT_NOFILE`, the soft one) less 128 for everything else, at least 16 (a
+/// batch of 1,512 EXR images failed with "Too many open files" under the common limit of
+/// 1,024).
+fn open_file_budget() -> usize {
+    #[cfg(unix)]
+    {
+        let mut lim = libc::rlimit {
+            rlim_cur: 0,
+            rlim_max: 0,
+        };
+        // SAFETY: getrlimit writes into the struct we own.
+        if unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) } == 0
+            && lim.rlim_cur != libc::RLIM_INFINITY
+        {
+            return usize::try_from(lim.rlim_cur)
+                .unwrap_or(usize::MAX)
+                .saturating_sub(128)
+                .max(16);
+        }
+    }
+    usize::MAX
 }
 
 /// Refuses a tile size whose band of rows (one row of tiles of one image, decoded) is larger
@@ -141,7 +166,9 @@ pub(super) fn build(
             }
             size_ok(w, h)?;
             check_band(&ds.images[0], w, h, &copts)?;
-            let light_block = (copts.batch_bytes / image_cost(&img, &copts)).clamp(1, n);
+            let light_block = (copts.batch_bytes / image_cost(&img, &copts))
+                .min(open_file_budget())
+                .clamp(1, n);
             first = Some(img);
             let header = Header {
                 width: w,

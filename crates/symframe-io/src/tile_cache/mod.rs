@@ -41,8 +41,9 @@
 //! with a warning in [`CacheInfo::warnings`].
 //!
 //! Memory: a batch of images is read in lockstep, one band of tile rows at a time (each image its
-//! band, in parallel: a PNG decoded row by row from its file's bytes, a PFM read a band at a time
-//! from its file, other formats decoded whole but kept in their file's sample type), and each
+//! band, in parallel: a PNG decoded row by row from its file's bytes; a PFM, EXR, TIFF or HDR read
+//! from its file a row of its own blocks at a time; a JPEG decoded whole but kept in its 8-bit
+//! samples), and each
 //! band's tiles are written into the file with positioned writes from a small per-thread buffer
 //! (the file is not mapped while it is built). A batch holds `batch_bytes` over what one image
 //! costs (its reader, its band of `width x tile` decoded pixels, its share of the per-thread
@@ -336,9 +337,18 @@ impl TileCache {
         if copts.tile == 0 {
             return Err(Error::invalid(dir, "tile size must be positive"));
         }
-        // The mask is one image: a bad one fails here, not after decoding the stack.
+        // The mask is one image: a bad one fails here, not after decoding the stack. Its size
+        // and the first image's are compared from their headers first, so a mask of another
+        // size is never decoded (one declaring 8000 x 8000 float pixels cost 800 MB).
         let mask = match &ds.mask {
             Some(p) => {
+                let header = |q: &Path, o: &DecodeOptions| crate::stack::read_image_size(q, o);
+                if let (Ok(m), Ok(i)) = (
+                    header(p, &DecodeOptions::default()),
+                    header(&ds.images[0], opts),
+                ) {
+                    check_mask_size(p, m, i)?;
+                }
                 let (w, h, _) = read_mask_any_size(p)?;
                 Some((p.as_path(), (w, h)))
             }
@@ -1071,8 +1081,10 @@ mod tests {
             e.contains("mask.png: mask is 3x4 but the images are 4x3"),
             "{e}"
         );
+        // (Refused from the headers, before the cache's folder is made.)
         let files: Vec<_> = fs::read_dir(&dir)
-            .unwrap()
+            .into_iter()
+            .flatten()
             .flatten()
             .filter(|e| e.file_name().to_string_lossy().contains(".stack"))
             .collect();
