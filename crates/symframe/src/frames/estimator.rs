@@ -499,7 +499,7 @@ impl<'a> Estimator<'a> {
             // to it, as with one lobe.
             Some(f) if f.residual >= LOBE_EXPLAINS && self.spiked_diffuse(&fit, None).is_none() => {
                 match fit_lobe_pair(&f, self.rig, lobe) {
-                    Some(p) if self.pair_explains(&p, f.trimmed > 0) => {
+                    Some(p) if self.pair_explains(&p) => {
                         let l = p.as_lobe(|l| self.lobe_has_tangent(l));
                         Some(LobeFit {
                             evals: f.evals + p.evals,
@@ -1118,12 +1118,11 @@ impl<'a> Estimator<'a> {
     /// "Two lobes"): they leave less than [`LOBE_EXPLAINS`], the second lobe is significant
     /// (an F test), and what they leave at every light (cast shadows included) is at the model
     /// floor ([`MODEL_FLOOR`]) or looks like independent noise ([`NOISE_LIKE_Z`]), not like a
-    /// material they do not describe; where the lobe fit left cast shadows out (`shadowed`),
-    /// only the floor counts (the shadow's edge, not the material, would be what is left).
-    fn pair_explains(&self, p: &LobePair, shadowed: bool) -> bool {
+    /// material they do not describe.
+    fn pair_explains(&self, p: &LobePair) -> bool {
         p.residual < LOBE_EXPLAINS
             && p.significant()
-            && (p.residual_everywhere < MODEL_FLOOR || (p.structure < NOISE_LIKE_Z && !shadowed))
+            && (p.residual_everywhere < MODEL_FLOOR || p.structure < NOISE_LIKE_Z)
     }
 
     /// Whether a fitted lobe is elongated enough for a tangent, and wide enough for the rig to

@@ -564,7 +564,7 @@ const COAT_START_SHARE: f64 = 0.3;
 const BROAD_START: f64 = 0.3;
 
 /// Fits two lobes sharing one frame to the samples the last [`super::fit_lobe`] on `scratch`
-/// searched (call it right after, for the same pixel and `rig`), from the one lobe `single` it fitted: the
+/// chose (those it left out as cast shadows included) (call it right after, for the same pixel and `rig`), from the one lobe `single` it fitted: the
 /// second lobe starts crossed (the first's widths swapped: a woven cross), as a sharp round
 /// coat, and as a broad round lobe; the best fit is kept. `None` where the samples are too few.
 pub fn fit_lobe_pair(single: &LobeFit, rig: &Rig, scratch: &mut LobeScratch) -> Option<LobePair> {
@@ -575,8 +575,17 @@ pub fn fit_lobe_pair(single: &LobeFit, rig: &Rig, scratch: &mut LobeScratch) -> 
         pair,
         greys,
         residuals,
+        fine_lights,
+        coarse_lights,
         ..
     } = scratch;
+    // The samples the one lobe left out as cast shadows are read again: under a coat they are
+    // the coat's or the base's, which the pair may explain; a real cast shadow it cannot, and
+    // it is then not accepted.
+    if single.trimmed > 0 {
+        fine.gather(fine_lights, lights, halfways, greys);
+        coarse.gather(coarse_lights, lights, halfways, greys);
+    }
     // As for one lobe: where the whole subset is at least twice the coarse one (dense rigs),
     // the starts are searched on the coarse subset to a looser tolerance and the best is
     // polished on the whole.
