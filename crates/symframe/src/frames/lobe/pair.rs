@@ -189,6 +189,20 @@ struct Geometry {
     lb: f64,
 }
 
+impl Geometry {
+    /// The projections of light `l` and halfway vector `h` on `model`'s frame, `nl` given.
+    fn of(model: &Model, nl: f64, l: DVec3, h: DVec3) -> Self {
+        Self {
+            nl,
+            hn: model.normal.dot(h),
+            ht: model.t.dot(h),
+            hb: model.b.dot(h),
+            lt: model.t.dot(l),
+            lb: model.b.dot(l),
+        }
+    }
+}
+
 /// A lobe's value at a lit sample and the derivatives of its logarithm with respect to the
 /// frame's rotations about `(t, b, n)`, its `ln a_t`, `ln a_b` and `ln k`; zero where the
 /// halfway vector is (nearly) behind the normal. The one-lobe model's formulas
@@ -261,14 +275,7 @@ impl Model {
         if nl <= 0.0 {
             return None;
         }
-        let g = Geometry {
-            nl,
-            hn: self.normal.dot(h),
-            ht: self.t.dot(h),
-            hb: self.b.dot(h),
-            lt: self.t.dot(l),
-            lb: self.b.dot(l),
-        };
+        let g = Geometry::of(self, nl, l, h);
         let f = s.fresnel(i);
         let (la, da) = lobe(&g, &self.lobes[0], self.shape);
         let (lb, db) = lobe(&g, &self.lobes[1], self.shape);
@@ -702,14 +709,7 @@ fn residual_structure(
                 if !y.is_finite() || nl <= 0.0 {
                     return f64::NAN;
                 }
-                let g = Geometry {
-                    nl,
-                    hn: model.normal.dot(h),
-                    ht: model.t.dot(h),
-                    hb: model.b.dot(h),
-                    lt: model.t.dot(l),
-                    lb: model.b.dot(l),
-                };
+                let g = Geometry::of(model, nl, l, h);
                 let fr = super::kernel::schlick(h);
                 let la = lobe(&g, &model.lobes[0], model.shape).0;
                 let lb = lobe(&g, &model.lobes[1], model.shape).0;
@@ -743,27 +743,10 @@ fn residual_structure(
 mod tests {
     use super::*;
     use crate::brdf::{Brdf, Ggx, Layered, Woven};
+    use crate::frames::lobe::tests::slice;
     use crate::frames::lobe::{fit_lobe, LobeStart};
     use crate::frames::rig::{uniform_cone_lights, Rig, RigOptions};
     use crate::geometry::tangent_basis;
-
-    /// The slice of `brdf` at a pixel of frame `(n, t)` under `rig` (view `+z`), RGB.
-    fn slice(rig: &Rig, brdf: &dyn Brdf, n: DVec3, t: DVec3) -> Vec<f32> {
-        let b = n.cross(t);
-        let to_local = |v: DVec3| DVec3::new(v.dot(t), v.dot(b), v.dot(n));
-        let view = to_local(DVec3::Z);
-        rig.lights_in_camera()
-            .iter()
-            .flat_map(|&l| {
-                let nl = l.dot(n);
-                if nl > 0.0 {
-                    brdf.eval(to_local(l), view).map(|c| (c * nl) as f32)
-                } else {
-                    [0.0; 3]
-                }
-            })
-            .collect()
-    }
 
     fn fits(rig: &Rig, brdf: &dyn Brdf, n: DVec3, t: DVec3) -> (LobeFit, LobePair) {
         let samples = slice(rig, brdf, n, t);
