@@ -503,20 +503,32 @@ const MICROFACET: [bool; P] = [true, true, true, true, true, true, false];
 const FORESHORTENING_FLOOR: f64 = 1e-6;
 
 /// Solves `a x = b` for a symmetric positive definite `a` (Cholesky); `None` if it is not.
+fn solve_spd<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
+    (cholesky_solve(&mut a, &mut b, N, |_| 0.0) && b.iter().all(|v| v.is_finite())).then_some(b)
+}
+
+/// Solves `a x = b` over the leading `n` x `n` block of `a` by Cholesky, in place (`b` becomes
+/// `x`, `a` its factor); false where the `j`-th pivot is NaN or at most `floor(j)` (the block is
+/// not positive definite, or too near singular). The two-lobe fit's active-set solves share it.
 // Index loops: the triangular recurrences read clearer as the textbook's indices.
 #[allow(clippy::needless_range_loop)]
-fn solve_spd<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
-    for j in 0..N {
+fn cholesky_solve<const N: usize>(
+    a: &mut [[f64; N]; N],
+    b: &mut [f64; N],
+    n: usize,
+    floor: impl Fn(usize) -> f64,
+) -> bool {
+    for j in 0..n {
         let mut d = a[j][j];
         for k in 0..j {
             d -= a[j][k] * a[j][k];
         }
-        if d.is_nan() || d <= 0.0 {
-            return None;
+        if d.is_nan() || d <= floor(j) {
+            return false;
         }
         let d = d.sqrt();
         a[j][j] = d;
-        for i in j + 1..N {
+        for i in j + 1..n {
             let mut v = a[i][j];
             for k in 0..j {
                 v -= a[i][k] * a[j][k];
@@ -524,21 +536,21 @@ fn solve_spd<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f
             a[i][j] = v / d;
         }
     }
-    for i in 0..N {
+    for i in 0..n {
         let mut v = b[i];
         for k in 0..i {
             v -= a[i][k] * b[k];
         }
         b[i] = v / a[i][i];
     }
-    for i in (0..N).rev() {
+    for i in (0..n).rev() {
         let mut v = b[i];
-        for k in i + 1..N {
+        for k in i + 1..n {
             v -= a[k][i] * b[k];
         }
         b[i] = v / a[i][i];
     }
-    b.iter().all(|v| v.is_finite()).then_some(b)
+    true
 }
 
 /// Whether a gain in the sum of squares is too small to go on for: below [`RELATIVE_GAIN`] of

@@ -21,8 +21,8 @@ use crate::frames::rig::Rig;
 
 use super::kernel::Subset;
 use super::{
-    negligible, solve_spd, LobeFit, LobeScratch, ALPHA_RANGE, MAX_ITERATIONS, RELATIVE_GAIN,
-    SHAPE_RANGE,
+    cholesky_solve, negligible, solve_spd, LobeFit, LobeScratch, ALPHA_RANGE, MAX_ITERATIONS,
+    RELATIVE_GAIN, SHAPE_RANGE,
 };
 
 /// Number of linear coefficients: the diffuse term and each lobe's two Fresnel terms.
@@ -305,35 +305,8 @@ fn solve_members(g: &[[f64; C]; C], p: &[f64; C], members: &[usize]) -> Option<[
         }
         x[r] = p[i];
     }
-    for j in 0..n {
-        let mut d = a[j][j];
-        for k in 0..j {
-            d -= a[j][k] * a[j][k];
-        }
-        if d.is_nan() || d <= 1e-12 * g[members[j]][members[j]] {
-            return None;
-        }
-        let d = d.sqrt();
-        a[j][j] = d;
-        for i in j + 1..n {
-            let mut v = a[i][j];
-            for k in 0..j {
-                v -= a[i][k] * a[j][k];
-            }
-            a[i][j] = v / d;
-        }
-    }
-    for i in 0..n {
-        for k in 0..i {
-            x[i] -= a[i][k] * x[k];
-        }
-        x[i] /= a[i][i];
-    }
-    for i in (0..n).rev() {
-        for k in i + 1..n {
-            x[i] -= a[k][i] * x[k];
-        }
-        x[i] /= a[i][i];
+    if !cholesky_solve(&mut a, &mut x, n, |j| 1e-12 * g[members[j]][members[j]]) {
+        return None;
     }
     let mut out = [0.0; C];
     for (r, &i) in members.iter().enumerate() {
