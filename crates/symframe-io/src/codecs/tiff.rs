@@ -16,21 +16,22 @@ pub(super) fn interleave<T: Copy>(v: Vec<T>, ch: usize) -> Vec<T> {
         .collect()
 }
 
-/// Decodes a TIFF (8/16-bit unsigned or 16/32/64-bit float; grey, grey+alpha, RGB or RGBA);
-/// returns its ICC profile too, when it has one.
-pub(super) fn read_tiff(path: &Path, bytes: &[u8]) -> Result<(RawImage, Option<Vec<u8>>)> {
-    use tiff::decoder::{Decoder, DecodingResult};
-    use tiff::tags::Tag;
-    use tiff::ColorType;
-    let terr = |e| tiff_err(path, e);
+/// A TIFF decoder over `reader` with the crate's decoding-buffer limit.
+fn decoder<R: std::io::Read + std::io::Seek>(
+    path: &Path,
+    reader: R,
+) -> Result<tiff::decoder::Decoder<R>> {
     let mut lim = tiff::decoder::Limits::default();
     lim.decoding_buffer_size = limits::MAX_DECODED_BYTES as usize;
-    let mut dec = Decoder::new(std::io::Cursor::new(bytes))
-        .map_err(terr)?
-        .with_limits(lim);
-    let (w, h) = dec.dimensions().map_err(terr)?;
-    limits::check_image_size(path, "TIFF header", w as u64, h as u64, bytes.len() as u64)?;
-    let ct = dec.colortype().map_err(terr)?;
+    Ok(tiff::decoder::Decoder::new(reader)
+        .map_err(|e| tiff_err(path, e))?
+        .with_limits(lim))
+}
+
+/// The channels and bits per sample of a TIFF colour type the readers take (grey, grey+alpha,
+/// RGB or RGBA, of 8, 16, 32 or 64 bits); an error naming `path` for any other.
+fn layout(path: &Path, ct: tiff::ColorType) -> Result<(usize, u8)> {
+    use tiff::ColorType;
     let (channels, bits) = match ct {
         ColorType::Gray(b) => (1, b),
         ColorType::GrayA(b) => (2, b),
@@ -46,6 +47,19 @@ pub(super) fn read_tiff(path: &Path, bytes: &[u8]) -> Result<(RawImage, Option<V
     if ![8, 16, 32, 64].contains(&bits) {
         return Err(Error::unsupported(path, format!("{bits}-bit TIFF")));
     }
+    Ok((channels, bits))
+}
+
+/// Decodes a TIFF (8/16-bit unsigned or 16/32/64-bit float; grey, grey+alpha, RGB or RGBA);
+/// returns its ICC profile too, when it has one.
+pub(super) fn read_tiff(path: &Path, bytes: &[u8]) -> Result<(RawImage, Option<Vec<u8>>)> {
+    use tiff::decoder::DecodingResult;
+    use tiff::tags::Tag;
+    let terr = |e| tiff_err(path, e);
+    let mut dec = decoder(path, std::io::Cursor::new(bytes))?;
+    let (w, h) = dec.dimensions().map_err(terr)?;
+    limits::check_image_size(path, "TIFF header", w as u64, h as u64, bytes.len() as u64)?;
+    let (channels, bits) = layout(path, dec.colortype().map_err(terr)?)?;
     let planar = matches!(
         dec.find_tag_unsigned::<u16>(Tag::PlanarConfiguration),
         Ok(Some(2))
@@ -146,34 +160,13 @@ impl TiffRows {
         len: u64,
         check: &dyn Fn((usize, usize)) -> Result<()>,
     ) -> Result<(Self, Option<Vec<u8>>)> {
-        use tiff::decoder::Decoder;
         use tiff::tags::Tag;
-        use tiff::ColorType;
         let terr = |e| tiff_err(path, e);
-        let mut lim = tiff::decoder::Limits::default();
-        lim.decoding_buffer_size = limits::MAX_DECODED_BYTES as usize;
-        let mut dec = Decoder::new(std::io::BufReader::new(file))
-            .map_err(terr)?
-            .with_limits(lim);
+        let mut dec = decoder(path, std::io::BufReader::new(file))?;
         let (w, h) = dec.dimensions().map_err(terr)?;
         check((w as usize, h as usize))?;
         limits::check_image_size(path, "TIFF header", w as u64, h as u64, len)?;
-        let ct = dec.colortype().map_err(terr)?;
-        let (channels, bits) = match ct {
-            ColorType::Gray(b) => (1, b),
-            ColorType::GrayA(b) => (2, b),
-            ColorType::RGB(b) => (3, b),
-            ColorType::RGBA(b) => (4, b),
-            other => {
-                return Err(Error::unsupported(
-                    path,
-                    format!("TIFF colour type {other:?} (expected grey or RGB)"),
-                ))
-            }
-        };
-        if ![8, 16, 32, 64].contains(&bits) {
-            return Err(Error::unsupported(path, format!("{bits}-bit TIFF")));
-        }
+        let (channels, bits) = layout(path, dec.colortype().map_err(terr)?)?;
         let planar = channels > 1
             && matches!(
                 dec.find_tag_unsigned::<u16>(Tag::PlanarConfiguration),
