@@ -534,6 +534,26 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
                 ..EstimatorParams::default()
             };
             let ours = estimate_stack(&stack, &rig, mask, params, &|_| {})?;
+            if let Ok(dir) = std::env::var("SYMFRAME_CAPTURE_DUMP") {
+                let gt = scene.gt_normals();
+                let mut out = String::new();
+                for p in 0..scene.n_pixels() {
+                    if let (true, Some(n), Some(g)) =
+                        (scene.mask[p], vec_at(&ours.normals, p), vec_at(&gt, p))
+                    {
+                        if g.z >= 0.5 {
+                            out += &format!(
+                                "{p}\t{:.4}\t{:.4}\t{}\n",
+                                n.angle_between(g).to_degrees(),
+                                ours.confidence[p],
+                                ours.source[p]
+                            );
+                        }
+                    }
+                }
+                let name = format!("{}_{}_{}_{}", mat.name, sweep, c, rig_name).replace(' ', "-");
+                std::fs::write(format!("{dir}/{name}.tsv"), out).ok();
+            }
             let mut cells = vec![cell(&scene, &ours, &gt_t, mat.anisotropic)];
             for b in [Baseline::HighlightCentroid, Baseline::MaxReflectance] {
                 let maps = estimate_stack_baseline(&stack, &known, mask, b, &|_| {})?;

@@ -982,14 +982,20 @@ impl<'a> Estimator<'a> {
             None
         };
 
-        let confidence = self.confidence(slice, n, &term_n, sd_n + sd_nt + sd_nb);
+        // Confidence: how sure the slice's symmetry is of the answer, whichever rule gave it
+        // (docs/method.md, "Confidence").
+        let (sd, e) = self.symmetry_sd(objective, n, cosine, &term_n);
+        evals += e;
+        let coverage = self.coverage(slice, n, &term_n);
+        let confidence = (coverage * within_confident(sd)) as f32;
         // A search that doubts its own answer (cast shadows that break the slice's symmetry, a
         // lobe cut by the rig's reach) gives way to a lobe fit that nearly explains the
         // samples, within the reach (measured on shadowed bumps, such pixels with a lobe
         // leaving 0.2-0.5%: rough GGX metal under 500 lights, the search 5.4 degrees mean off
-        // and the lobe 3.3; satin under 200 lights 2.9 and 1.0; where the search's confidence
-        // is higher it is the better of the two).
-        if source == PixelSource::Symmetry && (confidence as f64) < SEARCH_DOUBTFUL {
+        // and the lobe 3.3; satin under 200 lights 2.9 and 1.0; where the search's quality is
+        // higher it is the better of the two).
+        let quality = coverage / (1.0 + (sd_n + sd_nt + sd_nb) / SYMMETRY_SCALE);
+        if source == PixelSource::Symmetry && quality < SEARCH_DOUBTFUL {
             let plausible = fitted.filter(|f| {
                 f.residual < LOBE_PLAUSIBLE
                     && f.normal.z > 0.0
@@ -1046,14 +1052,7 @@ impl<'a> Estimator<'a> {
             tangent,
             alpha: [1.2 * r, 0.8 * r],
         };
-        fit_lobe(
-            slice,
-            rig.lights_in_camera(),
-            rig.halfway_in_camera(),
-            rig.query_order(),
-            start,
-            scratch,
-        )
+        fit_lobe(slice, rig, start, scratch)
     }
 
     /// The estimate of a pixel the lobe `f` explains (its normal within the rig's reach): the
@@ -1069,7 +1068,8 @@ impl<'a> Estimator<'a> {
     ) -> PixelEstimate {
         let anisotropy = f.elongation();
         let tangent = (self.params.tangents && self.lobe_has_tangent(f)).then_some(f.tangent);
-        let confidence = self.confidence(slice, f.normal, term_n, f.residual);
+        let confidence =
+            (self.coverage(slice, f.normal, term_n) * within_confident(f.normal_sd)) as f32;
         let status = self.status_of(confidence);
         let keep = status == PixelStatus::Estimated;
         // The tangent's confidence is the data's, as for the search: how much more symmetric
@@ -1154,11 +1154,10 @@ impl<'a> Estimator<'a> {
         }
     }
 
-    /// Confidence from the residual and the share of the pixel's signal inside the normal's
-    /// symmetry domain (docs/method.md, "Confidence"): low where the domain covers little of the
-    /// measured slice (normals near the rig's reach), and where the slice is not symmetric
-    /// (shadows, interreflections, noise).
-    fn confidence(&self, slice: &[f32], n: DVec3, term_n: &SymmetryTerm, residual: f64) -> f32 {
+    /// The share of the pixel's cosine-weighted signal inside the normal's symmetry domain,
+    /// relative to a quarter and capped at 1 (docs/method.md, "Confidence"): low where the
+    /// domain covers little of the measured slice (normals near the rig's reach).
+    fn coverage(&self, slice: &[f32], n: DVec3, term_n: &SymmetryTerm) -> f64 {
         let mut total = 0.0;
         for (s, l) in slice.chunks_exact(3).zip(self.rig.lights_in_camera()) {
             let nl = n.dot(*l);
@@ -1168,15 +1167,114 @@ impl<'a> Estimator<'a> {
                     + nl * nl * (s[2] as f64).powi(2);
             }
         }
-        let coverage = if total > 0.0 {
+        if total > 0.0 {
             (term_n.denominator / total / 0.25).min(1.0)
         } else {
             0.0
-        };
-        let fit = 1.0 / (1.0 + residual / 0.02);
-        (coverage * fit) as f32
+        }
+    }
+
+    /// The standard deviation (radians, both tilts) of a normal `n` as the slice's symmetry
+    /// judges it, and the evaluations spent (docs/method.md, "Confidence"): the symmetry
+    /// distance `SD_n` on a 3 x 3 stencil around `n` ([`SD_STENCIL_DEG`] apart) fitted by a
+    /// quadratic with gradient `g` and Hessian `H`; the scatter of the slice about its symmetry
+    /// (what the quadratic's minimum leaves, per independent pair of lights) through `H`,
+    /// `2 f_min / (count / 2 - 2) tr(H^-1)`, plus the squared offset `|H^-1 g|` of that
+    /// minimum from `n` (where the slice is more symmetric about another normal than about the
+    /// one given). Infinite where the stencil has no minimum.
+    fn symmetry_sd<O: Objective>(
+        &self,
+        objective: &O,
+        n: DVec3,
+        cosine: CosineMode,
+        term_n: &SymmetryTerm,
+    ) -> (f64, u32) {
+        let r = SD_STENCIL_DEG.to_radians();
+        let (u, w) = tangent_basis(n);
+        let chart = |x: f64, y: f64| (n + x * u + y * w).normalize();
+        let mut f = [[0.0f64; 3]; 3];
+        for (i, row) in f.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = if (i, j) == (1, 1) {
+                    term_n.distance(self.min_domain)
+                } else {
+                    let (x, y) = ((i as f64 - 1.0) * r, (j as f64 - 1.0) * r);
+                    self.normal_distance(objective, chart(x, y), cosine, Level::Full)
+                };
+            }
+        }
+        let evals = 8;
+        if f.iter()
+            .flatten()
+            .any(|v| *v >= EMPTY_DISTANCE || !v.is_finite())
+        {
+            return (f64::INFINITY, evals);
+        }
+        // Least-squares quadratic on the symmetric 3x3 stencil (orthogonal basis: closed form).
+        let col = |i: usize| f[i][0] + f[i][1] + f[i][2];
+        let row = |j: usize| f[0][j] + f[1][j] + f[2][j];
+        let gx = (col(2) - col(0)) / (6.0 * r);
+        let gy = (row(2) - row(0)) / (6.0 * r);
+        let hxx = (col(2) - 2.0 * col(1) + col(0)) / (3.0 * r * r);
+        let hyy = (row(2) - 2.0 * row(1) + row(0)) / (3.0 * r * r);
+        let hxy = (f[2][2] - f[2][0] - f[0][2] + f[0][0]) / (4.0 * r * r);
+        let det = hxx * hyy - hxy * hxy;
+        let pairs = term_n.count as f64 / 2.0 - 2.0;
+        if hxx <= 0.0 || det <= 0.0 || pairs < 1.0 {
+            return (f64::INFINITY, evals);
+        }
+        // The quadratic's minimum: its offset from n and its value.
+        let dx = -(hyy * gx - hxy * gy) / det;
+        let dy = -(hxx * gy - hxy * gx) / det;
+        let f_min = (f[1][1] + 0.5 * (gx * dx + gy * dy)).max(0.0);
+        let variance = 2.0 * f_min / pairs * (hxx + hyy) / det;
+        // The distance's own roughness: what the quadratic leaves at the nine points (three
+        // degrees of freedom; the piecewise-linear reconstruction's kinks, noise) is noise on
+        // the gradient, `var(g) = s^2 / (6 r^2)` per axis, moving the minimum by `H^-1 g`.
+        let mut rss = 0.0;
+        for (i, row) in f.iter().enumerate() {
+            for (j, v) in row.iter().enumerate() {
+                let (x, y) = ((i as f64 - 1.0) * r, (j as f64 - 1.0) * r);
+                let c = (col(0) + col(1) + col(2)) / 9.0 - (hxx + hyy) * r * r / 3.0;
+                let q = c + gx * x + gy * y + 0.5 * (hxx * x * x + hyy * y * y) + hxy * x * y;
+                rss += (v - q).powi(2);
+            }
+        }
+        let var_g = rss / 3.0 / (6.0 * r * r);
+        // tr(H^-1 var_g I H^-1) = var_g |H^-1|_F^2.
+        let inv_frob2 = (hxx * hxx + hyy * hyy + 2.0 * hxy * hxy) / (det * det);
+        let roughness = var_g * inv_frob2;
+        ((dx * dx + dy * dy + variance + roughness).sqrt(), evals)
     }
 }
+
+/// The angle (degrees) confidence is about: a pixel's confidence is the probability that its
+/// normal is within this of the truth.
+pub const CONFIDENT_WITHIN_DEG: f64 = 1.0;
+
+/// The probability that a normal whose error is a two-dimensional normal variable of total
+/// standard deviation `sd` (radians) is within [`CONFIDENT_WITHIN_DEG`] of the truth:
+/// `1 - exp(-a^2 / sd^2)` (the error's squared length over half its variance is chi-square
+/// with two degrees of freedom).
+fn within_confident(sd: f64) -> f64 {
+    if !sd.is_finite() {
+        return 0.0;
+    }
+    let a = CONFIDENT_WITHIN_DEG.to_radians();
+    if sd <= 0.0 {
+        1.0
+    } else {
+        1.0 - (-(a / sd).powi(2)).exp()
+    }
+}
+
+/// The spacing (degrees) of the stencil the symmetry's judgement of a normal reads
+/// ([`Estimator::symmetry_sd`]): the polish's.
+const SD_STENCIL_DEG: f64 = POLISH_RADIUS_DEG;
+
+/// The symmetry distance at which the search's own quality `coverage / (1 + SD / scale)` has
+/// halved: the search doubts its answer below [`SEARCH_DOUBTFUL`].
+const SYMMETRY_SCALE: f64 = 0.02;
 
 /// A lobe fit that leaves less than this share of the pixel's energy unexplained is the
 /// pixel's answer ([`PixelSource::Lobe`]); one that leaves more is no evidence, and the
@@ -1209,7 +1307,8 @@ const SPIKED_DIFFUSE_FIT: f64 = 0.999;
 /// ...and the most samples that fit may leave out as the spike's (share of those it considered).
 const SPIKE_SHARE: f64 = 0.05;
 
-/// A symmetry answer with a confidence below this is doubtful: a lobe fit that leaves less than
+/// A symmetry answer whose quality (coverage times `1 / (1 + SD / SYMMETRY_SCALE)`, the
+/// confidence before the noise-aware one) is below this is doubtful: a lobe fit that leaves less than
 /// [`LOBE_PLAUSIBLE`] of the energy unexplained answers instead.
 const SEARCH_DOUBTFUL: f64 = 0.1;
 
@@ -1521,4 +1620,21 @@ pub fn check_inputs(
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn confidence_is_the_chance_of_being_within_a_degree() {
+        let deg = 1f64.to_radians();
+        assert_eq!(within_confident(0.0), 1.0);
+        assert_eq!(within_confident(f64::INFINITY), 0.0);
+        // sd = 1 degree: 1 - 1/e; 0.9 at sd = 1 / sqrt(ln 10) degrees.
+        assert!((within_confident(deg) - (1.0 - (-1f64).exp())).abs() < 1e-12);
+        let sd90 = deg / 10f64.ln().sqrt();
+        assert!((within_confident(sd90) - 0.9).abs() < 1e-12);
+        assert!(within_confident(2.0 * deg) < within_confident(deg));
+    }
 }

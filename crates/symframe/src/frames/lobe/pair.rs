@@ -21,8 +21,8 @@ use crate::frames::rig::Rig;
 
 use super::kernel::Subset;
 use super::{
-    cholesky_solve, negligible, solve_spd, LobeFit, LobeScratch, ALPHA_RANGE, MAX_ITERATIONS,
-    RELATIVE_GAIN, SHAPE_RANGE,
+    cholesky_solve, negligible, solve_spd, tilt_sd, LobeFit, LobeScratch, ALPHA_RANGE,
+    MAX_ITERATIONS, RELATIVE_GAIN, SHAPE_RANGE,
 };
 
 /// Number of linear coefficients: the diffuse term and each lobe's two Fresnel terms.
@@ -62,6 +62,9 @@ pub struct LobePair {
     /// unexplained: unlike [`LobePair::residual`] (over the fitted samples, cast shadows
     /// trimmed) it counts the samples the fit left out.
     pub residual_everywhere: f64,
+    /// Standard deviation of the shared normal (radians) the samples' scatter about the pair
+    /// leaves, as [`LobeFit::normal_sd`].
+    pub normal_sd: f64,
     /// Model evaluations used.
     pub evals: u32,
 }
@@ -114,6 +117,7 @@ impl LobePair {
                 fresnel: 0.0,
                 residual: self.residual,
                 trimmed: 0,
+                normal_sd: self.normal_sd,
                 evals: self.evals,
             }
         };
@@ -621,6 +625,15 @@ pub fn fit_lobe_pair(single: &LobeFit, rig: &Rig, scratch: &mut LobeScratch) -> 
     let s: &Subset = fine;
     // Each lobe's share of the modelled energy.
     let model = Model::of(&state);
+    // The normal's uncertainty from the Gauss-Newton system at the answer (the terms
+    // recomputed there: the buffer may hold another start's).
+    let normal_sd = {
+        let at = project(&model, s, syy, &mut pair[0]);
+        let (jtj, _) = normal_equations(&at, s, &pair[0]);
+        evals += 2;
+        let parameters = P + members(at.set).1;
+        tilt_sd(&jtj, at.cost, s.len() as f64 - parameters as f64)
+    };
     let c = linear.coefficients;
     let mut energy = [0.0f64; 2];
     for i in 0..s.len() {
@@ -651,6 +664,7 @@ pub fn fit_lobe_pair(single: &LobeFit, rig: &Rig, scratch: &mut LobeScratch) -> 
         samples: s.len(),
         structure,
         residual_everywhere,
+        normal_sd,
         evals,
     })
 }
@@ -730,15 +744,7 @@ mod tests {
             tangent: t,
             alpha: [0.2, 0.1],
         };
-        let single = fit_lobe(
-            &samples,
-            rig.lights_in_camera(),
-            rig.halfway_in_camera(),
-            rig.query_order(),
-            start,
-            &mut scratch,
-        )
-        .unwrap();
+        let single = fit_lobe(&samples, rig, start, &mut scratch).unwrap();
         let pair = fit_lobe_pair(&single, rig, &mut scratch).unwrap();
         (single, pair)
     }
