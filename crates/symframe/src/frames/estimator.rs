@@ -320,18 +320,8 @@ impl<'a> Estimator<'a> {
         if f.iter().flatten().any(|v| *v >= EMPTY_DISTANCE) {
             return (chart(best.1, best.2), 9);
         }
-        // Least-squares quadratic on the symmetric 3x3 stencil (orthogonal basis: closed form).
-        let col = |i: usize| f[i][0] + f[i][1] + f[i][2];
-        let row = |j: usize| f[0][j] + f[1][j] + f[2][j];
-        let gx = (col(2) - col(0)) / (6.0 * r);
-        let gy = (row(2) - row(0)) / (6.0 * r);
-        let hxx = (col(2) - 2.0 * col(1) + col(0)) / (3.0 * r * r);
-        let hyy = (row(2) - 2.0 * row(1) + row(0)) / (3.0 * r * r);
-        let hxy = (f[2][2] - f[2][0] - f[0][2] + f[0][0]) / (4.0 * r * r);
-        let det = hxx * hyy - hxy * hxy;
-        if hxx > 0.0 && det > 0.0 {
-            let x = -(hyy * gx - hxy * gy) / det;
-            let y = -(hxx * gy - hxy * gx) / det;
+        let q = StencilQuadratic::of(&f, r);
+        if let Some([x, y]) = q.minimum() {
             if x.abs() <= 1.5 * r && y.abs() <= 1.5 * r {
                 return (chart(x, y), 9);
             }
@@ -1211,22 +1201,18 @@ impl<'a> Estimator<'a> {
         {
             return (f64::INFINITY, evals);
         }
-        // Least-squares quadratic on the symmetric 3x3 stencil (orthogonal basis: closed form).
-        let col = |i: usize| f[i][0] + f[i][1] + f[i][2];
-        let row = |j: usize| f[0][j] + f[1][j] + f[2][j];
-        let gx = (col(2) - col(0)) / (6.0 * r);
-        let gy = (row(2) - row(0)) / (6.0 * r);
-        let hxx = (col(2) - 2.0 * col(1) + col(0)) / (3.0 * r * r);
-        let hyy = (row(2) - 2.0 * row(1) + row(0)) / (3.0 * r * r);
-        let hxy = (f[2][2] - f[2][0] - f[0][2] + f[0][0]) / (4.0 * r * r);
-        let det = hxx * hyy - hxy * hxy;
+        let q = StencilQuadratic::of(&f, r);
         let pairs = term_n.count as f64 / 2.0 - 2.0;
-        if hxx <= 0.0 || det <= 0.0 || pairs < 1.0 {
+        let Some([dx, dy]) = q.minimum().filter(|_| pairs >= 1.0) else {
             return (f64::INFINITY, evals);
-        }
-        // The quadratic's minimum: its offset from n and its value.
-        let dx = -(hyy * gx - hxy * gy) / det;
-        let dy = -(hxx * gy - hxy * gx) / det;
+        };
+        let StencilQuadratic {
+            c,
+            g: [gx, gy],
+            h: [hxx, hyy, hxy],
+        } = q;
+        let det = hxx * hyy - hxy * hxy;
+        // The quadratic's minimum value, and the scatter it stands for through the curvature.
         let f_min = (f[1][1] + 0.5 * (gx * dx + gy * dy)).max(0.0);
         let variance = 2.0 * f_min / pairs * (hxx + hyy) / det;
         // The distance's own roughness: what the quadratic leaves at the nine points (three
@@ -1236,9 +1222,8 @@ impl<'a> Estimator<'a> {
         for (i, row) in f.iter().enumerate() {
             for (j, v) in row.iter().enumerate() {
                 let (x, y) = ((i as f64 - 1.0) * r, (j as f64 - 1.0) * r);
-                let c = (col(0) + col(1) + col(2)) / 9.0 - (hxx + hyy) * r * r / 3.0;
-                let q = c + gx * x + gy * y + 0.5 * (hxx * x * x + hyy * y * y) + hxy * x * y;
-                rss += (v - q).powi(2);
+                let fitted = c + gx * x + gy * y + 0.5 * (hxx * x * x + hyy * y * y) + hxy * x * y;
+                rss += (v - fitted).powi(2);
             }
         }
         let var_g = rss / 3.0 / (6.0 * r * r);
@@ -1246,6 +1231,43 @@ impl<'a> Estimator<'a> {
         let inv_frob2 = (hxx * hxx + hyy * hyy + 2.0 * hxy * hxy) / (det * det);
         let roughness = var_g * inv_frob2;
         ((dx * dx + dy * dy + variance + roughness).sqrt(), evals)
+    }
+}
+
+/// The least-squares quadratic `c + g.x + x^T H x / 2` through a function's values `f[i][j]`
+/// at `((i - 1) r, (j - 1) r)` on a 3 x 3 stencil (an orthogonal basis there: closed form).
+#[derive(Debug, Clone, Copy)]
+struct StencilQuadratic {
+    c: f64,
+    g: [f64; 2],
+    /// `H_xx`, `H_yy`, `H_xy`.
+    h: [f64; 3],
+}
+
+impl StencilQuadratic {
+    fn of(f: &[[f64; 3]; 3], r: f64) -> Self {
+        let col = |i: usize| f[i][0] + f[i][1] + f[i][2];
+        let row = |j: usize| f[0][j] + f[1][j] + f[2][j];
+        let hxx = (col(2) - 2.0 * col(1) + col(0)) / (3.0 * r * r);
+        let hyy = (row(2) - 2.0 * row(1) + row(0)) / (3.0 * r * r);
+        Self {
+            c: (col(0) + col(1) + col(2)) / 9.0 - (hxx + hyy) * r * r / 3.0,
+            g: [(col(2) - col(0)) / (6.0 * r), (row(2) - row(0)) / (6.0 * r)],
+            h: [
+                hxx,
+                hyy,
+                (f[2][2] - f[2][0] - f[0][2] + f[0][0]) / (4.0 * r * r),
+            ],
+        }
+    }
+
+    /// The offset of the minimum from the stencil's centre; `None` where `H` is not positive
+    /// definite.
+    fn minimum(&self) -> Option<[f64; 2]> {
+        let ([gx, gy], [hxx, hyy, hxy]) = (self.g, self.h);
+        let det = hxx * hyy - hxy * hxy;
+        (hxx > 0.0 && det > 0.0)
+            .then(|| [-(hyy * gx - hxy * gy) / det, -(hxx * gy - hxy * gx) / det])
     }
 }
 
