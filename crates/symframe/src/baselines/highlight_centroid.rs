@@ -8,8 +8,8 @@ use crate::geometry::halfway_from_light;
 use crate::maps::PixelStatus;
 
 /// Smallest elongation of the highlight for the highlight-centroid baseline to report a
-/// tangent (the estimator's own rule, [`crate::frames::estimator::MIN_ELONGATION`]).
-const CENTROID_MIN_ELONGATION: f64 = crate::frames::estimator::MIN_ELONGATION;
+/// tangent (the estimator's own rule, [`crate::frames::policy::MIN_ELONGATION`]).
+const CENTROID_MIN_ELONGATION: f64 = crate::frames::policy::MIN_ELONGATION;
 
 /// The highlight-centroid baseline at one pixel: the normal is the intensity-weighted mean of
 /// the halfway vectors of the samples at or above half the brightest grey value, the tangent

@@ -17,7 +17,8 @@ use crate::frames::lobe::{fit_lobe, fit_lobe_pair, LobeFit, LobePair, LobeScratc
 use crate::frames::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::frames::optim::{nelder_mead, NelderMeadOptions};
 use crate::frames::policy::{
-    has_tangent, tangent_confidence, LobeAxis, TangentEvidence, TangentSettings,
+    has_tangent, tangent_confidence, LobeAxis, PolicySettings, TangentEvidence, TangentSettings,
+    DEFAULT_MIN_ANISOTROPY,
 };
 use crate::frames::rig::Rig;
 use crate::frames::symmetry::{
@@ -155,8 +156,8 @@ pub struct Estimator<'a> {
     rig: &'a Rig,
     params: EstimatorParams,
     min_domain: u32,
-    /// The tangent decision's settings, `min_anisotropy` from the parameters.
-    tangent_policy: TangentSettings,
+    /// The choice of answer's settings (the tangent's `min_anisotropy` from the parameters).
+    policy: PolicySettings,
 }
 
 impl<'a> Estimator<'a> {
@@ -169,9 +170,12 @@ impl<'a> Estimator<'a> {
             rig,
             params,
             min_domain,
-            tangent_policy: TangentSettings {
-                min_anisotropy: params.min_anisotropy as f64,
-                ..TangentSettings::default()
+            policy: PolicySettings {
+                tangent: TangentSettings {
+                    min_anisotropy: params.min_anisotropy as f64,
+                    ..TangentSettings::default()
+                },
+                ..PolicySettings::default()
             },
         }
     }
@@ -346,18 +350,18 @@ impl<'a> Estimator<'a> {
     }
 
     /// The normal of a diffuse pixel's robust Lambertian fit, when the fit explains the samples
-    /// (uncentred R^2 at least [`DIFFUSE_CENTRE_FIT`]) and leaves less than
-    /// [`AUTO_SPECULAR_SHARE`] of the well-lit signal's energy unexplained (`share`, the
+    /// (uncentred R^2 at least [`DiffuseSettings::centre_fit`]) and leaves less than
+    /// [`DiffuseSettings::specular_share`] of the well-lit signal's energy unexplained (`share`, the
     /// [`unexplained_share`] at the fit's normal).
     fn diffuse_centre(&self, fit: &BaselinePixel, share: Option<f64>) -> Option<DVec3> {
         fit.normal
-            .filter(|_| fit.confidence as f64 >= DIFFUSE_CENTRE_FIT)
-            .filter(|_| share.is_some_and(|s| s < AUTO_SPECULAR_SHARE))
+            .filter(|_| fit.confidence as f64 >= self.policy.diffuse.centre_fit)
+            .filter(|_| share.is_some_and(|s| s < self.policy.diffuse.specular_share))
     }
 
     /// The normal of a diffuse pixel whose specular spike the rig undersamples: no lobe explains
     /// the samples, and the robust Lambertian fit explains all but a few of them nearly exactly
-    /// (uncentred R^2 at least [`SPIKED_DIFFUSE_FIT`], at most [`SPIKE_SHARE`] of the samples it
+    /// (uncentred R^2 at least [`DiffuseSettings::spiked_fit`], at most [`DiffuseSettings::spike_share`] of the samples it
     /// considered left out as outliers: the spike's). Such a slice is symmetric about the
     /// Lambertian normal but for the spike's few samples, which mislead the search (measured:
     /// GGX plastic `alpha` 0.02 on shadowed bumps under 200 lights, 14-20 degrees off where the
@@ -368,13 +372,13 @@ impl<'a> Estimator<'a> {
         }
         let left_out = fit.considered.saturating_sub(fit.used) as f64;
         fit.normal.filter(|_| {
-            fit.confidence as f64 >= SPIKED_DIFFUSE_FIT
-                && left_out <= SPIKE_SHARE * fit.considered as f64
+            fit.confidence as f64 >= self.policy.diffuse.spiked_fit
+                && left_out <= self.policy.diffuse.spike_share * fit.considered as f64
         })
     }
 
     /// The search's answer `found`, unless one of `starts` has a clearly lower `SD_n` on the full
-    /// level (below [`JUDGE_MARGIN`] times it):
+    /// level (below [`SearchSettings::judge_margin`] times it):
     /// then the coarse levels misled the search (a lobe narrower than their spacing is aliased
     /// there), and a full-level search from the best start decides. The result never has a
     /// higher full-level distance than the best start.
@@ -399,7 +403,7 @@ impl<'a> Estimator<'a> {
         // Only a clear win counts: near-ties would make the outcome hang on rounding (the fast
         // and reference paths must take the same branch), and a misled search ends several
         // times above its start.
-        if best.1 == found || best.0 >= JUDGE_MARGIN * at_found {
+        if best.1 == found || best.0 >= self.policy.search.judge_margin * at_found {
             return (found, evals);
         }
         let (m, e) = self.search_normal(objective, best.1, cosine, Level::Full, 0.02, 80);
@@ -455,10 +459,10 @@ impl<'a> Estimator<'a> {
         let share = fit
             .normal
             .filter(|_| auto)
-            .map(|n| unexplained_share(self.rig, slice, n));
+            .map(|n| unexplained_share(self.rig, slice, n, self.policy.shadows.min_cosine));
         // A pixel its Lambertian fit explains to the noise floor has no lobe to find.
-        let pure_diffuse = fit.confidence as f64 >= DIFFUSE_CENTRE_FIT
-            && share.is_some_and(|s| s < PURE_DIFFUSE_SHARE);
+        let pure_diffuse = fit.confidence as f64 >= self.policy.diffuse.centre_fit
+            && share.is_some_and(|s| s < self.policy.diffuse.pure_share);
         // The lobe's model has no clip: a censored sample tells it nothing it can fit (copied
         // only where a lobe is fitted).
         let lobe_slice = match self
@@ -488,7 +492,10 @@ impl<'a> Estimator<'a> {
         let fitted = match fitted {
             // A pixel the Lambertian fit explains but for a spike the rig undersamples is left
             // to it, as with one lobe.
-            Some(f) if f.residual >= LOBE_EXPLAINS && self.spiked_diffuse(&fit, None).is_none() => {
+            Some(f)
+                if f.residual >= self.policy.lobe.explains
+                    && self.spiked_diffuse(&fit, None).is_none() =>
+            {
                 match fit_lobe_pair(&f, self.rig, lobe) {
                     Some(p) if self.pair_explains(&p) => {
                         let l = p.as_lobe(|l| self.lobe_has_tangent(l));
@@ -506,7 +513,10 @@ impl<'a> Estimator<'a> {
         // without the coat's samples (those at or above the highlight level of the brightest),
         // is the evidence of the base's elongation and axes.
         let base = match (fitted, moments) {
-            (Some(f), Some(m)) if m.count <= SHARP_LOBE_SAMPLES && f.residual >= LOBE_PLAUSIBLE => {
+            (Some(f), Some(m))
+                if m.count <= self.policy.lobe.sharp_samples
+                    && f.residual >= self.policy.lobe.plausible =>
+            {
                 base_input.clear();
                 base_input.extend_from_slice(lobe_slice);
                 let max = greys
@@ -556,7 +566,7 @@ impl<'a> Estimator<'a> {
         let lights = self.rig.lights_in_camera();
         let Some(n) = fit
             .normal
-            .filter(|_| fit.confidence as f64 >= SHADOW_DIFFUSE_FIT)
+            .filter(|_| fit.confidence as f64 >= self.policy.shadows.diffuse_fit)
         else {
             return false;
         };
@@ -582,7 +592,9 @@ impl<'a> Estimator<'a> {
         for (s, l) in out.chunks_exact_mut(3).zip(lights) {
             let nl = n.dot(*l);
             let v = (s[0] + s[1] + s[2]) as f64;
-            if nl >= SHADOW_MIN_COSINE && v < SHADOW_FRACTION * albedo * nl {
+            if nl >= self.policy.shadows.min_cosine
+                && v < self.policy.shadows.fraction * albedo * nl
+            {
                 s.fill(f32::NAN);
                 marked = true;
             }
@@ -609,8 +621,8 @@ impl<'a> Estimator<'a> {
         // holds within reach), then the diffuse term, then the highlight.
         let diffuse = lambert
             .normal
-            .filter(|_| lambert.confidence as f64 >= FALLBACK_DIFFUSE_FIT);
-        // A lobe that explains the pixel ([`LOBE_EXPLAINS`]) answers unless a diffuse term
+            .filter(|_| lambert.confidence as f64 >= self.policy.fallback.diffuse_fit);
+        // A lobe that explains the pixel ([`LobeSettings::explains`]) answers unless a diffuse term
         // explains it nearly as well; one that does not still answers where it explains it
         // much better than the diffuse term: the joint model's normal is the diffuse term's
         // too, without the bias the unmodelled highlight's tails give the Lambertian fit
@@ -618,10 +630,12 @@ impl<'a> Estimator<'a> {
         // a lobe left 0.6-0.7% unexplained and was 1.6-3.1 degrees off; the Lambertian
         // fallback 7.5-11 degrees).
         let lobe = lobe.filter(|f| f.normal.z > 0.0).and_then(|f| {
-            let over_diffuse = diffuse.and(share).map(|s| LOBE_OVER_DIFFUSE * s);
-            let explains = f.residual < LOBE_EXPLAINS;
+            let over_diffuse = diffuse
+                .and(share)
+                .map(|s| self.policy.lobe.over_diffuse * s);
+            let explains = f.residual < self.policy.lobe.explains;
             let confidence = if explains {
-                1.0 - f.residual / LOBE_EXPLAINS
+                1.0 - f.residual / self.policy.lobe.explains
             } else {
                 1.0 - f.residual / over_diffuse?
             };
@@ -633,18 +647,18 @@ impl<'a> Estimator<'a> {
             (Some((f, confidence)), _) => (
                 PixelSource::Lobe,
                 f.normal,
-                FALLBACK_CONFIDENCE * confidence.max(0.0) as f32,
+                self.policy.fallback.confidence * confidence.max(0.0) as f32,
             ),
             (None, Some(n)) => (
                 PixelSource::Lambertian,
                 n,
-                FALLBACK_CONFIDENCE * lambert.confidence,
+                self.policy.fallback.confidence * lambert.confidence,
             ),
             (None, None) => match moments {
                 Some(m) if m.normal.z > 0.0 => (
                     PixelSource::Highlight,
                     m.normal,
-                    FALLBACK_CONFIDENCE * m.contrast as f32,
+                    self.policy.fallback.confidence * m.contrast as f32,
                 ),
                 _ => return e,
             },
@@ -672,7 +686,7 @@ impl<'a> Estimator<'a> {
     ) -> PixelEstimate {
         let Lobes { fitted, base } = lobes;
         let rig = self.rig;
-        let lobe = fitted.filter(|f| f.residual < LOBE_EXPLAINS);
+        let lobe = fitted.filter(|f| f.residual < self.policy.lobe.explains);
         // Start: the halfway vector of the brightest sample (docs/method.md, "The search"). The
         // brightest light itself is also tried: for diffuse surfaces it is the better guess.
         let mut brightest = None;
@@ -714,13 +728,13 @@ impl<'a> Estimator<'a> {
         // samples: the piecewise-linear slice cannot be symmetric about its centre, while a
         // log-quadratic reconstruction of the lobe is, about its peak (docs/method.md, "Sharp
         // lobes").
-        let sharp = moments.is_some_and(|m| m.count <= SHARP_LOBE_SAMPLES);
+        let sharp = moments.is_some_and(|m| m.count <= self.policy.lobe.sharp_samples);
         let sharp_peak =
             if self.params.cosine == CosineMode::Auto && diffuse_centre.is_none() && sharp {
                 // Where a diffuse part explains the samples once the spike is left out (a plastic),
                 // it locates the normal from every lit light; otherwise (a metal) the peak does.
                 match fit.normal {
-                    Some(m) if fit.confidence as f64 >= DIFFUSE_CENTRE_FIT => {
+                    Some(m) if fit.confidence as f64 >= self.policy.diffuse.centre_fit => {
                         Some((m, PixelSource::Lambertian))
                     }
                     _ => highlight_peak(slice, rig.lights_in_camera())
@@ -732,7 +746,7 @@ impl<'a> Estimator<'a> {
         // A lobe explains a pixel a diffuse term explains too only where it leaves much less
         // unexplained: a broad lobe passes the diffuse test, and biases the Lambertian normal.
         let lobe = lobe.filter(|f| match diffuse_centre.and(share) {
-            Some(s) => f.residual < LOBE_OVER_DIFFUSE * s,
+            Some(s) => f.residual < self.policy.lobe.over_diffuse * s,
             None => true,
         });
         // Nor where it barely improves on the robust Lambertian fit alone (the lobe model
@@ -740,8 +754,8 @@ impl<'a> Estimator<'a> {
         // centre is off at all it is far off (measured on the shadowed satin bumps: no diffuse
         // part, 0.5 wide, 30-35 degrees from normals the Lambertian fit finds to 2 degrees).
         let impersonated = lobe.is_some_and(|f| {
-            fit.confidence as f64 >= DIFFUSE_CENTRE_FIT
-                && f.residual >= LOBE_OVER_DIFFUSE * (1.0 - fit.confidence as f64)
+            fit.confidence as f64 >= self.policy.diffuse.centre_fit
+                && f.residual >= self.policy.lobe.over_diffuse * (1.0 - fit.confidence as f64)
         });
         let (lobe, diffuse_centre) = if impersonated {
             (None, fit.normal)
@@ -794,7 +808,8 @@ impl<'a> Estimator<'a> {
                 n = m;
             }
             let diffuse = self.params.cosine == CosineMode::Auto
-                && unexplained_share(rig, slice, n) < AUTO_SPECULAR_SHARE;
+                && unexplained_share(rig, slice, n, self.policy.shadows.min_cosine)
+                    < self.policy.diffuse.specular_share;
             let refine = match self.params.cosine {
                 CosineMode::Compensated(p) => Some(CosineMode::Compensated(p)),
                 CosineMode::Auto => (!diffuse).then_some(CosineMode::Compensated(0.0)),
@@ -938,7 +953,8 @@ impl<'a> Estimator<'a> {
         // lights) the highlight's moments are the coat's, round; the lobe fitted to the
         // samples is the broad base's (the coat is too narrow to pull it), and its elongation,
         // where the rig resolves it, is the base's.
-        let moments_elongated = moments.is_some_and(|m| m.has_tangent(MIN_ELONGATION))
+        let moments_elongated = moments
+            .is_some_and(|m| m.has_tangent(self.policy.tangent.min_moment_elongation))
             || (sharp && base.or(fitted).is_some_and(|f| self.lobe_has_tangent(&f)));
         let b = n.cross(t);
         let evidence = TangentEvidence {
@@ -947,7 +963,7 @@ impl<'a> Estimator<'a> {
             axes: [t, b],
             lobes: [fitted, base].map(|f| f.map(|f| self.lobe_axis(&f))),
         };
-        let tangent = if self.params.tangents && has_tangent(&self.tangent_policy, &evidence) {
+        let tangent = if self.params.tangents && has_tangent(&self.policy.tangent, &evidence) {
             // Which of the two symmetry axes is the tangent (the wider highlight's): the
             // fitted lobe's or the highlight's wide axis where they are elongated (they
             // read every sample of the highlight, its clipped plateau included), else the
@@ -958,7 +974,7 @@ impl<'a> Estimator<'a> {
                 .map(|f| f.tangent)
                 .or_else(|| {
                     moments
-                        .filter(|m| m.has_tangent(MIN_ELONGATION))
+                        .filter(|m| m.has_tangent(self.policy.tangent.min_moment_elongation))
                         .map(|m| m.tangent)
                 });
             let swap = match wide {
@@ -985,10 +1001,10 @@ impl<'a> Estimator<'a> {
         // leaving 0.2-0.5%: rough GGX metal under 500 lights, the search 5.4 degrees mean off
         // and the lobe 3.3; satin under 200 lights 2.9 and 1.0; where the search's quality is
         // higher it is the better of the two).
-        let quality = coverage / (1.0 + (sd_n + sd_nt + sd_nb) / SYMMETRY_SCALE);
-        if source == PixelSource::Symmetry && quality < SEARCH_DOUBTFUL {
+        let quality = coverage / (1.0 + (sd_n + sd_nt + sd_nb) / self.policy.search.symmetry_scale);
+        if source == PixelSource::Symmetry && quality < self.policy.search.doubtful {
             let plausible = fitted.filter(|f| {
-                f.residual < LOBE_PLAUSIBLE
+                f.residual < self.policy.lobe.plausible
                     && f.normal.z > 0.0
                     && centre_observed(rig, objective, f.normal)
             });
@@ -1017,7 +1033,7 @@ impl<'a> Estimator<'a> {
             anisotropy: anisotropy as f32,
             tangent_confidence: match tangent {
                 Some(_) if keep => {
-                    tangent_confidence(&self.tangent_policy, &evidence, f_min, f_max)
+                    tangent_confidence(&self.policy.tangent, &evidence, f_min, f_max)
                 }
                 _ => 0.0,
             },
@@ -1083,7 +1099,7 @@ impl<'a> Estimator<'a> {
                     lobes: [Some(self.lobe_axis(f)), None],
                 };
                 let c = tangent_confidence(
-                    &self.tangent_policy,
+                    &self.policy.tangent,
                     &evidence,
                     at(t),
                     at((t + b).normalize()),
@@ -1106,14 +1122,15 @@ impl<'a> Estimator<'a> {
     }
 
     /// Whether two lobes sharing a frame explain a pixel one lobe does not (docs/method.md,
-    /// "Two lobes"): they leave less than [`LOBE_EXPLAINS`], the second lobe is significant
+    /// "Two lobes"): they leave less than [`LobeSettings::explains`], the second lobe is significant
     /// (an F test), and what they leave at every light (cast shadows included) is at the model
-    /// floor ([`MODEL_FLOOR`]) or looks like independent noise ([`NOISE_LIKE_Z`]), not like a
+    /// floor ([`LobeSettings::model_floor`]) or looks like independent noise ([`LobeSettings::noise_like_z`]), not like a
     /// material they do not describe.
     fn pair_explains(&self, p: &LobePair) -> bool {
-        p.residual < LOBE_EXPLAINS
+        p.residual < self.policy.lobe.explains
             && p.significant()
-            && (p.residual_everywhere < MODEL_FLOOR || p.structure < NOISE_LIKE_Z)
+            && (p.residual_everywhere < self.policy.lobe.model_floor
+                || p.structure < self.policy.lobe.noise_like_z)
     }
 
     /// Whether a fitted lobe is elongated enough for a tangent, and wide enough for the rig to
@@ -1121,9 +1138,10 @@ impl<'a> Estimator<'a> {
     /// a ratio of 2); the rig tells a lobe's shape only where its long axis spans several
     /// lights (narrower, it reads as elongated or round by where the lights happen to be).
     fn lobe_has_tangent(&self, f: &LobeFit) -> bool {
-        let threshold =
-            LOBE_MIN_ELONGATION * self.params.min_anisotropy as f64 / DEFAULT_MIN_ANISOTROPY as f64;
-        let resolved = f.full_width().atan() >= TANGENT_MIN_SPACINGS * self.rig.halfway_spacing();
+        let threshold = self.policy.lobe.min_elongation * self.params.min_anisotropy as f64
+            / DEFAULT_MIN_ANISOTROPY as f64;
+        let resolved = f.full_width().atan()
+            >= self.policy.lobe.resolved_spacings * self.rig.halfway_spacing();
         f.elongation() >= threshold && resolved
     }
 
@@ -1295,51 +1313,6 @@ fn within_confident(sd: f64) -> f64 {
 /// ([`Estimator::symmetry_sd`]): the polish's.
 const SD_STENCIL_DEG: f64 = POLISH_RADIUS_DEG;
 
-/// The symmetry distance at which the search's own quality `coverage / (1 + SD / scale)` has
-/// halved: the search doubts its answer below [`SEARCH_DOUBTFUL`].
-const SYMMETRY_SCALE: f64 = 0.02;
-
-/// A lobe fit that leaves less than this share of the pixel's energy unexplained is the
-/// pixel's answer ([`PixelSource::Lobe`]); one that leaves more is no evidence, and the
-/// symmetry search decides. Measured on noise-free renders, fits of lobes in the family leave
-/// below 1e-4, and shot noise of 5,000 photons at full scale about as much; a lobe outside the
-/// family fits it with a shifted centre and leaves more: Ashikhmin-Shirley's
-/// (`1 / (h.v max(n.l, n.v))` is not symmetric about the normal) leaves 0.2-1% with normals
-/// 3-15 degrees off, where the search is within 1 degree. The lobe fit retries its other
-/// starts until one leaves less than this.
-pub(crate) const LOBE_EXPLAINS: f64 = 0.002;
-
-/// What a fit of lobes that describe a noise-free material leaves (share of the energy):
-/// noise-free fits of lobes in the family leave below 1e-4 (docs/method.md, "Lobe fit"). Above
-/// it, two lobes explain a pixel only where their residuals look like independent noise.
-const MODEL_FLOOR: f64 = 1e-4;
-
-/// The z score of the neighbouring lights' residual correlation ([`LobePair::structure`]) up
-/// to which the residuals look like independent noise: the one-sided 0.1% point of the normal
-/// distribution. Higher: more pixels whose residuals keep a smooth misfit are explained.
-const NOISE_LIKE_Z: f64 = 3.09;
-
-/// A pixel whose Lambertian fit leaves less than this share of its energy unexplained (1%
-/// RMS noise leaves 1e-4) is diffuse: no lobe fit is tried.
-const PURE_DIFFUSE_SHARE: f64 = 1e-4;
-
-/// The robust Lambertian fit's uncentred R^2 from which a pixel is diffuse but for a spike the
-/// rig undersamples ([`Estimator::spiked_diffuse`]).
-const SPIKED_DIFFUSE_FIT: f64 = 0.999;
-
-/// ...and the most samples that fit may leave out as the spike's (share of those it considered).
-const SPIKE_SHARE: f64 = 0.05;
-
-/// A symmetry answer whose quality (coverage times `1 / (1 + SD / SYMMETRY_SCALE)`, the
-/// confidence before the noise-aware one) is below this is doubtful: a lobe fit that leaves less than
-/// [`LOBE_PLAUSIBLE`] of the energy unexplained answers instead.
-const SEARCH_DOUBTFUL: f64 = 0.1;
-
-/// A lobe fit that leaves less than this share of the energy unexplained is a plausible answer
-/// where the search doubts its own (measured: at 1% the lobes leaving 0.5-1% on rough metal
-/// bumps under 200 lights were 9.4 degrees off where the search was 6.1).
-pub(crate) const LOBE_PLAUSIBLE: f64 = 0.005;
-
 /// The lobes fitted to a pixel: the one of all its samples, and under a sharp coat the base's,
 /// fitted without the coat's samples.
 #[derive(Debug, Clone, Copy)]
@@ -1348,78 +1321,20 @@ struct Lobes {
     base: Option<LobeFit>,
 }
 
-/// Where a diffuse term explains a pixel too, the lobe is its answer only if it leaves less
-/// than this share of what the diffuse term leaves unexplained.
-const LOBE_OVER_DIFFUSE: f64 = 0.25;
-
 /// Smallest width the lobe fit starts from (slope units): a highlight of one sample has no
 /// moment to measure it by.
 const LOBE_START_WIDTH: f64 = 0.02;
 
-/// A fitted lobe has a tangent only where its full width at half maximum along the wider axis
-/// spans at least this many halfway spacings of the rig.
-const TANGENT_MIN_SPACINGS: f64 = 1.5;
-
-/// Default smallest symmetry anisotropy for a tangent.
-pub const DEFAULT_MIN_ANISOTROPY: f32 = 0.6;
-
-/// Smallest elongation `(a_t - a_b) / (a_t + a_b)` of a fitted lobe for a tangent at the
-/// default `min_anisotropy` (scaled with it): a ratio of widths of 2 (an isotropic lobe read
-/// through few lights fits below).
-const LOBE_MIN_ELONGATION: f64 = 1.0 / 3.0;
-
-/// A start must have less than this share of the search answer's full-level `SD_n` to
-/// overrule it ([`Estimator::judge_at_full`]).
-const JUDGE_MARGIN: f64 = 0.5;
-
-/// A lobe whose half-maximum region holds at most this many lights
-/// ([`crate::highlight::HighlightMoments::count`]) is narrower than the rig's spacing and is
-/// located by its log-quadratic peak.
-const SHARP_LOBE_SAMPLES: u32 = 2;
-
-/// A diffuse pixel's normal comes from its robust Lambertian fit when the fit explains its
-/// samples this well (uncentred R^2).
-const DIFFUSE_CENTRE_FIT: f64 = 0.99;
-
-/// Cast shadows are looked for only where a robust Lambertian fit explains the pixel this
-/// well (uncentred R^2).
-const SHADOW_DIFFUSE_FIT: f64 = 0.9;
-
-/// A sample is in cast shadow when it is below this fraction of the diffuse level the pixel's
-/// albedo predicts for it...
-const SHADOW_FRACTION: f64 = 0.25;
-
-/// ...and the light is at least this far above the tangent plane (`n.l`), so that a small
-/// error in the fitted normal cannot put a lit sample in shadow.
-const SHADOW_MIN_COSINE: f64 = 0.2;
-
-/// A pixel beyond the rig's reach falls back to a robust Lambertian fit when the fit's
-/// uncentred R^2 is at least this (a diffuse part explains the unshadowed samples).
-pub const FALLBACK_DIFFUSE_FIT: f64 = 0.95;
-
-/// A fallback's confidence is its own goodness of fit times this: never as trusted as a
-/// symmetry estimate.
-pub const FALLBACK_CONFIDENCE: f32 = 0.5;
-
-/// Smallest elongation of the highlight's second moment
-/// ([`crate::frames::highlight::HighlightMoments::elongation`]) for a tangent.
-pub const MIN_ELONGATION: f64 = 0.4;
-
-/// Under [`CosineMode::Auto`], pixels where a Lambertian term leaves at least this share of
-/// the signal's energy unexplained are refined with the compensated measure at `p = 0`; the
-/// others keep the paper's form (docs/method.md, "Default measure").
-pub const AUTO_SPECULAR_SHARE: f64 = 0.005;
-
 /// The share of a pixel's signal energy (over lights with `n.l` at least
-/// [`SHADOW_MIN_COSINE`]: near grazing, shadows the fitted normal cannot tell from light
+/// [`ShadowSettings::min_cosine`]: near grazing, shadows the fitted normal cannot tell from light
 /// decide nothing) that the best Lambertian
 /// term `d (n.l)` with normal `n` (RGB `d >= 0`, least squares) leaves unexplained: 0 for a
 /// diffuse surface, the specular part's share otherwise.
-fn unexplained_share(rig: &Rig, slice: &[f32], n: DVec3) -> f64 {
+fn unexplained_share(rig: &Rig, slice: &[f32], n: DVec3, min_cosine: f64) -> f64 {
     let (mut il, mut ll, mut ii) = ([0.0f64; 3], 0.0f64, 0.0f64);
     for (s, l) in slice.chunks_exact(3).zip(rig.lights_in_camera()) {
         let nl = n.dot(*l);
-        if nl < SHADOW_MIN_COSINE || !s[0].is_finite() {
+        if nl < min_cosine || !s[0].is_finite() {
             continue;
         }
         ll += nl * nl;

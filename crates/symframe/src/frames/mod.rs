@@ -4,7 +4,8 @@
 //! point location), [`slice`](mod@slice) (a pixel's measured BRDF slice, interpolated between
 //! the samples), [`symmetry`] (the symmetry distances), [`objective`] (their reference and fast
 //! implementations), [`highlight`] (the highlight's moments: a start for the search),
-//! [`optim`] (Nelder-Mead), [`policy`] (whether the data determine a tangent, and how surely)
+//! [`optim`] (Nelder-Mead), [`policy`] (the settings of the choice of answer, grouped by rule; whether the data
+//! determine a tangent, and how surely)
 //! and [`estimator`] (the per-pixel search, confidence, anisotropy and fallbacks, and the
 //! whole-stack pipeline).
 

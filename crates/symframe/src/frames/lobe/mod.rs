@@ -324,7 +324,7 @@ const MAX_ITERATIONS: u32 = 60;
 /// A fit leaving more than this share of the energy unexplained is retried from other starts
 /// (the tangent and normal axes swapped, the brightest sample's halfway vector, broad lobes):
 /// the estimator's threshold for a lobe to be the pixel's answer.
-const RETRY_RESIDUAL: f64 = crate::frames::estimator::LOBE_EXPLAINS;
+const RETRY_RESIDUAL: f64 = crate::frames::policy::LOBE_EXPLAINS;
 
 /// Lights of the coarse subset the search runs on: the first of the spread subset's and of the
 /// highlight's (so evenly spread too); the fit is then polished on the whole subset. Measured
