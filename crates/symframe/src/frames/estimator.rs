@@ -1201,18 +1201,32 @@ impl<'a> Estimator<'a> {
         let r = SD_STENCIL_DEG.to_radians();
         let (u, w) = tangent_basis(n);
         let chart = |x: f64, y: f64| (n + x * u + y * w).normalize();
+        // The distance over every light, and over each half of them (the first half of the
+        // query order, evenly spread, and the rest: its terms are sums over the lights).
+        let half = Level::Coarse(objective.queries(Level::Full) / 2);
         let mut f = [[0.0f64; 3]; 3];
-        for (i, row) in f.iter_mut().enumerate() {
-            for (j, v) in row.iter_mut().enumerate() {
-                *v = if (i, j) == (1, 1) {
-                    term_n.distance(self.min_domain)
+        let mut halves = [[[0.0f64; 3]; 3]; 2];
+        for i in 0..3 {
+            for j in 0..3 {
+                let m = chart((i as f64 - 1.0) * r, (j as f64 - 1.0) * r);
+                let full = if (i, j) == (1, 1) {
+                    *term_n
                 } else {
-                    let (x, y) = ((i as f64 - 1.0) * r, (j as f64 - 1.0) * r);
-                    self.normal_distance(objective, chart(x, y), cosine, Level::Full)
+                    objective.normal_term(m, cosine, Level::Full)
                 };
+                let first = objective.normal_term(m, cosine, half);
+                let rest = SymmetryTerm {
+                    numerator: full.numerator - first.numerator,
+                    denominator: full.denominator - first.denominator,
+                    count: full.count - first.count.min(full.count),
+                };
+                let min = self.min_domain / 2;
+                f[i][j] = full.distance(self.min_domain);
+                halves[0][i][j] = first.distance(min);
+                halves[1][i][j] = rest.distance(min);
             }
         }
-        let evals = 8;
+        let evals = 13;
         if f.iter()
             .flatten()
             .any(|v| *v >= EMPTY_DISTANCE || !v.is_finite())
@@ -1248,7 +1262,16 @@ impl<'a> Estimator<'a> {
         // tr(H^-1 var_g I H^-1) = var_g |H^-1|_F^2.
         let inv_frob2 = (hxx * hxx + hyy * hyy + 2.0 * hxy * hxy) / (det * det);
         let roughness = var_g * inv_frob2;
-        ((dx * dx + dy * dy + variance + roughness).sqrt(), evals)
+        // Split half: the minima of the two halves' quadratics differ by twice the full one's
+        // error where the halves are independent (`var(m1 - m2) = 4 var(m)`): an estimate of
+        // its variance that holds whatever each light's noise (light errors, shot noise
+        // rising with the signal), where the curvature's assumes it alike.
+        let split = match halves.map(|h| StencilQuadratic::of(&h, r).minimum()) {
+            [Some([x1, y1]), Some([x2, y2])] => ((x1 - x2).powi(2) + (y1 - y2).powi(2)) / 4.0,
+            _ => f64::INFINITY,
+        };
+        let scatter = (variance + roughness).max(split);
+        ((dx * dx + dy * dy + scatter).sqrt(), evals)
     }
 }
 
