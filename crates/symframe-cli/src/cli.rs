@@ -290,6 +290,11 @@ pub struct EstimateArgs {
     /// Pixels with anisotropy below this get no tangent (NaN): the slice is isotropic.
     #[arg(long, default_value_t = EstimatorParams::default().min_anisotropy)]
     pub min_anisotropy: f32,
+    /// The light directions' uncertainty: the RMS angle in degrees between each light's given
+    /// and true direction, as its calibration reports it. The confidence counts what it moves
+    /// the normals by (default 0: the lights are taken as exact).
+    #[arg(long, default_value_t = 0.0)]
+    pub light_error: f64,
     /// Smallest symmetry domain, in lights, that counts as non-empty (default: 1.5% of the
     /// lights used, at least 6).
     #[arg(long)]

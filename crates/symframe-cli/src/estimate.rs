@@ -27,6 +27,12 @@ fn validate(args: &EstimateArgs) -> Result<()> {
             bail!("{flag} must be in [0, 1], got {v}");
         }
     }
+    if !(0.0..=10.0).contains(&args.light_error) {
+        bail!(
+            "--light-error must be in [0, 10] degrees, got {}",
+            args.light_error
+        );
+    }
     if !(args.saturation > 0.0 && args.saturation <= 1.0) {
         bail!("--saturation must be in (0, 1], got {}", args.saturation);
     }
@@ -73,6 +79,10 @@ pub fn config(args: &EstimateArgs) -> Result<EstimateConfig> {
                 min_domain: args.min_domain,
                 min_confidence: args.min_confidence,
                 min_anisotropy: args.min_anisotropy,
+                noise: symframe::NoiseModel {
+                    light_error_deg: args.light_error,
+                    ..symframe::NoiseModel::default()
+                },
                 tangents: !args.no_tangents,
                 interpolation: if args.reference {
                     Interpolation::Exact

@@ -646,8 +646,17 @@ fn run(
     if let Plan::Symmetry(_, params) = &mut plan {
         // The capture's noise model, unless the caller gave one: its clip level censors the
         // clipped samples (docs/method.md, "Noise model"); report.json records it.
-        if params.noise == symframe::NoiseModel::default() {
-            params.noise = symframe_io::capture_noise(&ds, &config.decode)?;
+        // The lights' uncertainty is the caller's (`--light-error`): the images cannot tell it.
+        let light_error_deg = params.noise.light_error_deg;
+        let told = symframe::NoiseModel {
+            light_error_deg: 0.0,
+            ..params.noise
+        };
+        if told == symframe::NoiseModel::default() {
+            params.noise = symframe::NoiseModel {
+                light_error_deg,
+                ..symframe_io::capture_noise(&ds, &config.decode)?
+            };
         }
     }
     let rig_s = t0.elapsed().as_secs_f64();

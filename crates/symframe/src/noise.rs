@@ -75,6 +75,11 @@ pub struct NoiseModel {
     pub shot: f64,
     /// Read noise: the variance floor.
     pub read: f64,
+    /// The light directions' uncertainty: the RMS angle (degrees) between each light's given
+    /// and true direction, as its calibration reports it (0: taken as exact). The confidence
+    /// reads it (docs/method.md, "Confidence").
+    #[serde(default)]
+    pub light_error_deg: f64,
 }
 
 impl NoiseModel {

@@ -520,7 +520,8 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
             let rig = Rig::new(&known, RigOptions::default())?;
             let mask = Some(&scene.mask[..]);
             // What the decoder tells the estimator: the clip level of integer files, and for
-            // a JPEG its 8-bit sRGB samples (the compression is not known to it).
+            // a JPEG its 8-bit sRGB samples (the compression is not known to it); and what the
+            // lights' calibration reports: their RMS error.
             let params = EstimatorParams {
                 noise: NoiseModel {
                     clip_level: d.saturation,
@@ -529,6 +530,7 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
                         (Some(b), true) => Quantisation::Srgb(b),
                         (Some(b), false) => Quantisation::Linear(b),
                     },
+                    light_error_deg: cond.light_error_deg,
                     ..NoiseModel::default()
                 },
                 ..EstimatorParams::default()

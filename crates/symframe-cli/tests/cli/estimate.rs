@@ -311,12 +311,51 @@ fn empty_and_wrong_size_masks_are_refused() {
 }
 
 #[test]
+fn a_light_error_lowers_the_confidence_and_leaves_the_normals() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (_, lp) = small_dataset(&tmp.path().join("data"), 20, 300, ImageFormat::Png16);
+    let (exact, off) = (tmp.path().join("exact"), tmp.path().join("off"));
+    ok(&estimate(&lp, &exact, &[]));
+    ok(&estimate(&lp, &off, &["--light-error", "2"]));
+    // Recorded beside the noise estimated from the images, which it does not replace.
+    let noise = &report(&off)["parameters"]["noise"];
+    assert_eq!(noise["light_error_deg"], 2.0, "{noise}");
+    assert_eq!(
+        noise["quantisation"],
+        report(&exact)["parameters"]["noise"]["quantisation"]
+    );
+    let read = |dir: &Path, name: &str| read_npy_f32(&dir.join(name)).unwrap().1;
+    let (n0, n1) = (read(&exact, "normals.npy"), read(&off, "normals.npy"));
+    assert!(n0
+        .iter()
+        .zip(&n1)
+        .all(|(a, b)| a == b || (a.is_nan() && b.is_nan())));
+    let (c0, c1) = (read(&exact, "confidence.npy"), read(&off, "confidence.npy"));
+    let mean = |c: &[f32]| {
+        let v: Vec<f64> = c
+            .iter()
+            .filter(|v| v.is_finite())
+            .map(|&v| v as f64)
+            .collect();
+        v.iter().sum::<f64>() / v.len() as f64
+    };
+    // Never higher (NaN where nothing was estimated, in both).
+    assert!(c0
+        .iter()
+        .zip(&c1)
+        .all(|(a, b)| b <= a || (a.is_nan() && b.is_nan())));
+    assert!(mean(&c1) < mean(&c0), "{} {}", mean(&c1), mean(&c0));
+}
+
+#[test]
 fn bad_flags_are_refused() {
     let tmp = tempfile::tempdir().unwrap();
     let lp = breakable(tmp.path());
     let out = tmp.path().join("out");
     let o = estimate(&lp, &out, &["--theta-d-max", "120"]);
     assert_fails_naming(&o, "--theta-d-max", &out);
+    let o = estimate(&lp, &out, &["--light-error=-1"]);
+    assert_fails_naming(&o, "--light-error", &out);
     let o = estimate(Path::new("/no/such/dataset.lp"), &out, &[]);
     assert_fails_naming(&o, "/no/such/dataset.lp", &out);
 }

@@ -501,6 +501,7 @@ impl<'a> Estimator<'a> {
                         let l = p.as_lobe(|l| self.lobe_has_tangent(l));
                         Some(LobeFit {
                             evals: f.evals + p.evals,
+                            light_sd: f.light_sd,
                             ..l
                         })
                     }
@@ -993,6 +994,9 @@ impl<'a> Estimator<'a> {
         // (docs/method.md, "Confidence").
         let (sd, e) = self.symmetry_sd(objective, n, cosine, &term_n);
         evals += e;
+        // The lights' uncertainty moves any reading of the highlight's centre about as much as
+        // it moves the lobe fitted to it (the symmetry cannot turn its rig's lights).
+        let sd = sd.hypot(fitted.map_or(0.0, |f| f.light_sd));
         let coverage = self.coverage(slice, n, &term_n);
         let confidence = (coverage * within_confident(sd)) as f32;
         // A search that doubts its own answer (cast shadows that break the slice's symmetry, a
@@ -1059,7 +1063,8 @@ impl<'a> Estimator<'a> {
             tangent,
             alpha: [1.2 * r, 0.8 * r],
         };
-        fit_lobe(slice, rig, start, scratch)
+        let light_error = self.params.noise.light_error_deg.to_radians();
+        fit_lobe(slice, rig, start, light_error, scratch)
     }
 
     /// The estimate of a pixel the lobe `f` explains (its normal within the rig's reach): the
@@ -1075,8 +1080,8 @@ impl<'a> Estimator<'a> {
     ) -> PixelEstimate {
         let anisotropy = f.elongation();
         let tangent = (self.params.tangents && self.lobe_has_tangent(f)).then_some(f.tangent);
-        let confidence =
-            (self.coverage(slice, f.normal, term_n) * within_confident(f.normal_sd)) as f32;
+        let sd = f.normal_sd.hypot(f.light_sd);
+        let confidence = (self.coverage(slice, f.normal, term_n) * within_confident(sd)) as f32;
         let status = self.status_of(confidence);
         let keep = status == PixelStatus::Estimated;
         // The tangent's confidence is the data's, as for the search: how much more symmetric

@@ -196,6 +196,43 @@ impl Subset {
     }
 }
 
+impl Subset {
+    /// Turns every sample's light by a random angle (each of its two components normal with
+    /// standard deviation `sd / sqrt(2)` radians: `sd` the RMS angle) from the stream `seed`,
+    /// and recomputes its halfway vector and Fresnel weight: the samples as a calibration off
+    /// by `sd` would have placed them.
+    pub(super) fn jitter_lights(&mut self, sd: f64, seed: u64) {
+        let mut state = seed;
+        let mut normal = move || {
+            // splitmix64, then Box-Muller (one of the pair).
+            let mut next = || {
+                state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+                let mut z = state;
+                z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+                z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+                ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+            };
+            let (u1, u2) = (next().max(1e-300), next());
+            (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+        };
+        let s = sd / std::f64::consts::SQRT_2;
+        for i in 0..self.len {
+            let l = self.light(i);
+            let (u, w) = crate::geometry::tangent_basis(l);
+            let moved = (l + u * (s * normal()) + w * (s * normal())).normalize();
+            let h = (moved + DVec3::Z).normalize();
+            for (k, v) in moved.to_array().into_iter().enumerate() {
+                self.l[k][i] = v;
+            }
+            for (k, v) in h.to_array().into_iter().enumerate() {
+                self.h[k][i] = v;
+            }
+            self.fresnel[i] = schlick(h);
+        }
+        self.id = next_id();
+    }
+}
+
 /// Schlick's Fresnel weight `(1 - h.v)^5` of a halfway vector (view `+z`): the lobe's
 /// second basis function is the lobe times it, so that `s1 + s2 (1 - h.v)^5 = s (f0 + (1 - f0)
 /// (1 - h.v)^5)` brightens grazing reflections as a dielectric's Fresnel term does (and

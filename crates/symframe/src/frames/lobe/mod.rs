@@ -81,6 +81,10 @@ pub struct LobeFit {
     /// Standard deviation of the normal (radians, both tilts together) the samples' scatter
     /// about the fit leaves ([`tilt_sd`]); infinite where they do not determine it.
     pub normal_sd: f64,
+    /// Standard deviation of the normal (radians) the lights' own uncertainty gives (0 where
+    /// the lights are taken as exact): how far the fit moves when every light is off by the
+    /// capture's light error at random.
+    pub light_sd: f64,
     /// Model evaluations used.
     pub evals: u32,
 }
@@ -334,6 +338,9 @@ const COARSE_SPREAD: usize = 128;
 /// Highlight lights of the coarse subset (see [`COARSE_SPREAD`]).
 const COARSE_HIGHLIGHT: usize = 128;
 
+/// Draws of the lights' error the lobe fit's [`LobeFit::light_sd`] averages.
+const LIGHT_DRAWS: u64 = 2;
+
 /// Per-thread buffers of [`fit_lobe`], reused from pixel to pixel.
 #[derive(Debug, Clone, Default)]
 pub struct LobeScratch {
@@ -349,7 +356,8 @@ pub struct LobeScratch {
     pair: [Vec<pair::Terms>; 2],
     /// The two-lobe fit's residual at every light.
     residuals: Vec<f64>,
-    /// Every other sample of `fine`: the split-half fit's.
+    /// Every other sample of `fine` (the split-half fit's), or all of them with the lights
+    /// turned (the light error's).
     every: Subset,
 }
 
@@ -754,13 +762,15 @@ fn search_subset(
 }
 
 /// Fits the symmetric lobe model to one pixel: `samples` RGB in `rig` order (NaN = invalid),
-/// from `start` (retried from other starts where it explains the samples poorly). `None` where
+/// from `start` (retried from other starts where it explains the samples poorly); `light_error`
+/// (radians, RMS) is the lights' uncertainty, for [`LobeFit::light_sd`]. `None` where
 /// fewer than eight samples are valid or nothing is lit. Allocation-free once `scratch` has
 /// grown to the rig.
 pub fn fit_lobe(
     samples: &[f32],
     rig: &Rig,
     start: LobeStart,
+    light_error: f64,
     scratch: &mut LobeScratch,
 ) -> Option<LobeFit> {
     let (lights, halfways, spread) = (
@@ -921,6 +931,32 @@ pub fn fit_lobe(
         let split2 = solve_spd(jtj, rhs).map_or(f64::INFINITY, |d| d[0] * d[0] + d[1] * d[1]);
         (sd * sd + split2).sqrt()
     };
+    // The lights' uncertainty: the Gauss-Newton step from the answer with every light of the
+    // whole subset turned at random by the light error, twice (the mean of the two squared
+    // tilts: four degrees of freedom), from a stream the pixel's samples seed.
+    let light_sd = if light_error > 0.0 {
+        let seed = fine_lights.iter().fold(fine.len() as u64, |h, &j| {
+            (h ^ greys[j as usize].to_bits()).wrapping_mul(0x0100_0000_01b3)
+        });
+        let mut sum = 0.0;
+        for draw in 0..LIGHT_DRAWS {
+            every.clone_from(fine);
+            every.jitter_lights(light_error, seed.wrapping_add(draw));
+            buffers.fit(every);
+            let Buffers { lobe, kept, .. } = buffers;
+            let moved = project(&m, every, lobe, kept);
+            let (mut jtj, rhs) = normal_equations(&m, &moved, free, every, kept);
+            evals += 2;
+            let floor = 1e-9 * (0..P).map(|k| jtj[k][k]).sum::<f64>().max(1e-300);
+            for (k, row) in jtj.iter_mut().enumerate() {
+                row[k] += floor;
+            }
+            sum += solve_spd(jtj, rhs).map_or(f64::INFINITY, |d| d[0] * d[0] + d[1] * d[1]);
+        }
+        (sum / LIGHT_DRAWS as f64).sqrt()
+    } else {
+        0.0
+    };
     // The coefficients and the sum of squares from the sums over the whole subset, as the
     // search judged its steps (the last search ran on it).
     let Linear {
@@ -946,6 +982,7 @@ pub fn fit_lobe(
         residual: (cost / syy).clamp(0.0, 1.0),
         trimmed: fine_lights.len() - fine.len(),
         normal_sd,
+        light_sd,
         evals,
     })
 }
@@ -977,7 +1014,7 @@ mod tests {
     }
 
     fn fit(rig: &Rig, samples: &[f32], start: LobeStart) -> LobeFit {
-        fit_lobe(samples, rig, start, &mut LobeScratch::default()).unwrap()
+        fit_lobe(samples, rig, start, 0.0, &mut LobeScratch::default()).unwrap()
     }
 
     fn frame() -> (DVec3, DVec3) {
