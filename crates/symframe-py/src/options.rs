@@ -98,12 +98,14 @@ fn bad(msg: String) -> PyErr {
 }
 
 /// The method and its parameters (`method`, `theta_d_max`, `min_confidence`, `min_anisotropy`,
-/// `min_domain`, `cosine`, `cosine_power`, `fallback`, `no_tangents`, `reference`).
+/// `light_error`, `min_domain`, `cosine`, `cosine_power`, `fallback`, `no_tangents`,
+/// `reference`).
 pub fn method(o: &mut Options) -> PyResult<MethodConfig> {
     let d = EstimatorParams::default();
     let theta_d_max = o.or("theta_d_max", RigOptions::default().theta_d_max_deg)?;
     let min_confidence: f32 = o.or("min_confidence", d.min_confidence)?;
     let min_anisotropy: f32 = o.or("min_anisotropy", d.min_anisotropy)?;
+    let light_error: f64 = o.or("light_error", 0.0)?;
     let min_domain: Option<u32> = o.get("min_domain")?;
     let cosine: String = o.or("cosine", "auto".to_string())?;
     let cosine_power: f64 = o.or("cosine_power", 0.5)?;
@@ -124,6 +126,11 @@ pub fn method(o: &mut Options) -> PyResult<MethodConfig> {
         if !(0.0..=1.0).contains(&v) {
             return Err(bad(format!("{name} must be in [0, 1], got {v}")));
         }
+    }
+    if !(0.0..=10.0).contains(&light_error) {
+        return Err(bad(format!(
+            "light_error must be in [0, 10] degrees, got {light_error}"
+        )));
     }
     if !(0.0..=1.0).contains(&cosine_power) {
         return Err(bad(format!(
@@ -173,6 +180,10 @@ pub fn method(o: &mut Options) -> PyResult<MethodConfig> {
                 min_domain,
                 min_confidence,
                 min_anisotropy,
+                noise: symframe::NoiseModel {
+                    light_error_deg: light_error,
+                    ..d.noise
+                },
                 tangents: !no_tangents,
                 interpolation: if reference {
                     Interpolation::Exact

@@ -71,6 +71,19 @@ def test_options_reach_the_job_as_the_flags_do(capture, cli, tmp_path):
     assert got["report"]["parameters"]["theta_d_max_deg"] == 55
 
 
+def test_light_error_reaches_the_job_and_lowers_the_confidence(capture, cli, tmp_path):
+    cli("estimate", capture, "-o", tmp_path / "cli", "--light-error", "2")
+    got = symframe.estimate_path(capture, tmp_path / "py", light_error=2)
+    assert_same_maps(got, cli_maps(tmp_path / "cli"))
+    assert got["report"]["parameters"]["noise"]["light_error_deg"] == 2
+    exact = symframe.estimate_path(capture, tmp_path / "exact")
+    sure = np.isfinite(exact["confidence"])
+    assert (got["confidence"][sure] <= exact["confidence"][sure]).all()
+    with pytest.raises(ValueError, match=r"light_error must be in \[0, 10\] degrees, got -1"):
+        symframe.estimate(symframe.load(capture).images(), symframe.load(capture).lights,
+                          light_error=-1)
+
+
 def test_in_memory_estimate_equals_the_tiled_job(capture, tmp_path):
     ds = symframe.load(capture)
     calls = []

@@ -111,7 +111,7 @@ def estimate(
     Options (the command line's flags of the method): ``method`` (``"symmetry"``, or a
     baseline: ``"woodham"``, ``"woodham-robust"``, ``"max-reflectance"``,
     ``"highlight-centroid"``), ``theta_d_max``, ``min_confidence``, ``min_anisotropy``,
-    ``min_domain``, ``cosine`` (``"auto"``, ``"cross"``, ``"raw"``, ``"compensated"``),
+    ``light_error`` (the lights' RMS error in degrees: the confidence counts it), ``min_domain``, ``cosine`` (``"auto"``, ``"cross"``, ``"raw"``, ``"compensated"``),
     ``cosine_power``, ``fallback`` (``"auto"``, ``"none"``), ``no_tangents``, ``reference``;
     ``threads`` (worker threads, default all cores).
 
