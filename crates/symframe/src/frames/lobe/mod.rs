@@ -597,6 +597,22 @@ pub(super) fn tilt_sd<const N: usize>(jtj: &[[f64; N]; N], cost: f64, dof: f64) 
     }
 }
 
+/// The squared tilt of the normal in one Gauss-Newton step from `m` over `data` (two passes):
+/// where `data` are the answer's samples changed a little (half of them, their lights turned),
+/// how far the fit would move its normal, to first order. Infinite where the step has no
+/// solution.
+fn tilt_step2(m: &Model, data: &Subset, free: [bool; P], buffers: &mut Buffers) -> f64 {
+    buffers.fit(data);
+    let Buffers { lobe, kept, .. } = buffers;
+    let linear = project(m, data, lobe, kept);
+    let (mut jtj, rhs) = normal_equations(m, &linear, free, data, kept);
+    let floor = 1e-9 * (0..P).map(|k| jtj[k][k]).sum::<f64>().max(1e-300);
+    for (k, row) in jtj.iter_mut().enumerate() {
+        row[k] += floor;
+    }
+    solve_spd(jtj, rhs).map_or(f64::INFINITY, |d| d[0] * d[0] + d[1] * d[1])
+}
+
 /// Whether a gain in the sum of squares is too small to go on for: below [`RELATIVE_GAIN`] of
 /// the cost, or [`ABSOLUTE_GAIN`] of the samples' energy `syy`.
 fn negligible(gain: f64, cost: f64, syy: f64, relative: f64) -> bool {
@@ -919,16 +935,8 @@ pub fn fit_lobe(
         // (two passes over half the samples instead of a fit).
         every.clone_from(fine);
         every.retain(|j| j % 2 == 0);
-        buffers.fit(every);
-        let Buffers { lobe, kept, .. } = buffers;
-        let half = project(&m, every, lobe, kept);
-        let (mut jtj, rhs) = normal_equations(&m, &half, free, every, kept);
-        evals += 1;
-        let floor = 1e-9 * (0..P).map(|k| jtj[k][k]).sum::<f64>().max(1e-300);
-        for (k, row) in jtj.iter_mut().enumerate() {
-            row[k] += floor;
-        }
-        let split2 = solve_spd(jtj, rhs).map_or(f64::INFINITY, |d| d[0] * d[0] + d[1] * d[1]);
+        let split2 = tilt_step2(&m, every, free, buffers);
+        evals += 2;
         (sd * sd + split2).sqrt()
     };
     // The lights' uncertainty: the Gauss-Newton step from the answer with every light of the
@@ -942,16 +950,8 @@ pub fn fit_lobe(
         for draw in 0..LIGHT_DRAWS {
             every.clone_from(fine);
             every.jitter_lights(light_error, seed.wrapping_add(draw));
-            buffers.fit(every);
-            let Buffers { lobe, kept, .. } = buffers;
-            let moved = project(&m, every, lobe, kept);
-            let (mut jtj, rhs) = normal_equations(&m, &moved, free, every, kept);
+            sum += tilt_step2(&m, every, free, buffers);
             evals += 2;
-            let floor = 1e-9 * (0..P).map(|k| jtj[k][k]).sum::<f64>().max(1e-300);
-            for (k, row) in jtj.iter_mut().enumerate() {
-                row[k] += floor;
-            }
-            sum += solve_spd(jtj, rhs).map_or(f64::INFINITY, |d| d[0] * d[0] + d[1] * d[1]);
         }
         (sum / LIGHT_DRAWS as f64).sqrt()
     } else {
