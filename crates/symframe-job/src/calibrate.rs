@@ -717,15 +717,10 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
         .unwrap_or_else(|| "lights".into());
     std::fs::create_dir_all(&lp_dir)
         .with_context(|| format!("{}: cannot create folder", lp_dir.display()))?;
-    let lp_text = format!(
-        "{}\n# symframe calibrate: mirror sphere at ({:.3}, {:.3}), radius {:.3} px ({source}); \
-         x right, y up, z toward the camera; surface toward light\n{}\n",
-        lp_lines.len(),
-        circle.cx,
-        circle.cy,
-        circle.r,
-        lp_lines.join("\n")
-    );
+    // Plain, as the other RTI tools read an `.lp` (RTIBuilder, RTIViewer, relight: a count,
+    // then that many `name x y z` rows, nothing else); the sphere, the conventions and each
+    // image's figures are in the JSON report beside it.
+    let lp_text = format!("{}\n{}\n", lp_lines.len(), lp_lines.join("\n"));
     let (pw, ph, rgb) = picture(&max_image, w, h, &circle, &found, &bad);
     let pic = lp_dir.join(format!("{stem}-highlights.png"));
     symframe_io::write_png_rgb8(&pic, pw, ph, &rgb)?;

@@ -21,17 +21,22 @@ fn run_ok(args: &[&str]) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
-/// `(image file name, direction)` of an `.lp` file.
+/// `(image file name, direction)` of an `.lp` file, read as the other RTI tools read one
+/// (RTIBuilder, RTIViewer, relight): the count on the first line, then exactly that many rows
+/// of `name x y z`; no comments, no blank lines.
 fn read_lp(path: &Path) -> Vec<(String, DVec3)> {
     let text = fs::read_to_string(path).unwrap();
-    let mut lines = text
-        .lines()
-        .map(|l| l.split('#').next().unwrap().trim())
-        .filter(|l| !l.is_empty());
-    let n: usize = lines.next().unwrap().parse().unwrap();
+    assert!(
+        !text.contains('#'),
+        "{}: a comment in\n{text}",
+        path.display()
+    );
+    let mut lines = text.lines();
+    let n: usize = lines.next().unwrap().trim().parse().unwrap();
     let v: Vec<(String, DVec3)> = lines
         .map(|l| {
             let t: Vec<&str> = l.split_whitespace().collect();
+            assert_eq!(t.len(), 4, "{}: row {l:?}", path.display());
             let name = Path::new(t[0])
                 .file_name()
                 .unwrap()
