@@ -146,7 +146,8 @@ fn open_folder(dir: &Path) -> Result<Dataset> {
 fn open_lp(lp: &Path) -> Result<Dataset> {
     let (images, lights) = lights::parse_lp(lp)?;
     let dir = parent_dir(lp);
-    let (intensities, warnings) = lp_intensities(lp, &dir, images.len())?;
+    let (intensities, mut warnings) = lp_intensities(lp, &dir, images.len())?;
+    warnings.extend(convention_warning(lp, &lights));
     Ok(Dataset {
         source: lp.to_path_buf(),
         lights,
@@ -154,6 +155,29 @@ fn open_lp(lp: &Path) -> Result<Dataset> {
         intensities,
         mask: mask_in(&dir)?,
         warnings,
+    })
+}
+
+/// Share of the lights pointing away from the camera (`z < 0`) above which the light file's
+/// convention is doubted: a dome or an arc lights the object from the camera's side; a
+/// symmetric rig whose halfway vectors fill a 65-degree cone (lights to 130 degrees from the
+/// view) has under half of its lights behind; a dome read with its z axis the other way has
+/// nearly all.
+const BEHIND_SHARE: f64 = 0.75;
+
+/// A warning where most of `lights` (read from `path`) point away from the camera: the
+/// commonest convention mix-up (z toward the scene instead of toward the camera) runs without
+/// an error, with the lights that survive the cone mirrored, and normals far off.
+fn convention_warning(path: &Path, lights: &[DVec3]) -> Option<Warning> {
+    let behind = lights.iter().filter(|l| l.z < 0.0).count();
+    (!lights.is_empty() && behind as f64 > BEHIND_SHARE * lights.len() as f64).then(|| Warning {
+        path: path.to_path_buf(),
+        message: format!(
+            "{behind} of {} lights point away from the camera (z < 0): symframe reads x right, \
+             y up, z toward the camera, each light from the object toward the lamp; if this \
+             file's z points into the scene, negate its z column",
+            lights.len()
+        ),
     })
 }
 
@@ -293,13 +317,16 @@ fn open_diligent(dir: &Path, source: &Path) -> Result<Dataset> {
     } else {
         None
     };
+    let warnings = convention_warning(&dirs_path, &lights)
+        .into_iter()
+        .collect();
     Ok(Dataset {
         source: source.to_path_buf(),
         lights,
         images,
         intensities,
         mask: mask_in(dir)?,
-        warnings: Vec::new(),
+        warnings,
     })
 }
 
@@ -319,6 +346,34 @@ mod tests {
 
     fn err_string(r: Result<Dataset>) -> String {
         r.expect_err("expected an error").to_string()
+    }
+
+    #[test]
+    fn lights_pointing_away_from_the_camera_are_warned_about() {
+        let d = tempfile::tempdir().unwrap();
+        touch(d.path(), &["a.png", "b.png", "c.png", "d.png"]);
+        let lp = d.path().join("rig.lp");
+        // A dome read with z the other way: every light behind the object.
+        fs::write(
+            &lp,
+            "4\na.png 0 0.5 -1\nb.png 0.5 0 -1\nc.png 0 -0.5 -1\nd.png -0.5 0 -0.2\n",
+        )
+        .unwrap();
+        let ds = open_dataset(&lp).unwrap();
+        assert_eq!(ds.warnings.len(), 1, "{:?}", ds.warnings);
+        let w = ds.warnings[0].to_string();
+        assert!(
+            w.contains("rig.lp") && w.contains("4 of 4") && w.contains("negate its z"),
+            "{w}"
+        );
+        // The same dome as it should be read: nothing to say; nor with half the lights behind
+        // (a symmetric rig reaching 130 degrees from the view).
+        fs::write(
+            &lp,
+            "4\na.png 0 0.5 1\nb.png 0.5 0 1\nc.png 0 -0.5 -1\nd.png -0.5 0 -0.2\n",
+        )
+        .unwrap();
+        assert!(open_dataset(&lp).unwrap().warnings.is_empty());
     }
 
     #[test]
