@@ -34,6 +34,7 @@ pub fn load_stack_with_warnings(
     on_image: &(dyn Fn() + Sync),
 ) -> Result<(Stack, Vec<Warning>)> {
     check_dataset(ds)?;
+    check_header_sizes(ds, opts)?;
     let n = ds.images.len();
     let notes = Notes::new(n);
     let chunk = 32.max(2 * rayon::current_num_threads());
@@ -277,6 +278,32 @@ pub(crate) fn check_size(
         first_width: first.0,
         first_height: first.1,
     })
+}
+
+/// Bytes of each image the size check before decoding reads ([`check_header_sizes`]): a
+/// header past them (a JPEG with a large EXIF block, a TIFF with its directory at the end) is
+/// left to the decode's own check.
+const SIZE_CHECK_BYTES: u64 = 64 << 10;
+
+/// Compares every image's size, from the first [`SIZE_CHECK_BYTES`] of its file, with the
+/// first image's before any is decoded: one image of another size fails the run at once,
+/// naming it, instead of after the images before it were decoded. A file that cannot be read
+/// or whose header is not in those bytes is left to the decode, which reports it.
+pub fn check_header_sizes(ds: &Dataset, opts: &DecodeOptions) -> Result<()> {
+    let size = |p: &Path| -> Option<(usize, usize)> {
+        let f = std::fs::File::open(p).ok()?;
+        let prefix = crate::read_at_most(f, p, SIZE_CHECK_BYTES).ok()?;
+        crate::codecs::declared_size(p, &prefix, opts).ok()
+    };
+    let Some(first) = ds.images.first().and_then(|p| size(p)) else {
+        return Ok(());
+    };
+    for (i, p) in ds.images.iter().enumerate().skip(1) {
+        if let Some(s) = size(p) {
+            check_size(ds, i, s, first)?;
+        }
+    }
+    Ok(())
 }
 
 /// Files up to this length are read whole at once; of a longer one this much is read first for
