@@ -33,9 +33,10 @@ pub enum Command {
     Estimate(EstimateArgs),
     /// Combine the outputs of `estimate --tiles K/N` shards into the full maps.
     Merge(MergeArgs),
-    /// Fit an anisotropic Ward BRDF per pixel in estimated frames (for relighting and editing).
+    /// Fit a BRDF per pixel in estimated frames: glTF metallic-roughness (the default) or
+    /// anisotropic Ward (for relighting, editing and export).
     Fit(FitArgs),
-    /// Render fitted Ward maps under new lights, optionally edited.
+    /// Render fitted maps (glTF or Ward) under new lights, optionally edited.
     Relight(RelightArgs),
     /// Write one self-contained HTML page that relights a fit in the browser (WebGL2): drag the
     /// light, edit as `relight` does, switch to the maps.
@@ -662,7 +663,7 @@ fn parse_light(s: &str) -> Result<[f64; 3], String> {
 #[derive(Debug, Clone, Args)]
 #[command(group = clap::ArgGroup::new("light-source").required(true).multiple(true).args(["light", "lights"]))]
 pub struct RelightArgs {
-    /// Output folder of `symframe fit` (kd, ks, alpha_t, alpha_b, normals, tangents .npy).
+    /// Output folder of `symframe fit` (its model's maps, normals and tangents .npy).
     pub fit_dir: PathBuf,
     /// Output folder: relit_000.exr (linear) and relit_000.png (tone-mapped) per light.
     #[arg(short, long)]
@@ -706,7 +707,7 @@ pub struct RelightArgs {
 /// Flags of `symframe view`.
 #[derive(Debug, Clone, Args)]
 pub struct ViewArgs {
-    /// Output folder of `symframe fit` (kd, ks, alpha_t, alpha_b, normals, tangents .npy).
+    /// Output folder of `symframe fit` (its model's maps, normals and tangents .npy).
     pub fit_dir: PathBuf,
     /// The HTML file to write (default: FIT_DIR/viewer.html).
     #[arg(short, long)]
@@ -818,7 +819,7 @@ pub struct ExportArgs {
     /// The asset format.
     #[arg(value_enum)]
     pub format: ExportFormat,
-    /// Output folder of `symframe fit` (kd, ks, alpha_t, alpha_b, normals, tangents .npy) or of
+    /// Output folder of `symframe fit` (its model's maps, normals and tangents .npy) or of
     /// `symframe estimate` (normals, tangents, anisotropy .npy).
     pub input: PathBuf,
     /// The file to write: `.gltf` (textures and `.bin` beside it) or `.glb` (all in one).

@@ -231,7 +231,11 @@ fn mismatched_image_sizes_are_refused() {
     assert_fails_naming(&o, "img_0007.exr", &out);
     // Found from the headers before anything is decoded: an undecodable image before it
     // (whose header says nothing) is not reached.
-    fs::write(lp.parent().unwrap().join("images/img_0002.exr"), b"not an image").unwrap();
+    fs::write(
+        lp.parent().unwrap().join("images/img_0002.exr"),
+        b"not an image",
+    )
+    .unwrap();
     let o = estimate(&lp, &out, &[]);
     assert_fails_naming(&o, "img_0007.exr", &out);
 }
