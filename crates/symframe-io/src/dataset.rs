@@ -52,9 +52,13 @@ pub fn open_dataset(input: &Path) -> Result<Dataset> {
                 "is a broken symbolic link (its target does not exist)",
             ));
         }
+        let message = match suggestion(input) {
+            Some(near) => format!("no such file or folder; did you mean {}?", near.display()),
+            None => "no such file or folder".to_string(),
+        };
         return Err(Error::read(
             input,
-            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or folder"),
+            std::io::Error::new(std::io::ErrorKind::NotFound, message),
         ));
     }
     let name = input.file_name().and_then(|n| n.to_str()).unwrap_or("");
@@ -70,6 +74,60 @@ pub fn open_dataset(input: &Path) -> Result<Dataset> {
         "not a dataset: expected a .lp light file or a folder with one .lp file or with \
          filenames.txt and light_directions.txt",
     ))
+}
+
+/// The entry of a missing path's folder whose name is nearest its own (Jaro-Winkler
+/// similarity at least 0.8, as clap suggests flags; an `.lp` file for a missing `.lp` whatever
+/// its name, when it is the folder's only one): the mistyped name or the dataset's real light
+/// file. `None` where the folder is missing or holds nothing near.
+fn suggestion(missing: &Path) -> Option<PathBuf> {
+    let name = missing.file_name()?.to_str()?;
+    let dir = parent_dir(missing);
+    let listed = if dir.as_os_str().is_empty() {
+        std::fs::read_dir(".")
+    } else {
+        std::fs::read_dir(&dir)
+    };
+    let entries: Vec<String> = listed
+        .ok()?
+        .flatten()
+        .take(10_000)
+        .filter_map(|e| e.file_name().into_string().ok())
+        .collect();
+    let best = entries
+        .iter()
+        .map(|e| {
+            (
+                strsim::jaro_winkler(&name.to_lowercase(), &e.to_lowercase()),
+                e,
+            )
+        })
+        .filter(|(score, _)| *score >= 0.8)
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, e)| e.clone());
+    let lone_lp = || {
+        let mut lps = entries.iter().filter(|e| is_lp(Path::new(e)));
+        match (lps.next(), lps.next()) {
+            (Some(only), None) if is_lp(missing) => Some(only.clone()),
+            _ => None,
+        }
+    };
+    best.or_else(lone_lp).map(|e| dir.join(e))
+}
+
+/// How many files of `dir` are images symframe reads (by extension).
+fn image_count(dir: &Path) -> usize {
+    const IMAGES: &[&str] = &["exr", "png", "tif", "tiff", "hdr", "pfm", "jpg", "jpeg"];
+    std::fs::read_dir(dir).map_or(0, |rd| {
+        rd.flatten()
+            .filter(|e| {
+                e.path()
+                    .extension()
+                    .and_then(|x| x.to_str())
+                    .is_some_and(|x| IMAGES.contains(&x.to_ascii_lowercase().as_str()))
+            })
+            .count()
+    })
 }
 
 /// Whether `p` has the `.lp` extension (case-insensitive).
@@ -133,10 +191,25 @@ fn open_folder(dir: &Path) -> Result<Dataset> {
             ),
         ));
     }
+    let images = image_count(dir);
+    let hint = if images > 0 {
+        format!(
+            "; the folder holds {images} images but not their lights: list them in an .lp \
+             file (the count, then one `image x y z` row per image, x right, y up, z toward \
+             the camera), or, with a chrome sphere in the frame, `symframe calibrate {} -o \
+             {}`",
+            dir.display(),
+            dir.join("lights.lp").display()
+        )
+    } else {
+        String::new()
+    };
     Err(Error::invalid(
         dir,
-        "not a dataset: looked for one .lp light file, or filenames.txt and \
-         light_directions.txt",
+        format!(
+            "not a dataset: looked for one .lp light file, or filenames.txt and \
+             light_directions.txt{hint}"
+        ),
     ))
 }
 
@@ -346,6 +419,36 @@ mod tests {
 
     fn err_string(r: Result<Dataset>) -> String {
         r.expect_err("expected an error").to_string()
+    }
+
+    #[test]
+    fn a_missing_path_suggests_the_nearest_name_and_a_folder_of_images_the_lights() {
+        let d = tempfile::tempdir().unwrap();
+        touch(d.path(), &["a.png", "b.png"]);
+        fs::write(d.path().join("lights.lp"), "2\na.png 0 0 1\nb.png 0 1 1\n").unwrap();
+        // The suggestion is in the error's source (the not-found reason), as printed.
+        let reason = |p: &Path| {
+            let e = open_dataset(p).expect_err("expected an error");
+            std::error::Error::source(&e).map_or(String::new(), |s| s.to_string())
+        };
+        let e = reason(&d.path().join("ligths.lp"));
+        assert!(
+            e.contains("did you mean") && e.ends_with("lights.lp?"),
+            "{e}"
+        );
+        // Another name for the folder's only .lp.
+        let e = reason(&d.path().join("capture.lp"));
+        assert!(e.ends_with("lights.lp?"), "{e}");
+        // Nothing near: no suggestion.
+        let e = reason(&d.path().join("zzzzzz.txt"));
+        assert!(!e.contains("did you mean"), "{e}");
+        // A folder of images without lights points to the format and to calibrate.
+        fs::remove_file(d.path().join("lights.lp")).unwrap();
+        let e = err_string(open_dataset(d.path()));
+        assert!(
+            e.contains("holds 2 images") && e.contains("symframe calibrate"),
+            "{e}"
+        );
     }
 
     #[test]
