@@ -21,8 +21,8 @@ use crate::frames::rig::Rig;
 
 use super::kernel::Subset;
 use super::{
-    cholesky_solve, negligible, solve_spd, tilt_sd, LobeFit, LobeScratch, ALPHA_RANGE,
-    MAX_ITERATIONS, RELATIVE_GAIN, SHAPE_RANGE,
+    cholesky_solve, damping_floor, negligible, solve_spd, tilt_sd, LobeFit, LobeScratch,
+    ALPHA_RANGE, MAX_ITERATIONS, RELATIVE_GAIN, SHAPE_RANGE,
 };
 
 /// Number of linear coefficients: the diffuse term and each lobe's two Fresnel terms.
@@ -508,7 +508,7 @@ fn levenberg_marquardt(
                 }
             }
         }
-        let floor = 1e-9 * (0..P).map(|k| jtj[k][k]).sum::<f64>().max(1e-300);
+        let floor = damping_floor(&jtj);
         let mut improved = false;
         for _ in 0..10 {
             let mut a = jtj;
