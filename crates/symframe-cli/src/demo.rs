@@ -12,7 +12,6 @@ use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use symframe::brdf::ward::Ward;
 use symframe::brdf::Brdf;
-use symframe::eval::evaluate;
 use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{Scene, TangentField};
 use symframe_io::ImageFormat;
@@ -108,14 +107,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let maps = done
         .maps
         .context("the demo's estimate kept no maps in memory")?;
-    let e = evaluate(
-        &maps.normals,
-        &maps.tangents,
-        &scene.gt_normals(),
-        Some(&scene.gt_tangents()),
-        Some(&scene.mask),
-        60.0,
-    );
+    let e = scene.evaluate(&maps.normals, &maps.tangents);
     let eval_path = estimate_dir.join("eval.json");
     symframe_io::write_bytes(
         &eval_path,

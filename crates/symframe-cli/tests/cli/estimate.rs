@@ -107,14 +107,7 @@ fn estimate_on_an_lp_dataset_writes_every_output_and_is_accurate() {
     let (shape, normals) = read_npy_f32(&out.join("normals.npy")).unwrap();
     assert_eq!(shape, vec![28, 28, 3]);
     let (_, tangents) = read_npy_f32(&out.join("tangents.npy")).unwrap();
-    let e = evaluate(
-        &normals,
-        &tangents,
-        &scene.gt_normals(),
-        Some(&scene.gt_tangents()),
-        Some(&scene.mask),
-        60.0,
-    );
+    let e = scene.evaluate(&normals, &tangents);
     assert!(e.normal_error.mean < 1.0, "{e:?}");
     assert!(e.tangent_error_swap_free.mean < 2.0, "{e:?}");
     let report: serde_json::Value =
@@ -203,14 +196,7 @@ fn estimate_on_a_diligent_folder_divides_by_light_intensities() {
     assert!(o.status.success(), "{}", stderr(&o));
     let (_, normals) = read_npy_f32(&out.join("normals.npy")).unwrap();
     let (_, tangents) = read_npy_f32(&out.join("tangents.npy")).unwrap();
-    let e = evaluate(
-        &normals,
-        &tangents,
-        &scene.gt_normals(),
-        Some(&scene.gt_tangents()),
-        Some(&scene.mask),
-        60.0,
-    );
+    let e = scene.evaluate(&normals, &tangents);
     assert!(e.normal_error.mean < 1.0, "{e:?}");
     assert!(e.coverage > 0.9, "{e:?}");
 }

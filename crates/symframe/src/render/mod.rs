@@ -13,6 +13,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::brdf::{Brdf, TangentAxis};
+use crate::eval::{evaluate, Evaluation};
 use crate::stack::Stack;
 
 pub mod noise;
@@ -46,6 +47,20 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// Estimated `normals` and `tangents` (`H x W x 3`, NaN where none) against this scene's
+    /// truth, over the masked pixels whose true normal is within 60 degrees of the view: the
+    /// figures the demo, the tests and the experiments report.
+    pub fn evaluate(&self, normals: &[f32], tangents: &[f32]) -> Evaluation {
+        evaluate(
+            normals,
+            tangents,
+            &self.gt_normals(),
+            Some(&self.gt_tangents()),
+            Some(&self.mask),
+            60.0,
+        )
+    }
+
     /// Number of pixels.
     pub fn n_pixels(&self) -> usize {
         self.width * self.height

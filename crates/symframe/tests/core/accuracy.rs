@@ -7,7 +7,7 @@ use glam::DVec3;
 use symframe::brdf::lambertian::Lambertian;
 use symframe::brdf::ward::Ward;
 use symframe::brdf::Brdf;
-use symframe::eval::{evaluate, Evaluation};
+use symframe::eval::Evaluation;
 use symframe::frames::estimator::Fallback;
 use symframe::frames::rig::uniform_cone_lights;
 use symframe::frames::symmetry::CosineMode;
@@ -28,14 +28,7 @@ fn run_with(
     let stack = scene.render_stack(brdf, &lights);
     let rig = Rig::new(&lights, RigOptions::default()).unwrap();
     let maps = estimate_stack(&stack, &rig, Some(&scene.mask), params, &|_| {}).unwrap();
-    let e = evaluate(
-        &maps.normals,
-        &maps.tangents,
-        &scene.gt_normals(),
-        Some(&scene.gt_tangents()),
-        Some(&scene.mask),
-        60.0,
-    );
+    let e = scene.evaluate(&maps.normals, &maps.tangents);
     eprintln!("{}: {e:#?}", brdf.name());
     e
 }
@@ -211,16 +204,7 @@ fn assert_paths_agree_with(
 fn fast_path_agrees_with_the_reference_path() {
     let scene = Scene::sphere(32, TangentField::Circular);
     let (fast, exact) = assert_paths_agree(&scene, "circular sphere");
-    let truth = |m: &symframe::EstimateMaps| {
-        evaluate(
-            &m.normals,
-            &m.tangents,
-            &scene.gt_normals(),
-            Some(&scene.gt_tangents()),
-            Some(&scene.mask),
-            60.0,
-        )
-    };
+    let truth = |m: &symframe::EstimateMaps| scene.evaluate(&m.normals, &m.tangents);
     let (fast_gt, exact_gt) = (truth(&fast), truth(&exact));
     assert!(
         fast_gt.normal_error.mean <= exact_gt.normal_error.mean * 1.01,

@@ -58,16 +58,7 @@ fn clipped_highlights_keep_their_normals_and_tangents() {
     let (scene, lights, stack) = clipped_capture();
     // The reader's saturation rule marked some samples censored (+inf).
     assert!(stack.data.contains(&f32::INFINITY));
-    let eval = |m: &EstimateMaps| {
-        evaluate(
-            &m.normals,
-            &m.tangents,
-            &scene.gt_normals(),
-            Some(&scene.gt_tangents()),
-            Some(&scene.mask),
-            60.0,
-        )
-    };
+    let eval = |m: &EstimateMaps| scene.evaluate(&m.normals, &m.tangents);
     let told = NoiseModel {
         quantisation: Quantisation::Srgb(8),
         clip_level: Some(srgb8_clip_level()),
@@ -132,14 +123,7 @@ fn float_sphere(brdf: &dyn Brdf, lights: usize) -> (f64, f64, f64) {
     let lights = uniform_cone_lights(lights, 65.0);
     let stack = scene.render_stack(brdf, &lights);
     let maps = run(&scene, &lights, &stack, NoiseModel::default());
-    let e = evaluate(
-        &maps.normals,
-        &maps.tangents,
-        &scene.gt_normals(),
-        Some(&scene.gt_tangents()),
-        Some(&scene.mask),
-        60.0,
-    );
+    let e = scene.evaluate(&maps.normals, &maps.tangents);
     (
         e.normal_error.mean,
         e.tangent_coverage,

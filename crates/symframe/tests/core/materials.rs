@@ -7,7 +7,6 @@
 use glam::DVec3;
 use symframe::baselines::{estimate_stack_baseline, Baseline};
 use symframe::brdf::{Brdf, Ggx, Lambertian};
-use symframe::eval::evaluate;
 use symframe::frames::estimator::Fallback;
 use symframe::frames::rig::uniform_cone_lights;
 use symframe::frames::slice::gather_pixel;
@@ -270,14 +269,7 @@ fn sparse_rigs_keep_brushed_frames() {
         )
         .unwrap();
         let f = figures(&scene, &maps);
-        let e = evaluate(
-            &maps.normals,
-            &maps.tangents,
-            &scene.gt_normals(),
-            Some(&scene.gt_tangents()),
-            Some(&scene.mask),
-            60.0,
-        );
+        let e = scene.evaluate(&maps.normals, &maps.tangents);
         eprintln!(
             "{field:?}: {f:?}, tangent mean {:.2} swapped {:.3} coverage {:.3}",
             e.tangent_error.mean, e.swapped_share, e.tangent_coverage
