@@ -58,8 +58,8 @@ pub use output::{
     write_npy_f32, write_npy_u8, write_png_rgb8, NormalPng, NpyRows, SOURCE_PALETTE,
 };
 pub use stack::{
-    capture_noise, check_header_sizes, load_stack, load_stack_with_warnings, read_image_size,
-    read_mask, read_mask_any_size,
+    capture_noise, load_stack, load_stack_with_warnings, read_image_size, read_mask,
+    read_mask_any_size,
 };
 pub use synth_out::{check_synth_target, write_lp_dataset, ImageFormat, OUTPUT_LOCK_FILE};
 pub use tile_cache::{

@@ -289,7 +289,7 @@ const SIZE_CHECK_BYTES: u64 = 64 << 10;
 /// first image's before any is decoded: one image of another size fails the run at once,
 /// naming it, instead of after the images before it were decoded. A file that cannot be read
 /// or whose header is not in those bytes is left to the decode, which reports it.
-pub fn check_header_sizes(ds: &Dataset, opts: &DecodeOptions) -> Result<()> {
+pub(crate) fn check_header_sizes(ds: &Dataset, opts: &DecodeOptions) -> Result<()> {
     let size = |p: &Path| -> Option<(usize, usize)> {
         let f = std::fs::File::open(p).ok()?;
         let prefix = crate::read_at_most(f, p, SIZE_CHECK_BYTES).ok()?;

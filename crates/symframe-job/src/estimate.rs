@@ -523,8 +523,8 @@ pub(crate) fn open_cache(
     ctl: &Control,
     check: &dyn Fn(&Fingerprints) -> Result<()>,
 ) -> Result<(TileCache, CacheInfo, Fingerprints)> {
-    // Image sizes from the headers first: one of another size fails before any is read whole.
-    symframe_io::check_header_sizes(ds, decode)?;
+    // Image sizes are compared from the headers first (`dataset_fingerprints`): one of another
+    // size fails before any is read whole.
     let fps = symframe_io::dataset_fingerprints(ds, decode, options.trust_mtime, options.format)?;
     check(&fps)?;
     let decoded = AtomicU64::new(0);

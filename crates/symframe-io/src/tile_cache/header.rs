@@ -279,6 +279,9 @@ pub fn dataset_fingerprints(
     trust_mtime: bool,
     format: CacheFormat,
 ) -> Result<Fingerprints> {
+    // The first pass over the images: one of another size fails here, from its header,
+    // before any is hashed or decoded.
+    crate::stack::check_header_sizes(ds, opts)?;
     let t = std::time::Instant::now();
     let mut f = Fingerprint::new();
     f.str("symframe tile cache")

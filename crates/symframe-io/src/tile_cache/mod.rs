@@ -334,7 +334,6 @@ impl TileCache {
         on_image: &(dyn Fn() + Sync),
     ) -> Result<(TileCache, CacheInfo)> {
         check_dataset(ds)?;
-        crate::stack::check_header_sizes(ds, opts)?;
         if copts.tile == 0 {
             return Err(Error::invalid(dir, "tile size must be positive"));
         }
