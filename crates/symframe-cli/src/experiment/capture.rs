@@ -536,6 +536,10 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
                 ..EstimatorParams::default()
             };
             let ours = estimate_stack(&stack, &rig, mask, params, &|_| {})?;
+            // A development aid: `SYMFRAME_CAPTURE_DUMP=DIR` writes one TSV per set into DIR,
+            // a row per pixel within 60 degrees of the view: pixel index, normal error
+            // (degrees), confidence, source code, the estimated normal and the true one (x y z
+            // each), for calibration studies of the confidence.
             if let Ok(dir) = std::env::var("SYMFRAME_CAPTURE_DUMP") {
                 let gt = scene.gt_normals();
                 let mut out = String::new();
@@ -544,11 +548,13 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
                         (scene.mask[p], vec_at(&ours.normals, p), vec_at(&gt, p))
                     {
                         if g.z >= 0.5 {
-                            out += &format!(
-                                "{p}\t{:.4}\t{:.4}\t{}\n",
+                            out +=
+                                &format!(
+                                "{p}\t{:.4}\t{:.4}\t{}\t{:.5}\t{:.5}\t{:.5}\t{:.5}\t{:.5}\t{:.5}\n",
                                 n.angle_between(g).to_degrees(),
                                 ours.confidence[p],
-                                ours.source[p]
+                                ours.source[p],
+                                n.x, n.y, n.z, g.x, g.y, g.z
                             );
                         }
                     }
