@@ -498,7 +498,7 @@ struct ChromeSphere {
     size: usize,
     margin: usize,
     scene: Scene,
-    brdf: symframe::brdf::Ggx,
+    ball: symframe::render::MirrorBall,
     matte: Option<symframe::brdf::Lambertian>,
 }
 
@@ -509,7 +509,18 @@ impl ChromeSphere {
             size,
             margin,
             scene: Scene::sphere(size - 2 * margin, TangentField::Circular),
-            brdf: symframe::brdf::Ggx::new([0.02; 3], [0.9; 3], 0.05, 0.05),
+            // A chrome ball as a camera sees it: a lamp of half a degree, a dim room, the rim
+            // and the lamp's reflection anti-aliased and blurred by the lens; the lamp clips in
+            // integer formats, the room stays well below the white level.
+            ball: symframe::render::MirrorBall {
+                lamp: 200.0,
+                room: 0.3,
+                ..symframe::render::MirrorBall::new(
+                    (size - 2 * margin) as f64 / 2.0,
+                    (size - 2 * margin) as f64 / 2.0,
+                    (size - 2 * margin) as f64 / 2.0,
+                )
+            },
             matte: matte.then(|| symframe::brdf::Lambertian::new([0.5; 3])),
         }
     }
@@ -521,7 +532,9 @@ impl ChromeSphere {
 
     /// The object's image (`size x size x 3`) with the sphere(s) under light `l` to its right.
     fn beside(&self, object: &[f32], l: DVec3) -> Vec<f32> {
-        let mut spheres = vec![self.scene.render(&self.brdf, l)];
+        let d = self.scene.width;
+        let grey = self.ball.render(d, d, l);
+        let mut spheres = vec![grey.iter().flat_map(|&v| [v; 3]).collect::<Vec<f32>>()];
         if let Some(m) = &self.matte {
             spheres.push(self.scene.render(m, l));
         }
@@ -586,7 +599,14 @@ impl ChromeSphere {
         json!({
             "cx": cx, "cy": cy, "r": r,
             "circle_convention": "pixels, x right, y down, centre of the top-left pixel (0.5, 0.5)",
-            "model": self.brdf.name(),
+            "model": format!(
+                "mirror ball: lamp {:.2} degrees radius, radiance {}, room {}, reflectance {}, lens blur {} px",
+                self.ball.lamp_radius.to_degrees(),
+                self.ball.lamp,
+                self.ball.room,
+                self.ball.reflectance,
+                self.ball.blur
+            ),
             "sphere_arg": format!("{cx},{cy},{r}"),
         })
     }

@@ -7,6 +7,7 @@
 //!   [`Scene::bumps`], [`Scene::from_bumps`]) which cast shadows ([`shadow`]).
 //! - Tangent fields ([`TangentField`]): circular, axial, radial, swirl, or any function.
 //! - Light rigs ([`rigs`]): the uniform cone, a DiLiGenT-like 96-light grid.
+//! - A mirror ball for light calibration ([`MirrorBall`]): lamps of finite size, anti-aliased.
 //! - Degradations ([`noise`]): exposure, Gaussian and shot noise, clipping, quantisation.
 
 use glam::DVec3;
@@ -16,12 +17,14 @@ use crate::brdf::{Brdf, TangentAxis};
 use crate::eval::{evaluate, Evaluation};
 use crate::stack::Stack;
 
+mod mirror_ball;
 pub mod noise;
 pub mod rigs;
 pub mod shadow;
 mod shapes;
 mod tangent;
 
+pub use mirror_ball::MirrorBall;
 pub use noise::{clip_point, jitter_lights, Degradation, Noise, Rng};
 pub use shapes::{plane_frame, Bump, BumpParams};
 pub use tangent::{image_position, project_to_tangent_plane, TangentField, TangentFn};
