@@ -563,9 +563,10 @@ pub struct SynthArgs {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Put a mirror (chrome) sphere beside the object, for `symframe calibrate`: the images
-    /// become twice as wide, the sphere in the right half, 1/16 of it from its edges (near-mirror GGX, roughness
-    /// 0.05, with a faint diffuse term so its outline shows). Its circle is recorded in
-    /// scene.json; the mask and ground truth cover the object only.
+    /// become twice as wide, the sphere in the right half, 1/16 of it from its edges (a perfect
+    /// mirror reflecting a lamp of 0.5 degrees and a dim room, anti-aliased, with a lens blur of
+    /// 0.7 px; the lamp clips in integer formats). Its circle is recorded in scene.json; the
+    /// mask and ground truth cover the object only.
     #[arg(long)]
     pub chrome_sphere: bool,
     /// With --chrome-sphere: a matte sphere (Lambertian, grey albedo 0.5) to the right of the
