@@ -7,17 +7,24 @@
 //!
 //! Per image ([`find_highlight`]): the brightest connected spot on the sphere (saturated pixels,
 //! `NaN` in a decoded image, count as the brightest), thresholded at a fraction of its peak
-//! above the sphere's median; its centre is the intensity-weighted mean of the sphere normals
-//! under it (in normal space rather than pixel space, so spots near the rim, stretched by the
-//! sphere's foreshortening, are not pulled inward); the light is the view `(0, 0, 1)` mirrored
-//! about that normal. No spot bright enough, or a second spot carrying a large share of the
+//! above the sphere's median. A spot of at most [`SMALL_SPOT`] pixels (a lamp's reflection
+//! smaller than a pixel, spread by the lens) is located by its centroid in the image over the
+//! spot and a halo, less a plane fitted to the background around it: a sub-pixel position, as
+//! a thresholded centroid is not. A broad or saturated spot is located by the mean of the
+//! sphere normals under it weighted by what each holds above the threshold (in normal space:
+//! the rim squeezes such a spot in the image). The light is the view `(0, 0, 1)` mirrored about
+//! the normal there. No spot bright enough, or a second spot carrying a large share of the
 //! first one's weight, is an error for that image (the command drops it with a warning).
 //!
 //! [`detect_sphere`] finds the sphere when its circle is not given: the connected region
 //! brighter than the image border (its median), in the mean over all images, that holds the
-//! brightest spot of most images; its circle has the region's centroid and the radius of a disc
-//! of the same area. It needs a background darker than the sphere all around it (the sphere
-//! not touching the object); otherwise give the circle.
+//! brightest spot of most images; its circle first has the region's centroid and the radius of
+//! a disc of the same area, then is fitted to the rim (`refine_circle`: the edge of a blurred
+//! step along rays from the centre, a robust circle fit). It needs a background darker than the
+//! sphere all around it (the sphere not touching the object); otherwise give the circle.
+//!
+//! Measured on anti-aliased renders with a lens blur ([`crate::render::MirrorBall`]) in
+//! docs/capture.md, "Light calibration from a chrome sphere".
 
 use glam::DVec3;
 
