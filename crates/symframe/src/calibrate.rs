@@ -7,7 +7,7 @@
 //!
 //! Per image ([`find_highlight`]): the brightest connected spot on the sphere (saturated pixels,
 //! `NaN` in a decoded image, count as the brightest), thresholded at a fraction of its peak
-//! above the sphere's median. A spot of at most [`SMALL_SPOT`] pixels (a lamp's reflection
+//! above the sphere's median. A spot of at most 16 pixels (a lamp's reflection
 //! smaller than a pixel, spread by the lens) is located by its centroid in the image over the
 //! spot and a halo, less a plane fitted to the background around it: a sub-pixel position, as
 //! a thresholded centroid is not. A broad or saturated spot is located by the mean of the
