@@ -47,7 +47,7 @@ pub(crate) fn dataset(dir: &Path, size: usize, n: usize) -> Result<PathBuf> {
         dir.display()
     );
     let t = Instant::now();
-    let bar = progress::bar(n as u64, "rendering");
+    let bar = progress::bar(n as u64, "rendering", "images");
     // One image per task: at most one image per thread in memory. Images already written by
     // an interrupted generation are kept (they are written atomically).
     (0..n).into_par_iter().try_for_each(|i| -> Result<()> {

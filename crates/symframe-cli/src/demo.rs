@@ -66,7 +66,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         brdf.name(),
         args.lights
     );
-    let bar = progress::bar(lights.len() as u64, "rendering");
+    let bar = progress::bar(lights.len() as u64, "rendering", "images");
     let images: Vec<Vec<f32>> = lights
         .par_iter()
         .map(|&l| {

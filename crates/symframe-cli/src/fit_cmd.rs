@@ -69,7 +69,7 @@ pub fn config(args: &FitArgs) -> Result<FitConfig> {
 /// Runs `symframe fit`.
 pub fn run(args: &FitArgs) -> Result<FitOutcome> {
     let config = config(args)?;
-    let bars = progress::Bars::default();
+    let bars = progress::Bars::new("fitting");
     let show = |p| bars.update(p);
     let done = symframe_job::fit(&config, &crate::control(&show, None))?;
     drop(bars);

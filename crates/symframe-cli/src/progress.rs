@@ -9,23 +9,71 @@ use std::time::{Duration, Instant};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use symframe_job::{Progress, Stage};
 
-/// A progress bar of `len` steps with an ETA, hidden when stderr is not a terminal.
-pub fn bar(len: u64, what: &str) -> ProgressBar {
+/// A progress bar of `len` steps of `unit` (`"images"`, `"tiles"`) with a rounded rate and an
+/// ETA, hidden when stderr is not a terminal.
+pub fn bar(len: u64, what: &str, unit: &str) -> ProgressBar {
     let target = if interactive() {
         ProgressDrawTarget::stderr()
     } else {
         ProgressDrawTarget::hidden()
     };
     let pb = ProgressBar::with_draw_target(Some(len), target);
+    let template = format!(
+        "{{prefix:>10}} [{{bar:40.cyan/blue}}] {{pos}}/{{len}} {unit} {{rate}} eta {{eta}} "
+    );
     pb.set_style(
-        ProgressStyle::with_template(
-            "{prefix:>10} [{bar:40.cyan/blue}] {pos}/{len} {per_sec} eta {eta} ",
-        )
-        .expect("valid progress template")
-        .progress_chars("=> "),
+        ProgressStyle::with_template(&template)
+            .expect("valid progress template")
+            .with_key(
+                "rate",
+                |state: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+                    let _ = w.write_str(&rate(state.per_sec()));
+                },
+            )
+            .progress_chars("=> "),
     );
     pb.set_prefix(what.to_string());
     pb
+}
+
+/// A rate of steps per second to three significant digits at most (`1055/s`, `12.3/s`,
+/// `0.42/s`), or `-` before there is one.
+fn rate(per_sec: f64) -> String {
+    if !(per_sec.is_finite() && per_sec > 0.0) {
+        "-".into()
+    } else if per_sec >= 100.0 {
+        format!("{per_sec:.0}/s")
+    } else if per_sec >= 10.0 {
+        format!("{per_sec:.1}/s")
+    } else {
+        format!("{per_sec:.2}/s")
+    }
+}
+
+/// A duration as `m:ss` (`h:mm:ss` from an hour).
+fn clock(d: Duration) -> String {
+    let s = d.as_secs();
+    if s >= 3600 {
+        format!("{}:{:02}:{:02}", s / 3600, s / 60 % 60, s % 60)
+    } else {
+        format!("{}:{:02}", s / 60, s % 60)
+    }
+}
+
+/// A plain progress line: `estimating 12/64 tiles (19%), 0:42 elapsed, about 2:59 left` (the
+/// time left from the rate so far; none before the first step or at the end).
+fn line_text(name: &str, done: u64, total: u64, unit: &str, elapsed: Duration) -> String {
+    let percent = (100 * done).checked_div(total).unwrap_or(100);
+    let mut text = format!(
+        "{name} {done}/{total}{unit} ({percent}%), {} elapsed",
+        clock(elapsed)
+    );
+    // A time left needs a rate: none in the first second.
+    if done > 0 && done < total && elapsed >= Duration::from_secs(1) {
+        let left = elapsed.mul_f64((total - done) as f64 / done as f64);
+        text += &format!(", about {} left", clock(left));
+    }
+    text
 }
 
 /// Set by `--quiet`.
@@ -50,7 +98,7 @@ pub fn interactive() -> bool {
 fn unit(stage: Stage) -> &'static str {
     match stage {
         Stage::Decoding => " images",
-        Stage::Tiles => "",
+        Stage::Tiles => " tiles",
         Stage::Merging => " tiles",
         Stage::Rendering => " images",
     }
@@ -61,21 +109,46 @@ struct Lines {
     stage: Stage,
     done: u64,
     tenth: u64,
+    started: Instant,
     last: Instant,
 }
 
 /// Progress of a library job drawn as one bar per stage (hidden when stderr is not a
 /// terminal); pass [`Bars::update`] as the job's progress callback.
-#[derive(Default)]
 pub struct Bars {
+    /// What the job calls its per-pixel stage (`estimating`, `fitting`).
+    work: &'static str,
     current: Mutex<Option<(Stage, ProgressBar)>>,
     lines: Mutex<Option<Lines>>,
 }
 
+impl Default for Bars {
+    fn default() -> Self {
+        Self::new("tiles")
+    }
+}
+
 impl Bars {
+    /// Bars whose per-pixel stage is named `work` (`estimating`, `fitting`).
+    pub fn new(work: &'static str) -> Self {
+        Self {
+            work,
+            current: Mutex::new(None),
+            lines: Mutex::new(None),
+        }
+    }
+
+    /// The name shown for `stage`.
+    fn name(&self, stage: Stage) -> &'static str {
+        match stage {
+            Stage::Tiles => self.work,
+            other => other.name(),
+        }
+    }
+
     /// Moves the bar of `p`'s stage (starting it, and ending the previous stage's, as needed);
-    /// off a terminal, prints a plain line (`decoding 300/1000 images`, `tiles 12/64`) at each
-    /// tenth of the stage and at least every 10 s.
+    /// off a terminal, prints a plain line (`decoding 300/1000 images (30%), 0:04 elapsed, about
+    /// 0:09 left`) at each tenth of the stage and at least every 10 s.
     pub fn update(&self, p: Progress) {
         if !chatty() {
             return;
@@ -92,7 +165,10 @@ impl Bars {
             if let Some((_, old)) = current.take() {
                 old.finish_and_clear();
             }
-            *current = Some((p.stage, bar(p.total, p.stage.name())));
+            *current = Some((
+                p.stage,
+                bar(p.total, self.name(p.stage), unit(p.stage).trim()),
+            ));
         }
         if let Some((_, b)) = current.as_ref() {
             // Updates arrive from several threads, not in order.
@@ -110,6 +186,7 @@ impl Bars {
                 stage: p.stage,
                 done: 0,
                 tenth: 0,
+                started: Instant::now(),
                 last: Instant::now(),
             });
         }
@@ -123,7 +200,14 @@ impl Bars {
         if fresh || tenth > l.tenth || l.last.elapsed() >= Duration::from_secs(10) {
             l.tenth = tenth;
             l.last = Instant::now();
-            eprintln!("{} {}/{}{}", p.stage.name(), l.done, p.total, unit(p.stage));
+            let text = line_text(
+                self.name(p.stage),
+                l.done,
+                p.total,
+                unit(p.stage),
+                l.started.elapsed(),
+            );
+            eprintln!("{text}");
         }
     }
 }
@@ -133,5 +217,28 @@ impl Drop for Bars {
         if let Some((_, b)) = self.current.get_mut().ok().and_then(|c| c.take()) {
             b.finish_and_clear();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rates_are_rounded_and_lines_say_the_time() {
+        assert_eq!(rate(1055.3355), "1055/s");
+        assert_eq!(rate(12.345), "12.3/s");
+        assert_eq!(rate(0.4249), "0.42/s");
+        assert_eq!(rate(0.0), "-");
+        assert_eq!(clock(Duration::from_secs(62)), "1:02");
+        assert_eq!(clock(Duration::from_secs(3725)), "1:02:05");
+        assert_eq!(
+            line_text("estimating", 16, 64, " tiles", Duration::from_secs(10)),
+            "estimating 16/64 tiles (25%), 0:10 elapsed, about 0:30 left"
+        );
+        assert_eq!(
+            line_text("decoding", 50, 50, " images", Duration::from_secs(3)),
+            "decoding 50/50 images (100%), 0:03 elapsed"
+        );
     }
 }

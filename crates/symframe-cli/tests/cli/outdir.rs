@@ -302,13 +302,25 @@ fn progress_summary_and_warnings_reach_a_log_and_quiet_silences_them() {
     let o = estimate(&lp, &out, &[]);
     ok(&o);
     let e = stderr(&o);
-    assert!(e.lines().any(|l| l == "decoding 60/60 images"), "{e}");
+    // Each line says how far, the share, the time spent and (past the first second) the time
+    // left: `estimating 16/64 tiles (25%), 0:10 elapsed, about 0:30 left`.
     assert!(
-        e.lines().any(|l| l == format!("tiles {TILES}/{TILES}")),
+        e.lines()
+            .any(|l| l.starts_with("decoding 60/60 images (100%), ") && l.ends_with(" elapsed")),
         "{e}"
     );
     assert!(
-        e.lines().filter(|l| l.starts_with("tiles ")).count() <= 12,
+        e.lines()
+            .any(|l| l.starts_with(&format!("estimating {TILES}/{TILES} tiles (100%), "))),
+        "{e}"
+    );
+    assert!(
+        e.lines().filter(|l| l.starts_with("estimating ")).count() <= 12,
+        "{e}"
+    );
+    assert!(
+        e.lines()
+            .any(|l| l.starts_with("symframe: answered by ") && l.contains("report.json in ")),
         "{e}"
     );
     assert!(
