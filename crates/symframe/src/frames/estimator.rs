@@ -13,12 +13,12 @@ use crate::baselines::{
 };
 use crate::error::{Error, Result};
 use crate::frames::highlight::{highlight_moments_of_greys, HighlightMoments, HIGHLIGHT_LEVEL};
-use crate::frames::lobe::{fit_lobe, fit_lobe_pair, LobeFit, LobePair, LobeScratch, LobeStart};
+use crate::frames::lobe::{fit_lobe, fit_lobe_pair, LobeFit, LobeScratch, LobeStart};
 use crate::frames::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::frames::optim::{nelder_mead, NelderMeadOptions};
 use crate::frames::policy::{
-    has_tangent, tangent_confidence, LobeAxis, PolicySettings, TangentEvidence, TangentSettings,
-    DEFAULT_MIN_ANISOTROPY,
+    self, has_tangent, tangent_confidence, LobeAxis, NormalChoice, NormalEvidence, PolicySettings,
+    TangentEvidence, TangentSettings, DEFAULT_MIN_ANISOTROPY,
 };
 use crate::frames::rig::Rig;
 use crate::frames::symmetry::{
@@ -349,34 +349,6 @@ impl<'a> Estimator<'a> {
         )
     }
 
-    /// The normal of a diffuse pixel's robust Lambertian fit, when the fit explains the samples
-    /// (uncentred R^2 at least [`DiffuseSettings::centre_fit`]) and leaves less than
-    /// [`DiffuseSettings::specular_share`] of the well-lit signal's energy unexplained (`share`, the
-    /// [`unexplained_share`] at the fit's normal).
-    fn diffuse_centre(&self, fit: &BaselinePixel, share: Option<f64>) -> Option<DVec3> {
-        fit.normal
-            .filter(|_| fit.confidence as f64 >= self.policy.diffuse.centre_fit)
-            .filter(|_| share.is_some_and(|s| s < self.policy.diffuse.specular_share))
-    }
-
-    /// The normal of a diffuse pixel whose specular spike the rig undersamples: no lobe explains
-    /// the samples, and the robust Lambertian fit explains all but a few of them nearly exactly
-    /// (uncentred R^2 at least [`DiffuseSettings::spiked_fit`], at most [`DiffuseSettings::spike_share`] of the samples it
-    /// considered left out as outliers: the spike's). Such a slice is symmetric about the
-    /// Lambertian normal but for the spike's few samples, which mislead the search (measured:
-    /// GGX plastic `alpha` 0.02 on shadowed bumps under 200 lights, 14-20 degrees off where the
-    /// Lambertian fit was 0.1-0.5).
-    fn spiked_diffuse(&self, fit: &BaselinePixel, lobe: Option<&LobeFit>) -> Option<DVec3> {
-        if lobe.is_some() {
-            return None;
-        }
-        let left_out = fit.considered.saturating_sub(fit.used) as f64;
-        fit.normal.filter(|_| {
-            fit.confidence as f64 >= self.policy.diffuse.spiked_fit
-                && left_out <= self.policy.diffuse.spike_share * fit.considered as f64
-        })
-    }
-
     /// The search's answer `found`, unless one of `starts` has a clearly lower `SD_n` on the full
     /// level (below [`SearchSettings::judge_margin`] times it):
     /// then the coarse levels misled the search (a lobe narrower than their spacing is aliased
@@ -461,8 +433,7 @@ impl<'a> Estimator<'a> {
             .filter(|_| auto)
             .map(|n| unexplained_share(self.rig, slice, n, self.policy.shadows.min_cosine));
         // A pixel its Lambertian fit explains to the noise floor has no lobe to find.
-        let pure_diffuse = fit.confidence as f64 >= self.policy.diffuse.centre_fit
-            && share.is_some_and(|s| s < self.policy.diffuse.pure_share);
+        let pure_diffuse = policy::pure_diffuse(&self.policy.diffuse, &fit, share);
         // The lobe's model has no clip: a censored sample tells it nothing it can fit (copied
         // only where a lobe is fitted).
         let lobe_slice = match self
@@ -494,10 +465,10 @@ impl<'a> Estimator<'a> {
             // to it, as with one lobe.
             Some(f)
                 if f.residual >= self.policy.lobe.explains
-                    && self.spiked_diffuse(&fit, None).is_none() =>
+                    && policy::spiked_diffuse(&self.policy.diffuse, &fit, None).is_none() =>
             {
                 match fit_lobe_pair(&f, self.rig, lobe) {
-                    Some(p) if self.pair_explains(&p) => {
+                    Some(p) if policy::pair_explains(&self.policy.lobe, &p) => {
                         let l = p.as_lobe(|l| self.lobe_has_tangent(l));
                         Some(LobeFit {
                             evals: f.evals + p.evals,
@@ -514,10 +485,7 @@ impl<'a> Estimator<'a> {
         // without the coat's samples (those at or above the highlight level of the brightest),
         // is the evidence of the base's elongation and axes.
         let base = match (fitted, moments) {
-            (Some(f), Some(m))
-                if m.count <= self.policy.lobe.sharp_samples
-                    && f.residual >= self.policy.lobe.plausible =>
-            {
+            (Some(f), Some(m)) if policy::reads_base(&self.policy.lobe, m.count, &f) => {
                 base_input.clear();
                 base_input.extend_from_slice(lobe_slice);
                 let max = greys
@@ -618,52 +586,12 @@ impl<'a> Estimator<'a> {
         if e.status != PixelStatus::Discarded || self.params.fallback == Fallback::None {
             return e;
         }
-        // The lobe where it explains the pixel much better than a diffuse term (the rule that
-        // holds within reach), then the diffuse term, then the highlight.
-        let diffuse = lambert
-            .normal
-            .filter(|_| lambert.confidence as f64 >= self.policy.fallback.diffuse_fit);
-        // A lobe that explains the pixel ([`LobeSettings::explains`]) answers unless a diffuse term
-        // explains it nearly as well; one that does not still answers where it explains it
-        // much better than the diffuse term: the joint model's normal is the diffuse term's
-        // too, without the bias the unmodelled highlight's tails give the Lambertian fit
-        // (measured: Ashikhmin-Shirley under 200 lights, normals 45-60 degrees from the view,
-        // a lobe left 0.6-0.7% unexplained and was 1.6-3.1 degrees off; the Lambertian
-        // fallback 7.5-11 degrees).
-        let lobe = lobe.filter(|f| f.normal.z > 0.0).and_then(|f| {
-            let over_diffuse = diffuse
-                .and(share)
-                .map(|s| self.policy.lobe.over_diffuse * s);
-            let explains = f.residual < self.policy.lobe.explains;
-            let confidence = if explains {
-                1.0 - f.residual / self.policy.lobe.explains
-            } else {
-                1.0 - f.residual / over_diffuse?
-            };
-            over_diffuse
-                .is_none_or(|limit| f.residual < limit)
-                .then_some((f, confidence))
-        });
-        let (source, normal, confidence) = match (lobe, diffuse) {
-            (Some((f, confidence)), _) => (
-                PixelSource::Lobe,
-                f.normal,
-                self.policy.fallback.confidence * confidence.max(0.0) as f32,
-            ),
-            (None, Some(n)) => (
-                PixelSource::Lambertian,
-                n,
-                self.policy.fallback.confidence * lambert.confidence,
-            ),
-            (None, None) => match moments {
-                Some(m) if m.normal.z > 0.0 => (
-                    PixelSource::Highlight,
-                    m.normal,
-                    self.policy.fallback.confidence * m.contrast as f32,
-                ),
-                _ => return e,
-            },
+        let Some((source, normal, confidence)) =
+            policy::choose_fallback(&self.policy, lambert, share, moments, lobe)
+        else {
+            return e;
         };
+        let confidence = self.policy.fallback.confidence * confidence;
         let status = self.status_of(confidence);
         PixelEstimate {
             status,
@@ -687,7 +615,6 @@ impl<'a> Estimator<'a> {
     ) -> PixelEstimate {
         let Lobes { fitted, base } = lobes;
         let rig = self.rig;
-        let lobe = fitted.filter(|f| f.residual < self.policy.lobe.explains);
         // Start: the halfway vector of the brightest sample (docs/method.md, "The search"). The
         // brightest light itself is also tried: for diffuse surfaces it is the better guess.
         let mut brightest = None;
@@ -718,59 +645,39 @@ impl<'a> Estimator<'a> {
                 term.count,
             )
         };
-        let mut source = PixelSource::Symmetry;
-        let diffuse_centre = if self.params.cosine == CosineMode::Auto {
-            self.diffuse_centre(fit, share)
-                .or_else(|| self.spiked_diffuse(fit, lobe.as_ref()))
-        } else {
-            None
-        };
-        // A lobe much narrower than the spacing of the lights is read through one or two
-        // samples: the piecewise-linear slice cannot be symmetric about its centre, while a
-        // log-quadratic reconstruction of the lobe is, about its peak (docs/method.md, "Sharp
-        // lobes").
+        // The reading that answers the normal (`frames::policy::choose_normal`), from the
+        // evidence gathered so far. A lobe much narrower than the spacing of the lights is read
+        // through one or two samples: the piecewise-linear slice cannot be symmetric about its
+        // centre, while a log-quadratic reconstruction of the lobe is, about its peak
+        // (docs/method.md, "Sharp lobes"); the peak is read where that rule may ask for it.
+        let auto = self.params.cosine == CosineMode::Auto;
         let sharp = moments.is_some_and(|m| m.count <= self.policy.lobe.sharp_samples);
-        let sharp_peak =
-            if self.params.cosine == CosineMode::Auto && diffuse_centre.is_none() && sharp {
-                // Where a diffuse part explains the samples once the spike is left out (a plastic),
-                // it locates the normal from every lit light; otherwise (a metal) the peak does.
-                match fit.normal {
-                    Some(m) if fit.confidence as f64 >= self.policy.diffuse.centre_fit => {
-                        Some((m, PixelSource::Lambertian))
-                    }
-                    _ => highlight_peak(slice, rig.lights_in_camera())
-                        .map(|m| (m, PixelSource::Highlight)),
-                }
+        let evidence = NormalEvidence {
+            auto,
+            lobe: fitted.as_ref(),
+            lambertian: fit,
+            share,
+            sharp,
+            peak: if auto && sharp {
+                highlight_peak(slice, rig.lights_in_camera())
             } else {
                 None
-            };
-        // A lobe explains a pixel a diffuse term explains too only where it leaves much less
-        // unexplained: a broad lobe passes the diffuse test, and biases the Lambertian normal.
-        let lobe = lobe.filter(|f| match diffuse_centre.and(share) {
-            Some(s) => f.residual < self.policy.lobe.over_diffuse * s,
-            None => true,
-        });
-        // Nor where it barely improves on the robust Lambertian fit alone (the lobe model
-        // holds a diffuse term too): such a lobe stands in for the diffuse light, and where its
-        // centre is off at all it is far off (measured on the shadowed satin bumps: no diffuse
-        // part, 0.5 wide, 30-35 degrees from normals the Lambertian fit finds to 2 degrees).
-        let impersonated = lobe.is_some_and(|f| {
-            fit.confidence as f64 >= self.policy.diffuse.centre_fit
-                && f.residual >= self.policy.lobe.over_diffuse * (1.0 - fit.confidence as f64)
-        });
-        let (lobe, diffuse_centre) = if impersonated {
-            (None, fit.normal)
-        } else {
-            (lobe, diffuse_centre)
+            },
+        };
+        let choice = policy::choose_normal(&self.policy, &evidence);
+        let mut source = PixelSource::Symmetry;
+        let lobe = match choice {
+            NormalChoice::Lobe(f) => Some(*f),
+            _ => None,
         };
         let n = if let Some(f) = lobe {
             source = PixelSource::Lobe;
             evals += f.evals;
             f.normal
-        } else if let Some((m, from)) = sharp_peak {
+        } else if let NormalChoice::Sharp(m, from) = choice {
             source = from;
             m
-        } else if let Some(m) = diffuse_centre {
+        } else if let NormalChoice::Diffuse(m) = choice {
             // A diffuse slice is symmetric about the normal of its Lambertian term, and a robust
             // Lambertian fit finds that centre in closed form from every lit sample, where the
             // search reads it through the interpolated slice (docs/method.md, "Default
@@ -999,18 +906,17 @@ impl<'a> Estimator<'a> {
         let sd = sd.hypot(fitted.map_or(0.0, |f| f.light_sd));
         let coverage = self.coverage(slice, n, &term_n);
         let confidence = (coverage * within_confident(sd)) as f32;
-        // A search that doubts its own answer (cast shadows that break the slice's symmetry, a
-        // lobe cut by the rig's reach) gives way to a lobe fit that nearly explains the
-        // samples, within the reach (measured on shadowed bumps, such pixels with a lobe
-        // leaving 0.2-0.5%: rough GGX metal under 500 lights, the search 5.4 degrees mean off
-        // and the lobe 3.3; satin under 200 lights 2.9 and 1.0; where the search's quality is
-        // higher it is the better of the two).
+        // A search that doubts its own answer gives way to a lobe fit that nearly explains the
+        // samples, within the reach (`frames::policy::search_gives_way`).
         let quality = coverage / (1.0 + (sd_n + sd_nt + sd_nb) / self.policy.search.symmetry_scale);
-        if source == PixelSource::Symmetry && quality < self.policy.search.doubtful {
+        if source == PixelSource::Symmetry {
             let plausible = fitted.filter(|f| {
-                f.residual < self.policy.lobe.plausible
-                    && f.normal.z > 0.0
-                    && centre_observed(rig, objective, f.normal)
+                policy::search_gives_way(
+                    &self.policy,
+                    quality,
+                    f,
+                    f.normal.z > 0.0 && centre_observed(rig, objective, f.normal),
+                )
             });
             if let Some(f) = plausible {
                 let term =
@@ -1124,18 +1030,6 @@ impl<'a> Estimator<'a> {
             residual: [sd_n, f.residual, 0.0],
             evals,
         }
-    }
-
-    /// Whether two lobes sharing a frame explain a pixel one lobe does not (docs/method.md,
-    /// "Two lobes"): they leave less than [`LobeSettings::explains`], the second lobe is significant
-    /// (an F test), and what they leave at every light (cast shadows included) is at the model
-    /// floor ([`LobeSettings::model_floor`]) or looks like independent noise ([`LobeSettings::noise_like_z`]), not like a
-    /// material they do not describe.
-    fn pair_explains(&self, p: &LobePair) -> bool {
-        p.residual < self.policy.lobe.explains
-            && p.significant()
-            && (p.residual_everywhere < self.policy.lobe.model_floor
-                || p.structure < self.policy.lobe.noise_like_z)
     }
 
     /// Whether a fitted lobe is elongated enough for a tangent, and wide enough for the rig to
