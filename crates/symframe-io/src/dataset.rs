@@ -562,9 +562,13 @@ mod tests {
         let e = err_string(open_dataset(&lp));
         assert!(e.contains("bad.lp:3: expected the number of lights"), "{e}");
 
+        // A path with spaces is read whole (everything before the three numbers).
         fs::write(&lp, "1\nmy image.png 0 0 1\n").unwrap();
         let e = err_string(open_dataset(&lp));
-        assert!(e.contains("bad.lp:2:") && e.contains("spaces"), "{e}");
+        assert!(
+            e.contains("bad.lp:2:") && e.contains("my image.png does not exist"),
+            "{e}"
+        );
 
         fs::write(&lp, "1\nmissing.png 0 0 1\n").unwrap();
         let e = err_string(open_dataset(&lp));
@@ -711,8 +715,8 @@ mod tests {
         let e = err_string(open_dataset(&lp));
         assert!(e.contains("h.lp:2: expected '<image> <lx> <ly> <lz>' ('#' starts a comment, so image paths may not contain '#'), found 1 fields"), "{e}");
         assert!(!e.contains("spaces"), "{e}");
-        fs::write(&lp, "1\nimg one.png 0 0 1\n").unwrap();
-        assert!(err_string(open_dataset(&lp)).contains("may not contain spaces"));
+        fs::write(&lp, "1\nimg one.png 0\n").unwrap();
+        assert!(err_string(open_dataset(&lp)).contains("a path with spaces needs three numbers"));
         fs::remove_file(&lp).unwrap();
         fs::write(d.path().join(FILENAMES), "x#1.png\n").unwrap();
         fs::write(d.path().join(DIRECTIONS), "0 0 1\n").unwrap();

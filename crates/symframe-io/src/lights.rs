@@ -321,7 +321,8 @@ pub(crate) fn unit_light(v: [f64; 3]) -> std::result::Result<DVec3, String> {
 /// Parses an RTI light-position file: the count `N`, then `N` lines `<image> <lx> <ly> <lz>`.
 ///
 /// Image paths are relative to the `.lp` file's folder (absolute paths are kept) and may not
-/// contain spaces or `#`. Returns the resolved image paths and unit light directions.
+/// contain `#`; a path with spaces is everything before a row's last three numbers. Returns the
+/// resolved image paths and unit light directions.
 pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
     let mut lines = TextLines::open(path)?;
     let dir = path.parent().unwrap_or(Path::new(""));
@@ -370,11 +371,17 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
     for (line, text) in &entries {
         let mut tokens = [""; 4];
         let n = fields(text, &mut tokens);
-        if n != 4 {
+        // A path with spaces (as RTIBuilder writes one from a folder named so): the row's
+        // last three fields are the direction, everything before them the path.
+        let spaced = (n > 4).then(|| split_row(text)).flatten();
+        if let Some((name, numbers)) = spaced {
+            tokens[0] = name;
+            tokens[1..].copy_from_slice(&numbers);
+        } else if n != 4 {
             let why = if has_trailing_comment(path, *line) {
                 "'#' starts a comment, so image paths may not contain '#'"
             } else {
-                "image paths may not contain spaces"
+                "a path with spaces needs three numbers after it"
             };
             return Err(Error::parse(
                 path,
@@ -404,6 +411,21 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
         images.push(img);
     }
     Ok((images, lights))
+}
+
+/// A row `<image> <lx> <ly> <lz>` whose image path may hold spaces: the path (everything
+/// before the last three fields, trimmed) and those three fields, where the last three are
+/// numbers; `None` otherwise.
+fn split_row(text: &str) -> Option<(&str, [&str; 3])> {
+    let mut rest = text.trim();
+    let mut numbers = [""; 3];
+    for k in (0..3).rev() {
+        let (before, last) = rest.rsplit_once(char::is_whitespace)?;
+        last.parse::<f64>().ok()?;
+        numbers[k] = last;
+        rest = before.trim_end();
+    }
+    (!rest.is_empty()).then_some((rest, numbers))
 }
 
 /// Refuses a light count `count` (declared at `line` of `path`) above [`MAX_LIGHTS`].
@@ -516,9 +538,8 @@ pub fn lp_path_convention(path: &Path) -> Result<LpPaths> {
     lines.next_content()?;
     let mut windows = false;
     while let Some((_, text)) = lines.next_content()? {
-        let found = text
-            .split_whitespace()
-            .next()
+        let found = split_row(text)
+            .map(|(name, _)| name)
             .and_then(|t| resolve_lp_image(dir, t));
         if found.is_some_and(|(_, c)| c == LpPaths::Windows) {
             windows = true;
@@ -570,14 +591,19 @@ pub fn read_light_directions(path: &Path) -> Result<Vec<DVec3>> {
         .map(|(line, text)| {
             let mut tokens = [""; 4];
             let n = fields(text, &mut tokens);
-            if n != 4 {
-                return Err(Error::parse(
-                    path,
-                    *line,
-                    format!("expected '<name> <lx> <ly> <lz>', found {n} fields"),
-                ));
-            }
-            let v = parse_triple(path, *line, 3, &tokens[1..], "light direction")?;
+            // A name with spaces: the last three fields are the direction.
+            let numbers = match split_row(text) {
+                Some((_, numbers)) if n > 4 => numbers,
+                _ if n == 4 => [tokens[1], tokens[2], tokens[3]],
+                _ => {
+                    return Err(Error::parse(
+                        path,
+                        *line,
+                        format!("expected '<name> <lx> <ly> <lz>', found {n} fields"),
+                    ))
+                }
+            };
+            let v = parse_triple(path, *line, 3, &numbers, "light direction")?;
             unit_direction(path, *line, v)
         })
         .collect()
@@ -647,6 +673,38 @@ fn parse_rows<T>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn image_paths_with_spaces_are_read_as_rtibuilder_writes_them() {
+        let d = tempfile::tempdir().unwrap();
+        let dir = d.path().join("my photos");
+        std::fs::create_dir(&dir).unwrap();
+        std::fs::write(dir.join("IMG 0001.jpg"), b"x").unwrap();
+        std::fs::write(dir.join("b.jpg"), b"x").unwrap();
+        let lp = d.path().join("s.lp");
+        std::fs::write(
+            &lp,
+            "2\nmy photos/IMG 0001.jpg  0.1 -0.2 0.97\nmy photos/b.jpg 0 0 1\n",
+        )
+        .unwrap();
+        let (images, lights) = parse_lp(&lp).unwrap();
+        assert_eq!(images[0], d.path().join("my photos/IMG 0001.jpg"));
+        assert!((lights[0] - DVec3::new(0.1, -0.2, 0.97).normalize()).length() < 1e-12);
+        assert_eq!(images[1], d.path().join("my photos/b.jpg"));
+        // Windows paths with spaces, as RTIBuilder writes them: found by file name.
+        std::fs::write(&lp, "1\nC:\\Users\\me\\My Photos\\IMG 0001.jpg 0 0 1\n").unwrap();
+        std::fs::write(d.path().join("IMG 0001.jpg"), b"x").unwrap();
+        let (images, _) = parse_lp(&lp).unwrap();
+        assert_eq!(images[0], d.path().join("IMG 0001.jpg"));
+        assert_eq!(lp_path_convention(&lp).unwrap(), LpPaths::Windows);
+        // Not three numbers after the path: the row is refused, naming the line.
+        std::fs::write(&lp, "1\nmy photos/b.jpg 0 0\n").unwrap();
+        let e = parse_lp(&lp).unwrap_err().to_string();
+        assert!(e.contains("s.lp:2: light direction"), "{e}");
+        // Directions alone (relighting): names with spaces too.
+        std::fs::write(&lp, "1\nlight one 0 0 1\n").unwrap();
+        assert_eq!(read_light_directions(&lp).unwrap(), vec![DVec3::Z]);
+    }
 
     #[test]
     fn light_directions_from_lp_or_table() {

@@ -83,11 +83,13 @@ pub fn s(p: &Path) -> &str {
 /// when stderr is not a terminal.
 pub fn is_progress_line(line: &str) -> bool {
     let mut w = line.split_whitespace();
-    matches!(w.next(), Some("decoding" | "tiles" | "merging"))
-        && w.next().is_some_and(|c| {
-            c.split_once('/')
-                .is_some_and(|(a, b)| a.parse::<u64>().is_ok() && b.parse::<u64>().is_ok())
-        })
+    matches!(
+        w.next(),
+        Some("decoding" | "tiles" | "estimating" | "fitting" | "merging")
+    ) && w.next().is_some_and(|c| {
+        c.split_once('/')
+            .is_some_and(|(a, b)| a.parse::<u64>().is_ok() && b.parse::<u64>().is_ok())
+    })
 }
 
 /// The run failed with a one-line error (no panic) that names `needle` (progress and
