@@ -231,7 +231,7 @@ fn answered_by(sources: &symframe_job::Sources) -> String {
     if total == 0 {
         return "no pixel".into();
     }
-    counts.sort_by(|a, b| b.1.cmp(&a.1));
+    counts.sort_by_key(|c| std::cmp::Reverse(c.1));
     counts
         .iter()
         .map(|(name, n)| format!("{name} {:.0}%", 100.0 * *n as f64 / total as f64))
