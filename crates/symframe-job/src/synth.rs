@@ -513,7 +513,7 @@ impl ChromeSphere {
             // and the lamp's reflection anti-aliased and blurred by the lens; the lamp clips in
             // integer formats, the room stays well below the white level.
             ball: symframe::render::MirrorBall {
-                lamp: 200.0,
+                lamp: 1000.0,
                 room: 0.3,
                 ..symframe::render::MirrorBall::new(
                     (size - 2 * margin) as f64 / 2.0,

@@ -93,6 +93,13 @@ impl MirrorBall {
         let k = self.samples.max(1);
         let mut room = vec![self.background; width * height];
         let mut hits: Vec<(f64, f64, f64)> = Vec::new();
+        // Where the mirror sends the view to the lamp's centre: the pixels around it are read
+        // on the finest grid whether or not a point of the coarser one sees the lamp (on a small
+        // ball the lamp's reflection is smaller than the coarser grid's spacing).
+        let mirror = {
+            let n = (light + DVec3::Z).normalize_or(DVec3::Z);
+            (n.z > 0.0).then_some((self.cx + self.r * n.x, self.cy - self.r * n.y))
+        };
         for row in 0..height {
             for col in 0..width {
                 let (x, y) = (col as f64 + 0.5, row as f64 + 0.5);
@@ -137,6 +144,8 @@ impl MirrorBall {
                     }
                 }
                 room[row * width + col] = sum * share;
+                lit |=
+                    mirror.is_some_and(|(mx, my)| (x - mx).abs() <= 1.5 && (y - my).abs() <= 1.5);
                 // A pixel that sees the lamp: where, on a grid eight times finer (the lamp's
                 // reflection is a fraction of a pixel across).
                 if lit {
