@@ -226,9 +226,8 @@ const HALO: usize = 3;
 /// The fewest pixels above the threshold up to which a highlight's spot is located by its
 /// centroid in the image (a 4 x 4 block: a lamp's reflection smaller than a pixel, blurred by
 /// the lens); on a larger ball up to a square a seventh of its radius across, where the
-/// ball's squeeze changes little over the spot (measured on `MirrorBall` and synth balls of
-/// 28-56 px radius, 8- and 16-bit with the lamp clipped: a fixed 16 or 64 pixels each failed
-/// one of them). A larger spot is located in normal space.
+/// ball's squeeze changes little over the spot (docs/capture.md, "Light calibration from a
+/// chrome sphere", says why not a fixed size). A larger spot is located in normal space.
 const SMALL_SPOT: usize = 16;
 
 /// Locates the highlight of a mirror sphere in one image of `width x height` grey values
@@ -333,13 +332,28 @@ pub fn find_highlight(
     let centre = |k: usize| -> (DVec3, usize) {
         let members = &spots[k].1;
         let sat = members.iter().filter(|&&i| !grey[i].is_finite()).count();
+        // A broad spot (a rough ball's lobe, a large saturated core) is squeezed toward the
+        // rim in the image: its centre is the mean of the sphere normals under the spot above
+        // the threshold (in normal space, as the squeeze does not pull it). A spot small against
+        // the ball ([`SMALL_SPOT`]) is the blur of a lamp smaller than a pixel, clipped or not:
+        // its centroid in the image.
+        if members.len() as f64 > (circle.r / 7.0).powi(2).max(SMALL_SPOT as f64) {
+            let mut sum = DVec3::ZERO;
+            for &i in members {
+                let (x, y) = ((i % width) as f64 + 0.5, (i / width) as f64 + 0.5);
+                if let Some(n) = circle.normal_at(x, y) {
+                    sum += (value(i) - threshold).max(0.0) * n;
+                }
+            }
+            return (sum.normalize_or(DVec3::Z), sat);
+        }
         let (mut x0, mut x1, mut y0, mut y1) = (usize::MAX, 0, usize::MAX, 0);
         for &i in members {
             let (col, row) = (i % width, i / width);
             (x0, x1, y0, y1) = (x0.min(col), x1.max(col), y0.min(row), y1.max(row));
         }
         // The halo: pixels within HALO of the spot's box, on the sphere, in no other spot.
-        // A broad spot (a rough ball's lobe, a large saturated core) has tails as broad.
+        // A wider spot (a clipped core) has tails as wide.
         let halo = HALO.max((x1 - x0).max(y1 - y0) / 2 + 1);
         let (x0, y0) = (x0.saturating_sub(halo), y0.saturating_sub(halo));
         let (x1, y1) = ((x1 + halo).min(width - 1), (y1 + halo).min(height - 1));
@@ -381,21 +395,6 @@ pub fn find_highlight(
                 + plane[2] * ((i / width) as f64 - my);
             v.min(threshold)
         };
-        // A broad spot (a rough ball's lobe, a large saturated core) is squeezed toward the
-        // rim in the image: its centre is the mean of the sphere normals under the spot above
-        // the threshold (in normal space, as the squeeze does not pull it). A spot small against
-        // the ball ([`SMALL_SPOT`]) is the blur of a lamp smaller than a pixel, clipped or not:
-        // its centroid in the image.
-        if members.len() as f64 > (circle.r / 7.0).powi(2).max(SMALL_SPOT as f64) {
-            let mut sum = DVec3::ZERO;
-            for &i in members {
-                let (x, y) = ((i % width) as f64 + 0.5, (i / width) as f64 + 0.5);
-                if let Some(n) = circle.normal_at(x, y) {
-                    sum += (value(i) - threshold).max(0.0) * n;
-                }
-            }
-            return (sum.normalize_or(DVec3::Z), sat);
-        }
         let (mut sx, mut sy, mut sw) = (0.0, 0.0, 0.0);
         for &i in &window {
             let w = value(i) - background(i);
