@@ -649,7 +649,7 @@ impl<'a> Estimator<'a> {
         // evidence gathered so far. A lobe much narrower than the spacing of the lights is read
         // through one or two samples: the piecewise-linear slice cannot be symmetric about its
         // centre, while a log-quadratic reconstruction of the lobe is, about its peak
-        // (docs/method.md, "Sharp lobes"); the peak is read where that rule may ask for it.
+        // (docs/method.md, "Sharp lobes"); the peak is read only where that rule asks for it.
         let auto = self.params.cosine == CosineMode::Auto;
         let sharp = moments.is_some_and(|m| m.count <= self.policy.lobe.sharp_samples);
         let evidence = NormalEvidence {
@@ -658,13 +658,10 @@ impl<'a> Estimator<'a> {
             lambertian: fit,
             share,
             sharp,
-            peak: if auto && sharp {
-                highlight_peak(slice, rig.lights_in_camera())
-            } else {
-                None
-            },
         };
-        let choice = policy::choose_normal(&self.policy, &evidence);
+        let choice = policy::choose_normal(&self.policy, &evidence, || {
+            highlight_peak(slice, rig.lights_in_camera())
+        });
         let mut source = PixelSource::Symmetry;
         let lobe = match choice {
             NormalChoice::Lobe(f) => Some(*f),
@@ -911,12 +908,9 @@ impl<'a> Estimator<'a> {
         let quality = coverage / (1.0 + (sd_n + sd_nt + sd_nb) / self.policy.search.symmetry_scale);
         if source == PixelSource::Symmetry {
             let plausible = fitted.filter(|f| {
-                policy::search_gives_way(
-                    &self.policy,
-                    quality,
-                    f,
-                    f.normal.z > 0.0 && centre_observed(rig, objective, f.normal),
-                )
+                policy::search_gives_way(&self.policy, quality, f, || {
+                    centre_observed(rig, objective, f.normal)
+                })
             });
             if let Some(f) = plausible {
                 let term =
@@ -1404,6 +1398,11 @@ impl PixelRecord {
             anisotropy: if scored { e.anisotropy } else { f32::NAN },
             tangent_confidence: if scored {
                 e.tangent_confidence
+            } else {
+                f32::NAN
+            },
+            residual: if scored {
+                e.residual[0] as f32
             } else {
                 f32::NAN
             },

@@ -320,8 +320,6 @@ pub(crate) struct NormalEvidence<'a> {
     /// The highlight's half-maximum region holds at most [`LobeSettings::sharp_samples`]
     /// lights: a lobe narrower than the rig's spacing.
     pub(crate) sharp: bool,
-    /// The highlight's log-quadratic peak, where the highlight is sharp.
-    pub(crate) peak: Option<DVec3>,
 }
 
 /// Which reading answers a pixel's normal (before the search, where it is asked).
@@ -348,21 +346,17 @@ pub(crate) enum NormalChoice<'a> {
 ///    [`DiffuseSettings::specular_share`]; or all but an undersampled spike) by its Lambertian
 ///    term;
 /// 4. anything else by the symmetry search.
-pub(crate) fn choose_normal<'a>(s: &PolicySettings, e: &NormalEvidence<'a>) -> NormalChoice<'a> {
+///
+/// `peak` reads the highlight's log-quadratic peak; it is called only where rule 2 asks for it.
+pub(crate) fn choose_normal<'a>(
+    s: &PolicySettings,
+    e: &NormalEvidence<'a>,
+    peak: impl FnOnce() -> Option<DVec3>,
+) -> NormalChoice<'a> {
     let fit = e.lambertian;
     let lobe = e.lobe.filter(|f| f.residual < s.lobe.explains);
     let diffuse = if e.auto {
         diffuse_centre(&s.diffuse, fit, e.share).or_else(|| spiked_diffuse(&s.diffuse, fit, lobe))
-    } else {
-        None
-    };
-    let sharp = if e.auto && diffuse.is_none() && e.sharp {
-        match fit.normal {
-            Some(m) if fit.confidence as f64 >= s.diffuse.centre_fit => {
-                Some((m, PixelSource::Lambertian))
-            }
-            _ => e.peak.map(|m| (m, PixelSource::Highlight)),
-        }
     } else {
         None
     };
@@ -380,33 +374,48 @@ pub(crate) fn choose_normal<'a>(s: &PolicySettings, e: &NormalEvidence<'a>) -> N
         fit.confidence as f64 >= s.diffuse.centre_fit
             && f.residual >= s.lobe.over_diffuse * (1.0 - fit.confidence as f64)
     });
-    let (lobe, diffuse) = if impersonated {
+    let (lobe, answering_diffuse) = if impersonated {
         (None, fit.normal)
     } else {
         (lobe, diffuse)
     };
-    match (lobe, sharp, diffuse) {
-        (Some(f), _, _) => NormalChoice::Lobe(f),
-        (None, Some((m, from)), _) => NormalChoice::Sharp(m, from),
-        (None, None, Some(m)) => NormalChoice::Diffuse(m),
-        (None, None, None) => NormalChoice::Search,
+    if let Some(f) = lobe {
+        return NormalChoice::Lobe(f);
+    }
+    // A sharp highlight where no diffuse term explains the pixel (the test before the
+    // impersonation rule): its diffuse part, else its peak.
+    let sharp = if e.auto && diffuse.is_none() && e.sharp {
+        match fit.normal {
+            Some(m) if fit.confidence as f64 >= s.diffuse.centre_fit => {
+                Some((m, PixelSource::Lambertian))
+            }
+            _ => peak().map(|m| (m, PixelSource::Highlight)),
+        }
+    } else {
+        None
+    };
+    match (sharp, answering_diffuse) {
+        (Some((m, from)), _) => NormalChoice::Sharp(m, from),
+        (None, Some(m)) => NormalChoice::Diffuse(m),
+        (None, None) => NormalChoice::Search,
     }
 }
 
 /// Whether the symmetry search's answer, of quality `quality` (see
 /// [`SearchSettings::doubtful`]), gives way to the fitted lobe `f` (whose centre is within
-/// the rig's reach where `observed`): the search doubts its answer (cast shadows that break
-/// the slice's symmetry, a lobe cut by the rig's reach) and the lobe nearly explains the
-/// samples (measured on shadowed bumps, such pixels with a lobe leaving 0.2-0.5%: rough GGX
-/// metal under 500 lights, the search 5.4 degrees mean off and the lobe 3.3; satin under 200
-/// lights 2.9 and 1.0; where the search's quality is higher it is the better of the two).
+/// the rig's reach where `observed()`, asked last): the search doubts its answer (cast
+/// shadows that break the slice's symmetry, a lobe cut by the rig's reach) and the lobe nearly
+/// explains the samples (measured on shadowed bumps, such pixels with a lobe leaving
+/// 0.2-0.5%: rough GGX metal under 500 lights, the search 5.4 degrees mean off and the lobe
+/// 3.3; satin under 200 lights 2.9 and 1.0; where the search's quality is higher it is the
+/// better of the two).
 pub(crate) fn search_gives_way(
     s: &PolicySettings,
     quality: f64,
     f: &LobeFit,
-    observed: bool,
+    observed: impl FnOnce() -> bool,
 ) -> bool {
-    quality < s.search.doubtful && f.residual < s.lobe.plausible && f.normal.z > 0.0 && observed
+    quality < s.search.doubtful && f.residual < s.lobe.plausible && f.normal.z > 0.0 && observed()
 }
 
 /// Whether a pixel is diffuse enough that no lobe is fitted: its Lambertian fit explains it
@@ -632,9 +641,8 @@ mod tests {
             lambertian: fit,
             share,
             sharp,
-            peak,
         };
-        choose_normal(&PolicySettings::default(), &evidence)
+        choose_normal(&PolicySettings::default(), &evidence, || peak)
     }
 
     #[test]
@@ -679,19 +687,37 @@ mod tests {
                 lambertian: &matte,
                 share: None,
                 sharp: true,
-                peak: Some(b),
             },
+            || Some(b),
         );
         assert_eq!(paper, NormalChoice::Search);
+        // The peak is read only where the sharp-lobe rule asks for it.
+        let sharp_lobe = NormalEvidence {
+            auto: true,
+            lobe: Some(&explaining),
+            lambertian: &glossy,
+            share: Some(0.3),
+            sharp: true,
+        };
+        assert_eq!(
+            choose_normal(&s, &sharp_lobe, || panic!("the peak was read")),
+            NormalChoice::Lobe(&explaining)
+        );
     }
 
     #[test]
     fn a_doubtful_search_gives_way_only_to_a_plausible_lobe_within_reach() {
         let s = PolicySettings::default();
         let lobe = fitted(DVec3::Z, 0.003);
-        assert!(search_gives_way(&s, 0.05, &lobe, true));
-        assert!(!search_gives_way(&s, 0.5, &lobe, true));
-        assert!(!search_gives_way(&s, 0.05, &lobe, false));
-        assert!(!search_gives_way(&s, 0.05, &fitted(DVec3::Z, 0.01), true));
+        assert!(search_gives_way(&s, 0.05, &lobe, || true));
+        assert!(!search_gives_way(&s, 0.5, &lobe, || true));
+        assert!(!search_gives_way(&s, 0.05, &lobe, || false));
+        assert!(!search_gives_way(&s, 0.05, &fitted(DVec3::Z, 0.01), || {
+            true
+        }));
+        // The reach is asked last: not where the search is sure of itself.
+        assert!(!search_gives_way(&s, 0.5, &lobe, || panic!(
+            "the reach was asked"
+        )));
     }
 }
