@@ -369,41 +369,33 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
     let mut images = Vec::with_capacity(count);
     let mut lights = Vec::with_capacity(count);
     for (line, text) in &entries {
-        let mut tokens = [""; 4];
-        let n = fields(text, &mut tokens);
-        // A path with spaces (as RTIBuilder writes one from a folder named so): the row's
-        // last three fields are the direction, everything before them the path.
-        let spaced = (n > 4).then(|| split_row(text)).flatten();
-        if let Some((name, numbers)) = spaced {
-            tokens[0] = name;
-            tokens[1..].copy_from_slice(&numbers);
-        } else if n != 4 {
+        let (name, numbers) = lp_row(text).map_err(|n| {
             let why = if has_trailing_comment(path, *line) {
                 "'#' starts a comment, so image paths may not contain '#'"
             } else {
                 "a path with spaces needs three numbers after it"
             };
-            return Err(Error::parse(
+            Error::parse(
                 path,
                 *line,
                 format!("expected '<image> <lx> <ly> <lz>' ({why}), found {n} fields"),
-            ));
-        }
-        let v = parse_triple(path, *line, 3, &tokens[1..], "light direction")?;
+            )
+        })?;
+        let v = parse_triple(path, *line, 3, &numbers, "light direction")?;
         lights.push(unit_direction(path, *line, v)?);
-        let Some((img, _)) = resolve_lp_image(dir, tokens[0]) else {
-            if is_windows_path(tokens[0]) {
+        let Some((img, _)) = resolve_lp_image(dir, name) else {
+            if is_windows_path(name) {
                 return Err(Error::parse(
                     path,
                     *line,
                     format!(
                         "image {} does not exist (a Windows path: looked for {} next to the .lp)",
-                        tokens[0],
-                        dir.join(windows_file_name(tokens[0])).display()
+                        name,
+                        dir.join(windows_file_name(name)).display()
                     ),
                 ));
             }
-            let tried = dir.join(tokens[0]);
+            let tried = dir.join(name);
             let why = not_a_file(&tried)
                 .unwrap_or_else(|| format!("{} is not a readable file", tried.display()));
             return Err(image_problem(path, *line, why));
@@ -411,6 +403,19 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
         images.push(img);
     }
     Ok((images, lights))
+}
+
+/// An `.lp` row `<image> <lx> <ly> <lz>`: the image path and the three direction fields (not
+/// yet parsed). A path with spaces (as RTIBuilder writes one from a folder named so) is
+/// everything before the row's last three fields, when those are numbers. `Err(n)`: the row
+/// has `n` fields and is not of that form.
+fn lp_row(text: &str) -> std::result::Result<(&str, [&str; 3]), usize> {
+    let mut tokens = [""; 4];
+    match fields(text, &mut tokens) {
+        4 => Ok((tokens[0], [tokens[1], tokens[2], tokens[3]])),
+        n if n > 4 => split_row(text).ok_or(n),
+        n => Err(n),
+    }
 }
 
 /// A row `<image> <lx> <ly> <lz>` whose image path may hold spaces: the path (everything
@@ -538,7 +543,8 @@ pub fn lp_path_convention(path: &Path) -> Result<LpPaths> {
     lines.next_content()?;
     let mut windows = false;
     while let Some((_, text)) = lines.next_content()? {
-        let found = split_row(text)
+        let found = lp_row(text)
+            .ok()
             .map(|(name, _)| name)
             .and_then(|t| resolve_lp_image(dir, t));
         if found.is_some_and(|(_, c)| c == LpPaths::Windows) {
@@ -589,20 +595,13 @@ pub fn read_light_directions(path: &Path) -> Result<Vec<DVec3>> {
     entries
         .iter()
         .map(|(line, text)| {
-            let mut tokens = [""; 4];
-            let n = fields(text, &mut tokens);
-            // A name with spaces: the last three fields are the direction.
-            let numbers = match split_row(text) {
-                Some((_, numbers)) if n > 4 => numbers,
-                _ if n == 4 => [tokens[1], tokens[2], tokens[3]],
-                _ => {
-                    return Err(Error::parse(
-                        path,
-                        *line,
-                        format!("expected '<name> <lx> <ly> <lz>', found {n} fields"),
-                    ))
-                }
-            };
+            let (_, numbers) = lp_row(text).map_err(|n| {
+                Error::parse(
+                    path,
+                    *line,
+                    format!("expected '<name> <lx> <ly> <lz>', found {n} fields"),
+                )
+            })?;
             let v = parse_triple(path, *line, 3, &numbers, "light direction")?;
             unit_direction(path, *line, v)
         })
