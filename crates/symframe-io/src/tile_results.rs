@@ -3,11 +3,12 @@
 //! tiles, whatever interrupted the run.
 //!
 //! File `tile-NNNNNN.bin`: a 48-byte header (magic `SYMFTILE`, format version, the job's
-//! fingerprint, the tile index, the pixel count, a checksum), then 44 bytes per pixel in tile
+//! fingerprint, the tile index, the pixel count, a checksum), then 48 bytes per pixel in tile
 //! order (little-endian): status (1 byte), source (1 byte, a [`PixelSource`] code), 2 padding,
-//! normal (3 x f32), tangent (3 x f32), confidence, anisotropy, tangent confidence (f32), objective evaluations
-//! (u32). The job fingerprint covers everything the results depend on (inputs, mask,
-//! parameters, tile size): a file of another job is stale. The checksum (XXH3-64 of the
+//! normal (3 x f32), tangent (3 x f32), confidence, anisotropy, tangent confidence, residual
+//! (f32), objective evaluations (u32). The job fingerprint covers everything the results
+//! depend on (inputs, mask, parameters, tile size, this format's version): a file of another
+//! job is stale. The checksum (XXH3-64 of the
 //! header's first 40 bytes and the records) catches a file changed after it was written (disk
 //! or copy errors, a stray edit): such a file is [`TileFile::Corrupt`], recomputed by a resumed
 //! run and named by a merge, never trusted.
@@ -22,12 +23,13 @@ use crate::error::{Error, Result};
 
 const MAGIC: &[u8; 8] = b"SYMFTILE";
 /// Format version of tile result files (1 had neither a source byte nor a checksum, 3 no
-/// tangent confidence).
-pub const TILE_RESULT_VERSION: u32 = 4;
+/// tangent confidence, 4 no residual). A file of another version is stale: recomputed by a
+/// resumed run, refused by a merge.
+pub const TILE_RESULT_VERSION: u32 = 5;
 const HEADER: usize = 48;
 /// Bytes of the header the checksum covers (all but the checksum itself).
 const HEADER_SUMMED: usize = 40;
-const RECORD: usize = 44;
+const RECORD: usize = 48;
 
 /// The length in bytes of the result file of a tile of `n` pixels (header and records).
 pub fn tile_result_len(n: usize) -> u64 {
@@ -89,6 +91,7 @@ pub fn write_tile_result(path: &Path, job: u64, t: usize, records: &[PixelRecord
             &r.confidence,
             &r.anisotropy,
             &r.tangent_confidence,
+            &r.residual,
         ]) {
             b.extend_from_slice(&v.to_le_bytes());
         }
@@ -223,7 +226,8 @@ fn records(b: &[u8]) -> std::result::Result<Vec<PixelRecord>, Problem> {
                 confidence: f(6),
                 anisotropy: f(7),
                 tangent_confidence: f(8),
-                evals: u32::from_le_bytes(r[40..44].try_into().unwrap()),
+                residual: f(9),
+                evals: u32::from_le_bytes(r[44..48].try_into().unwrap()),
             })
         })
         .collect()
@@ -324,6 +328,7 @@ mod tests {
                 confidence: 0.5,
                 anisotropy: 0.25,
                 tangent_confidence: 0.75,
+                residual: 0.0625,
                 evals: 123,
             },
         ];
@@ -366,6 +371,7 @@ mod tests {
                 confidence: 0.5,
                 anisotropy: k as f32 / n as f32,
                 tangent_confidence: 0.5,
+                residual: k as f32 / (2 * n) as f32,
                 evals: k as u32,
             })
             .collect()

@@ -1,13 +1,16 @@
-//! Error-map pictures: the map coloured with viridis (enlarged when small), a colour bar with
-//! labelled ticks in degrees, a title and a legend, drawn with plotters into an RGB buffer
-//! (for [`crate::eval`] and the experiments' plots).
+//! Pictures drawn with plotters into RGB buffers: the [`Picture`] type, the text style, the
+//! vertical colour bar every scale shares ([`draw_bar`]), and error-map pictures (the map
+//! coloured with viridis, enlarged when small, a colour bar in degrees, a title and a legend)
+//! for [`crate::eval`], the estimate's legends ([`crate::pictures`]) and the experiments' plots.
 //!
 //! Text uses an embedded subset of DejaVu Sans (`assets/`, with its licence), so nothing depends
 //! on the system's fonts.
 
+use std::path::Path;
 use std::sync::OnceLock;
 
-use anyhow::{anyhow, ensure, Result};
+use anyhow::{anyhow, ensure, Context, Result};
+use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use plotters::style::{register_font, FontStyle};
@@ -27,6 +30,105 @@ pub fn font_ready() -> Result<()> {
     static REGISTERED: OnceLock<bool> = OnceLock::new();
     let ok = *REGISTERED.get_or_init(|| register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
     ensure!(ok, "the embedded font cannot be read");
+    Ok(())
+}
+
+/// An RGB picture.
+pub struct Picture {
+    /// Interleaved RGB bytes.
+    pub rgb: Vec<u8>,
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+}
+
+impl Picture {
+    /// A white picture of `width x height` pixels.
+    pub fn white(width: usize, height: usize) -> Self {
+        Self {
+            rgb: vec![255; width * height * 3],
+            width,
+            height,
+        }
+    }
+
+    /// Writes the picture as an 8-bit PNG (atomically: never half-written).
+    pub fn save(&self, path: &Path) -> Result<()> {
+        symframe_io::write_png_rgb8(path, self.width, self.height, &self.rgb)
+            .with_context(|| format!("{}: cannot write", path.display()))
+    }
+
+    /// The colour of pixel `(x, y)`.
+    pub fn pixel(&self, x: usize, y: usize) -> [u8; 3] {
+        let o = (y * self.width + x) * 3;
+        [self.rgb[o], self.rgb[o + 1], self.rgb[o + 2]]
+    }
+}
+
+/// Black text of `size` pixels in the embedded font.
+pub fn text(size: i32) -> TextStyle<'static> {
+    TextStyle::from((FAMILY, size).into_font()).color(&BLACK)
+}
+
+/// A plotters error as this crate's.
+pub(crate) fn draw_err(e: impl std::fmt::Display) -> anyhow::Error {
+    anyhow!("drawing a picture: {e}")
+}
+
+/// A vertical colour bar: its gradient fills columns `left..left + width` and rows
+/// `top..=bottom` exactly (row `bottom` is the colour of `lo`, row `top` that of `hi`), framed
+/// one pixel outside, with ticks and labels on the right.
+pub struct Bar<'a> {
+    /// Left column of the gradient.
+    pub left: i32,
+    /// Top row of the gradient (the colour of `hi`).
+    pub top: i32,
+    /// Bottom row of the gradient (the colour of `lo`).
+    pub bottom: i32,
+    /// Width of the gradient in pixels.
+    pub width: i32,
+    /// The value at the bottom.
+    pub lo: f64,
+    /// The value at the top.
+    pub hi: f64,
+    /// The colour of a value.
+    pub colour: &'a dyn Fn(f64) -> [u8; 3],
+    /// Tick values with their labels.
+    pub ticks: &'a [(f64, String)],
+    /// Label size in pixels.
+    pub label_size: i32,
+}
+
+/// Draws `bar` on `root`.
+pub fn draw_bar<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, bar: &Bar) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let (top, bottom, left) = (bar.top, bar.bottom, bar.left);
+    let right = left + bar.width;
+    let span = (bottom - top).max(1) as f64;
+    let value = |y: i32| bar.lo + (bar.hi - bar.lo) * (bottom - y) as f64 / span;
+    for y in top..=bottom {
+        let c = (bar.colour)(value(y));
+        for x in left..right {
+            root.draw_pixel((x, y), &RGBColor(c[0], c[1], c[2]))
+                .map_err(draw_err)?;
+        }
+    }
+    root.draw(&Rectangle::new(
+        [(left - 1, top - 1), (right, bottom + 1)],
+        BLACK,
+    ))
+    .map_err(draw_err)?;
+    let label = text(bar.label_size).pos(Pos::new(HPos::Left, VPos::Center));
+    for (v, s) in bar.ticks {
+        let y = bottom - ((v - bar.lo) / (bar.hi - bar.lo) * span).round() as i32;
+        root.draw(&PathElement::new(vec![(right, y), (right + 5, y)], BLACK))
+            .map_err(draw_err)?;
+        root.draw(&Text::new(s.clone(), (right + 8, y), label.clone()))
+            .map_err(draw_err)?;
+    }
     Ok(())
 }
 
@@ -105,11 +207,38 @@ impl Scale {
         }
     }
 
+    /// The ticks with their labels (`unit` appended; the top one marked `≥` when `clipped`:
+    /// larger values have its colour).
+    pub fn labelled_ticks(&self, unit: &str, clipped: bool) -> Vec<(f64, String)> {
+        self.ticks
+            .iter()
+            .map(|&v| {
+                let mut s = format!("{v:.*}{unit}", self.decimals);
+                if clipped && (v - self.max).abs() <= 1e-9 * self.max {
+                    s.insert(0, '\u{2265}');
+                }
+                (v, s)
+            })
+            .collect()
+    }
+
     /// The viridis colour of a value on this scale.
     pub fn colour(&self, v: f32) -> [u8; 3] {
         let rgb = symframe_io::gray_map_rgb8(&[v], 0.0, self.max as f32);
         [rgb[0], rgb[1], rgb[2]]
     }
+}
+
+/// Left margin of an error picture's map.
+const PAD: usize = 12;
+/// Height of an error picture's title band, above the map.
+const TITLE_H: usize = 30;
+
+/// Where [`error_picture`] puts a `width x height` map: its top-left corner `(x, y)` in the
+/// picture and the whole factor it is enlarged by (map pixel `(i, j)` covers the picture's
+/// pixels `(x + i * zoom.., y + j * zoom..)`).
+pub fn error_map_layout(width: usize, height: usize) -> (usize, usize, usize) {
+    (PAD, TITLE_H, (256 / width.max(height).max(1)).max(1))
 }
 
 /// Draws an error map with its colour bar. Returns the picture's RGB bytes, width and height.
@@ -123,12 +252,10 @@ pub fn error_picture(
 ) -> Result<(Vec<u8>, usize, usize)> {
     ensure!(cells.len() == width * height && width > 0 && height > 0);
     font_ready()?;
-    const PAD: usize = 12;
-    const TITLE_H: usize = 30;
     const LEGEND_H: usize = 26;
     const BAR_W: usize = 22;
     const LABELS_W: usize = 64;
-    let zoom = (256 / width.max(height)).max(1);
+    let (_, _, zoom) = error_map_layout(width, height);
     let (mw, mh) = (width * zoom, height * zoom);
     let body_h = mh.max(200);
     let (pw, ph) = (
@@ -144,7 +271,6 @@ pub fn error_picture(
     {
         let root = BitMapBackend::with_buffer(&mut buf, (pw as u32, ph as u32)).into_drawing_area();
         let err = |e: &dyn std::fmt::Display| anyhow!("drawing the error picture: {e}");
-        let text = |size: i32| TextStyle::from((FAMILY, size).into_font()).color(&BLACK);
         root.draw_text(title, &text(17), (PAD as i32, 7))
             .map_err(|e| err(&e))?;
         root.draw_text(
@@ -154,32 +280,21 @@ pub fn error_picture(
         )
         .map_err(|e| err(&e))?;
 
-        // The bar: the gradient one pixel row at a time, a frame, ticks and labels on the right.
-        let (top, bottom) = (bar_y as i32 + 10, (bar_y + body_h) as i32 - 10);
-        let (left, right) = (bar_x as i32, (bar_x + BAR_W) as i32);
-        let span = (bottom - top) as f64;
-        for y in top..=bottom {
-            let c = scale.colour((scale.max * (bottom - y) as f64 / span) as f32);
-            root.draw(&Rectangle::new(
-                [(left, y), (right, y + 1)],
-                RGBColor(c[0], c[1], c[2]).filled(),
-            ))
-            .map_err(|e| err(&e))?;
-        }
-        root.draw(&Rectangle::new([(left, top), (right, bottom + 1)], BLACK))
-            .map_err(|e| err(&e))?;
-        let label = text(14).pos(Pos::new(HPos::Left, VPos::Center));
-        for &v in &scale.ticks {
-            let y = bottom - (v / scale.max * span).round() as i32;
-            root.draw(&PathElement::new(vec![(right, y), (right + 5, y)], BLACK))
-                .map_err(|e| err(&e))?;
-            let mut s = format!("{v:.*}", scale.decimals);
-            if clipped && (v - scale.max).abs() <= 1e-9 * scale.max {
-                s.insert(0, '\u{2265}');
-            }
-            root.draw(&Text::new(s, (right + 8, y), label.clone()))
-                .map_err(|e| err(&e))?;
-        }
+        // The bar, its ticks and labels on the right.
+        draw_bar(
+            &root,
+            &Bar {
+                left: bar_x as i32,
+                top: bar_y as i32 + 10,
+                bottom: (bar_y + body_h) as i32 - 10,
+                width: BAR_W as i32,
+                lo: 0.0,
+                hi: scale.max,
+                colour: &|v| scale.colour(v as f32),
+                ticks: &scale.labelled_ticks("", clipped),
+                label_size: 14,
+            },
+        )?;
         root.present().map_err(|e| err(&e))?;
     }
 

@@ -23,6 +23,7 @@ use symframe_io::{
 use crate::maps_out::{write_estimate_outputs, TileResults, WriteOptions};
 use crate::merge::{write_manifest, ShardManifest, MANIFEST, MANIFEST_FORMAT, MANIFEST_VERSION};
 use crate::outdir::OutputDir;
+use crate::pictures::LightsPlot;
 use crate::tiles::{peak_rss_bytes, run_tiles, shard_tiles, tile_path};
 use crate::{Checkpoint, Control, Interrupted, Progress, Stage};
 
@@ -840,12 +841,32 @@ fn run(
         Plan::Symmetry(rig, _) => rig.covered(n),
         Plan::Baseline(_) => true,
     };
+    // The rig for `lights.png`: every input light, used or dropped.
+    let used: Vec<bool> = match &plan {
+        Plan::Symmetry(rig, _) => {
+            let mut used = vec![false; ds.lights.len()];
+            for &i in rig.input_index() {
+                used[i] = true;
+            }
+            used
+        }
+        Plan::Baseline(_) => vec![true; ds.lights.len()],
+    };
+    let lights_plot = LightsPlot {
+        lights: &ds.lights,
+        used: &used,
+        theta_d_max_deg: match &plan {
+            Plan::Symmetry(rig, _) => Some(rig.theta_d_max_deg()),
+            Plan::Baseline(_) => None,
+        },
+    };
     let opts = WriteOptions {
         normal_png: config.normal_png,
         keep_maps: config.keep_maps,
         covered: matches!(plan, Plan::Symmetry(..))
             .then_some(&covered as &(dyn Fn(DVec3) -> bool + Sync)),
         on_tiles: &|_| {},
+        lights: Some(&lights_plot),
     };
     let tiles = TileResults {
         grid,
@@ -873,12 +894,13 @@ fn run(
 }
 
 /// The files of an estimate's output set (`write_estimate_outputs`), the report last.
-pub(crate) const ESTIMATE_FILES: [&str; 14] = [
+pub(crate) const ESTIMATE_FILES: [&str; 22] = [
     "normals.npy",
     "tangents.npy",
     "confidence.npy",
     "anisotropy.npy",
     "tangent_confidence.npy",
+    "residual.npy",
     "source.npy",
     "normals.exr",
     "tangents.exr",
@@ -886,7 +908,14 @@ pub(crate) const ESTIMATE_FILES: [&str; 14] = [
     "tangents.png",
     "confidence.png",
     "source.png",
+    "residual.png",
     "tangents_gltf.png",
+    "lights.png",
+    "confidence_legend.png",
+    "source_legend.png",
+    "tangents_legend.png",
+    "residual_legend.png",
+    "index.html",
     "report.json",
 ];
 

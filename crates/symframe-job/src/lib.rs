@@ -64,6 +64,7 @@ pub mod integrate;
 mod maps_out;
 mod merge;
 mod outdir;
+pub mod pictures;
 mod relight;
 pub mod synth;
 mod tiles;

@@ -16,6 +16,7 @@ use symframe_io::{NormalPng, NpyRows, PngRows, TileGrid};
 
 use crate::estimate::Sources;
 use crate::outdir::{OutputDir, OutputSet};
+use crate::pictures::LightsPlot;
 use crate::{Checkpoint, Control};
 
 /// The result files of a finished job's tiles: the grid, the job's fingerprint, and where
@@ -83,6 +84,8 @@ pub(crate) struct WriteOptions<'a> {
     pub covered: Option<&'a (dyn Fn(DVec3) -> bool + Sync)>,
     /// Called after each band of the first pass with the number of tiles read so far.
     pub on_tiles: &'a dyn Fn(usize),
+    /// The rig for `lights.png` (none: no such picture, as for a merge, which has no rig).
+    pub lights: Option<&'a LightsPlot<'a>>,
 }
 
 /// `a += b`, field by field.
@@ -102,11 +105,13 @@ struct RowWriters {
     confidence: NpyRows<f32>,
     anisotropy: NpyRows<f32>,
     tangent_confidence: NpyRows<f32>,
+    residual: NpyRows<f32>,
     source: NpyRows<u8>,
     normals_png: PngRows,
     tangents_png: PngRows,
     confidence_png: PngRows,
     source_png: PngRows,
+    residual_png: PngRows,
     gltf_png: PngRows,
 }
 
@@ -119,11 +124,13 @@ impl RowWriters {
             confidence: NpyRows::create(&p("confidence.npy"), &[h, w])?,
             anisotropy: NpyRows::create(&p("anisotropy.npy"), &[h, w])?,
             tangent_confidence: NpyRows::create(&p("tangent_confidence.npy"), &[h, w])?,
+            residual: NpyRows::create(&p("residual.npy"), &[h, w])?,
             source: NpyRows::create(&p("source.npy"), &[h, w])?,
             normals_png: PngRows::rgb16(&p("normals.png"), w, h)?,
             tangents_png: PngRows::rgb8(&p("tangents.png"), w, h)?,
             confidence_png: PngRows::rgb8(&p("confidence.png"), w, h)?,
             source_png: PngRows::rgb8(&p("source.png"), w, h)?,
+            residual_png: PngRows::rgb8(&p("residual.png"), w, h)?,
             gltf_png: PngRows::rgb8(&p("tangents_gltf.png"), w, h)?,
         })
     }
@@ -135,6 +142,7 @@ impl RowWriters {
         self.confidence.push(&m.confidence)?;
         self.anisotropy.push(&m.anisotropy)?;
         self.tangent_confidence.push(&m.tangent_confidence)?;
+        self.residual.push(&m.residual)?;
         self.source.push(&m.source)?;
         let w = m.width;
         for r in 0..m.height {
@@ -150,6 +158,9 @@ impl RowWriters {
                 &m.confidence[n1.clone()],
                 0.0,
                 1.0,
+            )))?;
+            self.residual_png.push(copy(crate::pictures::residual_rgb8(
+                &m.residual[n1.clone()],
             )))?;
             self.source_png
                 .push(copy(symframe_io::source_map_rgb8(&m.source[n1])))?;
@@ -167,11 +178,13 @@ impl RowWriters {
         self.confidence.finish()?;
         self.anisotropy.finish()?;
         self.tangent_confidence.finish()?;
+        self.residual.finish()?;
         self.source.finish()?;
         self.normals_png.finish()?;
         self.tangents_png.finish()?;
         self.confidence_png.finish()?;
         self.source_png.finish()?;
+        self.residual_png.finish()?;
         self.gltf_png.finish()?;
         Ok(())
     }
@@ -225,7 +238,8 @@ fn triple(v: &[f32], i: usize) -> [f32; 3] {
     [v[3 * i], v[3 * i + 1], v[3 * i + 2]]
 }
 
-/// Writes the maps (`.npy`, `.exr`), pictures, the source map and `report.json` (the value
+/// Writes the maps (`.npy`, `.exr`), pictures, the source map, the legends, `lights.png` and
+/// `index.html` ([`crate::pictures`]) and `report.json` (the value
 /// `report` returns, given the seconds spent writing the rest and what the maps hold) as one
 /// output set: staged inside the locked folder `out`, then switched in with the report last
 /// (see [`OutputSet`]). The maps are read from the tile results a band at a time: the `.npy`
@@ -273,6 +287,7 @@ pub(crate) fn write_estimate_outputs(
             f.confidence[a..b].copy_from_slice(&m.confidence);
             f.anisotropy[a..b].copy_from_slice(&m.anisotropy);
             f.tangent_confidence[a..b].copy_from_slice(&m.tangent_confidence);
+            f.residual[a..b].copy_from_slice(&m.residual);
             f.status[a..b].copy_from_slice(&m.status);
             f.source[a..b].copy_from_slice(&m.source);
         }
@@ -296,6 +311,7 @@ pub(crate) fn write_estimate_outputs(
         f.evals = evals;
     }
     let json = report(t_write.elapsed().as_secs_f64(), &summary)?;
+    crate::pictures::write_pictures(&staging, &json, opts.lights)?;
     staging.commit("report.json", json, &|n| {
         (ctl.checkpoint)(Checkpoint::Moved(n))
     })?;
@@ -339,6 +355,7 @@ mod tests {
             confidence: f(5) * 1.5,
             anisotropy: f(6) + 0.5,
             tangent_confidence: f(7),
+            residual: f(8).abs(),
             evals: (p % 97) as u32,
         }
     }
@@ -370,6 +387,7 @@ mod tests {
         write_npy_f32(&p("confidence.npy"), &[h, w], &m.confidence).unwrap();
         write_npy_f32(&p("anisotropy.npy"), &[h, w], &m.anisotropy).unwrap();
         write_npy_f32(&p("tangent_confidence.npy"), &[h, w], &m.tangent_confidence).unwrap();
+        write_npy_f32(&p("residual.npy"), &[h, w], &m.residual).unwrap();
         write_npy_u8(&p("source.npy"), &[h, w], &m.source).unwrap();
         write_exr_map(&p("normals.exr"), w, h, 3, &m.normals).unwrap();
         write_exr_map(&p("tangents.exr"), w, h, 3, &m.tangents).unwrap();
@@ -378,6 +396,7 @@ mod tests {
             ("tangents.png", tangent_map_rgb8(&m.tangents)),
             ("confidence.png", gray_map_rgb8(&m.confidence, 0.0, 1.0)),
             ("source.png", source_map_rgb8(&m.source)),
+            ("residual.png", crate::pictures::residual_rgb8(&m.residual)),
             (
                 "tangents_gltf.png",
                 crate::export::gltf_anisotropy_rgb8(&m.tangents, &m.anisotropy),
@@ -417,6 +436,7 @@ mod tests {
                 keep_maps: true,
                 covered: Some(&covered),
                 on_tiles: &|n| read.lock().unwrap().push(n),
+                lights: None,
             };
             let (summary, kept) =
                 write_estimate_outputs(&out, &tiles, &opts, &Control::default(), |_, _| {
@@ -425,7 +445,8 @@ mod tests {
                 .unwrap();
             drop(out);
             for name in crate::estimate::ESTIMATE_FILES {
-                if name == "report.json" {
+                // The report, and the pictures made from it, are not the maps'.
+                if name == "report.json" || crate::pictures::PICTURE_FILES.contains(&name) {
                     continue;
                 }
                 let a = std::fs::read(reference.join(name)).unwrap();
@@ -443,6 +464,7 @@ mod tests {
                 bits(&kept.tangent_confidence),
                 bits(&whole.tangent_confidence)
             );
+            assert_eq!(bits(&kept.residual), bits(&whole.residual));
             assert_eq!(
                 (&kept.status, &kept.source, kept.counts, kept.evals),
                 (&whole.status, &whole.source, whole.counts, whole.evals)
@@ -490,6 +512,7 @@ mod tests {
                     std::fs::remove_file(&last).unwrap();
                 }
             },
+            lights: None,
         };
         let e = write_estimate_outputs(&out, &tiles, &opts, &Control::default(), |_, _| {
             Ok(serde_json::json!({}))

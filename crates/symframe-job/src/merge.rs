@@ -289,7 +289,7 @@ fn run(
     }
     // Nothing the size of the declared image is allocated before the tiles listed cover the
     // grid and every tile's file is there with the length of its records: what the manifests
-    // declare is then backed by files of 40 bytes per pixel (a forged `shard.json` of a few
+    // declare is then backed by files of 48 bytes per pixel (a forged `shard.json` of a few
     // bytes declaring 65536 x 2048 one-pixel tiles made merge allocate gigabytes first).
     // Which shard folder holds each tile: the first that lists it (memory in proportion to the
     // manifests' lists, already read).
@@ -401,6 +401,8 @@ fn run(
         keep_maps,
         covered: None,
         on_tiles: &|n| ctl.report(Progress::new(Stage::Merging, n as u64, total)),
+        // The shards' reports carry no light directions: a merge draws no `lights.png`.
+        lights: None,
     };
     let (summary, maps) = write_estimate_outputs(out, &tiles, &opts, ctl, |write_s, summary| {
         report["pixels"] = serde_json::to_value(summary.counts)?;

@@ -126,6 +126,9 @@ pub struct EstimateMaps {
     /// Tangent confidence, `H x W`: how clearly the data single out the tangent's axes, in
     /// [0, 1], 0 where the pixel has no tangent, NaN where nothing was estimated.
     pub tangent_confidence: Vec<f32>,
+    /// Residual, `H x W`: the symmetry distance about the normal at the answer (see
+    /// [`PixelRecord::residual`]), NaN where none was measured.
+    pub residual: Vec<f32>,
     /// Per-pixel status.
     pub status: Vec<PixelStatus>,
     /// Per-pixel [`PixelSource`] code, `H x W`.
@@ -171,6 +174,12 @@ pub struct PixelRecord {
     /// How clearly the data single out the tangent's axes, in [0, 1] (0 without a tangent;
     /// `NaN` unless estimated or culled).
     pub tangent_confidence: f32,
+    /// How much of the pixel's data the answer leaves unexplained: the symmetry distance
+    /// `SD_n` about the answer's normal, the share of the slice's signal that its mirror image
+    /// about the normal does not reproduce (0: perfectly symmetric; docs/method.md, "Symmetry
+    /// distances and the domain rule"). `NaN` where no symmetry was measured at the answer
+    /// (not estimated, a fallback beyond the rig's reach, a baseline).
+    pub residual: f32,
     /// Objective evaluations spent.
     pub evals: u32,
 }
@@ -185,6 +194,7 @@ impl PixelRecord {
         confidence: f32::NAN,
         anisotropy: f32::NAN,
         tangent_confidence: f32::NAN,
+        residual: f32::NAN,
         evals: 0,
     };
 
@@ -207,6 +217,7 @@ impl EstimateMaps {
             confidence: vec![f32::NAN; n],
             anisotropy: vec![f32::NAN; n],
             tangent_confidence: vec![f32::NAN; n],
+            residual: vec![f32::NAN; n],
             status: vec![PixelStatus::Masked; n],
             source: vec![PixelSource::None as u8; n],
             counts: PixelCounts::default(),
@@ -223,6 +234,7 @@ impl EstimateMaps {
         self.confidence[p] = r.confidence;
         self.anisotropy[p] = r.anisotropy;
         self.tangent_confidence[p] = r.tangent_confidence;
+        self.residual[p] = r.residual;
         self.normals[p * 3..p * 3 + 3].copy_from_slice(&r.normal);
         self.tangents[p * 3..p * 3 + 3].copy_from_slice(&r.tangent);
     }

@@ -4,31 +4,13 @@
 //! All text uses the embedded DejaVu subset of [`symframe_job::colorbar`] (printable ASCII plus `°`,
 //! `−`, `≤`, `≥`), so nothing depends on the system's fonts.
 
-use std::path::Path;
-
-use anyhow::{anyhow, Context, Result};
+use anyhow::{anyhow, Result};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use symframe_job::colorbar::{font_ready, Scale, FAMILY};
+use symframe_job::colorbar::{draw_bar, font_ready, text, Bar, Scale};
 
-/// An RGB picture.
-pub struct Picture {
-    /// Interleaved RGB bytes.
-    pub rgb: Vec<u8>,
-    /// Width in pixels.
-    pub width: usize,
-    /// Height in pixels.
-    pub height: usize,
-}
-
-impl Picture {
-    /// Writes the picture as an 8-bit PNG.
-    pub fn save(&self, path: &Path) -> Result<()> {
-        symframe_io::write_png_rgb8(path, self.width, self.height, &self.rgb)
-            .with_context(|| format!("{}: cannot write", path.display()))
-    }
-}
+pub use symframe_job::colorbar::Picture;
 
 /// Colour of cells or pixels without an estimate.
 pub const NO_ESTIMATE: [u8; 3] = [230, 60, 200];
@@ -37,10 +19,6 @@ pub const BACKGROUND: [u8; 3] = [0, 0, 0];
 
 fn err(e: impl std::fmt::Display) -> anyhow::Error {
     anyhow!("drawing a plot: {e}")
-}
-
-fn text(size: i32) -> TextStyle<'static> {
-    TextStyle::from((FAMILY, size).into_font()).color(&BLACK)
 }
 
 /// A heat map of `values` (row-major, `rows x cols`; `None` = no estimate, drawn magenta) with
@@ -142,32 +120,20 @@ fn colour_bar<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let (top, bottom) = (y as i32, (y + height) as i32 - 1);
-    let (l, r) = (x as i32, x as i32 + 16);
-    let span = (bottom - top).max(1) as f64;
-    for yy in top..=bottom {
-        let c = scale.colour((scale.max * (bottom - yy) as f64 / span) as f32);
-        root.draw(&Rectangle::new(
-            [(l, yy), (r, yy + 1)],
-            RGBColor(c[0], c[1], c[2]).filled(),
-        ))
-        .map_err(err)?;
-    }
-    root.draw(&Rectangle::new([(l, top), (r, bottom + 1)], BLACK))
-        .map_err(err)?;
-    let label = text(11).pos(Pos::new(HPos::Left, VPos::Center));
-    for (i, &v) in scale.ticks.iter().enumerate() {
-        let yy = bottom - (v / scale.max * span).round() as i32;
-        let mut s = format!("{v:.*}°", scale.decimals);
-        if i + 1 == scale.ticks.len() && (v - scale.max).abs() < 1e-9 {
-            s.insert(0, '≥');
-        }
-        root.draw(&PathElement::new(vec![(r, yy), (r + 4, yy)], BLACK))
-            .map_err(err)?;
-        root.draw(&Text::new(s, (r + 6, yy), label.clone()))
-            .map_err(err)?;
-    }
-    Ok(())
+    draw_bar(
+        root,
+        &Bar {
+            left: x as i32,
+            top: y as i32,
+            bottom: (y + height) as i32 - 1,
+            width: 16,
+            lo: 0.0,
+            hi: scale.max,
+            colour: &|v| scale.colour(v as f32),
+            ticks: &scale.labelled_ticks("°", true),
+            label_size: 11,
+        },
+    )
 }
 
 /// Series colours of the line plots.

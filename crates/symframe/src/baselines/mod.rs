@@ -173,8 +173,8 @@ impl BaselinePixel {
     }
 
     /// What the maps hold at this pixel, whose normal comes from `source`: the normal and,
-    /// where there is one, the confidence; no anisotropy or tangent confidence (`NaN`), no objective
-    /// evaluations.
+    /// where there is one, the confidence; no anisotropy, tangent confidence or residual (`NaN`), no
+    /// objective evaluations.
     pub fn record(&self, source: PixelSource) -> PixelRecord {
         PixelRecord {
             status: self.status,
@@ -196,6 +196,7 @@ impl BaselinePixel {
             },
             anisotropy: f32::NAN,
             tangent_confidence: f32::NAN,
+            residual: f32::NAN,
             evals: 0,
         }
     }
