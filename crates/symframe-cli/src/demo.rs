@@ -1,6 +1,6 @@
 //! `symframe demo`: renders a built-in anisotropic sphere, writes it as an `.lp` dataset, runs
 //! the estimation job on it with every default (as `symframe estimate` does), and reports the
-//! error against ground truth; then fits a Ward BRDF per pixel in the estimated frames (the fit
+//! error against ground truth (the eval job: `eval.json` and the error pictures); then fits a Ward BRDF per pixel in the estimated frames (the fit
 //! job, on the estimate's tile cache) and relights it under a new light, plain and with the
 //! tangents turned by 90 degrees inside a letter-shaped region, as in the paper's Section 5.1;
 //! and writes the fit's viewer page (`fit/viewer.html`).
@@ -17,7 +17,9 @@ use symframe::render::{Scene, TangentField};
 use symframe_io::ImageFormat;
 
 use glam::DVec3;
-use symframe_job::{EstimateConfig, EstimateOutcome, FitConfig, RelightConfig, ViewConfig};
+use symframe_job::{
+    EstimateConfig, EstimateOutcome, EvalConfig, FitConfig, RelightConfig, ViewConfig,
+};
 
 use crate::cli::DemoArgs;
 use crate::progress;
@@ -99,20 +101,16 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let bars = progress::Bars::default();
     let show = |p| bars.update(p);
     let ctl = crate::control(&show, None);
-    let EstimateOutcome::Maps(done) =
-        symframe_job::estimate(&EstimateConfig::new(&lp, &estimate_dir), &ctl)?
-    else {
+    let mut estimate = EstimateConfig::new(&lp, &estimate_dir);
+    // Evaluated from the files below: nothing needs the whole maps in memory.
+    estimate.keep_maps = false;
+    let EstimateOutcome::Maps(_) = symframe_job::estimate(&estimate, &ctl)? else {
         unreachable!("the demo does not run shards");
     };
-    let maps = done
-        .maps
-        .context("the demo's estimate kept no maps in memory")?;
-    let e = scene.evaluate(&maps.normals, &maps.tangents);
-    let eval_path = estimate_dir.join("eval.json");
-    symframe_io::write_bytes(
-        &eval_path,
-        (serde_json::to_string_pretty(&e)? + "\n").as_bytes(),
-    )?;
+    // The eval job on the estimate and the dataset's ground truth: eval.json and the error
+    // pictures with their colour bars, beside the maps.
+    let report = symframe_job::evaluate_job(&EvalConfig::new(&dataset_dir, &estimate_dir), &ctl)?;
+    let e = &report.evaluation;
     say!(
         "normal error (pixels within 60 deg of the view): mean {:.2} deg, median {:.2}, 90th pct {:.2}; coverage {:.1}%",
         e.normal_error.mean,
@@ -129,9 +127,18 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     );
     say!("dataset:  {}", lp.display());
     say!(
-        "pictures: {} and {} (also confidence.png; maps as .npy and .exr, report.json)",
+        "pictures: {} and {} (also confidence, residual, source and lights; maps as .npy and .exr, report.json)",
         estimate_dir.join("normals.png").display(),
         estimate_dir.join("tangents.png").display()
+    );
+    say!(
+        "errors:   {} and {} (angular error against the ground truth, colour bars in degrees)",
+        estimate_dir.join("normal_error.png").display(),
+        estimate_dir.join("tangent_error.png").display()
+    );
+    say!(
+        "overview: {} (every picture with its legend, and the run's summary)",
+        estimate_dir.join("index.html").display()
     );
 
     // Section 5.1: per-pixel Ward fit in the estimated frames, relit and edited.
