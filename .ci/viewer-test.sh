@@ -54,7 +54,9 @@ trap 'rm -rf "$work"' EXIT
 "$sf" -q fit "$work/data" --frames "$work/est" -o "$work/fit" --model ward
 "$sf" -q fit "$work/data" --frames "$work/est" -o "$work/gltf" --model gltf
 # From the work folder, so that the page's title is just "fit".
-(cd "$work" && "$sf" -q view fit -o viewer.html && "$sf" -q view gltf -o viewer_gltf.html)
+(cd "$work" && "$sf" -q view fit -o viewer.html && "$sf" -q view gltf -o viewer_gltf.html &&
+    "$sf" -q view est -o viewer_est.html &&
+    "$sf" -q view fit -o viewer_pyramid.html --pyramid-above 32 --tile-size 16)
 
 l1=0.3,0.4,0.866 l2=-0.5,0.2,0.84 l3=0.1,-0.6,0.79
 "$sf" -q relight "$work/fit" -o "$work/relit" --light "$l1" --light "$l2" --light "$l3"
@@ -62,7 +64,7 @@ edits="exposure=0.5&diffuse=0.7&specular=1.5&roughness=0.8&rotate=60"
 "$sf" -q relight "$work/fit" -o "$work/edited" --light "$l2" --exposure 0.5 --diffuse-scale 0.7 \
     --specular-scale 1.5 --roughness-scale 0.8 --rotate-tangents 60
 
-args=(--viewer "$work/viewer.html" --mask "$work/data/mask.png" --min-psnr 45
+args=(--viewer "$work/viewer.html" --mask "$work/data/mask.png" --min-psnr 45 --interact
     --case "light=$l1" "$work/relit/relit_000.png"
     --case "light=$l2" "$work/relit/relit_001.png"
     --case "light=$l3" "$work/relit/relit_002.png"
@@ -82,10 +84,22 @@ node "$here/viewer-test.js" "${args[@]}"
 "$sf" -q relight "$work/gltf" -o "$work/grelit" --light "$l1" --light "$l2" --light "$l3"
 "$sf" -q relight "$work/gltf" -o "$work/gedited" --light "$l2" --exposure 0.5 --diffuse-scale 0.7 \
     --roughness-scale 0.8 --rotate-tangents 60
-node "$here/viewer-test.js" --viewer "$work/viewer_gltf.html" --mask "$work/data/mask.png" --min-psnr 45 \
+node "$here/viewer-test.js" --viewer "$work/viewer_gltf.html" --mask "$work/data/mask.png" --min-psnr 45 --interact \
     --case "light=$l1" "$work/grelit/relit_000.png" \
     --case "light=$l2" "$work/grelit/relit_001.png" \
     --case "light=$l3" "$work/grelit/relit_002.png" \
     --case "light=$l2&exposure=0.5&diffuse=0.7&roughness=0.8&rotate=60" "$work/gedited/relit_000.png" \
     --case "view=base_color" "$work/gltf/base_color.png"
+
+# The estimate folder itself (no fit): its maps' pictures, a relit view, the legends.
+node "$here/viewer-test.js" --viewer "$work/viewer_est.html" --mask "$work/data/mask.png" --min-psnr 45 --interact \
+    --case "view=normal" "$work/est/normals.png" \
+    --case "view=tangent" "$work/est/tangents.png" \
+    --case "view=confidence" "$work/est/confidence.png" \
+    --case "view=source" "$work/est/source.png" \
+    --nonblank "light=$l1"
+
+# The Ward fit as a pyramid of 16 px tiles (3 levels): the coarse level at once, tiles on demand.
+node "$here/viewer-test.js" --viewer "$work/viewer_pyramid.html" --mask "$work/data/mask.png" --min-psnr 45 \
+    --pyramid 16 3 --case "light=$l1" "$work/relit/relit_000.png"
 echo "viewer-test: passed in $(($(date +%s) - start)) s (${size}x${size} fit, $(stat -c %s "$work/viewer.html") byte page)"

@@ -708,7 +708,9 @@ pub struct RelightArgs {
 /// Flags of `symframe view`.
 #[derive(Debug, Clone, Args)]
 pub struct ViewArgs {
-    /// Output folder of `symframe fit` (its model's maps, normals and tangents .npy).
+    /// Output folder of `symframe fit` (its model's maps, normals and tangents .npy), or of
+    /// `symframe estimate` (normals, tangents, confidence, anisotropy and source, shaded with
+    /// a fixed grey material).
     pub fit_dir: PathBuf,
     /// The HTML file to write (default: FIT_DIR/viewer.html).
     #[arg(short, long)]
@@ -717,6 +719,13 @@ pub struct ViewArgs {
     /// source views (default: the folder fit.json records, if it is still there).
     #[arg(long)]
     pub frames: Option<PathBuf>,
+    /// Maps wider or taller than this many pixels go to a tile pyramid in the folder NAME_files
+    /// beside the page NAME.html, which the page loads as it zooms (0: always).
+    #[arg(long, value_name = "PIXELS", default_value_t = symframe_job::DEFAULT_PYRAMID_ABOVE)]
+    pub pyramid_above: usize,
+    /// Side of the pyramid's square tiles, pixels (8 to 4096).
+    #[arg(long, value_name = "PIXELS", default_value_t = symframe_job::DEFAULT_TILE_SIZE)]
+    pub tile_size: usize,
 }
 
 /// Solvers of `symframe integrate`.

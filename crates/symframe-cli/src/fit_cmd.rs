@@ -164,6 +164,8 @@ pub fn view_config(args: &ViewArgs) -> ViewConfig {
         config.output = o.clone();
     }
     config.frames = args.frames.clone();
+    config.pyramid_above = args.pyramid_above;
+    config.tile_size = args.tile_size;
     config
 }
 
@@ -182,6 +184,16 @@ pub fn view(args: &ViewArgs) -> Result<ViewOutcome> {
             done.bytes as f64 / 1e6,
             done.views.join(", ")
         );
+        if let Some(p) = &done.pyramid {
+            eprintln!(
+                "symframe: {} written ({} levels of {} px tiles, {} tiles, {:.1} MB)",
+                p.dir.display(),
+                p.levels,
+                p.tile_size,
+                p.tiles,
+                p.bytes as f64 / 1e6
+            );
+        }
     }
     Ok(done)
 }

@@ -85,7 +85,9 @@ pub use relight::{
     RelightOutcome,
 };
 pub use tiles::{peak_rss_bytes, shard_tiles, TileCounts};
-pub use view::{write_viewer, ViewConfig, ViewOutcome};
+pub use view::{
+    write_viewer, PyramidOutcome, ViewConfig, ViewOutcome, DEFAULT_PYRAMID_ABOVE, DEFAULT_TILE_SIZE,
+};
 /// The parsers of files a hostile user can plant, for the fuzz targets (`fuzz/`).
 #[cfg(feature = "fuzzing")]
 pub use {merge::check_shard_manifest, outdir::check_switch_plan};

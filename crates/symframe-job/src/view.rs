@@ -1,13 +1,18 @@
-//! The viewer: the folder of [`crate::fit`] (and the maps of the estimate it was fitted in) in,
-//! one self-contained HTML file out that relights the fit in a browser in real time with WebGL2.
+//! The viewer: the folder of [`crate::fit`] (and the maps of the estimate it was fitted in), or
+//! the folder of [`crate::estimate`] alone, in; one HTML page out that relights the maps in a
+//! browser in real time with WebGL2, zooms and pans.
 //!
 //! The page needs nothing else (no network, works from a `file:` URL): the HTML, its script
 //! and its shaders (`src/view/`, real files in the repository) are copied in, and the maps are
 //! embedded as RGBA half-float textures, byte-shuffled, zlib-compressed and base64-encoded
-//! (the browser inflates them with its own `DecompressionStream`). The shader is the model of
-//! [`symframe::Relighter`] with the same edits, and it shades the pixels the relighter shades in
-//! the frames the relighter uses (taken from it, not recomputed), so a screenshot under a light
-//! matches `symframe relight --light` of the same fit (the browser test checks this).
+//! (the browser inflates them with its own `DecompressionStream`). Maps larger than
+//! [`ViewConfig::pyramid_above`] go to a tile pyramid in a folder beside the page instead
+//! (`view/pyramid.rs`), whose coarsest level is in the page; the page loads the tiles it shows.
+//!
+//! A fit is shaded with the model of [`symframe::Relighter`] with the same edits, in the frames
+//! the relighter uses (taken from it, not recomputed), so a screenshot under a light matches
+//! `symframe relight --light` of the same fit (the browser test checks this). An estimate has
+//! no material: the page shades it with a fixed grey Lambert plus Ward lobe along its tangents.
 //!
 //! Textures, four half floats per pixel, rows top to bottom:
 //! - `geom`: the normal, then a flag (0 no normal, 1 a normal but no model, 2 a model);
@@ -15,40 +20,60 @@
 //!   then 1 where it came from the tangent map (only those are turned by a rotation);
 //! - `kd`: diffuse albedo and `alpha_t`; `ks`: specular albedo and `alpha_b` (a glTF fit:
 //!   `kd` base colour and metallic, `ks` roughness, anisotropy strength, 0, 0; the fitted
-//!   light intensity is in the page's data);
+//!   light intensity is in the page's data); neither for an estimate;
 //! - `est` (when the estimate's maps are found): confidence, anisotropy, source code, and a
 //!   flag sum (1 confidence, 2 anisotropy, 4 source present).
 //!
 //! Values without a meaning (NaN) are stored as 0; the flags say where data is.
+
+mod npy;
+mod pyramid;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
-use symframe::{Edits, PixelSource};
+use symframe::{Edits, PixelSource, Relighter};
 
 use crate::relight::{read_fit_maps, FittedMaps};
+use npy::{Dtype, NpyBands};
+use pyramid::{Builder, Layout};
 
 /// The page template; `{{NAME}}` marks are filled in by [`render_page`].
 const PAGE: &str = include_str!("view/viewer.html");
 /// The page's script.
 const SCRIPT: &str = include_str!("view/viewer.js");
-/// The vertex shader (one triangle covering the canvas).
+/// The vertex shader (one tile's rectangle on the canvas).
 const VERTEX_SHADER: &str = include_str!("view/viewer.vert");
 /// The fragment shader: relighting and the map views.
 const FRAGMENT_SHADER: &str = include_str!("view/viewer.frag");
 
+/// The textures, in the order of [`Band::textures`].
+const TEXTURE_NAMES: [&str; 5] = ["geom", "frame", "kd", "ks", "est"];
+
+/// Default of [`ViewConfig::pyramid_above`]: WebGL2 browsers take textures of 4096 pixels a
+/// side at least, and a page of larger maps would be hundreds of megabytes.
+pub const DEFAULT_PYRAMID_ABOVE: usize = 4096;
+/// Default of [`ViewConfig::tile_size`].
+pub const DEFAULT_TILE_SIZE: usize = 256;
+
 /// Everything the viewer needs.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ViewConfig {
-    /// Output folder of [`crate::fit`].
+    /// Output folder of [`crate::fit`], or of [`crate::estimate`] (a folder with
+    /// `normals.npy` but no fitted maps).
     pub fit_dir: PathBuf,
     /// Output folder of the estimate the fit was made in (confidence, anisotropy and source
     /// maps); `None`: the `frames` folder recorded in `fit.json`, if it is still there.
     pub frames: Option<PathBuf>,
     /// The HTML file to write (its folder is created).
     pub output: PathBuf,
+    /// Maps wider or taller than this many pixels are written as a tile pyramid in the folder
+    /// `NAME_files` beside the page `NAME.html` (0: always).
+    pub pyramid_above: usize,
+    /// Side of the pyramid's square tiles, pixels.
+    pub tile_size: usize,
 }
 
 impl ViewConfig {
@@ -60,6 +85,8 @@ impl ViewConfig {
             output: fit_dir.join("viewer.html"),
             fit_dir,
             frames: None,
+            pyramid_above: DEFAULT_PYRAMID_ABOVE,
+            tile_size: DEFAULT_TILE_SIZE,
         }
     }
 }
@@ -69,7 +96,7 @@ impl ViewConfig {
 pub struct ViewOutcome {
     /// The HTML file.
     pub path: PathBuf,
-    /// Map size in pixels (the canvas is this size).
+    /// Map size in pixels.
     pub width: usize,
     /// Map size in pixels.
     pub height: usize,
@@ -77,10 +104,29 @@ pub struct ViewOutcome {
     pub bytes: u64,
     /// The views the page offers, `relit` first.
     pub views: Vec<&'static str>,
+    /// What the page shades: `ward`, `gltf` or `estimate` (an estimate folder, no fit).
+    pub model: &'static str,
     /// The estimate folder whose maps were embedded, if any.
     pub frames: Option<PathBuf>,
+    /// The tile pyramid, when the maps were too large for the page.
+    pub pyramid: Option<PyramidOutcome>,
     /// Things the user should know that did not stop the job (estimate maps not found).
     pub notes: Vec<String>,
+}
+
+/// The tile pyramid [`write_viewer`] wrote beside the page.
+#[derive(Debug, Clone)]
+pub struct PyramidOutcome {
+    /// Its folder.
+    pub dir: PathBuf,
+    /// Levels, the page's coarsest one included.
+    pub levels: usize,
+    /// Tile side, pixels.
+    pub tile_size: usize,
+    /// Tile files written.
+    pub tiles: usize,
+    /// Their bytes.
+    pub bytes: u64,
 }
 
 /// The data block of the page (JSON in a `<script>` element).
@@ -91,24 +137,229 @@ struct PageData {
     title: String,
     width: usize,
     height: usize,
+    /// The coarsest level's textures (the whole maps without a pyramid).
     textures: Textures,
+    /// The pyramid the page loads tiles of, if any.
+    pyramid: Option<PagePyramid>,
     views: Vec<&'static str>,
     /// Names of the source codes, by code.
     sources: Vec<&'static str>,
-    /// The fitted model: `ward` or `gltf`.
+    /// Their colours (as `source.png`).
+    source_colors: Vec<[u8; 3]>,
+    /// What the page shades: `ward`, `gltf` or `estimate`.
     model: &'static str,
     /// A glTF fit's light intensity (1 for Ward).
     light_intensity: f64,
 }
 
-/// The encoded textures (see the module documentation).
+/// The pyramid as the page sees it.
 #[derive(Serialize)]
+struct PagePyramid {
+    /// The tile folder, relative to the page.
+    dir: String,
+    tile: usize,
+    /// Levels below the page's: 0 (full resolution) to `levels - 1`, which is the page's.
+    levels: usize,
+}
+
+/// The encoded textures (see the module documentation).
+#[derive(Serialize, Default)]
 struct Textures {
-    geom: String,
-    frame: String,
-    kd: String,
-    ks: String,
+    geom: Option<String>,
+    frame: Option<String>,
+    kd: Option<String>,
+    ks: Option<String>,
     est: Option<String>,
+}
+
+/// Rows of the textures, four half floats a pixel (the `Some` ones of [`TEXTURE_NAMES`]).
+struct Band {
+    width: usize,
+    textures: [Option<Vec<u16>>; 5],
+}
+
+impl Band {
+    fn new(width: usize, present: [bool; 5]) -> Self {
+        Self {
+            width,
+            textures: present.map(|p| p.then(Vec::new)),
+        }
+    }
+
+    fn rows(&self) -> usize {
+        match self.textures[0].as_ref() {
+            Some(t) if self.width > 0 => t.len() / (4 * self.width),
+            _ => 0,
+        }
+    }
+
+    fn clear(&mut self) {
+        for t in self.textures.iter_mut().flatten() {
+            t.clear();
+        }
+    }
+
+    /// Appends one pixel's texels (those of absent textures are dropped).
+    fn push(&mut self, texels: [[f32; 4]; 5]) {
+        for (t, v) in self.textures.iter_mut().zip(texels) {
+            if let Some(t) = t {
+                t.extend(v.map(half_bits));
+            }
+        }
+    }
+
+    /// Appends row `y` of `src` (full resolution), every `step`-th pixel.
+    fn push_row_sampled(&mut self, src: &Band, y: usize, step: usize) {
+        for (t, s) in self.textures.iter_mut().zip(&src.textures) {
+            if let (Some(t), Some(s)) = (t, s) {
+                let row = &s[y * src.width * 4..(y + 1) * src.width * 4];
+                for px in row.chunks_exact(4).step_by(step) {
+                    t.extend_from_slice(px);
+                }
+            }
+        }
+    }
+
+    /// Columns `x0..x1` of every row.
+    fn crop(&self, x0: usize, x1: usize) -> Band {
+        let rows = self.rows();
+        Band {
+            width: x1 - x0,
+            textures: std::array::from_fn(|i| {
+                self.textures[i].as_ref().map(|t| {
+                    (0..rows)
+                        .flat_map(|y| &t[(y * self.width + x0) * 4..(y * self.width + x1) * 4])
+                        .copied()
+                        .collect()
+                })
+            }),
+        }
+    }
+}
+
+/// A value as half-float bits: NaN as 0, beyond the half range clamped to it.
+fn half_bits(v: f32) -> u16 {
+    let v = if v.is_nan() {
+        0.0
+    } else {
+        v.clamp(-65504.0, 65504.0)
+    };
+    half::f16::from_f32(v).to_bits()
+}
+
+/// Where the texels come from, a band of rows at a time.
+trait Rows {
+    fn fill(&mut self, y0: usize, y1: usize, band: &mut Band) -> Result<()>;
+}
+
+/// A fit's maps (held whole: the relighter's frames are of the whole map) and its estimate's.
+struct FitRows {
+    width: usize,
+    fitted: FittedMaps,
+    relighter: Relighter,
+    est: Option<EstimateMaps>,
+}
+
+impl Rows for FitRows {
+    fn fill(&mut self, y0: usize, y1: usize, band: &mut Band) -> Result<()> {
+        band.clear();
+        let (normals, tangents) = match &self.fitted {
+            FittedMaps::Ward(m) => (&m.normals, &m.tangents),
+            FittedMaps::Gltf(m) => (&m.normals, &m.tangents),
+        };
+        for p in y0 * self.width..y1 * self.width {
+            let geom = match self.relighter.frame(p) {
+                Some((_, nrm, _)) => [nrm.x as f32, nrm.y as f32, nrm.z as f32, 2.0],
+                None => match finite3(normals, p) {
+                    Some([x, y, z]) => [x, y, z, 1.0],
+                    None => [0.0; 4],
+                },
+            };
+            let frame = match self.relighter.frame(p) {
+                Some((t, _, aniso)) => [t.x as f32, t.y as f32, t.z as f32, f32::from(aniso)],
+                None => match finite3(tangents, p) {
+                    Some([x, y, z]) => [x, y, z, 1.0],
+                    None => [0.0; 4],
+                },
+            };
+            // Albedos and roughnesses matter only where there is a model (the flag of `geom`).
+            let (kd, ks) = match &self.fitted {
+                FittedMaps::Ward(m) => {
+                    let (d, s) = (&m.kd[p * 3..p * 3 + 3], &m.ks[p * 3..p * 3 + 3]);
+                    (
+                        [d[0], d[1], d[2], m.alpha_t[p]],
+                        [s[0], s[1], s[2], m.alpha_b[p]],
+                    )
+                }
+                FittedMaps::Gltf(m) => {
+                    let c = &m.base_color[p * 3..p * 3 + 3];
+                    (
+                        [c[0], c[1], c[2], m.metallic[p]],
+                        [m.roughness[p], m.anisotropy[p], 0.0, 0.0],
+                    )
+                }
+            };
+            let est = self.est.as_ref().map_or([0.0; 4], |e| e.texel(p));
+            band.push([geom, frame, kd, ks, est]);
+        }
+        Ok(())
+    }
+}
+
+/// An estimate folder read a band at a time.
+struct EstimateRows {
+    width: usize,
+    normals: NpyBands,
+    tangents: Option<NpyBands>,
+    confidence: Option<NpyBands>,
+    anisotropy: Option<NpyBands>,
+    source: Option<NpyBands>,
+}
+
+impl Rows for EstimateRows {
+    fn fill(&mut self, y0: usize, y1: usize, band: &mut Band) -> Result<()> {
+        band.clear();
+        let n = (y1 - y0) * self.width;
+        let mut normals = Vec::new();
+        self.normals.rows_f32(y0, y1, &mut normals)?;
+        let mut tangents = vec![f32::NAN; n * 3];
+        if let Some(t) = &mut self.tangents {
+            t.rows_f32(y0, y1, &mut tangents)?;
+        }
+        let scalar = |m: &mut Option<NpyBands>| -> Result<Option<Vec<f32>>> {
+            let Some(m) = m else { return Ok(None) };
+            let mut v = Vec::new();
+            m.rows_f32(y0, y1, &mut v)?;
+            Ok(Some(v))
+        };
+        let confidence = scalar(&mut self.confidence)?;
+        let anisotropy = scalar(&mut self.anisotropy)?;
+        let source = match &mut self.source {
+            Some(s) => {
+                let mut v = Vec::new();
+                s.rows_u8(y0, y1, &mut v)?;
+                Some(v)
+            }
+            None => None,
+        };
+        let est = EstimateMaps {
+            confidence,
+            anisotropy,
+            source,
+        };
+        for p in 0..n {
+            let geom = match finite3(&normals, p) {
+                Some([x, y, z]) => [x, y, z, 1.0],
+                None => [0.0; 4],
+            };
+            let frame = match finite3(&tangents, p) {
+                Some([x, y, z]) if geom[3] > 0.0 => [x, y, z, 1.0],
+                _ => [0.0; 4],
+            };
+            band.push([geom, frame, [0.0; 4], [0.0; 4], est.texel(p)]);
+        }
+        Ok(())
+    }
 }
 
 /// The estimate's maps that the viewer shows (each optional).
@@ -118,135 +369,335 @@ struct EstimateMaps {
     source: Option<Vec<u8>>,
 }
 
-/// Writes the viewer of a fit: see the module documentation. Errors name the file at fault
-/// (a fit map missing or of the wrong size, an estimate map of the wrong size, the output).
+impl EstimateMaps {
+    fn is_empty(&self) -> bool {
+        self.confidence.is_none() && self.anisotropy.is_none() && self.source.is_none()
+    }
+
+    /// The `est` texel of pixel `p`.
+    fn texel(&self, p: usize) -> [f32; 4] {
+        let at = |m: &Option<Vec<f32>>| m.as_ref().map_or(f32::NAN, |v| v[p]);
+        let (c, a) = (at(&self.confidence), at(&self.anisotropy));
+        let s = self.source.as_ref().map(|s| s[p]);
+        let flags =
+            u8::from(c.is_finite()) + 2 * u8::from(a.is_finite()) + 4 * u8::from(s.is_some());
+        [c, a, f32::from(s.unwrap_or(0)), f32::from(flags)]
+    }
+
+    fn views(&self) -> impl Iterator<Item = &'static str> + '_ {
+        [
+            ("confidence", self.confidence.is_some()),
+            ("anisotropy", self.anisotropy.is_some()),
+            ("source", self.source.is_some()),
+        ]
+        .into_iter()
+        .filter_map(|(v, p)| p.then_some(v))
+    }
+}
+
+/// Whether `dir` holds an estimate's maps and no fitted ones.
+fn is_estimate_folder(dir: &Path) -> bool {
+    dir.join("normals.npy").is_file()
+        && !dir.join("kd.npy").exists()
+        && !dir.join("base_color.npy").exists()
+}
+
+/// Writes the viewer of a fit or an estimate: see the module documentation. Errors name the
+/// file at fault (a map missing or of the wrong size, an estimate map of the wrong size, the
+/// output or its tile folder when they are not this tool's to replace).
 pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
     check_replaceable(&config.output)?;
-    let fitted = read_fit_maps(&config.fit_dir)?;
-    let (w, h) = fitted.size();
-    let relighter = fitted
-        .relighter(&Edits::default())
-        .with_context(|| config.fit_dir.display().to_string())?;
-    let (normals, tangents) = match &fitted {
-        FittedMaps::Ward(m) => (&m.normals, &m.tangents),
-        FittedMaps::Gltf(m) => (&m.normals, &m.tangents),
-    };
+    if config.tile_size < 8 || config.tile_size > 4096 {
+        bail!("tile size {}: must be 8 to 4096 pixels", config.tile_size);
+    }
     let mut notes = Vec::new();
-    let frames = frames_dir(config, &mut notes)?;
-    let est = match &frames {
-        Some(dir) => {
-            let e = read_estimate_maps(dir, w, h)?;
-            if e.confidence.is_none() && e.anisotropy.is_none() && e.source.is_none() {
-                notes.push(format!(
-                    "{}: no confidence.npy, anisotropy.npy or source.npy; those views are left \
-                     out",
-                    dir.display()
-                ));
-                None
-            } else {
-                Some(e)
+    let (mut rows, w, h, present, mut views, model, light_intensity, frames): (
+        Box<dyn Rows>,
+        usize,
+        usize,
+        [bool; 5],
+        Vec<&'static str>,
+        &'static str,
+        f64,
+        Option<PathBuf>,
+    ) = if is_estimate_folder(&config.fit_dir) {
+        if config.frames.is_some() {
+            notes.push(format!(
+                "{}: an estimate folder; --frames is not used",
+                config.fit_dir.display()
+            ));
+        }
+        let (r, w, h) = open_estimate(&config.fit_dir)?;
+        let mut views = vec!["relit", "normal"];
+        let mut est = false;
+        for (name, view, present) in [
+            ("tangent", "tangent", r.tangents.is_some()),
+            ("confidence", "confidence", r.confidence.is_some()),
+            ("anisotropy", "anisotropy", r.anisotropy.is_some()),
+            ("source", "source", r.source.is_some()),
+        ] {
+            if present {
+                views.push(view);
+                est |= name != "tangent";
             }
         }
-        None => None,
-    };
-
-    let n = w * h;
-    let geom = encode_texture(n, |p| match relighter.frame(p) {
-        Some((_, nrm, _)) => [nrm.x as f32, nrm.y as f32, nrm.z as f32, 2.0],
-        None => match finite3(normals, p) {
-            Some([x, y, z]) => [x, y, z, 1.0],
-            None => [0.0; 4],
-        },
-    })?;
-    let frame = encode_texture(n, |p| match relighter.frame(p) {
-        Some((t, _, aniso)) => [t.x as f32, t.y as f32, t.z as f32, f32::from(aniso)],
-        None => match finite3(tangents, p) {
-            Some([x, y, z]) => [x, y, z, 1.0],
-            None => [0.0; 4],
-        },
-    })?;
-    // Albedos and roughnesses matter only where there is a model (the flag of `geom`).
-    let (kd, ks, mut views, model, light_intensity) = match &fitted {
-        FittedMaps::Ward(maps) => (
-            encode_texture(n, |p| {
-                let c = &maps.kd[p * 3..p * 3 + 3];
-                [c[0], c[1], c[2], maps.alpha_t[p]]
-            })?,
-            encode_texture(n, |p| {
-                let c = &maps.ks[p * 3..p * 3 + 3];
-                [c[0], c[1], c[2], maps.alpha_b[p]]
-            })?,
-            vec!["relit", "normal", "tangent", "kd", "ks"],
-            "ward",
+        let dir = Some(config.fit_dir.clone());
+        (
+            Box::new(r),
+            w,
+            h,
+            [true, true, false, false, est],
+            views,
+            "estimate",
             1.0,
-        ),
-        FittedMaps::Gltf(maps) => (
-            encode_texture(n, |p| {
-                let c = &maps.base_color[p * 3..p * 3 + 3];
-                [c[0], c[1], c[2], maps.metallic[p]]
-            })?,
-            encode_texture(n, |p| [maps.roughness[p], maps.anisotropy[p], 0.0, 0.0])?,
-            vec!["relit", "normal", "tangent", "base_color"],
-            "gltf",
-            maps.exposure,
-        ),
-    };
-
-    let est = match est {
-        Some(e) => {
-            let at = |m: &Option<Vec<f32>>, p: usize| m.as_ref().map_or(f32::NAN, |v| v[p]);
-            let texture = encode_texture(n, |p| {
-                let (c, a) = (at(&e.confidence, p), at(&e.anisotropy, p));
-                let s = e.source.as_ref().map(|s| s[p]);
-                let flags = u8::from(c.is_finite())
-                    + 2 * u8::from(a.is_finite())
-                    + 4 * u8::from(s.is_some());
-                [c, a, f32::from(s.unwrap_or(0)), f32::from(flags)]
-            })?;
-            for (name, present) in [
-                ("confidence", e.confidence.is_some()),
-                ("anisotropy", e.anisotropy.is_some()),
-                ("source", e.source.is_some()),
-            ] {
-                if present {
-                    views.push(name);
+            dir,
+        )
+    } else {
+        let fitted = read_fit_maps(&config.fit_dir)?;
+        let (w, h) = fitted.size();
+        let relighter = fitted
+            .relighter(&Edits::default())
+            .with_context(|| config.fit_dir.display().to_string())?;
+        let frames = frames_dir(config, &mut notes)?;
+        let est = match &frames {
+            Some(dir) => {
+                let e = read_estimate_maps(dir, w, h)?;
+                if e.is_empty() {
+                    notes.push(format!(
+                        "{}: no confidence.npy, anisotropy.npy or source.npy; those views are \
+                         left out",
+                        dir.display()
+                    ));
+                    None
+                } else {
+                    Some(e)
                 }
             }
-            Some(texture)
+            None => None,
+        };
+        let (mut views, model, light_intensity) = match &fitted {
+            FittedMaps::Ward(_) => (vec!["relit", "normal", "tangent", "kd", "ks"], "ward", 1.0),
+            FittedMaps::Gltf(m) => (
+                vec!["relit", "normal", "tangent", "base_color"],
+                "gltf",
+                m.exposure,
+            ),
+        };
+        if let Some(e) = &est {
+            views.extend(e.views());
         }
-        None => None,
+        let present = [true, true, true, true, est.is_some()];
+        let rows = FitRows {
+            width: w,
+            fitted,
+            relighter,
+            est,
+        };
+        (
+            Box::new(rows),
+            w,
+            h,
+            present,
+            views,
+            model,
+            light_intensity,
+            frames,
+        )
     };
 
-    // The fit folder as given (a full path would show where it was made, not what it is).
+    let tiled = w.max(h) > config.pyramid_above;
+    let tiles_dir = pyramid::folder_of(&config.output);
+    // The tile folder is replaced (a pyramid) or removed (none: it would be stale) only if
+    // this tool wrote it.
+    let old = match pyramid::our_folder(&tiles_dir) {
+        Ok(old) => old,
+        Err(e) if tiled => return Err(e),
+        Err(_) => None,
+    };
+    let layout = if tiled {
+        Layout::new(w, h, config.tile_size)
+    } else {
+        Layout {
+            width: w,
+            height: h,
+            tile: w.max(h),
+            top: 0,
+        }
+    };
+    let building = tiled.then(|| partial_path(&tiles_dir));
+    if let Some(b) = &building {
+        if let Some(parent) = b.parent().filter(|p| !p.as_os_str().is_empty()) {
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("{}: cannot create folder", parent.display()))?;
+        }
+        // A leftover of an interrupted run of this tool goes; anything else stops the job.
+        if let Some(files) = pyramid::our_folder(b)? {
+            pyramid::remove_ours(b, &files)?;
+        }
+        std::fs::create_dir(b).with_context(|| format!("{}: cannot create", b.display()))?;
+    }
+    let built = build_levels(&mut *rows, layout, building.as_deref(), present);
+    let (top, tiles, tile_bytes) = match built {
+        Ok(b) => b,
+        Err(e) => {
+            if let Some(b) = &building {
+                if let Ok(Some(files)) = pyramid::our_folder(b) {
+                    let _ = pyramid::remove_ours(b, &files);
+                }
+            }
+            return Err(e);
+        }
+    };
+    drop(rows);
+    let encode = |i: usize| -> Result<Option<String>> {
+        top.textures[i]
+            .as_ref()
+            .map(|t| encode_halves(t, 6))
+            .transpose()
+    };
+    let textures = Textures {
+        geom: encode(0)?,
+        frame: encode(1)?,
+        kd: encode(2)?,
+        ks: encode(3)?,
+        est: encode(4)?,
+    };
+    drop(top);
+    if views.is_empty() {
+        views.push("relit");
+    }
+
+    // The folder as given (a full path would show where it was made, not what it is).
     let title = config.fit_dir.display().to_string();
     let data = PageData {
-        format: 1,
+        format: 2,
         title: title.clone(),
         width: w,
         height: h,
-        textures: Textures {
-            geom,
-            frame,
-            kd,
-            ks,
-            est,
-        },
+        textures,
+        pyramid: tiled.then(|| PagePyramid {
+            dir: tiles_dir
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            tile: layout.tile,
+            levels: layout.top + 1,
+        }),
         views: views.clone(),
         sources: PixelSource::legend().iter().map(|l| l.1).collect(),
+        source_colors: symframe_io::SOURCE_PALETTE.to_vec(),
         model,
         light_intensity,
     };
     let page = render_page(&title, &data)?;
+    // The tiles move into place, then the page that loads them is written, then the old tiles
+    // go.
+    let mut retired = None;
+    if let Some(b) = &building {
+        if let Some(files) = &old {
+            let aside = partial_path(&tiles_dir).with_extension("old");
+            std::fs::rename(&tiles_dir, &aside)
+                .with_context(|| format!("{}: cannot move aside", tiles_dir.display()))?;
+            let files: Vec<PathBuf> = files
+                .iter()
+                .map(|f| aside.join(f.strip_prefix(&tiles_dir).unwrap_or(f)))
+                .collect();
+            retired = Some((aside, files));
+        }
+        std::fs::rename(b, &tiles_dir)
+            .with_context(|| format!("{}: cannot write", tiles_dir.display()))?;
+    } else if let Some(files) = &old {
+        retired = Some((tiles_dir.clone(), files.clone()));
+    }
     write_file(&config.output, page.as_bytes())?;
+    if let Some((dir, files)) = retired {
+        pyramid::remove_ours(&dir, &files)?;
+    }
     Ok(ViewOutcome {
         path: config.output.clone(),
         width: w,
         height: h,
         bytes: page.len() as u64,
         views,
+        model,
         frames,
+        pyramid: tiled.then(|| PyramidOutcome {
+            dir: tiles_dir.clone(),
+            levels: layout.top + 1,
+            tile_size: layout.tile,
+            tiles,
+            bytes: tile_bytes,
+        }),
         notes,
     })
+}
+
+/// A hidden name beside `path` for a folder being built.
+fn partial_path(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    path.with_file_name(format!(".{name}.partial-{}", std::process::id()))
+}
+
+/// Reads the maps a band of tile rows at a time into the pyramid (`dir`: its folder; `None`
+/// without one, the page's level is then the whole map). Returns the page's level, the tile
+/// files written and their bytes.
+fn build_levels(
+    rows: &mut dyn Rows,
+    layout: Layout,
+    dir: Option<&Path>,
+    present: [bool; 5],
+) -> Result<(Band, usize, u64)> {
+    let mut builder = Builder::new(layout, dir, present)?;
+    let step = if dir.is_some() {
+        layout.tile
+    } else {
+        layout.height.max(1)
+    };
+    let mut band = Band::new(layout.width, present);
+    let mut y0 = 0;
+    while y0 < layout.height {
+        let y1 = (y0 + step).min(layout.height);
+        rows.fill(y0, y1, &mut band)?;
+        builder.push(y0, &band)?;
+        y0 = y1;
+    }
+    builder.finish()
+}
+
+/// Opens the maps of an estimate folder: `normals.npy` (required), and `tangents.npy`,
+/// `confidence.npy`, `anisotropy.npy`, `source.npy` where present, all of its size.
+fn open_estimate(dir: &Path) -> Result<(EstimateRows, usize, usize)> {
+    let path = dir.join("normals.npy");
+    let normals = NpyBands::open_any(&path, Dtype::F32)?;
+    let [h, w, c] = normals.shape();
+    if c != 3 {
+        bail!(
+            "{}: shape [{h}, {w}, {c}] is not an H x W x 3 map",
+            path.display()
+        );
+    }
+    let open = |name: &str, dtype: Dtype, channels: usize| -> Result<Option<NpyBands>> {
+        let path = dir.join(name);
+        if !path.is_file() {
+            return Ok(None);
+        }
+        NpyBands::open(&path, dtype, h, w, channels).map(Some)
+    };
+    Ok((
+        EstimateRows {
+            width: w,
+            tangents: open("tangents.npy", Dtype::F32, 3)?,
+            confidence: open("confidence.npy", Dtype::F32, 1)?,
+            anisotropy: open("anisotropy.npy", Dtype::F32, 1)?,
+            source: open("source.npy", Dtype::U8, 1)?,
+            normals,
+        },
+        w,
+        h,
+    ))
 }
 
 /// The estimate folder to take confidence, anisotropy and source from: the one asked for
@@ -350,25 +801,19 @@ fn finite3(map: &[f32], p: usize) -> Option<[f32; 3]> {
     v.iter().all(|x| x.is_finite()).then_some(v)
 }
 
-/// One texture of `n` pixels, four values each from `texel`: half floats (NaN as 0, beyond the
-/// half range clamped to it), the low bytes of all values then the high bytes (which deflate
-/// far better than interleaved), zlib-compressed, base64-encoded.
-fn encode_texture(n: usize, texel: impl Fn(usize) -> [f32; 4]) -> Result<String> {
-    let mut bytes = vec![0u8; n * 8];
-    let (lo, hi) = bytes.split_at_mut(n * 4);
-    for p in 0..n {
-        for (c, v) in texel(p).into_iter().enumerate() {
-            let v = if v.is_nan() {
-                0.0
-            } else {
-                v.clamp(-65504.0, 65504.0)
-            };
-            let [l, h] = half::f16::from_f32(v).to_bits().to_le_bytes();
-            lo[p * 4 + c] = l;
-            hi[p * 4 + c] = h;
-        }
+/// Half floats, four a pixel, as the page takes them: the low bytes of all values then the
+/// high bytes (which deflate far better than interleaved), zlib-compressed at `level`,
+/// base64-encoded.
+fn encode_halves(halves: &[u16], level: u32) -> Result<String> {
+    let n = halves.len();
+    let mut bytes = vec![0u8; n * 2];
+    let (lo, hi) = bytes.split_at_mut(n);
+    for (i, h) in halves.iter().enumerate() {
+        let [l, b] = h.to_le_bytes();
+        lo[i] = l;
+        hi[i] = b;
     }
-    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::new(6));
+    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::new(level));
     z.write_all(&bytes)?;
     Ok(base64(&z.finish()?))
 }
@@ -515,19 +960,15 @@ mod tests {
     #[test]
     fn the_template_has_every_mark_and_no_other() {
         let data = PageData {
-            format: 1,
+            format: 2,
             title: "a</script>".into(),
             width: 1,
             height: 1,
-            textures: Textures {
-                geom: String::new(),
-                frame: String::new(),
-                kd: String::new(),
-                ks: String::new(),
-                est: None,
-            },
+            textures: Textures::default(),
+            pyramid: None,
             views: vec!["relit"],
             sources: vec![],
+            source_colors: vec![],
             model: "ward",
             light_intensity: 1.0,
         };
@@ -541,7 +982,11 @@ mod tests {
 
     #[test]
     fn textures_are_shuffled_half_floats() {
-        let s = encode_texture(2, |p| [p as f32, 0.5, f32::NAN, 1e9]).unwrap();
+        let mut band = Band::new(2, [true, false, false, false, false]);
+        for p in 0..2 {
+            band.push([[p as f32, 0.5, f32::NAN, 1e9]; 5]);
+        }
+        let s = encode_halves(band.textures[0].as_ref().unwrap(), 6).unwrap();
         // Back: base64 by hand, then zlib with flate2's decoder.
         let raw: Vec<u8> = {
             let table = |c: u8| -> u32 {

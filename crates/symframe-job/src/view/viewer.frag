@@ -1,6 +1,7 @@
 #version 300 es
-// symframe viewer: relights fitted Ward or glTF maps, or shows one map, one texel per canvas
-// pixel.
+// symframe viewer: relights fitted Ward or glTF maps (or an estimate's frames with a fixed
+// material), or shows one map, for one tile of the maps at a time; each canvas pixel shows the
+// texel under its centre (nearest neighbour).
 //
 // The relit view is `symframe relight`'s image (symframe::Relighter): the radiance
 // f(l, v) (n.l) of each pixel's model in its frame (x = t, y = b = n x t, z = n), view
@@ -20,7 +21,7 @@ uniform highp sampler2D uKs;     // Ward: ks, alpha_b; glTF: roughness, strength
 uniform highp sampler2D uEst;    // confidence, anisotropy, source, flags (1, 2, 4)
 uniform int uView;               // 0 relit, 1 normal, 2 tangent, 3 kd, 4 ks, 5 confidence,
                                  // 6 anisotropy, 7 source, 8 base colour
-uniform int uModel;              // 0 Ward, 1 glTF
+uniform int uModel;              // 0 Ward, 1 glTF, 2 an estimate (no fitted material)
 uniform float uIntensity;        // glTF: the fitted light intensity
 uniform vec3 uLight;             // unit light direction, camera frame
 uniform float uGain;             // 2^exposure
@@ -28,6 +29,14 @@ uniform float uDiffuse;          // factor on kd
 uniform float uSpecular;         // factor on ks
 uniform float uRoughness;        // factor on alpha_t and alpha_b
 uniform vec2 uRotation;          // (cos, sin) of the tangent rotation
+// Where the tile is: the canvas pixel (device pixels, y down) shows map point
+// uCenter + (pixel - uCanvas / 2) / uZoom; the tile's texel (i, j) covers the map pixels from
+// uOrigin + (i, j) * uScale, uScale on a side (a coarse level).
+uniform vec2 uCenter;
+uniform float uZoom;
+uniform vec2 uCanvas;
+uniform vec2 uOrigin;
+uniform float uScale;
 
 out vec4 outColor;
 
@@ -122,17 +131,43 @@ vec3 gltf(vec3 n, vec3 t, vec3 base, float metallic, float roughness, float stre
     return (base * ta + tb) * ll.z;
 }
 
+// An estimate's stand-in material: grey Lambert plus a Ward lobe, stretched along the
+// tangent where the estimate has one (alpha 0.35 along, 0.12 across; 0.2 where isotropic),
+// times the edits' factors.
+vec3 estimateShade(vec3 n, vec4 frame, vec3 l) {
+    n = normalize(n);
+    vec3 t;
+    float ax = 0.2, ay = 0.2;
+    if (frame.w > 0.5) {
+        t = normalize(frame.xyz - dot(frame.xyz, n) * n);
+        t = editedTangent(t, n, frame.w);
+        ax = 0.35;
+        ay = 0.12;
+    } else {
+        vec3 a = abs(n.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0);
+        t = normalize(a - dot(a, n) * n);
+    }
+    return ward(n, t, vec3(0.5 * uDiffuse), vec3(0.15 * uSpecular), ax * uRoughness,
+                ay * uRoughness, l);
+}
+
 void main() {
     ivec2 size = textureSize(uGeom, 0);
-    // Texture rows run top to bottom, the canvas' y bottom to top.
-    ivec2 p = ivec2(int(gl_FragCoord.x), size.y - 1 - int(gl_FragCoord.y));
+    // The canvas' y runs bottom to top, the map's and the textures' rows top to bottom.
+    vec2 screen = vec2(gl_FragCoord.x, uCanvas.y - gl_FragCoord.y);
+    vec2 m = uCenter + (screen - 0.5 * uCanvas) / uZoom;
+    ivec2 p = clamp(ivec2(floor((m - uOrigin) / uScale)), ivec2(0), size - 1);
     vec4 geom = texelFetch(uGeom, p, 0);
     vec4 frame = texelFetch(uFrame, p, 0);
     int flag = int(geom.w + 0.5);
     vec3 n = geom.xyz;
     vec3 c = vec3(0.0);
     if (uView == 0) {
-        if (flag == 2) {
+        if (uModel == 2) {
+            if (flag > 0) {
+                c = srgb3(estimateShade(n, frame, uLight) * uGain);
+            }
+        } else if (flag == 2) {
             vec4 kd = texelFetch(uKd, p, 0);
             vec4 ks = texelFetch(uKs, p, 0);
             // The half floats are near unit length; renormalise, and keep t perpendicular to n.
@@ -152,7 +187,8 @@ void main() {
         c = flag > 0 ? (n + 1.0) * 0.5 : vec3(0.0);
     } else if (uView == 2) {
         if (frame.w > 0.5) {
-            vec3 t = flag == 2 ? editedTangent(frame.xyz, normalize(n), frame.w) : frame.xyz;
+            vec3 t = flag == 2 || uModel == 2 ? editedTangent(frame.xyz, normalize(n), frame.w)
+                                              : frame.xyz;
             c = hue(2.0 * atan(t.y, t.x) / (2.0 * PI));
         }
     } else if (uView == 8) {
