@@ -189,8 +189,7 @@ pub fn lights_picture(plot: &LightsPlot) -> Result<Picture> {
                 } else {
                     root.draw(&Circle::new(at, size, colour.stroke_width(1)))
                         .map_err(draw_err)?;
-                    root.draw(&Rectangle::new([at, at], colour.filled()))
-                        .map_err(draw_err)?;
+                    root.draw_pixel(at, &colour).map_err(draw_err)?;
                 }
             }
         }

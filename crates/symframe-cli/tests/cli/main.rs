@@ -17,6 +17,7 @@ mod hostile_jobs;
 mod integrate;
 mod normal_png;
 mod outdir;
+mod pictures;
 mod reliability;
 mod scaling;
 mod synth;
