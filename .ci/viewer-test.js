@@ -237,6 +237,8 @@ async function main() {
     // every view; only the model's controls.
     async function interact(c) {
       const ref = readPng(c.ref);
+      // The case's fragment without its view (set here view by view).
+      const base = c.fragment.split("&").filter((p) => !p.startsWith("view=")).join("&");
       const { page } = await open(c.fragment, 1200, 800);
       const vp = { width: 1200, height: 800 };
       const canvasBox = await page.locator("#view").boundingBox();
@@ -309,7 +311,7 @@ async function main() {
       // A legend for every view, of the view shown.
       const data = await page.evaluate(() => JSON.parse(document.getElementById("symframe-data").textContent));
       for (const name of data.views) {
-        await goTo(page, `${c.fragment}&view=${name}`);
+        await goTo(page, `${base}&view=${name}`);
         const l = await page.evaluate(() => {
           const el = document.getElementById("legend"), r = el.getBoundingClientRect();
           return { view: el.dataset.view, h: r.height, visible: el.checkVisibility(),
