@@ -980,6 +980,36 @@ mod tests {
         assert!(page.contains("symframeReady"));
     }
 
+    /// The half floats of an encoded texture (base64 by hand, zlib with flate2, unshuffled).
+    fn decode(s: &str) -> Vec<half::f16> {
+        let table = |c: u8| -> u32 {
+            match c {
+                b'A'..=b'Z' => (c - b'A') as u32,
+                b'a'..=b'z' => (c - b'a') as u32 + 26,
+                b'0'..=b'9' => (c - b'0') as u32 + 52,
+                b'+' => 62,
+                _ => 63,
+            }
+        };
+        let mut raw = Vec::new();
+        for ch in s.trim_end_matches('=').as_bytes().chunks(4) {
+            let mut v = 0u32;
+            for (i, &c) in ch.iter().enumerate() {
+                v |= table(c) << (18 - 6 * i);
+            }
+            for i in 0..ch.len() - 1 {
+                raw.push((v >> (16 - 8 * i)) as u8);
+            }
+        }
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(&mut flate2::read::ZlibDecoder::new(&raw[..]), &mut bytes)
+            .unwrap();
+        let n = bytes.len() / 2;
+        (0..n)
+            .map(|i| half::f16::from_bits(u16::from_le_bytes([bytes[i], bytes[n + i]])))
+            .collect()
+    }
+
     #[test]
     fn textures_are_shuffled_half_floats() {
         let mut band = Band::new(2, [true, false, false, false, false]);
@@ -987,36 +1017,74 @@ mod tests {
             band.push([[p as f32, 0.5, f32::NAN, 1e9]; 5]);
         }
         let s = encode_halves(band.textures[0].as_ref().unwrap(), 6).unwrap();
-        // Back: base64 by hand, then zlib with flate2's decoder.
-        let raw: Vec<u8> = {
-            let table = |c: u8| -> u32 {
-                match c {
-                    b'A'..=b'Z' => (c - b'A') as u32,
-                    b'a'..=b'z' => (c - b'a') as u32 + 26,
-                    b'0'..=b'9' => (c - b'0') as u32 + 52,
-                    b'+' => 62,
-                    _ => 63,
-                }
-            };
-            let b = s.trim_end_matches('=').as_bytes();
-            let mut out = Vec::new();
-            for ch in b.chunks(4) {
-                let mut v = 0u32;
-                for (i, &c) in ch.iter().enumerate() {
-                    v |= table(c) << (18 - 6 * i);
-                }
-                for i in 0..ch.len() - 1 {
-                    out.push((v >> (16 - 8 * i)) as u8);
-                }
-            }
-            out
-        };
-        let mut bytes = Vec::new();
-        std::io::Read::read_to_end(&mut flate2::read::ZlibDecoder::new(&raw[..]), &mut bytes)
-            .unwrap();
-        assert_eq!(bytes.len(), 16);
-        let half = |i: usize| half::f16::from_bits(u16::from_le_bytes([bytes[i], bytes[8 + i]]));
-        let got: Vec<f32> = (0..8).map(|i| half(i).to_f32()).collect();
+        let got: Vec<f32> = decode(&s).iter().map(|h| h.to_f32()).collect();
         assert_eq!(got, vec![0.0, 0.5, 0.0, 65504.0, 1.0, 0.5, 0.0, 65504.0]);
+    }
+
+    #[test]
+    fn pyramid_tiles_hold_every_other_pixel_of_the_estimate() {
+        let dir = tempfile::tempdir().unwrap();
+        let est = dir.path().join("est");
+        std::fs::create_dir(&est).unwrap();
+        let (w, h) = (40usize, 36usize);
+        // A different normal at every pixel; no normal in the first column.
+        let normal = |x: usize, y: usize| -> [f32; 3] {
+            if x == 0 {
+                return [f32::NAN; 3];
+            }
+            let v = glam::Vec3::new(x as f32 - 20.0, y as f32 - 18.0, 40.0).normalize();
+            v.to_array()
+        };
+        let normals: Vec<f32> = (0..h)
+            .flat_map(|y| (0..w).flat_map(move |x| normal(x, y)))
+            .collect();
+        symframe_io::write_npy_f32(&est.join("normals.npy"), &[h, w, 3], &normals).unwrap();
+        let mut config = ViewConfig::new(&est);
+        config.pyramid_above = 32;
+        config.tile_size = 8;
+        let done = write_viewer(&config).unwrap();
+        let p = done.pyramid.unwrap();
+        // 40 x 36, 20 x 18, 10 x 9, 5 x 5 (the page's).
+        assert_eq!((p.levels, p.tiles), (4, 5 * 5 + 3 * 3 + 2 * 2));
+        let texel = |g: &[half::f16], tw: usize, i: usize, j: usize| -> [f32; 4] {
+            std::array::from_fn(|c| g[(j * tw + i) * 4 + c].to_f32())
+        };
+        let expect = |x: usize, y: usize| -> [f32; 4] {
+            let n = normal(x, y);
+            if n[0].is_nan() {
+                return [0.0; 4];
+            }
+            let q = |v: f32| half::f16::from_f32(v).to_f32();
+            [q(n[0]), q(n[1]), q(n[2]), 1.0]
+        };
+        // Level 1, tile (2, 1): level-1 pixels x 16..20, y 8..16, full-resolution pixels twice
+        // those.
+        let script = std::fs::read_to_string(p.dir.join("1/2_1.js")).unwrap();
+        assert!(
+            script.starts_with("symframeTile(1,2,1,4,8,{"),
+            "{script:.30}"
+        );
+        let geom = script.split('"').nth(3).unwrap();
+        let g = decode(geom);
+        assert_eq!(g.len(), 4 * 8 * 4);
+        for j in 0..8 {
+            for i in 0..4 {
+                assert_eq!(
+                    texel(&g, 4, i, j),
+                    expect(2 * (16 + i), 2 * (8 + j)),
+                    "{i} {j}"
+                );
+            }
+        }
+        // The page's level: every 8th pixel.
+        let page = std::fs::read_to_string(&done.path).unwrap();
+        let start = page.find("\"geom\":\"").unwrap() + 8;
+        let g = decode(&page[start..start + page[start..].find('"').unwrap()]);
+        assert_eq!(g.len(), 5 * 5 * 4);
+        for j in 0..5 {
+            for i in 0..5 {
+                assert_eq!(texel(&g, 5, i, j), expect(8 * i, 8 * j));
+            }
+        }
     }
 }

@@ -193,3 +193,250 @@ fn a_new_fit_removes_the_old_fits_page() {
     assert!(fit.join("base_color.npy").is_file() && !fit.join("viewer.html").exists());
     assert!(!fit.join("kd.npy").exists());
 }
+
+/// An estimate folder `dir/name` of a `size` x `size` sphere as `symframe estimate` writes it
+/// (normals, tangents, confidence, anisotropy, source).
+fn estimate_folder(dir: &Path, name: &str, size: usize) -> std::path::PathBuf {
+    let scene = Scene::sphere(size, TangentField::Circular);
+    let est = dir.join(name);
+    fs::create_dir_all(&est).unwrap();
+    let n = size * size;
+    let hw3 = [size, size, 3];
+    write_npy_f32(&est.join("normals.npy"), &hw3, &scene.gt_normals()).unwrap();
+    write_npy_f32(&est.join("tangents.npy"), &hw3, &scene.gt_tangents()).unwrap();
+    let grey: Vec<f32> = (0..n)
+        .map(|p| if scene.mask[p] { 0.8 } else { f32::NAN })
+        .collect();
+    write_npy_f32(&est.join("confidence.npy"), &[size, size], &grey).unwrap();
+    write_npy_f32(&est.join("anisotropy.npy"), &[size, size], &grey).unwrap();
+    let source: Vec<u8> = scene.mask.iter().map(|&m| 3 * u8::from(m)).collect();
+    write_npy_u8(&est.join("source.npy"), &[size, size], &source).unwrap();
+    est
+}
+
+/// The tile scripts of a pyramid folder by level: `(level, file names)`, sorted.
+fn tiles_by_level(dir: &Path) -> Vec<(usize, Vec<String>)> {
+    let mut levels: Vec<(usize, Vec<String>)> = fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .filter(|e| e.file_type().unwrap().is_dir())
+        .map(|e| {
+            let mut names: Vec<String> = fs::read_dir(e.path())
+                .unwrap()
+                .map(|t| t.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            names.sort();
+            (e.file_name().to_string_lossy().parse().unwrap(), names)
+        })
+        .collect();
+    levels.sort();
+    levels
+}
+
+#[test]
+fn an_estimate_folder_opens() {
+    let dir = tempfile::tempdir().unwrap();
+    let est = estimate_folder(dir.path(), "est", SIZE);
+    let o = symframe(&["view", s(&est)]);
+    ok(&o);
+    assert!(
+        stderr(&o).contains("views: relit, normal, tangent, confidence, anisotropy, source"),
+        "{}",
+        stderr(&o)
+    );
+    let page = fs::read_to_string(est.join("viewer.html")).unwrap();
+    let data = page_data(&page);
+    assert_eq!(data["model"], "estimate");
+    assert_eq!(
+        (data["width"].clone(), data["height"].clone()),
+        (SIZE.into(), SIZE.into())
+    );
+    // Frames and the estimate's maps; no fitted material.
+    for t in ["geom", "frame", "est"] {
+        assert!(
+            data["textures"][t].as_str().unwrap().starts_with('e'),
+            "{t}"
+        );
+    }
+    assert!(data["textures"]["kd"].is_null() && data["textures"]["ks"].is_null());
+    assert!(data["pyramid"].is_null());
+    assert!(!est.join("viewer_files").exists());
+    // Without the optional maps: the views of what is there.
+    for f in [
+        "tangents.npy",
+        "confidence.npy",
+        "anisotropy.npy",
+        "source.npy",
+    ] {
+        fs::remove_file(est.join(f)).unwrap();
+    }
+    ok(&symframe(&["view", s(&est)]));
+    let data = page_data(&fs::read_to_string(est.join("viewer.html")).unwrap());
+    assert_eq!(data["views"], serde_json::json!(["relit", "normal"]));
+    assert!(data["textures"]["est"].is_null());
+}
+
+#[test]
+fn a_large_map_is_written_as_a_pyramid() {
+    let dir = tempfile::tempdir().unwrap();
+    let est = estimate_folder(dir.path(), "est", 40);
+    let out = dir.path().join("big.html");
+    let args = |extra: &[&str]| -> Vec<String> {
+        ["view", s(&est), "-o", s(&out)]
+            .iter()
+            .chain(extra)
+            .map(|a| a.to_string())
+            .collect()
+    };
+    let run = |extra: &[&str]| {
+        let a = args(extra);
+        symframe(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let o = run(&["--pyramid-above", "32", "--tile-size", "8"]);
+    ok(&o);
+    assert!(
+        stderr(&o).contains("4 levels of 8 px tiles, 38 tiles"),
+        "{}",
+        stderr(&o)
+    );
+    // 40 px: levels of 40, 20, 10 and 5 px; the last (one tile) in the page, the others in
+    // 8 px tiles beside it: 5 x 5, 3 x 3 and 2 x 2.
+    let tiles = dir.path().join("big_files");
+    let levels = tiles_by_level(&tiles);
+    let counts: Vec<(usize, usize)> = levels.iter().map(|(k, n)| (*k, n.len())).collect();
+    assert_eq!(counts, [(0, 25), (1, 9), (2, 4)]);
+    assert!(levels[1].1.contains(&"2_2.js".to_string()));
+    // A tile is a script handing its textures to the page: level 1, tile (2, 0) is the last
+    // column, 20 - 16 = 4 texels wide.
+    let script = fs::read_to_string(tiles.join("1/2_0.js")).unwrap();
+    assert!(
+        script.starts_with("symframeTile(1,2,0,4,8,{\"geom\":\"e"),
+        "{script:.40}"
+    );
+    assert!(script.contains("\"frame\":\"e") && script.contains("\"est\":\"e"));
+    assert!(!script.contains("\"kd\""));
+    let marker = fs::read_to_string(tiles.join("pyramid.json")).unwrap();
+    assert!(marker.contains("\"levels\":4"), "{marker}");
+    let data = page_data(&fs::read_to_string(&out).unwrap());
+    assert_eq!(
+        data["pyramid"],
+        serde_json::json!({"dir": "big_files", "tile": 8, "levels": 4})
+    );
+    // The page itself holds the 5 x 5 level only (compared below with the 40 x 40 maps).
+    let coarse = data["textures"]["geom"].as_str().unwrap().len();
+
+    // Again with larger tiles: the folder is replaced, nothing of the old one is left.
+    ok(&run(&["--pyramid-above", "32", "--tile-size", "16"]));
+    let counts: Vec<(usize, usize)> = tiles_by_level(&tiles)
+        .iter()
+        .map(|(k, n)| (*k, n.len()))
+        .collect();
+    assert_eq!(counts, [(0, 9), (1, 4)]);
+    // Below the threshold the page holds the maps, and its old tile folder goes.
+    ok(&run(&[]));
+    assert!(!tiles.exists());
+    let whole = page_data(&fs::read_to_string(&out).unwrap());
+    assert!(whole["pyramid"].is_null());
+    let full = whole["textures"]["geom"].as_str().unwrap().len();
+    assert!(coarse * 8 < full, "{coarse} {full}");
+    // Nothing half-written or set aside is left beside the page.
+    for e in fs::read_dir(dir.path()).unwrap() {
+        let name = e.unwrap().file_name().to_string_lossy().into_owned();
+        assert!(!name.starts_with('.'), "{name}");
+    }
+}
+
+#[test]
+fn a_tile_folder_symframe_did_not_write_is_never_replaced() {
+    let dir = tempfile::tempdir().unwrap();
+    let est = estimate_folder(dir.path(), "est", 20);
+    // A folder of the user's where the tiles would go.
+    let theirs = dir.path().join("page_files");
+    fs::create_dir(&theirs).unwrap();
+    fs::write(theirs.join("notes.txt"), "mine").unwrap();
+    let out = dir.path().join("page.html");
+    let o = symframe(&["view", s(&est), "-o", s(&out), "--pyramid-above", "0"]);
+    assert_one_line_error(&o, "page_files");
+    assert_eq!(
+        fs::read_to_string(theirs.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    assert!(!out.exists());
+    // Even one that looks like ours but holds something else.
+    ok(&symframe(&[
+        "view",
+        s(&est),
+        "-o",
+        s(&dir.path().join("x.html")),
+        "--pyramid-above",
+        "8",
+        "--tile-size",
+        "8",
+    ]));
+    let ours = dir.path().join("x_files");
+    fs::write(ours.join("0/extra.txt"), "mine").unwrap();
+    let o = symframe(&[
+        "view",
+        s(&est),
+        "-o",
+        s(&dir.path().join("x.html")),
+        "--pyramid-above",
+        "8",
+        "--tile-size",
+        "8",
+    ]);
+    assert_one_line_error(&o, "x_files");
+    assert!(ours.join("0/extra.txt").is_file());
+    // Without a pyramid, a folder of the user's is left alone.
+    ok(&symframe(&["view", s(&est), "-o", s(&out)]));
+    assert!(theirs.join("notes.txt").is_file());
+    // A link is refused, and what it points to left alone.
+    #[cfg(unix)]
+    {
+        let link = dir.path().join("linked_files");
+        std::os::unix::fs::symlink(&theirs, &link).unwrap();
+        let o = symframe(&[
+            "view",
+            s(&est),
+            "-o",
+            s(&dir.path().join("linked.html")),
+            "--pyramid-above",
+            "0",
+        ]);
+        assert_one_line_error(&o, "linked_files");
+        assert_eq!(fs::read_dir(&theirs).unwrap().count(), 1);
+    }
+}
+
+#[test]
+fn bad_estimate_folders_are_refused_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let est = estimate_folder(dir.path(), "est", SIZE);
+    let out = dir.path().join("v.html");
+    // A map of another size.
+    write_npy_f32(&est.join("anisotropy.npy"), &[3, 4], &[0.0; 12]).unwrap();
+    let o = symframe(&["view", s(&est), "-o", s(&out)]);
+    assert_one_line_error(&o, "anisotropy.npy");
+    fs::remove_file(est.join("anisotropy.npy")).unwrap();
+    // Source codes of the wrong type.
+    write_npy_f32(&est.join("source.npy"), &[SIZE, SIZE], &[0.0; SIZE * SIZE]).unwrap();
+    let o = symframe(&["view", s(&est), "-o", s(&out)]);
+    assert_one_line_error(&o, "source.npy");
+    fs::remove_file(est.join("source.npy")).unwrap();
+    // Normals cut short.
+    let normals = est.join("normals.npy");
+    let bytes = fs::read(&normals).unwrap();
+    fs::write(&normals, &bytes[..bytes.len() / 2]).unwrap();
+    let o = symframe(&["view", s(&est), "-o", s(&out)]);
+    assert_one_line_error(&o, "normals.npy");
+    // Not a .npy file at all.
+    fs::write(&normals, "hello").unwrap();
+    let o = symframe(&["view", s(&est), "-o", s(&out)]);
+    assert_one_line_error(&o, "normals.npy");
+    assert!(!out.exists());
+    // Tiles too small.
+    fs::write(&normals, &bytes).unwrap();
+    let o = symframe(&["view", s(&est), "-o", s(&out), "--tile-size", "2"]);
+    assert_one_line_error(&o, "tile size 2");
+    assert!(!out.exists());
+}
