@@ -402,6 +402,109 @@ fn is_estimate_folder(dir: &Path) -> bool {
         && !dir.join("base_color.npy").exists()
 }
 
+/// What the page is made of: the maps' rows and what they hold.
+struct Source {
+    rows: Box<dyn Rows>,
+    width: usize,
+    height: usize,
+    /// Which of [`TEXTURE_NAMES`] there are.
+    present: [bool; 5],
+    views: Vec<&'static str>,
+    model: &'static str,
+    light_intensity: f64,
+    /// The estimate folder whose maps are shown.
+    frames: Option<PathBuf>,
+}
+
+/// The maps of an estimate folder, read a band at a time.
+fn estimate_source(config: &ViewConfig, notes: &mut Vec<String>) -> Result<Source> {
+    if config.frames.is_some() {
+        notes.push(format!(
+            "{}: an estimate folder; --frames is not used",
+            config.fit_dir.display()
+        ));
+    }
+    let (r, width, height) = open_estimate(&config.fit_dir)?;
+    let mut views = vec!["relit", "normal"];
+    if r.tangents.is_some() {
+        views.push("tangent");
+    }
+    let mut est = false;
+    for (view, present) in [
+        ("confidence", r.confidence.is_some()),
+        ("anisotropy", r.anisotropy.is_some()),
+        ("source", r.source.is_some()),
+    ] {
+        if present {
+            views.push(view);
+            est = true;
+        }
+    }
+    Ok(Source {
+        rows: Box::new(r),
+        width,
+        height,
+        present: [true, true, false, false, est],
+        views,
+        model: "estimate",
+        light_intensity: 1.0,
+        frames: Some(config.fit_dir.clone()),
+    })
+}
+
+/// The maps of a fit folder (held whole) and of its estimate.
+fn fit_source(config: &ViewConfig, notes: &mut Vec<String>) -> Result<Source> {
+    let fitted = read_fit_maps(&config.fit_dir)?;
+    let (w, h) = fitted.size();
+    let relighter = fitted
+        .relighter(&Edits::default())
+        .with_context(|| config.fit_dir.display().to_string())?;
+    let frames = frames_dir(config, notes)?;
+    let est = match &frames {
+        Some(dir) => {
+            let e = read_estimate_maps(dir, w, h)?;
+            if e.is_empty() {
+                notes.push(format!(
+                    "{}: no confidence.npy, anisotropy.npy or source.npy; those views are left \
+                     out",
+                    dir.display()
+                ));
+                None
+            } else {
+                Some(e)
+            }
+        }
+        None => None,
+    };
+    let (mut views, model, light_intensity) = match &fitted {
+        FittedMaps::Ward(_) => (vec!["relit", "normal", "tangent", "kd", "ks"], "ward", 1.0),
+        FittedMaps::Gltf(m) => (
+            vec!["relit", "normal", "tangent", "base_color"],
+            "gltf",
+            m.exposure,
+        ),
+    };
+    if let Some(e) = &est {
+        views.extend(e.views());
+    }
+    let present = [true, true, true, true, est.is_some()];
+    Ok(Source {
+        rows: Box::new(FitRows {
+            width: w,
+            fitted,
+            relighter,
+            est,
+        }),
+        width: w,
+        height: h,
+        present,
+        views,
+        model,
+        light_intensity,
+        frames,
+    })
+}
+
 /// Writes the viewer of a fit or an estimate: see the module documentation. Errors name the
 /// file at fault (a map missing or of the wrong size, an estimate map of the wrong size, the
 /// output or its tile folder when they are not this tool's to replace).
@@ -411,100 +514,21 @@ pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
         bail!("tile size {}: must be 8 to 4096 pixels", config.tile_size);
     }
     let mut notes = Vec::new();
-    let (mut rows, w, h, present, mut views, model, light_intensity, frames): (
-        Box<dyn Rows>,
-        usize,
-        usize,
-        [bool; 5],
-        Vec<&'static str>,
-        &'static str,
-        f64,
-        Option<PathBuf>,
-    ) = if is_estimate_folder(&config.fit_dir) {
-        if config.frames.is_some() {
-            notes.push(format!(
-                "{}: an estimate folder; --frames is not used",
-                config.fit_dir.display()
-            ));
-        }
-        let (r, w, h) = open_estimate(&config.fit_dir)?;
-        let mut views = vec!["relit", "normal"];
-        let mut est = false;
-        for (name, view, present) in [
-            ("tangent", "tangent", r.tangents.is_some()),
-            ("confidence", "confidence", r.confidence.is_some()),
-            ("anisotropy", "anisotropy", r.anisotropy.is_some()),
-            ("source", "source", r.source.is_some()),
-        ] {
-            if present {
-                views.push(view);
-                est |= name != "tangent";
-            }
-        }
-        let dir = Some(config.fit_dir.clone());
-        (
-            Box::new(r),
-            w,
-            h,
-            [true, true, false, false, est],
-            views,
-            "estimate",
-            1.0,
-            dir,
-        )
+    let source = if is_estimate_folder(&config.fit_dir) {
+        estimate_source(config, &mut notes)?
     } else {
-        let fitted = read_fit_maps(&config.fit_dir)?;
-        let (w, h) = fitted.size();
-        let relighter = fitted
-            .relighter(&Edits::default())
-            .with_context(|| config.fit_dir.display().to_string())?;
-        let frames = frames_dir(config, &mut notes)?;
-        let est = match &frames {
-            Some(dir) => {
-                let e = read_estimate_maps(dir, w, h)?;
-                if e.is_empty() {
-                    notes.push(format!(
-                        "{}: no confidence.npy, anisotropy.npy or source.npy; those views are \
-                         left out",
-                        dir.display()
-                    ));
-                    None
-                } else {
-                    Some(e)
-                }
-            }
-            None => None,
-        };
-        let (mut views, model, light_intensity) = match &fitted {
-            FittedMaps::Ward(_) => (vec!["relit", "normal", "tangent", "kd", "ks"], "ward", 1.0),
-            FittedMaps::Gltf(m) => (
-                vec!["relit", "normal", "tangent", "base_color"],
-                "gltf",
-                m.exposure,
-            ),
-        };
-        if let Some(e) = &est {
-            views.extend(e.views());
-        }
-        let present = [true, true, true, true, est.is_some()];
-        let rows = FitRows {
-            width: w,
-            fitted,
-            relighter,
-            est,
-        };
-        (
-            Box::new(rows),
-            w,
-            h,
-            present,
-            views,
-            model,
-            light_intensity,
-            frames,
-        )
+        fit_source(config, &mut notes)?
     };
-
+    let Source {
+        mut rows,
+        width: w,
+        height: h,
+        present,
+        mut views,
+        model,
+        light_intensity,
+        frames,
+    } = source;
     let tiled = w.max(h) > config.pyramid_above;
     let tiles_dir = pyramid::folder_of(&config.output);
     // The tile folder is replaced (a pyramid) or removed (none: it would be stale) only if
