@@ -134,7 +134,7 @@ pub struct EstimateConfig {
     pub shard: Option<Shard>,
     /// The y convention of `normals.png` (16-bit, `(n + 1) / 2` per channel).
     pub normal_png: NormalPng,
-    /// Return the whole maps in memory ([`Done::maps`]) as well as writing them (34 bytes per
+    /// Return the whole maps in memory ([`Done::maps`]) as well as writing them (42 bytes per
     /// pixel); off, the outputs are written a band of tiles at a time and memory stays bounded
     /// whatever the image size (the CLI).
     pub keep_maps: bool,

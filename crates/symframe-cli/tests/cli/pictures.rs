@@ -260,7 +260,7 @@ fn the_demo_writes_error_pictures_whose_mean_it_prints() {
     let mut evaluated = Vec::new();
     for p in 0..24 * 24 {
         let g = &gt[3 * p..3 * p + 3];
-        if !(g[2] >= cos60) || !errors[p].is_finite() {
+        if g[2].is_nan() || g[2] < cos60 || !errors[p].is_finite() {
             continue;
         }
         evaluated.push(errors[p] as f64);
