@@ -18,7 +18,9 @@
 //   ui=0             the canvas alone, filling the window (for screenshots and tests)
 // Hooks for tests: window.symframeReady becomes true once the first frame is drawn;
 // window.symframeFrames counts frames drawn; window.symframeTilesLoaded counts pyramid tiles
-// loaded; window.symframeIdle() is true when no tile is wanted or on its way and the last
+// loaded (window.symframeDecodeMs: the time spent decoding them and the page's level,
+// window.symframeReadyAt: when the first frame was drawn, ms after navigation);
+// window.symframeIdle() is true when no tile is wanted or on its way and the last
 // frame shows every loaded tile; window.symframeView() is the view's state.
 "use strict";
 
@@ -163,6 +165,7 @@
 
   async function addTile(k, x, y, w, h, t) {
     decoding++;
+    const t0 = performance.now();
     try {
       const maps = await Promise.all(NAMES.map((n) => (t[n] ? decodeTexture(t[n], w, h) : null)));
       const tex = maps.map((m) => (m ? texture(w, h, m) : null));
@@ -170,6 +173,7 @@
       shownAll = false;
     } finally {
       decoding--;
+      window.symframeDecodeMs = (window.symframeDecodeMs || 0) + performance.now() - t0;
     }
   }
   // Tile scripts call this (works from file: URLs, where fetch does not).
@@ -710,6 +714,7 @@
     draw();
     gl.finish();
     window.symframeLoadMs = performance.now() - t0;
+    window.symframeReadyAt = performance.now();
     window.symframeReady = true;
   }
   start().catch((e) => {
