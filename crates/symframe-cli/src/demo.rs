@@ -190,7 +190,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     view.frames = Some(estimate_dir.clone());
     let viewer = symframe_job::write_viewer(&view)?;
     say!(
-        "viewer:   {} (open it in a browser; drag to move the light)",
+        "viewer:   {} (open it in a browser; drag the ball to move the light)",
         viewer.path.display()
     );
     say!("done in {:.1} s", t0.elapsed().as_secs_f64());

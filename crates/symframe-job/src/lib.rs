@@ -13,8 +13,9 @@
 //!   source map of a capture, or one shard's tiles; [`merge`] joins shards.
 //! - [`fit`] with a [`FitConfig`]: per-pixel anisotropic Ward parameters in estimated frames.
 //! - [`relight`] with a [`RelightConfig`]: the fitted maps rendered under new lights, edited.
-//! - [`write_viewer`] with a [`ViewConfig`]: one self-contained HTML page relighting a fit in
-//!   the browser (WebGL2), with the same model and edits as [`relight`].
+//! - [`write_viewer`] with a [`ViewConfig`]: one self-contained HTML page relighting a fit (or
+//!   showing an estimate) in the browser (WebGL2), with the same model and edits as
+//!   [`relight`]; large maps as a tile pyramid beside it.
 //! - [`calibrate()`] with a [`CalibrateConfig`]: light directions from a mirror sphere.
 //! - [`integrate_job`] with an [`IntegrateConfig`]: an estimate's normals to a height map and a
 //!   mesh.

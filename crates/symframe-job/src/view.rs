@@ -619,7 +619,7 @@ pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
     let mut retired = None;
     if let Some(b) = &building {
         if let Some(files) = &old {
-            let aside = partial_path(&tiles_dir).with_extension("old");
+            let aside = aside_path(&tiles_dir);
             std::fs::rename(&tiles_dir, &aside)
                 .with_context(|| format!("{}: cannot move aside", tiles_dir.display()))?;
             let files: Vec<PathBuf> = files
@@ -656,6 +656,15 @@ pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
     })
 }
 
+/// A hidden name beside `path` for its old version while the new one moves in.
+fn aside_path(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    path.with_file_name(format!(".{name}.old-{}", std::process::id()))
+}
+
 /// A hidden name beside `path` for a folder being built.
 fn partial_path(path: &Path) -> PathBuf {
     let name = path
@@ -675,11 +684,9 @@ fn build_levels(
     present: [bool; 5],
 ) -> Result<(Band, usize, u64)> {
     let mut builder = Builder::new(layout, dir, present)?;
-    let step = if dir.is_some() {
-        layout.tile
-    } else {
-        layout.height.max(1)
-    };
+    // The maps are read 256 rows at a time; each level keeps the rows of its next tile row
+    // (without a pyramid: the whole map, which the page holds anyway).
+    let step = 256;
     let mut band = Band::new(layout.width, present);
     let mut y0 = 0;
     while y0 < layout.height {
