@@ -159,6 +159,7 @@
   const key = (k, x, y) => `${k}/${x}/${y}`;
   const wanted = new Map(); // key -> [k, x, y] not yet asked for
   const loading = new Set();
+  const failed = new Set(); // tiles whose script did not load: not asked for again
   const MAX_LOADING = 6;
   const BUDGET = 12e6; // texels of tiles kept besides those on screen
   let decoding = 0, shownAll = true, useTick = 0;
@@ -195,6 +196,7 @@
       el.onerror = () => {
         el.remove();
         loading.delete(id);
+        failed.add(id);
         status(`symframe viewer: ${PYR.dir}/${k}/${x}_${y}.js did not load (is the folder beside the page?)`);
         pump();
       };
@@ -316,7 +318,7 @@
             if (t) {
               drawTile(t);
               drawn.push(t);
-            } else if (k === level && !loading.has(key(k, tx, ty))) {
+            } else if (k === level && !loading.has(key(k, tx, ty)) && !failed.has(key(k, tx, ty))) {
               wanted.set(key(k, tx, ty), [k, tx, ty]);
             }
           }
