@@ -560,18 +560,9 @@ pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
         }
         std::fs::create_dir(b).with_context(|| format!("{}: cannot create", b.display()))?;
     }
-    let built = build_levels(&mut *rows, layout, building.as_deref(), present);
-    let (top, tiles, tile_bytes) = match built {
-        Ok(b) => b,
-        Err(e) => {
-            if let Some(b) = &building {
-                if let Ok(Some(files)) = pyramid::our_folder(b) {
-                    let _ = pyramid::remove_ours(b, &files);
-                }
-            }
-            return Err(e);
-        }
-    };
+    // Removed on any error from here on: this run created it, so all in it is its own.
+    let _cleanup = building.as_ref().map(|b| RemoveOnDrop(b.clone()));
+    let (top, tiles, tile_bytes) = build_levels(&mut *rows, layout, building.as_deref(), present)?;
     drop(rows);
     let encode = |i: usize| -> Result<Option<String>> {
         top.textures[i]
@@ -654,6 +645,17 @@ pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
         }),
         notes,
     })
+}
+
+/// Removes the folder it names when dropped, if it is still there (a half-built pyramid).
+struct RemoveOnDrop(PathBuf);
+
+impl Drop for RemoveOnDrop {
+    fn drop(&mut self) {
+        if std::fs::symlink_metadata(&self.0).is_ok_and(|m| m.is_dir()) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
 }
 
 /// A hidden name beside `path` for its old version while the new one moves in.
