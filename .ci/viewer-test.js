@@ -225,7 +225,7 @@ async function main() {
     if (a.interact && a.cases.length > 0) await interact(a.cases[0]);
     if (a.pyramid && a.cases.length > 0) await pyramid(a.cases[0]);
     if (a.screenshot && a.cases.length > 0) {
-      const { page } = await open(a.cases[0].fragment, 1100, 680);
+      const { page } = await open(a.cases[0].fragment, 1100, 860);
       // A pixel's readout, as when hovering.
       const box = await page.locator("#view").boundingBox();
       await page.mouse.move(box.x + box.width * 0.55, box.y + box.height * 0.4);
@@ -346,9 +346,9 @@ async function main() {
       check(n === all, `at zoom 1 the ${all} full-resolution tiles are loaded (${n})`);
       failed ||= !(await compare(page, c, `pyramid ${c.fragment} at zoom 1`)).ok;
       await page.close();
-      // Zoomed into one tile: that tile only.
-      const t = a.pyramid.tile;
-      const z = await open(`${c.fragment}&ui=0&zoom=${ref.width / t}&cx=${t * 1.5}&cy=${t * 1.5}`, ref.width, ref.height);
+      // Zoomed into one tile (the one at the map's centre): that tile only.
+      const t = a.pyramid.tile, mid = (Math.floor(ref.width / 2 / t) + 0.5) * t;
+      const z = await open(`${c.fragment}&ui=0&zoom=${ref.width / t}&cx=${mid}&cy=${mid}`, ref.width, ref.height);
       await idle(z.page);
       n = await z.page.evaluate(() => window.symframeTilesLoaded);
       check(n === 1, `zoomed into one tile, ${n} tile loaded`);
