@@ -896,11 +896,19 @@ impl<'a> Estimator<'a> {
 
         // Confidence: how sure the slice's symmetry is of the answer, whichever rule gave it
         // (docs/method.md, "Confidence").
-        let (sd, e) = self.symmetry_sd(objective, n, cosine, &term_n);
+        let (judged, e) = self.symmetry_sd(objective, n, cosine, Level::Full, true, &term_n);
         evals += e;
         // The lights' uncertainty moves any reading of the highlight's centre about as much as
         // it moves the lobe fitted to it (the symmetry cannot turn its rig's lights).
-        let sd = sd.hypot(fitted.map_or(0.0, |f| f.light_sd));
+        let mut variance = judged.variance() + fitted.map_or(0.0, |f| f.light_sd.powi(2));
+        // A fitted lobe is a second reading of the centre: where the two disagree by more
+        // than both their uncertainties allow, one of them is biased (a reconstruction or a
+        // model that does not describe the slice), and the answer may be the biased one.
+        if let Some(f) = fitted.filter(|f| f.normal_sd.is_finite()) {
+            let d = n.angle_between(f.normal);
+            variance += disagreement(d * d, variance, f.normal_sd.powi(2));
+        }
+        let sd = variance.sqrt();
         let coverage = self.coverage(slice, n, &term_n);
         let confidence = (coverage * within_confident(sd)) as f32;
         // A search that doubts its own answer gives way to a lobe fit that nearly explains the
@@ -980,7 +988,24 @@ impl<'a> Estimator<'a> {
     ) -> PixelEstimate {
         let anisotropy = f.elongation();
         let tangent = (self.params.tangents && self.lobe_has_tangent(f)).then_some(f.tangent);
-        let sd = f.normal_sd.hypot(f.light_sd);
+        // The data's symmetry judges the lobe's centre: where the slice is more symmetric about
+        // a normal nearby than the two readings' uncertainties allow, the lobe does not
+        // describe the material and its centre may be biased by as much (docs/method.md,
+        // "Confidence").
+        // On a quarter of the lights (all of them on small rigs), as the tangent's confidence
+        // below, and without the split halves: the full stencil with them cost a lobe pixel a
+        // quarter of its time (the paper-scale benchmark).
+        let quarter = Level::Coarse(objective.queries(Level::Full).div_ceil(4).max(256));
+        let centre = objective.normal_term(f.normal, cosine, quarter);
+        let (judged, evals) =
+            self.symmetry_sd(objective, f.normal, cosine, quarter, false, &centre);
+        let own = f.normal_sd.powi(2);
+        let bias = if judged.offset2.is_finite() {
+            disagreement(judged.offset2, own, judged.scatter)
+        } else {
+            0.0
+        };
+        let sd = (own + f.light_sd.powi(2) + bias).sqrt();
         let confidence = (self.coverage(slice, f.normal, term_n) * within_confident(sd)) as f32;
         let status = self.status_of(confidence);
         let keep = status == PixelStatus::Estimated;
@@ -989,10 +1014,8 @@ impl<'a> Estimator<'a> {
         let (tangent_confidence, evals) = match tangent {
             Some(t) if keep => {
                 let b = f.normal.cross(t);
-                // On a quarter of the lights (all of them on small rigs), as the search's
-                // first comparisons: two full-level evaluations cost a lobe pixel a fifth of
-                // its time (measured on the paper-scale benchmark).
-                let quarter = Level::Coarse(objective.queries(Level::Full).div_ceil(4).max(256));
+                // On a quarter of the lights, as the search's first comparisons: two full-level
+                // evaluations cost a lobe pixel a fifth of its time (the paper-scale benchmark).
                 let at = |a: DVec3| {
                     self.tangent_distance(objective, f.normal, a, cosine, quarter)
                         .0
@@ -1009,9 +1032,9 @@ impl<'a> Estimator<'a> {
                     at(t),
                     at((t + b).normalize()),
                 );
-                (c, 2)
+                (c, evals + 3)
             }
-            _ => (0.0, 0),
+            _ => (0.0, evals + 1),
         };
         PixelEstimate {
             status,
@@ -1076,27 +1099,31 @@ impl<'a> Estimator<'a> {
         }
     }
 
-    /// The standard deviation (radians, both tilts) of a normal `n` as the slice's symmetry
-    /// judges it, and the evaluations spent (docs/method.md, "Confidence"): the symmetry
-    /// distance `SD_n` on a 3 x 3 stencil around `n` ([`SD_STENCIL_DEG`] apart) fitted by a
-    /// quadratic with gradient `g` and Hessian `H`; the scatter of the slice about its symmetry
-    /// (what the quadratic's minimum leaves, per independent pair of lights) through `H`,
-    /// `2 f_min / (count / 2 - 2) tr(H^-1)`, plus the squared offset `|H^-1 g|` of that
-    /// minimum from `n` (where the slice is more symmetric about another normal than about the
-    /// one given). Infinite where the stencil has no minimum.
+    /// What the slice's symmetry says of a normal `n`, read on the lights of `level` (`term_n`
+    /// its term at `n` there), and the evaluations spent (docs/method.md, "Confidence"): the
+    /// symmetry distance `SD_n` on a 3 x 3 stencil around `n` ([`SD_STENCIL_DEG`] apart)
+    /// fitted by a quadratic with gradient `g` and Hessian `H`; the squared offset `|H^-1 g|^2`
+    /// of its minimum from `n` (where the slice is more symmetric about another normal than
+    /// about the one given), and the minimum's variance: the scatter of the slice about its
+    /// symmetry (what the quadratic's minimum leaves, per independent pair of lights) through
+    /// `H`, `2 f_min / (count / 2 - 2) tr(H^-1)`, or where `split` and larger, the split
+    /// halves'. Infinite where the stencil has no minimum.
     fn symmetry_sd<O: Objective>(
         &self,
         objective: &O,
         n: DVec3,
         cosine: CosineMode,
+        level: Level,
+        split: bool,
         term_n: &SymmetryTerm,
-    ) -> (f64, u32) {
+    ) -> (SymmetryJudgement, u32) {
         let r = SD_STENCIL_DEG.to_radians();
         let (u, w) = tangent_basis(n);
         let chart = |x: f64, y: f64| (n + x * u + y * w).normalize();
         // The distance over every light, and over each half of them (the first half of the
         // query order, evenly spread, and the rest: its terms are sums over the lights).
-        let half = Level::Coarse(objective.queries(Level::Full) / 2);
+        let half = Level::Coarse(objective.queries(level) / 2);
+        let min = self.min_count(objective, level);
         let mut f = [[0.0f64; 3]; 3];
         let mut halves = [[[0.0f64; 3]; 3]; 2];
         for i in 0..3 {
@@ -1105,31 +1132,34 @@ impl<'a> Estimator<'a> {
                 let full = if (i, j) == (1, 1) {
                     *term_n
                 } else {
-                    objective.normal_term(m, cosine, Level::Full)
+                    objective.normal_term(m, cosine, level)
                 };
+                if !split {
+                    f[i][j] = full.distance(min);
+                    continue;
+                }
                 let first = objective.normal_term(m, cosine, half);
                 let rest = SymmetryTerm {
                     numerator: full.numerator - first.numerator,
                     denominator: full.denominator - first.denominator,
                     count: full.count - first.count.min(full.count),
                 };
-                let min = self.min_domain / 2;
-                f[i][j] = full.distance(self.min_domain);
-                halves[0][i][j] = first.distance(min);
-                halves[1][i][j] = rest.distance(min);
+                f[i][j] = full.distance(min);
+                halves[0][i][j] = first.distance(min / 2);
+                halves[1][i][j] = rest.distance(min / 2);
             }
         }
-        let evals = 13;
+        let evals = if split { 17 } else { 8 };
         if f.iter()
             .flatten()
             .any(|v| *v >= EMPTY_DISTANCE || !v.is_finite())
         {
-            return (f64::INFINITY, evals);
+            return (SymmetryJudgement::NONE, evals);
         }
         let q = StencilQuadratic::of(&f, r);
         let pairs = term_n.count as f64 / 2.0 - 2.0;
         let Some([dx, dy]) = q.minimum().filter(|_| pairs >= 1.0) else {
-            return (f64::INFINITY, evals);
+            return (SymmetryJudgement::NONE, evals);
         };
         let StencilQuadratic {
             c,
@@ -1160,12 +1190,49 @@ impl<'a> Estimator<'a> {
         // its variance that holds whatever each light's noise (light errors, shot noise
         // rising with the signal), where the curvature's assumes it alike.
         let split = match halves.map(|h| StencilQuadratic::of(&h, r).minimum()) {
+            _ if !split => 0.0,
             [Some([x1, y1]), Some([x2, y2])] => ((x1 - x2).powi(2) + (y1 - y2).powi(2)) / 4.0,
             _ => f64::INFINITY,
         };
         let scatter = (variance + roughness).max(split);
-        ((dx * dx + dy * dy + scatter).sqrt(), evals)
+        let judged = SymmetryJudgement {
+            offset2: dx * dx + dy * dy,
+            scatter,
+        };
+        (judged, evals)
     }
+}
+
+/// What the slice's symmetry says of a normal ([`Estimator::symmetry_sd`]), in squared
+/// radians: how far its minimum is from the normal, and the variance of that minimum.
+#[derive(Debug, Clone, Copy)]
+struct SymmetryJudgement {
+    /// `|H^-1 g|^2`: the squared offset of the stencil quadratic's minimum.
+    offset2: f64,
+    /// The minimum's variance (the scatter through the curvature and the distance's roughness,
+    /// or the split halves' where larger).
+    scatter: f64,
+}
+
+impl SymmetryJudgement {
+    /// The stencil has no minimum: the symmetry cannot judge the normal.
+    const NONE: Self = Self {
+        offset2: f64::INFINITY,
+        scatter: f64::INFINITY,
+    };
+
+    /// The normal's variance as the symmetry judges it: its offset from the minimum and the
+    /// minimum's own variance.
+    fn variance(&self) -> f64 {
+        self.offset2 + self.scatter
+    }
+}
+
+/// The squared disagreement `d2` of two readings of one normal beyond what their variances
+/// `va` and `vb` explain (`E d^2 = va + vb` for unbiased independent readings): an estimate of
+/// the squared bias one of them carries, 0 where they agree within their noise.
+fn disagreement(d2: f64, va: f64, vb: f64) -> f64 {
+    (d2 - va - vb).max(0.0)
 }
 
 /// The least-squares quadratic `c + g.x + x^T H x / 2` through a function's values `f[i][j]`
@@ -1484,6 +1551,21 @@ pub fn check_inputs(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn readings_that_disagree_beyond_their_noise_carry_a_bias() {
+        let deg2 = 1f64.to_radians().powi(2);
+        // Within what the two variances explain: no bias.
+        assert_eq!(disagreement(0.5 * deg2, 0.3 * deg2, 0.3 * deg2), 0.0);
+        // Beyond it: the excess, which lowers the confidence of either reading.
+        let bias = disagreement(4.0 * deg2, 0.5 * deg2, 0.5 * deg2);
+        assert!((bias - 3.0 * deg2).abs() < 1e-15);
+        let own = (0.5 * deg2).sqrt();
+        assert!(within_confident((own * own + bias).sqrt()) < within_confident(own));
+        // A symmetry that cannot judge (no minimum on the stencil) has infinite variance.
+        assert!(SymmetryJudgement::NONE.variance().is_infinite());
+        assert_eq!(disagreement(1.0, f64::INFINITY, 0.0), 0.0);
+    }
 
     #[test]
     fn confidence_is_the_chance_of_being_within_a_degree() {

@@ -368,8 +368,7 @@ pub(crate) fn choose_normal<'a>(
     });
     // Nor where it barely improves on the robust Lambertian fit alone (the lobe model holds a
     // diffuse term too): such a lobe stands in for the diffuse light, and where its centre is
-    // off at all it is far off (measured on the shadowed satin bumps: no diffuse part, 0.5
-    // wide, 30-35 degrees from normals the Lambertian fit finds to 2 degrees).
+    // off at all it is far off (docs/method.md, "Default measure", for what was measured).
     let impersonated = lobe.is_some_and(|f| {
         fit.confidence as f64 >= s.diffuse.centre_fit
             && f.residual >= s.lobe.over_diffuse * (1.0 - fit.confidence as f64)
@@ -405,10 +404,8 @@ pub(crate) fn choose_normal<'a>(
 /// [`SearchSettings::doubtful`]), gives way to the fitted lobe `f` (whose centre is within
 /// the rig's reach where `observed()`, asked last): the search doubts its answer (cast
 /// shadows that break the slice's symmetry, a lobe cut by the rig's reach) and the lobe nearly
-/// explains the samples (measured on shadowed bumps, such pixels with a lobe leaving
-/// 0.2-0.5%: rough GGX metal under 500 lights, the search 5.4 degrees mean off and the lobe
-/// 3.3; satin under 200 lights 2.9 and 1.0; where the search's quality is higher it is the
-/// better of the two).
+/// explains the samples (where the search's quality is higher it is the better of the two:
+/// docs/method.md, "Default measure", has the figures).
 pub(crate) fn search_gives_way(
     s: &PolicySettings,
     quality: f64,
@@ -459,8 +456,7 @@ pub(crate) fn diffuse_centre(
 /// (uncentred R^2 at least [`DiffuseSettings::spiked_fit`], at most
 /// [`DiffuseSettings::spike_share`] of the samples it considered left out as outliers: the
 /// spike's). Such a slice is symmetric about the Lambertian normal but for the spike's few
-/// samples, which mislead the search (measured: GGX plastic `alpha` 0.02 on shadowed bumps
-/// under 200 lights, 14-20 degrees off where the Lambertian fit was 0.1-0.5).
+/// samples, which mislead the search (docs/method.md, "Default measure").
 pub(crate) fn spiked_diffuse(
     s: &DiffuseSettings,
     fit: &BaselinePixel,
@@ -480,9 +476,8 @@ pub(crate) fn spiked_diffuse(
 /// nothing does. The lobe `lobe` where it explains the pixel ([`LobeSettings::explains`])
 /// unless a diffuse term explains it nearly as well, or where it explains it much better than
 /// the diffuse term (the joint model's normal is the diffuse term's too, without the bias the
-/// unmodelled highlight's tails give the Lambertian fit; measured: Ashikhmin-Shirley under 200
-/// lights, normals 45-60 degrees from the view, a lobe left 0.6-0.7% unexplained and was
-/// 1.6-3.1 degrees off, the Lambertian fallback 7.5-11 degrees); else the Lambertian fit where
+/// unmodelled highlight's tails give the Lambertian fit: docs/method.md, "Fallbacks and the
+/// source map"); else the Lambertian fit where
 /// it explains the pixel ([`FallbackSettings::diffuse_fit`]); else the highlight's centroid.
 pub(crate) fn choose_fallback(
     s: &PolicySettings,
