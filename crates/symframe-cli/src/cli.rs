@@ -38,18 +38,20 @@ pub enum Command {
     Fit(FitArgs),
     /// Render fitted maps (glTF or Ward) under new lights, optionally edited.
     Relight(RelightArgs),
-    /// Write one self-contained HTML page that relights a fit in the browser (WebGL2): drag the
-    /// light, edit as `relight` does, switch to the maps.
+    /// Write one self-contained HTML page that relights a fit (or an estimate) in the browser
+    /// (WebGL2): drag the light, edit as `relight` does, switch to the maps, zoom and pan.
     View(ViewArgs),
-    /// Render a built-in synthetic object, estimate its frames and report the error (no download).
+    /// Render a built-in synthetic object, estimate its frames and report the error, then fit,
+    /// relight and write the viewer page (no download).
     Demo(DemoArgs),
     /// Render a synthetic capture with known normals and tangents into an .lp dataset folder.
     Synth(SynthArgs),
     /// Compare an estimate with a synthetic dataset's ground truth: eval.json, error-map
     /// pictures with colour bars, and a summary table.
     Eval(EvalArgs),
-    /// Re-run the paper's validation experiments in memory (Figures 3, 4, 10 and a noise
-    /// study): tables on stdout, PNG plots and a markdown report in the output folder.
+    /// Re-run the validation experiments in memory (the paper's Figures 3, 4 and 10, noise,
+    /// relighting, materials, real-capture conditions): tables on stdout, PNG plots and a
+    /// markdown report in the output folder.
     Experiment(ExperimentArgs),
     /// Light directions from a mirror (chrome) sphere in the images: writes an .lp file, a
     /// picture of the detected highlights and a JSON record beside it.
@@ -239,7 +241,8 @@ impl CosineArg {
 /// What to do beyond the rig's reach.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum FallbackArg {
-    /// Robust Lambertian fit or highlight centroid, flagged in the source map.
+    /// The lobe fit, a robust Lambertian fit or the highlight centroid, flagged in the source
+    /// map.
     Auto,
     /// No estimate.
     None,
@@ -710,7 +713,7 @@ pub struct RelightArgs {
 pub struct ViewArgs {
     /// Output folder of `symframe fit` (its model's maps, normals and tangents .npy), or of
     /// `symframe estimate` (normals, tangents, confidence, anisotropy and source, shaded with
-    /// a fixed grey material).
+    /// a stand-in grey material).
     pub fit_dir: PathBuf,
     /// The HTML file to write (default: FIT_DIR/viewer.html).
     #[arg(short, long)]
