@@ -513,6 +513,17 @@ pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
     if config.tile_size < 8 || config.tile_size > 4096 {
         bail!("tile size {}: must be 8 to 4096 pixels", config.tile_size);
     }
+    let dir = &config.fit_dir;
+    if !["normals.npy", "kd.npy", "base_color.npy"]
+        .iter()
+        .any(|f| dir.join(f).exists())
+    {
+        bail!(
+            "{}: no maps to show (expected an output folder of symframe estimate, with \
+             normals.npy, or of symframe fit, with base_color.npy or kd.npy)",
+            dir.display()
+        );
+    }
     let mut notes = Vec::new();
     let source = if is_estimate_folder(&config.fit_dir) {
         estimate_source(config, &mut notes)?

@@ -364,8 +364,14 @@ def test_view_writes_the_command_lines_page(capture, cli, tmp_path):
         page = symframe.view(fit_dir, tmp_path / "no_est.html")
     assert '"views":["relit","normal","tangent","base_color"]' in Path(page).read_text()
     assert symframe.view(fit_dir, tmp_path / "v.html", frames=tmp_path / "moved").endswith("v.html")
-    with pytest.raises(symframe.SymframeError, match="kd.npy"):
-        symframe.view(tmp_path / "moved", tmp_path / "bad.html")
+    # An estimate folder opens on its own maps.
+    page = symframe.view(tmp_path / "moved", tmp_path / "est.html")
+    assert '"views":["relit","normal","tangent","confidence","anisotropy","source"' in \
+        Path(page).read_text()
+    # A folder of neither says what it expected.
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(symframe.SymframeError, match="normals.npy"):
+        symframe.view(tmp_path / "empty", tmp_path / "bad.html")
     assert not (tmp_path / "bad.html").exists()
 
 

@@ -833,8 +833,14 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
     let mut conf_rows = Vec::new();
     let (mut all_confident, mut all_within) = (0usize, 0.0f64);
     let (mut all_t, mut all_t_within) = (0usize, 0.0f64);
+    // Sets with confident pixels, and those where 95% of them are within 1 degree.
+    let (mut sets, mut sets_calibrated) = (0usize, 0usize);
     for r in &rows {
         let c = &r.cells[0];
+        if c.confident > 0 {
+            sets += 1;
+            sets_calibrated += usize::from(c.confident_within_1 >= 0.95);
+        }
         all_confident += c.confident;
         all_within += c.confident_within_1 * c.confident as f64;
         all_t += c.tangent_confident;
@@ -876,11 +882,12 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
     );
     md += &format!(
         "### Does confidence mean something?\n\nOver every set above: {} pixels with \
-         confidence ≥ 0.9, {} of them within 1° of the truth; {} tangents (anisotropic \
-         materials) with tangent confidence ≥ 0.9 (`tangent_confidence.npy`), {} of them with \
-         their axes within {TANGENT_WITHIN_DEG}° of the truth's.\n\n{t}\n",
+         confidence ≥ 0.9, {:.1}% of them within 1° of the truth ({sets_calibrated} of the \
+         {sets} sets with such pixels at 95% or more); {} tangents (anisotropic materials) with \
+         tangent confidence ≥ 0.9 (`tangent_confidence.npy`), {} of them with their axes \
+         within {TANGENT_WITHIN_DEG}° of the truth's.\n\n{t}\n",
         all_confident,
-        pct(all_within / all_confident.max(1) as f64),
+        100.0 * all_within / all_confident.max(1) as f64,
         all_t,
         pct(all_t_within / all_t.max(1) as f64)
     );

@@ -150,9 +150,10 @@ fn bad_folders_are_refused_naming_the_file() {
     let o = symframe(&["view", s(&fit), "-o", s(&out)]);
     assert_one_line_error(&o, "alpha_b.npy");
     assert!(!out.exists());
-    // Not a fit folder at all.
+    // Neither a fit nor an estimate folder: what was expected.
     let o = symframe(&["view", s(dir.path()), "-o", s(&out)]);
-    assert_one_line_error(&o, "kd.npy");
+    assert_one_line_error(&o, "no maps to show");
+    assert!(stderr(&o).contains("normals.npy") && stderr(&o).contains("base_color.npy"));
     assert!(!out.exists());
     // Nothing half-written beside the output.
     for e in fs::read_dir(dir.path()).unwrap() {
