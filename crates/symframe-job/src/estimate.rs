@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 use symframe::baselines::{Baseline, BaselineMethod, BaselineParams};
 use symframe::frames::estimator::check_inputs;
 use symframe::maps::PixelCounts;
+use symframe::orientation::LightAxes;
 use symframe::{EstimateMaps, Estimator, EstimatorParams, PixelSource};
 use symframe::{Rig, RigOptions};
 use symframe_io::fingerprint::Fingerprint;
@@ -607,9 +608,21 @@ pub(crate) fn lock_warnings(w: &Mutex<Vec<String>>) -> std::sync::MutexGuard<'_,
 
 /// The loud warnings about a finished job's maps: nothing estimated, or (given `beyond`, the
 /// number of estimated normals whose symmetry centre `h = n` the rig does not cover) most
-/// normals beyond the rig's reach, where only the fallbacks answer.
-pub(crate) fn result_warnings(counts: &PixelCounts, beyond: Option<usize>) -> Vec<String> {
+/// normals beyond the rig's reach, where only the fallbacks answer; and normals that fit
+/// together as a surface only with the lights' axes turned or reflected (`axes`).
+pub(crate) fn result_warnings(
+    counts: &PixelCounts,
+    beyond: Option<usize>,
+    axes: LightAxes,
+) -> Vec<String> {
     let mut w = Vec::new();
+    if let Some(mapping) = axes.mapping() {
+        w.push(format!(
+            "the lights' convention looks wrong: the normals fit together as one surface facing \
+             out of its outline only with each light read as {mapping}; check the light file \
+             (symframe's lights: x to the image's right, y up the image, z toward the camera)"
+        ));
+    }
     if counts.estimated == 0 {
         w.push(format!(
             "0 pixels estimated ({} discarded, {} culled, {} without data): the maps are empty",
@@ -877,7 +890,7 @@ fn run(
         report.pixels = summary.counts;
         report.sources = summary.sources.clone();
         report.evals_per_pixel = summary.evals as f64 / summary.counts.estimated.max(1) as f64;
-        for w in result_warnings(&report.pixels, summary.beyond_reach) {
+        for w in result_warnings(&report.pixels, summary.beyond_reach, summary.light_axes) {
             ctl.warn(&w);
         }
         report.warnings = lock_warnings(warnings).clone();

@@ -11,6 +11,7 @@ use anyhow::Result;
 use glam::DVec3;
 use rayon::prelude::*;
 use symframe::maps::PixelCounts;
+use symframe::orientation::{AxesCheck, LightAxes};
 use symframe::{EstimateMaps, PixelSource};
 use symframe_io::{NormalPng, NpyRows, PngRows, TileGrid};
 
@@ -71,6 +72,8 @@ pub(crate) struct MapSummary {
     pub evals: u64,
     /// Estimated normals beyond the rig's reach (when a reach was given).
     pub beyond_reach: Option<usize>,
+    /// What the normal map says of the lights' axes (a convention mix-up shows there).
+    pub light_axes: LightAxes,
 }
 
 /// How the output set is written.
@@ -262,9 +265,11 @@ pub(crate) fn write_estimate_outputs(
     let mut evals = 0u64;
     let mut sources = vec![0usize; PixelSource::ALL.len()];
     let mut beyond = 0usize;
+    let mut axes = AxesCheck::new(w, h);
     for row in 0..g.tiles_y() {
         let Band { y0, maps: m } = tiles.band(row)?;
         rows.push(&m, opts.normal_png)?;
+        axes.push_rows(&m.normals);
         add_counts(&mut counts, &m.counts);
         evals += m.evals;
         for &c in &m.source {
@@ -305,6 +310,7 @@ pub(crate) fn write_estimate_outputs(
         sources: Sources::from_counts(&sources),
         evals,
         beyond_reach: opts.covered.map(|_| beyond),
+        light_axes: axes.verdict(),
     };
     if let Some(f) = &mut full {
         f.counts = counts;

@@ -410,7 +410,7 @@ fn run(
         report["evals_per_pixel"] =
             serde_json::json!(summary.evals as f64 / summary.counts.estimated.max(1) as f64);
         // The reach warning needs the rig: each shard's own warnings (above) carry it.
-        for w in result_warnings(&summary.counts, None) {
+        for w in result_warnings(&summary.counts, None, summary.light_axes) {
             ctl.warn(&w);
             warnings.push(w);
         }

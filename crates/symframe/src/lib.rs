@@ -77,6 +77,7 @@ pub mod integrate;
 pub mod maps;
 pub mod method;
 pub mod noise;
+pub mod orientation;
 pub mod render;
 pub mod stack;
 

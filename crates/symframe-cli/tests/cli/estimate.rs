@@ -5,8 +5,8 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use crate::common::{
-    assert_fails_keeping_cache, assert_fails_naming, estimate, ok, report, s, sphere_dataset,
-    stderr, symframe, Truth,
+    assert_fails_keeping_cache, assert_fails_naming, estimate, ok, report, report_warnings, s,
+    sphere_dataset, stderr, symframe, ward_sphere, Truth,
 };
 
 use glam::DVec3;
@@ -435,4 +435,46 @@ fn a_clipped_8_bit_capture_records_its_noise_model_and_keeps_its_tangents() {
     // Measured: 0.07 degrees, tangents on every pixel at 0.1 degrees.
     assert!(e["normal_error"]["mean"].as_f64().unwrap() < 0.3, "{e}");
     assert!(e["tangent_coverage"].as_f64().unwrap() > 0.95, "{e}");
+}
+
+#[test]
+fn lights_read_in_a_reflected_convention_are_warned_about() {
+    // The same sphere with its light file as written and with the y column negated (rows
+    // counted down): each pixel is consistent either way, the map as a whole is not.
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = ward_sphere(&tmp.path().join("data"), 32, 150);
+    let text = fs::read_to_string(&lp).unwrap();
+    let flipped: Vec<String> = text
+        .lines()
+        .enumerate()
+        .map(|(i, line)| {
+            let f: Vec<&str> = line.split_whitespace().collect();
+            if i == 0 || f.len() < 4 {
+                return line.to_string();
+            }
+            let y: f64 = f[f.len() - 2].parse().unwrap();
+            let mut f: Vec<String> = f.iter().map(|s| s.to_string()).collect();
+            let k = f.len() - 2;
+            f[k] = format!("{}", -y);
+            f.join(" ")
+        })
+        .collect();
+    let lp_flipped = lp.with_file_name("flipped.lp");
+    fs::write(&lp_flipped, flipped.join("\n") + "\n").unwrap();
+    let (good, bad) = (tmp.path().join("good"), tmp.path().join("bad"));
+    let o = estimate(&lp, &good, &[]);
+    ok(&o);
+    assert!(!stderr(&o).contains("convention"), "{}", stderr(&o));
+    assert!(report_warnings(&good)
+        .iter()
+        .all(|w| !w.contains("convention")));
+    let o = estimate(&lp_flipped, &bad, &[]);
+    ok(&o);
+    let needle = "(x, y, z) -> (x, -y, z)";
+    assert!(stderr(&o).contains(needle), "{}", stderr(&o));
+    assert!(
+        report_warnings(&bad).iter().any(|w| w.contains(needle)),
+        "{:?}",
+        report_warnings(&bad)
+    );
 }
