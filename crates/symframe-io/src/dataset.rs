@@ -38,9 +38,11 @@ const MASK: &str = "mask.png";
 /// `light_intensities.txt` and `mask.png`).
 ///
 /// `.lp` format: the light count `N` on the first meaningful line, then `N` lines
-/// `<image> <lx> <ly> <lz>`, image paths relative to the `.lp` file's folder and without spaces.
-/// Blank lines and `#` comments are allowed. Directions are normalised; every listed image must
-/// exist.
+/// `<image> <lx> <ly> <lz>`, image paths relative to the `.lp` file's folder (a path with spaces
+/// is everything before the last three numbers; fields are separated by spaces or tabs). Blank
+/// lines and `#` comments are allowed. Directions are normalised (lights far from unit length,
+/// near-light positions perhaps, are warned about); every listed image must exist. The row
+/// variants other tools write are read or refused as `lights.rs` says.
 pub fn open_dataset(input: &Path) -> Result<Dataset> {
     if input.is_dir() {
         return open_folder(input);
@@ -217,10 +219,16 @@ fn open_folder(dir: &Path) -> Result<Dataset> {
 /// `light_intensities.txt` (one `r g b` row per light, in the `.lp`'s order, as `symframe
 /// calibrate --matte-sphere` writes it) by the rule of [`lp_intensities`].
 fn open_lp(lp: &Path) -> Result<Dataset> {
-    let (images, lights) = lights::parse_lp(lp)?;
+    let lights::LpFile {
+        images,
+        lights,
+        lengths,
+        ..
+    } = lights::parse_lp(lp)?;
     let dir = parent_dir(lp);
     let (intensities, mut warnings) = lp_intensities(lp, &dir, images.len())?;
     warnings.extend(convention_warning(lp, &lights));
+    warnings.extend(length_warning(lp, &lengths));
     Ok(Dataset {
         source: lp.to_path_buf(),
         lights,
@@ -250,6 +258,49 @@ fn convention_warning(path: &Path, lights: &[DVec3]) -> Option<Warning> {
              y up, z toward the camera, each light from the object toward the lamp; if this \
              file's z points into the scene, negate its z column",
             lights.len()
+        ),
+    })
+}
+
+/// How far from 1 a light's length as written may be (a factor either way) and still count
+/// as a direction: unit vectors written to 6 digits, hand-written `0 0 2` or `1 1 1` are; light
+/// positions in millimetres or centimetres are not.
+const UNIT_FACTOR: f64 = 3.0;
+
+/// A warning where most of a light file's vectors are far from unit length (lengths as written,
+/// `lengths`): they are read as directions and normalised, as every tool that reads `.lp`
+/// files does (relight's `parseLP`, the HSH fitter), but where they are the positions of near
+/// lights (ramamoorthyluxman/illumi-net reads `.lp` rows so, the distance being the vector's
+/// length) the direction from the scene's origin is right only there. Said, never silent.
+fn length_warning(path: &Path, lengths: &[f64]) -> Option<Warning> {
+    let far: Vec<f64> = lengths
+        .iter()
+        .copied()
+        .filter(|l| !(1.0 / UNIT_FACTOR..=UNIT_FACTOR).contains(l))
+        .collect();
+    if far.len() * 2 <= lengths.len() {
+        return None;
+    }
+    let min = far.iter().copied().fold(f64::INFINITY, f64::min);
+    let max = far.iter().copied().fold(0.0, f64::max);
+    let shown = |x: f64| {
+        if (1e-3..1e6).contains(&x) {
+            format!("{}", (x * 1000.0).round() / 1000.0)
+        } else {
+            format!("{x:.3e}")
+        }
+    };
+    Some(Warning {
+        path: path.to_path_buf(),
+        message: format!(
+            "{} of {} lights are far from unit length (lengths {} to {}): each is read as a \
+             direction toward the light and normalised, as RTI tools read .lp rows; if these \
+             are the positions of near lights (say in mm), symframe takes each light as \
+             distant, in its direction from the origin, which is right only at the origin",
+            far.len(),
+            lengths.len(),
+            shown(min),
+            shown(max)
         ),
     })
 }
@@ -476,6 +527,44 @@ mod tests {
             "4\na.png 0 0.5 1\nb.png 0.5 0 1\nc.png 0 -0.5 -1\nd.png -0.5 0 -0.2\n",
         )
         .unwrap();
+        assert!(open_dataset(&lp).unwrap().warnings.is_empty());
+    }
+
+    /// Light positions in an `.lp` (ramamoorthyluxman/illumi-net 2a411f25,
+    /// utils/dataset_class.py, reads `.lp` rows as positions, the distance to a pixel from the
+    /// vector): normalised as every `.lp` row is, and said when most lights are far from unit
+    /// length; directions written to 6 digits, or a few hand-scaled rows, are not.
+    #[test]
+    fn near_light_positions_are_normalised_and_warned_about() {
+        let d = tempfile::tempdir().unwrap();
+        touch(d.path(), &["a.png", "b.png", "c.png"]);
+        let lp = d.path().join("mm.lp");
+        fs::write(
+            &lp,
+            "3\na.png 120 -40 300\nb.png 0 0 250\nc.png -90 60 280\n",
+        )
+        .unwrap();
+        let ds = open_dataset(&lp).unwrap();
+        assert!((ds.lights[1] - DVec3::Z).length() < 1e-15);
+        assert_eq!(ds.warnings.len(), 1, "{:?}", ds.warnings);
+        let w = ds.warnings[0].to_string();
+        assert!(
+            w.contains("mm.lp: 3 of 3 lights are far from unit length (lengths 250 to 325.576)")
+                && w.contains("positions of near lights"),
+            "{w}"
+        );
+        fs::write(
+            &lp,
+            "3\na.png 1e200 0 1e200\nb.png 0 0 2e300\nc.png 0 0 1\n",
+        )
+        .unwrap();
+        let w = open_dataset(&lp).unwrap().warnings[0].to_string();
+        assert!(
+            w.contains("2 of 3 lights") && w.contains("1.414e200 to 2.000e300"),
+            "{w}"
+        );
+        // Unit rows, and one scaled row of three: nothing to say.
+        fs::write(&lp, "3\na.png 0 0 1\nb.png 0 0.6 0.8\nc.png 3 0 4\n").unwrap();
         assert!(open_dataset(&lp).unwrap().warnings.is_empty());
     }
 

@@ -1,5 +1,15 @@
 //! Parsers of light files: RTI light-position files (`.lp`) and DiLiGenT-style text tables.
 //!
+//! `.lp` rows are read as the tools that write them do (surveyed from their sources; the tests
+//! name each tool and the file read): RTIBuilder's absolute Windows paths with spaces and CR LF,
+//! relight's `%g` numbers, the PTM fitter's tab after the path, SpectralRTI_Toolkit's CR CR LF,
+//! rows without an image (psmImages, NeuralRTI) as lights to render under. Every other row is
+//! refused naming the file, the line and what the row holds ([`lp_row`]): a fourth number or
+//! r g b columns after the direction, two numbers (angles), a missing count line, decimal
+//! commas. None is read from the wrong columns. Vectors of any finite length are normalised;
+//! the lengths as written are kept ([`LpFile::lengths`]) so that light positions are warned
+//! about where a dataset is opened.
+//!
 //! All text files accept blank lines and `#` comments (whole-line or trailing), so a `#` can not
 //! be part of an image path. A UTF-8 byte-order mark at the start (as Windows editors write) is
 //! ignored. Lines end with LF, CR LF or a lone CR (old Mac editors, some rig software).
@@ -318,12 +328,28 @@ pub(crate) fn unit_light(v: [f64; 3]) -> std::result::Result<DVec3, String> {
     Ok(n)
 }
 
+/// An `.lp` file as [`parse_lp`] reads it.
+#[derive(Debug)]
+pub(crate) struct LpFile {
+    /// The images, resolved (relative to the `.lp` file's folder, or absolute).
+    pub images: Vec<PathBuf>,
+    /// Unit light directions, one per image.
+    pub lights: Vec<DVec3>,
+    /// The length of each light's vector as written (1 for a unit direction; the distance for
+    /// a light position): how far a row is from being a direction.
+    pub lengths: Vec<f64>,
+    /// How the image paths were read.
+    pub paths: LpPaths,
+}
+
 /// Parses an RTI light-position file: the count `N`, then `N` lines `<image> <lx> <ly> <lz>`.
 ///
 /// Image paths are relative to the `.lp` file's folder (absolute paths are kept) and may not
-/// contain `#`; a path with spaces is everything before a row's last three numbers. Returns the
-/// resolved image paths and unit light directions.
-pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
+/// contain `#`; a path with spaces is everything before a row's last three numbers; fields are
+/// separated by spaces or tabs. Every row variant of the tools that write `.lp` files is read,
+/// and every other row refused naming its line and what it holds ([`lp_row`]). Returns the
+/// resolved image paths, unit light directions and the vectors' lengths as written.
+pub(crate) fn parse_lp(path: &Path) -> Result<LpFile> {
     let mut lines = TextLines::open(path)?;
     let dir = path.parent().unwrap_or(Path::new(""));
     let Some((count_line, count_text)) = lines.next_content()? else {
@@ -332,16 +358,9 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
             "empty light file: expected the number of lights on the first line",
         ));
     };
-    let count: usize = count_text.parse().map_err(|_| {
-        Error::parse(
-            path,
-            count_line,
-            format!(
-                "expected the number of lights, found '{}'",
-                quoted(count_text)
-            ),
-        )
-    })?;
+    let count: usize = count_text
+        .parse()
+        .map_err(|_| Error::parse(path, count_line, count_expected(count_text)))?;
     if count == 0 {
         return Err(Error::parse(path, count_line, "the light count is zero"));
     }
@@ -366,24 +385,37 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
             ),
         ));
     }
-    let mut images = Vec::with_capacity(count);
-    let mut lights = Vec::with_capacity(count);
+    let mut out = LpFile {
+        images: Vec::with_capacity(count),
+        lights: Vec::with_capacity(count),
+        lengths: Vec::with_capacity(count),
+        paths: LpPaths::AsWritten,
+    };
     for (line, text) in &entries {
-        let (name, numbers) = lp_row(text).map_err(|n| {
-            let why = if has_trailing_comment(path, *line) {
-                "'#' starts a comment, so image paths may not contain '#'"
-            } else {
-                "a path with spaces needs three numbers after it"
-            };
-            Error::parse(
-                path,
-                *line,
-                format!("expected '<image> <lx> <ly> <lz>' ({why}), found {n} fields"),
-            )
-        })?;
+        let (name, numbers) = match lp_row(text) {
+            Ok(LpRow::Light(name, numbers)) => (name, numbers),
+            Ok(LpRow::FourNumbers {
+                name,
+                joined,
+                numbers,
+            }) => {
+                // `scan 2 0 0 1`: the image `scan 2`, if there is one (relight reads it so).
+                if resolve_lp_image_unquoted(dir, joined).is_none() {
+                    return Err(Error::parse(path, *line, four_numbers(name)));
+                }
+                (joined, [numbers[1], numbers[2], numbers[3]])
+            }
+            Ok(LpRow::Nameless(_)) => return Err(Error::parse(path, *line, NAMELESS_IN_A_CAPTURE)),
+            Err(e) => {
+                let hint = has_trailing_comment(path, *line)
+                    .then_some("'#' starts a comment, so image paths may not contain '#'");
+                return Err(Error::parse(path, *line, e.message("<image>", hint)));
+            }
+        };
         let v = parse_triple(path, *line, 3, &numbers, "light direction")?;
-        lights.push(unit_direction(path, *line, v)?);
-        let Some((img, _)) = resolve_lp_image(dir, name) else {
+        out.lights.push(unit_direction(path, *line, v)?);
+        out.lengths.push(vector_length(v));
+        let Some((img, convention)) = resolve_lp_image_unquoted(dir, name) else {
             if is_windows_path(name) {
                 return Err(Error::parse(
                     path,
@@ -400,37 +432,243 @@ pub(crate) fn parse_lp(path: &Path) -> Result<(Vec<PathBuf>, Vec<DVec3>)> {
                 .unwrap_or_else(|| format!("{} is not a readable file", tried.display()));
             return Err(image_problem(path, *line, why));
         };
-        images.push(img);
+        if convention == LpPaths::Windows {
+            out.paths = LpPaths::Windows;
+        }
+        out.images.push(img);
     }
-    Ok((images, lights))
+    Ok(out)
 }
 
-/// An `.lp` row `<image> <lx> <ly> <lz>`: the image path and the three direction fields (not
-/// yet parsed). A path with spaces (as RTIBuilder writes one from a folder named so) is
-/// everything before the row's last three fields, when those are numbers. `Err(n)`: the row
-/// has `n` fields and is not of that form.
-fn lp_row(text: &str) -> std::result::Result<(&str, [&str; 3]), usize> {
-    let mut tokens = [""; 4];
-    match fields(text, &mut tokens) {
-        4 => Ok((tokens[0], [tokens[1], tokens[2], tokens[3]])),
-        n if n > 4 => split_row(text).ok_or(n),
-        n => Err(n),
+/// The length of `v`, finite for any finite `v` short of the largest floats (scaled by its
+/// largest component, as [`unit_light`] normalises it).
+fn vector_length(v: [f64; 3]) -> f64 {
+    let largest = v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    if largest == 0.0 || !largest.is_finite() {
+        return largest;
+    }
+    largest * (DVec3::from_array(v) / largest).length()
+}
+
+/// The message for a first line `text` that is not a light count: a light row there means the
+/// count line is missing (relight crashed on such a file, cnr-isti-vclab/relight issue #19).
+fn count_expected(text: &str) -> String {
+    let row = matches!(lp_row(text), Ok(LpRow::Light(name, _)) if name.parse::<f64>().is_err());
+    if row {
+        format!(
+            "expected the number of lights, found the light row '{}': an .lp file starts with \
+             its light count N on a line of its own, then N rows (RTIBuilder, relight and the \
+             PTM and HSH fitters all write and need it); add the count as the first line",
+            quoted(text)
+        )
+    } else {
+        format!("expected the number of lights, found '{}'", quoted(text))
     }
 }
 
-/// A row `<image> <lx> <ly> <lz>` whose image path may hold spaces: the path (everything
-/// before the last three fields, trimmed) and those three fields, where the last three are
-/// numbers; `None` otherwise.
-fn split_row(text: &str) -> Option<(&str, [&str; 3])> {
-    let mut rest = text.trim();
-    let mut numbers = [""; 3];
-    for k in (0..3).rev() {
-        let (before, last) = rest.rsplit_once(char::is_whitespace)?;
-        last.parse::<f64>().ok()?;
-        numbers[k] = last;
-        rest = before.trim_end();
+/// Why a row of only three numbers under an `.lp` count is not a capture's row.
+const NAMELESS_IN_A_CAPTURE: &str = "3 numbers and no image: a light without its image (a \
+     table of lights under a count, as psmImages' lights.txt; NeuralRTI pairs such rows with \
+     the folder's images sorted by name, which symframe does not guess) is read only as lights \
+     to relight under (relight --lights); name each row's image ('<image> <x> <y> <z>'), or \
+     give a DiLiGenT folder (filenames.txt and light_directions.txt)";
+
+/// Why a row of four numbers after the image `name` is refused.
+fn four_numbers(name: &str) -> String {
+    format!(
+        "4 numbers after the image '{}': a row holds 3 (x y z toward the light), as RTIBuilder, \
+         relight and the PTM and HSH fitters write and read it; a 4th column (a per-light \
+         intensity?) is not read, and which 3 are the direction is not guessed (relight would \
+         take the first as part of the image name); give intensities in light_intensities.txt \
+         beside the .lp (one 'r g b' row per light)",
+        quoted(name)
+    )
+}
+
+/// What an `.lp` row (after the count) holds.
+#[derive(Debug, PartialEq)]
+enum LpRow<'a> {
+    /// `<image> <x> <y> <z>`: the image (a path with spaces whole) and the three numbers.
+    Light(&'a str, [&'a str; 3]),
+    /// `<image> <n> <x> <y> <z>`: four numbers after a name. The image's name may end in the
+    /// first (`scan 2`, `joined`), else the row has a fourth column.
+    FourNumbers {
+        /// The image name before the four numbers.
+        name: &'a str,
+        /// The name with the first number: the image if its name ends in a number.
+        joined: &'a str,
+        /// The four numbers.
+        numbers: [&'a str; 4],
+    },
+    /// `<x> <y> <z>` and no image: a table of lights under a count (psmImages' lights.txt):
+    /// lights to render under, not a capture's row.
+    Nameless([&'a str; 3]),
+}
+
+/// Why a row is not an `.lp` row.
+#[derive(Debug, PartialEq)]
+enum RowError<'a> {
+    /// Fewer than four fields, `numbers` of them numbers at the end; the text, for hints.
+    Fields {
+        count: usize,
+        numbers: usize,
+        text: &'a str,
+    },
+    /// One of the three fields meant as the direction (the last three) is not a number; the
+    /// row ends in `numbers` numbers.
+    NotANumber { token: &'a str, numbers: usize },
+    /// Numbers in another count than three after the image (`name`), or numbers only.
+    Columns {
+        name: Option<&'a str>,
+        numbers: usize,
+    },
+}
+
+impl RowError<'_> {
+    /// The message: `what` names the first field (`<image>`, `<name>`), `hint` (a trailing
+    /// comment) explains a short row.
+    fn message(&self, what: &str, hint: Option<&str>) -> String {
+        match *self {
+            RowError::Fields {
+                count,
+                numbers,
+                text,
+            } => {
+                let why = if let Some(h) = hint {
+                    h.to_string()
+                } else if numbers == 2 {
+                    "2 numbers after the image: a row holds x y z toward the light, not angles"
+                        .to_string()
+                } else if text.contains([',', ';']) {
+                    "fields are separated by spaces or tabs, not commas or semicolons".to_string()
+                } else {
+                    "a path with spaces needs three numbers after it".to_string()
+                };
+                format!("expected '{what} <lx> <ly> <lz>' ({why}), found {count} fields")
+            }
+            RowError::NotANumber { token, numbers } => {
+                let mut m = format!(
+                    "light direction: cannot parse '{}' as a number",
+                    quoted(token)
+                );
+                if token.contains(',') {
+                    m.push_str(" (a decimal comma? write 0.5, not 0,5)");
+                } else if numbers == 2 {
+                    m.push_str(" (the row ends in 2 numbers: it needs x y z)");
+                }
+                m
+            }
+            RowError::Columns {
+                name: None,
+                numbers,
+            } => format!(
+                "{numbers} numbers and no image: expected '{what} <lx> <ly> <lz>' (x y z \
+                 toward the light)"
+            ),
+            RowError::Columns {
+                name: Some(name),
+                numbers,
+            } => {
+                let what_else = if numbers == 6 {
+                    " (x y z and r g b intensities?)"
+                } else {
+                    ""
+                };
+                format!(
+                    "{numbers} numbers after the image '{}'{what_else}: a row holds 3 (x y z \
+                     toward the light), as RTIBuilder, relight and the PTM and HSH fitters \
+                     write and read it; other columns are not read, and which 3 are the \
+                     direction is not guessed; give intensities in light_intensities.txt \
+                     beside the .lp (one 'r g b' row per light)",
+                    quoted(name)
+                )
+            }
+        }
     }
-    (!rest.is_empty()).then_some((rest, numbers))
+}
+
+/// Most trailing numbers a row's reading keeps (the count goes on).
+const KEPT: usize = 7;
+
+/// Reads an `.lp` row (after the count line): the name is everything before the row's trailing
+/// numbers (a path with spaces whole, as RTIBuilder writes one from a folder named so), the
+/// fields separated by spaces or tabs (the PTM fitter's samples put a tab after the path).
+/// Three numbers after a name are a light; three numbers alone a light without its image; four
+/// after a name an image whose name may end in the first; anything else is refused, saying what
+/// the row holds (no silent reading of an extra column as z).
+fn lp_row(text: &str) -> std::result::Result<LpRow<'_>, RowError<'_>> {
+    let text = text.trim();
+    let mut rest = text;
+    let mut kept = [""; KEPT];
+    let mut numbers = 0;
+    while !rest.is_empty() {
+        let (before, last) = match rest.rsplit_once(char::is_whitespace) {
+            Some((before, last)) => (before.trim_end(), last),
+            None => ("", rest),
+        };
+        if last.parse::<f64>().is_err() {
+            break;
+        }
+        if numbers < KEPT {
+            kept[numbers] = last;
+        }
+        numbers += 1;
+        rest = before;
+    }
+    // `kept` holds the trailing numbers, last first.
+    let xyz = [kept[2], kept[1], kept[0]];
+    if rest.is_empty() {
+        return match numbers {
+            3 => Ok(LpRow::Nameless(xyz)),
+            // `0001 x y z`: an image named by a number (relight and RTIBuilder read it so).
+            4 if kept[3].bytes().all(|b| b.is_ascii_digit()) => Ok(LpRow::Light(kept[3], xyz)),
+            n => Err(RowError::Columns {
+                name: None,
+                numbers: n,
+            }),
+        };
+    }
+    match numbers {
+        3 => Ok(LpRow::Light(rest, xyz)),
+        4 => {
+            let first = kept[3];
+            let end = first.as_ptr() as usize - text.as_ptr() as usize + first.len();
+            Ok(LpRow::FourNumbers {
+                name: rest,
+                joined: &text[..end],
+                numbers: [first, kept[2], kept[1], kept[0]],
+            })
+        }
+        n if n < 3 => {
+            let count = n + rest.split_whitespace().count();
+            if count < 4 {
+                return Err(RowError::Fields {
+                    count,
+                    numbers: n,
+                    text,
+                });
+            }
+            let token = rest.rsplit(char::is_whitespace).next().unwrap_or(rest);
+            Err(RowError::NotANumber { token, numbers: n })
+        }
+        n => Err(RowError::Columns {
+            name: Some(rest),
+            numbers: n,
+        }),
+    }
+}
+
+/// [`resolve_lp_image`], and for a name in quotes (`"my photos/a.jpg"`, as a spreadsheet or
+/// CSV export writes one) that is not found as written, the name without them.
+fn resolve_lp_image_unquoted(dir: &Path, name: &str) -> Option<(PathBuf, LpPaths)> {
+    resolve_lp_image(dir, name).or_else(|| {
+        let inner = ['"', '\'']
+            .iter()
+            .find_map(|&q| name.strip_prefix(q)?.strip_suffix(q))?;
+        (!inner.is_empty())
+            .then(|| resolve_lp_image(dir, inner))
+            .flatten()
+    })
 }
 
 /// Refuses a light count `count` (declared at `line` of `path`) above [`MAX_LIGHTS`].
@@ -537,33 +775,15 @@ fn resolve_lp_image(dir: &Path, token: &str) -> Option<(PathBuf, LpPaths)> {
 /// How an `.lp` file's image paths are read (see [`LpPaths`]): `Windows` when any entry needed
 /// the Windows reading. Errors as opening the dataset would give them.
 pub fn lp_path_convention(path: &Path) -> Result<LpPaths> {
-    parse_lp(path)?;
-    let dir = path.parent().unwrap_or(Path::new(""));
-    let mut lines = TextLines::open(path)?;
-    lines.next_content()?;
-    let mut windows = false;
-    while let Some((_, text)) = lines.next_content()? {
-        let found = lp_row(text)
-            .ok()
-            .map(|(name, _)| name)
-            .and_then(|t| resolve_lp_image(dir, t));
-        if found.is_some_and(|(_, c)| c == LpPaths::Windows) {
-            windows = true;
-            break;
-        }
-    }
-    Ok(if windows {
-        LpPaths::Windows
-    } else {
-        LpPaths::AsWritten
-    })
+    Ok(parse_lp(path)?.paths)
 }
 
 /// Reads light directions alone (e.g. the lights to relight under), from either an `.lp`-style
-/// file (the count `N` on the first line, then `N` lines `<name> <lx> <ly> <lz>`; the names are
-/// ignored and need not exist) or a table of `x y z` rows (DiLiGenT `light_directions.txt`).
-/// The form is told by the first meaningful line: one integer means `.lp`. Directions are
-/// normalised; errors name the file and line.
+/// file (the count `N` on the first line, then `N` lines `<name> <lx> <ly> <lz>` or `<lx> <ly>
+/// <lz>`; the names are ignored and need not exist) or a table of `x y z` rows (DiLiGenT
+/// `light_directions.txt`). The form is told by the first meaningful line: one integer means
+/// `.lp`. Directions are normalised; rows as [`parse_lp`] reads them; errors name the file and
+/// line.
 pub fn read_light_directions(path: &Path) -> Result<Vec<DVec3>> {
     let mut lines = TextLines::open(path)?;
     let Some((first_line, first)) = lines.next_content()? else {
@@ -571,6 +791,9 @@ pub fn read_light_directions(path: &Path) -> Result<Vec<DVec3>> {
     };
     let mut tokens = [""; 1];
     if fields(first, &mut tokens) != 1 {
+        if matches!(lp_row(first), Ok(LpRow::Light(name, _)) if name.parse::<f64>().is_err()) {
+            return Err(Error::parse(path, first_line, count_expected(first)));
+        }
         return parse_directions(path);
     }
     let count: usize = tokens[0].parse().map_err(|_| {
@@ -595,13 +818,13 @@ pub fn read_light_directions(path: &Path) -> Result<Vec<DVec3>> {
     entries
         .iter()
         .map(|(line, text)| {
-            let (_, numbers) = lp_row(text).map_err(|n| {
-                Error::parse(
-                    path,
-                    *line,
-                    format!("expected '<name> <lx> <ly> <lz>', found {n} fields"),
-                )
-            })?;
+            let numbers = match lp_row(text) {
+                Ok(LpRow::Light(_, numbers) | LpRow::Nameless(numbers)) => numbers,
+                Ok(LpRow::FourNumbers { name, .. }) => {
+                    return Err(Error::parse(path, *line, four_numbers(name)))
+                }
+                Err(e) => return Err(Error::parse(path, *line, e.message("<name>", None))),
+            };
             let v = parse_triple(path, *line, 3, &numbers, "light direction")?;
             unit_direction(path, *line, v)
         })
@@ -686,14 +909,14 @@ mod tests {
             "2\nmy photos/IMG 0001.jpg  0.1 -0.2 0.97\nmy photos/b.jpg 0 0 1\n",
         )
         .unwrap();
-        let (images, lights) = parse_lp(&lp).unwrap();
+        let LpFile { images, lights, .. } = parse_lp(&lp).unwrap();
         assert_eq!(images[0], d.path().join("my photos/IMG 0001.jpg"));
         assert!((lights[0] - DVec3::new(0.1, -0.2, 0.97).normalize()).length() < 1e-12);
         assert_eq!(images[1], d.path().join("my photos/b.jpg"));
         // Windows paths with spaces, as RTIBuilder writes them: found by file name.
         std::fs::write(&lp, "1\nC:\\Users\\me\\My Photos\\IMG 0001.jpg 0 0 1\n").unwrap();
         std::fs::write(d.path().join("IMG 0001.jpg"), b"x").unwrap();
-        let (images, _) = parse_lp(&lp).unwrap();
+        let images = parse_lp(&lp).unwrap().images;
         assert_eq!(images[0], d.path().join("IMG 0001.jpg"));
         assert_eq!(lp_path_convention(&lp).unwrap(), LpPaths::Windows);
         // Not three numbers after the path: the row is refused, naming the line.
@@ -758,7 +981,7 @@ mod tests {
             "2\nC:\\capture\\jpeg-exports\\img_0000.jpg 0 0 1\njpeg-exports\\img_0001.jpg 0 1 1\n",
         )
         .unwrap();
-        let (images, lights) = parse_lp(&lp).unwrap();
+        let LpFile { images, lights, .. } = parse_lp(&lp).unwrap();
         assert_eq!(images[0], d.path().join("img_0000.jpg"));
         assert_eq!(images[1], d.path().join("jpeg-exports/img_0001.jpg"));
         assert_eq!(lights.len(), 2);
@@ -940,6 +1163,264 @@ mod tests {
         assert_eq!(l.next_line().unwrap(), Some((2, "\u{feff}x")));
     }
 
+    // The row variants of the tools that write or read `.lp` files, one test each, naming the
+    // tool and (in a comment) the source read.
+
+    /// Writes `text` as `dir/name` and an empty file for each of `images`; the `.lp` path.
+    fn lp_file(dir: &Path, name: &str, text: &str, images: &[&str]) -> PathBuf {
+        for i in images {
+            let p = dir.join(i);
+            std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+            std::fs::write(p, b"x").unwrap();
+        }
+        let lp = dir.join(name);
+        std::fs::write(&lp, text).unwrap();
+        lp
+    }
+
+    fn near(a: DVec3, b: [f64; 3]) -> bool {
+        (a - DVec3::from_array(b).normalize()).length() < 1e-12
+    }
+
+    /// relight (cnr-isti-vclab/relight 5cca5c3e, src/project.cpp `Project::saveLP`): the count,
+    /// then `<file> x y z` rows through a QTextStream, whose default notation writes small
+    /// components with an exponent (`-1.2e-05`); LF line ends, none after the last row (as
+    /// sungam94/NeuralRTI's data/dirs.lp). Its reader (src/lp.cpp `parseLP`) normalises rows.
+    #[test]
+    fn relight_rows_with_exponents_are_read() {
+        let d = tempfile::tempdir().unwrap();
+        let text = "3\na.jpg 0.5 -1.2e-05 0.866025\nb.jpg 1e-06 0 1\nc.jpg -0.6 1E-3 8.0e-01";
+        let lp = lp_file(d.path(), "relight.lp", text, &["a.jpg", "b.jpg", "c.jpg"]);
+        let f = parse_lp(&lp).unwrap();
+        assert_eq!(f.images[2], d.path().join("c.jpg"));
+        assert!(near(f.lights[0], [0.5, -1.2e-5, 0.866025]));
+        assert!(near(f.lights[1], [1e-6, 0.0, 1.0]));
+        assert!(near(f.lights[2], [-0.6, 1e-3, 0.8]));
+        assert!(
+            f.lengths.iter().all(|l| (l - 1.0).abs() < 1e-5),
+            "{:?}",
+            f.lengths
+        );
+        assert_eq!(f.paths, LpPaths::AsWritten);
+        assert_eq!(read_light_directions(&lp).unwrap(), f.lights);
+    }
+
+    /// RTIBuilder (Cultural Heritage Imaging, Java, 2008-11; its reader
+    /// Plugin/helpers/LPparser/LPparser.java `parseLPFileStrict` joins the words before the
+    /// last three numbers into the path): absolute Windows paths to `jpeg-exports`, with
+    /// spaces, and Windows line ends (CR LF).
+    #[test]
+    fn rtibuilder_windows_paths_with_spaces_and_crlf_are_read() {
+        let d = tempfile::tempdir().unwrap();
+        let text = "2\r\nC:\\RTI\\My Coin\\jpeg-exports\\coin 01.jpg 0.01813509 -0.33164996 \
+                    0.9432282\r\nC:\\RTI\\My Coin\\jpeg-exports\\coin 02.jpg -0.040955737 \
+                    0.32322052 0.945437\r\n";
+        let lp = lp_file(d.path(), "coin.lp", text, &["coin 01.jpg", "coin 02.jpg"]);
+        let f = parse_lp(&lp).unwrap();
+        assert_eq!(
+            f.images,
+            [d.path().join("coin 01.jpg"), d.path().join("coin 02.jpg")]
+        );
+        assert!(near(f.lights[1], [-0.040955737, 0.32322052, 0.945437]));
+        assert_eq!(f.paths, LpPaths::Windows);
+        assert_eq!(lp_path_convention(&lp).unwrap(), LpPaths::Windows);
+    }
+
+    /// The PTM fitter's sample light files (HP; quoted in lpgen.py, M. Hodgson 2011:
+    /// `../Samplexx/xx-001.tga<TAB>-0.015760 0.196076 0.980462`) put a tab after the path;
+    /// NeuralRTI's reader (univr-GRAIL/NeuralRTI a1b276f9, modules/dataset/datasetwmask.py)
+    /// takes rows with tabs between all fields.
+    #[test]
+    fn ptm_fitter_tab_separated_rows_are_read() {
+        let d = tempfile::tempdir().unwrap();
+        let text = "3\nSample 01/xx-001.tga\t-0.015760 0.196076 0.980462\n\
+                    xx-002.tga\t0\t0\t1\n xx-003.tga \t 0.6\t\t0 0.8 \n";
+        let images = ["Sample 01/xx-001.tga", "xx-002.tga", "xx-003.tga"];
+        let lp = lp_file(d.path(), "ptm.lp", text, &images);
+        let f = parse_lp(&lp).unwrap();
+        assert_eq!(f.images[0], d.path().join("Sample 01/xx-001.tga"));
+        assert!(near(f.lights[0], [-0.015760, 0.196076, 0.980462]));
+        assert!(near(f.lights[1], [0.0, 0.0, 1.0]));
+        assert!(near(f.lights[2], [0.6, 0.0, 0.8]));
+    }
+
+    /// SpectralRTI_Toolkit (thanneken/SpectralRTI_Toolkit 86d185eb,
+    /// src/main/java/toolkit/SpectralRTI_Toolkit.java) rewrites an RTIBuilder `.lp` after
+    /// splitting it on LF, appending the platform's line separator: on Windows each line ends
+    /// CR CR LF. The extra CR ends an empty line, skipped; errors count it as a line.
+    #[test]
+    fn spectral_rti_toolkit_cr_cr_lf_line_ends_are_read() {
+        let d = tempfile::tempdir().unwrap();
+        let text = "2\r\r\nAccurateColorRTI\\AccurateColor_01.jpg 0.1 0.2 0.97\r\r\n\
+                    AccurateColorRTI\\AccurateColor_02.jpg 0 0 1\r\r\n";
+        let images = [
+            "AccurateColorRTI/AccurateColor_01.jpg",
+            "AccurateColorRTI/AccurateColor_02.jpg",
+        ];
+        let lp = lp_file(d.path(), "spectral.lp", text, &images);
+        let f = parse_lp(&lp).unwrap();
+        assert_eq!(f.images[1], d.path().join(images[1]));
+        assert_eq!(f.paths, LpPaths::Windows);
+        std::fs::write(&lp, text.replace("0 0 1", "0 O 1")).unwrap();
+        let e = parse_lp(&lp).unwrap_err().to_string();
+        assert!(
+            e.ends_with("spectral.lp:5: light direction: cannot parse 'O' as a number"),
+            "{e}"
+        );
+    }
+
+    /// psmImages' lights.txt (the photometric stereo test set, e.g. xiumingzhang/
+    /// photometric-stereo 5327958b, psmImages/lights.txt, read by run_ps.m past one header
+    /// line): the count, then `x y z` rows without names; NeuralRTI's reader (datasetwmask.py
+    /// above) takes such rows too, pairing them with the folder's images sorted by name.
+    /// Lights to render under; as a capture, refused naming the row (the pairing is a guess).
+    #[test]
+    fn nameless_rows_under_a_count_are_lights_not_a_capture() {
+        let d = tempfile::tempdir().unwrap();
+        let text = "3\n0.403259 0.480808 0.778592\n0.0982272 0.163712 0.981606\n\
+                    -0.0654826 0.180077 0.98147\n";
+        let lights = lp_file(d.path(), "lights.txt", text, &[]);
+        let l = read_light_directions(&lights).unwrap();
+        assert_eq!(l.len(), 3);
+        assert!(near(l[2], [-0.0654826, 0.180077, 0.98147]));
+        let lp = lp_file(d.path(), "lights.lp", text, &[]);
+        let e = parse_lp(&lp).unwrap_err().to_string();
+        assert!(
+            e.contains("lights.lp:2: 3 numbers and no image") && e.contains("filenames.txt"),
+            "{e}"
+        );
+    }
+
+    /// A fourth number after the image was read silently: relight's reader (src/lp.cpp) joins
+    /// all but the last three fields into the file name, and so did symframe, so
+    /// `a.jpg 0.1 0.2 0.9 1.0` was the light (0.2, 0.9, 1.0) to `read_light_directions`. No
+    /// tool surveyed (RTIBuilder, relight, the PTM and HSH fitters, SpectralRTI_Toolkit,
+    /// NeuralRTI) writes a 4th or an r g b column: refused naming the line, unless the image's
+    /// name ends in that number.
+    #[test]
+    fn extra_columns_are_refused_never_read_as_the_direction() {
+        let d = tempfile::tempdir().unwrap();
+        let lp = lp_file(d.path(), "x.lp", "1\na.jpg 0.1 0.2 0.9 1.0\n", &["a.jpg"]);
+        for e in [
+            parse_lp(&lp).unwrap_err().to_string(),
+            read_light_directions(&lp).unwrap_err().to_string(),
+        ] {
+            assert!(
+                e.contains("x.lp:2: 4 numbers after the image 'a.jpg'")
+                    && e.contains("light_intensities.txt"),
+                "{e}"
+            );
+        }
+        // The image `scan 2` (a name ending in a number, as relight reads the row): read.
+        std::fs::write(d.path().join("scan 2"), b"x").unwrap();
+        std::fs::write(&lp, "1\nscan 2 0 0.6 0.8\n").unwrap();
+        let f = parse_lp(&lp).unwrap();
+        assert_eq!(f.images[0], d.path().join("scan 2"));
+        assert!(near(f.lights[0], [0.0, 0.6, 0.8]));
+        // An image named by a number, the row all numbers: read.
+        std::fs::write(d.path().join("0001"), b"x").unwrap();
+        std::fs::write(&lp, "1\n0001 0 0.6 0.8\n").unwrap();
+        assert_eq!(parse_lp(&lp).unwrap().images[0], d.path().join("0001"));
+        assert!(near(
+            read_light_directions(&lp).unwrap()[0],
+            [0.0, 0.6, 0.8]
+        ));
+        // r g b after x y z; five numbers; numbers only.
+        let refused = [
+            (
+                "a.jpg 0 0 1 1 0.9 0.8",
+                "6 numbers after the image 'a.jpg' (x y z and r g b",
+            ),
+            ("a.jpg 0 0 1 1 1", "5 numbers after the image 'a.jpg'"),
+            ("0.5 0 0 1 1", "5 numbers and no image"),
+            (
+                "a.jpg 30 45",
+                "2 numbers after the image: a row holds x y z toward the light, not angles",
+            ),
+            (
+                "a.jpg 0,1 0,2 0,97",
+                "cannot parse '0,97' as a number (a decimal comma?",
+            ),
+            (
+                "a.jpg,0.1,0.2,0.97",
+                "not commas or semicolons), found 1 fields",
+            ),
+        ];
+        for (row, want) in refused {
+            std::fs::write(&lp, format!("1\n{row}\n")).unwrap();
+            for e in [
+                parse_lp(&lp).unwrap_err().to_string(),
+                read_light_directions(&lp).unwrap_err().to_string(),
+            ] {
+                assert!(e.contains("x.lp:2: ") && e.contains(want), "{row}: {e}");
+            }
+        }
+    }
+
+    /// relight crashed on an `.lp` without its count line (cnr-isti-vclab/relight issue #19);
+    /// symframe said "expected the number of lights": the light row is named, the count asked
+    /// for.
+    #[test]
+    fn a_missing_count_line_is_named() {
+        let d = tempfile::tempdir().unwrap();
+        let lp = lp_file(
+            d.path(),
+            "n.lp",
+            "a.jpg 0 0 1\nb.jpg 0 1 1\n",
+            &["a.jpg", "b.jpg"],
+        );
+        for e in [
+            parse_lp(&lp).unwrap_err().to_string(),
+            read_light_directions(&lp).unwrap_err().to_string(),
+        ] {
+            assert!(
+                e.contains(
+                    "n.lp:1: expected the number of lights, found the light row 'a.jpg 0 0 1'"
+                ) && e.contains("add the count as the first line"),
+                "{e}"
+            );
+        }
+        // A DiLiGenT table stays a table.
+        std::fs::write(&lp, "0 0 1\n0 1 1\n").unwrap();
+        assert_eq!(read_light_directions(&lp).unwrap().len(), 2);
+    }
+
+    /// Quoted image paths (no RTI tool writes them; a spreadsheet's CSV export or a hand edit
+    /// does): the name without its quotes when the quoted one is not a file.
+    #[test]
+    fn quoted_image_paths_are_unquoted() {
+        let d = tempfile::tempdir().unwrap();
+        let text = "2\n\"my photos/a.jpg\" 0 0 1\n'b.jpg' 0 1 1\n";
+        let lp = lp_file(d.path(), "q.lp", text, &["my photos/a.jpg", "b.jpg"]);
+        let f = parse_lp(&lp).unwrap();
+        assert_eq!(
+            f.images,
+            [d.path().join("my photos/a.jpg"), d.path().join("b.jpg")]
+        );
+        std::fs::write(&lp, "1\n\"gone.jpg\" 0 0 1\n").unwrap();
+        let e = parse_lp(&lp).unwrap_err().to_string();
+        assert!(
+            e.contains("q.lp:2: image") && e.contains("does not exist"),
+            "{e}"
+        );
+    }
+
+    /// Lengths as written are kept for the near-light warning, however large.
+    #[test]
+    fn lengths_as_written_are_kept() {
+        assert_eq!(vector_length([3.0, 0.0, 4.0]), 5.0);
+        assert!((vector_length([1e200, 0.0, 1e200]) / 1e200 - 2f64.sqrt()).abs() < 1e-12);
+        assert_eq!(vector_length([0.0; 3]), 0.0);
+        let d = tempfile::tempdir().unwrap();
+        let lp = lp_file(
+            d.path(),
+            "mm.lp",
+            "2\na 300 0 400\nb 0 0 250\n",
+            &["a", "b"],
+        );
+        assert_eq!(parse_lp(&lp).unwrap().lengths, [500.0, 250.0]);
+    }
+
     proptest::proptest! {
         /// Line numbers follow every line end (LF, CR LF, lone CR); no input panics.
         #[test]
@@ -968,6 +1449,22 @@ mod tests {
                     proptest::prop_assert!(!l.contains(['\r', '\n']));
                 }
             }
+        }
+
+        /// No row panics the row reader; a row written as `<name> x y z` reads back so.
+        #[test]
+        fn lp_rows_never_panic_and_written_rows_read_back(
+            row in "[ \t#,a-z0-9.eE+-]{0,40}",
+            name in "[a-z_][a-z0-9_. ]{0,12}\\.jpg",
+            v in proptest::array::uniform3(-1e3f64..1e3),
+        ) {
+            let _ = lp_row(&row);
+            let text = format!("{name} {} {}\t{}", v[0], v[1], v[2]);
+            let (x, y, z) = (v[0].to_string(), v[1].to_string(), v[2].to_string());
+            proptest::prop_assert_eq!(
+                lp_row(&text),
+                Ok(LpRow::Light(name.trim(), [x.as_str(), y.as_str(), z.as_str()]))
+            );
         }
 
         /// Any finite light other than zero has a unit direction.

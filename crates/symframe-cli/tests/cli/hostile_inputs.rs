@@ -790,3 +790,60 @@ fn a_mask_of_another_size_is_refused_before_it_is_decoded() {
     );
     assert!(peak_kib < 100 << 10, "peak {peak_kib} KiB");
 }
+
+/// The `.lp` row variants other tools write, end to end: tabs after the path (the PTM
+/// fitter's samples), CR LF line ends (RTIBuilder on Windows) and vectors of 300 (light
+/// positions in mm, as ramamoorthyluxman/illumi-net reads `.lp` rows) give the same normals
+/// as the plain file, the lengths warned about; a fourth number after the image (read by
+/// relight as part of the name, and by symframe as a wrong image before) is refused naming the
+/// line.
+#[test]
+fn lp_row_variants_of_other_tools_are_read_or_refused_naming_the_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    let lp = lambert(&tmp.path().join("data"), 12, 12);
+    let plain = tmp.path().join("plain");
+    ok(&estimate(&lp, &plain, &["--method", "woodham", "-q"]));
+    let text = fs::read_to_string(&lp).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let variant: Vec<String> = lines
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            let t: Vec<&str> = l.split_whitespace().collect();
+            if i == 0 {
+                return t[0].to_string();
+            }
+            let v: Vec<String> = t[1..]
+                .iter()
+                .map(|x| format!("{}", x.parse::<f64>().unwrap() * 300.0))
+                .collect();
+            format!("{}\t{}", t[0], v.join(" "))
+        })
+        .collect();
+    fs::write(&lp, variant.join("\r\n") + "\r\n").unwrap();
+    let out = tmp.path().join("variant");
+    let o = estimate(&lp, &out, &["--method", "woodham", "-q"]);
+    ok(&o);
+    let want = "12 of 12 lights are far from unit length";
+    assert!(stderr(&o).contains(want), "{}", stderr(&o));
+    assert!(crate::common::report_warnings(&out)
+        .iter()
+        .any(|w| w.contains(want)));
+    let a = read_npy_f32(&plain.join("normals.npy")).unwrap().1;
+    let b = read_npy_f32(&out.join("normals.npy")).unwrap().1;
+    let worst = a
+        .iter()
+        .zip(&b)
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .fold(0f32, |m, (x, y)| m.max((x - y).abs()));
+    assert!(worst < 1e-5, "normals differ by {worst}");
+    // A fourth number after the image: refused, naming the line.
+    let mut rows: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
+    rows[2].push_str(" 1.0");
+    fs::write(&lp, rows.join("\n") + "\n").unwrap();
+    let o = symframe(&["estimate", s(&lp), "-o", s(&tmp.path().join("x"))]);
+    assert_one_line_error(
+        &o,
+        "lights.lp:3: 4 numbers after the image 'images/img_0001.exr'",
+    );
+}
