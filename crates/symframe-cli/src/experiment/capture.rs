@@ -520,18 +520,26 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
             let rig = Rig::new(&known, RigOptions::default())?;
             let mask = Some(&scene.mask[..]);
             // What the decoder tells the estimator: the clip level of integer files, and for
-            // a JPEG its 8-bit sRGB samples (the compression is not known to it); and what the
-            // lights' calibration reports: their RMS error.
+            // a JPEG its 8-bit sRGB samples (the compression is not known to it); the shot and
+            // read noise estimated from four of the images as `estimate` does
+            // (`symframe_io::capture_noise`); and what the lights' calibration reports: their
+            // RMS error.
+            let told = NoiseModel {
+                clip_level: d.saturation,
+                quantisation: match (cond.bits, cond.srgb) {
+                    (None, _) => Quantisation::Float,
+                    (Some(b), true) => Quantisation::Srgb(b),
+                    (Some(b), false) => Quantisation::Linear(b),
+                },
+                ..NoiseModel::default()
+            };
+            let n = lights.len();
+            let picks: Vec<Vec<f32>> = (0..4).map(|k| stack.image(k * (n - 1) / 3)).collect();
+            let estimated = told.estimate(picks.iter().map(|v| &v[..]), stack.width, None);
             let params = EstimatorParams {
                 noise: NoiseModel {
-                    clip_level: d.saturation,
-                    quantisation: match (cond.bits, cond.srgb) {
-                        (None, _) => Quantisation::Float,
-                        (Some(b), true) => Quantisation::Srgb(b),
-                        (Some(b), false) => Quantisation::Linear(b),
-                    },
                     light_error_deg: cond.light_error_deg,
-                    ..NoiseModel::default()
+                    ..estimated
                 },
                 ..EstimatorParams::default()
             };

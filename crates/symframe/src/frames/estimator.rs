@@ -464,15 +464,17 @@ impl<'a> Estimator<'a> {
             // A pixel the Lambertian fit explains but for a spike the rig undersamples is left
             // to it, as with one lobe.
             Some(f)
-                if f.residual >= self.policy.lobe.explains
+                if !policy::lobe_explains(&self.policy.lobe, &f)
                     && policy::spiked_diffuse(&self.policy.diffuse, &fit, None).is_none() =>
             {
                 match fit_lobe_pair(&f, self.rig, lobe) {
-                    Some(p) if policy::pair_explains(&self.policy.lobe, &p) => {
+                    Some(p) if policy::pair_explains(&self.policy.lobe, &p, &f) => {
                         let l = p.as_lobe(|l| self.lobe_has_tangent(l));
                         Some(LobeFit {
                             evals: f.evals + p.evals,
                             light_sd: f.light_sd,
+                            noise_share: f.noise_share,
+                            noise_share_sd: f.noise_share_sd,
                             ..l
                         })
                     }
@@ -971,8 +973,7 @@ impl<'a> Estimator<'a> {
             tangent,
             alpha: [1.2 * r, 0.8 * r],
         };
-        let light_error = self.params.noise.light_error_deg.to_radians();
-        fit_lobe(slice, rig, start, light_error, scratch)
+        fit_lobe(slice, rig, start, &self.params.noise, scratch)
     }
 
     /// The estimate of a pixel the lobe `f` explains (its normal within the rig's reach): the

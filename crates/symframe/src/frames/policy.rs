@@ -56,12 +56,27 @@ pub struct PolicySettings {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LobeSettings {
     /// A lobe leaving less than this share of the pixel's energy unexplained is the answer
-    /// (source `lobe`); one leaving more is no evidence, and the symmetry search decides. Fits
-    /// of lobes in the family leave below 1e-4 noise-free, as much under shot noise of 5,000
-    /// photons at full scale; a lobe outside the family (Ashikhmin-Shirley) leaves 0.2-1% with
-    /// normals 3-15 degrees off where the search is within 1. Higher: more pixels answered by
-    /// the lobe's centre, biased where the family misdescribes the material.
+    /// (source `lobe`), as is one that leaves no more than the capture's noise does (see
+    /// [`LobeSettings::noise_z`]); one leaving more is no evidence, and the symmetry search
+    /// decides. Fits of lobes in the family leave below 1e-4 noise-free; a lobe outside the
+    /// family (Ashikhmin-Shirley) leaves 0.2-1% with normals 3-15 degrees off where the search
+    /// is within 1. Higher: more pixels answered by the lobe's centre, biased where the family
+    /// misdescribes the material.
     pub explains: f64,
+    /// A lobe explains the pixel too where what it leaves is what the noise model expects the
+    /// capture's noise to leave ([`LobeFit::noise_share`]) plus the family's floor
+    /// ([`LobeSettings::model_floor`]), within this many standard deviations of that share
+    /// (the one-sided 0.1% point of the normal distribution): a chi-square test of the fit, in
+    /// the noise's units. Higher: lobes that misdescribe the material by more than the noise
+    /// hides answer too.
+    pub noise_z: f64,
+    /// ...and only where the data determine the lobe's centre: its standard deviation (the
+    /// fit's covariance and split half with the lights' error, [`LobeFit::normal_sd`] and
+    /// [`LobeFit::light_sd`]) at most this (radians; 0.5 degrees, a confidence of 0.98 of
+    /// being within 1 degree). A lobe that the noise lets through but that the samples hardly
+    /// pin down (a broad lobe whose tilt trades against its shape) may sit far from the
+    /// symmetric centre, which the search then reads. Higher: more such lobes answer.
+    pub noise_determined: f64,
     /// A lobe leaving less than this is a plausible answer where the search doubts its own,
     /// and its axis counts as a reading of the tangent by itself (at 1%, lobes on rough metal
     /// bumps under 200 lights were 9.4 degrees off where the search was 6.1). Higher: more
@@ -98,6 +113,8 @@ impl Default for LobeSettings {
     fn default() -> Self {
         Self {
             explains: LOBE_EXPLAINS,
+            noise_z: 3.09,
+            noise_determined: 0.5f64.to_radians(),
             plausible: LOBE_PLAUSIBLE,
             over_diffuse: 0.25,
             model_floor: 1e-4,
@@ -354,7 +371,7 @@ pub(crate) fn choose_normal<'a>(
     peak: impl FnOnce() -> Option<DVec3>,
 ) -> NormalChoice<'a> {
     let fit = e.lambertian;
-    let lobe = e.lobe.filter(|f| f.residual < s.lobe.explains);
+    let lobe = e.lobe.filter(|f| lobe_explains(&s.lobe, f));
     let diffuse = if e.auto {
         diffuse_centre(&s.diffuse, fit, e.share).or_else(|| spiked_diffuse(&s.diffuse, fit, lobe))
     } else {
@@ -415,6 +432,25 @@ pub(crate) fn search_gives_way(
     quality < s.search.doubtful && f.residual < s.lobe.plausible && f.normal.z > 0.0 && observed()
 }
 
+/// The largest share of the energy the lobe `f` may leave and explain the pixel: the fixed
+/// share [`LobeSettings::explains`], or what the capture's noise leaves at most (its expected
+/// share and the family's floor, plus [`LobeSettings::noise_z`] standard deviations).
+pub(crate) fn lobe_limit(s: &LobeSettings, f: &LobeFit) -> f64 {
+    s.explains
+        .max(f.noise_share + s.model_floor + s.noise_z * f.noise_share_sd)
+}
+
+/// Whether the lobe `f` explains the pixel: it leaves less than [`LobeSettings::explains`],
+/// or less than [`lobe_limit`] with its centre determined ([`LobeSettings::noise_determined`]).
+pub(crate) fn lobe_explains(s: &LobeSettings, f: &LobeFit) -> bool {
+    f.residual < s.explains || (f.residual < lobe_limit(s, f) && centre_determined(s, f))
+}
+
+/// Whether the samples determine the lobe's centre to [`LobeSettings::noise_determined`].
+fn centre_determined(s: &LobeSettings, f: &LobeFit) -> bool {
+    f.normal_sd.hypot(f.light_sd) <= s.noise_determined
+}
+
 /// Whether a pixel is diffuse enough that no lobe is fitted: its Lambertian fit explains it
 /// to the noise floor ([`DiffuseSettings::pure_share`]).
 pub(crate) fn pure_diffuse(s: &DiffuseSettings, fit: &BaselinePixel, share: Option<f64>) -> bool {
@@ -422,12 +458,15 @@ pub(crate) fn pure_diffuse(s: &DiffuseSettings, fit: &BaselinePixel, share: Opti
 }
 
 /// Whether two lobes sharing a frame explain the pixel (docs/method.md, "Two lobes"): they
-/// leave less than [`LobeSettings::explains`], the second lobe is significant (an F test), and
+/// leave less than the one lobe `single` may ([`lobe_limit`]: the pair is fitted to its
+/// samples), the second lobe is significant (an F test), and
 /// what they leave at every light (cast shadows included) is at the model floor
 /// ([`LobeSettings::model_floor`]) or looks like independent noise
 /// ([`LobeSettings::noise_like_z`]), not like a material they do not describe.
-pub(crate) fn pair_explains(s: &LobeSettings, p: &LobePair) -> bool {
-    p.residual < s.explains
+pub(crate) fn pair_explains(s: &LobeSettings, p: &LobePair, single: &LobeFit) -> bool {
+    (p.residual < s.explains
+        || (p.residual < lobe_limit(s, single)
+            && p.normal_sd.hypot(single.light_sd) <= s.noise_determined))
         && p.significant()
         && (p.residual_everywhere < s.model_floor || p.structure < s.noise_like_z)
 }
@@ -491,9 +530,13 @@ pub(crate) fn choose_fallback(
         .filter(|_| lambert.confidence as f64 >= s.fallback.diffuse_fit);
     let lobe = lobe.filter(|f| f.normal.z > 0.0).and_then(|f| {
         let over_diffuse = diffuse.and(share).map(|v| s.lobe.over_diffuse * v);
-        let explains = f.residual < s.lobe.explains;
-        let confidence = if explains {
-            1.0 - f.residual / s.lobe.explains
+        let limit = if centre_determined(&s.lobe, f) {
+            lobe_limit(&s.lobe, f)
+        } else {
+            s.lobe.explains
+        };
+        let confidence = if f.residual < limit {
+            1.0 - f.residual / limit
         } else {
             1.0 - f.residual / over_diffuse?
         };
@@ -619,6 +662,8 @@ mod tests {
             trimmed: 0,
             normal_sd: 0.0,
             light_sd: 0.0,
+            noise_share: 0.0,
+            noise_share_sd: 0.0,
             evals: 0,
         }
     }
@@ -638,6 +683,32 @@ mod tests {
             sharp,
         };
         choose_normal(&PolicySettings::default(), &evidence, || peak)
+    }
+
+    #[test]
+    fn a_lobe_explains_what_the_noise_leaves_and_no_more() {
+        let b = DVec3::new(0.1, 0.0, 1.0).normalize();
+        let glossy = lambertian(DVec3::Z, 0.5);
+        // 1% left: refused by the fixed share, accepted where the noise expects 0.9% with a
+        // spread of 0.05%, refused again where the noise expects 0.5%.
+        let noisy = |share: f64| LobeFit {
+            noise_share: share,
+            noise_share_sd: 5e-4,
+            ..fitted(b, 0.01)
+        };
+        let (quiet, hidden, shown) = (noisy(0.0), noisy(0.009), noisy(0.005));
+        let s = LobeSettings::default();
+        assert!(!lobe_explains(&s, &quiet));
+        assert!(lobe_explains(&s, &hidden));
+        assert!(!lobe_explains(&s, &shown));
+        assert_eq!(
+            choose(Some(&hidden), &glossy, Some(0.3), false, None),
+            NormalChoice::Lobe(&hidden)
+        );
+        assert_eq!(
+            choose(Some(&shown), &glossy, Some(0.3), false, None),
+            NormalChoice::Search
+        );
     }
 
     #[test]

@@ -118,8 +118,11 @@ impl LobePair {
                 residual: self.residual,
                 trimmed: 0,
                 normal_sd: self.normal_sd,
-                // The pair's lights are the one lobe's: the estimator keeps its light error.
+                // The pair's lights are the one lobe's: the estimator keeps its light error and
+                // noise.
                 light_sd: 0.0,
+                noise_share: 0.0,
+                noise_share_sd: 0.0,
                 evals: self.evals,
             }
         };
@@ -746,7 +749,14 @@ mod tests {
             tangent: t,
             alpha: [0.2, 0.1],
         };
-        let single = fit_lobe(&samples, rig, start, 0.0, &mut scratch).unwrap();
+        let single = fit_lobe(
+            &samples,
+            rig,
+            start,
+            &crate::noise::NoiseModel::default(),
+            &mut scratch,
+        )
+        .unwrap();
         let pair = fit_lobe_pair(&single, rig, &mut scratch).unwrap();
         (single, pair)
     }
