@@ -296,7 +296,8 @@ pub struct EstimateArgs {
     pub min_anisotropy: f32,
     /// The light directions' uncertainty: the RMS angle in degrees between each light's given
     /// and true direction, as its calibration reports it. The confidence counts what it moves
-    /// the normals by (default 0: the lights are taken as exact).
+    /// the normals by, and the lobe fit's acceptance what it adds to the samples' noise
+    /// (default 0: the lights are taken as exact).
     #[arg(long, default_value_t = 0.0)]
     pub light_error: f64,
     /// Smallest symmetry domain, in lights, that counts as non-empty (default: 1.5% of the

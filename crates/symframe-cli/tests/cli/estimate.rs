@@ -306,7 +306,7 @@ fn empty_and_wrong_size_masks_are_refused() {
 }
 
 #[test]
-fn a_light_error_lowers_the_confidence_and_leaves_the_normals() {
+fn a_light_error_lowers_the_confidence_and_barely_moves_the_normals() {
     let tmp = tempfile::tempdir().unwrap();
     let (_, lp) = small_dataset(&tmp.path().join("data"), 20, 300, ImageFormat::Png16);
     let (exact, off) = (tmp.path().join("exact"), tmp.path().join("off"));
@@ -320,11 +320,16 @@ fn a_light_error_lowers_the_confidence_and_leaves_the_normals() {
         report(&exact)["parameters"]["noise"]["quantisation"]
     );
     let read = |dir: &Path, name: &str| read_npy_f32(&dir.join(name)).unwrap().1;
+    // The lobe's acceptance reads the light error (a lobe may answer where the lights' error
+    // explains what it leaves), so a normal may move, but by little.
     let (n0, n1) = (read(&exact, "normals.npy"), read(&off, "normals.npy"));
-    assert!(n0
-        .iter()
-        .zip(&n1)
-        .all(|(a, b)| a == b || (a.is_nan() && b.is_nan())));
+    for (a, b) in n0.chunks_exact(3).zip(n1.chunks_exact(3)) {
+        assert_eq!(a[0].is_nan(), b[0].is_nan());
+        if a[0].is_finite() {
+            let dot: f32 = a.iter().zip(b).map(|(x, y)| x * y).sum();
+            assert!(dot.min(1.0).acos().to_degrees() < 1.0, "{a:?} {b:?}");
+        }
+    }
     let (c0, c1) = (read(&exact, "confidence.npy"), read(&off, "confidence.npy"));
     let mean = |c: &[f32]| {
         let v: Vec<f64> = c
@@ -334,11 +339,8 @@ fn a_light_error_lowers_the_confidence_and_leaves_the_normals() {
             .collect();
         v.iter().sum::<f64>() / v.len() as f64
     };
-    // Never higher (NaN where nothing was estimated, in both).
-    assert!(c0
-        .iter()
-        .zip(&c1)
-        .all(|(a, b)| b <= a || (a.is_nan() && b.is_nan())));
+    // NaN where nothing was estimated, in both.
+    assert!(c0.iter().zip(&c1).all(|(a, b)| a.is_nan() == b.is_nan()));
     assert!(mean(&c1) < mean(&c0), "{} {}", mean(&c1), mean(&c0));
 }
 
