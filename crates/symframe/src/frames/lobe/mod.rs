@@ -1100,6 +1100,21 @@ mod tests {
         .unwrap()
     }
 
+    /// Standard normal draws (xorshift, Box-Muller) from `seed`.
+    fn gaussians(seed: u64) -> impl FnMut() -> f64 {
+        let mut state = seed;
+        move || {
+            let mut u = || {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state >> 11) as f64 / (1u64 << 53) as f64
+            };
+            let (u1, u2) = (u().max(1e-12), u());
+            (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+        }
+    }
+
     fn frame() -> (DVec3, DVec3) {
         let n = DVec3::new(0.35, -0.2, 1.0).normalize();
         let (u, w) = tangent_basis(n);
@@ -1136,23 +1151,13 @@ mod tests {
         let brdf = Ggx::new([0.1; 3], [0.9; 3], 0.2, 0.1);
         let clean = slice(&rig, &brdf, n, t);
         let peak = clean.iter().copied().fold(0.0f32, f32::max) as f64;
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut uniform = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut gauss = gaussians(0x2545_f491_4f6c_dd1d);
         let (mut errors2, mut sds2) = (0.0, 0.0);
         let draws = 40;
         for _ in 0..draws {
             let noisy: Vec<f32> = clean
                 .chunks_exact(3)
-                .flat_map(|s| {
-                    let (u1, u2) = (uniform().max(1e-12), uniform());
-                    let g = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
-                    [(s[0] as f64 + 0.01 * peak * g) as f32; 3]
-                })
+                .flat_map(|s| [(s[0] as f64 + 0.01 * peak * gauss()) as f32; 3])
                 .collect();
             let start = LobeStart {
                 normal: n,
@@ -1189,17 +1194,7 @@ mod tests {
             read: (2.0f64 / 200.0).powi(2) / 9.0,
             ..NoiseModel::default()
         };
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut gauss = || {
-            let mut u = || {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                (state >> 11) as f64 / (1u64 << 53) as f64
-            };
-            let (u1, u2) = (u().max(1e-12), u());
-            (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
-        };
+        let mut gauss = gaussians(0x9e37_79b9_7f4a_7c15);
         let start = LobeStart {
             normal: n,
             tangent: t,
