@@ -3,9 +3,11 @@
 // of R, G, B into one interleaved float buffer on one thread, and checksums what it decodes so
 // that symframe's result can be compared to the bit.
 //
-//   exr-reference write DIR SIZE COUNT   COUNT images of SIZE x SIZE, float RGB content, written
+//   exr-reference write DIR SIZE COUNT [TILE]
+//                                        COUNT images of SIZE x SIZE, float RGB content, written
 //                                        as DIR/{scan,tile}-{half,float}-COMPRESSION/NNNN.exr for
-//                                        every compression OpenEXR writes (tiles of 64 x 64)
+//                                        every compression OpenEXR writes (tiles of TILE x TILE,
+//                                        default 64)
 //   exr-reference time [-r R] FILES...   best and median decode time per image over R rounds
 //   exr-reference sum FILES...           FNV-1a 64 of the decoded floats of every file in order
 //
@@ -126,7 +128,7 @@ static std::vector<float> content(int n, int i) {
   return px;
 }
 
-static int write(const char* dir, int n, int count) {
+static int write(const char* dir, int n, int count, int tile) {
   struct { const char* name; Imf::Compression c; } comps[] = {
       {"none", Imf::NO_COMPRESSION},  {"rle", Imf::RLE_COMPRESSION},
       {"zips", Imf::ZIPS_COMPRESSION}, {"zip", Imf::ZIP_COMPRESSION},
@@ -158,7 +160,7 @@ static int write(const char* dir, int n, int count) {
             fb.insert(names[c], hf ? Imf::Slice(Imf::HALF, (char*)(hpx.data() + c), 6, 6 * (size_t)n)
                                      : Imf::Slice(Imf::FLOAT, (char*)(px.data() + c), 12, 12 * (size_t)n));
           if (tiled) {
-            h.setTileDescription(Imf::TileDescription(64, 64, Imf::ONE_LEVEL));
+            h.setTileDescription(Imf::TileDescription(tile, tile, Imf::ONE_LEVEL));
             Imf::TiledOutputFile out(path.c_str(), h);
             out.setFrameBuffer(fb);
             out.writeTiles(0, out.numXTiles() - 1, 0, out.numYTiles() - 1);
@@ -175,7 +177,8 @@ static int write(const char* dir, int n, int count) {
 int main(int argc, char** argv) {
   Imf::setGlobalThreadCount(0);
   std::string cmd = argc > 1 ? argv[1] : "";
-  if (cmd == "write" && argc == 5) return write(argv[2], atoi(argv[3]), atoi(argv[4]));
+  if (cmd == "write" && (argc == 5 || argc == 6))
+    return write(argv[2], atoi(argv[3]), atoi(argv[4]), argc == 6 ? atoi(argv[5]) : 64);
   if (cmd == "sum" && argc > 2) {
     uint64_t hsh = 0xcbf29ce484222325ull;
     std::vector<float> px;
@@ -209,6 +212,6 @@ int main(int argc, char** argv) {
            times[times.size() / 2] / n * 1e3, sink == 12345.678 ? "!" : "");
     return 0;
   }
-  fprintf(stderr, "usage: exr-reference write DIR SIZE COUNT | time [-r R] FILES... | sum FILES...\n");
+  fprintf(stderr, "usage: exr-reference write DIR SIZE COUNT [TILE] | time [-r R] FILES... | sum FILES...\n");
   return 2;
 }

@@ -234,18 +234,16 @@ impl BlockLayout {
         })
     }
 
-    /// Converts the lines of `block` (its data in native order, every channel's samples of a
-    /// line one after the other) into `out`, interleaved rows of `out_width` pixels of the
+    /// Converts the lines of `block` into `out`, interleaved rows of the layer's width of the
     /// picked channels, with row `block_y0 - out_y0` of `out` the block's first line;
     /// `(width, height)`: the layer's size, which the block must lie inside.
     fn copy(
         &self,
-        block: &exr::block::UncompressedBlock,
+        block: &Block,
         (width, height): (usize, usize),
         out: &mut [f32],
         out_y0: usize,
     ) -> exr::error::Result<()> {
-        use exr::meta::attribute::SampleType;
         let k = self.picked.len();
         let (x0, y0) = (
             block.index.pixel_position.x(),
@@ -255,36 +253,53 @@ impl BlockLayout {
             block.index.pixel_size.width(),
             block.index.pixel_size.height(),
         );
-        let line = bw * self.pixel_bytes;
+        let stored = match &block.data {
+            BlockData::Lines(d) => d.len(),
+            BlockData::Planes(w) => 2 * w.len(),
+        };
         if x0 + bw > width
             || y0 + bh > height
             || y0 < out_y0
-            || block.data.len() != line * bh
+            || stored != bw * bh * self.pixel_bytes
             || (y0 - out_y0 + bh) * width * k > out.len()
         {
             return Err(exr::error::Error::Invalid("block size".into()));
         }
-        for (dy, row) in block.data.chunks_exact(line).enumerate() {
+        // Each picked channel's line converted into a row of `rows`, then the rows
+        // interleaved into the output: contiguous loops the compiler vectorises (F16C for
+        // half floats), where converting straight into every k-th output sample did not.
+        let mut rows = vec![0.0f32; k * bw];
+        for dy in 0..bh {
+            for (&ci, row) in self.picked.iter().zip(rows.chunks_exact_mut(bw)) {
+                let before = self.sizes[..ci].iter().sum::<usize>();
+                let size = self.sizes[ci];
+                match &block.data {
+                    BlockData::Lines(d) => {
+                        let at = dy * bw * self.pixel_bytes + bw * before;
+                        line_to_f32(self.types[ci], &d[at..at + bw * size], row);
+                    }
+                    BlockData::Planes(w) => {
+                        // Words: channel planes one after the other, lines within each.
+                        let at = (bh * bw * before + dy * bw * size) / 2;
+                        words_to_f32(self.types[ci], &w[at..at + bw * size / 2], row);
+                    }
+                }
+            }
             let at = (y0 - out_y0 + dy) * width + x0;
             let out = &mut out[at * k..(at + bw) * k];
-            for (j, &ci) in self.picked.iter().enumerate() {
-                let at = bw * self.sizes[..ci].iter().sum::<usize>();
-                let src = &row[at..at + bw * self.sizes[ci]];
-                let dst = out.iter_mut().skip(j).step_by(k);
-                match self.types[ci] {
-                    SampleType::F32 => {
-                        for (o, s) in dst.zip(src.chunks_exact(4)) {
-                            *o = f32::from_ne_bytes([s[0], s[1], s[2], s[3]]);
-                        }
+            match k {
+                3 => {
+                    let (r, gb) = rows.split_at(bw);
+                    let (g, b) = gb.split_at(bw);
+                    for (((o, r), g), b) in out.chunks_exact_mut(3).zip(r).zip(g).zip(b) {
+                        o.copy_from_slice(&[*r, *g, *b]);
                     }
-                    SampleType::F16 => {
-                        for (o, s) in dst.zip(src.chunks_exact(2)) {
-                            *o = exr::prelude::f16::from_ne_bytes([s[0], s[1]]).to_f32();
-                        }
-                    }
-                    SampleType::U32 => {
-                        for (o, s) in dst.zip(src.chunks_exact(4)) {
-                            *o = u32::from_ne_bytes([s[0], s[1], s[2], s[3]]) as f32;
+                }
+                1 => out.copy_from_slice(&rows),
+                _ => {
+                    for (j, row) in rows.chunks_exact(bw).enumerate() {
+                        for (o, v) in out.iter_mut().skip(j).step_by(k).zip(row) {
+                            *o = *v;
                         }
                     }
                 }
@@ -292,6 +307,147 @@ impl BlockLayout {
         }
         Ok(())
     }
+}
+
+/// Converts one line of one channel, native-order bytes of `ty` samples, into `out`.
+fn line_to_f32(ty: exr::meta::attribute::SampleType, src: &[u8], out: &mut [f32]) {
+    use exr::meta::attribute::SampleType;
+    match ty {
+        SampleType::F32 => {
+            for (o, s) in out.iter_mut().zip(src.chunks_exact(4)) {
+                *o = f32::from_ne_bytes([s[0], s[1], s[2], s[3]]);
+            }
+        }
+        SampleType::U32 => {
+            for (o, s) in out.iter_mut().zip(src.chunks_exact(4)) {
+                *o = u32::from_ne_bytes([s[0], s[1], s[2], s[3]]) as f32;
+            }
+        }
+        SampleType::F16 => match bytemuck::try_cast_slice::<u8, u16>(src) {
+            // Aligned (as a line of a block's buffer is): converted where it is.
+            Ok(words) => half_to_f32(words, out),
+            Err(_) => {
+                let mut words = [0u16; 256];
+                for (src, out) in src.chunks(512).zip(out.chunks_mut(256)) {
+                    let w = &mut words[..src.len() / 2];
+                    for (w, s) in w.iter_mut().zip(src.chunks_exact(2)) {
+                        *w = u16::from_ne_bytes([s[0], s[1]]);
+                    }
+                    half_to_f32(w, out);
+                }
+            }
+        },
+    }
+}
+
+/// Converts one line of one channel, 16-bit words as PIZ decodes them (a 32-bit sample as
+/// two, low half first), into `out`.
+fn words_to_f32(ty: exr::meta::attribute::SampleType, src: &[u16], out: &mut [f32]) {
+    use exr::meta::attribute::SampleType;
+    let pair = |s: &[u16]| u32::from(s[0]) | (u32::from(s[1]) << 16);
+    match ty {
+        SampleType::F32 => {
+            for (o, s) in out.iter_mut().zip(src.chunks_exact(2)) {
+                *o = f32::from_bits(pair(s));
+            }
+        }
+        SampleType::U32 => {
+            for (o, s) in out.iter_mut().zip(src.chunks_exact(2)) {
+                *o = pair(s) as f32;
+            }
+        }
+        SampleType::F16 => half_to_f32(src, out),
+    }
+}
+
+/// Half floats given as bits into floats, with `half`'s slice conversion (F16C where the CPU
+/// has it: 3x faster than converting sample by sample, docs/performance.md).
+fn half_to_f32(src: &[u16], out: &mut [f32]) {
+    use half::slice::{HalfBitsSliceExt, HalfFloatSliceExt};
+    let n = src.len().min(out.len());
+    src[..n]
+        .reinterpret_cast::<half::f16>()
+        .convert_to_f32_slice(&mut out[..n]);
+}
+
+/// A decompressed block: where it lies and its samples.
+struct Block {
+    index: exr::block::BlockIndex,
+    data: BlockData,
+}
+
+/// How a decompressed block's samples are laid out.
+enum BlockData {
+    /// As the `exr` crate gives them: native-order bytes, line after line, every channel's
+    /// samples of a line one after the other.
+    Lines(Vec<u8>),
+    /// As PIZ decodes them: 16-bit words, channel after channel, each channel's lines one
+    /// after the other, a 32-bit sample as two words (low half first).
+    Planes(Vec<u16>),
+}
+
+/// Decompresses `chunk` of the file described by `meta`: PIZ blocks with [`super::exr_piz`],
+/// the others (and PIZ blocks stored uncompressed) with the `exr` crate.
+fn decompress_block(
+    chunk: exr::block::chunk::Chunk,
+    meta: &exr::meta::MetaData,
+) -> exr::error::Result<Block> {
+    use exr::block::chunk::CompressedBlock;
+    use exr::compression::Compression;
+    let header = meta
+        .headers
+        .get(chunk.layer_index)
+        .ok_or_else(|| exr::error::Error::Invalid("chunk layer index".into()))?;
+    let piz = match &chunk.compressed_block {
+        CompressedBlock::ScanLine(b) if header.compression == Compression::PIZ => {
+            Some(&b.compressed_pixels_le)
+        }
+        CompressedBlock::Tile(b) if header.compression == Compression::PIZ => {
+            Some(&b.compressed_pixels_le)
+        }
+        _ => None,
+    };
+    let Some(bytes) = piz else {
+        let block = exr::block::UncompressedBlock::decompress_chunk(chunk, meta, false)?;
+        return Ok(Block {
+            index: block.index,
+            data: BlockData::Lines(block.data),
+        });
+    };
+    let tile = header.get_block_data_indices(&chunk.compressed_block)?;
+    let bounds = header.get_absolute_block_pixel_coordinates(tile)?;
+    bounds.validate(Some(header.layer_size))?;
+    let index = exr::block::BlockIndex {
+        layer: chunk.layer_index,
+        pixel_position: bounds.position.to_usize("data indices start")?,
+        level: tile.level_index,
+        pixel_size: bounds.size,
+    };
+    let (bw, bh) = (bounds.size.width(), bounds.size.height());
+    let list = &header.channels.list;
+    if bytes.len() == bw * bh * header.channels.bytes_per_pixel
+        || list
+            .iter()
+            .any(|c| c.sampling.x() != 1 || c.sampling.y() != 1)
+    {
+        // Stored as it is (compressing did not make it smaller), or subsampled (refused
+        // later): `exr`'s path.
+        let block = exr::block::UncompressedBlock::decompress_chunk(chunk, meta, false)?;
+        return Ok(Block {
+            index: block.index,
+            data: BlockData::Lines(block.data),
+        });
+    }
+    let words: Vec<usize> = list
+        .iter()
+        .map(|c| c.sample_type.bytes_per_sample() / 2)
+        .collect();
+    let planes = super::exr_piz::decompress(bytes, &words, (bw, bh))
+        .map_err(|m| exr::error::Error::Invalid(format!("PIZ-compressed data ({m})").into()))?;
+    Ok(Block {
+        index,
+        data: BlockData::Planes(planes),
+    })
 }
 
 /// Decodes an OpenEXR file's radiance layer (see the module's documentation) at full
@@ -320,11 +476,13 @@ pub(super) fn read_exr(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Resul
             block.layer == layer && tile.is_largest_resolution_level()
         })
         .map_err(eerr)?;
-    chunks
-        .decompress_sequential(false, |_, block| {
-            lines.copy(&block, (width, height), &mut data, 0)
-        })
-        .map_err(eerr)?;
+    let mut chunks = chunks;
+    while let Some(chunk) = chunks.read_next_chunk() {
+        let block = decompress_block(chunk.map_err(eerr)?, chunks.meta_data()).map_err(eerr)?;
+        lines
+            .copy(&block, (width, height), &mut data, 0)
+            .map_err(eerr)?;
+    }
     Ok(RawImage {
         width,
         height,
@@ -471,8 +629,7 @@ impl ExrRows {
                 .seek_to(self.offsets[r * across + x])
                 .map_err(|e| Error::read(path, e))?;
             let chunk = exr::block::chunk::Chunk::read(&mut self.file, &self.meta).map_err(eerr)?;
-            let block = exr::block::UncompressedBlock::decompress_chunk(chunk, &self.meta, false)
-                .map_err(eerr)?;
+            let block = decompress_block(chunk, &self.meta).map_err(eerr)?;
             let want = (x * bw, y0, bw.min(self.width - x * bw), held);
             let got = &block.index;
             if got.layer != self.part

@@ -46,6 +46,7 @@ use crate::error::{Error, Result};
 mod colour;
 mod convert;
 mod exr;
+mod exr_piz;
 mod hdr;
 mod image_rs;
 mod pfm;
@@ -491,8 +492,15 @@ fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, integer: bool) -> Re
     let data = match raw {
         // Float samples with no channel to drop are marked in place: no second buffer.
         Raw::F32(mut v) if take == channels => {
-            for px in v.chunks_exact_mut(take) {
-                convert::mark_non_finite(px);
+            // Tested 64 pixels at a time without branching (the compiler vectorises the
+            // fold), pixel by pixel only where one is not finite: the per-pixel loop alone
+            // took 13% of decoding a half-float PIZ EXR of 1024 x 1024.
+            for block in v.chunks_mut(64 * take) {
+                if !block.iter().fold(true, |all, s| all & s.is_finite()) {
+                    for px in block.chunks_exact_mut(take) {
+                        convert::mark_non_finite(px);
+                    }
+                }
             }
             v
         }
@@ -610,6 +618,8 @@ mod tests {
             (Compression::ZIP1, Blocks::ScanLines),
             (Compression::RLE, Blocks::Tiles(Vec2(16, 8))),
             (Compression::PIZ, Blocks::ScanLines),
+            (Compression::PIZ, Blocks::Tiles(Vec2(16, 8))),
+            (Compression::PIZ, Blocks::Tiles(Vec2(1, 3))),
             (Compression::Uncompressed, Blocks::ScanLines),
         ];
         for (k, (compression, blocks)) in encodings.into_iter().enumerate() {
