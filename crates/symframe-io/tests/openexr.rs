@@ -81,3 +81,32 @@ fn forged_piz_files_give_errors_not_panics() {
         }
     }
 }
+
+/// A compression this reader does not decode is refused with an error naming it: the HTJ2K
+/// ones of OpenEXR 3.4 (codes 10 and 11, forged into a ZIP file's header) and a code no
+/// OpenEXR has.
+#[test]
+fn unsupported_compressions_are_refused_by_name() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/openexr");
+    let good = std::fs::read(dir.join("scan-half-zip.exr")).unwrap();
+    let key = b"compression\0compression\0\x01\0\0\0";
+    let at = good.windows(key.len()).position(|w| w == key).unwrap() + key.len();
+    assert_eq!(good[at], 3, "ZIP's code");
+    for (code, want) in [(10u8, "HTJ2K256"), (11, "HTJ2K32"), (42, "compression")] {
+        let mut b = good.clone();
+        b[at] = code;
+        let p = Path::new("forged.exr");
+        let e = symframe_io::decode_image(p, &b, &Default::default()).unwrap_err();
+        // The message with its causes, as the command line prints it.
+        let mut msg = e.to_string();
+        let mut cause = std::error::Error::source(&e);
+        while let Some(c) = cause {
+            msg = format!("{msg}: {c}");
+            cause = c.source();
+        }
+        assert!(
+            msg.contains(want) && !msg.contains("panicked"),
+            "{code}: {msg}"
+        );
+    }
+}

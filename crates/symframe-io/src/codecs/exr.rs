@@ -211,6 +211,20 @@ impl BlockLayout {
     /// The layout of `header`'s blocks with `picked` channels read; subsampled channels are
     /// refused (the line layout assumes one sample per pixel).
     fn new(path: &Path, header: &exr::meta::header::Header, picked: Vec<usize>) -> Result<Self> {
+        use exr::compression::Compression;
+        // Every compression OpenEXR 3.1 writes is decoded; the HTJ2K ones of OpenEXR 3.4 and
+        // later are refused here, by name, before any block is read.
+        if let Compression::HTJ2K32 | Compression::HTJ2K256 = header.compression {
+            let lines = header.compression.scan_lines_per_block();
+            return Err(Error::unsupported(
+                path,
+                format!(
+                    "EXR compression HTJ2K{lines} (High-Throughput JPEG 2000, OpenEXR 3.4 and \
+                     later) is not supported; rewrite the file with another compression \
+                     (none, RLE, ZIPS, ZIP, PIZ, PXR24, B44, B44A, DWAA or DWAB)"
+                ),
+            ));
+        }
         let list = &header.channels.list;
         if let Some(c) = list
             .iter()
