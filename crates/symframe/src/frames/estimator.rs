@@ -993,13 +993,12 @@ impl<'a> Estimator<'a> {
         // a normal nearby than the two readings' uncertainties allow, the lobe does not
         // describe the material and its centre may be biased by as much (docs/method.md,
         // "Confidence").
-        // On a quarter of the lights (all of them on small rigs), as the tangent's confidence
-        // below, and without the split halves: the full stencil with them cost a lobe pixel a
-        // quarter of its time (the paper-scale benchmark).
-        let quarter = Level::Coarse(objective.queries(Level::Full).div_ceil(4).max(256));
-        let centre = objective.normal_term(f.normal, cosine, quarter);
+        // On the first JUDGE_LIGHTS of the query order (evenly spread; all of them on small
+        // rigs), as the tangent's confidence below, and without the split halves.
+        let judged_on = Level::Coarse(JUDGE_LIGHTS);
+        let centre = objective.normal_term(f.normal, cosine, judged_on);
         let (judged, evals) =
-            self.symmetry_sd(objective, f.normal, cosine, quarter, false, &centre);
+            self.symmetry_sd(objective, f.normal, cosine, judged_on, false, &centre);
         let own = f.normal_sd.powi(2);
         let bias = if judged.offset2.is_finite() {
             disagreement(judged.offset2, own, judged.scatter)
@@ -1015,10 +1014,8 @@ impl<'a> Estimator<'a> {
         let (tangent_confidence, evals) = match tangent {
             Some(t) if keep => {
                 let b = f.normal.cross(t);
-                // On a quarter of the lights, as the search's first comparisons: two full-level
-                // evaluations cost a lobe pixel a fifth of its time (the paper-scale benchmark).
                 let at = |a: DVec3| {
-                    self.tangent_distance(objective, f.normal, a, cosine, quarter)
+                    self.tangent_distance(objective, f.normal, a, cosine, judged_on)
                         .0
                 };
                 let evidence = TangentEvidence {
@@ -1292,6 +1289,12 @@ fn within_confident(sd: f64) -> f64 {
         1.0 - (-(a / sd).powi(2)).exp()
     }
 }
+
+/// Lights (the first of the query order, so evenly spread) on which the slice's symmetry
+/// judges a lobe's answer: its centre on the stencil and its tangent. More lights judge more
+/// finely and cost in proportion, eleven evaluations at every lobe pixel (higher is slower; a
+/// smaller rig's lights are all read).
+const JUDGE_LIGHTS: usize = 256;
 
 /// The spacing (degrees) of the stencil the symmetry's judgement of a normal reads
 /// ([`Estimator::symmetry_sd`]): the polish's.

@@ -178,6 +178,27 @@ impl Subset {
         self.y.iter().map(|v| v * v).sum()
     }
 
+    /// Makes the samples every `step`-th of `from`'s (its first, then every `step` on), padded:
+    /// a nested part of `from` for its split.
+    pub(super) fn gather_every(&mut self, from: &Subset, step: usize) {
+        let step = step.max(1);
+        self.len = from.len.div_ceil(step);
+        let len = self.len;
+        for (column, source) in self.columns().into_iter().zip(from.columns_ref()) {
+            column.clear();
+            column.extend(source[..from.len].iter().step_by(step).copied());
+            debug_assert_eq!(column.len(), len);
+        }
+        self.id = next_id();
+        self.pad();
+    }
+
+    fn columns_ref(&self) -> [&Vec<f64>; 9] {
+        let [lx, ly, lz] = &self.l;
+        let [hx, hy, hz] = &self.h;
+        [lx, ly, lz, hx, hy, hz, &self.fresnel, &self.y, &self.w]
+    }
+
     /// Keeps the samples for which `keep(i)` holds, in order, and pads again.
     pub(super) fn retain(&mut self, keep: impl Fn(usize) -> bool) {
         let mut kept = 0;

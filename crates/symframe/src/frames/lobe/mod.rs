@@ -347,6 +347,10 @@ const COARSE_SPREAD: usize = 128;
 /// Highlight lights of the coarse subset (see [`COARSE_SPREAD`]).
 const COARSE_HIGHLIGHT: usize = 128;
 
+/// Fewest samples in the part of a lobe fit's split ([`fit_lobe`]'s `normal_sd`): its fit
+/// must still read the lobe, not only its neighbourhood (lower is faster on dense rigs).
+const SPLIT_SAMPLES: usize = 128;
+
 /// Draws of the lights' error the lobe fit's [`LobeFit::light_sd`] averages.
 const LIGHT_DRAWS: u64 = 2;
 
@@ -948,16 +952,19 @@ pub fn fit_lobe(
             linear.cost,
             fine.len() as f64 - parameters as f64,
         );
-        // Split half: the fit repeated from the answer on every other sample. Its normal's
-        // distance from the whole fit's estimates the whole fit's error, what the lights'
-        // sampling of the lobe leaves (a lobe the model does not describe, read between few
-        // lights) as well as the noise: for nested fits `var(n_half - n) = var(n_half) -
-        // var(n)`, and half the samples double the variance.
-        // One Gauss-Newton step from the answer on the half gives its normal to first order
-        // (two passes over half the samples instead of a fit).
-        every.clone_from(fine);
-        every.retain(|j| j % 2 == 0);
-        let split2 = tilt_step2(&m, every, free, buffers);
+        // Split: the fit repeated from the answer on every k-th sample. Its normal's distance
+        // from the whole fit's estimates the whole fit's error, what the lights' sampling of
+        // the lobe leaves (a lobe the model does not describe, read between few lights) as well
+        // as the noise: for nested fits `var(n_k - n) = var(n_k) - var(n)`, and a k-th of the
+        // samples has k times the variance, so `var(n) = var(n_k - n) / (k - 1)`. One
+        // distance is one draw of two degrees of freedom whatever k: a dense rig's fit is
+        // split every fourth sample (at least SPLIT_SAMPLES in the part), at a quarter of a
+        // pass's cost, a sparse rig's in halves.
+        // One Gauss-Newton step from the answer on the part gives its normal to first order
+        // (two passes over its samples instead of a fit).
+        let k = (fine.len() / SPLIT_SAMPLES).clamp(2, 4);
+        every.gather_every(fine, k);
+        let split2 = tilt_step2(&m, every, free, buffers) / (k - 1) as f64;
         evals += 2;
         (sd * sd + split2).sqrt()
     };
