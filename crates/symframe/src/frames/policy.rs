@@ -130,8 +130,17 @@ impl Default for LobeSettings {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DiffuseSettings {
     /// A pixel whose Lambertian fit leaves less than this share of its energy unexplained is
-    /// diffuse: no lobe is fitted (1% RMS noise leaves 1e-4). Higher: more pixels skip the lobe.
+    /// diffuse: no lobe is fitted (1% RMS noise leaves 1e-4), as is one whose fit leaves no
+    /// more than the capture's noise would (see [`DiffuseSettings::noise_z`]). Higher: more
+    /// pixels skip the lobe.
     pub pure_share: f64,
+    /// A pixel whose Lambertian fit leaves no more than the noise model expects the capture's
+    /// noise to leave (quantisation, shot and read noise), within this many standard
+    /// deviations of that share (the one-sided 0.1% point of the normal distribution), has no
+    /// lobe the data can tell: it is diffuse, as below [`DiffuseSettings::pure_share`], and its
+    /// Lambertian term answers, as below [`DiffuseSettings::specular_share`]. Higher: weaker
+    /// lobes taken for noise.
+    pub noise_z: f64,
     /// The robust Lambertian fit's uncentred R^2 from which its normal is a diffuse pixel's
     /// answer (and a sharp lobe's where the spike is left out). Higher: fewer Lambertian answers.
     pub centre_fit: f64,
@@ -151,6 +160,7 @@ impl Default for DiffuseSettings {
     fn default() -> Self {
         Self {
             pure_share: 1e-4,
+            noise_z: 3.09,
             centre_fit: 0.99,
             specular_share: 0.005,
             spiked_fit: 0.999,
@@ -334,6 +344,11 @@ pub(crate) struct NormalEvidence<'a> {
     /// The share of the well-lit energy the Lambertian term leaves unexplained (default
     /// measure only).
     pub(crate) share: Option<f64>,
+    /// What the capture's noise alone would leave of that share, at
+    /// [`DiffuseSettings::noise_z`] standard deviations (where it was asked: the Lambertian fit
+    /// explains the pixel to [`DiffuseSettings::centre_fit`] and `share` is above
+    /// [`DiffuseSettings::pure_share`]).
+    pub(crate) diffuse_noise: Option<f64>,
     /// The highlight's half-maximum region holds at most [`LobeSettings::sharp_samples`]
     /// lights: a lobe narrower than the rig's spacing.
     pub(crate) sharp: bool,
@@ -373,7 +388,8 @@ pub(crate) fn choose_normal<'a>(
     let fit = e.lambertian;
     let lobe = e.lobe.filter(|f| lobe_explains(&s.lobe, f));
     let diffuse = if e.auto {
-        diffuse_centre(&s.diffuse, fit, e.share).or_else(|| spiked_diffuse(&s.diffuse, fit, lobe))
+        diffuse_centre(&s.diffuse, fit, e.share, e.diffuse_noise)
+            .or_else(|| spiked_diffuse(&s.diffuse, fit, lobe))
     } else {
         None
     };
@@ -453,8 +469,14 @@ fn centre_determined(s: &LobeSettings, f: &LobeFit) -> bool {
 
 /// Whether a pixel is diffuse enough that no lobe is fitted: its Lambertian fit explains it
 /// to the noise floor ([`DiffuseSettings::pure_share`]).
-pub(crate) fn pure_diffuse(s: &DiffuseSettings, fit: &BaselinePixel, share: Option<f64>) -> bool {
-    fit.confidence as f64 >= s.centre_fit && share.is_some_and(|v| v < s.pure_share)
+pub(crate) fn pure_diffuse(
+    s: &DiffuseSettings,
+    fit: &BaselinePixel,
+    share: Option<f64>,
+    noise_limit: Option<f64>,
+) -> bool {
+    fit.confidence as f64 >= s.centre_fit
+        && share.is_some_and(|v| v < s.pure_share || noise_limit.is_some_and(|l| v < l))
 }
 
 /// Whether two lobes sharing a frame explain the pixel (docs/method.md, "Two lobes"): they
@@ -484,10 +506,13 @@ pub(crate) fn diffuse_centre(
     s: &DiffuseSettings,
     fit: &BaselinePixel,
     share: Option<f64>,
+    noise_limit: Option<f64>,
 ) -> Option<DVec3> {
     fit.normal
         .filter(|_| fit.confidence as f64 >= s.centre_fit)
-        .filter(|_| share.is_some_and(|v| v < s.specular_share))
+        .filter(|_| {
+            share.is_some_and(|v| v < s.specular_share || noise_limit.is_some_and(|l| v < l))
+        })
 }
 
 /// The normal of a diffuse pixel whose specular spike the rig undersamples: no lobe explains
@@ -680,6 +705,7 @@ mod tests {
             lobe,
             lambertian: fit,
             share,
+            diffuse_noise: None,
             sharp,
         };
         choose_normal(&PolicySettings::default(), &evidence, || peak)
@@ -752,6 +778,7 @@ mod tests {
                 lobe: None,
                 lambertian: &matte,
                 share: None,
+                diffuse_noise: None,
                 sharp: true,
             },
             || Some(b),
@@ -763,6 +790,7 @@ mod tests {
             lobe: Some(&explaining),
             lambertian: &glossy,
             share: Some(0.3),
+            diffuse_noise: None,
             sharp: true,
         };
         assert_eq!(
@@ -785,5 +813,26 @@ mod tests {
         assert!(!search_gives_way(&s, 0.5, &lobe, || panic!(
             "the reach was asked"
         )));
+    }
+
+    #[test]
+    fn a_lambertian_fit_leaving_only_noise_is_diffuse() {
+        // Above the noise-free share, the noise test decides: under the noise's limit the
+        // pixel is diffuse (no lobe fitted) and its Lambertian term answers; over it, not.
+        let s = DiffuseSettings::default();
+        let fit = lambertian(DVec3::Z, 0.995);
+        let share = Some(10.0 * s.pure_share);
+        assert!(!pure_diffuse(&s, &fit, share, None));
+        assert!(pure_diffuse(&s, &fit, share, Some(20.0 * s.pure_share)));
+        assert!(!pure_diffuse(&s, &fit, share, Some(5.0 * s.pure_share)));
+        let noisy = Some(2.0 * s.specular_share);
+        assert_eq!(diffuse_centre(&s, &fit, noisy, None), None);
+        assert_eq!(
+            diffuse_centre(&s, &fit, noisy, Some(3.0 * s.specular_share)),
+            Some(DVec3::Z)
+        );
+        // A fit that does not explain the pixel is no diffuse answer, whatever the noise.
+        let poor = lambertian(DVec3::Z, 0.9);
+        assert!(!pure_diffuse(&s, &poor, share, Some(1.0)));
     }
 }

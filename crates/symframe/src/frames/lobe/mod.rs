@@ -1071,14 +1071,14 @@ pub fn fit_lobe(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::brdf::{Brdf, Ggx, Ward};
     use crate::frames::rig::{uniform_cone_lights, Rig, RigOptions};
 
     /// The slice of `brdf` at a pixel of frame `(n, t)` under `rig` (view `+z`), RGB (the red
     /// channel's value in all three).
-    pub(super) fn slice(rig: &Rig, brdf: &dyn Brdf, n: DVec3, t: DVec3) -> Vec<f32> {
+    pub(crate) fn slice(rig: &Rig, brdf: &dyn Brdf, n: DVec3, t: DVec3) -> Vec<f32> {
         let b = n.cross(t);
         let to_local = |v: DVec3| DVec3::new(v.dot(t), v.dot(b), v.dot(n));
         let view = to_local(DVec3::Z);
@@ -1108,7 +1108,7 @@ mod tests {
     }
 
     /// Standard normal draws (xorshift, Box-Muller) from `seed`.
-    fn gaussians(seed: u64) -> impl FnMut() -> f64 {
+    pub(crate) fn gaussians(seed: u64) -> impl FnMut() -> f64 {
         let mut state = seed;
         move || {
             let mut u = || {
