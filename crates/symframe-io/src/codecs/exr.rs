@@ -401,9 +401,10 @@ enum BlockData {
 }
 
 /// Decompresses `chunk` of the file described by `meta`: PIZ blocks with [`super::exr_piz`],
-/// the others (and PIZ blocks stored uncompressed) with the `exr` crate.
+/// DWAA/DWAB blocks with their AC section decoded by [`super::exr_dwa`] first, the others (and
+/// blocks stored uncompressed) with the `exr` crate.
 fn decompress_block(
-    chunk: exr::block::chunk::Chunk,
+    mut chunk: exr::block::chunk::Chunk,
     meta: &exr::meta::MetaData,
 ) -> exr::error::Result<Block> {
     use exr::block::chunk::CompressedBlock;
@@ -412,46 +413,61 @@ fn decompress_block(
         .headers
         .get(chunk.layer_index)
         .ok_or_else(|| exr::error::Error::Invalid("chunk layer index".into()))?;
-    let piz = match &chunk.compressed_block {
-        CompressedBlock::ScanLine(b) if header.compression == Compression::PIZ => {
-            Some(&b.compressed_pixels_le)
-        }
-        CompressedBlock::Tile(b) if header.compression == Compression::PIZ => {
-            Some(&b.compressed_pixels_le)
-        }
-        _ => None,
-    };
-    let Some(bytes) = piz else {
+    let ours = matches!(
+        header.compression,
+        Compression::PIZ | Compression::DWAA(_) | Compression::DWAB(_)
+    );
+    let crate_block = |chunk| -> exr::error::Result<Block> {
         let block = exr::block::UncompressedBlock::decompress_chunk(chunk, meta, false)?;
-        return Ok(Block {
+        Ok(Block {
             index: block.index,
             data: BlockData::Lines(block.data),
-        });
+        })
     };
+    let flat = matches!(
+        chunk.compressed_block,
+        CompressedBlock::ScanLine(_) | CompressedBlock::Tile(_)
+    );
+    if !ours || !flat {
+        return crate_block(chunk);
+    }
     let tile = header.get_block_data_indices(&chunk.compressed_block)?;
     let bounds = header.get_absolute_block_pixel_coordinates(tile)?;
     bounds.validate(Some(header.layer_size))?;
-    let index = exr::block::BlockIndex {
-        layer: chunk.layer_index,
-        pixel_position: bounds.position.to_usize("data indices start")?,
-        level: tile.level_index,
-        pixel_size: bounds.size,
+    let bytes = match &mut chunk.compressed_block {
+        CompressedBlock::ScanLine(b) => &mut b.compressed_pixels_le,
+        CompressedBlock::Tile(b) => &mut b.compressed_pixels_le,
+        _ => return crate_block(chunk),
     };
     let (bw, bh) = (bounds.size.width(), bounds.size.height());
     let list = &header.channels.list;
-    if bytes.len() == bw * bh * header.channels.bytes_per_pixel
+    let raw = bw * bh * header.channels.bytes_per_pixel;
+    if bytes.len() == raw
         || list
             .iter()
             .any(|c| c.sampling.x() != 1 || c.sampling.y() != 1)
     {
         // Stored as it is (compressing did not make it smaller), or subsampled (refused
         // later): `exr`'s path.
-        let block = exr::block::UncompressedBlock::decompress_chunk(chunk, meta, false)?;
-        return Ok(Block {
-            index: block.index,
-            data: BlockData::Lines(block.data),
-        });
+        return crate_block(chunk);
     }
+    if header.compression != Compression::PIZ {
+        // DWA: at most one AC value per sample of the block's 8 x 8 blocks.
+        let samples = list.len() * bw.next_multiple_of(8) * bh.next_multiple_of(8);
+        if let Some(recoded) = super::exr_dwa::recode_ac(bytes, samples) {
+            // (A block exactly as long as its raw samples would be read as raw.)
+            if recoded.len() != raw {
+                *bytes = recoded;
+            }
+        }
+        return crate_block(chunk);
+    }
+    let index = exr::block::BlockIndex {
+        layer: chunk.layer_index,
+        pixel_position: bounds.position.to_usize("data indices start")?,
+        level: tile.level_index,
+        pixel_size: bounds.size,
+    };
     let words: Vec<usize> = list
         .iter()
         .map(|c| c.sample_type.bytes_per_sample() / 2)

@@ -294,8 +294,9 @@ impl TableBits<'_> {
     }
 }
 
-/// OpenEXR's `hufUncompress` into `out` (its length is the symbol count the block must hold).
-fn huf_decompress(input: &[u8], out: &mut [u16]) -> Result<(), PizError> {
+/// OpenEXR's `hufUncompress` into `out` (its length is the symbol count the block must hold):
+/// PIZ's Huffman code, which DWA's AC coefficients use too.
+pub(super) fn huf_decompress(input: &[u8], out: &mut [u16]) -> Result<(), PizError> {
     if input.is_empty() {
         return if out.is_empty() {
             Ok(())

@@ -46,6 +46,7 @@ use crate::error::{Error, Result};
 mod colour;
 mod convert;
 mod exr;
+mod exr_dwa;
 mod exr_piz;
 mod hdr;
 mod image_rs;
