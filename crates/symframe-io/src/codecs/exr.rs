@@ -267,14 +267,15 @@ impl BlockLayout {
             block.index.pixel_size.width(),
             block.index.pixel_size.height(),
         );
-        let stored = match &block.data {
-            BlockData::Lines(d) => d.len(),
-            BlockData::Planes(w) => 2 * w.len(),
+        let (stored, want) = match &block.data {
+            BlockData::Lines(d) => (d.len(), bw * bh * self.pixel_bytes),
+            BlockData::Planes(w) => (2 * w.len(), bw * bh * self.pixel_bytes),
+            BlockData::Halves(w) => (w.len(), bw * bh * self.sizes.len()),
         };
         if x0 + bw > width
             || y0 + bh > height
             || y0 < out_y0
-            || stored != bw * bh * self.pixel_bytes
+            || stored != want
             || (y0 - out_y0 + bh) * width * k > out.len()
         {
             return Err(exr::error::Error::Invalid("block size".into()));
@@ -296,6 +297,10 @@ impl BlockLayout {
                         // Words: channel planes one after the other, lines within each.
                         let at = (bh * bw * before + dy * bw * size) / 2;
                         words_to_f32(self.types[ci], &w[at..at + bw * size / 2], row);
+                    }
+                    BlockData::Halves(w) => {
+                        let at = (ci * bh + dy) * bw;
+                        half_to_f32(&w[at..at + bw], row);
                     }
                 }
             }
@@ -398,6 +403,9 @@ enum BlockData {
     /// As PIZ decodes them: 16-bit words, channel after channel, each channel's lines one
     /// after the other, a 32-bit sample as two words (low half first).
     Planes(Vec<u16>),
+    /// As DWA decodes them: half floats, channel after channel, each channel's lines one after
+    /// the other, whatever the channel's type (DWA keeps half precision).
+    Halves(Vec<u16>),
 }
 
 /// Decompresses `chunk` of the file described by `meta`: PIZ blocks with [`super::exr_piz`],
@@ -451,8 +459,42 @@ fn decompress_block(
         // later): `exr`'s path.
         return crate_block(chunk);
     }
+    let index = exr::block::BlockIndex {
+        layer: chunk.layer_index,
+        pixel_position: bounds.position.to_usize("data indices start")?,
+        level: tile.level_index,
+        pixel_size: bounds.size,
+    };
     if header.compression != Compression::PIZ {
-        // DWA: at most one AC value per sample of the block's 8 x 8 blocks.
+        let channels: Vec<super::exr_dwa::DwaChannel> = list
+            .iter()
+            .map(|c| {
+                let name = c.name.to_string();
+                let cut = name.rfind('.').map_or(0, |i| i + 1);
+                super::exr_dwa::DwaChannel {
+                    prefix: name[..cut].to_string(),
+                    suffix: name[cut..].to_string(),
+                    sample_type: c.sample_type,
+                    linear: c.quantize_linearly,
+                }
+            })
+            .collect();
+        match super::exr_dwa::decode(bytes, &channels, (bw, bh)) {
+            Some(Ok(halves)) => {
+                return Ok(Block {
+                    index,
+                    data: BlockData::Halves(halves),
+                })
+            }
+            Some(Err(m)) => {
+                return Err(exr::error::Error::Invalid(
+                    format!("DWA-compressed data ({m})").into(),
+                ))
+            }
+            None => {}
+        }
+        // Channels that our decoder leaves to `exr`: their AC section recoded.
+        // At most one AC value per sample of the block's 8 x 8 blocks.
         let samples = list.len() * bw.next_multiple_of(8) * bh.next_multiple_of(8);
         if let Some(recoded) = super::exr_dwa::recode_ac(bytes, samples) {
             // (A block exactly as long as its raw samples would be read as raw.)
@@ -462,12 +504,6 @@ fn decompress_block(
         }
         return crate_block(chunk);
     }
-    let index = exr::block::BlockIndex {
-        layer: chunk.layer_index,
-        pixel_position: bounds.position.to_usize("data indices start")?,
-        level: tile.level_index,
-        pixel_size: bounds.size,
-    };
     let words: Vec<usize> = list
         .iter()
         .map(|c| c.sample_type.bytes_per_sample() / 2)
