@@ -226,7 +226,7 @@ mod tests {
     }
 
     #[test]
-    #[should_panic]
+    #[should_panic(expected = "glTF parameters out of range")]
     fn rejects_zero_roughness() {
         let _ = GltfPbr::new([0.5; 3], 0.0, 0.0, 0.0);
     }

@@ -181,7 +181,7 @@ mod tests {
     }
 
     #[test]
-    #[should_panic]
+    #[should_panic(expected = "Ward roughness must be positive and finite")]
     fn rejects_zero_roughness() {
         let _ = Ward::new([0.5; 3], [0.5; 3], 0.0, 0.1);
     }
