@@ -270,7 +270,7 @@ impl BlockLayout {
         let (stored, want) = match &block.data {
             BlockData::Lines(d) => (d.len(), bw * bh * self.pixel_bytes),
             BlockData::Planes(w) => (2 * w.len(), bw * bh * self.pixel_bytes),
-            BlockData::Halves(w) => (w.len(), bw * bh * self.sizes.len()),
+            BlockData::Dwa(..) => (0, 0),
         };
         if x0 + bw > width
             || y0 + bh > height
@@ -279,6 +279,38 @@ impl BlockLayout {
             || (y0 - out_y0 + bh) * width * k > out.len()
         {
             return Err(exr::error::Error::Invalid("block size".into()));
+        }
+        if let BlockData::Dwa(bytes, plan) = &block.data {
+            // Each decoded row of an 8 x 8 block written where its picked channel goes.
+            let slot: Vec<Option<usize>> = (0..self.sizes.len())
+                .map(|ci| self.picked.iter().position(|&p| p == ci))
+                .collect();
+            let base = y0 - out_y0;
+            return super::exr_dwa::decode(bytes, plan, (bw, bh), |group, y, rows| {
+                let at = ((base + y) * width + x0) * k;
+                let out = &mut out[at..at + bw * k];
+                let slots: Vec<Option<usize>> = group.iter().map(|&c| slot[c]).collect();
+                if k == 3 && slots == [Some(0), Some(1), Some(2)] {
+                    // R, G, B in one pass, as `copy` interleaves lines.
+                    for (((o, r), g), b) in out
+                        .chunks_exact_mut(3)
+                        .zip(rows[0])
+                        .zip(rows[1])
+                        .zip(rows[2])
+                    {
+                        o.copy_from_slice(&[*r, *g, *b]);
+                    }
+                    return;
+                }
+                for (s, row) in slots.iter().zip(rows) {
+                    if let Some(j) = s {
+                        for (o, v) in out[*j..].iter_mut().step_by(k).zip(row.iter()) {
+                            *o = *v;
+                        }
+                    }
+                }
+            })
+            .map_err(|m| exr::error::Error::Invalid(format!("DWA-compressed data ({m})").into()));
         }
         // Each picked channel's line converted into a row of `rows`, then the rows
         // interleaved into the output: contiguous loops the compiler vectorises (F16C for
@@ -298,10 +330,7 @@ impl BlockLayout {
                         let at = (bh * bw * before + dy * bw * size) / 2;
                         words_to_f32(self.types[ci], &w[at..at + bw * size / 2], row);
                     }
-                    BlockData::Halves(w) => {
-                        let at = (ci * bh + dy) * bw;
-                        half_to_f32(&w[at..at + bw], row);
-                    }
+                    BlockData::Dwa(..) => {}
                 }
             }
             let at = (y0 - out_y0 + dy) * width + x0;
@@ -403,9 +432,9 @@ enum BlockData {
     /// As PIZ decodes them: 16-bit words, channel after channel, each channel's lines one
     /// after the other, a 32-bit sample as two words (low half first).
     Planes(Vec<u16>),
-    /// As DWA decodes them: half floats, channel after channel, each channel's lines one after
-    /// the other, whatever the channel's type (DWA keeps half precision).
-    Halves(Vec<u16>),
+    /// A DWA block still compressed, with how to decode it: decoded by [`BlockLayout::copy`]
+    /// straight into the image (no block-sized buffer of samples).
+    Dwa(Vec<u8>, super::exr_dwa::Plan),
 }
 
 /// Decompresses `chunk` of the file described by `meta`: PIZ blocks with [`super::exr_piz`],
@@ -479,12 +508,13 @@ fn decompress_block(
                 }
             })
             .collect();
-        match super::exr_dwa::decode(bytes, &channels, (bw, bh)) {
-            Some(Ok(halves)) => {
+        match super::exr_dwa::plan(bytes, &channels, (bw, bh)) {
+            Some(Ok(plan)) => {
+                // Decoded by `copy`, straight into the image.
                 return Ok(Block {
                     index,
-                    data: BlockData::Halves(halves),
-                })
+                    data: BlockData::Dwa(std::mem::take(bytes), plan),
+                });
             }
             Some(Err(m)) => {
                 return Err(exr::error::Error::Invalid(

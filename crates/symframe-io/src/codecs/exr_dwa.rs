@@ -73,19 +73,25 @@ pub(super) struct DwaChannel {
     pub(super) linear: bool,
 }
 
-/// Decodes a DWAA/DWAB block of `width` x `height` pixels whose channels are all lossy
-/// (R, G, B, Y, BY, RY in half or float, as OpenEXR writes colour) into half-float planes,
-/// one per channel in `channels`' order; `None` where the block holds anything else (other
-/// channels, stored in its "unknown" or RLE sections; a version 1 block), which the `exr`
-/// crate then decodes. Follows the `exr` crate's decoder step for step (the AC run lengths,
-/// the zig-zag, [`idct_8x8`], the Y'CbCr inverse, the transfer curve), whose values equal
-/// OpenEXR 3.1's, but without its per-block buffers and sample-by-sample conversions: 1.5-1.7x
-/// faster than it with [`recode_ac`] (docs/performance.md, "Decoding, every compression").
-pub(super) fn decode(
+/// How [`decode`] reads a DWA block whose channels are all lossy: the header's counters, where
+/// its AC and DC sections lie, and the groups of channels decoded together (each Y'CbCr
+/// triplet, then each other channel), with whether the group skips the transfer curve.
+pub(super) struct Plan {
+    h: [usize; COUNTERS],
+    ac: std::ops::Range<usize>,
+    dc: std::ops::Range<usize>,
+    groups: Vec<(Vec<usize>, bool)>,
+}
+
+/// The [`Plan`] of a DWAA/DWAB block of `width` x `height` pixels whose channels are all lossy
+/// (R, G, B, Y, BY, RY in half or float, as OpenEXR writes colour); `None` where the block
+/// holds anything else (other channels, stored in its "unknown" or RLE sections; a version 1
+/// block), which the `exr` crate then decodes; an error where its counts cannot be right.
+pub(super) fn plan(
     block: &[u8],
     channels: &[DwaChannel],
     (width, height): (usize, usize),
-) -> Option<Result<Vec<u16>, &'static str>> {
+) -> Option<Result<Plan, &'static str>> {
     use exr::meta::attribute::SampleType;
     let counter = |i: usize| -> Option<usize> {
         let b = block.get(8 * i..8 * i + 8)?;
@@ -122,44 +128,55 @@ pub(super) fn decode(
             return None;
         }
     }
-    let groups: Vec<[usize; 3]> = slots
+    let triplets: Vec<usize> = slots
         .iter()
         .filter_map(|(_, s)| Some([s[0]?, s[1]?, s[2]?]))
+        .flatten()
         .collect();
-    let (ac_size, dc_size, ac_count, dc_count) = (h[AC_SIZE], h[4], h[AC_COUNT], h[9]);
+    let groups: Vec<(Vec<usize>, bool)> = triplets
+        .chunks(3)
+        .map(|g| (g.to_vec(), false))
+        .chain(
+            (0..channels.len())
+                .filter(|i| !triplets.contains(i))
+                .map(|i| (vec![i], channels[i].linear)),
+        )
+        .collect();
     let blocks = width.div_ceil(8) * height.div_ceil(8);
     // At most one AC value per sample, one DC value per 8 x 8 block and channel.
-    if ac_count > channels.len() * blocks * 64 || dc_count > channels.len() * blocks {
+    if h[AC_COUNT] > channels.len() * blocks * 64 || h[9] > channels.len() * blocks {
         return Some(Err("DWA coefficient counts beyond the block"));
     }
-    let ac_end = at.checked_add(ac_size)?;
-    let dc_end = ac_end.checked_add(dc_size)?;
-    let (Some(ac), Some(dc)) = (block.get(at..ac_end), block.get(ac_end..dc_end)) else {
+    let ac_end = at.checked_add(h[AC_SIZE])?;
+    let dc_end = ac_end.checked_add(h[4])?;
+    if dc_end > block.len() {
         return Some(Err("truncated DWA sections"));
-    };
-    Some(decode_lossy(
-        ac,
-        dc,
-        &h,
-        channels,
-        &groups,
-        (width, height),
-        blocks,
-    ))
+    }
+    Some(Ok(Plan {
+        h,
+        ac: at..ac_end,
+        dc: ac_end..dc_end,
+        groups,
+    }))
 }
 
-/// The lossy part of [`decode`]: the AC and DC sections, then each group (a Y'CbCr triplet,
-/// then each channel on its own) 8 x 8 block by block.
-fn decode_lossy(
-    ac: &[u8],
-    dc: &[u8],
-    h: &[usize; COUNTERS],
-    channels: &[DwaChannel],
-    groups: &[[usize; 3]],
+/// Decodes a block as its [`Plan`] says, giving the samples to `sink` a row of a group of
+/// channels at a time: `sink(channels, y, rows)`, `rows[i]` the whole row `y` of the block for
+/// channel `channels[i]`. Follows the
+/// `exr` crate's decoder step for step (the AC run lengths, the zig-zag, [`idct_8x8`], the
+/// Y'CbCr inverse, the transfer curve), whose values equal OpenEXR 3.1's, but without its
+/// per-block buffers and sample-by-sample conversions, and straight into the caller's image:
+/// 1.6-1.8x faster than it (docs/performance.md, "Decoding, every compression").
+pub(super) fn decode(
+    block: &[u8],
+    plan: &Plan,
     (width, height): (usize, usize),
-    blocks: usize,
-) -> Result<Vec<u16>, &'static str> {
+    mut sink: impl FnMut(&[usize], usize, &[&[f32]]),
+) -> Result<(), &'static str> {
     use half::slice::HalfFloatSliceExt;
+    let h = &plan.h;
+    let (ac, dc) = (&block[plan.ac.clone()], &block[plan.dc.clone()]);
+    let blocks = width.div_ceil(8) * height.div_ceil(8);
     let mut ac_values = vec![0u16; h[AC_COUNT]];
     if !ac_values.is_empty() {
         match h[AC_CODING] {
@@ -180,24 +197,24 @@ fn decode_lossy(
             *v = u16::from_le_bytes([b[0], b[1]]);
         }
     }
-    let to_linear = to_linear_table();
-    let mut out = vec![0u16; channels.len() * width * height];
-    let grouped: Vec<usize> = groups.iter().flatten().copied().collect();
-    let singles = (0..channels.len()).filter(|i| !grouped.contains(i));
-    let all: Vec<Vec<usize>> = groups
-        .iter()
-        .map(|g| g.to_vec())
-        .chain(singles.map(|i| vec![i]))
-        .collect();
     let (mut ac_at, mut dc_at) = (0usize, 0usize);
     let (bx_n, by_n) = (width.div_ceil(8), height.div_ceil(8));
-    for group in &all {
+    for (group, linear) in &plan.groups {
         let k = group.len();
-        let linear = k == 1 && channels[group[0]].linear;
+        // Nonlinear half to the float the channel holds: through the transfer curve, or
+        // (channels quantised linearly) as it is.
+        let to_float = if *linear {
+            half_table()
+        } else {
+            to_linear_table()
+        };
         let dc_group = dc_values
             .get(dc_at..dc_at + k * blocks)
             .ok_or("truncated DWA DC data")?;
+        // A band of 8 rows of the group's channels, given to `sink` row by row once full.
+        let mut band = vec![0.0f32; k * 8 * width];
         for by in 0..by_n {
+            let rows = 8.min(height - by * 8);
             for bx in 0..bx_n {
                 let b = by * bx_n + bx;
                 let mut data = [[0.0f32; 64]; 3];
@@ -231,30 +248,28 @@ fn decode_lossy(
                     }
                 }
                 // To half floats (nonlinear), then through the transfer curve, cropped to
-                // the block's pixels.
-                let rows = 8.min(height - by * 8);
+                // the block's pixels, into the band.
                 let cols = 8.min(width - bx * 8);
                 for (c, data) in data.iter().enumerate().take(k) {
                     let mut halves = [half::f16::ZERO; 64];
                     halves.convert_from_f32_slice(data);
-                    let plane = &mut out[group[c] * width * height..][..width * height];
                     for y in 0..rows {
-                        let row = &mut plane[(by * 8 + y) * width + bx * 8..][..cols];
+                        let row = &mut band[(c * 8 + y) * width + bx * 8..][..cols];
                         for (o, hv) in row.iter_mut().zip(&halves[y * 8..y * 8 + cols]) {
-                            let bits = hv.to_bits();
-                            *o = if linear {
-                                bits
-                            } else {
-                                to_linear[usize::from(bits)]
-                            };
+                            *o = to_float[usize::from(hv.to_bits())];
                         }
                     }
                 }
             }
+            for y in 0..rows {
+                let row = |c: usize| &band[(c * 8 + y) * width..][..width];
+                let all = [row(0), row(k.min(2) - 1), row(k - 1)];
+                sink(group, by * 8 + y, &all[..k.min(3)]);
+            }
         }
         dc_at += k * blocks;
     }
-    Ok(out)
+    Ok(())
 }
 
 /// The zig-zag order: raster position `i` of an 8 x 8 block holds coefficient `ZIGZAG[i]`.
@@ -265,11 +280,11 @@ const ZIGZAG: [usize; 64] = [
 ];
 
 /// Where coefficient `p` of the zig-zag order goes in raster order.
-const UNZIGZAG: [usize; 64] = {
+const UNZIGZAG: [u8; 64] = {
     let mut inv = [0; 64];
     let mut i = 0;
     while i < 64 {
-        inv[ZIGZAG[i]] = i;
+        inv[ZIGZAG[i]] = i as u8;
         i += 1;
     }
     inv
@@ -282,16 +297,21 @@ const UNZIGZAG: [usize; 64] = {
 fn un_rle_ac(ac: &[u16], at: &mut usize, raster: &mut [u16; 64]) -> Result<usize, &'static str> {
     let mut last = 0;
     let mut pos = 1;
+    // Without branches on the token: a run writes a zero at its first position (which is
+    // zero anyway) and steps over the run; a coefficient writes itself and steps by one.
     for &v in ac.get(*at..).unwrap_or_default() {
         *at += 1;
-        if v & 0xff00 == 0xff00 {
-            let n = usize::from(v & 0xff);
-            pos += if n == 0 { 64 } else { n };
+        let run = v & 0xff00 == 0xff00;
+        let n = usize::from(v & 0xff);
+        raster[usize::from(UNZIGZAG[pos])] = if run { 0 } else { v };
+        last = if run { last } else { pos };
+        pos += if !run {
+            1
+        } else if n == 0 {
+            64
         } else {
-            last = pos;
-            raster[UNZIGZAG[pos]] = v;
-            pos += 1;
-        }
+            n
+        };
         if pos >= 64 {
             return Ok(last);
         }
@@ -492,15 +512,17 @@ fn undo_zip_predictor(mut d: Vec<u8>) -> Vec<u8> {
 }
 
 /// OpenEXR's DWA transfer curve, nonlinear half to linear half, for every half (as the `exr`
-/// crate computes it: `x^2.2` up to 1, `e^(2.2 (x - 1))` above, sign kept, non-finite to 0).
-fn to_linear_table() -> &'static [u16; 65536] {
-    static TABLE: std::sync::OnceLock<Box<[u16; 65536]>> = std::sync::OnceLock::new();
+/// crate computes it: `x^2.2` up to 1, `e^(2.2 (x - 1))` above, sign kept, non-finite to 0),
+/// as the float of that linear half: the channel's value (a float channel's DWA values are
+/// halves too). One lookup instead of a lookup and a conversion per sample.
+fn to_linear_table() -> &'static [f32; 65536] {
+    static TABLE: std::sync::OnceLock<Box<[f32; 65536]>> = std::sync::OnceLock::new();
     TABLE.get_or_init(|| {
-        let mut t = Box::new([0u16; 65536]);
+        let mut t = Box::new([0.0f32; 65536]);
         for (bits, slot) in t.iter_mut().enumerate() {
             let v = half::f16::from_bits(bits as u16).to_f32();
             *slot = if !v.is_finite() {
-                0
+                0.0
             } else {
                 let sign = if v < 0.0 { -1.0f32 } else { 1.0 };
                 let a = v.abs();
@@ -510,8 +532,20 @@ fn to_linear_table() -> &'static [u16; 65536] {
                     #[allow(clippy::excessive_precision)]
                     9.025_013_291_56_f32.powf(a - 1.0)
                 };
-                half::f16::from_f32(sign * lin).to_bits()
+                half::f16::from_f32(sign * lin).to_f32()
             };
+        }
+        t
+    })
+}
+
+/// Every half as a float (channels quantised linearly skip the transfer curve).
+fn half_table() -> &'static [f32; 65536] {
+    static TABLE: std::sync::OnceLock<Box<[f32; 65536]>> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        let mut t = Box::new([0.0f32; 65536]);
+        for (bits, slot) in t.iter_mut().enumerate() {
+            *slot = half::f16::from_bits(bits as u16).to_f32();
         }
         t
     })
@@ -630,8 +664,11 @@ mod tests {
                     linear: false,
                 })
                 .collect();
-            let _ = decode(&b, &channels, (45, 32));
-            let _ = decode(&b, &channels, (7, 300));
+            for size in [(45, 32), (7, 300)] {
+                if let Some(Ok(p)) = plan(&b, &channels, size) {
+                    let _ = decode(&b, &p, size, |_, _, _| {});
+                }
+            }
         }
     }
 }
