@@ -8,7 +8,7 @@
 //! alphabet for each block (70% of its time on 128 x 128 scan-line DWAA files, 8.5-12x
 //! OpenEXR 3.1's time), and its DCT path converted samples one by one (62% of a 1024 x 1024
 //! decode once the Huffman part was ours). [`decode`] does what it does, in the same
-//! arithmetic order, so its values are OpenEXR's to the bit (`tests/openexr.rs`), at 0.9-1.4x
+//! arithmetic order, so its values are OpenEXR's to the bit (`tests/openexr.rs`), at 0.7-1.25x
 //! OpenEXR's time (docs/performance.md, "Decoding, every compression").
 //!
 //! Blocks with other channels (alpha, depth: the unknown and RLE sections) go to the `exr`
