@@ -548,7 +548,7 @@ fn decode(
         }
     }
     // The last bits: drop the padding of the last byte, then decode what is left.
-    let pad = ((8 - n_bits) & 7) as u32;
+    let pad = (n_bits.wrapping_neg() & 7) as u32;
     if pad > lc {
         return Err("Huffman bit count");
     }
