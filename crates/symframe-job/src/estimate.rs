@@ -10,7 +10,7 @@ use anyhow::{Context, Result};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use symframe::baselines::{Baseline, BaselineMethod, BaselineParams};
-use symframe::frames::estimator::check_inputs;
+use symframe::check_inputs;
 use symframe::maps::PixelCounts;
 use symframe::orientation::LightAxes;
 use symframe::{EstimateMaps, Estimator, EstimatorParams, PixelSource};

@@ -14,7 +14,7 @@ use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray4, PyUnty
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
-use symframe::estimate::check_inputs;
+use symframe::check_inputs;
 use symframe::{BaselineMethod, EstimateMaps, Estimator, PixelMethod, PixelRecord, Rig, Stack};
 use symframe_io::DecodeOptions;
 use symframe_job::{EstimateConfig, EstimateOutcome, MethodConfig, Progress, Sources, Stage};

@@ -18,6 +18,11 @@ pub const HIGHLIGHT_LEVEL: f64 = 0.5;
 /// where the lights happen to be than about the lobe.
 const MIN_SAMPLES_FOR_TANGENT: u32 = 4;
 
+/// Smallest elongation of the highlight's second moment ([`HighlightMoments::elongation`])
+/// for it to show a wide axis: the estimator's default and the highlight-centroid baseline's
+/// tangent rule.
+pub const MIN_ELONGATION: f64 = 0.4;
+
 /// The moments of a pixel's highlight.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HighlightMoments {

@@ -9,9 +9,10 @@
 //! - [`frames`]: the method, a pixel's frame from its samples: [`frames::rig`] (lights,
 //!   halfway vectors, triangulation, point location), [`frames::slice`] (per-pixel
 //!   interpolation), [`frames::symmetry`] (the symmetry distances), [`frames::objective`] (their
-//!   reference and fast implementations), [`frames::highlight`] (the highlight's moments),
-//!   [`frames::optim`] (Nelder-Mead) and [`frames::estimator`] (the per-pixel estimator and the
+//!   reference and fast implementations), [`frames::optim`] (Nelder-Mead) and [`frames::estimator`] (the per-pixel estimator and the
 //!   whole-stack pipeline).
+//! - [`highlight`]: the highlight's moments, read by the estimator (a start, evidence
+//!   of a tangent) and the highlight baselines alike.
 //! - [`geometry`]: halfway vectors for the fixed view, the stereographic projection, a
 //!   tangent-plane basis.
 //! - [`baselines`]: the photometric-stereo, max-reflectance and highlight-centroid baselines the
@@ -73,6 +74,7 @@ pub mod error;
 pub mod eval;
 pub mod frames;
 pub mod geometry;
+pub mod highlight;
 pub mod integrate;
 pub mod maps;
 pub mod method;
@@ -90,7 +92,7 @@ pub use baselines as baseline;
 #[doc(hidden)]
 pub use frames::estimator as estimate;
 #[doc(hidden)]
-pub use frames::{highlight, objective, optim, rig, slice, symmetry};
+pub use frames::{objective, optim, rig, slice, symmetry};
 
 pub use appearance::fit::{fit_stack, FitMaps, FitMethod, FitModel, FitParams, GltfMaps, WardMaps};
 pub use appearance::relight::{Edits, Relighter};
@@ -103,4 +105,4 @@ pub use frames::rig::{Rig, RigOptions};
 pub use maps::{EstimateMaps, PixelCounts, PixelRecord, PixelSource, PixelStatus};
 pub use method::{run_stack, PixelMethod};
 pub use noise::{NoiseModel, NoiseSamples, Quantisation};
-pub use stack::Stack;
+pub use stack::{check_inputs, Stack};

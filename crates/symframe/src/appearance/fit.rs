@@ -971,7 +971,7 @@ pub fn fit_stack(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<FitMaps> {
     let (w, h) = (stack.width, stack.height);
-    crate::frames::estimator::check_inputs(w, h, stack.n_lights, lights.len(), mask)?;
+    crate::stack::check_inputs(w, h, stack.n_lights, lights.len(), mask)?;
     let method = FitMethod::new(lights, params, normals, tangents, w * h)?;
     let outcomes = run_stack(&method, stack, mask, progress);
     Ok(FitMaps::from_outcomes(

@@ -3,18 +3,18 @@
 use glam::DVec3;
 
 use super::BaselinePixel;
-use crate::frames::highlight::highlight_moments_by;
 use crate::geometry::halfway_from_light;
+use crate::highlight::highlight_moments_by;
 use crate::maps::PixelStatus;
 
 /// Smallest elongation of the highlight for the highlight-centroid baseline to report a
-/// tangent (the estimator's own rule, [`crate::frames::policy::MIN_ELONGATION`]).
-const CENTROID_MIN_ELONGATION: f64 = crate::frames::policy::MIN_ELONGATION;
+/// tangent (the estimator's own rule, [`crate::highlight::MIN_ELONGATION`]).
+const CENTROID_MIN_ELONGATION: f64 = crate::highlight::MIN_ELONGATION;
 
 /// The highlight-centroid baseline at one pixel: the normal is the intensity-weighted mean of
 /// the halfway vectors of the samples at or above half the brightest grey value, the tangent
 /// the widest axis of their weighted second moment where the highlight is elongated
-/// ([`highlight_moments`](crate::frames::highlight::highlight_moments)). Strong on glossy materials under dense rigs; on diffuse surfaces it
+/// ([`highlight_moments`](crate::highlight::highlight_moments)). Strong on glossy materials under dense rigs; on diffuse surfaces it
 /// shares max-reflectance's bias (half the normal's angle from the view). Confidence: the
 /// highlight's contrast. Allocation-free.
 pub fn highlight_centroid_pixel(samples: &[f32], lights: &[DVec3]) -> BaselinePixel {

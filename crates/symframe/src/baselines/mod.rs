@@ -44,7 +44,7 @@ pub enum Baseline {
     /// value over its nearest neighbours in halfway space.
     MaxReflectance,
     /// The intensity-weighted mean (normal) and second moment (tangent axis) of the halfway
-    /// vectors of the brightest samples ([`crate::frames::highlight`]).
+    /// vectors of the brightest samples ([`crate::highlight`]).
     HighlightCentroid,
 }
 
@@ -340,7 +340,7 @@ pub fn estimate_stack_baseline_with(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<EstimateMaps> {
     let method = BaselineMethod::new(method, lights, params)?;
-    crate::frames::estimator::check_inputs(
+    crate::stack::check_inputs(
         stack.width,
         stack.height,
         stack.n_lights,

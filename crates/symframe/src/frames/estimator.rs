@@ -11,8 +11,7 @@ use crate::noise::NoiseModel;
 use crate::baselines::{
     grey_values, highlight_peak, woodham_robust_greys, BaselineParams, BaselinePixel,
 };
-use crate::error::{Error, Result};
-use crate::frames::highlight::{highlight_moments_of_greys, HighlightMoments, HIGHLIGHT_LEVEL};
+use crate::error::Result;
 use crate::frames::lobe::{fit_lobe, fit_lobe_pair, LobeFit, LobeScratch, LobeStart};
 use crate::frames::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::frames::optim::{nelder_mead, NelderMeadOptions};
@@ -25,6 +24,7 @@ use crate::frames::symmetry::{
     default_min_domain, CosineMode, Frame, SymmetryTerm, EMPTY_DISTANCE,
 };
 use crate::geometry::tangent_basis;
+use crate::highlight::{highlight_moments_of_greys, HighlightMoments, HIGHLIGHT_LEVEL};
 use crate::method::{run_stack, PixelMethod};
 use crate::stack::Stack;
 
@@ -1579,7 +1579,7 @@ pub fn estimate_stack(
     params: EstimatorParams,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<EstimateMaps> {
-    check_inputs(
+    crate::stack::check_inputs(
         stack.width,
         stack.height,
         stack.n_lights,
@@ -1592,31 +1592,6 @@ pub fn estimate_stack(
         stack.height,
         &records,
     ))
-}
-
-/// Checks that a stack of `width x height` pixels and `n_lights` lights fits an estimator
-/// expecting `expected_lights` lights (a rig's `n_input`) and `mask` (the checks of
-/// [`estimate_stack`], for pipelines that read the stack piecewise).
-pub fn check_inputs(
-    width: usize,
-    height: usize,
-    n_lights: usize,
-    expected_lights: usize,
-    mask: Option<&[bool]>,
-) -> Result<()> {
-    if n_lights != expected_lights {
-        return Err(Error::LightCountMismatch {
-            stack: n_lights,
-            rig: expected_lights,
-        });
-    }
-    if let Some(m) = mask {
-        crate::stack::check_mask_size(m, width, height, "mask")?;
-        if !m.iter().any(|&v| v) {
-            return Err(Error::BadMask("mask is empty: no pixel inside".into()));
-        }
-    }
-    Ok(())
 }
 
 #[cfg(test)]

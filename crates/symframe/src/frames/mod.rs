@@ -3,14 +3,12 @@
 //! In the order a pixel meets them: [`rig`] (lights, halfway vectors, their triangulation and
 //! point location), [`slice`](mod@slice) (a pixel's measured BRDF slice, interpolated between
 //! the samples), [`symmetry`] (the symmetry distances), [`objective`] (their reference and fast
-//! implementations), [`highlight`] (the highlight's moments: a start for the search),
-//! [`optim`] (Nelder-Mead), [`policy`] (the settings of the choice of answer, grouped by rule; whether the data
+//! implementations), [`optim`] (Nelder-Mead), [`policy`] (the settings of the choice of answer, grouped by rule; whether the data
 //! determine a tangent, and how surely)
 //! and [`estimator`] (the per-pixel search, confidence, anisotropy and fallbacks, and the
 //! whole-stack pipeline).
 
 pub mod estimator;
-pub mod highlight;
 pub mod lobe;
 pub mod objective;
 pub mod optim;

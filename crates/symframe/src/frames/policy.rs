@@ -16,21 +16,13 @@
 use glam::DVec3;
 
 use crate::baselines::BaselinePixel;
-use crate::frames::highlight::HighlightMoments;
-use crate::frames::lobe::{LobeFit, LobePair};
+use crate::frames::lobe::{LobeFit, LobePair, LOBE_EXPLAINS};
+use crate::highlight::HighlightMoments;
+use crate::highlight::MIN_ELONGATION;
 use crate::maps::PixelSource;
 
 /// Default smallest symmetry anisotropy for a tangent (`--min-anisotropy`).
 pub const DEFAULT_MIN_ANISOTROPY: f32 = 0.6;
-
-/// Smallest elongation of the highlight's second moment
-/// ([`crate::frames::highlight::HighlightMoments::elongation`]) for it to show a wide axis
-/// (the highlight-centroid baseline's tangent rule too).
-pub const MIN_ELONGATION: f64 = 0.4;
-
-/// [`LobeSettings::explains`]'s default: the lobe fit also retries its other starts until one
-/// leaves less than this.
-pub(crate) const LOBE_EXPLAINS: f64 = 0.002;
 
 /// [`LobeSettings::plausible`]'s default.
 const LOBE_PLAUSIBLE: f64 = 0.005;

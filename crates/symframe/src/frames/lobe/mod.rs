@@ -334,10 +334,14 @@ const HIGHLIGHT_SHARE: f64 = 0.02;
 /// Levenberg-Marquardt iterations at most.
 const MAX_ITERATIONS: u32 = 60;
 
+/// The policy's default for a lobe to be the pixel's answer (`LobeSettings::explains`): the
+/// share of the energy a fit may leave unexplained.
+pub(crate) const LOBE_EXPLAINS: f64 = 0.002;
+
 /// A fit leaving more than this share of the energy unexplained is retried from other starts
 /// (the tangent and normal axes swapped, the brightest sample's halfway vector, broad lobes):
 /// the estimator's threshold for a lobe to be the pixel's answer.
-const RETRY_RESIDUAL: f64 = crate::frames::policy::LOBE_EXPLAINS;
+const RETRY_RESIDUAL: f64 = LOBE_EXPLAINS;
 
 /// Lights of the coarse subset the search runs on: the first of the spread subset's and of the
 /// highlight's (so evenly spread too); the fit is then polished on the whole subset. Measured
