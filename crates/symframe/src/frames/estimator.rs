@@ -1022,10 +1022,11 @@ impl<'a> Estimator<'a> {
     ) -> PixelEstimate {
         let anisotropy = f.elongation();
         let tangent = (self.params.tangents && self.lobe_has_tangent(f)).then_some(f.tangent);
-        // The data's symmetry judges the lobe's centre: where the slice is more symmetric about
-        // a normal nearby than the two readings' uncertainties allow, the lobe does not
-        // describe the material and its centre may be biased by as much (docs/method.md,
-        // "Confidence").
+        // The data's symmetry judges the lobe's centre, which is only as certain as the
+        // symmetry can confirm it: its own variance (up to the stencil's resolution) is added,
+        // and where the slice is more symmetric about a normal nearby than the two readings'
+        // uncertainties allow, the lobe does not describe the material and its centre may be
+        // biased by as much (docs/method.md, "Confidence").
         // On the first JUDGE_LIGHTS of the query order (evenly spread; all of them on small
         // rigs), as the tangent's confidence below, and without the split halves.
         let judged_on = Level::Coarse(JUDGE_LIGHTS);
@@ -1033,12 +1034,7 @@ impl<'a> Estimator<'a> {
         let (judged, evals) =
             self.symmetry_sd(objective, f.normal, cosine, judged_on, false, &centre);
         let own = f.normal_sd.powi(2);
-        let bias = if judged.offset2.is_finite() {
-            disagreement(judged.offset2, own, judged.scatter)
-        } else {
-            0.0
-        };
-        let sd = (own + f.light_sd.powi(2) + bias).sqrt();
+        let sd = (own + f.light_sd.powi(2) + unconfirmed(&judged, own)).sqrt();
         let confidence = (self.coverage(slice, f.normal, term_n) * within_confident(sd)) as f32;
         let status = self.status_of(confidence);
         let keep = status == PixelStatus::Estimated;
@@ -1264,6 +1260,20 @@ impl SymmetryJudgement {
 /// the squared bias one of them carries, 0 where they agree within their noise.
 fn disagreement(d2: f64, va: f64, vb: f64) -> f64 {
     (d2 - va - vb).max(0.0)
+}
+
+/// The variance a model's reading of the normal (of variance `own`) adds where the data's
+/// symmetry judges it (`judged`): what the symmetry cannot confirm. Its own variance, up to the
+/// stencil's squared spacing (beyond it the stencil does not resolve the minimum), plus the
+/// readings' disagreement beyond both variances; the squared spacing where the distance has no
+/// minimum on the stencil (the symmetry does not place the normal within it).
+fn unconfirmed(judged: &SymmetryJudgement, own: f64) -> f64 {
+    let resolution = SD_STENCIL_DEG.to_radians().powi(2);
+    if judged.offset2.is_finite() {
+        disagreement(judged.offset2, own, judged.scatter) + judged.scatter.min(resolution)
+    } else {
+        resolution
+    }
 }
 
 /// The least-squares quadratic `c + g.x + x^T H x / 2` through a function's values `f[i][j]`
@@ -1611,6 +1621,35 @@ mod tests {
         // A symmetry that cannot judge (no minimum on the stencil) has infinite variance.
         assert!(SymmetryJudgement::NONE.variance().is_infinite());
         assert_eq!(disagreement(1.0, f64::INFINITY, 0.0), 0.0);
+    }
+
+    #[test]
+    fn a_lobe_is_as_certain_as_the_symmetry_confirms_it() {
+        let deg2 = 1f64.to_radians().powi(2);
+        let own = (0.1f64.to_radians()).powi(2);
+        let confidence =
+            |j: SymmetryJudgement| within_confident((own + unconfirmed(&j, own)).sqrt());
+        // A sharp minimum at the lobe's centre confirms it: it stays confident.
+        let sharp = SymmetryJudgement {
+            offset2: 0.0,
+            scatter: 0.05 * deg2,
+        };
+        assert!(confidence(sharp) > 0.99);
+        // A symmetry with no minimum on the stencil, or too shallow to place one within it,
+        // confirms nothing finer than the stencil: however small the fit's own variance, the
+        // lobe is not confident (the family's bias on a material outside it is hidden there).
+        assert!(confidence(SymmetryJudgement::NONE) < 0.9);
+        let shallow = SymmetryJudgement {
+            offset2: 0.5 * deg2,
+            scatter: 3.0 * deg2,
+        };
+        assert!(confidence(shallow) < 0.9);
+        // A minimum elsewhere, beyond both readings' variances, counts as the lobe's bias.
+        let elsewhere = SymmetryJudgement {
+            offset2: 2.0 * deg2,
+            scatter: 0.05 * deg2,
+        };
+        assert!(confidence(elsewhere) < 0.9 && confidence(elsewhere) < confidence(sharp));
     }
 
     #[test]
