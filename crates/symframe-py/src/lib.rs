@@ -758,7 +758,7 @@ fn synth(
         let lock = symframe_job::OutputDir::lock(&out)?;
         let written = (|| -> anyhow::Result<PathBuf> {
             symframe_io::check_synth_target(&out, false)?;
-            let lights = symframe::rig::uniform_cone_lights(n_lights, theta_d_max);
+            let lights = symframe::uniform_cone_lights(n_lights, theta_d_max);
             let images: Vec<Vec<f32>> = {
                 use rayon::prelude::*;
                 lights

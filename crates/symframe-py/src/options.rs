@@ -8,10 +8,9 @@ use pyo3::conversion::FromPyObjectOwned;
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use symframe::baseline::{Baseline, BaselineParams};
-use symframe::estimate::Fallback;
-use symframe::symmetry::CosineMode;
-use symframe::{EstimatorParams, Interpolation, RigOptions};
+use symframe::{
+    Baseline, BaselineParams, CosineMode, EstimatorParams, Fallback, Interpolation, RigOptions,
+};
 use symframe_io::{CacheOptions, DecodeOptions, Gamma};
 use symframe_job::{CacheConfig, MethodConfig, Shard};
 

@@ -83,25 +83,15 @@ pub mod orientation;
 pub mod render;
 pub mod stack;
 
-// The module paths of the flat layout before `frames/`, `baselines/` and `appearance/`, kept so
-// that code written against them still compiles. New code uses the paths above.
-#[doc(hidden)]
-pub use appearance::{fit, relight};
-#[doc(hidden)]
-pub use baselines as baseline;
-#[doc(hidden)]
-pub use frames::estimator as estimate;
-#[doc(hidden)]
-pub use frames::{objective, optim, rig, slice, symmetry};
-
 pub use appearance::fit::{fit_stack, FitMaps, FitMethod, FitModel, FitParams, GltfMaps, WardMaps};
 pub use appearance::relight::{Edits, Relighter};
-pub use baselines::{estimate_stack_baseline, Baseline, BaselineMethod};
+pub use baselines::{estimate_stack_baseline, Baseline, BaselineMethod, BaselineParams};
 pub use error::{Error, Result};
 pub use frames::estimator::{
-    estimate_stack, Estimator, EstimatorParams, Interpolation, PixelScratch,
+    estimate_stack, Estimator, EstimatorParams, Fallback, Interpolation, PixelScratch,
 };
-pub use frames::rig::{Rig, RigOptions};
+pub use frames::rig::{uniform_cone_lights, Rig, RigOptions};
+pub use frames::symmetry::CosineMode;
 pub use maps::{EstimateMaps, PixelCounts, PixelRecord, PixelSource, PixelStatus};
 pub use method::{run_stack, PixelMethod};
 pub use noise::{NoiseModel, NoiseSamples, Quantisation};

@@ -28,9 +28,7 @@ use crate::highlight::{highlight_moments_of_greys, HighlightMoments, HIGHLIGHT_L
 use crate::method::{run_stack, PixelMethod};
 use crate::stack::Stack;
 
-// The map types lived here before `maps`; their old paths still resolve.
-#[doc(hidden)]
-pub use crate::maps::{EstimateMaps, PixelCounts, PixelRecord, PixelSource, PixelStatus};
+use crate::maps::{EstimateMaps, PixelRecord, PixelSource, PixelStatus};
 
 /// Parameters of the symmetry estimator.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
