@@ -10,8 +10,8 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 use symframe::appearance::fit::{
-    holdout_lights, FitMaps, FitMethod, FitModel, FitParams, FitSummary, HoldoutError, PixelFit,
-    PixelOutcome,
+    holdout_lights, FitMaps, FitMethod, FitModel, FitParams, FitSummary, HoldoutError,
+    PixelOutcome, WardFit,
 };
 use symframe::appearance::gltf_fit::GltfFit;
 use symframe_io::fingerprint::Fingerprint;
@@ -664,7 +664,7 @@ fn decode(r: &[u8]) -> Option<Option<PixelOutcome>> {
         1 => Some(PixelOutcome::NoFrame),
         2 => Some(PixelOutcome::TooFewSamples),
         3 => {
-            let fit = PixelFit {
+            let fit = WardFit {
                 kd: [f64_at(8), f64_at(16), f64_at(24)],
                 ks: [f64_at(32), f64_at(40), f64_at(48)],
                 alpha_t: f64_at(56),
@@ -763,7 +763,7 @@ mod tests {
     #[test]
     fn fit_records_round_trip_bit_for_bit() {
         let d = tempfile::tempdir().unwrap();
-        let fit = PixelFit {
+        let fit = WardFit {
             kd: [0.1, 0.2, 0.3],
             ks: [1.0 / 3.0, 2.5, f64::MIN_POSITIVE],
             alpha_t: 0.07,

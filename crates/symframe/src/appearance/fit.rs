@@ -54,7 +54,7 @@ use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
-use super::gltf_fit::{self, GSample, GltfFit};
+use super::gltf_fit::{self, GltfFit, GltfSample};
 use crate::error::{Error, Result};
 use crate::eval::vec_at;
 use crate::geometry::tangent_basis;
@@ -390,7 +390,7 @@ pub struct FitMaps {
 
 /// The fitted Ward parameters of one pixel.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PixelFit {
+pub struct WardFit {
     /// Diffuse albedo per channel.
     pub kd: [f64; 3],
     /// Specular albedo per channel.
@@ -409,7 +409,7 @@ pub struct PixelFit {
     pub iterations: u32,
 }
 
-impl PixelFit {
+impl WardFit {
     /// RMS error over the training samples and channels.
     pub fn rms(&self) -> f64 {
         (self.sse / (3 * self.samples.max(1)) as f64).sqrt()
@@ -431,7 +431,7 @@ pub struct HoldoutError {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum PixelOutcome {
     /// Fitted: the parameters and the held-out error.
-    Fitted(PixelFit, HoldoutError),
+    Fitted(WardFit, HoldoutError),
     /// Fitted with the glTF model: the parameters and the held-out error.
     FittedGltf(GltfFit, HoldoutError),
     /// No normal, or it faces away from the view.
@@ -601,7 +601,7 @@ fn pass(samples: &[Sample], p: [f64; 2], iso: bool, upper: f64, derivatives: boo
 }
 
 /// Fits one pixel's usable training samples; `iso` fits one roughness.
-fn fit_samples(samples: &[Sample], iso: bool, params: &FitParams) -> PixelFit {
+fn fit_samples(samples: &[Sample], iso: bool, params: &FitParams) -> WardFit {
     let (lo, hi) = (params.alpha_min.ln(), params.alpha_max.ln());
     let clamp = |p: [f64; 2]| [p[0].clamp(lo, hi), p[1].clamp(lo, hi)];
     let brightest = samples.iter().flat_map(|s| s.rgb).fold(0.0f64, f64::max);
@@ -685,7 +685,7 @@ fn fit_samples(samples: &[Sample], iso: bool, params: &FitParams) -> PixelFit {
     let ab = if iso { at } else { p[1].exp() };
     // Ward's albedo from the lobe's peak: peak = ks / (4 pi alpha_t alpha_b).
     let to_ks = 4.0 * PI * at * ab;
-    let fit = PixelFit {
+    let fit = WardFit {
         kd: [cur.coef[0][0], cur.coef[1][0], cur.coef[2][0]],
         ks: [cur.coef[0][1], cur.coef[1][1], cur.coef[2][1]].map(|v| v * to_ks),
         alpha_t: at,
@@ -695,7 +695,7 @@ fn fit_samples(samples: &[Sample], iso: bool, params: &FitParams) -> PixelFit {
         sse: 0.0,
         iterations,
     };
-    PixelFit {
+    WardFit {
         sse: sse(&fit, samples).0,
         ..fit
     }
@@ -703,14 +703,14 @@ fn fit_samples(samples: &[Sample], iso: bool, params: &FitParams) -> PixelFit {
 
 /// The predicted radiance of a fit at one sample.
 #[inline]
-fn predict(fit: &PixelFit, s: &Sample) -> [f64; 3] {
+fn predict(fit: &WardFit, s: &Sample) -> [f64; 3] {
     let e = s.xt / (fit.alpha_t * fit.alpha_t) + s.xb / (fit.alpha_b * fit.alpha_b);
     let phi_s = s.spec * (-e).exp() / (4.0 * PI * fit.alpha_t * fit.alpha_b);
     std::array::from_fn(|c| fit.kd[c] * s.diffuse + fit.ks[c] * phi_s)
 }
 
 /// Sum of squared errors (direct, no cancellation) and the largest measurement.
-fn sse(fit: &PixelFit, samples: &[Sample]) -> (f64, f64) {
+fn sse(fit: &WardFit, samples: &[Sample]) -> (f64, f64) {
     squared_errors(samples, |s| (predict(fit, s), s.rgb))
 }
 
@@ -740,8 +740,8 @@ pub struct PixelFitter<'a> {
     held_out: Vec<bool>,
     train: Vec<Sample>,
     test: Vec<Sample>,
-    gtrain: Vec<GSample>,
-    gtest: Vec<GSample>,
+    gtrain: Vec<GltfSample>,
+    gtest: Vec<GltfSample>,
     gscratch: gltf_fit::Scratch,
 }
 
@@ -841,7 +841,7 @@ impl PixelFitter<'_> {
             if !px.iter().all(|v| v.is_finite()) || n.dot(*l) <= 0.0 {
                 continue;
             }
-            let s = GSample {
+            let s = GltfSample {
                 l: local(*l),
                 rgb: [px[0] as f64, px[1] as f64, px[2] as f64],
             };
@@ -1157,7 +1157,7 @@ mod tests {
         let params = FitParams::default();
         let mut f = PixelFitter::new(&lights, &params).unwrap();
         f.fit(n, Some(t), &rgb);
-        let fit = PixelFit {
+        let fit = WardFit {
             kd: w.kd,
             ks: w.ks,
             alpha_t: w.alpha_x,

@@ -61,7 +61,7 @@ impl GltfFit {
 /// One usable sample: the light in the pixel's local frame (x = t, y = n x t, z = n) and the
 /// measured radiance.
 #[derive(Debug, Clone, Copy, Default)]
-pub(crate) struct GSample {
+pub(crate) struct GltfSample {
     pub l: DVec3,
     pub rgb: [f64; 3],
 }
@@ -83,7 +83,7 @@ pub(crate) struct Scratch {
 /// `e`. With `None` (free scale, [`fit_exposure`]): the products `e c` (at least 0) and the
 /// pixel's own best `e` (at least 0), returned as `([e c_r, e c_g, e c_b], e)`.
 fn project(
-    samples: &[GSample],
+    samples: &[GltfSample],
     v: DVec3,
     p: P,
     e: Option<f64>,
@@ -154,7 +154,7 @@ fn project(
 /// Fits one pixel's usable training samples (light directions local to the pixel's frame, `v`
 /// the view in that frame); `iso` holds the strength at 0.
 pub(crate) fn fit_samples(
-    samples: &[GSample],
+    samples: &[GltfSample],
     v: DVec3,
     iso: bool,
     params: &FitParams,
@@ -171,7 +171,7 @@ pub(crate) fn fit_samples(
 /// (`e`, at least 0) and products `e c` (at least 0) in place of the colour. Returns `e`, the
 /// products and the fitted metalness: what [`choose_exposure`] needs.
 pub(crate) fn fit_exposure(
-    samples: &[GSample],
+    samples: &[GltfSample],
     v: DVec3,
     iso: bool,
     params: &FitParams,
@@ -238,7 +238,7 @@ pub fn choose_exposure(pixels: &[PixelScale]) -> Option<f64> {
 /// The grid start and Levenberg-Marquardt search; returns the fit (its `sse` unset), the
 /// linear coefficients of [`project`] and the scale used.
 fn search(
-    samples: &[GSample],
+    samples: &[GltfSample],
     v: DVec3,
     iso: bool,
     params: &FitParams,
@@ -391,19 +391,19 @@ fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
 
 /// The radiance a fit predicts under exposure `e` for one sample.
 #[inline]
-fn predict(fit: &GltfFit, s: &GSample, v: DVec3, e: f64) -> [f64; 3] {
+fn predict(fit: &GltfFit, s: &GltfSample, v: DVec3, e: f64) -> [f64; 3] {
     let (at, ab) = GltfPbr::alphas(fit.roughness, fit.anisotropy);
     let (a, b) = GltfPbr::terms(s.l, v, fit.metallic, at, ab).unwrap_or((0.0, 0.0));
     fit.base_color.map(|c| e * s.l.z * (c * a + b))
 }
 
 /// Sum of squared errors and the largest measurement.
-pub(crate) fn sse(fit: &GltfFit, samples: &[GSample], v: DVec3, e: f64) -> (f64, f64) {
+pub(crate) fn sse(fit: &GltfFit, samples: &[GltfSample], v: DVec3, e: f64) -> (f64, f64) {
     squared_errors(samples, |s| (predict(fit, s, v, e), s.rgb))
 }
 
 /// The held-out error of a fit.
-pub(crate) fn holdout(fit: &GltfFit, test: &[GSample], v: DVec3, e: f64) -> HoldoutError {
+pub(crate) fn holdout(fit: &GltfFit, test: &[GltfSample], v: DVec3, e: f64) -> HoldoutError {
     let (sse, peak) = sse(fit, test, v, e);
     HoldoutError {
         sse,

@@ -4,7 +4,7 @@
 //! Written by hand for speed (measured: the fit is ~90% of the estimator's time on dense rigs):
 //! the samples are stored as columns (one array per coordinate, padded to whole blocks with
 //! empty samples of weight 0), and every block's terms are branch-free arithmetic on
-//! [`LANES`] lanes ([`F16`]), so they run as vector instructions (the Gauss-Newton loop's
+//! [`LANES`] lanes ([`F64x16`]), so they run as vector instructions (the Gauss-Newton loop's
 //! running sums by fused multiply-adds); the block loops are compiled three times, for AVX-512F
 //! or AVX2 with FMA where the processor has them and for the baseline, with the same operations
 //! in the same order (identical results).
@@ -15,7 +15,7 @@ use glam::DVec3;
 
 #[cfg(target_arch = "x86_64")]
 use super::lanes::{Avx2, Avx512};
-use super::lanes::{Lanes, F16, LANES};
+use super::lanes::{F64x16, Lanes, LANES};
 
 /// The builds of the sample loops: the same operations in the same order (identical results),
 /// compiled for the baseline, for AVX2 with FMA and for AVX-512F.
@@ -325,7 +325,7 @@ pub(super) struct Kept {
     /// The samples' identity, the model's constants' bits and whether the foreshortening was
     /// in the terms; `None` until a pass has kept its terms.
     key: Option<(u64, [u64; 14], bool)>,
-    /// The fields of [`Costly`], in its order.
+    /// The fields of [`CachedTerms`], in its order.
     columns: [Vec<f64>; 8],
 }
 
@@ -348,7 +348,7 @@ impl Kept {
 
     /// Keeps a block's costly part.
     #[inline(always)]
-    fn store<V: Lanes>(&mut self, i: usize, c: &Costly<V>) {
+    fn store<V: Lanes>(&mut self, i: usize, c: &CachedTerms<V>) {
         let values = [
             c.inv_hn, c.ln_base, c.ln_nl, c.inv_sum, c.value, c.by_q, c.inv_nl, c.inv_root,
         ];
@@ -359,9 +359,9 @@ impl Kept {
 
     /// A block's kept costly part.
     #[inline(always)]
-    fn load<V: Lanes>(&self, i: usize) -> Costly<V> {
+    fn load<V: Lanes>(&self, i: usize) -> CachedTerms<V> {
         let [inv_hn, ln_base, ln_nl, inv_sum, value, by_q, inv_nl, inv_root] = &self.columns;
-        Costly {
+        CachedTerms {
             inv_hn: V::load(inv_hn, i),
             ln_base: V::load(ln_base, i),
             ln_nl: V::load(ln_nl, i),
@@ -442,7 +442,7 @@ fn geometry<V: Lanes>(f: &Frame, s: &Block<V>) -> Geometry<V> {
 /// The costly part of a block's terms (its divisions, logarithms, root and exponential):
 /// what a [`sums`] pass keeps for the Gauss-Newton pass at the same model ([`Kept`]).
 #[derive(Clone, Copy)]
-struct Costly<V> {
+struct CachedTerms<V> {
     inv_hn: V,
     ln_base: V,
     ln_nl: V,
@@ -463,7 +463,7 @@ fn slopes<V: Lanes>(f: &Frame, g: &Geometry<V>, inv_hn: V) -> (V, V, V, V) {
 
 /// `FORESHORTENED`: whether `m` may be non-zero (with `m = 0` the power of `n.l` is left out).
 #[inline(always)]
-fn costly<V: Lanes, const FORESHORTENED: bool>(f: &Frame, g: &Geometry<V>) -> Costly<V> {
+fn costly<V: Lanes, const FORESHORTENED: bool>(f: &Frame, g: &Geometry<V>) -> CachedTerms<V> {
     let zero = V::splat(0.0);
     let one = V::splat(1.0);
     let nl_s = g.nl_s;
@@ -485,7 +485,7 @@ fn costly<V: Lanes, const FORESHORTENED: bool>(f: &Frame, g: &Geometry<V>) -> Co
     } else {
         ln_base * -f.shape
     };
-    Costly {
+    CachedTerms {
         inv_hn,
         ln_base,
         ln_nl,
@@ -503,7 +503,7 @@ fn finish<V: Lanes, const FORESHORTENED: bool>(
     f: &Frame,
     s_w: V,
     g: &Geometry<V>,
-    c: &Costly<V>,
+    c: &CachedTerms<V>,
 ) -> Terms<V> {
     let zero = V::splat(0.0);
     let one = V::splat(1.0);
@@ -628,8 +628,8 @@ fn sums_with(backend: Backend, m: &Model, s: &Subset, lobe: &mut [f64], kept: &m
         sums_kernel::<Avx512, M>(f, s, lobe, k)
     }
     let v = match backend {
-        Backend::Baseline if foreshortened => sums_kernel::<F16, true>(&f, s, lobe, kept),
-        Backend::Baseline => sums_kernel::<F16, false>(&f, s, lobe, kept),
+        Backend::Baseline if foreshortened => sums_kernel::<F64x16, true>(&f, s, lobe, kept),
+        Backend::Baseline => sums_kernel::<F64x16, false>(&f, s, lobe, kept),
         #[cfg(target_arch = "x86_64")]
         // SAFETY: `backend` is a build the processor runs (`Backend::detect`,
         // `Backend::available`).
@@ -785,7 +785,7 @@ fn gauss_newton_with(
             }
         };
     }
-    build!(baseline, F16);
+    build!(baseline, F64x16);
     build!(avx2, Avx2, "avx2,fma");
     build!(avx512, Avx512, "avx512f");
     // The build for the foreshortening's presence and for kept terms.
@@ -859,20 +859,20 @@ mod tests {
         let rig = Rig::new(&uniform_cone_lights(60, 65.0), RigOptions::default()).unwrap();
         // One sample in every lane.
         let block = |l: DVec3, h: DVec3| Block {
-            l: [F16::splat(l.x), F16::splat(l.y), F16::splat(l.z)],
-            h: [F16::splat(h.x), F16::splat(h.y), F16::splat(h.z)],
-            fresnel: F16::splat(0.0),
-            y: F16::splat(0.0),
-            w: F16::splat(1.0),
+            l: [F64x16::splat(l.x), F64x16::splat(l.y), F64x16::splat(l.z)],
+            h: [F64x16::splat(h.x), F64x16::splat(h.y), F64x16::splat(h.z)],
+            fresnel: F64x16::splat(0.0),
+            y: F64x16::splat(0.0),
+            w: F64x16::splat(1.0),
         };
         let at = |d: [f64; P], l: DVec3, h: DVec3| {
             let f = Frame::of(&Model::of(&state.moved(&d)));
-            let t = terms::<F16, true>(&f, &block(l, h));
+            let t = terms::<F64x16, true>(&f, &block(l, h));
             (t.a.0[0], t.lobe.0[0])
         };
         let mut checked = 0;
         for (&l, &h) in rig.lights_in_camera().iter().zip(rig.halfway_in_camera()) {
-            let t = terms::<F16, true>(&frame, &block(l, h));
+            let t = terms::<F64x16, true>(&frame, &block(l, h));
             if state.normal.dot(l) < 0.1 || t.lobe.0[0] < 1e-6 {
                 continue;
             }

@@ -1,5 +1,5 @@
 //! Sixteen `f64` lanes computed side by side, so the lobe fit's sample loops read as scalar
-//! formulas and run as vector code: [`F16`] is a plain array (each operation a loop over the
+//! formulas and run as vector code: [`F64x16`] is a plain array (each operation a loop over the
 //! lanes: the baseline build, and the reference), [`Avx2`] four AVX registers (processors with
 //! AVX2 and FMA), [`Avx512`] two AVX-512 registers (processors with AVX-512F). Comparisons give
 //! masks and [`Lanes::select`] blends by them: no branches. The logarithm and the exponential
@@ -158,42 +158,44 @@ const LN_SERIES: [f64; 10] = [
 
 /// The lanes as a plain array: the baseline build.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct F16(pub(super) [f64; LANES]);
+pub(super) struct F64x16(pub(super) [f64; LANES]);
 
-/// A mask of [`F16`].
+/// A mask of [`F64x16`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct M16([u64; LANES]);
 
-impl F16 {
+impl F64x16 {
     #[inline(always)]
-    fn map(self, f: impl Fn(f64) -> f64) -> F16 {
-        F16(self.0.map(f))
+    fn map(self, f: impl Fn(f64) -> f64) -> F64x16 {
+        F64x16(self.0.map(f))
     }
 
     #[inline(always)]
-    fn zip(self, other: F16, f: impl Fn(f64, f64) -> f64) -> F16 {
-        F16(std::array::from_fn(|k| f(self.0[k], other.0[k])))
+    fn zip(self, other: F64x16, f: impl Fn(f64, f64) -> f64) -> F64x16 {
+        F64x16(std::array::from_fn(|k| f(self.0[k], other.0[k])))
     }
 
     #[inline(always)]
-    fn bits(self, f: impl Fn(u64) -> u64) -> F16 {
+    fn bits(self, f: impl Fn(u64) -> u64) -> F64x16 {
         self.map(|x| f64::from_bits(f(x.to_bits())))
     }
 }
 
-impl Lanes for F16 {
+impl Lanes for F64x16 {
     type Mask = M16;
 
     #[inline(always)]
     fn splat(v: f64) -> Self {
-        F16([v; LANES])
+        F64x16([v; LANES])
     }
 
     #[inline(always)]
     fn load(column: &[f64], i: usize) -> Self {
-        F16(column[i..i + LANES]
-            .try_into()
-            .expect("columns are padded to whole blocks"))
+        F64x16(
+            column[i..i + LANES]
+                .try_into()
+                .expect("columns are padded to whole blocks"),
+        )
     }
 
     #[inline(always)]
@@ -208,7 +210,7 @@ impl Lanes for F16 {
 
     #[inline(always)]
     fn mul_add(self, a: Self, b: Self) -> Self {
-        F16(std::array::from_fn(|k| self.0[k].mul_add(a.0[k], b.0[k])))
+        F64x16(std::array::from_fn(|k| self.0[k].mul_add(a.0[k], b.0[k])))
     }
 
     #[inline(always)]
@@ -234,7 +236,7 @@ impl Lanes for F16 {
 
     #[inline(always)]
     fn select(mask: M16, yes: Self, no: Self) -> Self {
-        F16(std::array::from_fn(|k| {
+        F64x16(std::array::from_fn(|k| {
             f64::from_bits((yes.0[k].to_bits() & mask.0[k]) | (no.0[k].to_bits() & !mask.0[k]))
         }))
     }
@@ -264,27 +266,27 @@ impl BitAnd for M16 {
     }
 }
 
-impl Neg for F16 {
-    type Output = F16;
+impl Neg for F64x16 {
+    type Output = F64x16;
     #[inline(always)]
-    fn neg(self) -> F16 {
+    fn neg(self) -> F64x16 {
         self.map(|a| -a)
     }
 }
 
 macro_rules! array_ops {
     ($($trait:ident $method:ident $op:tt),*) => {$(
-        impl $trait for F16 {
-            type Output = F16;
+        impl $trait for F64x16 {
+            type Output = F64x16;
             #[inline(always)]
-            fn $method(self, other: F16) -> F16 {
+            fn $method(self, other: F64x16) -> F64x16 {
                 self.zip(other, |a, b| a $op b)
             }
         }
-        impl $trait<f64> for F16 {
-            type Output = F16;
+        impl $trait<f64> for F64x16 {
+            type Output = F64x16;
             #[inline(always)]
-            fn $method(self, other: f64) -> F16 {
+            fn $method(self, other: f64) -> F64x16 {
                 self.map(|a| a $op other)
             }
         }
@@ -661,15 +663,15 @@ mod tests {
 
     #[test]
     fn exp_and_ln_match_the_standard_library() {
-        exp_and_ln::<F16>();
+        exp_and_ln::<F64x16>();
     }
 
     #[test]
     fn select_and_masks_pick_lane_by_lane() {
-        let mut a = F16::splat(5.0);
+        let mut a = F64x16::splat(5.0);
         a.0[..4].copy_from_slice(&[1.0, -2.0, 3.0, f64::NAN]);
-        let m = a.gt(F16::splat(0.0));
-        let picked = F16::select(m, a, F16::splat(9.0));
+        let m = a.gt(F64x16::splat(0.0));
+        let picked = F64x16::select(m, a, F64x16::splat(9.0));
         assert_eq!(&picked.0[..3], &[1.0, 9.0, 3.0]);
         // NaN compares false.
         assert_eq!(picked.0[3], 9.0);
@@ -718,7 +720,7 @@ mod tests {
             .chain((0..12).map(|i| i as f64))
             .collect();
         let bits = |v: Vec<f64>| v.into_iter().map(f64::to_bits).collect::<Vec<_>>();
-        let baseline = bits(through::<F16>(&x));
+        let baseline = bits(through::<F64x16>(&x));
         if has!("avx2") && has!("fma") {
             // SAFETY: the processor supports AVX2 and FMA (checked just above).
             assert_eq!(bits(unsafe { avx2(&x) }), baseline);
