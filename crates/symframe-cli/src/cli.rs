@@ -582,6 +582,28 @@ pub struct SynthArgs {
     /// truth written as gt_light_intensities.txt (default 0: every light of intensity 1).
     #[arg(long, default_value_t = 0.0, value_name = "S")]
     pub intensity_spread: f64,
+    /// Near lights and a pinhole camera instead: two unit spheres side by side (the left of
+    /// --model, the right of --second-model), isotropic point lights on a dome about them, a
+    /// perspective camera; written as a DiLiGenT folder with light_positions.txt, K.txt,
+    /// light_directions.txt (from the dome's centre) and gt_depth.npy. --size is the image
+    /// width (the height is half of it); --shape, --rig and the sphere and plane flags do not
+    /// apply.
+    #[arg(long)]
+    pub near: bool,
+    /// With --near: the right sphere's reflectance model (default: a brushed Ward,
+    /// `ward:kd=0.1,ks=0.6,ax=0.08,ay=0.3`; the left one's default is then
+    /// `ggx:kd=0.4,f0=0.04,ax=0.15,ay=0.15` unless --model is given).
+    #[arg(long, requires = "near")]
+    pub second_model: Option<String>,
+    /// With --near: the number of lights on the dome.
+    #[arg(long, requires = "near", default_value_t = 150)]
+    pub dome_lights: usize,
+    /// With --near: the dome's radius over the object's width (the pair of spheres, 4.2 units).
+    #[arg(long, requires = "near", default_value_t = 2.0)]
+    pub dome_ratio: f64,
+    /// With --near: the camera's distance from the spheres' centres over the object's width.
+    #[arg(long, requires = "near", default_value_t = 3.0)]
+    pub camera_ratio: f64,
 }
 
 /// Flags of `symframe fit`.

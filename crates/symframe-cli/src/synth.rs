@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Result};
 use symframe_io::ImageFormat;
-use symframe_job::{synth, RigSpec, SynthConfig, SynthShape};
+use symframe_job::{synth, synth_near, NearSynthConfig, RigSpec, SynthConfig, SynthShape};
 
 use crate::cli::{FormatArg, ShapeArg, SynthArgs};
 use crate::progress;
@@ -70,6 +70,9 @@ fn validate(args: &SynthArgs) -> Result<()> {
 
 /// Runs the command; returns the path of the written `lights.lp`.
 pub fn run(args: &SynthArgs) -> Result<PathBuf> {
+    if args.near {
+        return run_near(args);
+    }
     validate(args)?;
     let t0 = Instant::now();
     let config = SynthConfig {
@@ -112,6 +115,61 @@ pub fn run(args: &SynthArgs) -> Result<PathBuf> {
             args.size,
             args.shape,
             done.model,
+            done.lights,
+            args.output.display(),
+            t0.elapsed().as_secs_f64()
+        );
+    }
+    Ok(done.lp)
+}
+
+/// `synth --near`: the two-sphere near-light capture ([`NearSynthConfig`]).
+fn run_near(args: &SynthArgs) -> Result<PathBuf> {
+    let distant_only = [
+        ("--shape", args.shape != ShapeArg::Sphere),
+        ("--rig", args.rig != "cone:1000"),
+        ("--tangent-field", args.tangent_field.is_some()),
+        ("--normal-angle", args.normal_angle.is_some()),
+        ("--normal-azimuth", args.normal_azimuth.is_some()),
+        ("--tangent-angle", args.tangent_angle.is_some()),
+        ("--bumps", args.bumps.is_some()),
+        ("--relief", args.relief.is_some()),
+        ("--chrome-sphere", args.chrome_sphere),
+        ("--intensity-spread", args.intensity_spread != 0.0),
+    ];
+    if let Some((flag, _)) = distant_only.iter().find(|(_, given)| *given) {
+        bail!("{flag} does not apply to --near (two spheres under a dome of point lights)");
+    }
+    let t0 = Instant::now();
+    let mut config = NearSynthConfig::new(args.output.clone());
+    if args.model != "ward" {
+        config.models[0] = args.model.clone();
+    }
+    if let Some(m) = &args.second_model {
+        config.models[1] = m.clone();
+    }
+    config.force = args.force;
+    config.size = args.size;
+    config.lights = args.dome_lights;
+    config.dome_ratio = args.dome_ratio;
+    config.camera_ratio = args.camera_ratio;
+    config.noise = args.noise.clone();
+    config.format = match args.format {
+        FormatArg::Exr => ImageFormat::Exr,
+        FormatArg::Png16 => ImageFormat::Png16,
+        FormatArg::Png8 => ImageFormat::Png8,
+    };
+    config.exposure = args.exposure;
+    config.seed = args.seed;
+    let bars = progress::Bars::default();
+    let done = synth_near(&config, &crate::control(&|p| bars.update(p), None))?;
+    drop(bars);
+    if progress::chatty() {
+        eprintln!(
+            "symframe synth --near: rendered {} under {} point lights; wrote {} images to {} in \
+             {:.1} s",
+            done.model,
+            done.lights,
             done.lights,
             args.output.display(),
             t0.elapsed().as_secs_f64()

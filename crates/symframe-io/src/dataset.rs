@@ -32,6 +32,7 @@ const FILENAMES: &str = "filenames.txt";
 const DIRECTIONS: &str = "light_directions.txt";
 const INTENSITIES: &str = "light_intensities.txt";
 const MASK: &str = "mask.png";
+use crate::near::POSITIONS;
 
 /// Opens a dataset from an RTI `.lp` file, a folder holding exactly one `.lp` file, or a
 /// DiLiGenT-style folder (`filenames.txt`, `light_directions.txt`, optional
@@ -67,7 +68,7 @@ pub fn open_dataset(input: &Path) -> Result<Dataset> {
     if is_lp(input) {
         return open_lp(input);
     }
-    if name == FILENAMES || name == DIRECTIONS || name == INTENSITIES {
+    if name == FILENAMES || name == DIRECTIONS || name == INTENSITIES || name == POSITIONS {
         let dir = parent_dir(input);
         return open_diligent(&dir, input);
     }
@@ -177,7 +178,9 @@ fn open_folder(dir: &Path) -> Result<Dataset> {
     if lps.len() == 1 {
         return open_lp(&lps[0]);
     }
-    if dir.join(FILENAMES).is_file() && dir.join(DIRECTIONS).is_file() {
+    if dir.join(FILENAMES).is_file()
+        && (dir.join(DIRECTIONS).is_file() || dir.join(POSITIONS).is_file())
+    {
         return open_diligent(dir, dir);
     }
     if lps.len() > 1 {
@@ -397,27 +400,42 @@ fn other_lp_counts(lp: &Path, dir: &Path) -> Vec<(String, usize)> {
 /// Opens a DiLiGenT-style folder; `source` is what the user named (folder or one of its files).
 fn open_diligent(dir: &Path, source: &Path) -> Result<Dataset> {
     let names_path = dir.join(FILENAMES);
-    let dirs_path = dir.join(DIRECTIONS);
+    let mut dirs_path = dir.join(DIRECTIONS);
+    let positions_path = dir.join(POSITIONS);
+    // Near lights alone: the directions are those from the lights' sphere centre.
+    let from_positions = !dirs_path.is_file() && positions_path.is_file();
+    if from_positions {
+        dirs_path = positions_path;
+    }
     for p in [&names_path, &dirs_path] {
         if !p.is_file() {
             return Err(Error::invalid(
                 dir,
                 format!(
                     "not a dataset: {} is missing (a DiLiGenT folder needs filenames.txt and \
-                     light_directions.txt)",
+                     light_directions.txt or light_positions.txt)",
                     p.display()
                 ),
             ));
         }
     }
     let images = lights::parse_filenames(&names_path, dir)?;
-    let lights = lights::parse_directions(&dirs_path)?;
+    let lights = if from_positions {
+        crate::near::directions_from_positions(&dirs_path, &lights::parse_positions(&dirs_path)?)?
+    } else {
+        lights::parse_directions(&dirs_path)?
+    };
     if lights.len() != images.len() {
         return Err(Error::invalid(
             &dirs_path,
             format!(
-                "{} light directions but {} lists {} images",
+                "{} light {} but {} lists {} images",
                 lights.len(),
+                if from_positions {
+                    "positions"
+                } else {
+                    "directions"
+                },
                 names_path.display(),
                 images.len()
             ),

@@ -33,6 +33,7 @@ pub mod error;
 pub mod fingerprint;
 mod lights;
 pub mod limits;
+pub mod near;
 pub mod output;
 pub mod stack;
 pub mod synth_out;
@@ -52,6 +53,7 @@ pub use codecs::{read_image_grey, GreyBand};
 pub use dataset::{open_dataset, Dataset};
 pub use error::{Error, Result, Warning};
 pub use lights::{lp_path_convention, read_light_directions, read_list, LpPaths};
+pub use near::{open_near_geometry, NearGeometry};
 pub use output::{
     gray_map_rgb8, normal_map_rgb8, normal_map_values, normal_png16_row, read_npy_f32, read_npy_u8,
     source_map_rgb8, tangent_map_rgb8, write_exr_map, write_exr_map_with, write_normal_png16,
@@ -61,7 +63,10 @@ pub use stack::{
     capture_noise, load_stack, load_stack_with_warnings, read_image_size, read_mask,
     read_mask_any_size,
 };
-pub use synth_out::{check_synth_target, write_lp_dataset, ImageFormat, OUTPUT_LOCK_FILE};
+pub use synth_out::{
+    check_synth_target, write_lp_dataset, write_near_dataset, ImageFormat, NearFiles,
+    OUTPUT_LOCK_FILE,
+};
 pub use tile_cache::{
     cache_holds_work, dataset_fingerprints, CacheFormat, CacheInfo, CacheOptions, Fingerprints,
     StampKind, TileCache, TileGather, TileGrid, TileView,

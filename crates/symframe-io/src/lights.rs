@@ -871,6 +871,101 @@ pub(crate) fn parse_intensities(path: &Path) -> Result<Vec<[f32; 3]>> {
     })
 }
 
+/// Parses a table of `x y z` light positions (`light_positions.txt`, camera frame, any length
+/// unit): finite numbers, kept as written.
+pub(crate) fn parse_positions(path: &Path) -> Result<Vec<DVec3>> {
+    parse_rows(path, ["light positions", "light position"], |line, v| {
+        if let Some(bad) = v.iter().find(|x| !x.is_finite()) {
+            return Err(Error::parse(
+                path,
+                line,
+                format!("light position is not finite ({bad})"),
+            ));
+        }
+        Ok(DVec3::from_array(v))
+    })
+}
+
+/// Parses a table of `x y z` LED principal directions (`light_principal_directions.txt`, from
+/// the LED into the scene), normalised.
+pub(crate) fn parse_principal_directions(path: &Path) -> Result<Vec<DVec3>> {
+    parse_rows(
+        path,
+        ["principal directions", "principal direction"],
+        |line, v| {
+            unit_light(v)
+                .map_err(|why| Error::parse(path, line, format!("principal direction {why}")))
+        },
+    )
+}
+
+/// Parses `K.txt`: three rows of three numbers, the pinhole intrinsics in OpenCV's convention;
+/// a fourth row or a matrix that is not a pinhole's is refused naming the line or the file.
+pub(crate) fn parse_k(path: &Path) -> Result<[[f64; 3]; 3]> {
+    let mut lines = TextLines::open_as(path, "an intrinsics file")?;
+    let mut k = [[0.0; 3]; 3];
+    let mut rows = 0;
+    while let Some((line, text)) = lines.next_content()? {
+        if rows == 3 {
+            return Err(Error::parse(
+                path,
+                line,
+                "K holds 3 rows of 3 numbers; this is a fourth row",
+            ));
+        }
+        let mut tokens = [""; 3];
+        let n = fields(text, &mut tokens);
+        k[rows] = parse_triple(path, line, n, &tokens[..n.min(3)], "row of K")?;
+        rows += 1;
+    }
+    if rows < 3 {
+        return Err(Error::invalid(
+            path,
+            format!("K holds 3 rows of 3 numbers, found {rows} rows"),
+        ));
+    }
+    Ok(k)
+}
+
+/// Parses a column of LED falloff exponents (`light_mu.txt`): one finite number of at least 0 a
+/// line.
+pub(crate) fn parse_mu(path: &Path) -> Result<Vec<f64>> {
+    let mut lines = TextLines::open(path)?;
+    let mut out = Vec::new();
+    while let Some((line, text)) = lines.next_content()? {
+        if out.len() == MAX_LIGHTS {
+            return Err(too_many(path, line, "falloff exponents"));
+        }
+        let mut tokens = [""; 1];
+        let n = fields(text, &mut tokens);
+        if n != 1 {
+            return Err(Error::parse(
+                path,
+                line,
+                format!("expected 1 number for the falloff exponent, found {n}"),
+            ));
+        }
+        let mu = tokens[0]
+            .parse::<f64>()
+            .ok()
+            .filter(|m| m.is_finite() && *m >= 0.0);
+        match mu {
+            Some(m) => out.push(m),
+            None => {
+                return Err(Error::parse(
+                    path,
+                    line,
+                    format!(
+                        "falloff exponent '{}' is not a finite number of at least 0",
+                        quoted(tokens[0])
+                    ),
+                ))
+            }
+        }
+    }
+    Ok(out)
+}
+
 /// The rows of a table of three numbers a line (`[rows, row]`: "light directions", "light
 /// direction"), each made a value by `row(line, numbers)`; at most [`MAX_LIGHTS`] rows.
 fn parse_rows<T>(

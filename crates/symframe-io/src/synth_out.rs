@@ -59,6 +59,42 @@ pub fn write_lp_dataset(
             ),
         ));
     }
+    let names = write_images_and_truth(
+        dir,
+        images,
+        width,
+        height,
+        format,
+        gt_normals,
+        gt_tangents,
+        mask,
+    )?;
+    let lp = dir.join("lights.lp");
+    let mut text = format!("{}\n", lights.len());
+    for (name, l) in names.iter().zip(lights) {
+        let _ = writeln!(text, "{name} {:?} {:?} {:?}", l.x, l.y, l.z);
+    }
+    write_bytes(&lp, text.as_bytes())?;
+    write_bytes(
+        &dir.join(SYNTH_MARKER),
+        b"Written by symframe: a later `symframe synth -o` may replace this folder's dataset.\n",
+    )?;
+    Ok(lp)
+}
+
+/// Writes `images/img_NNNN.<ext>`, and when given `gt_normals.npy`, `gt_tangents.npy` and
+/// `mask.png`, into `dir`; returns the images' names relative to `dir`.
+#[allow(clippy::too_many_arguments)]
+fn write_images_and_truth(
+    dir: &Path,
+    images: &[Vec<f32>],
+    width: usize,
+    height: usize,
+    format: ImageFormat,
+    gt_normals: Option<&[f32]>,
+    gt_tangents: Option<&[f32]>,
+    mask: Option<&[bool]>,
+) -> Result<Vec<String>> {
     let img_dir = dir.join("images");
     std::fs::create_dir_all(&img_dir).map_err(|e| Error::write(&img_dir, e))?;
     let names: Vec<String> = (0..images.len())
@@ -93,17 +129,95 @@ pub fn write_lp_dataset(
         let bytes: Vec<u8> = m.iter().map(|&b| if b { 255 } else { 0 }).collect();
         write_png(&p, width, height, &bytes, crate::codecs::PngLayout::L8)?;
     }
-    let lp = dir.join("lights.lp");
-    let mut text = format!("{}\n", lights.len());
-    for (name, l) in names.iter().zip(lights) {
-        let _ = writeln!(text, "{name} {:?} {:?} {:?}", l.x, l.y, l.z);
+    Ok(names)
+}
+
+/// What a near-light dataset holds besides its images (see [`write_near_dataset`]).
+#[derive(Debug, Clone, Copy)]
+pub struct NearFiles<'a> {
+    /// Light positions, camera frame, one per image.
+    pub positions: &'a [DVec3],
+    /// Directions from the object's centre to each light (`light_directions.txt`, what a
+    /// distant-light reader is given).
+    pub directions: &'a [DVec3],
+    /// The pinhole intrinsics, OpenCV's convention, row-major.
+    pub k: [[f64; 3]; 3],
+    /// Depth along the optical axis per pixel (`gt_depth.npy`, `H x W`, NaN on the background).
+    pub gt_depth: Option<&'a [f32]>,
+}
+
+/// Writes a near-light dataset into `dir` (created if needed) in the DiLiGenT layout: the images
+/// as [`write_lp_dataset`] writes them, `filenames.txt`, `light_positions.txt`, `K.txt`,
+/// `light_directions.txt` and the truth (`gt_normals.npy`, `gt_tangents.npy`, `gt_depth.npy`,
+/// `mask.png`), numbers at round-trip precision. Returns the folder.
+#[allow(clippy::too_many_arguments)]
+pub fn write_near_dataset(
+    dir: &Path,
+    near: &NearFiles,
+    images: &[Vec<f32>],
+    width: usize,
+    height: usize,
+    format: ImageFormat,
+    gt_normals: Option<&[f32]>,
+    gt_tangents: Option<&[f32]>,
+    mask: Option<&[bool]>,
+) -> Result<PathBuf> {
+    if near.positions.len() != images.len()
+        || near.directions.len() != images.len()
+        || images.is_empty()
+    {
+        return Err(Error::invalid(
+            dir,
+            format!(
+                "need one image, position and direction per light and at least one light: {} \
+                 images, {} positions, {} directions",
+                images.len(),
+                near.positions.len(),
+                near.directions.len()
+            ),
+        ));
     }
-    write_bytes(&lp, text.as_bytes())?;
+    let names = write_images_and_truth(
+        dir,
+        images,
+        width,
+        height,
+        format,
+        gt_normals,
+        gt_tangents,
+        mask,
+    )?;
+    if let Some(d) = near.gt_depth {
+        write_npy_f32(&dir.join("gt_depth.npy"), &[height, width], d)?;
+    }
+    let table = |v: &[DVec3]| {
+        v.iter().fold(String::new(), |mut t, p| {
+            let _ = writeln!(t, "{:?} {:?} {:?}", p.x, p.y, p.z);
+            t
+        })
+    };
+    write_bytes(
+        &dir.join("filenames.txt"),
+        (names.join("\n") + "\n").as_bytes(),
+    )?;
+    write_bytes(
+        &dir.join(crate::near::POSITIONS),
+        table(near.positions).as_bytes(),
+    )?;
+    write_bytes(
+        &dir.join("light_directions.txt"),
+        table(near.directions).as_bytes(),
+    )?;
+    let k: String = near.k.iter().fold(String::new(), |mut t, r| {
+        let _ = writeln!(t, "{:?} {:?} {:?}", r[0], r[1], r[2]);
+        t
+    });
+    write_bytes(&dir.join(crate::near::INTRINSICS), k.as_bytes())?;
     write_bytes(
         &dir.join(SYNTH_MARKER),
         b"Written by symframe: a later `symframe synth -o` may replace this folder's dataset.\n",
     )?;
-    Ok(lp)
+    Ok(dir.to_path_buf())
 }
 
 /// The file that marks a folder as written by [`write_lp_dataset`] (`symframe synth`).

@@ -68,6 +68,7 @@ mod outdir;
 pub mod pictures;
 mod relight;
 pub mod synth;
+pub mod synth_near;
 mod tiles;
 mod view;
 
@@ -98,6 +99,7 @@ pub use eval::{evaluate_job, EvalConfig, EvalReport};
 pub use export::{export_gltf, ExportConfig, ExportOutcome};
 pub use integrate::{integrate_job, IntegrateConfig, IntegrateReport};
 pub use synth::{synth, RigSpec, SynthConfig, SynthOutcome, SynthShape};
+pub use synth_near::{synth_near, NearSynthConfig};
 
 /// The run stopped early on request; what was done (cache images, finished tiles) is kept,
 /// and the same call again resumes.

@@ -78,6 +78,7 @@ pub mod highlight;
 pub mod integrate;
 pub mod maps;
 pub mod method;
+pub mod near;
 pub mod noise;
 pub mod orientation;
 pub mod render;

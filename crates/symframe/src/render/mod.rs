@@ -19,6 +19,7 @@ use crate::stack::Stack;
 
 mod mirror_ball;
 pub mod noise;
+pub mod perspective;
 pub mod rigs;
 pub mod shadow;
 mod shapes;

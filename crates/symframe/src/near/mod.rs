@@ -1,0 +1,15 @@
+//! Near lights and perspective cameras: a pinhole camera ([`Pinhole`]: each pixel's ray and
+//! view direction from OpenCV's intrinsics), point lights ([`PointLight`]: each light's
+//! direction and irradiance at a surface point, LEDs with a cos^mu falloff) and the sphere
+//! through the lights ([`fit_sphere`]: a dome's centre, where the object is taken to be when its
+//! distance is not given).
+//!
+//! The estimator itself assumes distant lights and the view along +z; with near lights each
+//! pixel has its own light directions, irradiances and view. docs/method.md ("Near lights and
+//! perspective cameras") says how the two meet.
+
+mod camera;
+mod light;
+
+pub use camera::Pinhole;
+pub use light::{fit_sphere, rotation_to_z, PointLight};
