@@ -364,10 +364,12 @@ pub struct EstimateArgs {
     /// image exceeds it is refused.
     #[arg(long, default_value_t = CacheOptions::default().batch_bytes >> 20, value_name = "MIB")]
     pub decode_memory: usize,
-    /// Sample type of the tile cache: f32 (12 bytes per pixel per light; tiled results equal
-    /// in-memory ones bit for bit) or f16 (half the size and I/O, 11 significant bits, HDR
-    /// range kept by a power-of-two scale per block; see docs/performance.md for its effect).
-    #[arg(long, value_enum, default_value_t = CacheFormatArg::F32)]
+    /// Sample type of the tile cache: auto (u8 for 8-bit images, u16 for 16-bit ones, else
+    /// f32), u8 or u16 (the images' own codes, 3 or 6 bytes per pixel per light, made linear
+    /// when read: the same samples as f32), f32 (12 bytes; tiled results equal in-memory ones
+    /// bit for bit) or f16 (6 bytes, 11 significant bits, HDR range kept by a power-of-two
+    /// scale per block; see docs/performance.md for its effect).
+    #[arg(long, value_enum, default_value_t = CacheFormatArg::Auto)]
     pub cache_format: CacheFormatArg,
     /// The y convention of normals.png (16-bit, `(n + 1) / 2` per channel): opengl (green =
     /// up: glTF, Blender) or directx (green = down: Unreal).
@@ -411,7 +413,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = CacheOptions::default().batch_bytes >> 20, value_name = "MIB")]
     pub decode_memory: usize,
     /// Passed to `estimate --cache-format`.
-    #[arg(long, value_enum, default_value_t = CacheFormatArg::F32)]
+    #[arg(long, value_enum, default_value_t = CacheFormatArg::Auto)]
     pub cache_format: CacheFormatArg,
     /// Estimate only this shard of the tiles (`estimate --tiles K/N`): the whole cache is
     /// still built, so decoding and memory are measured at full size in a fraction of the time.
@@ -875,10 +877,16 @@ pub struct ExportArgs {
 /// Sample type of the tile cache.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum CacheFormatArg {
+    /// The smallest exact one for the images: u8, u16 or f32.
+    Auto,
     /// 32-bit floats (exact).
     F32,
     /// Half floats (half the size).
     F16,
+    /// 8-bit images' codes (exact, a quarter of f32).
+    U8,
+    /// 8- or 16-bit images' codes (exact, half of f32).
+    U16,
 }
 
 impl From<CacheFormatArg> for symframe_io::CacheFormat {
@@ -886,6 +894,9 @@ impl From<CacheFormatArg> for symframe_io::CacheFormat {
         match a {
             CacheFormatArg::F32 => symframe_io::CacheFormat::F32,
             CacheFormatArg::F16 => symframe_io::CacheFormat::F16,
+            CacheFormatArg::Auto => symframe_io::CacheFormat::Auto,
+            CacheFormatArg::U8 => symframe_io::CacheFormat::U8,
+            CacheFormatArg::U16 => symframe_io::CacheFormat::U16,
         }
     }
 }

@@ -438,6 +438,23 @@ impl StackImage {
         Ok(())
     }
 
+    /// Reads the next `out.len() / (3 * width)` rows into `out` as the file's integer codes
+    /// (3 a pixel, grey replicated), not made linear nor divided by the intensity: what an
+    /// integer tile cache stores; see [`Rows::read_codes`].
+    pub(crate) fn read_codes(&mut self, out: &mut [u16]) -> Result<()> {
+        self.rows.read_codes(out)
+    }
+
+    /// How the codes [`Self::read_codes`] gives become what [`Self::read_rgb`] gives: the
+    /// sample kind (its transfer curve), the first saturated code and the light's intensity.
+    pub(crate) fn code_decoding(&self) -> (SampleKind, u32, Option<[f32; 3]>) {
+        (
+            self.rows.kind(),
+            self.rows.first_saturated(),
+            self.intensity,
+        )
+    }
+
     /// Ends the reading (every row read; see [`Rows::finish`]) and notes the image.
     pub(crate) fn finish(&mut self, notes: &Notes) -> Result<()> {
         self.rows.finish()?;

@@ -236,10 +236,17 @@ pub fn cache(o: &mut Options) -> PyResult<CacheConfig> {
     let trust_mtime: bool = o.or("trust_mtime", d.trust_mtime)?;
     let tile: usize = o.or("tile_size", d.tile)?;
     let decode_memory: usize = o.or("decode_memory", d.batch_bytes >> 20)?;
-    let format = match o.or("cache_format", "f32".to_string())?.as_str() {
+    let format = match o.or("cache_format", "auto".to_string())?.as_str() {
+        "auto" => symframe_io::CacheFormat::Auto,
         "f32" => symframe_io::CacheFormat::F32,
         "f16" => symframe_io::CacheFormat::F16,
-        other => return Err(bad(format!("cache_format must be f32 or f16, got {other}"))),
+        "u8" => symframe_io::CacheFormat::U8,
+        "u16" => symframe_io::CacheFormat::U16,
+        other => {
+            return Err(bad(format!(
+                "cache_format must be auto, f32, f16, u8 or u16, got {other}"
+            )))
+        }
     };
     if !(1..=4096).contains(&tile) {
         return Err(bad(format!("tile_size must be in [1, 4096], got {tile}")));

@@ -5,7 +5,7 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use crate::common::{estimate_tiled as estimate, ok, report, stderr, symframe, ward_sphere};
+use crate::common::{estimate_tiled as estimate, ok, report, s, stderr, symframe, ward_sphere};
 
 use symframe::baselines::{estimate_stack_baseline, Baseline};
 use symframe::frames::symmetry::CosineMode;
@@ -403,4 +403,66 @@ fn half_float_cache_is_recorded_reused_and_rebuilt_on_a_format_change() {
         }
     }
     assert!(worst < 0.1, "{worst} degrees");
+}
+
+/// 8-bit (PNG and JPEG) and 16-bit PNG captures: the automatic cache keeps the images' own
+/// codes (3 or 6 bytes per pixel per light) and gives the maps of a float32 cache bit for bit.
+#[test]
+fn integer_caches_give_the_float_caches_maps_bit_for_bit() {
+    use crate::common::{sphere_dataset, Truth};
+    use symframe_io::ImageFormat;
+    let tmp = tempfile::tempdir().unwrap();
+    let brdf = symframe::brdf::ward::Ward::new([0.4; 3], [0.3; 3], 0.15, 0.4);
+    let truth = Truth {
+        normals: false,
+        tangents: false,
+    };
+    let (size, n) = (24, 40);
+    for (name, format, jpeg, want, bytes) in [
+        ("png8", ImageFormat::Png8, false, "u8", 3),
+        ("jpeg", ImageFormat::Png8, true, "u8", 3),
+        ("png16", ImageFormat::Png16, false, "u16", 6),
+    ] {
+        let dir = tmp.path().join(name);
+        let (_, mut lp) = sphere_dataset(&dir, size, n, &brdf, format, 1.5, truth);
+        if jpeg {
+            // The same pictures as baseline JPEG of quality 90.
+            let text = fs::read_to_string(&lp).unwrap().replace(".png ", ".jpg ");
+            for line in text.lines().skip(1) {
+                let jpg = dir.join(line.split(' ').next().unwrap());
+                let img = image::open(jpg.with_extension("png")).unwrap().to_rgb8();
+                let f = std::io::BufWriter::new(fs::File::create(&jpg).unwrap());
+                image::codecs::jpeg::JpegEncoder::new_with_quality(f, 90)
+                    .encode_image(&img)
+                    .unwrap();
+            }
+            lp = dir.join("jpeg.lp");
+            fs::write(&lp, text).unwrap();
+        }
+        let run = |out: &str, format: &str| {
+            let out = dir.join(out);
+            let cache = dir.join(format!("cache-{format}"));
+            ok(&estimate(
+                &lp,
+                &out,
+                &["--cache", s(&cache), "--cache-format", format],
+            ));
+            let r = report(&out);
+            (out, r)
+        };
+        let (a, r) = run("auto", "auto");
+        assert_eq!(r["cache"]["format"], want, "{name}: {r}");
+        // Header, samples, a checksum per tile (9 tiles of 8 pixels, one light block), a
+        // record per light.
+        let expect = 4096 + size * size * n * bytes + 9 * 8 + n * 32;
+        assert_eq!(r["cache"]["bytes"], expect as u64, "{name}");
+        let (b, r) = run("f32", "f32");
+        assert_eq!(r["cache"]["format"], "f32", "{name}");
+        same_maps(&a, &b);
+        assert_eq!(
+            fs::read(a.join("normals.npy")).unwrap(),
+            fs::read(b.join("normals.npy")).unwrap(),
+            "{name}"
+        );
+    }
 }

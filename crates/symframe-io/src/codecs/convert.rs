@@ -71,8 +71,7 @@ impl Convert {
         };
         let mut lut8 = [0.0f32; 256];
         for (i, v) in lut8.iter_mut().enumerate() {
-            let x = i as f32 / 255.0;
-            *v = if srgb8 { srgb_to_linear(x) } else { x };
+            *v = linear_value(srgb8, 8, i as u32);
         }
         let sat = match ty {
             SampleType::U8 => opts.saturation * 255.0,
@@ -123,14 +122,7 @@ impl Convert {
                 0
             }
             RawRun::U16(v) => {
-                let linear = |s: u16| {
-                    let x = s as f32 / 65535.0;
-                    if self.srgb16 {
-                        srgb_to_linear(x)
-                    } else {
-                        x
-                    }
-                };
+                let linear = |s: u16| linear_value(self.srgb16, 16, s as u32);
                 self.each(v, out, out_ch, |px, o| {
                     if px.iter().any(|&s| s as f32 >= self.sat) {
                         o.fill(f32::INFINITY);
@@ -164,6 +156,50 @@ impl Convert {
         }
     }
 
+    /// The first integer code at or above the saturation level (a pixel with any kept sample
+    /// at or above it is saturated); `2^bits` when none is, `0` for float samples (unused).
+    pub(crate) fn first_saturated(&self) -> u32 {
+        let max: u32 = match self.kind {
+            SampleKind::Srgb8 | SampleKind::Linear8 => 255,
+            SampleKind::U16 | SampleKind::Srgb16 => 65535,
+            SampleKind::Float => return 0,
+        };
+        // `s as f32` grows with `s`: the codes at or above the level are one final range.
+        let (mut lo, mut hi) = (0u32, max + 1);
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            if mid as f32 >= self.sat {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        lo
+    }
+
+    /// Copies the kept integer samples of the whole pixels of `src` into `out`, 3 a pixel
+    /// (grey replicated), as the file stores them: what an integer tile cache keeps, made
+    /// linear when read ([`linear_table`]). Float samples are refused (`false`).
+    pub(crate) fn codes(&self, src: RawRun, out: &mut [u16]) -> bool {
+        fn copy<T: Copy + Into<u16>>(ch: usize, take: usize, src: &[T], out: &mut [u16]) {
+            for (px, o) in src.chunks_exact(ch).zip(out.chunks_exact_mut(3)) {
+                if take == 3 {
+                    for (o, &s) in o.iter_mut().zip(&px[..3]) {
+                        *o = s.into();
+                    }
+                } else {
+                    o.fill(px[0].into());
+                }
+            }
+        }
+        match src {
+            RawRun::U8(v) => copy(self.ch, self.take, v, out),
+            RawRun::U16(v) => copy(self.ch, self.take, v, out),
+            RawRun::F32(_) => return false,
+        }
+        true
+    }
+
     /// Calls `one(kept samples, their linear values)` for each pixel of `src`, then writes the
     /// values into `out` (`out_ch` a pixel, grey replicated).
     fn each<T: Copy>(
@@ -184,6 +220,39 @@ impl Convert {
             }
         }
     }
+}
+
+/// The linear value of the integer code `s` of a `bits`-bit sample (8 or 16), sRGB-decoded
+/// or not: the one definition of [`Convert`]'s curves, so that tables built from it
+/// ([`linear_table`]) give its values bit for bit.
+fn linear_value(srgb: bool, bits: u32, s: u32) -> f32 {
+    let x = s as f32 / if bits == 8 { 255.0 } else { 65535.0 };
+    if srgb {
+        srgb_to_linear(x)
+    } else {
+        x
+    }
+}
+
+/// The linear values of every code of samples of `kind` (an integer kind), `len` entries:
+/// codes past the kind's largest (none in a file this crate wrote) read as `NaN`.
+pub(crate) fn linear_table(kind: SampleKind, len: usize) -> Vec<f32> {
+    let (srgb, bits) = match kind {
+        SampleKind::Srgb8 => (true, 8),
+        SampleKind::Linear8 => (false, 8),
+        SampleKind::Srgb16 => (true, 16),
+        SampleKind::U16 | SampleKind::Float => (false, 16),
+    };
+    let codes = 1usize << bits;
+    (0..len)
+        .map(|s| {
+            if s < codes {
+                linear_value(srgb, bits, s as u32)
+            } else {
+                f32::NAN
+            }
+        })
+        .collect()
 }
 
 /// Sets a float pixel's samples all `NaN` when any is not finite; returns how many of them

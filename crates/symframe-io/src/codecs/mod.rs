@@ -56,7 +56,7 @@ mod rows;
 mod tiff;
 
 pub use colour::ColourTag;
-pub(crate) use convert::{Convert, RawRun, SampleType};
+pub(crate) use convert::{linear_table, Convert, RawRun, SampleType};
 use exr::read_exr;
 pub use exr::{write_exr_channels, write_exr_rgb};
 pub(crate) use exr::{write_exr_interleaved, write_exr_pixels};
@@ -331,6 +331,45 @@ pub fn declared_size(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<
     };
     catch_unwind(AssertUnwindSafe(run))
         .unwrap_or_else(|_| Err(Error::decode(path, "decoder panicked (corrupt file?)")))
+}
+
+/// The bits of the integer samples the image file `path` (whose first bytes are `prefix`)
+/// declares in its header, as its decoder gives them: 8 for JPEG and for PNG under 16 bits (a
+/// palette, or fewer bits, expanded to 8), 16 for 16-bit PNG, 8 or 16 for unsigned-integer
+/// TIFF; `None` for float formats and headers that do not say (then the samples are taken as
+/// float).
+pub(crate) fn declared_bits(path: &Path, prefix: &[u8]) -> Option<u32> {
+    let ext = extension(path).ok()?;
+    match ext.as_str() {
+        "jpg" | "jpeg" => Some(8),
+        "png" => {
+            // Signature, then the IHDR chunk: length, type, width, height, bit depth.
+            if prefix.len() < 26 || &prefix[12..16] != b"IHDR" {
+                return None;
+            }
+            Some(if prefix[24] == 16 { 16 } else { 8 })
+        }
+        "tif" | "tiff" => {
+            let run = || -> Option<u32> {
+                use ::tiff::tags::Tag;
+                let mut dec = ::tiff::decoder::Decoder::new(std::io::Cursor::new(prefix)).ok()?;
+                let unsigned = matches!(dec.find_tag_unsigned::<u16>(Tag::SampleFormat), Ok(None))
+                    || dec
+                        .get_tag_u16_vec(Tag::SampleFormat)
+                        .is_ok_and(|v| v.iter().all(|&f| f == 1));
+                let bits = match dec.colortype().ok()? {
+                    ::tiff::ColorType::Gray(b)
+                    | ::tiff::ColorType::GrayA(b)
+                    | ::tiff::ColorType::RGB(b)
+                    | ::tiff::ColorType::RGBA(b) => b,
+                    _ => return None,
+                };
+                (unsigned && (bits == 8 || bits == 16)).then_some(bits as u32)
+            };
+            catch_unwind(AssertUnwindSafe(run)).ok().flatten()
+        }
+        _ => None,
+    }
 }
 
 /// Reads the mask image `path` (any format [`read_image`] reads): width, height and which

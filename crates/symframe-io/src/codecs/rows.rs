@@ -295,6 +295,11 @@ impl Rows {
         self.conv.kind()
     }
 
+    /// The first integer code at or above the saturation level ([`Convert::first_saturated`]).
+    pub(crate) fn first_saturated(&self) -> u32 {
+        self.conv.first_saturated()
+    }
+
     /// Whether the image is grey (one channel kept).
     pub(crate) fn grey(&self) -> bool {
         self.conv.take() == 1
@@ -375,29 +380,8 @@ impl Rows {
                 row16,
                 ..
             } => {
-                let want = w * ch * if *sixteen { 2 } else { 1 };
                 for o in out.chunks_exact_mut(out_row) {
-                    let row = reader
-                        .next_row()
-                        .map_err(|e| png_error(path, e))?
-                        .ok_or_else(|| Error::decode(path, "image data ends early"))?;
-                    let data = row.data();
-                    if data.len() != want {
-                        return Err(Error::decode(
-                            path,
-                            format!("a row of {} bytes, expected {want}", data.len()),
-                        ));
-                    }
-                    let run = if *sixteen {
-                        row16.clear();
-                        row16.extend(
-                            data.chunks_exact(2)
-                                .map(|b| u16::from_be_bytes([b[0], b[1]])),
-                        );
-                        RawRun::U16(row16)
-                    } else {
-                        RawRun::U8(data)
-                    };
+                    let run = next_png_row(path, reader, *sixteen, row16, w * ch)?;
                     self.negative += self.conv.run(run, o, out_ch);
                 }
             }
@@ -428,6 +412,67 @@ impl Rows {
         Ok(())
     }
 
+    /// Reads the next `out.len() / (3 * width)` rows into `out` as the file's integer codes,
+    /// 3 a pixel (grey replicated, alpha dropped; see [`Convert::codes`]). An image of float
+    /// samples is refused, naming the file.
+    pub(crate) fn read_codes(&mut self, out: &mut [u16]) -> Result<()> {
+        let w = self.width;
+        let rows = out.len() / (w * 3).max(1);
+        if self.next + rows > self.height {
+            return Err(Error::invalid(&self.path, "read past the image's last row"));
+        }
+        match catch_unwind(AssertUnwindSafe(|| self.read_code_rows(out, rows))) {
+            Ok(Ok(true)) => {}
+            Ok(Ok(false)) => {
+                return Err(Error::invalid(
+                    &self.path,
+                    format!(
+                        "{} samples do not fit an integer tile cache; use --cache-format f32",
+                        self.conv.kind().describe()
+                    ),
+                ))
+            }
+            Ok(Err(e)) => return Err(e),
+            Err(_) => return Err(panicked(&self.path)),
+        }
+        self.next += rows;
+        Ok(())
+    }
+
+    /// [`Self::read_codes`] of `rows` rows: `false` for float samples.
+    fn read_code_rows(&mut self, out: &mut [u16], rows: usize) -> Result<bool> {
+        let (w, ch, y0) = (self.width, self.conv.channels(), self.next);
+        let path = &self.path;
+        let out_row = w * 3;
+        match &mut self.source {
+            Source::Whole(raw) => Ok(self
+                .conv
+                .codes(raw.run(y0 * w * ch..(y0 + rows) * w * ch), out)),
+            Source::Tiff(r) => {
+                for (k, o) in out.chunks_exact_mut(out_row).enumerate() {
+                    let row = r.row(path, y0 + k)?;
+                    if !self.conv.codes(row, o) {
+                        return Ok(false);
+                    }
+                }
+                Ok(true)
+            }
+            Source::Png {
+                reader,
+                sixteen,
+                row16,
+                ..
+            } => {
+                for o in out.chunks_exact_mut(out_row) {
+                    let run = next_png_row(path, reader, *sixteen, row16, w * ch)?;
+                    self.conv.codes(run, o);
+                }
+                Ok(true)
+            }
+            Source::Exr(_) | Source::Hdr(_) | Source::Pfm { .. } => Ok(false),
+        }
+    }
+
     /// Ends the reading, every row read: a PNG's image data is read to its end, as a whole
     /// decode reads it (so a file that a whole decode refuses is refused here too).
     pub(crate) fn finish(&mut self) -> Result<()> {
@@ -448,6 +493,39 @@ impl Rows {
         }
         Ok(())
     }
+}
+
+/// The next row of a PNG decoded row by row (`samples` a row), checked for its length, as a
+/// run of its samples (16-bit ones put in `row16`, native order).
+fn next_png_row<'a>(
+    path: &Path,
+    reader: &'a mut ::png::Reader<Cursor<Vec<u8>>>,
+    sixteen: bool,
+    row16: &'a mut Vec<u16>,
+    samples: usize,
+) -> Result<RawRun<'a>> {
+    let want = samples * if sixteen { 2 } else { 1 };
+    let row = reader
+        .next_row()
+        .map_err(|e| png_error(path, e))?
+        .ok_or_else(|| Error::decode(path, "image data ends early"))?;
+    let data = row.data();
+    if data.len() != want {
+        return Err(Error::decode(
+            path,
+            format!("a row of {} bytes, expected {want}", data.len()),
+        ));
+    }
+    Ok(if sixteen {
+        row16.clear();
+        row16.extend(
+            data.chunks_exact(2)
+                .map(|b| u16::from_be_bytes([b[0], b[1]])),
+        );
+        RawRun::U16(row16)
+    } else {
+        RawRun::U8(data)
+    })
 }
 
 /// What [`read_image_grey`] gives each band to: its first row, grey values and RGB samples.

@@ -9,9 +9,11 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
+use super::codes::{LightCodes, LIGHT_RECORD_BYTES};
 use super::header::{encode_warnings, matches, read_header, Header, HEADER_BYTES, WARNINGS_AT};
 use super::{block_sum, pow2, CacheFormat, CacheInfo, CacheOptions, TileGrid};
 use crate::codecs::DecodeOptions;
+use crate::codecs::SampleKind;
 use crate::dataset::Dataset;
 use crate::error::{Error, Result, Warning};
 use crate::stack::{open_stack_image, Notes, StackImage};
@@ -57,20 +59,23 @@ pub(super) fn create_sized(path: &Path, len: u64) -> Result<File> {
 
 /// What one image of a decoding batch holds in memory while the cache is built: its reader
 /// (a PNG's file and decoder, a PFM's band of stored bytes, a row of an EXR's or TIFF's blocks,
-/// an HDR scan line, or a JPEG's samples decoded whole, in the file's type), its band of decoded rows (`width x tile` RGB `f32`), and its
+/// an HDR scan line, or a JPEG's samples decoded whole, in the file's type), its band of decoded
+/// rows (`width x tile` RGB `f32`, or `u16` codes for an integer cache), and its
 /// share of the per-thread buffers that assemble a tile's block. `--decode-memory` divided by
 /// it is the batch, so a small file declaring a large image costs its band, not its image.
 pub(super) fn image_cost(img: &StackImage, copts: &CacheOptions) -> usize {
     let (w, h) = img.size();
     let rows = copts.tile.min(h);
     let tile_pixels = copts.tile.min(w) * rows;
-    let assemble = 12
-        + if copts.format == CacheFormat::F16 {
-            6
-        } else {
-            0
-        };
-    img.resident_bytes(rows) + w * rows * 12 + rayon::current_num_threads() * tile_pixels * assemble
+    let (band, assemble) = match copts.format {
+        CacheFormat::F16 => (12, 18),
+        CacheFormat::U8 => (6, 3),
+        CacheFormat::U16 => (6, 6),
+        CacheFormat::F32 | CacheFormat::Auto => (12, 12),
+    };
+    img.resident_bytes(rows)
+        + w * rows * band
+        + rayon::current_num_threads() * tile_pixels * assemble
 }
 
 /// How many images a decoding batch may hold open at once: most images (PFM, EXR, TIFF, HDR)
@@ -292,7 +297,12 @@ impl Batch<'_> {
         }
         times.decode += t.elapsed().as_secs_f64();
         let band_len = grid.width * grid.tile.min(grid.height) * 3;
-        let mut bands = vec![0.0f32; images.len() * band_len];
+        let (mut bands, records) = if to.header.format.integer() {
+            let records = self.write_records(to, lights.start, &images)?;
+            (Bands::Codes(vec![0; images.len() * band_len]), records)
+        } else {
+            (Bands::Float(vec![0.0; images.len() * band_len]), Vec::new())
+        };
         let bands_y = grid.tiles_y();
         let mut reported = 0;
         for band in 0..bands_y {
@@ -302,21 +312,30 @@ impl Batch<'_> {
             let t = Instant::now();
             let rows = grid.tile.min(grid.height - band * grid.tile);
             let last = band + 1 == bands_y;
-            let read: Vec<Result<()>> = images
-                .par_iter_mut()
-                .zip(bands.par_chunks_mut(band_len))
-                .map(|(img, buf)| {
-                    img.read_rgb(&mut buf[..rows * grid.width * 3])?;
-                    if last {
-                        img.finish(self.notes)?;
-                    }
-                    Ok(())
-                })
-                .collect();
+            let n = rows * grid.width * 3;
+            let done = |img: &mut StackImage| if last { img.finish(self.notes) } else { Ok(()) };
+            let read: Vec<Result<()>> = match &mut bands {
+                Bands::Float(b) => images
+                    .par_iter_mut()
+                    .zip(b.par_chunks_mut(band_len))
+                    .map(|(img, buf)| {
+                        img.read_rgb(&mut buf[..n])?;
+                        done(img)
+                    })
+                    .collect(),
+                Bands::Codes(b) => images
+                    .par_iter_mut()
+                    .zip(b.par_chunks_mut(band_len))
+                    .map(|(img, buf)| {
+                        img.read_codes(&mut buf[..n])?;
+                        done(img)
+                    })
+                    .collect(),
+            };
             read.into_iter().collect::<Result<()>>()?;
             times.decode += t.elapsed().as_secs_f64();
             let t = Instant::now();
-            scatter(to, lights.start, band, &bands, band_len)?;
+            scatter(to, lights.start, band, &bands, band_len, &records)?;
             times.scatter += t.elapsed().as_secs_f64();
             let done = images.len() * (band + 1) / bands_y;
             while reported < done {
@@ -325,6 +344,70 @@ impl Batch<'_> {
             }
         }
         Ok(())
+    }
+}
+
+impl Batch<'_> {
+    /// Writes the records of images `start..` (opened) of an integer cache: how each one's
+    /// codes become samples. An image whose samples the format cannot hold (a float image, or
+    /// a 16-bit one in a `u8` cache) is refused, naming it. Returns the records' bytes.
+    fn write_records(&self, to: &Target, start: usize, images: &[StackImage]) -> Result<Vec<u8>> {
+        let mut table = Vec::with_capacity(images.len() * LIGHT_RECORD_BYTES);
+        for (j, img) in images.iter().enumerate() {
+            let (kind, first_saturated, intensity) = img.code_decoding();
+            let fits = match kind {
+                SampleKind::Srgb8 | SampleKind::Linear8 => true,
+                SampleKind::U16 | SampleKind::Srgb16 => to.header.format == CacheFormat::U16,
+                SampleKind::Float => false,
+            };
+            if !fits {
+                let format = serde_json::to_string(&to.header.format).unwrap_or_default();
+                return Err(Error::invalid(
+                    &self.ds.images[start + j],
+                    format!(
+                        "{} samples do not fit a {} tile cache; use --cache-format f32",
+                        kind.describe(),
+                        format.trim_matches('"')
+                    ),
+                ));
+            }
+            let record = LightCodes {
+                kind,
+                first_saturated,
+                intensity,
+            };
+            table.extend_from_slice(&record.encode());
+        }
+        let at = to.header.lights_offset() + (start * LIGHT_RECORD_BYTES) as u64;
+        write_all_at(to.file, &table, at).map_err(|e| Error::write(to.path, e))?;
+        Ok(table)
+    }
+}
+
+/// One band of each image of a batch, interleaved RGB: linear samples for a float cache,
+/// the files' codes for an integer one.
+enum Bands {
+    Float(Vec<f32>),
+    Codes(Vec<u16>),
+}
+
+/// Appends tile `t`'s pixels of the band (its first pixel `offset`) of each image in `bands`
+/// (`band_len` samples apart) to `buf`: pixel-major, each pixel's RGB under the images.
+fn gather_tile<T: Copy>(
+    grid: &TileGrid,
+    t: usize,
+    offset: usize,
+    bands: &[T],
+    band_len: usize,
+    buf: &mut Vec<T>,
+) {
+    buf.clear();
+    buf.reserve(grid.tile_pixels(t) * (bands.len() / band_len) * 3);
+    for p in grid.pixels(t) {
+        let q = (p - offset) * 3;
+        for img in bands.chunks_exact(band_len) {
+            buf.extend_from_slice(&img[q..q + 3]);
+        }
     }
 }
 
@@ -359,14 +442,22 @@ pub(super) fn write_all_at(file: &File, buf: &[u8], offset: u64) -> std::io::Res
 /// Writes one band of tile rows (`band`: a row of tiles) of images `start..` (one block of
 /// lights, every block before it full) into each of the band's tiles, and the blocks'
 /// checksums (and, for half floats, scale exponents) into the tables: `bands` holds each
-/// image's band (interleaved RGB, row-major, `band_len` samples apart). Per tile, the block is
-/// assembled in a per-thread buffer (`pixels * images * 12` bytes, 1 MB for a 32-pixel tile
-/// and 85 images; converted to half floats in a second one for that format) and written with
+/// image's band (interleaved RGB, row-major, `band_len` samples apart; an integer cache's
+/// codes, whose block checksums cover `records`, the block's lights' records, too). Per tile,
+/// the block is assembled in a per-thread buffer (`pixels * images * 12` bytes for floats, 1 MB
+/// for a 32-pixel tile and 85 images; converted to half floats or bytes in a second one for
+/// those formats) and written with
 /// one positioned write, so every page of the file is written once, by one batch, and nothing
 /// of the file is mapped while building.
-fn scatter(to: &Target, start: usize, band: usize, bands: &[f32], band_len: usize) -> Result<()> {
+fn scatter(
+    to: &Target,
+    start: usize,
+    band: usize,
+    bands: &Bands,
+    band_len: usize,
+    records: &[u8],
+) -> Result<()> {
     let (grid, h) = (to.grid, to.header);
-    let b = bands.len() / band_len;
     let px = h.format.pixel_bytes();
     // Image pixel index of the band's first pixel; the band's tiles, a run of tile numbers.
     let offset = band * grid.tile * grid.width;
@@ -374,41 +465,46 @@ fn scatter(to: &Target, start: usize, band: usize, bands: &[f32], band_len: usiz
     let sums: Vec<(u64, i32)> = tiles
         .clone()
         .into_par_iter()
-        .map_init(
-            || (Vec::new(), Vec::new()),
-            |(buf, halves): &mut (Vec<f32>, Vec<half::f16>), t| {
-                let np = grid.tile_pixels(t);
-                buf.clear();
-                buf.reserve(np * b * 3);
-                for p in grid.pixels(t) {
-                    let q = (p - offset) * 3;
-                    for img in bands.chunks_exact(band_len) {
-                        buf.extend_from_slice(&img[q..q + 3]);
+        .map_init(Buffers::default, |bufs, t| {
+            let np = grid.tile_pixels(t);
+            let (bytes, e): (&[u8], i32) = match bands {
+                Bands::Float(b) => {
+                    gather_tile(grid, t, offset, b, band_len, &mut bufs.floats);
+                    let buf = &mut bufs.floats;
+                    match h.format {
+                        CacheFormat::F16 => {
+                            use half::slice::HalfFloatSliceExt;
+                            let e = half_exponent(buf);
+                            if e != 0 {
+                                let f = pow2(e);
+                                for v in buf.iter_mut() {
+                                    *v *= f;
+                                }
+                            }
+                            bufs.halves.clear();
+                            bufs.halves.resize(buf.len(), half::f16::ZERO);
+                            bufs.halves.convert_from_f32_slice(buf);
+                            let bits: &[u16] = bufs.halves.reinterpret_cast();
+                            (bytemuck::cast_slice(bits), e)
+                        }
+                        _ => (bytemuck::cast_slice(buf), 0),
                     }
                 }
-                let (bytes, e): (&[u8], i32) = match h.format {
-                    CacheFormat::F32 => (bytemuck::cast_slice(buf), 0),
-                    CacheFormat::F16 => {
-                        use half::slice::HalfFloatSliceExt;
-                        let e = half_exponent(buf);
-                        if e != 0 {
-                            let f = pow2(e);
-                            for v in buf.iter_mut() {
-                                *v *= f;
-                            }
-                        }
-                        halves.clear();
-                        halves.resize(buf.len(), half::f16::ZERO);
-                        halves.convert_from_f32_slice(buf);
-                        let bits: &[u16] = halves.reinterpret_cast();
-                        (bytemuck::cast_slice(bits), e)
+                Bands::Codes(b) => {
+                    gather_tile(grid, t, offset, b, band_len, &mut bufs.codes);
+                    if h.format == CacheFormat::U8 {
+                        bufs.bytes.clear();
+                        bufs.bytes.extend(bufs.codes.iter().map(|&c| c as u8));
+                        (&bufs.bytes[..], 0)
+                    } else {
+                        (bytemuck::cast_slice(&bufs.codes), 0)
                     }
-                };
-                let at = HEADER_BYTES + grid.first_pixel(t) * h.n_lights * px + start * np * px;
-                write_all_at(to.file, bytes, at as u64).map_err(|e| Error::write(to.path, e))?;
-                Ok((block_sum(bytes, e), e))
-            },
-        )
+                }
+            };
+            let at = HEADER_BYTES + grid.first_pixel(t) * h.n_lights * px + start * np * px;
+            write_all_at(to.file, bytes, at as u64).map_err(|e| Error::write(to.path, e))?;
+            Ok((block_sum(bytes, e, records), e))
+        })
         .collect::<Result<_>>()?;
     // Block-major tables: the band's tiles of this block are one run.
     let k = start / h.light_block * grid.n_tiles() + tiles.start;
@@ -421,6 +517,16 @@ fn scatter(to: &Target, start: usize, band: usize, bands: &[f32], band_len: usiz
             .map_err(|e| Error::write(to.path, e))?;
     }
     Ok(())
+}
+
+/// A thread's buffers for assembling a tile's block: its samples (floats or codes) and their
+/// stored form (half floats, bytes).
+#[derive(Default)]
+struct Buffers {
+    floats: Vec<f32>,
+    halves: Vec<half::f16>,
+    codes: Vec<u16>,
+    bytes: Vec<u8>,
 }
 
 /// The power-of-two exponent `e` that puts the largest finite magnitude of `v` times `2^e` in

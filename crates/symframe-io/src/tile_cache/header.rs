@@ -7,14 +7,15 @@ use std::time::UNIX_EPOCH;
 
 use rayon::prelude::*;
 
+use super::codes::{LightCodes, LIGHT_RECORD_BYTES};
 use super::{verify, CacheFormat, TileGrid};
 use crate::codecs::DecodeOptions;
 use crate::dataset::Dataset;
 use crate::error::{Error, Result, Warning};
 use crate::fingerprint::Fingerprint;
 
-/// Format version of the cache file (bumped whenever the layout changes).
-pub const CACHE_VERSION: u32 = 3;
+/// Format version of the cache file (bumped whenever the layout changes; 4: integer caches).
+pub const CACHE_VERSION: u32 = 4;
 pub(super) const MAGIC: &[u8; 8] = b"SYMFCACH";
 pub(super) const HEADER_BYTES: usize = 4096;
 pub(super) const ENDIAN_MARK: u32 = 0x0102_0304;
@@ -73,21 +74,59 @@ impl Header {
         )
     }
 
+    /// Where the table of the lights' records starts (integer caches only; after the
+    /// checksums, where a half-float cache has its exponents).
+    pub(super) fn lights_offset(&self) -> u64 {
+        self.scales_offset()
+    }
+
     /// The whole file's length: header, samples, checksum table, and for half floats the
-    /// table of block scale exponents.
+    /// table of block scale exponents, for integer formats the table of the lights' records.
     pub(super) fn file_len(&self) -> u64 {
-        let scales = match self.format {
-            CacheFormat::F32 => 0,
+        let extra = match self.format {
             CacheFormat::F16 => self.n_tiles().saturating_mul(self.n_blocks() as u64) * 4,
+            CacheFormat::U8 | CacheFormat::U16 => {
+                (self.n_lights as u64).saturating_mul(LIGHT_RECORD_BYTES as u64)
+            }
+            CacheFormat::F32 | CacheFormat::Auto => 0,
         };
-        self.scales_offset().saturating_add(scales)
+        self.scales_offset().saturating_add(extra)
+    }
+
+    /// The records of block `b`'s lights (integer caches; empty for float ones, or past the
+    /// end of `file`): part of what the block's checksum covers.
+    pub(super) fn block_lights<'a>(&self, file: &'a [u8], b: usize) -> &'a [u8] {
+        if !matches!(self.format, CacheFormat::U8 | CacheFormat::U16) {
+            return &[];
+        }
+        let first = b * self.light_block;
+        let lights = self.light_block.min(self.n_lights.saturating_sub(first));
+        let at = self.lights_offset() as usize + first * LIGHT_RECORD_BYTES;
+        file.get(at..at + lights * LIGHT_RECORD_BYTES)
+            .unwrap_or(&[])
+    }
+
+    /// Every light's record of an integer cache's `file`; `None` when one is not a record of
+    /// this format (a file damaged or forged with valid checksums).
+    pub(super) fn light_records(&self, file: &[u8]) -> Option<Vec<LightCodes>> {
+        let bits = match self.format {
+            CacheFormat::U8 => 8,
+            CacheFormat::U16 => 16,
+            _ => return None,
+        };
+        let at = self.lights_offset() as usize;
+        let table = file.get(at..at + self.n_lights * LIGHT_RECORD_BYTES)?;
+        table
+            .chunks_exact(LIGHT_RECORD_BYTES)
+            .map(|r| LightCodes::decode(r, bits))
+            .collect()
     }
 
     /// The power-of-two exponent that scaled block `k` (`block * n_tiles + tile`) before it
-    /// was stored as half floats (0 for float32 caches).
+    /// was stored as half floats (0 for other caches).
     pub(super) fn scale_exponent(&self, file: &[u8], k: usize) -> i32 {
         match self.format {
-            CacheFormat::F32 => 0,
+            CacheFormat::F32 | CacheFormat::U8 | CacheFormat::U16 | CacheFormat::Auto => 0,
             CacheFormat::F16 => {
                 let at = self.scales_offset() as usize + 4 * k;
                 file.get(at..at + 4)
@@ -178,6 +217,9 @@ pub fn check_cache_bytes(b: &[u8]) -> Option<usize> {
     {
         return None;
     }
+    if matches!(h.format, CacheFormat::U8 | CacheFormat::U16) {
+        h.light_records(b)?;
+    }
     let _ = read_warnings(b);
     Some(verify(b, &h, |_, _| {}).len())
 }
@@ -253,6 +295,9 @@ pub struct Fingerprints {
     /// any changed image or light a different one. Recorded in `report.json` so that `fit`
     /// can tell frames estimated from another capture.
     pub inputs: u64,
+    /// The cache format the fingerprint is for: the one asked for, or the one
+    /// [`CacheFormat::Auto`] picks for these images ([`resolve_format`]).
+    pub format: CacheFormat,
     /// How the images were stamped.
     pub kind: StampKind,
     /// Seconds spent computing them (reading and hashing every image unless `trust_mtime`).
@@ -283,6 +328,7 @@ pub fn dataset_fingerprints(
     // before any is hashed or decoded.
     crate::stack::check_header_sizes(ds, opts)?;
     let t = std::time::Instant::now();
+    let format = resolve_format(ds, format);
     let mut f = Fingerprint::new();
     f.str("symframe tile cache")
         .u64(CACHE_VERSION as u64)
@@ -348,9 +394,36 @@ pub fn dataset_fingerprints(
     Ok(Fingerprints {
         cache: f.finish(),
         inputs: g.finish(),
+        format,
         kind,
         seconds: t.elapsed().as_secs_f64(),
     })
+}
+
+/// The cache format to build for `ds`: `format` itself, or for [`CacheFormat::Auto`] the
+/// smallest that holds every image's samples as its header declares them (read from its
+/// first 64 KiB): `u8` when all are 8-bit, `u16` when all are 8- or 16-bit integers, else
+/// `f32` (float images, or a header that does not say).
+pub fn resolve_format(ds: &Dataset, format: CacheFormat) -> CacheFormat {
+    if format != CacheFormat::Auto {
+        return format;
+    }
+    let mut bits = 8;
+    for p in &ds.images {
+        let declared = std::fs::File::open(p)
+            .ok()
+            .and_then(|f| crate::read_at_most(f, p, 64 << 10).ok())
+            .and_then(|prefix| crate::codecs::declared_bits(p, &prefix));
+        match declared {
+            Some(b) => bits = bits.max(b),
+            None => return CacheFormat::F32,
+        }
+    }
+    if bits == 8 {
+        CacheFormat::U8
+    } else {
+        CacheFormat::U16
+    }
 }
 
 /// The cache's file stem for a dataset: a readable name plus a hash of its canonical source, so
@@ -393,6 +466,17 @@ pub(super) fn read_header(path: &Path) -> Result<Option<(Header, u64)>> {
         return Ok(None);
     }
     Ok(Header::decode(&b).map(|h| (h, len)))
+}
+
+/// The format version of the cache file at `path` when it is a cache of another version than
+/// this one's ([`CACHE_VERSION`]); `None` when it is not a cache, or of this version.
+pub(super) fn other_version(path: &Path) -> Option<u32> {
+    use std::io::Read;
+    let (mut f, _) = crate::open_own_file(path).ok()??;
+    let mut b = [0u8; 12];
+    f.read_exact(&mut b).ok()?;
+    let v = u32::from_le_bytes(b[8..12].try_into().unwrap());
+    (&b[..8] == MAGIC && v != CACHE_VERSION).then_some(v)
 }
 
 /// Whether `h` (of a file `len` bytes long) is a cache of these inputs with this tile size.

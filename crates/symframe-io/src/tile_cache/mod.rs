@@ -77,19 +77,21 @@ use crate::error::{Error, Result};
 use crate::stack::{check_dataset, check_mask_size, read_mask_any_size};
 
 mod build;
+mod codes;
 mod grid;
 mod header;
 mod lock;
 mod view;
 
 use build::{build, repair};
+use codes::CodeTables;
 pub use grid::{TileGrid, TileRect};
 #[doc(hidden)]
 pub use header::check_cache_bytes;
 use header::{cache_stem, matches, read_header, read_warnings, Header, HEADER_BYTES};
 pub use header::{
-    dataset_fingerprints, file_content_hash, inputs_fingerprint, Fingerprints, StampKind,
-    CACHE_VERSION,
+    dataset_fingerprints, file_content_hash, inputs_fingerprint, resolve_format, Fingerprints,
+    StampKind, CACHE_VERSION,
 };
 use lock::CacheLock;
 use view::Samples;
@@ -99,9 +101,12 @@ pub use view::{TileGather, TileView};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum CacheFormat {
+    /// The smallest exact format for the images ([`resolve_format`]): `u8` for 8-bit images,
+    /// `u16` for 8- and 16-bit ones, else `f32`.
+    #[default]
+    Auto,
     /// 32-bit floats, 12 bytes per pixel per light: the samples exactly as decoded, so a tiled
     /// estimate equals the in-memory one bit for bit.
-    #[default]
     F32,
     /// Half floats, 6 bytes per pixel per light: half the disk and I/O. Each block of a tile
     /// (its pixels under one decoding batch of lights) is scaled by a power of two so that its
@@ -110,22 +115,32 @@ pub enum CacheFormat {
     /// 2^-29 of the block's largest, and lose precision gradually below (half-float
     /// subnormals) to 2^-39 of it, under which they read as 0. `NaN` (missing) stays `NaN`.
     F16,
+    /// The 8-bit images' own codes, 3 bytes per pixel per light, made linear (transfer curve,
+    /// saturation, intensity) when read: the same samples as `f32`, bit for bit.
+    U8,
+    /// The 8- or 16-bit images' own codes, 6 bytes per pixel per light, made linear when
+    /// read: the same samples as `f32`, bit for bit.
+    U16,
 }
 
 impl CacheFormat {
-    /// Bytes of one pixel's RGB under one light.
+    /// Bytes of one pixel's RGB under one light (`Auto`: as `f32`, before it is resolved).
     pub fn pixel_bytes(self) -> usize {
         match self {
-            CacheFormat::F32 => 12,
-            CacheFormat::F16 => 6,
+            CacheFormat::F32 | CacheFormat::Auto => 12,
+            CacheFormat::F16 | CacheFormat::U16 => 6,
+            CacheFormat::U8 => 3,
         }
     }
 
-    /// The header's code for it.
+    /// The header's code for it (`Auto` is never stored).
     pub(super) fn code(self) -> u64 {
         match self {
             CacheFormat::F32 => 0,
             CacheFormat::F16 => 1,
+            CacheFormat::U8 => 2,
+            CacheFormat::U16 => 3,
+            CacheFormat::Auto => 255,
         }
     }
 
@@ -133,8 +148,15 @@ impl CacheFormat {
         match c {
             0 => Some(CacheFormat::F32),
             1 => Some(CacheFormat::F16),
+            2 => Some(CacheFormat::U8),
+            3 => Some(CacheFormat::U16),
             _ => None,
         }
+    }
+
+    /// Whether the cache stores the images' integer codes.
+    pub(super) fn integer(self) -> bool {
+        matches!(self, CacheFormat::U8 | CacheFormat::U16)
     }
 }
 
@@ -152,18 +174,19 @@ pub struct CacheOptions {
     /// (skips reading every image on a rerun; an image changed with its size and time kept,
     /// as `cp -p`, `rsync -a` or `tar x` do, then goes unnoticed).
     pub trust_mtime: bool,
-    /// How samples are stored (a cache of another format is rebuilt).
+    /// How samples are stored (a cache of another format is rebuilt); [`CacheFormat::Auto`]
+    /// picks the smallest exact one for the images.
     pub format: CacheFormat,
 }
 
 impl Default for CacheOptions {
-    /// 32-pixel tiles, 1 GiB batches, float32 samples.
+    /// 32-pixel tiles, 1 GiB batches, the format picked for the images.
     fn default() -> Self {
         Self {
             tile: 32,
             batch_bytes: 1 << 30,
             trust_mtime: false,
-            format: CacheFormat::F32,
+            format: CacheFormat::Auto,
         }
     }
 }
@@ -175,7 +198,7 @@ pub struct CacheInfo {
     pub path: PathBuf,
     /// Its size in bytes.
     pub bytes: u64,
-    /// How it stores samples.
+    /// How it stores samples (never `Auto`: the format picked).
     pub format: CacheFormat,
     /// Whether a complete cache for these inputs was found (no image decoded).
     pub hit: bool,
@@ -216,14 +239,24 @@ pub struct TileCache {
     light_block: usize,
     fingerprint: u64,
     path: PathBuf,
+    /// How an integer cache's codes become samples (`None` for float caches).
+    codes: Option<CodeTables>,
     /// Held (shared) while the cache is mapped, so no other process rebuilds it meanwhile.
     _lock: CacheLock,
 }
 
-/// The checksum of a block's bytes: XXH3-64 seeded with its scale exponent (0 for float32, so
-/// plain XXH3-64 there), so that a damaged exponent fails the block too.
-pub(super) fn block_sum(bytes: &[u8], exponent: i32) -> u64 {
-    xxhash_rust::xxh3::xxh3_64_with_seed(bytes, exponent as u32 as u64)
+/// The checksum of a block's bytes: XXH3-64 seeded with its scale exponent (0 but for half
+/// floats, so plain XXH3-64 there), so that a damaged exponent fails the block too; for an
+/// integer cache, of the bytes followed by the records of the block's lights (`lights`), so
+/// that a damaged record fails its blocks.
+pub(super) fn block_sum(bytes: &[u8], exponent: i32, lights: &[u8]) -> u64 {
+    if lights.is_empty() {
+        return xxhash_rust::xxh3::xxh3_64_with_seed(bytes, exponent as u32 as u64);
+    }
+    let mut h = xxhash_rust::xxh3::Xxh3::with_seed(exponent as u32 as u64);
+    h.update(bytes);
+    h.update(lights);
+    h.digest()
 }
 
 /// The blocks of a complete cache whose checksum fails: `(tile, block)` pairs. `done(o, len)`
@@ -239,7 +272,12 @@ fn verify(map: &[u8], h: &Header, done: impl Fn(usize, usize) + Sync) -> Vec<(us
             let (o, len) = h.block_range(&grid, t, b);
             let want =
                 u64::from_le_bytes(map[table + 8 * k..table + 8 * k + 8].try_into().unwrap());
-            let bad = block_sum(&map[o..o + len], h.scale_exponent(map, k)) != want;
+            let sum = block_sum(
+                &map[o..o + len],
+                h.scale_exponent(map, k),
+                h.block_lights(map, b),
+            );
+            let bad = sum != want;
             done(o, len);
             bad.then_some((t, b))
         })
@@ -250,6 +288,8 @@ fn verify(map: &[u8], h: &Header, done: impl Fn(usize, usize) + Sync) -> Vec<(us
 struct Found {
     map: Mmap,
     header: Header,
+    /// How an integer cache's codes become samples.
+    codes: Option<CodeTables>,
     /// `(tile, block)` pairs whose checksum failed.
     bad: Vec<(usize, usize)>,
     verify_s: f64,
@@ -268,6 +308,18 @@ fn map_file(path: &Path, len: u64) -> Result<Mmap> {
     Ok(map)
 }
 
+/// How the codes of the cache `file` (its header `h`) become samples: `Some(None)` for a
+/// float cache, `None` when an integer cache's light records are not valid.
+fn code_tables(h: &Header, file: &[u8]) -> Option<Option<CodeTables>> {
+    let codes = match h.format {
+        CacheFormat::U8 => 256,
+        CacheFormat::U16 => 65536,
+        _ => return Some(None),
+    };
+    let records = h.light_records(file)?;
+    Some(Some(CodeTables::new(&records, codes)))
+}
+
 /// The complete cache of these inputs at `path`, mapped and verified; `None` if there is none
 /// (missing, incomplete, stale or with a bad header).
 fn open_complete(path: &Path, fingerprint: u64, tile: usize, n: usize) -> Result<Option<Found>> {
@@ -278,6 +330,10 @@ fn open_complete(path: &Path, fingerprint: u64, tile: usize, n: usize) -> Result
         return Ok(None);
     }
     let map = map_file(path, len)?;
+    // Records that are not an integer cache's (a forged file: valid checksums) are no cache.
+    let Some(codes) = code_tables(&header, &map) else {
+        return Ok(None);
+    };
     let t = Instant::now();
     // Each block's pages are unmapped once summed, so verifying does not hold the whole cache
     // resident (it did: a reused 18 GB cache showed a peak RSS of 17 GiB).
@@ -295,6 +351,7 @@ fn open_complete(path: &Path, fingerprint: u64, tile: usize, n: usize) -> Result
     Ok(Some(Found {
         map,
         header,
+        codes,
         bad,
         verify_s: t.elapsed().as_secs_f64(),
     }))
@@ -328,7 +385,7 @@ impl TileCache {
         ds: &Dataset,
         opts: &DecodeOptions,
         dir: &Path,
-        copts: CacheOptions,
+        mut copts: CacheOptions,
         known: Option<Fingerprints>,
         stop: &AtomicBool,
         on_image: &(dyn Fn() + Sync),
@@ -359,6 +416,9 @@ impl TileCache {
             None => dataset_fingerprints(ds, opts, copts.trust_mtime, copts.format)?,
         };
         let (fingerprint, fingerprint_s) = (fps.cache, fps.seconds);
+        if copts.format == CacheFormat::Auto {
+            copts.format = fps.format;
+        }
         let fits_mask = |w: usize, h: usize| match mask {
             Some((p, size)) => check_mask_size(p, size, (w, h)),
             None => Ok(()),
@@ -368,6 +428,14 @@ impl TileCache {
         let path = dir.join(format!("{stem}.stack"));
         let partial = dir.join(format!("{stem}.stack.partial"));
         let lock = CacheLock::open(&dir.join(format!("{stem}.lock")))?;
+        // A cache of another format version is never read: said once it is rebuilt.
+        let other_version = header::other_version(&path).map(|v| Warning {
+            path: path.clone(),
+            message: format!(
+                "a tile cache of format version {v} (written by another version of symframe): \
+                 not read, rebuilt in format version {CACHE_VERSION}"
+            ),
+        });
         let n = ds.images.len();
         let mut info = CacheInfo {
             path: path.clone(),
@@ -478,6 +546,7 @@ impl TileCache {
             info.scatter_s = built.scatter_s;
             info.warnings = built.warnings;
             info.warnings.extend(rebuilt);
+            info.warnings.extend(other_version);
             // What an earlier, interrupted build wrote is verified like a reused cache.
             if built.resumed > 0 {
                 if let Some(found) = open_complete(&path, fingerprint, copts.tile, n)? {
@@ -493,9 +562,13 @@ impl TileCache {
         lock.set(false)?;
         let (header, len) = read_header(&path)?
             .ok_or_else(|| Error::invalid(&path, "cache vanished after it was built"))?;
+        let map = map_file(&path, len)?;
+        let codes = code_tables(&header, &map)
+            .ok_or_else(|| Error::invalid(&path, "cache's light records are not valid"))?;
         let found = Found {
-            map: map_file(&path, len)?,
+            map,
             header,
+            codes,
             bad: Vec::new(),
             verify_s: 0.0,
         };
@@ -520,6 +593,7 @@ impl TileCache {
                 light_block: h.light_block,
                 fingerprint,
                 path,
+                codes: found.codes,
                 _lock: lock,
             },
             info,
@@ -567,13 +641,16 @@ impl TileCache {
     }
 
     /// Tile `t`'s samples, read in place; for a half-float cache `scratch` holds the factors
-    /// that undo each light block's scale (converted to floats pixel by pixel when read).
+    /// that undo each light block's scale (converted to floats pixel by pixel when read); an
+    /// integer cache's codes are made linear pixel by pixel when read.
     pub fn tile<'a>(&'a self, t: usize, scratch: &'a mut Vec<f32>) -> TileView<'a> {
         let (o, len) = self.range(t);
         let bytes = &self.map[o..o + len];
-        let data = match self.header.format {
-            CacheFormat::F32 => Samples::F32(bytemuck::cast_slice(bytes)),
-            CacheFormat::F16 => {
+        // (Codes are there exactly for integer caches: [`code_tables`].)
+        let data = match (&self.codes, self.header.format) {
+            (Some(codes), CacheFormat::U16) => Samples::U16(bytemuck::cast_slice(bytes), codes),
+            (Some(codes), _) => Samples::U8(bytes, codes),
+            (None, CacheFormat::F16) => {
                 scratch.clear();
                 scratch.extend((0..self.header.n_blocks()).map(|b| {
                     pow2(
@@ -584,6 +661,7 @@ impl TileCache {
                 }));
                 Samples::F16(bytemuck::cast_slice(bytes), scratch)
             }
+            (None, _) => Samples::F32(bytemuck::cast_slice(bytes)),
         };
         TileView {
             data,
@@ -650,7 +728,7 @@ pub fn cache_holds_work(dir: &Path) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::codecs::write_exr_rgb;
+    use crate::codecs::{write_exr_rgb, Gamma};
     use crate::stack::load_stack;
     use glam::DVec3;
 
@@ -708,7 +786,12 @@ mod tests {
 
     /// Checks every tile against the in-memory stack, bit for bit (each read after a prefetch).
     fn same_as_stack(cache: &TileCache, ds: &Dataset) {
-        let stack = load_stack(ds, &DecodeOptions::default(), &|| {}).unwrap();
+        same_as_stack_with(cache, ds, &DecodeOptions::default())
+    }
+
+    /// [`same_as_stack`] with the stack decoded with `opts`.
+    fn same_as_stack_with(cache: &TileCache, ds: &Dataset, opts: &DecodeOptions) {
+        let stack = load_stack(ds, opts, &|| {}).unwrap();
         let g = cache.grid();
         assert_eq!(
             (g.width, g.height, cache.n_lights()),
@@ -1310,5 +1393,202 @@ mod tests {
         .unwrap();
         assert_eq!(info.batch_images, 1);
         same_as_stack(&cache, &ds);
+    }
+
+    /// The fixture of every kind of image (see `stack::fixture`) cut to the images whose
+    /// names `keep` accepts.
+    fn every_kind_but(dir: &Path, keep: impl Fn(&str) -> bool) -> Dataset {
+        let mut ds = crate::stack::fixture::every_kind(dir);
+        let kept: Vec<usize> = (0..ds.images.len())
+            .filter(|&i| keep(ds.images[i].file_name().unwrap().to_str().unwrap()))
+            .collect();
+        ds.images = kept.iter().map(|&i| ds.images[i].clone()).collect();
+        ds.lights = kept.iter().map(|&i| ds.lights[i]).collect();
+        ds.intensities = ds.intensities.map(|v| kept.iter().map(|&i| v[i]).collect());
+        ds
+    }
+
+    fn eight_bit(name: &str) -> bool {
+        !(name.contains("16") || name.ends_with(".pfm") || name.ends_with(".exr"))
+    }
+
+    fn integer(name: &str) -> bool {
+        !(name.ends_with(".pfm") || name.ends_with(".exr"))
+    }
+
+    /// 8-bit images (PNG of every layout, JPEG) in a `u8` cache, and 8- and 16-bit ones (PNG,
+    /// TIFF) in a `u16` one, picked automatically: 3 and 6 bytes per pixel per light, and the
+    /// samples read are the float path's bit for bit under every transfer curve, saturated
+    /// pixels and intensities included.
+    #[test]
+    fn integer_caches_read_the_float_samples_bit_for_bit() {
+        let d = tempfile::tempdir().unwrap();
+        for (sub, keep, want) in [
+            ("a", eight_bit as fn(&str) -> bool, CacheFormat::U8),
+            ("b", integer, CacheFormat::U16),
+        ] {
+            let sub = d.path().join(sub);
+            fs::create_dir(&sub).unwrap();
+            let ds = every_kind_but(&sub, keep);
+            let n = ds.images.len();
+            assert!(n >= 10, "{n}");
+            assert_eq!(resolve_format(&ds, CacheFormat::Auto), want);
+            for gamma in [Gamma::Auto, Gamma::Srgb, Gamma::Linear] {
+                let opts = DecodeOptions {
+                    gamma,
+                    saturation: 0.9,
+                    ..Default::default()
+                };
+                let dir = sub.join(format!("cache-{gamma:?}"));
+                let copts = batches_of(3, &ds, CacheFormat::Auto, 8);
+                let go = AtomicBool::new(false);
+                let (cache, info) =
+                    TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
+                assert_eq!((info.format, cache.format()), (want, want));
+                let (w, h) = (cache.grid().width, cache.grid().height);
+                let (tiles, blocks) = (cache.grid().n_tiles(), n.div_ceil(3));
+                assert_eq!(
+                    info.bytes as usize,
+                    HEADER_BYTES + w * h * n * want.pixel_bytes() + tiles * blocks * 8 + n * 32,
+                    "{want:?}"
+                );
+                assert_eq!(
+                    want.pixel_bytes(),
+                    [3, 6][(want == CacheFormat::U16) as usize]
+                );
+                same_as_stack_with(&cache, &ds, &opts);
+                drop(cache);
+                let (cache, info) =
+                    TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
+                assert!(info.hit, "{info:?}");
+                same_as_stack_with(&cache, &ds, &opts);
+            }
+        }
+        // Float images: f32.
+        let all = crate::stack::fixture::every_kind(&d.path().join("a"));
+        assert_eq!(resolve_format(&all, CacheFormat::Auto), CacheFormat::F32);
+        assert_eq!(resolve_format(&all, CacheFormat::U8), CacheFormat::U8);
+    }
+
+    /// A format forced on images it cannot hold is refused, naming the image.
+    #[test]
+    fn an_integer_cache_refuses_images_it_cannot_hold() {
+        let d = tempfile::tempdir().unwrap();
+        let ds = crate::stack::fixture::every_kind(d.path());
+        let go = AtomicBool::new(false);
+        for (format, name, what) in [
+            (
+                CacheFormat::U8,
+                "rgb16.png",
+                "16-bit (linear) samples do not fit a u8 tile cache",
+            ),
+            (
+                CacheFormat::U16,
+                "rgb.pfm",
+                "float (linear) samples do not fit a u16 tile cache",
+            ),
+        ] {
+            let copts = CacheOptions {
+                format,
+                ..CacheOptions::default()
+            };
+            let dir = d.path().join(format!("{format:?}"));
+            let e =
+                TileCache::open_or_build(&ds, &DecodeOptions::default(), &dir, copts, &go, &|| {})
+                    .unwrap_err()
+                    .to_string();
+            assert!(
+                e.contains(&format!("{name}: {what}; use --cache-format f32")),
+                "{e}"
+            );
+        }
+    }
+
+    /// A damaged light record is detected like damaged samples (its blocks repaired, or the
+    /// cache rebuilt when the record is not one at all); a truncated cache or one of the
+    /// former format version is rebuilt (the latter said in a warning); no byte flipped
+    /// anywhere makes the cache reader panic.
+    #[test]
+    fn damaged_truncated_or_old_integer_caches_are_repaired_or_rebuilt() {
+        let d = tempfile::tempdir().unwrap();
+        let ds = every_kind_but(d.path(), eight_bit);
+        let n = ds.images.len();
+        let dir = d.path().join("cache");
+        let (opts, go) = (DecodeOptions::default(), AtomicBool::new(false));
+        let copts = batches_of(3, &ds, CacheFormat::U8, 8);
+        drop(TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap());
+        let file = stack_file(&dir);
+        let clean = fs::read(&file).unwrap();
+        let (hd, _) = read_header(&file).unwrap().unwrap();
+        let records = hd.lights_offset() as usize;
+        assert_eq!(clean.len(), records + n * 32);
+        let reopen = || TileCache::open_or_build(&ds, &opts, &dir, copts, &go, &|| {}).unwrap();
+        // Light 4's intensity (block 1): that block is decoded again.
+        let mut b = clean.clone();
+        b[records + 4 * 32 + 13] ^= 1;
+        fs::write(&file, &b).unwrap();
+        let (cache, info) = reopen();
+        assert_eq!(
+            (info.hit, info.blocks_repaired, info.images_decoded),
+            (false, 1, 3),
+            "{info:?}"
+        );
+        same_as_stack(&cache, &ds);
+        drop(cache);
+        assert_eq!(fs::read(&file).unwrap(), clean, "repaired in place");
+        // Light 2's kind not a kind: no cache; rebuilt.
+        let mut b = clean.clone();
+        b[records + 2 * 32] = 9;
+        fs::write(&file, &b).unwrap();
+        let (cache, info) = reopen();
+        assert!(!info.hit && info.images_decoded == n, "{info:?}");
+        same_as_stack(&cache, &ds);
+        drop(cache);
+        // Truncated: rebuilt.
+        fs::write(&file, &clean[..clean.len() - 1]).unwrap();
+        let (cache, info) = reopen();
+        assert!(!info.hit && info.images_decoded == n, "{info:?}");
+        same_as_stack(&cache, &ds);
+        drop(cache);
+        // Written by the former format version: rebuilt, with a warning.
+        let mut b = clean.clone();
+        b[8..12].copy_from_slice(&3u32.to_le_bytes());
+        fs::write(&file, &b).unwrap();
+        let (cache, info) = reopen();
+        assert!(!info.hit && info.images_decoded == n, "{info:?}");
+        let said = info
+            .warnings
+            .iter()
+            .map(|w| w.to_string())
+            .collect::<Vec<_>>();
+        assert!(
+            said.iter().any(|w| w.ends_with(
+                "a tile cache of format version 3 (written by another version of symframe): \
+                 not read, rebuilt in format version 4"
+            )),
+            "{said:?}"
+        );
+        same_as_stack(&cache, &ds);
+        drop(cache);
+        // Every byte of the header's fields and of the tables flipped, and truncations: the
+        // reader's checks give an answer, never a panic.
+        assert_eq!(header::check_cache_bytes(&clean), Some(0));
+        let table = hd.table_offset() as usize;
+        let spots = (0..header::FIELDS).chain(table..clean.len());
+        for at in spots {
+            let mut b = clean.clone();
+            b[at] ^= 0x81;
+            let _ = header::check_cache_bytes(&b);
+        }
+        for len in [
+            0,
+            12,
+            header::FIELDS,
+            HEADER_BYTES,
+            records,
+            clean.len() - 1,
+        ] {
+            assert_eq!(header::check_cache_bytes(&clean[..len]), None, "{len}");
+        }
     }
 }

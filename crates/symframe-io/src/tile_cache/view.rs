@@ -2,12 +2,17 @@
 
 use half::slice::{HalfBitsSliceExt, HalfFloatSliceExt};
 
-/// A tile's samples as stored: float32 as they are, or half floats with one factor per light
-/// block (the inverse of the block's power-of-two scale).
+use super::codes::CodeTables;
+
+/// A tile's samples as stored: float32 as they are, half floats with one factor per light
+/// block (the inverse of the block's power-of-two scale), or the images' integer codes with
+/// their decoding.
 #[derive(Debug, Clone, Copy)]
 pub(super) enum Samples<'a> {
     F32(&'a [f32]),
     F16(&'a [u16], &'a [f32]),
+    U8(&'a [u8], &'a CodeTables),
+    U16(&'a [u16], &'a CodeTables),
 }
 
 /// The samples of one tile: blocks of `light_block` lights (the last block shorter), each block
@@ -47,15 +52,15 @@ impl<'a> TileView<'a> {
         // In the file's order (each block's run of a pixel's samples read front to back, the
         // output written out of order in a buffer that stays in cache; measured: the gather
         // 3.1% -> 2.6% of the paper-scale job's CPU time).
-        let mut table: Vec<(usize, usize, usize)> = lights
+        let mut table: Vec<(usize, usize, usize, usize)> = lights
             .iter()
             .enumerate()
             .map(|(o, &i)| {
                 let (base, step) = self.locate(i);
-                (base, step, o * 3)
+                (base, step, o * 3, i)
             })
             .collect();
-        table.sort_unstable_by_key(|&(base, _, _)| base);
+        table.sort_unstable_by_key(|&(base, _, _, _)| base);
         TileGather {
             view: *self,
             table,
@@ -73,6 +78,22 @@ impl<'a> TileView<'a> {
                 }
             }
             Samples::F16(halves, factors) => self.pixel_f16(halves, factors, k, out),
+            Samples::U8(codes, tables) => self.pixel_codes(codes, tables, k, out),
+            Samples::U16(codes, tables) => self.pixel_codes(codes, tables, k, out),
+        }
+    }
+
+    /// [`Self::pixel`] from an integer cache's codes, made linear light by light.
+    fn pixel_codes<T: Copy + Into<u32>>(
+        &self,
+        codes: &[T],
+        tables: &CodeTables,
+        k: usize,
+        out: &mut [f32],
+    ) {
+        for (i, o) in out.chunks_exact_mut(3).enumerate() {
+            let (base, step) = self.locate(i);
+            tables.rgb(i, &codes[base + k * step..base + k * step + 3], o);
         }
     }
 
@@ -103,9 +124,9 @@ impl<'a> TileView<'a> {
 #[derive(Debug, Clone)]
 pub struct TileGather<'a> {
     view: TileView<'a>,
-    /// Per chosen light: its samples' offset at pixel 0 and per pixel, and where its values go
-    /// in the output; sorted by where they lie in the file.
-    table: Vec<(usize, usize, usize)>,
+    /// Per chosen light: its samples' offset at pixel 0 and per pixel, where its values go
+    /// in the output, and its input index; sorted by where they lie in the file.
+    table: Vec<(usize, usize, usize, usize)>,
     /// Every light, in input order: half floats are then converted run by run.
     in_order: bool,
 }
@@ -116,17 +137,19 @@ impl TileGather<'_> {
     pub fn pixel(&self, k: usize, out: &mut [f32]) {
         match self.view.data {
             Samples::F32(data) => {
-                for &(base, step, o) in &self.table {
+                for &(base, step, o, _) in &self.table {
                     let at = base + k * step;
                     out[o..o + 3].copy_from_slice(&data[at..at + 3]);
                 }
             }
+            Samples::U8(codes, tables) => self.pixel_codes(codes, tables, k, out),
+            Samples::U16(codes, tables) => self.pixel_codes(codes, tables, k, out),
             Samples::F16(halves, factors) if self.in_order => {
                 self.view.pixel_f16(halves, factors, k, out)
             }
             Samples::F16(halves, factors) => {
                 let per_block = self.view.light_block * self.view.n_pixels * 3;
-                for &(base, step, o) in &self.table {
+                for &(base, step, o, _) in &self.table {
                     let at = base + k * step;
                     let f = factors[base / per_block];
                     for (o, &h) in out[o..o + 3].iter_mut().zip(&halves[at..at + 3]) {
@@ -134,6 +157,21 @@ impl TileGather<'_> {
                     }
                 }
             }
+        }
+    }
+
+    /// [`Self::pixel`] from an integer cache's codes.
+    #[inline]
+    fn pixel_codes<T: Copy + Into<u32>>(
+        &self,
+        codes: &[T],
+        tables: &CodeTables,
+        k: usize,
+        out: &mut [f32],
+    ) {
+        for &(base, step, o, i) in &self.table {
+            let at = base + k * step;
+            tables.rgb(i, &codes[at..at + 3], &mut out[o..o + 3]);
         }
     }
 }

@@ -149,7 +149,7 @@ def estimate_path(
     ``gamma`` (``"srgb"`` or ``"linear"``: the curve of 8- and 16-bit images), ``saturation``,
     ``cache`` (folder), ``no_keep_cache``, ``trust_mtime``, ``tiles`` (``"K/N"``: one shard;
     then only ``report`` is returned), ``tile_size``, ``decode_memory`` (MiB), ``cache_format``
-    (``"f32"`` or ``"f16"``, as ``--cache-format``).
+    (``"auto"``, ``"u8"``, ``"u16"``, ``"f32"`` or ``"f16"``, as ``--cache-format``).
 
     Returns the maps as :func:`estimate` does and ``report``: the content of ``report.json``.
     """

@@ -99,7 +99,7 @@ def estimate_path(
     tiles: Optional[str] = None,
     tile_size: int = 32,
     decode_memory: int = 1024,
-    cache_format: str = "f32",
+    cache_format: str = "auto",
 ) -> Maps:
     """The tiled, resumable `symframe estimate` job."""
 
