@@ -2,7 +2,8 @@
 //!
 //! Each image is decoded once and its samples are scattered into one cache file, laid out tile by
 //! tile (tiles of `tile x tile` pixels, row-major over the tile grid, the right and bottom tiles
-//! cropped; each tile one contiguous range of `pixels * lights * 12` bytes (6 for half floats), so
+//! cropped; each tile one contiguous range of `pixels * lights * 12` bytes (6 for half floats and
+//! 16-bit codes, 3 for 8-bit codes: [`CacheFormat`]), so
 //! estimation maps one tile at a time). Inside a tile the lights come in blocks of `light_block`
 //! lights (the decoding batch; the last block shorter), each block pixel-major: the tile's pixels
 //! row-major, each pixel's RGB under the block's lights contiguous. When one batch holds every
@@ -23,11 +24,13 @@
 //! File: a 4,096-byte header (magic, format version, an endianness mark, width, height, lights,
 //! tile size, the inputs' fingerprint, the number of images already scattered, a completion flag,
 //! the light block, the sample format, and an XXH3-64 checksum of these fields), then the samples
-//! in native byte order (`f32` by default, so the tiled estimate equals the in-memory one bit for
-//! bit; half floats with [`CacheFormat::F16`]), then a table of one XXH3-64 checksum per block of
-//! each tile (block-major: block 0 of every tile, then block 1, ...; little-endian `u64`; seeded
-//! with the block's scale exponent), and for half floats a table of the blocks' power-of-two scale
-//! exponents in the same order (little-endian `i32`). The fingerprint covers every image's path,
+//! in native byte order (`f32`, or the images' own `u8`/`u16` codes, so the tiled estimate equals
+//! the in-memory one bit for bit; half floats with [`CacheFormat::F16`]), then a table of one
+//! XXH3-64 checksum per block of each tile (block-major: block 0 of every tile, then block 1, ...;
+//! little-endian `u64`; seeded with the block's scale exponent; for codes, of the block's bytes
+//! followed by its lights' records), and for half floats a table of the blocks' power-of-two scale
+//! exponents in the same order (little-endian `i32`), for codes a table of each light's record
+//! of how its codes become samples (sample kind, first saturated code, intensity; 32 bytes). The fingerprint covers every image's path,
 //! size and content (XXH3-64 of the file's bytes; modification time instead of content with
 //! [`CacheOptions::trust_mtime`]), the light intensities, the decode options, the sample format and
 //! the crate version: the cache is reused when they match and rebuilt when they do not.
