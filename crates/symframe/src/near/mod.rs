@@ -10,6 +10,11 @@
 
 mod camera;
 mod light;
+mod solve;
 
 pub use camera::Pinhole;
 pub use light::{fit_sphere, rotation_to_z, PointLight};
+pub use solve::{
+    depth_from_normals, estimate_near_stack, mean_change_deg, NearMethod, NearOutcome, NearParams,
+    NearScratch,
+};
