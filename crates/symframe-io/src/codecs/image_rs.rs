@@ -1,4 +1,4 @@
-//! PNG, JPEG and Radiance HDR decoding through the `image` crate (image-rs).
+//! PNG and Radiance HDR decoding through the `image` crate (image-rs).
 
 use std::path::Path;
 
@@ -6,7 +6,7 @@ use super::{io_err, Raw, RawImage};
 use crate::error::{Error, Result};
 use crate::limits;
 
-/// Decodes PNG, JPEG or Radiance HDR with the `image` crate: the declared size is checked
+/// Decodes PNG or Radiance HDR with the `image` crate: the declared size is checked
 /// first ([`crate::limits`]), then the image decoded under the same limits. Returns its ICC
 /// profile too, when it has one.
 pub(super) fn read_with_image(

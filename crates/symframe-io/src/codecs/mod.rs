@@ -34,9 +34,9 @@
 //! 8-bit samples), converted by the same code (`convert`), to the same samples.
 //!
 //! One module per codec: `exr`, `tiff`, `pfm`, `png` (writing), `hdr` (Radiance scan lines read
-//! one at a time), and `image_rs` (PNG, JPEG and Radiance HDR decoding through the `image`
-//! crate); this one holds the common types, the dispatch by extension and the conversion to
-//! linear samples.
+//! one at a time), `jpeg` (zune-jpeg, the decoder `image` uses, called directly), and
+//! `image_rs` (PNG and Radiance HDR decoding through the `image` crate); this one holds the
+//! common types, the dispatch by extension and the conversion to linear samples.
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
@@ -50,6 +50,7 @@ mod exr_dwa;
 mod exr_piz;
 mod hdr;
 mod image_rs;
+mod jpeg;
 mod pfm;
 mod png;
 mod rows;
@@ -292,10 +293,7 @@ fn decode_raw(
             read_with_image(path, bytes, ::image::ImageFormat::Png)?,
             true,
         ),
-        "jpg" | "jpeg" => (
-            read_with_image(path, bytes, ::image::ImageFormat::Jpeg)?,
-            true,
-        ),
+        "jpg" | "jpeg" => (jpeg::read_jpeg(path, bytes)?, true),
         _ => (
             read_with_image(path, bytes, ::image::ImageFormat::Hdr)?,
             false,
@@ -328,6 +326,28 @@ pub fn declared_size(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<
             .into_dimensions()
             .map_err(|e| Error::decode(path, e))?;
         Ok((w as usize, h as usize))
+    };
+    catch_unwind(AssertUnwindSafe(run))
+        .unwrap_or_else(|_| Err(Error::decode(path, "decoder panicked (corrupt file?)")))
+}
+
+/// An 8-bit image's width, height, channels and interleaved samples ([`decode_8bit`]).
+#[doc(hidden)]
+pub type Samples8 = (usize, usize, usize, Vec<u8>);
+
+/// The samples of the 8-bit image file `path` (content `bytes`) as its decoder gives them
+/// (width, height, channels, every channel interleaved), before anything is made linear: what
+/// an integer tile cache stores. For timing and comparing decoders; `None` for an image of
+/// other samples.
+#[doc(hidden)]
+pub fn decode_8bit(path: &Path, bytes: &[u8]) -> Result<Option<Samples8>> {
+    let ext = extension(path)?;
+    let run = || -> Result<Option<Samples8>> {
+        let ((raw, _), _) = decode_raw(path, &ext, bytes, &DecodeOptions::default())?;
+        Ok(match raw.raw {
+            Raw::U8(v) => Some((raw.width, raw.height, raw.channels, v)),
+            _ => None,
+        })
     };
     catch_unwind(AssertUnwindSafe(run))
         .unwrap_or_else(|_| Err(Error::decode(path, "decoder panicked (corrupt file?)")))
