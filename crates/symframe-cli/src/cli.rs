@@ -174,6 +174,17 @@ pub fn gamma(gamma: Option<GammaArg>, linear: bool) -> symframe_io::Gamma {
 }
 
 /// Which estimator `symframe estimate` runs.
+/// `--light-model` of estimate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LightModelArg {
+    /// Near lights where the dataset gives light_positions.txt and K.txt.
+    Auto,
+    /// The light file's directions.
+    Distant,
+    /// Point lights and a pinhole camera.
+    Near,
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum MethodArg {
     /// BRDF symmetry (Holroyd et al. 2008): normals and tangents, any material.
@@ -280,6 +291,23 @@ pub struct EstimateArgs {
     /// --cosine-power, --no-tangents).
     #[arg(long, value_enum, default_value_t = MethodArg::Symmetry)]
     pub method: MethodArg,
+    /// Light model: `near` (point lights and a pinhole camera, from light_positions.txt and
+    /// K.txt beside the dataset; normals estimated in rounds with a depth map, written as
+    /// depth.npy), `distant` (the light file's directions, whatever else is there) or `auto`
+    /// (near where the positions and K.txt are there).
+    #[arg(long, value_enum, default_value_t = LightModelArg::Auto)]
+    pub light_model: LightModelArg,
+    /// Near lights: the object's distance from the camera, the depth of its centre along the
+    /// optical axis in the light positions' unit (default: that of the centre of the sphere
+    /// through the lights, a dome's centre).
+    #[arg(long, value_name = "D")]
+    pub distance: Option<f64>,
+    /// Near lights: side of the square of pixels that share one rig (1: a rig per pixel).
+    #[arg(long, default_value_t = symframe_job::NearOptions::default().tile)]
+    pub rig_tile: usize,
+    /// Near lights: estimation rounds at most (each but the last followed by a new depth map).
+    #[arg(long, default_value_t = symframe_job::NearOptions::default().max_iterations)]
+    pub rounds: usize,
     /// Mask image: only pixels where it is non-zero are estimated (default: mask.png beside
     /// the input, if any).
     #[arg(long)]

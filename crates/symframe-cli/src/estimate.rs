@@ -5,9 +5,11 @@ use anyhow::{bail, Result};
 use symframe::baselines::{Baseline, BaselineParams};
 use symframe::{EstimatorParams, Interpolation, RigOptions};
 use symframe_io::{CacheOptions, DecodeOptions};
-use symframe_job::{CacheConfig, EstimateConfig, EstimateOutcome, MethodConfig};
+use symframe_job::{
+    CacheConfig, EstimateConfig, EstimateOutcome, LightModel, MethodConfig, NearOptions,
+};
 
-use crate::cli::{EstimateArgs, MergeArgs, MethodArg};
+use crate::cli::{EstimateArgs, LightModelArg, MergeArgs, MethodArg};
 use crate::progress;
 
 /// Checks the flags that clap cannot.
@@ -47,6 +49,20 @@ fn validate(args: &EstimateArgs) -> Result<()> {
     }
     if !(1..=4096).contains(&args.tile_size) {
         bail!("--tile-size must be in [1, 4096], got {}", args.tile_size);
+    }
+    if let Some(d) = args.distance {
+        if !(d.is_finite() && d > 0.0) {
+            bail!("--distance must be a positive depth, got {d}");
+        }
+    }
+    if !(1..=1024).contains(&args.rig_tile) {
+        bail!(
+            "--rig-tile must be in [1, 1024] pixels, got {}",
+            args.rig_tile
+        );
+    }
+    if !(1..=100).contains(&args.rounds) {
+        bail!("--rounds must be in [1, 100], got {}", args.rounds);
     }
     decode_memory_bytes(args.decode_memory)?;
     Ok(())
@@ -125,6 +141,17 @@ pub fn config(args: &EstimateArgs) -> Result<EstimateConfig> {
         shard: args.tiles,
         keep_maps: false,
         normal_png: args.normal_png.into(),
+        near: NearOptions {
+            model: match args.light_model {
+                LightModelArg::Auto => LightModel::Auto,
+                LightModelArg::Distant => LightModel::Distant,
+                LightModelArg::Near => LightModel::Near,
+            },
+            distance: args.distance,
+            tile: args.rig_tile,
+            max_iterations: args.rounds,
+            ..NearOptions::default()
+        },
     })
 }
 

@@ -21,6 +21,7 @@ use symframe_io::{
     TileCache, TileGrid,
 };
 
+use crate::estimate_near::{run_near_rounds, LightModel, NearOptions, NearReport};
 use crate::maps_out::{write_estimate_outputs, TileResults, WriteOptions};
 use crate::merge::{write_manifest, ShardManifest, MANIFEST, MANIFEST_FORMAT, MANIFEST_VERSION};
 use crate::outdir::OutputDir;
@@ -139,6 +140,8 @@ pub struct EstimateConfig {
     /// pixel); off, the outputs are written a band of tiles at a time and memory stays bounded
     /// whatever the image size (the CLI).
     pub keep_maps: bool,
+    /// The light model, and how near lights are estimated.
+    pub near: NearOptions,
 }
 
 impl EstimateConfig {
@@ -154,6 +157,7 @@ impl EstimateConfig {
             shard: None,
             normal_png: NormalPng::OpenGl,
             keep_maps: true,
+            near: NearOptions::default(),
         }
     }
 
@@ -203,6 +207,9 @@ pub struct Report {
     pub timings: Timings,
     /// Every warning of the run, as printed (inputs, recomputed tiles, suspicious results).
     pub warnings: Vec<String>,
+    /// The camera and light model of a near-light run (absent for distant lights).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub near: Option<NearReport>,
 }
 
 /// The capture a job read, as its report records it: the path-free inputs fingerprint (see
@@ -639,6 +646,47 @@ pub(crate) fn result_warnings(
     w
 }
 
+/// The near-light geometry the job uses: the dataset's positions and camera unless the
+/// distant model is asked for; an error where the near model is asked for and the dataset has
+/// none, or a shard of a near-light job is (its rounds need every tile's normals).
+fn near_geometry(
+    config: &EstimateConfig,
+    ds: &Dataset,
+    ctl: &Control,
+) -> Result<Option<symframe_io::NearGeometry>> {
+    if config.near.model == LightModel::Distant {
+        return Ok(None);
+    }
+    let geometry = symframe_io::open_near_geometry(ds)?;
+    let Some(g) = geometry else {
+        if config.near.model == LightModel::Near {
+            anyhow::bail!(
+                "{}: near lights need light_positions.txt and K.txt beside the dataset",
+                ds.source.display()
+            );
+        }
+        return Ok(None);
+    };
+    if !matches!(config.method, MethodConfig::Symmetry { .. }) {
+        ctl.warn(&format!(
+            "{}: the baselines take the lights as distant (the directions of the light file); \
+             its light positions are not used",
+            ds.source.display()
+        ));
+        return Ok(None);
+    }
+    if config.shard.is_some() {
+        anyhow::bail!(
+            "near lights are estimated in rounds over the whole image: run them as one job \
+             (no --tiles K/N), or --light-model distant"
+        );
+    }
+    for w in &g.warnings {
+        ctl.warn(&w.to_string());
+    }
+    Ok(Some(g))
+}
+
 fn run(
     config: &EstimateConfig,
     ctl: &Control,
@@ -650,6 +698,7 @@ fn run(
     for w in &ds.warnings {
         ctl.warn(&w.to_string());
     }
+    let geometry = near_geometry(config, &ds, ctl)?;
     // The mask in force is checked with the cache, before the images are decoded.
     ds.mask = config.mask.clone().or(ds.mask);
     out.guard_inputs(
@@ -727,15 +776,38 @@ fn run(
         }
     }
     let t_est = Instant::now();
-    let counts = run_plan(
-        &plan,
-        &cache,
-        mask.as_deref(),
-        job,
-        &my_tiles,
-        &tiles_dir,
-        ctl,
-    )?;
+    let (counts, job, near) = match (&geometry, &plan) {
+        (Some(g), Plan::Symmetry(rig, params)) => {
+            let rig_options = RigOptions {
+                theta_d_max_deg: rig.theta_d_max_deg(),
+            };
+            let run = run_near_rounds(
+                &cache,
+                g,
+                &config.near,
+                rig_options,
+                *params,
+                mask.as_deref(),
+                job,
+                &my_tiles,
+                &tiles_dir,
+                ctl,
+            )?;
+            (run.counts, run.job, Some((run.report, run.depth)))
+        }
+        _ => {
+            let counts = run_plan(
+                &plan,
+                &cache,
+                mask.as_deref(),
+                job,
+                &my_tiles,
+                &tiles_dir,
+                ctl,
+            )?;
+            (counts, job, None)
+        }
+    };
     let estimate_s = t_est.elapsed().as_secs_f64();
     let cache_path = cache.path().to_path_buf();
     drop(cache);
@@ -807,6 +879,7 @@ fn run(
             peak_rss_bytes: None,
         },
         warnings: Vec::new(),
+        near: near.as_ref().map(|(r, _)| r.clone()),
     };
 
     if let Some(shard) = config.shard {
@@ -876,7 +949,8 @@ fn run(
     let opts = WriteOptions {
         normal_png: config.normal_png,
         keep_maps: config.keep_maps,
-        covered: matches!(plan, Plan::Symmetry(..))
+        // Near lights: each tile has its own rig, so the distant rig's reach says nothing.
+        covered: (matches!(plan, Plan::Symmetry(..)) && near.is_none())
             .then_some(&covered as &(dyn Fn(DVec3) -> bool + Sync)),
         on_tiles: &|_| {},
         lights: Some(&lights_plot),
@@ -899,6 +973,13 @@ fn run(
         report.timings.peak_rss_bytes = peak_rss_bytes();
         Ok(serde_json::to_value(&report)?)
     })?;
+    if let Some((_, depth)) = &near {
+        symframe_io::write_npy_f32(
+            &config.output.join("depth.npy"),
+            &[grid.height, grid.width],
+            depth,
+        )?;
+    }
     crate::tiles::remove_tile_folder(&tiles_dir)?;
     if config.cache.remove_after {
         remove_cache(&cache_path, &cache_dir)?;

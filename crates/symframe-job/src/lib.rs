@@ -58,6 +58,7 @@
 pub mod calibrate;
 pub mod colorbar;
 mod estimate;
+mod estimate_near;
 pub mod eval;
 pub mod export;
 mod fit;
@@ -99,6 +100,7 @@ pub use eval::{evaluate_job, EvalConfig, EvalReport};
 pub use export::{export_gltf, ExportConfig, ExportOutcome};
 pub use integrate::{integrate_job, IntegrateConfig, IntegrateReport};
 pub use synth::{synth, RigSpec, SynthConfig, SynthOutcome, SynthShape};
+pub use estimate_near::{LightModel, NearOptions, NearReport};
 pub use synth_near::{synth_near, NearSynthConfig};
 
 /// The run stopped early on request; what was done (cache images, finished tiles) is kept,

@@ -249,6 +249,7 @@ fn estimate_path<'py>(
         shard: options::shard(&mut o)?,
         normal_png: symframe_io::NormalPng::OpenGl,
         keep_maps: true,
+        near: Default::default(),
     };
     o.finish()?;
     let outcome = run_job(py, progress, threads, |ctl| {
