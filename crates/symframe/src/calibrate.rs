@@ -29,6 +29,8 @@
 
 use glam::DVec3;
 
+use crate::regions::{label_regions, OUTSIDE};
+
 /// A circle in image pixels: centre `(cx, cy)` (x right, y down, top-left pixel centre at
 /// `(0.5, 0.5)`) and radius `r`.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
@@ -492,51 +494,14 @@ pub fn detect_sphere(
     let level = border[border.len() / 2];
     let threshold = level + 1e-3 * (top - level).max(0.0) + 1e-9 * top;
     let on = |i: usize| value(i) > threshold;
-    // Label the regions (4-neighbours), pixels and labels as 32-bit indices: 4 bytes a pixel
-    // (8000 x 8000 images took 512 MB for the labels alone).
-    const NONE: u32 = u32::MAX;
-    let mut label = vec![NONE; width * height];
-    let mut sizes = Vec::new();
-    for start in 0..width * height {
-        if !on(start) || label[start] != NONE {
-            continue;
-        }
-        let id = u32::try_from(sizes.len()).map_err(|_| "too many bright regions")?;
-        label[start] = id;
-        let mut stack = vec![start as u32];
-        let mut n = 0usize;
-        while let Some(i) = stack.pop() {
-            let i = i as usize;
-            n += 1;
-            let (r, c) = (i / width, i % width);
-            let mut push = |j: usize| {
-                if on(j) && label[j] == NONE {
-                    label[j] = id;
-                    stack.push(j as u32);
-                }
-            };
-            if c + 1 < width {
-                push(i + 1);
-            }
-            if c > 0 {
-                push(i - 1);
-            }
-            if r + 1 < height {
-                push(i + width);
-            }
-            if r > 0 {
-                push(i - width);
-            }
-        }
-        sizes.push(n);
-    }
+    let (label, sizes) = label_regions(width, height, on).ok_or("the images are too large")?;
     if sizes.is_empty() {
         return Err("nothing in the images is brighter than their border".into());
     }
     let mut votes = vec![0usize; sizes.len()];
     for &b in brightest {
         if let Some(&l) = label.get(b) {
-            if l != NONE {
+            if l != OUTSIDE {
                 votes[l as usize] += 1;
             }
         }

@@ -38,6 +38,7 @@
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
+use crate::regions::{label_regions, OUTSIDE};
 
 /// Which solver [`integrate`] runs.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -614,45 +615,6 @@ fn poisson_pyramid(level: &Level, params: &IntegrateParams) -> (Vec<f64>, usize)
     (z, iterations)
 }
 
-/// Labels the connected regions of the mask (4-neighbours, through pixels that are coupled);
-/// returns the label per pixel (`usize::MAX` outside) and the count.
-fn regions(level: &Level) -> (Vec<usize>, usize) {
-    let (w, h) = (level.w, level.h);
-    let mut label = vec![usize::MAX; w * h];
-    let mut count = 0;
-    let mut stack = Vec::new();
-    for start in 0..w * h {
-        if !level.mask[start] || label[start] != usize::MAX {
-            continue;
-        }
-        label[start] = count;
-        stack.push(start);
-        while let Some(i) = stack.pop() {
-            let (r, q) = (i / w, i % w);
-            let mut visit = |j: usize| {
-                if level.mask[j] && label[j] == usize::MAX {
-                    label[j] = count;
-                    stack.push(j);
-                }
-            };
-            if q + 1 < w {
-                visit(i + 1);
-            }
-            if q > 0 {
-                visit(i - 1);
-            }
-            if r + 1 < h {
-                visit(i + w);
-            }
-            if r > 0 {
-                visit(i - w);
-            }
-        }
-        count += 1;
-    }
-    (label, count)
-}
-
 /// Integrates a normal map (`H x W x 3`, camera frame, unit vectors, NaN where there is no
 /// normal) into heights, weighted by `confidence` (`H x W`, values in [0, 1]) when given.
 pub fn integrate(
@@ -736,19 +698,24 @@ pub fn integrate(
     }
     let energy = level.energy(&weights, &z);
     // One offset per region: its lowest point at 0.
-    let (label, count) = regions(&level);
-    let mut lowest = vec![f64::INFINITY; count];
+    let (label, sizes) = label_regions(level.w, level.h, |i| level.mask[i]).ok_or_else(|| {
+        Error::BadParameter(format!(
+            "a {width}x{height} normal map is too large to integrate"
+        ))
+    })?;
+    let mut lowest = vec![f64::INFINITY; sizes.len()];
     for i in 0..n {
-        if label[i] != usize::MAX {
-            lowest[label[i]] = lowest[label[i]].min(z[i]);
+        if label[i] != OUTSIDE {
+            let l = label[i] as usize;
+            lowest[l] = lowest[l].min(z[i]);
         }
     }
     let depth = (0..n)
         .map(|i| {
-            if label[i] == usize::MAX {
+            if label[i] == OUTSIDE {
                 f32::NAN
             } else {
-                (z[i] - lowest[label[i]]) as f32
+                (z[i] - lowest[label[i] as usize]) as f32
             }
         })
         .collect();
@@ -760,7 +727,7 @@ pub fn integrate(
         cg_iterations,
         reweight_iterations,
         energy,
-        regions: count,
+        regions: sizes.len(),
         pixels,
     })
 }

@@ -81,6 +81,7 @@ pub mod method;
 pub mod near;
 pub mod noise;
 pub mod orientation;
+mod regions;
 pub mod render;
 pub mod stack;
 
