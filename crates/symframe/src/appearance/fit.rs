@@ -1125,21 +1125,11 @@ pub fn psnr_db(peak: f64, rms: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::brdf::ward::Ward;
-    use crate::brdf::Brdf;
     use crate::frames::rig::uniform_cone_lights;
 
-    /// Renders one pixel's samples with a Ward BRDF in the frame (n, t, b = n x t), x = t.
+    /// One pixel's samples of a Ward BRDF in the frame (n, t, b = n x t), x = t.
     fn render_pixel(w: &Ward, n: DVec3, t: DVec3, lights: &[DVec3]) -> Vec<f32> {
-        let b = n.cross(t);
-        let local = |d: DVec3| DVec3::new(d.dot(t), d.dot(b), d.dot(n));
-        lights
-            .iter()
-            .flat_map(|&l| {
-                let nl = n.dot(l).max(0.0);
-                let f = w.eval(local(l), local(DVec3::Z));
-                f.map(|v| (v * nl) as f32)
-            })
-            .collect()
+        crate::brdf::testutil::render_pixel(w, n, t, lights, 1.0)
     }
 
     fn frame() -> (DVec3, DVec3) {

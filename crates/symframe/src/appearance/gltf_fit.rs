@@ -416,23 +416,13 @@ pub(crate) fn holdout(fit: &GltfFit, test: &[GltfSample], v: DVec3, e: f64) -> H
 mod tests {
     use super::*;
     use crate::appearance::fit::{FitModel, PixelFitter, PixelOutcome};
-    use crate::brdf::Brdf;
     use crate::frames::rig::uniform_cone_lights;
     use crate::geometry::tangent_basis;
 
     /// One pixel's samples of a glTF material in the frame (n, t, b = n x t) under lights of
     /// intensity `e`.
     fn render_pixel(m: &GltfPbr, n: DVec3, t: DVec3, lights: &[DVec3], e: f64) -> Vec<f32> {
-        let b = n.cross(t);
-        let local = |d: DVec3| DVec3::new(d.dot(t), d.dot(b), d.dot(n));
-        lights
-            .iter()
-            .flat_map(|&l| {
-                let nl = n.dot(l).max(0.0);
-                m.eval(local(l), local(DVec3::Z))
-                    .map(|v| (e * v * nl) as f32)
-            })
-            .collect()
+        crate::brdf::testutil::render_pixel(m, n, t, lights, e)
     }
 
     fn frame() -> (DVec3, DVec3) {

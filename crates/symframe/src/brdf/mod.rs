@@ -56,7 +56,7 @@ pub mod microfacet;
 pub mod sheen;
 pub mod spec;
 #[cfg(test)]
-mod testutil;
+pub(crate) mod testutil;
 pub mod torrance_sparrow;
 pub mod ward;
 pub mod woven;

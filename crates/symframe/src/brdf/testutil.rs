@@ -265,3 +265,18 @@ pub fn measured_wide_axis(b: &dyn Brdf) -> super::TangentAxis {
         super::TangentAxis::Y
     }
 }
+
+/// One pixel's samples (RGB per light) of `brdf` in the frame `(n, t, b = n x t)` (x = t, view
+/// `+z`) under `lights` of intensity `scale`: `scale f (n.l)`, 0 where the light is below.
+pub fn render_pixel(brdf: &dyn Brdf, n: DVec3, t: DVec3, lights: &[DVec3], scale: f64) -> Vec<f32> {
+    let b = n.cross(t);
+    let local = |d: DVec3| DVec3::new(d.dot(t), d.dot(b), d.dot(n));
+    let view = local(DVec3::Z);
+    lights
+        .iter()
+        .flat_map(|&l| {
+            let nl = n.dot(l).max(0.0);
+            brdf.eval(local(l), view).map(|v| (scale * v * nl) as f32)
+        })
+        .collect()
+}

@@ -1086,20 +1086,9 @@ pub(crate) mod tests {
     /// The slice of `brdf` at a pixel of frame `(n, t)` under `rig` (view `+z`), RGB (the red
     /// channel's value in all three).
     pub(crate) fn slice(rig: &Rig, brdf: &dyn Brdf, n: DVec3, t: DVec3) -> Vec<f32> {
-        let b = n.cross(t);
-        let to_local = |v: DVec3| DVec3::new(v.dot(t), v.dot(b), v.dot(n));
-        let view = to_local(DVec3::Z);
-        rig.lights_in_camera()
-            .iter()
-            .flat_map(|&l| {
-                let nl = l.dot(n);
-                let v = if nl > 0.0 {
-                    brdf.eval(to_local(l), view)[0] * nl
-                } else {
-                    0.0
-                };
-                [v as f32; 3]
-            })
+        crate::brdf::testutil::render_pixel(brdf, n, t, rig.lights_in_camera(), 1.0)
+            .chunks_exact(3)
+            .flat_map(|s| [s[0]; 3])
             .collect()
     }
 
