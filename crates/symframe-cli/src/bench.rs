@@ -8,7 +8,11 @@
 //!
 //! The paper's captures are 1,512 lights at 1024x1024 (the defaults): about 10 GB of images,
 //! an 18 GB cache, and hours of estimation on two cores. `--size 256 --lights 380` is a quick
-//! try. `symframe bench-scaling` ([`scaling`]) sweeps size, lights and threads with the same
+//! try. `--width W --height H --format jpeg|png16` benchmarks another layout (the sphere as
+//! large as the shorter side, the rest background; 8-bit sRGB JPEG as cameras write them, or
+//! 16-bit linear PNG), whose tile cache is then `u8` or `u16` by default. The figures are also
+//! written to `bench.json` in `--dir` (`total_s`, `decode_s`, `estimate_s`, `peak_rss_bytes`,
+//! `cache_bytes`, `woodham_s`, ...). `symframe bench-scaling` ([`scaling`]) sweeps size, lights and threads with the same
 //! dataset and run code.
 
 pub mod scaling;
@@ -26,11 +30,83 @@ use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{Scene, TangentField};
 use symframe_job::{EstimateConfig, EstimateOutcome, MethodConfig};
 
-use crate::cli::{BenchArgs, CacheFormatArg};
+use crate::cli::{BenchArgs, BenchFormat, CacheFormatArg};
 use crate::progress;
 
 /// Renders the dataset into `dir` unless a complete one is there; returns the `.lp` path.
 pub(crate) fn dataset(dir: &Path, size: usize, n: usize) -> Result<PathBuf> {
+    dataset_layout(dir, size, size, n, BenchFormat::Exr)
+}
+
+/// The scene of a `width x height` capture: the brushed sphere of the paper's layout, as large
+/// as the shorter side, centred, the rest background outside the mask.
+fn layout_scene(width: usize, height: usize) -> Scene {
+    let side = width.min(height);
+    let sphere = Scene::sphere(side, TangentField::Circular);
+    if width == height {
+        return sphere;
+    }
+    let (x0, y0) = ((width - side) / 2, (height - side) / 2);
+    let n = width * height;
+    let mut scene = Scene {
+        width,
+        height,
+        mask: vec![false; n],
+        normals_in_camera: vec![glam::DVec3::Z; n],
+        tangents_in_camera: vec![glam::DVec3::X; n],
+        heights: None,
+    };
+    for y in 0..side {
+        for x in 0..side {
+            let (p, q) = ((y0 + y) * width + x0 + x, y * side + x);
+            scene.mask[p] = sphere.mask[q];
+            scene.normals_in_camera[p] = sphere.normals_in_camera[q];
+            scene.tangents_in_camera[p] = sphere.tangents_in_camera[q];
+        }
+    }
+    scene
+}
+
+/// Writes one rendered image (linear RGB) in `format`: float EXR, 8-bit sRGB JPEG of quality
+/// 90, or 16-bit linear PNG (both clamped to [0, 1]).
+fn write_image(p: &Path, w: usize, h: usize, img: &[f32], format: BenchFormat) -> Result<()> {
+    match format {
+        BenchFormat::Exr => symframe_io::write_exr_rgb(p, w, h, img)?,
+        BenchFormat::Png16 => symframe_io::write_png16_rgb(p, w, h, img)?,
+        BenchFormat::Jpeg => {
+            let bytes: Vec<u8> = img
+                .iter()
+                .map(|&v| (symframe_io::linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0).round() as u8)
+                .collect();
+            // Written aside and renamed, so that an interrupted generation leaves no torn file.
+            let tmp = p.with_extension("jpg.tmp");
+            let f = std::io::BufWriter::new(
+                fs::File::create(&tmp)
+                    .with_context(|| format!("{}: cannot write", tmp.display()))?,
+            );
+            image::ImageEncoder::write_image(
+                image::codecs::jpeg::JpegEncoder::new_with_quality(f, 90),
+                &bytes,
+                w as u32,
+                h as u32,
+                image::ExtendedColorType::Rgb8,
+            )
+            .with_context(|| format!("{}: cannot encode", tmp.display()))?;
+            fs::rename(&tmp, p).with_context(|| format!("{}: cannot write", p.display()))?;
+        }
+    }
+    Ok(())
+}
+
+/// Renders a `width x height` dataset of `n` lights in `format` into `dir` unless a complete
+/// one is there ([`layout_scene`]; the paper's when square and EXR); returns the `.lp` path.
+pub(crate) fn dataset_layout(
+    dir: &Path,
+    width: usize,
+    height: usize,
+    n: usize,
+    format: BenchFormat,
+) -> Result<PathBuf> {
     let lp = dir.join("lights.lp");
     if lp.is_file() {
         eprintln!("bench: reusing the dataset in {}", dir.display());
@@ -39,11 +115,16 @@ pub(crate) fn dataset(dir: &Path, size: usize, n: usize) -> Result<PathBuf> {
     let images = dir.join("images");
     fs::create_dir_all(&images)
         .with_context(|| format!("{}: cannot create folder", images.display()))?;
-    let scene = Scene::sphere(size, TangentField::Circular);
+    let scene = layout_scene(width, height);
     let lights = uniform_cone_lights(n, 65.0);
     let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
+    let ext = match format {
+        BenchFormat::Exr => "exr",
+        BenchFormat::Jpeg => "jpg",
+        BenchFormat::Png16 => "png",
+    };
     eprintln!(
-        "bench: rendering {n} images of {size}x{size} into {} (once)",
+        "bench: rendering {n} images of {width}x{height} into {} (once)",
         dir.display()
     );
     let t = Instant::now();
@@ -51,7 +132,7 @@ pub(crate) fn dataset(dir: &Path, size: usize, n: usize) -> Result<PathBuf> {
     // One image per task: at most one image per thread in memory. Images already written by
     // an interrupted generation are kept (they are written atomically).
     (0..n).into_par_iter().try_for_each(|i| -> Result<()> {
-        let p = images.join(format!("img_{i:04}.exr"));
+        let p = images.join(format!("img_{i:04}.{ext}"));
         if !p.is_file() {
             // Exposure 0.5, as the tests do.
             let img: Vec<f32> = scene
@@ -59,7 +140,7 @@ pub(crate) fn dataset(dir: &Path, size: usize, n: usize) -> Result<PathBuf> {
                 .iter()
                 .map(|v| 0.5 * v)
                 .collect();
-            symframe_io::write_exr_rgb(&p, size, size, &img)?;
+            write_image(&p, width, height, &img, format)?;
         }
         bar.inc(1);
         Ok(())
@@ -70,11 +151,15 @@ pub(crate) fn dataset(dir: &Path, size: usize, n: usize) -> Result<PathBuf> {
         .iter()
         .flat_map(|&m| [m as u8 as f32; 3])
         .collect();
-    symframe_io::write_png8_rgb(&dir.join("mask.png"), size, size, &mask, false)?;
+    symframe_io::write_png8_rgb(&dir.join("mask.png"), width, height, &mask, false)?;
     // The light file last: its presence marks a complete dataset.
     let mut text = format!("{n}\n");
     for (i, l) in lights.iter().enumerate() {
-        writeln!(text, "images/img_{i:04}.exr {:?} {:?} {:?}", l.x, l.y, l.z)?;
+        writeln!(
+            text,
+            "images/img_{i:04}.{ext} {:?} {:?} {:?}",
+            l.x, l.y, l.z
+        )?;
     }
     let tmp = dir.join(".lights.lp.tmp");
     fs::write(&tmp, text).with_context(|| format!("{}: cannot write", tmp.display()))?;
@@ -103,6 +188,10 @@ pub(crate) struct Figures {
     pub cache_bytes: f64,
     /// Whether the cache was reused (nothing decoded).
     pub cache_hit: bool,
+    /// Of building the cache: decoding the images, and scattering them into the cache,
+    /// seconds (all threads' wall clock together; 0 on a cache hit).
+    pub cache_decode_s: f64,
+    pub cache_scatter_s: f64,
     /// Images per decoding batch.
     pub batch_images: f64,
     /// CPU seconds of the process during the run, all threads (user + system; NaN off Unix):
@@ -135,6 +224,8 @@ impl Figures {
                 .and_then(|v| v.as_bool())
                 .unwrap_or(false),
             batch_images: num("/cache/batch_images"),
+            cache_decode_s: num("/cache/decode_s"),
+            cache_scatter_s: num("/cache/scatter_s"),
             cpu_s,
         }
     }
@@ -231,12 +322,24 @@ fn print_figures(name: &str, f: &Figures) {
 
 /// Runs the benchmark.
 pub fn run(args: &BenchArgs) -> Result<()> {
-    if !(8..=4096).contains(&args.size) || !(16..=20000).contains(&args.lights) {
-        bail!("--size must be in [8, 4096] and --lights in [16, 20000]");
+    let (width, height) = (
+        args.width.unwrap_or(args.size),
+        args.height.unwrap_or(args.size),
+    );
+    if ![width, height].iter().all(|s| (8..=65536).contains(s))
+        || !(16..=20000).contains(&args.lights)
+    {
+        bail!("--size, --width and --height must be in [8, 65536] and --lights in [16, 20000]");
     }
-    let tag = format!("{}px-{}lights", args.size, args.lights);
+    // The paper's layout keeps its folder names, so existing datasets and caches are reused.
+    let tag = if width == height && args.format == BenchFormat::Exr {
+        format!("{width}px-{}lights", args.lights)
+    } else {
+        let format = format!("{:?}", args.format).to_lowercase();
+        format!("{width}x{height}-{}lights-{format}", args.lights)
+    };
     let data = args.dir.join(format!("data-{tag}"));
-    let lp = dataset(&data, args.size, args.lights)?;
+    let lp = dataset_layout(&data, width, height, args.lights, args.format)?;
     let mut config = symmetry_config(
         &lp,
         args.dir.join(format!("out-{tag}-symmetry")),
@@ -248,33 +351,57 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     config.shard = args.tiles;
     let sym = run_estimate(&config)?;
     println!(
-        "bench: {0}x{0} pixels, {1} lights, {2} threads{3}",
-        args.size,
+        "bench: {width}x{height} pixels, {} lights, {:?} images, {} threads{}",
         args.lights,
+        args.format,
         rayon::current_num_threads(),
         args.tiles
             .map_or(String::new(), |s| format!(", tiles of shard {s} only"))
     );
     print_figures("symmetry", &sym);
-    if args.no_baseline {
-        return Ok(());
+    let samples = (width * height * args.lights) as f64;
+    let mut json = serde_json::json!({
+        "width": width,
+        "height": height,
+        "lights": args.lights,
+        "format": format!("{:?}", args.format).to_lowercase(),
+        "threads": rayon::current_num_threads(),
+        "cold": args.cold,
+        "cache_hit": sym.cache_hit,
+        "total_s": sym.wall_s,
+        "decode_s": sym.decode_s,
+        "cache_decode_s": sym.cache_decode_s,
+        "cache_scatter_s": sym.cache_scatter_s,
+        "estimate_s": sym.estimate_s,
+        "pixels_per_s": sym.pixels_per_s(),
+        "peak_rss_bytes": sym.peak_rss_bytes,
+        "cache_bytes": sym.cache_bytes,
+        "cache_bytes_per_pixel_per_light": (sym.cache_bytes / samples * 100.0).round() / 100.0,
+        "woodham_s": serde_json::Value::Null,
+    });
+    if !args.no_baseline {
+        config.output = args.dir.join(format!("out-{tag}-woodham"));
+        config.method = MethodConfig::Baseline {
+            method: Baseline::Woodham,
+            params: BaselineParams::default(),
+        };
+        let base = run_estimate(&config)?;
+        print_figures("woodham", &base);
+        println!(
+            "    ratio: symmetry / woodham estimation time {:.1}x",
+            sym.estimate_s / base.estimate_s
+        );
+        // End to end: the baseline ran on the cache the first run built, so its job from the
+        // images would have cost that decoding too.
+        println!(
+            "    ratio: symmetry / woodham end to end (decoding counted in both) {:.1}x",
+            sym.wall_s / (base.wall_s + sym.decode_s)
+        );
+        json["woodham_s"] = base.estimate_s.into();
     }
-    config.output = args.dir.join(format!("out-{tag}-woodham"));
-    config.method = MethodConfig::Baseline {
-        method: Baseline::Woodham,
-        params: BaselineParams::default(),
-    };
-    let base = run_estimate(&config)?;
-    print_figures("woodham", &base);
-    println!(
-        "    ratio: symmetry / woodham estimation time {:.1}x",
-        sym.estimate_s / base.estimate_s
-    );
-    // End to end: the baseline ran on the cache the first run built, so its job from the
-    // images would have cost that decoding too.
-    println!(
-        "    ratio: symmetry / woodham end to end (decoding counted in both) {:.1}x",
-        sym.wall_s / (base.wall_s + sym.decode_s)
-    );
+    let out = args.dir.join("bench.json");
+    fs::write(&out, serde_json::to_string_pretty(&json)? + "\n")
+        .with_context(|| format!("{}: cannot write", out.display()))?;
+    println!("    figures written to {}", out.display());
     Ok(())
 }

@@ -428,6 +428,16 @@ pub struct BenchArgs {
     /// Image size in pixels (the paper's captures: 1024).
     #[arg(long, default_value_t = 1024)]
     pub size: usize,
+    /// Image width in pixels, for a layout other than the paper's square (with --height).
+    #[arg(long, requires = "height")]
+    pub width: Option<usize>,
+    /// Image height in pixels, for a layout other than the paper's square (with --width).
+    #[arg(long, requires = "width")]
+    pub height: Option<usize>,
+    /// The images' format: exr (float, the paper's), jpeg (8-bit sRGB, quality 90, as
+    /// cameras write) or png16 (16-bit linear).
+    #[arg(long, value_enum, default_value_t = BenchFormat::Exr)]
+    pub format: BenchFormat,
     /// Number of lights (the paper's captures: 1512).
     #[arg(long, default_value_t = 1512)]
     pub lights: usize,
@@ -900,6 +910,17 @@ pub struct ExportArgs {
     /// With --mesh: leave out triangles across depth jumps (as `integrate --max-jump`).
     #[arg(long, default_value_t = 2.0)]
     pub max_jump: f64,
+}
+
+/// The image format of a benchmark's synthetic capture.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum BenchFormat {
+    /// Float32 OpenEXR.
+    Exr,
+    /// 8-bit sRGB JPEG of quality 90.
+    Jpeg,
+    /// 16-bit linear PNG.
+    Png16,
 }
 
 /// Sample type of the tile cache.

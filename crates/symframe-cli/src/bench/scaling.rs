@@ -756,6 +756,8 @@ fn recorded(path: &Path) -> Result<Recorded> {
                 cache_bytes: num("cache_bytes"),
                 cache_hit: false,
                 batch_images: num("batch_images"),
+                cache_decode_s: f64::NAN,
+                cache_scatter_s: f64::NAN,
                 cpu_s: num("cpu_s"),
             };
             (recorded_job(r), f)

@@ -105,3 +105,53 @@ fn bench_scaling_quick_writes_a_consistent_model() {
     // Only the figures are kept: no cache or maps left behind.
     assert!(!out.join("cache").exists() && !out.join("out").exists());
 }
+
+/// `bench-paper` of another layout and format writes that capture, runs on the cache its
+/// images call for (`u8` for JPEG, `u16` for 16-bit PNG) and records its figures in
+/// `bench.json`.
+#[test]
+fn bench_paper_of_a_jpeg_or_png16_layout_writes_bench_json() {
+    let dir = tempfile::tempdir().unwrap();
+    for (format, bytes, baseline) in [("jpeg", 3.0, false), ("png16", 6.0, true)] {
+        let d = dir.path().join(format);
+        let mut args = vec![
+            "bench-paper",
+            "--dir",
+            s(&d),
+            "--width",
+            "40",
+            "--height",
+            "24",
+            "--format",
+            format,
+            "--lights",
+            "16",
+            "--cold",
+        ];
+        if !baseline {
+            args.push("--no-baseline");
+        }
+        ok(&symframe(&args));
+        let data = d.join(format!("data-40x24-16lights-{format}"));
+        assert!(data.join("lights.lp").is_file());
+        let doc: serde_json::Value =
+            serde_json::from_str(&fs::read_to_string(d.join("bench.json")).unwrap()).unwrap();
+        assert_eq!(
+            (
+                &doc["width"],
+                &doc["height"],
+                &doc["lights"],
+                &doc["format"]
+            ),
+            (&40.into(), &24.into(), &16.into(), &format.into()),
+            "{doc}"
+        );
+        // (The header and tables add a little at this size.)
+        let per_sample = doc["cache_bytes_per_pixel_per_light"].as_f64().unwrap();
+        assert_eq!(per_sample.floor(), bytes, "{doc}");
+        for k in ["total_s", "decode_s", "estimate_s", "cache_bytes"] {
+            assert!(doc[k].as_f64().is_some_and(|v| v > 0.0), "{k}: {doc}");
+        }
+        assert_eq!(doc["woodham_s"].is_number(), baseline, "{doc}");
+    }
+}
