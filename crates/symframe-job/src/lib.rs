@@ -96,11 +96,11 @@ pub use view::{
 pub use {merge::check_shard_manifest, outdir::check_switch_plan};
 
 pub use calibrate::{calibrate, CalibrateConfig, CalibrationReport};
+pub use estimate_near::{LightModel, NearOptions, NearReport};
 pub use eval::{evaluate_job, EvalConfig, EvalReport};
 pub use export::{export_gltf, ExportConfig, ExportOutcome};
 pub use integrate::{integrate_job, IntegrateConfig, IntegrateReport};
 pub use synth::{synth, RigSpec, SynthConfig, SynthOutcome, SynthShape};
-pub use estimate_near::{LightModel, NearOptions, NearReport};
 pub use synth_near::{synth_near, NearSynthConfig};
 
 /// The run stopped early on request; what was done (cache images, finished tiles) is kept,
