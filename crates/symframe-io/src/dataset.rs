@@ -32,7 +32,9 @@ const FILENAMES: &str = "filenames.txt";
 const DIRECTIONS: &str = "light_directions.txt";
 const INTENSITIES: &str = "light_intensities.txt";
 const MASK: &str = "mask.png";
-use crate::near::POSITIONS;
+pub mod near;
+
+use near::POSITIONS;
 
 /// Opens a dataset from an RTI `.lp` file, a folder holding exactly one `.lp` file, or a
 /// DiLiGenT-style folder (`filenames.txt`, `light_directions.txt`, optional
@@ -421,7 +423,7 @@ fn open_diligent(dir: &Path, source: &Path) -> Result<Dataset> {
     }
     let images = lights::parse_filenames(&names_path, dir)?;
     let lights = if from_positions {
-        crate::near::directions_from_positions(&dirs_path, &lights::parse_positions(&dirs_path)?)?
+        near::directions_from_positions(&dirs_path, &lights::parse_positions(&dirs_path)?)?
     } else {
         lights::parse_directions(&dirs_path)?
     };

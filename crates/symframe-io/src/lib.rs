@@ -33,7 +33,6 @@ pub mod error;
 pub mod fingerprint;
 mod lights;
 pub mod limits;
-pub mod near;
 pub mod output;
 pub mod stack;
 pub mod synth_out;
@@ -50,10 +49,11 @@ pub use codecs::{
     DecodeOptions, Gamma, Image, PngRows, SampleKind,
 };
 pub use codecs::{read_image_grey, GreyBand};
+pub use dataset::near;
+pub use dataset::near::{open_near_geometry, NearGeometry};
 pub use dataset::{open_dataset, Dataset};
 pub use error::{Error, Result, Warning};
 pub use lights::{lp_path_convention, read_light_directions, read_list, LpPaths};
-pub use near::{open_near_geometry, NearGeometry};
 pub use output::{
     gray_map_rgb8, normal_map_rgb8, normal_map_values, normal_png16_row, read_npy_f32, read_npy_u8,
     source_map_rgb8, tangent_map_rgb8, write_exr_map, write_exr_map_with, write_normal_png16,

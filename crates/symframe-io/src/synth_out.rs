@@ -201,7 +201,7 @@ pub fn write_near_dataset(
         (names.join("\n") + "\n").as_bytes(),
     )?;
     write_bytes(
-        &dir.join(crate::near::POSITIONS),
+        &dir.join(crate::dataset::near::POSITIONS),
         table(near.positions).as_bytes(),
     )?;
     write_bytes(
@@ -212,7 +212,7 @@ pub fn write_near_dataset(
         let _ = writeln!(t, "{:?} {:?} {:?}", r[0], r[1], r[2]);
         t
     });
-    write_bytes(&dir.join(crate::near::INTRINSICS), k.as_bytes())?;
+    write_bytes(&dir.join(crate::dataset::near::INTRINSICS), k.as_bytes())?;
     write_bytes(
         &dir.join(SYNTH_MARKER),
         b"Written by symframe: a later `symframe synth -o` may replace this folder's dataset.\n",

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 use symframe::near::{fit_sphere, Pinhole, PointLight};
 
-use crate::dataset::Dataset;
+use super::Dataset;
 use crate::error::{Error, Result, Warning};
 use crate::lights;
 
