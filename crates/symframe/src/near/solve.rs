@@ -27,6 +27,7 @@ use crate::integrate::{integrate, IntegrateParams};
 use crate::maps::{EstimateMaps, PixelRecord, PixelStatus};
 use crate::method::{run_stack, PixelMethod};
 use crate::near::{rotation_to_z, Pinhole, PointLight};
+use crate::regions::{label_regions, OUTSIDE};
 use crate::stack::Stack;
 
 /// Parameters of the near-light estimation.
@@ -292,40 +293,26 @@ pub fn depth_from_normals(
     }
     let heights = integrate(width, height, &pseudo, confidence, params)?;
     // One scale per connected region: the median of ln z kept.
-    let mut label = vec![usize::MAX; n];
+    let (label, sizes) = label_regions(width, height, |p| heights.depth[p].is_finite())
+        .ok_or_else(|| {
+            Error::BadParameter(format!(
+                "a {width}x{height} image is too large to integrate"
+            ))
+        })?;
+    // Each region's pixels, in label order (a counting sort of the labels).
+    let mut starts = vec![0usize; sizes.len() + 1];
+    for (l, &size) in sizes.iter().enumerate() {
+        starts[l + 1] = starts[l] + size;
+    }
+    let mut order = vec![0usize; starts[sizes.len()]];
+    let mut next = starts.clone();
+    for (p, &l) in label.iter().enumerate().filter(|(_, &l)| l != OUTSIDE) {
+        order[next[l as usize]] = p;
+        next[l as usize] += 1;
+    }
     let mut out = previous.to_vec();
-    let mut stack = Vec::new();
-    let mut region = Vec::new();
     let (mut logs, mut hs, mut fitted) = (Vec::new(), Vec::new(), Vec::new());
-    for start in 0..n {
-        if label[start] != usize::MAX || !heights.depth[start].is_finite() {
-            continue;
-        }
-        region.clear();
-        label[start] = start;
-        stack.push(start);
-        while let Some(p) = stack.pop() {
-            region.push(p);
-            let (c, r) = (p % width, p / width);
-            let mut visit = |q: usize| {
-                if label[q] == usize::MAX && heights.depth[q].is_finite() {
-                    label[q] = start;
-                    stack.push(q);
-                }
-            };
-            if c > 0 {
-                visit(p - 1);
-            }
-            if c + 1 < width {
-                visit(p + 1);
-            }
-            if r > 0 {
-                visit(p - width);
-            }
-            if r + 1 < height {
-                visit(p + width);
-            }
-        }
+    for region in starts.windows(2).map(|w| &order[w[0]..w[1]]) {
         hs.clear();
         hs.extend(region.iter().map(|&p| heights.depth[p] as f64));
         let h_mid = median(&mut hs);
@@ -341,7 +328,7 @@ pub fn depth_from_normals(
                 median(&mut logs)
             }
         };
-        for &p in &region {
+        for &p in region {
             out[p] = (c + h_mid - heights.depth[p] as f64).exp() as f32;
         }
     }
