@@ -146,8 +146,7 @@ where
                     return Ok(false);
                 }
                 // Each thread walks a run of consecutive tiles: the next one's disk reads
-                // overlap this one's estimation (measured at paper scale right after decoding,
-                // the cache partly on disk: estimation 108.7 s -> 96.5 s).
+                // overlap this one's estimation (docs/performance.md, "Paper scale").
                 if let Some(&next) = todo.get(i + 1) {
                     cache.prefetch(next);
                 }

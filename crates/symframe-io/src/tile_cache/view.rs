@@ -50,8 +50,8 @@ impl<'a> TileView<'a> {
         let in_order =
             lights.len() == self.n_lights && lights.iter().enumerate().all(|(k, &i)| k == i);
         // In the file's order (each block's run of a pixel's samples read front to back, the
-        // output written out of order in a buffer that stays in cache; measured: the gather
-        // 3.1% -> 2.6% of the paper-scale job's CPU time).
+        // output written out of order in a buffer that stays in cache: docs/performance.md,
+        // "The tile cache's gather").
         let mut table: Vec<(usize, usize, usize, usize)> = lights
             .iter()
             .enumerate()

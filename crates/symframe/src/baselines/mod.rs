@@ -95,8 +95,8 @@ pub struct BaselineParams {
     /// The pixel's reference level for the shadow threshold is this quantile of its valid grey
     /// values (default 0.9; the maximum where that quantile is zero). 1 makes it the maximum:
     /// then on a glossy material a highlight 20 times brighter than the diffuse part puts every
-    /// diffuse sample "in shadow" and the fit runs on the highlight alone (measured: 37 degrees
-    /// mean error on a Ward sphere with `alpha = 0.1`). A high quantile is the brightness of the
+    /// diffuse sample "in shadow" and the fit runs on the highlight alone (docs/method.md, "Cast
+    /// shadows"). A high quantile is the brightness of the
     /// lit diffuse part as long as the highlight covers under 10% of the lights.
     pub shadow_reference_quantile: f64,
     /// `woodham-robust` drops samples whose residual after the first fit is more than this many

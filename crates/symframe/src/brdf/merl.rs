@@ -518,8 +518,7 @@ mod tests {
             // 1/((n·l)(n·v)) varies fast. Within a bin θ_h moves by at most
             // (π/2)(2i+1)/8100 ≈ 0.02 rad at θ_h = 0.5, θ_d and φ_d by 1°; the lobe's
             // log-derivative in θ_h is 2 tanθ_h/(m² cos²θ_h) ≈ 16/rad there, so
-            // nearest-bin errors of up to ~16% are expected on the lobe's flank (measured:
-            // median 0.3%, max 10%).
+            // nearest-bin errors of up to ~16% are expected on the lobe's flank.
             if l.z > 0.2 && v.z > 0.2 && th < 0.6 && td < 1.2 {
                 let a = ct.eval(l, v);
                 for c in 0..3 {

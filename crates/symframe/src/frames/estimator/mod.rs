@@ -370,8 +370,7 @@ impl<'a> Estimator<'a> {
     /// Copies `slice` into `out` with the samples in cast shadow marked invalid (NaN), when the
     /// pixel has a diffuse part to tell them by; returns whether any was marked. A cast shadow
     /// (a light the surface faces but something else blocks) is not symmetric: left in, its
-    /// zeros pull the normal away from the light (measured: 7 degrees mean on a Lambertian bumpy
-    /// scene). A robust Lambertian fit `g` over the unshadowed samples predicts the diffuse
+    /// zeros pull the normal away from the light (docs/method.md, "Cast shadows"). A robust Lambertian fit `g` over the unshadowed samples predicts the diffuse
     /// part; a sample far below the prediction where it is clearly lit is in shadow. Pixels the
     /// fit does not explain (metals) are left as they are: their dark samples are the lobe's
     /// tails.

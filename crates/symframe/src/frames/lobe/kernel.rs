@@ -1,7 +1,8 @@
 //! The lobe fit's loops over the samples: the sums the linear solve, the residuals and the
 //! Gauss-Newton system need, block by block of [`LANES`] samples.
 //!
-//! Written by hand for speed (measured: the fit is ~90% of the estimator's time on dense rigs):
+//! Written by hand for speed: the fit is most of the estimator's time on dense rigs
+//! (docs/performance.md, "The default estimator with the lobe fit").
 //! the samples are stored as columns (one array per coordinate, padded to whole blocks with
 //! empty samples of weight 0), and every block's terms are branch-free arithmetic on
 //! [`LANES`] lanes ([`F64x16`]), so they run as vector instructions (the Gauss-Newton loop's
@@ -104,8 +105,9 @@ impl Subset {
     }
 
     /// Makes the samples those of lights `js`, in that order: light and halfway vectors from
-    /// `lights` and `halfways`, values from `y` (all indexed by light), padded. Column by column
-    /// (measured: a third of the time of appending sample by sample to nine columns).
+    /// `lights` and `halfways`, values from `y` (all indexed by light), padded. Column by column,
+    /// faster than appending sample by sample to nine columns (docs/performance.md,
+    /// "Rig-built layouts").
     pub(super) fn gather(&mut self, js: &[u32], lights: &[DVec3], halfways: &[DVec3], y: &[f64]) {
         fn fill(column: &mut Vec<f64>, js: &[u32], value: impl Fn(usize) -> f64) {
             column.clear();

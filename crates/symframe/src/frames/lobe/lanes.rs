@@ -7,13 +7,11 @@
 //! vectorisation. Every operation is IEEE-exact lane by lane in all three (the fused
 //! multiply-add rounded once in each), in the same order: identical results.
 //!
-//! Written by hand (measured: the lobe fit is ~90% of the estimator's time on dense rigs, and
-//! the compiler does not vectorise the scalar formulas by itself, libm calls included).
-//! Sixteen lanes rather than one register's four or eight: each block is a long chain of
-//! dependent operations (the polynomials), and several registers side by side keep the
-//! processor's units busy (measured per pixel at 1,512 lights, anisotropic Ward sphere, AVX-512:
-//! 4 lanes 505 us, 8 lanes 362 us, with fused multiply-adds in the polynomials 319 us, 16 lanes
-//! 276-286 us).
+//! Written by hand: the lobe fit is most of the estimator's time on dense rigs, and the
+//! compiler does not vectorise the scalar formulas by itself, libm calls included. Sixteen lanes
+//! rather than one register's four or eight: each block is a long chain of dependent operations
+//! (the polynomials), and several registers side by side keep the processor's units busy
+//! (docs/performance.md, "The default estimator with the lobe fit", "Sixteen lanes").
 
 use std::ops::{Add, BitAnd, Div, Mul, Neg, Sub};
 

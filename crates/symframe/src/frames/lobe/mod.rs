@@ -324,8 +324,8 @@ impl ActiveSet {
 /// Lights of the evenly spread subset the fit reads besides the highlight's.
 const SPREAD_LIGHTS: usize = 256;
 
-/// Most highlight lights the fit reads besides the spread subset (measured: a broad Ward lobe
-/// under 1,512 lights has 600 and more above [`HIGHLIGHT_SHARE`]).
+/// Most highlight lights the fit reads besides the spread subset: a broad lobe under a dense rig
+/// has many times more above [`HIGHLIGHT_SHARE`] (docs/method.md, "Lobe fit").
 const HIGHLIGHT_LIGHTS: usize = 256;
 
 /// Samples at or above this share of the brightest are the highlight's, read by the fit.
@@ -654,13 +654,13 @@ fn negligible(gain: f64, cost: f64, syy: f64, relative: f64) -> bool {
 /// The search stops once a step gains less than this share of the cost...
 const RELATIVE_GAIN: f64 = 1e-4;
 
-/// The search on a coarse subset stops at this share instead (the polish on the whole subset
-/// settles the rest; measured: 1e-1 moves the dense materials maps by up to 0.02 degrees mean,
-/// 1e-2 leaves them unchanged).
+/// The search on a coarse subset stops at this share instead: the polish on the whole subset
+/// settles the rest, and at a tenth of this the maps stay the same (docs/performance.md, "The
+/// default estimator with the lobe fit", "Fewer passes").
 const COARSE_RELATIVE_GAIN: f64 = 1e-2;
 
-/// ...or of the samples' energy (measured: 1e-9 stops near-mirror lobes early, 0.013 -> 0.029
-/// degrees mean on the dense rig).
+/// ...or of the samples' energy: a floor much above this stops near-mirror lobes early
+/// (docs/performance.md, "Fewer passes").
 const ABSOLUTE_GAIN: f64 = 1e-12;
 
 /// The gain in the sum of squares the Gauss-Newton model predicts for its undamped step
@@ -718,8 +718,7 @@ fn levenberg_marquardt(
         // a round lobe, a width at its bound) must not make the system singular.
         let floor = damping_floor(&jtj);
         // Converged where even the undamped Gauss-Newton step would gain too little: no trial
-        // pass is spent finding that out (measured: 5-6% fewer passes, the same maps on dense
-        // and sparse rigs).
+        // pass is spent finding that out (docs/performance.md, "Fewer passes").
         if undamped_gain(&jtj, &rhs, floor)
             .is_some_and(|g| negligible(g, linear.cost, syy, relative))
         {
@@ -906,8 +905,7 @@ pub fn fit_lobe(
     };
     // Broad lobes from the same centre, both ways: a highlight cut by the rig's edge (its peak
     // outside the lights) has moments far narrower than the lobe, and a start that narrow
-    // converges to a spurious fit (measured: brushed metal under a 65-degree rig, normals at
-    // 35-55 degrees).
+    // converges to a spurious fit (docs/method.md, "Lobe fit").
     let broad = LobeStart {
         alpha: [BROAD_START.0, BROAD_START.1],
         ..start
@@ -925,11 +923,11 @@ pub fn fit_lobe(
     let starts = &starts[..if distinct { 5 } else { 4 }];
     // The coarse subset pays where it is much smaller than the whole one (dense rigs); under a
     // sparse rig the search reads every light: a lobe sampled by few lights can alias in a
-    // subset (measured on 200 lights: more fits left unexplained).
+    // subset (docs/performance.md, "Coarse-to-fine").
     let polish = fine.len() >= 2 * coarse.len();
     let searched = if polish { &mut *coarse } else { &mut *fine };
     // Where the polish follows, the search need not settle to the last digits: the polish
-    // does (measured: 17% fewer passes on the Ward sphere, the materials maps unchanged).
+    // does (docs/performance.md, "Fewer passes").
     let relative = if polish {
         COARSE_RELATIVE_GAIN
     } else {
