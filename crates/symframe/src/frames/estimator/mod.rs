@@ -339,30 +339,16 @@ impl<'a> Estimator<'a> {
             _ => None,
         };
         let lobes = Lobes { fitted, base };
+        let evidence = (share, diffuse_noise);
+        let answer = |e: PixelEstimate| self.or_fallback(e, &fit, share, moments, fitted.as_ref());
         match self.params.interpolation {
             Interpolation::Exact => {
                 let objective = ExactObjective::new(self.rig, slice);
-                let e = self.solve(
-                    slice,
-                    &objective,
-                    &fit,
-                    (share, diffuse_noise),
-                    moments,
-                    lobes,
-                );
-                self.or_fallback(e, &fit, share, moments, fitted.as_ref())
+                answer(self.solve(slice, &objective, &fit, evidence, moments, lobes))
             }
             Interpolation::Fast => {
                 let objective = fast.prepare(self.rig, slice);
-                let e = self.solve(
-                    slice,
-                    &objective,
-                    &fit,
-                    (share, diffuse_noise),
-                    moments,
-                    lobes,
-                );
-                self.or_fallback(e, &fit, share, moments, fitted.as_ref())
+                answer(self.solve(slice, &objective, &fit, evidence, moments, lobes))
             }
         }
     }
