@@ -1,7 +1,6 @@
 //! `symframe calibrate`: flags to a [`CalibrateConfig`], the library's calibration, a summary.
 
 use anyhow::{bail, Result};
-use symframe_io::DecodeOptions;
 use symframe_job::calibrate::{CircleDoesNotFit, SphereNotFound};
 use symframe_job::{calibrate, CalibrateConfig, CalibrationReport, Control};
 
@@ -9,9 +8,7 @@ use crate::cli::CalibrateArgs;
 
 /// Runs the command; returns the report (also written as JSON beside the `.lp`).
 pub fn run(args: &CalibrateArgs) -> Result<CalibrationReport> {
-    if !(args.saturation > 0.0 && args.saturation <= 1.0) {
-        bail!("--saturation must be in (0, 1], got {}", args.saturation);
-    }
+    let decode = args.decode.options()?;
     if !(args.threshold > 0.0 && args.threshold < 1.0) {
         bail!("--threshold must be in (0, 1), got {}", args.threshold);
     }
@@ -22,11 +19,7 @@ pub fn run(args: &CalibrateArgs) -> Result<CalibrationReport> {
         threshold: args.threshold,
         strict: args.strict,
         matte_sphere: args.matte_sphere,
-        decode: DecodeOptions {
-            gamma: crate::cli::gamma(args.gamma, args.linear),
-            saturation: args.saturation,
-            exr_layer: args.exr_layer.clone(),
-        },
+        decode,
     };
     let ctl = Control {
         warning: &|line| eprintln!("symframe calibrate: warning: {line}"),

@@ -8,6 +8,8 @@ use symframe::appearance::relight::Edits;
 use symframe::frames::estimator::Fallback;
 use symframe::frames::symmetry::CosineMode;
 use symframe::{EstimatorParams, RigOptions};
+use symframe_console::flags::{default_decode_memory_mib, CacheFormatArg};
+use symframe_console::Globals;
 use symframe_io::{CacheOptions, DecodeOptions};
 use symframe_job::Shard;
 
@@ -16,12 +18,9 @@ use symframe_job::Shard;
 #[derive(Debug, Parser)]
 #[command(name = "symframe", version, about, long_about = None)]
 pub struct Cli {
-    /// Worker threads (default: all cores).
-    #[arg(long, global = true, value_parser = clap::value_parser!(usize))]
-    pub threads: Option<usize>,
-    /// No progress lines and no summary (warnings and errors are still printed).
-    #[arg(long, short = 'q', global = true)]
-    pub quiet: bool,
+    /// `--threads` and `--quiet`.
+    #[command(flatten)]
+    pub globals: Globals,
     #[command(subcommand)]
     pub command: Command,
 }
@@ -49,10 +48,6 @@ pub enum Command {
     /// Compare an estimate with a synthetic dataset's ground truth: eval.json, error-map
     /// pictures with colour bars, and a summary table.
     Eval(EvalArgs),
-    /// Re-run the validation experiments in memory (the paper's Figures 3, 4 and 10, noise,
-    /// relighting, materials, real-capture conditions): tables on stdout, PNG plots and a
-    /// markdown report in the output folder.
-    Experiment(ExperimentArgs),
     /// Light directions from a mirror (chrome) sphere in the images: writes an .lp file, a
     /// picture of the detected highlights and a JSON record beside it.
     Calibrate(CalibrateArgs),
@@ -62,53 +57,6 @@ pub enum Command {
     /// Export a fit's (or an estimate's) maps as an asset for renderers: `export gltf DIR -o
     /// FILE.gltf|.glb`.
     Export(ExportArgs),
-    /// Paper-scale benchmark: generate a synthetic stack once, time `estimate` on it.
-    #[command(hide = true)]
-    BenchPaper(BenchArgs),
-    /// Scaling curves: time and memory of `estimate` against image size, light count and
-    /// threads, a fitted cost model, tables and a plot.
-    #[command(hide = true)]
-    BenchScaling(ScalingArgs),
-}
-
-/// The experiments of `symframe experiment`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum ExperimentArg {
-    /// Figure 3: error over normal angle x light cone, anisotropic materials.
-    Fig3,
-    /// Figure 4: symmetry against Woodham and max-reflectance, diffuse to shiny materials.
-    Fig4,
-    /// Figure 10: normal and error maps at 1512, 743, 380 and 172 lights.
-    Fig10,
-    /// Error against Gaussian noise and quantisation.
-    Noise,
-    /// Relighting from per-pixel Ward and glTF fits: held-out PSNR per model and fit, side-by-side
-    /// picture.
-    Relight,
-    /// Every BRDF family over roughness and diffuse fraction, spheres and shadowed bumps, dense,
-    /// sparse and narrow rigs: the estimator against every baseline.
-    Materials,
-    /// Real-capture conditions: bit depth, JPEG quality, clipping, shot noise and
-    /// light-direction error swept over one-lobe, two-lobe, woven, sheen and off-family
-    /// materials, against the baselines.
-    Capture,
-    /// Every experiment, then the report `<output>.md` (e.g. docs/validation.md).
-    All,
-}
-
-/// Flags of `symframe experiment`.
-#[derive(Debug, Clone, Args)]
-pub struct ExperimentArgs {
-    /// Which experiment to run.
-    #[arg(value_enum)]
-    pub which: ExperimentArg,
-    /// Output folder of the plots (created). A single experiment also writes `<name>.md` into
-    /// it; `all` writes the report beside it as `<output>.md`.
-    #[arg(short, long, default_value = "docs/validation")]
-    pub output: PathBuf,
-    /// Reduced sizes (for tests): fewer cells, lights and pixels.
-    #[arg(long)]
-    pub quick: bool,
 }
 
 /// Values of `--gamma`.
@@ -118,6 +66,70 @@ pub enum GammaArg {
     Srgb,
     /// Take 8- and 16-bit samples as linear.
     Linear,
+}
+
+/// The decoding flags of `estimate`, `fit` and `calibrate`.
+#[derive(Debug, Clone, Args)]
+pub struct DecodeFlags {
+    /// Transfer curve of 8- and 16-bit PNG, TIFF and JPEG images: `srgb` (e.g. 16-bit files
+    /// from raw converters) or `linear` (default: 8-bit sRGB, 16-bit linear; float is linear).
+    #[arg(long, value_enum, conflicts_with = "linear")]
+    pub gamma: Option<GammaArg>,
+    /// Same as `--gamma linear`.
+    #[arg(long)]
+    pub linear: bool,
+    /// The EXR layer holding the radiance: `beauty` for channels `beauty.R`, `beauty.G`,
+    /// `beauty.B` (default: the channels without a layer name, R, G, B or Y).
+    #[arg(long, value_name = "NAME")]
+    pub exr_layer: Option<String>,
+    /// Integer samples at or above this fraction of the format's maximum are saturated and
+    /// excluded.
+    #[arg(long, default_value_t = DecodeOptions::default().saturation)]
+    pub saturation: f32,
+}
+
+impl DecodeFlags {
+    /// The decoding options the flags ask for, `--saturation` checked.
+    pub fn options(&self) -> anyhow::Result<DecodeOptions> {
+        if !(self.saturation > 0.0 && self.saturation <= 1.0) {
+            anyhow::bail!("--saturation must be in (0, 1], got {}", self.saturation);
+        }
+        let gamma = match (self.gamma, self.linear) {
+            (Some(GammaArg::Linear), _) | (None, true) => symframe_io::Gamma::Linear,
+            (Some(GammaArg::Srgb), _) => symframe_io::Gamma::Srgb,
+            (None, false) => symframe_io::Gamma::Auto,
+        };
+        Ok(DecodeOptions {
+            gamma,
+            saturation: self.saturation,
+            exr_layer: self.exr_layer.clone(),
+        })
+    }
+}
+
+/// The tile-cache flags of `estimate` and `fit`.
+#[derive(Debug, Clone, Args)]
+pub struct CacheFlags {
+    /// Folder of the on-disk tile cache of the decoded images (default: OUTPUT/.symframe-cache;
+    /// for `fit`, the estimate's FRAMES/.symframe-cache when it exists, so nothing is decoded
+    /// again). A cache of the same images is reused; several runs (shards) may share one folder.
+    #[arg(long = "cache", value_name = "DIR")]
+    pub dir: Option<PathBuf>,
+    /// Delete the tile cache once the job has finished (default: keep it, so a rerun with other
+    /// parameters does not decode the images again).
+    #[arg(long)]
+    pub no_keep_cache: bool,
+}
+
+impl CacheFlags {
+    /// The tile cache the flags ask for, laid out by `options`.
+    pub fn config(&self, options: CacheOptions) -> symframe_job::CacheConfig {
+        symframe_job::CacheConfig {
+            dir: self.dir.clone(),
+            remove_after: self.no_keep_cache,
+            options,
+        }
+    }
 }
 
 /// Values of `symframe fit --model`.
@@ -161,15 +173,6 @@ fn parse_exposure(s: &str) -> Result<ExposureArg, String> {
         _ => Err(format!(
             "expected 'auto' or a positive finite number, got '{s}'"
         )),
-    }
-}
-
-/// The transfer curve of `--gamma` and `--linear` (its alias).
-pub fn gamma(gamma: Option<GammaArg>, linear: bool) -> symframe_io::Gamma {
-    match (gamma, linear) {
-        (Some(GammaArg::Linear), _) | (None, true) => symframe_io::Gamma::Linear,
-        (Some(GammaArg::Srgb), _) => symframe_io::Gamma::Srgb,
-        (None, false) => symframe_io::Gamma::Auto,
     }
 }
 
@@ -344,21 +347,9 @@ pub struct EstimateArgs {
     /// lobes, 1 for Blinn-Phong).
     #[arg(long, default_value_t = default_cosine_power())]
     pub cosine_power: f64,
-    /// Transfer curve of 8- and 16-bit PNG, TIFF and JPEG images: `srgb` (e.g. 16-bit files
-    /// from raw converters) or `linear` (default: 8-bit sRGB, 16-bit linear; float is linear).
-    #[arg(long, value_enum, conflicts_with = "linear")]
-    pub gamma: Option<GammaArg>,
-    /// Same as `--gamma linear`.
-    #[arg(long)]
-    pub linear: bool,
-    /// The EXR layer holding the radiance: `beauty` for channels `beauty.R`, `beauty.G`,
-    /// `beauty.B` (default: the channels without a layer name, R, G, B or Y).
-    #[arg(long, value_name = "NAME")]
-    pub exr_layer: Option<String>,
-    /// Integer samples at or above this fraction of the format's maximum are saturated and
-    /// excluded.
-    #[arg(long, default_value_t = DecodeOptions::default().saturation)]
-    pub saturation: f32,
+    /// How the images are decoded.
+    #[command(flatten)]
+    pub decode: DecodeFlags,
     /// Skip tangents (normals only; faster).
     #[arg(long)]
     pub no_tangents: bool,
@@ -367,14 +358,9 @@ pub struct EstimateArgs {
     /// default fast path, which does the same in single precision, on your own data).
     #[arg(long)]
     pub reference: bool,
-    /// Folder of the on-disk tile cache of the decoded images (default: OUTPUT/.symframe-cache).
-    /// A cache of the same images is reused; several runs (shards) may share one folder.
-    #[arg(long, value_name = "DIR")]
-    pub cache: Option<PathBuf>,
-    /// Delete the tile cache once the run has finished (default: keep it, so a rerun with other
-    /// parameters does not decode the images again).
-    #[arg(long)]
-    pub no_keep_cache: bool,
+    /// Where the tile cache goes and whether it stays.
+    #[command(flatten)]
+    pub cache: CacheFlags,
     /// Recognise unchanged images by path, size and modification time only, without reading
     /// them (default: by content, which reads every image once on a rerun; see the README).
     #[arg(long)]
@@ -390,7 +376,7 @@ pub struct EstimateArgs {
     /// in lockstep a band of tile rows at a time, as many as fit (each costs its reader and its
     /// band of decoded rows; at least one). A --tile-size above the default whose band of one
     /// image exceeds it is refused.
-    #[arg(long, default_value_t = CacheOptions::default().batch_bytes >> 20, value_name = "MIB")]
+    #[arg(long, default_value_t = default_decode_memory_mib(), value_name = "MIB")]
     pub decode_memory: usize,
     /// Sample type of the tile cache: auto (u8 for 8-bit images, u16 for 16-bit ones, else
     /// f32), u8 or u16 (the images' own codes, 3 or 6 bytes per pixel per light, made linear
@@ -417,68 +403,6 @@ pub struct MergeArgs {
     /// Output folder for the full maps.
     #[arg(short, long)]
     pub output: PathBuf,
-}
-
-/// Flags of `symframe bench-paper`.
-#[derive(Debug, Clone, Args)]
-pub struct BenchArgs {
-    /// Folder for the generated dataset (reused when it exists) and the runs' outputs.
-    #[arg(long, default_value = "symframe-bench")]
-    pub dir: PathBuf,
-    /// Image size in pixels (the paper's captures: 1024).
-    #[arg(long, default_value_t = 1024)]
-    pub size: usize,
-    /// Image width in pixels, for a layout other than the paper's square (with --height).
-    #[arg(long, requires = "height")]
-    pub width: Option<usize>,
-    /// Image height in pixels, for a layout other than the paper's square (with --width).
-    #[arg(long, requires = "width")]
-    pub height: Option<usize>,
-    /// The images' format: exr (float, the paper's), jpeg (8-bit sRGB, quality 90, as
-    /// cameras write) or png16 (16-bit linear).
-    #[arg(long, value_enum, default_value_t = BenchFormat::Exr)]
-    pub format: BenchFormat,
-    /// Number of lights (the paper's captures: 1512).
-    #[arg(long, default_value_t = 1512)]
-    pub lights: usize,
-    /// Skip the baseline run (`woodham` on the same cache).
-    #[arg(long)]
-    pub no_baseline: bool,
-    /// Delete the tile cache first, so the run decodes every image (default: reuse it).
-    #[arg(long)]
-    pub cold: bool,
-    /// Passed to `estimate --decode-memory` (MiB for a batch of images decoded a band at a time).
-    #[arg(long, default_value_t = CacheOptions::default().batch_bytes >> 20, value_name = "MIB")]
-    pub decode_memory: usize,
-    /// Passed to `estimate --cache-format`.
-    #[arg(long, value_enum, default_value_t = CacheFormatArg::Auto)]
-    pub cache_format: CacheFormatArg,
-    /// Estimate only this shard of the tiles (`estimate --tiles K/N`): the whole cache is
-    /// still built, so decoding and memory are measured at full size in a fraction of the time.
-    #[arg(long, value_name = "K/N")]
-    pub tiles: Option<Shard>,
-}
-
-/// Flags of `symframe bench-scaling`.
-#[derive(Debug, Clone, Args)]
-pub struct ScalingArgs {
-    /// Folder for the generated datasets (reused when they exist), the runs' outputs and the
-    /// results: scaling.json, scaling.md, scaling.png.
-    #[arg(long, default_value = "symframe-scaling")]
-    pub dir: PathBuf,
-    /// A tiny sweep (for tests): seconds instead of minutes.
-    #[arg(long)]
-    pub quick: bool,
-    /// Measure nothing: fit the model again and rewrite the tables and the plot from the runs
-    /// recorded in DIR/scaling.json.
-    #[arg(long)]
-    pub refit: bool,
-    /// Add 1024 x 1024 to the image-size sweep (about 5 GB of cache and minutes more).
-    #[arg(long)]
-    pub large: bool,
-    /// Passed to `estimate --decode-memory` (MiB for a batch of images decoded a band at a time).
-    #[arg(long, default_value_t = CacheOptions::default().batch_bytes >> 20, value_name = "MIB")]
-    pub decode_memory: usize,
 }
 
 /// Flags of `symframe demo`.
@@ -665,21 +589,9 @@ pub struct FitArgs {
     /// input, if any).
     #[arg(long)]
     pub mask: Option<PathBuf>,
-    /// Transfer curve of 8- and 16-bit PNG, TIFF and JPEG images: `srgb` (e.g. 16-bit files
-    /// from raw converters) or `linear` (default: 8-bit sRGB, 16-bit linear; float is linear).
-    #[arg(long, value_enum, conflicts_with = "linear")]
-    pub gamma: Option<GammaArg>,
-    /// Same as `--gamma linear`.
-    #[arg(long)]
-    pub linear: bool,
-    /// The EXR layer holding the radiance: `beauty` for channels `beauty.R`, `beauty.G`,
-    /// `beauty.B` (default: the channels without a layer name, R, G, B or Y).
-    #[arg(long, value_name = "NAME")]
-    pub exr_layer: Option<String>,
-    /// Integer samples at or above this fraction of the format's maximum are saturated and
-    /// excluded.
-    #[arg(long, default_value_t = DecodeOptions::default().saturation)]
-    pub saturation: f32,
+    /// How the images are decoded.
+    #[command(flatten)]
+    pub decode: DecodeFlags,
     /// The reflectance model fitted per pixel (default: the one that predicts held-out lights
     /// better on the validation scenes, docs/validation.md).
     #[arg(long, value_enum, default_value_t = ModelArg::DEFAULT)]
@@ -699,14 +611,9 @@ pub struct FitArgs {
     /// The fitted highlight's peak may be at most this many times the pixel's brightest sample.
     #[arg(long, default_value_t = FitParams::default().max_peak_ratio)]
     pub max_peak_ratio: f64,
-    /// Folder of the on-disk tile cache of the decoded images (default: the estimate's,
-    /// FRAMES/.symframe-cache, when it exists, so nothing is decoded again; else
-    /// OUTPUT/.symframe-cache).
-    #[arg(long, value_name = "DIR")]
-    pub cache: Option<PathBuf>,
-    /// Delete the tile cache once the fit has finished.
-    #[arg(long)]
-    pub no_keep_cache: bool,
+    /// Where the tile cache goes and whether it stays.
+    #[command(flatten)]
+    pub cache: CacheFlags,
 }
 
 /// Parses a light direction written `x,y,z`.
@@ -861,20 +768,9 @@ pub struct CalibrateArgs {
     /// normalised to a mean of 1 over all lights and channels.
     #[arg(long, value_parser = parse_circle, allow_hyphen_values = true, value_name = "CX,CY,R")]
     pub matte_sphere: Option<symframe::calibrate::Circle>,
-    /// Transfer curve of 8- and 16-bit PNG, TIFF and JPEG images: `srgb` (e.g. 16-bit files
-    /// from raw converters) or `linear` (default: 8-bit sRGB, 16-bit linear; float is linear).
-    #[arg(long, value_enum, conflicts_with = "linear")]
-    pub gamma: Option<GammaArg>,
-    /// Same as `--gamma linear`.
-    #[arg(long)]
-    pub linear: bool,
-    /// The EXR layer holding the radiance: `beauty` for channels `beauty.R`, `beauty.G`,
-    /// `beauty.B` (default: the channels without a layer name, R, G, B or Y).
-    #[arg(long, value_name = "NAME")]
-    pub exr_layer: Option<String>,
-    /// Integer samples at or above this fraction of the format's maximum are saturated.
-    #[arg(long, default_value_t = 0.995)]
-    pub saturation: f32,
+    /// How the images are decoded.
+    #[command(flatten)]
+    pub decode: DecodeFlags,
 }
 
 fn parse_circle(s: &str) -> Result<symframe::calibrate::Circle, String> {
@@ -910,44 +806,6 @@ pub struct ExportArgs {
     /// With --mesh: leave out triangles across depth jumps (as `integrate --max-jump`).
     #[arg(long, default_value_t = 2.0)]
     pub max_jump: f64,
-}
-
-/// The image format of a benchmark's synthetic capture.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum BenchFormat {
-    /// Float32 OpenEXR.
-    Exr,
-    /// 8-bit sRGB JPEG of quality 90.
-    Jpeg,
-    /// 16-bit linear PNG.
-    Png16,
-}
-
-/// Sample type of the tile cache.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum CacheFormatArg {
-    /// The smallest exact one for the images: u8, u16 or f32.
-    Auto,
-    /// 32-bit floats (exact).
-    F32,
-    /// Half floats (half the size).
-    F16,
-    /// 8-bit images' codes (exact, a quarter of f32).
-    U8,
-    /// 8- or 16-bit images' codes (exact, half of f32).
-    U16,
-}
-
-impl From<CacheFormatArg> for symframe_io::CacheFormat {
-    fn from(a: CacheFormatArg) -> Self {
-        match a {
-            CacheFormatArg::F32 => symframe_io::CacheFormat::F32,
-            CacheFormatArg::F16 => symframe_io::CacheFormat::F16,
-            CacheFormatArg::Auto => symframe_io::CacheFormat::Auto,
-            CacheFormatArg::U8 => symframe_io::CacheFormat::U8,
-            CacheFormatArg::U16 => symframe_io::CacheFormat::U16,
-        }
-    }
 }
 
 /// The y convention of `normals.png`.

@@ -4,10 +4,9 @@
 use anyhow::{bail, Result};
 use symframe::baselines::{Baseline, BaselineParams};
 use symframe::{EstimatorParams, Interpolation, RigOptions};
-use symframe_io::{CacheOptions, DecodeOptions};
-use symframe_job::{
-    CacheConfig, EstimateConfig, EstimateOutcome, LightModel, MethodConfig, NearOptions,
-};
+use symframe_console::flags::decode_memory_bytes;
+use symframe_io::CacheOptions;
+use symframe_job::{EstimateConfig, EstimateOutcome, LightModel, MethodConfig, NearOptions};
 
 use crate::cli::{EstimateArgs, LightModelArg, MergeArgs, MethodArg};
 use crate::progress;
@@ -35,9 +34,7 @@ fn validate(args: &EstimateArgs) -> Result<()> {
             args.light_error
         );
     }
-    if !(args.saturation > 0.0 && args.saturation <= 1.0) {
-        bail!("--saturation must be in (0, 1], got {}", args.saturation);
-    }
+    args.decode.options()?;
     if !(0.0..=1.0).contains(&args.cosine_power) {
         bail!(
             "--cosine-power must be in [0, 1], got {}",
@@ -66,19 +63,6 @@ fn validate(args: &EstimateArgs) -> Result<()> {
     }
     decode_memory_bytes(args.decode_memory)?;
     Ok(())
-}
-
-/// The largest `--decode-memory`, in MiB (1 TiB): far above any machine's memory, and its
-/// bytes fit a 64-bit size.
-pub const MAX_DECODE_MEMORY_MIB: usize = 1 << 20;
-
-/// The bytes of `--decode-memory MIB`, checked: 1 MiB to [`MAX_DECODE_MEMORY_MIB`] (a huge
-/// value once wrapped around to a tiny batch).
-pub fn decode_memory_bytes(mib: usize) -> Result<usize> {
-    if !(1..=MAX_DECODE_MEMORY_MIB).contains(&mib) {
-        bail!("--decode-memory must be in [1, {MAX_DECODE_MEMORY_MIB}] MiB (at most 1 TiB), got {mib}");
-    }
-    Ok(mib << 20)
 }
 
 /// The job the flags ask for.
@@ -123,21 +107,13 @@ pub fn config(args: &EstimateArgs) -> Result<EstimateConfig> {
         output: args.output.clone(),
         method,
         mask: args.mask.clone(),
-        decode: DecodeOptions {
-            gamma: crate::cli::gamma(args.gamma, args.linear),
-            saturation: args.saturation,
-            exr_layer: args.exr_layer.clone(),
-        },
-        cache: CacheConfig {
-            dir: args.cache.clone(),
-            remove_after: args.no_keep_cache,
-            options: CacheOptions {
-                tile: args.tile_size,
-                batch_bytes: decode_memory_bytes(args.decode_memory)?,
-                trust_mtime: args.trust_mtime,
-                format: args.cache_format.into(),
-            },
-        },
+        decode: args.decode.options()?,
+        cache: args.cache.config(CacheOptions {
+            tile: args.tile_size,
+            batch_bytes: decode_memory_bytes(args.decode_memory)?,
+            trust_mtime: args.trust_mtime,
+            format: args.cache_format.into(),
+        }),
         shard: args.tiles,
         keep_maps: false,
         normal_png: args.normal_png.into(),

@@ -5,19 +5,15 @@
 use anyhow::{bail, Result};
 use glam::DVec3;
 use symframe::appearance::fit::{holdout_lights, FitParams};
-use symframe_io::{CacheOptions, DecodeOptions};
-use symframe_job::{
-    CacheConfig, FitConfig, FitOutcome, RelightConfig, RelightOutcome, ViewConfig, ViewOutcome,
-};
+use symframe_io::CacheOptions;
+use symframe_job::{FitConfig, FitOutcome, RelightConfig, RelightOutcome, ViewConfig, ViewOutcome};
 
 use crate::cli::{FitArgs, RelightArgs, ViewArgs};
 use crate::progress;
 
 /// The fit job the flags ask for.
 pub fn config(args: &FitArgs) -> Result<FitConfig> {
-    if !(args.saturation > 0.0 && args.saturation <= 1.0) {
-        bail!("--saturation must be in (0, 1], got {}", args.saturation);
-    }
+    let decode = args.decode.options()?;
     if args.max_iterations == 0 {
         bail!("--max-iterations must be at least 1");
     }
@@ -53,16 +49,8 @@ pub fn config(args: &FitArgs) -> Result<FitConfig> {
             ..FitParams::default()
         },
         mask: args.mask.clone(),
-        decode: DecodeOptions {
-            gamma: crate::cli::gamma(args.gamma, args.linear),
-            saturation: args.saturation,
-            exr_layer: args.exr_layer.clone(),
-        },
-        cache: CacheConfig {
-            dir: args.cache.clone(),
-            remove_after: args.no_keep_cache,
-            options: CacheOptions::default(),
-        },
+        decode,
+        cache: args.cache.config(CacheOptions::default()),
     })
 }
 

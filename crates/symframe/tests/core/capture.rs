@@ -1,7 +1,7 @@
 //! Real-capture conditions: an 8-bit sRGB capture whose brightest samples clip keeps its
 //! normals and tangents when the estimator is told the clip level (the clipped samples read as
 //! censored at it, docs/method.md "Noise model"), where dropping them left holes at the top of
-//! every highlight. Figures: `symframe experiment capture` (docs/validation.md).
+//! every highlight. Figures: `symframe-lab experiment capture` (docs/validation.md).
 
 use glam::DVec3;
 use symframe::brdf::{Brdf, Ggx};

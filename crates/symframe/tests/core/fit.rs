@@ -205,7 +205,7 @@ fn estimated_frames_give_close_parameters_and_relighting() {
 
 /// Fits data of other reflectance models (model error: the fit is a Ward lobe) and judges it on
 /// held-out lights, with the true frames and with estimated ones. The bounds only catch a broken
-/// fit; `symframe experiment relight` reports the figures.
+/// fit; `symframe-lab experiment relight` reports the figures.
 #[test]
 fn other_models_held_out_psnr() {
     let scene = Scene::sphere(32, TangentField::Circular);

@@ -1,6 +1,6 @@
-//! `symframe bench-scaling` (hidden): scaling curves of the estimation job. Sweeps the image size
+//! `symframe-lab bench scaling`: scaling curves of the estimation job. Sweeps the image size
 //! at a fixed light count, the light count at a fixed size, the threads at a fixed job and the
-//! decoding batch at a fixed job (datasets as `bench-paper` renders them, each run cold: the
+//! decoding batch at a fixed job (datasets as `bench` renders them, each run cold: the
 //! tile cache deleted first), fits a cost model by least squares, and writes `scaling.json`
 //! (every run, the model, its error), `scaling.md` (tables and the formula) and `scaling.png`
 //! (the curves with the model).
@@ -19,8 +19,10 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
 
+use symframe_console::flags::CacheFormatArg;
+
 use super::{dataset, remove_dir, run_estimate, symmetry_config, Figures};
-use crate::cli::{CacheFormatArg, ScalingArgs};
+use crate::cli::ScalingArgs;
 use crate::experiment::plot;
 
 /// The lobe fit reads at most this many lights per pixel (`EstimatorParams`' lobe subset).
@@ -923,7 +925,7 @@ fn plot_curves(
         w,
         h,
         1,
-        "regenerate: symframe bench-scaling --dir DIR",
+        "regenerate: symframe-lab bench scaling --dir DIR",
     )
 }
 

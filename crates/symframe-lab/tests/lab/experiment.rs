@@ -1,14 +1,13 @@
-//! `symframe experiment all --quick`: every experiment runs end to end and the report, plots
+//! `symframe-lab experiment all --quick`: every experiment runs end to end and the report, plots
 //! and JSON figures are written (each experiment's figures are checked by its unit tests).
 
-use crate::common::{s, symframe};
+use crate::common::{lab, ok, s};
 
 #[test]
 fn all_quick_writes_the_report_plots_and_figures() {
     let dir = tempfile::tempdir().unwrap();
     let out_dir = dir.path().join("validation");
-    let o = symframe(&["experiment", "all", "--quick", "-o", s(&out_dir)]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    ok(&lab(&["experiment", "all", "--quick", "-o", s(&out_dir)]));
     let md = std::fs::read_to_string(dir.path().join("validation.md")).unwrap();
     for s in [
         "Figure 3",

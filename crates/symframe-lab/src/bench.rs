@@ -1,4 +1,4 @@
-//! `symframe bench-paper` (hidden): the paper-scale benchmark. Generates a synthetic stack once
+//! `symframe-lab bench`: the paper-scale benchmark. Generates a synthetic stack once
 //! (a brushed-metal sphere, anisotropic Ward, under lights uniform over the 65-degree cone; RGB
 //! float EXR images and an `.lp` file, reused by later runs), then runs the estimation job on it
 //! ([`symframe_job::estimate`], as `symframe estimate` does) and prints wall time, decoding and
@@ -12,8 +12,8 @@
 //! large as the shorter side, the rest background; 8-bit sRGB JPEG as cameras write them, or
 //! 16-bit linear PNG), whose tile cache is then `u8` or `u16` by default. The figures are also
 //! written to `bench.json` in `--dir` (`total_s`, `decode_s`, `estimate_s`, `peak_rss_bytes`,
-//! `cache_bytes`, `woodham_s`, ...). `symframe bench-scaling` ([`scaling`]) sweeps size, lights and threads with the same
-//! dataset and run code.
+//! `cache_bytes`, `woodham_s`, ...). `symframe-lab bench scaling` ([`scaling`]) sweeps size,
+//! lights and threads with the same dataset and run code.
 
 pub mod scaling;
 
@@ -28,10 +28,11 @@ use symframe::baselines::{Baseline, BaselineParams};
 use symframe::brdf::ward::Ward;
 use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{Scene, TangentField};
+use symframe_console::flags::{decode_memory_bytes, CacheFormatArg};
+use symframe_console::progress;
 use symframe_job::{EstimateConfig, EstimateOutcome, MethodConfig};
 
-use crate::cli::{BenchArgs, BenchFormat, CacheFormatArg};
-use crate::progress;
+use crate::cli::{BenchArgs, BenchFormat};
 
 /// Renders the dataset into `dir` unless a complete one is there; returns the `.lp` path.
 pub(crate) fn dataset(dir: &Path, size: usize, n: usize) -> Result<PathBuf> {
@@ -168,8 +169,8 @@ pub(crate) fn dataset_layout(
     Ok(lp)
 }
 
-/// The figures of one timed estimation run, read from its report: what `bench-paper` prints and
-/// `bench-scaling` records and fits.
+/// The figures of one timed estimation run, read from its report: what `bench` prints and
+/// `bench scaling` records and fits.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Figures {
     /// Wall time of the whole job, seconds.
@@ -273,7 +274,7 @@ pub(crate) fn run_estimate(config: &EstimateConfig) -> Result<Figures> {
     let bars = progress::Bars::default();
     let show = |p| bars.update(p);
     let (t, cpu) = (Instant::now(), cpu_seconds());
-    let outcome = symframe_job::estimate(config, &crate::control(&show, None))?;
+    let outcome = symframe_job::estimate(config, &symframe_console::control(&show, None))?;
     let (wall_s, cpu_s) = (t.elapsed().as_secs_f64(), cpu_seconds() - cpu);
     let report = match outcome {
         EstimateOutcome::Maps(done) => serde_json::to_value(&done.report)?,
@@ -297,7 +298,7 @@ pub(crate) fn symmetry_config(
     }
     let mut config = EstimateConfig::new(lp, out);
     config.cache.dir = Some(cache);
-    config.cache.options.batch_bytes = crate::estimate::decode_memory_bytes(decode_memory_mib)?;
+    config.cache.options.batch_bytes = decode_memory_bytes(decode_memory_mib)?;
     config.cache.options.format = cache_format.into();
     Ok(config)
 }

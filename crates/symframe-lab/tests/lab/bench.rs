@@ -1,10 +1,10 @@
-//! `symframe bench-scaling --quick`: the sweep runs end to end, writes its JSON, report and plot,
-//! and the fitted model is consistent with its own points. Timings are noisy, so only the
+//! `symframe-lab bench scaling --quick`: the sweep runs end to end, writes its JSON, report and
+//! plot, and the fitted model is consistent with its own points. Timings are noisy, so only the
 //! structure and the model's arithmetic are asserted, never a speed.
 
 use std::fs;
 
-use crate::common::{ok, s, symframe};
+use crate::common::{lab, ok, s};
 
 /// Relative tolerance of a prediction recomputed from the JSON's coefficients and terms (the
 /// same sums in another order: rounding only).
@@ -14,8 +14,7 @@ const RECOMPUTE_TOLERANCE: f64 = 1e-9;
 fn bench_scaling_quick_writes_a_consistent_model() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("scaling");
-    let o = symframe(&["bench-scaling", "--quick", "--dir", s(&out)]);
-    ok(&o);
+    ok(&lab(&["bench", "scaling", "--quick", "--dir", s(&out)]));
     let doc: serde_json::Value =
         serde_json::from_str(&fs::read_to_string(out.join("scaling.json")).unwrap()).unwrap();
     let runs = doc["runs"].as_array().unwrap();
@@ -106,16 +105,16 @@ fn bench_scaling_quick_writes_a_consistent_model() {
     assert!(!out.join("cache").exists() && !out.join("out").exists());
 }
 
-/// `bench-paper` of another layout and format writes that capture, runs on the cache its
+/// `bench` of another layout and format writes that capture, runs on the cache its
 /// images call for (`u8` for JPEG, `u16` for 16-bit PNG) and records its figures in
 /// `bench.json`.
 #[test]
-fn bench_paper_of_a_jpeg_or_png16_layout_writes_bench_json() {
+fn bench_of_a_jpeg_or_png16_layout_writes_bench_json() {
     let dir = tempfile::tempdir().unwrap();
     for (format, bytes, baseline) in [("jpeg", 3.0, false), ("png16", 6.0, true)] {
         let d = dir.path().join(format);
         let mut args = vec![
-            "bench-paper",
+            "bench",
             "--dir",
             s(&d),
             "--width",
@@ -131,7 +130,7 @@ fn bench_paper_of_a_jpeg_or_png16_layout_writes_bench_json() {
         if !baseline {
             args.push("--no-baseline");
         }
-        ok(&symframe(&args));
+        ok(&lab(&args));
         let data = d.join(format!("data-40x24-16lights-{format}"));
         assert!(data.join("lights.lp").is_file());
         let doc: serde_json::Value =
