@@ -21,6 +21,7 @@ pub struct Cli {
     /// `--threads` and `--quiet`.
     #[command(flatten)]
     pub globals: Globals,
+    /// What to do.
     #[command(subcommand)]
     pub command: Command,
 }
@@ -176,7 +177,6 @@ fn parse_exposure(s: &str) -> Result<ExposureArg, String> {
     }
 }
 
-/// Which estimator `symframe estimate` runs.
 /// `--light-model` of estimate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum LightModelArg {
@@ -188,6 +188,7 @@ pub enum LightModelArg {
     Near,
 }
 
+/// Which estimator `symframe estimate` runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum MethodArg {
     /// BRDF symmetry (Holroyd et al. 2008): normals and tangents, any material.
@@ -773,6 +774,7 @@ pub struct CalibrateArgs {
     pub decode: DecodeFlags,
 }
 
+/// Parses a circle written `CX,CY,R` (`--sphere`, `--matte-sphere`).
 fn parse_circle(s: &str) -> Result<symframe::calibrate::Circle, String> {
     symframe::calibrate::Circle::parse(s)
 }

@@ -15,6 +15,7 @@ pub struct Cli {
     /// `--threads` and `--quiet`.
     #[command(flatten)]
     pub globals: Globals,
+    /// What to do.
     #[command(subcommand)]
     pub command: Command,
 }
