@@ -177,7 +177,7 @@ pub struct CalibrationReport {
 /// The image list: every image file of a folder sorted by name (leaving out `mask.*`), the
 /// images of an `.lp` file, or a list file of paths (one per line, relative to the list's
 /// folder; blank lines and `#` comments allowed).
-fn image_list(input: &Path) -> Result<Vec<PathBuf>> {
+pub(crate) fn image_list(input: &Path) -> Result<Vec<PathBuf>> {
     if input.is_dir() {
         let mut v: Vec<PathBuf> = std::fs::read_dir(input)
             .with_context(|| format!("{}: cannot read folder", input.display()))?
@@ -242,7 +242,7 @@ pub const MAX_CALIBRATE_PIXELS: usize = 1 << 26;
 
 /// The memory for the images read at once (the spheres' rows): as many in parallel as fit, at
 /// least one.
-const DECODE_MEMORY: usize = 256 << 20;
+pub(crate) const DECODE_MEMORY: usize = 256 << 20;
 
 /// Checks the size image `path` declares (read from its header, undecoded) against the first
 /// image's.
@@ -260,7 +260,7 @@ fn check_declared(path: &Path, opts: &DecodeOptions, (w, h): (usize, usize)) -> 
 /// Reads one image a band of rows at a time (its declared size checked against the first
 /// image's before anything is decoded), giving `band(y, grey, rgb)` each band: its first row,
 /// its grey values (the mean of the channels; `NaN` where any is saturated) and its RGB.
-fn read_grey(
+pub(crate) fn read_grey(
     path: &Path,
     opts: &DecodeOptions,
     size: (usize, usize),
@@ -281,7 +281,7 @@ fn read_grey(
 
 /// The rows a circle's pixels lie in, clipped to an image of `height` rows (as
 /// [`matte_intensity`] and [`find_highlight`] bound their pixels).
-fn circle_rows(c: &Circle, height: usize) -> std::ops::Range<usize> {
+pub(crate) fn circle_rows(c: &Circle, height: usize) -> std::ops::Range<usize> {
     let y0 = (c.cy - c.r).floor().max(0.0) as usize;
     let y1 = ((c.cy + c.r).ceil().max(0.0) as usize).min(height);
     y0.min(y1)..y1
@@ -289,7 +289,13 @@ fn circle_rows(c: &Circle, height: usize) -> std::ops::Range<usize> {
 
 /// Copies the rows of `band` (of `width` samples a row, starting at row `y`) that fall in
 /// `rows` to `out`, which holds those rows from its start (`rows.start` is its row 0).
-fn keep_rows(band: &[f32], y: usize, width: usize, rows: &std::ops::Range<usize>, out: &mut [f32]) {
+pub(crate) fn keep_rows(
+    band: &[f32],
+    y: usize,
+    width: usize,
+    rows: &std::ops::Range<usize>,
+    out: &mut [f32],
+) {
     let n = band.len() / width.max(1);
     let (a, b) = (rows.start.clamp(y, y + n), rows.end.clamp(y, y + n));
     if a < b {
@@ -299,7 +305,7 @@ fn keep_rows(band: &[f32], y: usize, width: usize, rows: &std::ops::Range<usize>
 }
 
 /// `path` relative to folder `base` when it lies below it (else absolute).
-fn relative_to(path: &Path, base: &Path) -> PathBuf {
+pub(crate) fn relative_to(path: &Path, base: &Path) -> PathBuf {
     let abs = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
     let (p, b) = (abs(path), abs(base));
     let (pc, bc): (Vec<Component>, Vec<Component>) =

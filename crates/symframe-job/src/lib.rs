@@ -16,7 +16,9 @@
 //! - [`write_viewer`] with a [`ViewConfig`]: one self-contained HTML page relighting a fit (or
 //!   showing an estimate) in the browser (WebGL2), with the same model and edits as
 //!   [`relight`]; large maps as a tile pyramid beside it.
-//! - [`calibrate()`] with a [`CalibrateConfig`]: light directions from a mirror sphere.
+//! - [`calibrate()`] with a [`CalibrateConfig`]: light directions from a mirror sphere;
+//!   [`calibrate_near()`] with a [`NearCalibrateConfig`]: light positions from two or more
+//!   chrome spheres and a pinhole camera.
 //! - [`integrate_job`] with an [`IntegrateConfig`]: an estimate's normals to a height map and a
 //!   mesh.
 //! - [`export_gltf`] with an [`ExportConfig`]: a fit or estimate as a glTF 2.0 asset.
@@ -56,6 +58,7 @@
 //! ```
 
 pub mod calibrate;
+pub mod calibrate_near;
 pub mod colorbar;
 mod estimate;
 mod estimate_near;
@@ -96,6 +99,7 @@ pub use view::{
 pub use {merge::check_shard_manifest, outdir::check_switch_plan};
 
 pub use calibrate::{calibrate, CalibrateConfig, CalibrationReport};
+pub use calibrate_near::{calibrate_near, NearCalibrateConfig, NearCalibrationReport};
 pub use estimate_near::{LightModel, NearOptions, NearReport};
 pub use eval::{evaluate_job, EvalConfig, EvalReport};
 pub use export::{export_gltf, ExportConfig, ExportOutcome};

@@ -21,6 +21,7 @@ use serde_json::json;
 use symframe::brdf::{parse_model, Brdf};
 use symframe::near::Pinhole;
 use symframe::render::perspective::{dome_lights, Ball, NearScene};
+use symframe::render::NearMirrorBalls;
 use symframe::render::{Degradation, Noise};
 use symframe_io::{ImageFormat, NearFiles};
 
@@ -30,6 +31,12 @@ use crate::{Checkpoint, Control, Interrupted, Progress, Stage};
 
 /// The pair of spheres' width (two unit spheres, centres 2.2 apart).
 pub const PAIR_WIDTH: f64 = 4.2;
+
+/// The folder of the chrome spheres' calibration images ([`NearSynthConfig::chrome_spheres`]).
+pub const CHROME_FOLDER: &str = "chrome";
+
+/// The radius of the lamps the chrome spheres reflect.
+const CHROME_LAMP_RADIUS: f64 = 0.05;
 
 /// Everything a near-light synthetic capture needs.
 #[derive(Debug, Clone, PartialEq)]
@@ -57,6 +64,11 @@ pub struct NearSynthConfig {
     pub exposure: f64,
     /// Seed of the noise.
     pub seed: u64,
+    /// Also render the calibration images of two chrome spheres where the object's spheres
+    /// are (the object taken away), under the same lights and camera, into `chrome/`
+    /// ([`symframe::render::NearMirrorBalls`]: a lamp of radius 0.05 and radiance 5000, a room
+    /// of radiance 1), for `symframe calibrate --K`.
+    pub chrome_spheres: bool,
 }
 
 impl NearSynthConfig {
@@ -78,6 +90,7 @@ impl NearSynthConfig {
             format: ImageFormat::Exr,
             exposure: 1.0,
             seed: 0,
+            chrome_spheres: false,
         }
     }
 
@@ -202,6 +215,54 @@ fn render_and_write(config: &NearSynthConfig, ctl: &Control) -> Result<SynthOutc
         Some(&mask),
     )
     .with_context(|| format!("{}: cannot write the dataset", config.output.display()))?;
+    if config.chrome_spheres {
+        let balls: Vec<(DVec3, f64)> = scene.balls.iter().map(|b| (b.centre, b.radius)).collect();
+        let mirrors = NearMirrorBalls {
+            lamp_radius: CHROME_LAMP_RADIUS,
+            ..NearMirrorBalls::new(scene.width, scene.height, scene.camera, &balls)
+        };
+        let done = std::sync::atomic::AtomicU64::new(0);
+        let chrome: Vec<Vec<f32>> = lights
+            .par_iter()
+            .enumerate()
+            .map(|(i, light)| -> Result<Vec<f32>> {
+                if ctl.stop.load(std::sync::atomic::Ordering::SeqCst) {
+                    return Err(Interrupted.into());
+                }
+                let mut img: Vec<f32> = mirrors
+                    .render(light.position)
+                    .into_iter()
+                    .flat_map(|v| [v; 3])
+                    .collect();
+                degradation.apply(&mut img, i);
+                let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                ctl.report(Progress::new(Stage::Rendering, k, n_lights));
+                Ok(img)
+            })
+            .collect::<Result<_>>()?;
+        symframe_io::write_near_dataset(
+            &staging.path(CHROME_FOLDER),
+            &NearFiles {
+                positions: &positions,
+                directions: &directions,
+                k: scene.camera.k(),
+                gt_depth: None,
+            },
+            &chrome,
+            scene.width,
+            scene.height,
+            config.format,
+            None,
+            None,
+            None,
+        )
+        .with_context(|| {
+            format!(
+                "{}: cannot write the chrome spheres' images",
+                config.output.display()
+            )
+        })?;
+    }
     let description = json!({
         "version": env!("CARGO_PKG_VERSION"),
         "generator": "symframe synth --near",
@@ -227,6 +288,12 @@ fn render_and_write(config: &NearSynthConfig, ctl: &Control) -> Result<SynthOutc
             ImageFormat::Png8 => "png8",
         },
         "seed": config.seed,
+        "chrome_spheres": config.chrome_spheres.then(|| json!({
+            "folder": CHROME_FOLDER,
+            "centres": scene.balls.iter().map(|b| b.centre.to_array()).collect::<Vec<_>>(),
+            "radius": 1.0,
+            "lamp_radius": CHROME_LAMP_RADIUS,
+        })),
         "mask_pixels": mask.iter().filter(|&&m| m).count(),
         "conventions": "camera frame x right, y up, z toward the camera, origin at the centre \
                         of projection; K in OpenCV's convention (u right, v down, top-left \

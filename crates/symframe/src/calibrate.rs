@@ -515,8 +515,32 @@ pub fn detect_sphere(
     if count == 0 {
         return Err("no bright region holds the images' brightest spots".into());
     }
+    let (circle, n, roundness) = region_circle(width, height, &label, best as u32, &value);
+    if roundness < 0.9 {
+        return Err(format!(
+            "the region holding the brightest spots (centre {:.1}, {:.1}, {} pixels) is not \
+             round (overlap with its circle {:.2})",
+            circle.cx, circle.cy, n, roundness
+        ));
+    }
+    Ok(Detection {
+        circle,
+        highlight_share: share,
+        roundness,
+    })
+}
+
+/// The circle of region `best` of `label` (its centroid and the radius of a disc of its area,
+/// then fitted to its rim in the image `value`), its pixel count and its roundness (the
+/// intersection over union of the region and that first circle).
+fn region_circle(
+    width: usize,
+    height: usize,
+    label: &[u32],
+    best: u32,
+    value: &dyn Fn(usize) -> f64,
+) -> (Circle, usize, f64) {
     let (mut sx, mut sy, mut n) = (0.0, 0.0, 0usize);
-    let best = best as u32;
     for (i, &l) in label.iter().enumerate() {
         if l == best {
             sx += (i % width) as f64 + 0.5;
@@ -545,19 +569,116 @@ pub fn detect_sphere(
     // The region's circle is whole pixels: its rim is wherever the blurred edge crossed a
     // threshold near the background. The rim itself, to a few hundredths of a pixel: fitted
     // to where the mean image falls off most steeply along rays from the centre.
-    let circle = refine_circle(width, height, &value, circle).unwrap_or(circle);
-    if roundness < 0.9 {
+    let circle = refine_circle(width, height, value, circle).map_or(circle, |(c, _)| c);
+    (circle, n, roundness)
+}
+
+/// The fewest pixels a region must have for [`detect_spheres`] to take it for a sphere.
+const MIN_SPHERE_PIXELS: usize = 50;
+
+/// Finds every mirror sphere in the images for a calibration with two or more spheres: as
+/// [`detect_sphere`] finds one (the connected regions brighter than the image border in the
+/// mean image `mean`), every region at least [`MIN_SPHERE_PIXELS`] large, round (roundness
+/// 0.9) and holding at least `min_share` of the images' brightest spots (`brightest`), largest
+/// share first. `Err` says why none was found.
+pub fn detect_spheres(
+    width: usize,
+    height: usize,
+    mean: &[f32],
+    brightest: &[usize],
+    min_share: f64,
+) -> Result<Vec<Detection>, String> {
+    if width < 3 || height < 3 || mean.len() != width * height {
+        return Err("the images are too small to find a sphere in".into());
+    }
+    if mean.len() >= u32::MAX as usize {
+        return Err("the images are too large to find a sphere in".into());
+    }
+    let top = mean
+        .iter()
+        .filter(|v| v.is_finite())
+        .cloned()
+        .fold(0.0f32, f32::max) as f64;
+    let value = |i: usize| -> f64 {
+        if mean[i].is_finite() {
+            mean[i] as f64
+        } else {
+            top
+        }
+    };
+    let mut border: Vec<f64> = (0..width * height)
+        .filter(|&i| {
+            let (r, c) = (i / width, i % width);
+            r < 2 || c < 2 || r + 2 >= height || c + 2 >= width
+        })
+        .map(value)
+        .collect();
+    border.sort_by(f64::total_cmp);
+    let level = border[border.len() / 2];
+    let threshold = level + 1e-3 * (top - level).max(0.0) + 1e-9 * top;
+    let on = |i: usize| value(i) > threshold;
+    let (label, sizes) = label_regions(width, height, on).ok_or("the images are too large")?;
+    let mut votes = vec![0usize; sizes.len()];
+    for &b in brightest {
+        if let Some(&l) = label.get(b) {
+            if l != OUTSIDE {
+                votes[l as usize] += 1;
+            }
+        }
+    }
+    let total = brightest.len().max(1) as f64;
+    let mut found = Vec::new();
+    for (region, &count) in votes.iter().enumerate() {
+        let share = count as f64 / total;
+        if share < min_share || sizes[region] < MIN_SPHERE_PIXELS {
+            continue;
+        }
+        let (circle, _, roundness) = region_circle(width, height, &label, region as u32, &value);
+        if roundness >= 0.9 {
+            found.push(Detection {
+                circle,
+                highlight_share: share,
+                roundness,
+            });
+        }
+    }
+    if found.is_empty() {
         return Err(format!(
-            "the region holding the brightest spots (centre {:.1}, {:.1}, {} pixels) is not \
-             round (overlap with its circle {:.2})",
-            circle.cx, circle.cy, n, roundness
+            "no round region of at least {MIN_SPHERE_PIXELS} pixels brighter than the images' \
+             border holds {:.0}% of their brightest spots",
+            100.0 * min_share
         ));
     }
-    Ok(Detection {
-        circle,
-        highlight_share: share,
-        roundness,
-    })
+    found.sort_by(|a, b| b.highlight_share.total_cmp(&a.highlight_share));
+    Ok(found)
+}
+
+/// A sphere's outline in the image `image` (`width x height` grey values, `NaN` counting as
+/// the brightest) near `start`: the points where its rim falls off most steeply, as
+/// [`detect_sphere`] refines a circle (outliers left out), and the circle fitted to them;
+/// `None` where too few rays find the rim.
+pub fn outline_points(
+    width: usize,
+    height: usize,
+    image: &[f32],
+    start: Circle,
+) -> Option<(Circle, Vec<(f64, f64)>)> {
+    if width == 0 || height == 0 || image.len() != width * height {
+        return None;
+    }
+    let top = image
+        .iter()
+        .filter(|v| v.is_finite())
+        .cloned()
+        .fold(0.0f32, f32::max) as f64;
+    let value = |i: usize| -> f64 {
+        if image[i].is_finite() {
+            image[i] as f64
+        } else {
+            top
+        }
+    };
+    refine_circle(width, height, &value, start)
 }
 
 /// The circle fitted to the rim of a bright disc in an image (`value(i)` at pixel `i`) near
@@ -568,13 +689,14 @@ pub fn detect_sphere(
 /// then by a parabola through the steepest three; a circle fitted to those points (Kasa's
 /// algebraic fit, then least squares of the distances by Gauss-Newton), points more than 3
 /// robust deviations off it (a highlight on the rim, the object touching it) left out, three
-/// rounds from the new centre. `None` where too few rays find a rim.
+/// rounds from the new centre; with the points of the last round that were kept. `None` where
+/// too few rays find a rim.
 fn refine_circle(
     width: usize,
     height: usize,
     value: &dyn Fn(usize) -> f64,
     start: Circle,
-) -> Option<Circle> {
+) -> Option<(Circle, Vec<(f64, f64)>)> {
     // Bilinear between pixel centres (at +0.5), edges clamped.
     let sample = |x: f64, y: f64| -> f64 {
         let (fx, fy) = (x - 0.5, y - 0.5);
@@ -591,6 +713,7 @@ fn refine_circle(
     };
     const STEP: f64 = 0.25;
     let mut circle = start;
+    let mut kept_points = Vec::new();
     for _ in 0..3 {
         let reach = 6.0f64.max(0.1 * circle.r);
         let rays = ((2.0 * std::f64::consts::PI * circle.r).ceil() as usize).clamp(64, 2048);
@@ -679,8 +802,15 @@ fn refine_circle(
                 *k = r <= limit;
             }
         }
+        kept_points = points
+            .iter()
+            .zip(&keep)
+            .filter(|(_, k)| **k)
+            .map(|(p, _)| *p)
+            .collect();
     }
-    (circle.r > 0.0 && circle.cx.is_finite() && circle.cy.is_finite()).then_some(circle)
+    (circle.r > 0.0 && circle.cx.is_finite() && circle.cy.is_finite())
+        .then_some((circle, kept_points))
 }
 
 /// Half the width of a ray's profile [`fit_edge`] reads, in pixels.

@@ -48,6 +48,18 @@ pub struct NearGeometry {
     pub warnings: Vec<Warning>,
 }
 
+/// Reads a `K.txt` (OpenCV's 3 x 3 pinhole intrinsics) as a camera; errors name the file (and
+/// the line).
+pub fn read_camera(path: &Path) -> Result<Pinhole> {
+    Pinhole::from_k(lights::parse_k(path)?).map_err(|why| Error::invalid(path, why))
+}
+
+/// Reads a `light_positions.txt` (one `x y z` row per light, camera frame); errors name the file
+/// and the line.
+pub fn read_positions(path: &Path) -> Result<Vec<DVec3>> {
+    lights::parse_positions(path)
+}
+
 /// The folder a dataset's side files are in: the folder it was opened as, or its file's folder.
 fn folder(ds: &Dataset) -> PathBuf {
     if ds.source.is_dir() {

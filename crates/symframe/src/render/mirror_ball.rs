@@ -174,7 +174,15 @@ impl MirrorBall {
 /// Adds `value` at image point `(x, y)` spread by a Gaussian of standard deviation `sigma`
 /// pixels, integrated over each pixel (all of it to the pixel holding the point where
 /// `sigma` is 0).
-fn splat(img: &mut [f32], width: usize, height: usize, x: f64, y: f64, value: f64, sigma: f64) {
+pub(super) fn splat(
+    img: &mut [f32],
+    width: usize,
+    height: usize,
+    x: f64,
+    y: f64,
+    value: f64,
+    sigma: f64,
+) {
     if sigma <= 0.0 {
         let (c, r) = (x as usize, y as usize);
         if c < width && r < height {
@@ -197,7 +205,7 @@ fn splat(img: &mut [f32], width: usize, height: usize, x: f64, y: f64, value: f6
 
 /// Convolves the `width x height` image with a Gaussian of standard deviation `sigma` pixels
 /// (separable, truncated at 4 sigma, edges clamped).
-fn blur(img: &mut [f32], width: usize, height: usize, sigma: f64) {
+pub(super) fn blur(img: &mut [f32], width: usize, height: usize, sigma: f64) {
     if sigma <= 0.0 {
         return;
     }

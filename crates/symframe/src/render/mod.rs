@@ -7,7 +7,8 @@
 //!   [`Scene::bumps`], [`Scene::from_bumps`]) which cast shadows ([`shadow`]).
 //! - Tangent fields ([`TangentField`]): circular, axial, radial, swirl, or any function.
 //! - Light rigs ([`rigs`]): the uniform cone, a DiLiGenT-like 96-light grid.
-//! - A mirror ball for light calibration ([`MirrorBall`]): lamps of finite size, anti-aliased.
+//! - A mirror ball for light calibration ([`MirrorBall`]): lamps of finite size, anti-aliased;
+//!   mirror balls before a pinhole camera under a near lamp ([`NearMirrorBalls`]).
 //! - Degradations ([`noise`]): exposure, Gaussian and shot noise, clipping, quantisation.
 
 use glam::DVec3;
@@ -18,6 +19,7 @@ use crate::eval::{evaluate, Evaluation};
 use crate::stack::Stack;
 
 mod mirror_ball;
+mod near_mirror;
 pub mod noise;
 pub mod perspective;
 pub mod rigs;
@@ -26,6 +28,7 @@ mod shapes;
 mod tangent;
 
 pub use mirror_ball::MirrorBall;
+pub use near_mirror::NearMirrorBalls;
 pub use noise::{clip_point, jitter_lights, Degradation, Noise, Rng};
 pub use shapes::{plane_frame, Bump, BumpParams};
 pub use tangent::{image_position, project_to_tangent_plane, TangentField, TangentFn};

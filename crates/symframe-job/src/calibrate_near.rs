@@ -1,0 +1,608 @@
+//! The near-light calibration job (`symframe calibrate --K K.txt --sphere-radius R`): the
+//! lights' positions from two or more chrome spheres seen by a pinhole camera, written as
+//! `light_positions.txt` with a JSON record beside it. The geometry (each sphere placed by its
+//! outline and radius, each light triangulated from its reflections) is
+//! [`symframe::near::chrome`]'s; the highlights and the spheres' outlines are
+//! [`symframe::calibrate`]'s. This module reads the images and writes the files.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use glam::DVec3;
+use rayon::prelude::*;
+use serde::Serialize;
+use symframe::calibrate::{
+    detect_spheres, find_highlight, outline_points, Circle, HighlightParams,
+};
+use symframe::near::chrome::{circle_rim, reflected_ray, sphere_from_rim, triangulate};
+use symframe::near::{fit_sphere, Pinhole};
+use symframe_io::DecodeOptions;
+
+use crate::calibrate::{image_list, keep_rows, read_grey, DECODE_MEMORY, MAX_CALIBRATE_PIXELS};
+use crate::{Control, Interrupted};
+
+/// Everything a calibration of light positions needs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NearCalibrateConfig {
+    /// A folder of images (sorted by name; `mask.*` left out), an `.lp` file (its images), or a
+    /// list file of image paths (one per line, relative to it, e.g. a DiLiGenT
+    /// `filenames.txt`): one image per light, in the order the positions are written.
+    pub images: PathBuf,
+    /// The camera's `K.txt` (OpenCV's 3 x 3 intrinsics).
+    pub k_file: PathBuf,
+    /// The chrome spheres' radius, in the length unit of the positions written.
+    pub radius: f64,
+    /// The spheres' circles in pixels (empty: detect them); at least two.
+    pub spheres: Vec<Circle>,
+    /// The `light_positions.txt` to write; `<stem>-calibration.json` is written beside it, and
+    /// `K.txt` where the folder has none.
+    pub output: PathBuf,
+    /// A highlight is the pixels above this fraction of its peak (above the sphere's median).
+    pub threshold: f64,
+    /// Fail where a light is seen on fewer than two spheres (else it is placed on its one ray
+    /// where that meets the sphere through the other lights, with a warning).
+    pub strict: bool,
+    /// How images are decoded.
+    pub decode: DecodeOptions,
+}
+
+/// One sphere in `<stem>-calibration.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct SphereRecord {
+    /// Its circle in the image (pixels, x right, y down, top-left pixel centre (0.5, 0.5)).
+    pub circle: Circle,
+    /// `given` or `detected`.
+    pub circle_source: &'static str,
+    /// Where its outline came from: `image` (the rim found in the mean image) or `circle` (the
+    /// circle's own rim, where the image gave none).
+    pub outline: &'static str,
+    /// Points of the outline the cone was fitted to.
+    pub outline_points: usize,
+    /// Its centre, camera frame.
+    pub centre: [f64; 3],
+}
+
+/// One light in `<stem>-calibration.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct LightRecord {
+    /// The image.
+    pub image: String,
+    /// The position written (camera frame).
+    pub position: [f64; 3],
+    /// `triangulated` (two or more rays) or `dome` (one ray, met with the sphere through the
+    /// other lights).
+    pub placed_by: &'static str,
+    /// Per sphere, the highlight's centre in pixels, or why none.
+    pub highlights: Vec<Result<[f64; 2], String>>,
+    /// The root mean square distance from the position to its rays (triangulated lights).
+    pub residual_rms: Option<f64>,
+    /// The largest distance from the position to its rays (triangulated lights).
+    pub residual_max: Option<f64>,
+    /// The widest angle between two of its rays, degrees (triangulated lights).
+    pub spread_deg: Option<f64>,
+}
+
+/// What `<stem>-calibration.json` holds.
+#[derive(Debug, Serialize)]
+pub struct NearCalibrationReport {
+    /// symframe version.
+    pub version: &'static str,
+    /// The camera's intrinsics (OpenCV's convention, row-major).
+    pub k: [[f64; 3]; 3],
+    /// The spheres' radius.
+    pub sphere_radius: f64,
+    /// The spheres.
+    pub spheres: Vec<SphereRecord>,
+    /// Images (lights) read.
+    pub images: usize,
+    /// Lights triangulated from two or more spheres.
+    pub triangulated: usize,
+    /// The median and the largest of the triangulated lights' rms residuals.
+    pub residual_rms_median: f64,
+    /// The largest rms residual.
+    pub residual_rms_max: f64,
+    /// The sphere through the light positions (centre, radius), when they lie on one.
+    pub dome: Option<([f64; 3], f64)>,
+    /// Per light, in the images' order.
+    pub records: Vec<LightRecord>,
+    /// The conventions of the figures.
+    pub conventions: &'static str,
+    /// The files written: `light_positions.txt`, the report, and `K.txt` where it was written.
+    #[serde(skip)]
+    pub written: Vec<PathBuf>,
+}
+
+/// Checks the settings and the output's folder before any image is read: the output a `.txt`,
+/// a `K.txt` beside it the same camera as the one given.
+fn check(config: &NearCalibrateConfig, camera: &Pinhole) -> Result<()> {
+    let txt = config
+        .output
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("txt"));
+    if !txt {
+        bail!(
+            "{}: the light positions are written as a .txt file (light_positions.txt)",
+            config.output.display()
+        );
+    }
+    if !(config.radius.is_finite() && config.radius > 0.0) {
+        bail!(
+            "the chrome spheres' radius must be a positive number, got {}",
+            config.radius
+        );
+    }
+    if !(config.threshold > 0.0 && config.threshold < 1.0) {
+        bail!(
+            "the highlight threshold must be in (0, 1), got {}",
+            config.threshold
+        );
+    }
+    if !(config.decode.saturation > 0.0 && config.decode.saturation <= 1.0) {
+        bail!(
+            "the saturation level must be in (0, 1], got {}",
+            config.decode.saturation
+        );
+    }
+    if config.spheres.len() == 1 {
+        bail!("light positions need two or more chrome spheres: give --sphere once for each, or none to detect them");
+    }
+    let beside = out_dir(&config.output).join(symframe_io::near::INTRINSICS);
+    if beside.symlink_metadata().is_ok() {
+        let there = symframe_io::near::read_camera(&beside)?;
+        if there != *camera {
+            bail!(
+                "{}: a different camera than {} is already there; write the positions to \
+                 another folder",
+                beside.display(),
+                config.k_file.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The folder of the output file.
+fn out_dir(output: &Path) -> PathBuf {
+    output
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."))
+        .to_path_buf()
+}
+
+/// Runs a calibration of light positions: finds the spheres (or takes their circles), places
+/// each by its outline in the mean image, finds every image's highlight on each sphere and
+/// triangulates its light; writes `light_positions.txt` (one row per image), the JSON report and
+/// `K.txt` where the output's folder has none. Lights seen on one sphere only are told through
+/// `ctl`'s warnings; its stop flag is polled between images.
+pub fn calibrate_near(
+    config: &NearCalibrateConfig,
+    ctl: &Control,
+) -> Result<NearCalibrationReport> {
+    let camera = symframe_io::near::read_camera(&config.k_file)?;
+    check(config, &camera)?;
+    let images = image_list(&config.images)?;
+    let dir = out_dir(&config.output);
+    let stem = config
+        .output
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "light_positions".into());
+    let json_path = dir.join(format!("{stem}-calibration.json"));
+    let k_path = dir.join(symframe_io::near::INTRINSICS);
+    {
+        let canon = |p: &Path| p.canonicalize().ok();
+        let inputs: Vec<PathBuf> = std::iter::once(config.images.as_path())
+            .chain(images.iter().map(PathBuf::as_path))
+            .filter_map(canon)
+            .collect();
+        for o in [&config.output, &json_path] {
+            if canon(o).is_some_and(|c| inputs.contains(&c)) {
+                bail!(
+                    "{}: is an input of this run, and the output would replace it; write the \
+                     positions elsewhere (-o)",
+                    o.display()
+                );
+            }
+        }
+    }
+    let opts = config.decode.clone();
+    let stopped = || ctl.stop.load(std::sync::atomic::Ordering::SeqCst);
+    let (w, h) = symframe_io::read_image_size(&images[0], &opts)?;
+    if w == 0 || h == 0 {
+        bail!("{}: the image is empty", images[0].display());
+    }
+    if w.saturating_mul(h) > MAX_CALIBRATE_PIXELS {
+        bail!(
+            "{}: {w}x{h} pixels, more than the {MAX_CALIBRATE_PIXELS} (8192 x 8192) calibrate \
+             reads; crop the images to the spheres",
+            images[0].display()
+        );
+    }
+    for c in &config.spheres {
+        if let Err(why) = c.check_fits(w, h) {
+            bail!(
+                "the sphere's circle {},{},{} (CX,CY,R) does not fit the {w}x{h} image: {why}",
+                c.cx,
+                c.cy,
+                c.r
+            );
+        }
+    }
+    let at_once = (DECODE_MEMORY / (4 * w * h)).max(1);
+
+    // The mean image and each image's brightest pixel: the spheres are found, and their
+    // outlines fitted, in the mean.
+    let mut mean = vec![0.0f32; w * h];
+    let mut brightest = Vec::with_capacity(images.len());
+    let key = |v: f32| if v.is_finite() { v } else { f32::INFINITY };
+    for batch in images.chunks(at_once) {
+        if stopped() {
+            return Err(Interrupted.into());
+        }
+        let greys = batch
+            .par_iter()
+            .map(|p| -> Result<(Vec<f32>, usize)> {
+                let mut own = Vec::with_capacity(w * h);
+                read_grey(p, &opts, (w, h), &mut |_, g, _| own.extend_from_slice(g))?;
+                let best = (0..own.len())
+                    .max_by(|&a, &b| key(own[a]).total_cmp(&key(own[b])))
+                    .unwrap_or(0);
+                Ok((own, best))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        for (g, best) in greys {
+            for (m, v) in mean.iter_mut().zip(&g) {
+                // Saturated pixels stay saturated in the mean.
+                *m += v / images.len() as f32;
+            }
+            brightest.push(best);
+        }
+    }
+
+    let (circles, source): (Vec<Circle>, &'static str) = if config.spheres.is_empty() {
+        let found = detect_spheres(w, h, &mean, &brightest, 0.05).map_err(|why| {
+            anyhow::anyhow!(
+                "{}: cannot find the chrome spheres: {why}; give each circle with --sphere \
+                 CX,CY,R",
+                config.images.display()
+            )
+        })?;
+        if found.len() < 2 {
+            let c = found[0].circle;
+            bail!(
+                "{}: found one chrome sphere (at {:.1}, {:.1}, radius {:.1} px), two or more \
+                 are needed; give each circle with --sphere CX,CY,R",
+                config.images.display(),
+                c.cx,
+                c.cy,
+                c.r
+            );
+        }
+        let mut v: Vec<Circle> = found.iter().map(|d| d.circle).collect();
+        v.sort_by(|a, b| a.cx.total_cmp(&b.cx).then(a.cy.total_cmp(&b.cy)));
+        (v, "detected")
+    } else {
+        (config.spheres.clone(), "given")
+    };
+
+    let mut spheres = Vec::with_capacity(circles.len());
+    for c in &circles {
+        let (outline, rim) = match outline_points(w, h, &mean, *c) {
+            Some((_, rim)) if rim.len() >= 16 => ("image", rim),
+            _ => {
+                ctl.warn(&format!(
+                    "the sphere at ({:.1}, {:.1}): no outline found in the mean image; its \
+                     circle's rim is taken",
+                    c.cx, c.cy
+                ));
+                ("circle", circle_rim(c, 360))
+            }
+        };
+        let centre = sphere_from_rim(&camera, &rim, config.radius).map_err(|why| {
+            anyhow::anyhow!(
+                "the sphere at ({:.1}, {:.1}), radius {:.1} px: cannot place it: {why}",
+                c.cx,
+                c.cy,
+                c.r
+            )
+        })?;
+        spheres.push(SphereRecord {
+            circle: *c,
+            circle_source: source,
+            outline,
+            outline_points: rim.len(),
+            centre: centre.to_array(),
+        });
+    }
+
+    // Each image's highlight on each sphere, from the spheres' rows.
+    let rows = circles
+        .iter()
+        .map(|c| crate::calibrate::circle_rows(c, h))
+        .fold(h..0, |a, r| a.start.min(r.start)..a.end.max(r.end));
+    let rows = if rows.start < rows.end { rows } else { 0..0 };
+    let params = HighlightParams {
+        fraction: config.threshold,
+        ..HighlightParams::default()
+    };
+    let mut found: Vec<Vec<Result<[f64; 2], String>>> = Vec::with_capacity(images.len());
+    for batch in images.chunks(at_once) {
+        if stopped() {
+            return Err(Interrupted.into());
+        }
+        let done = batch
+            .par_iter()
+            .map(|p| -> Result<Vec<Result<[f64; 2], String>>> {
+                let mut g = vec![0.0f32; w * h];
+                read_grey(p, &opts, (w, h), &mut |y, band, _| {
+                    keep_rows(band, y, w, &rows, &mut g[rows.start * w..rows.end * w]);
+                })?;
+                Ok(circles
+                    .iter()
+                    .map(|c| {
+                        find_highlight(w, h, &g, c, &params)
+                            .map(|hl| [hl.x, hl.y])
+                            .map_err(|e| e.to_string())
+                    })
+                    .collect())
+            })
+            .collect::<Result<Vec<_>>>()?;
+        found.extend(done);
+    }
+
+    // Triangulated lights first; lights seen once are then placed on the sphere through them.
+    let centres: Vec<DVec3> = spheres.iter().map(|s| DVec3::from(s.centre)).collect();
+    let mut placed: Vec<Option<(DVec3, Option<symframe::near::chrome::Triangulation>)>> =
+        Vec::with_capacity(images.len());
+    let mut single: Vec<(usize, (DVec3, DVec3))> = Vec::new();
+    for (k, (path, hls)) in images.iter().zip(&found).enumerate() {
+        let rays: Vec<(DVec3, DVec3)> = hls
+            .iter()
+            .zip(&centres)
+            .filter_map(|(hl, c)| {
+                hl.as_ref()
+                    .ok()
+                    .map(|[x, y]| reflected_ray(&camera, *c, config.radius, *x, *y))
+            })
+            .collect();
+        let why = |e: &str| {
+            let each: Vec<String> = hls
+                .iter()
+                .enumerate()
+                .map(|(i, hl)| match hl {
+                    Ok([x, y]) => format!("sphere {}: highlight at ({x:.1}, {y:.1})", i + 1),
+                    Err(e) => format!("sphere {}: {e}", i + 1),
+                })
+                .collect();
+            format!("{}: {e} ({})", path.display(), each.join("; "))
+        };
+        match rays.len() {
+            0 => bail!("{}", why("the light is seen on no sphere")),
+            1 if config.strict => bail!("{}", why("the light is seen on one sphere only")),
+            1 => {
+                single.push((k, rays[0]));
+                placed.push(None);
+            }
+            _ => match triangulate(&rays) {
+                Ok(t) => placed.push(Some((t.position, Some(t)))),
+                Err(e) if config.strict => bail!("{}", why(&e)),
+                Err(_) => {
+                    // The widest-spread pair failed as a whole: the first ray alone.
+                    single.push((k, rays[0]));
+                    placed.push(None);
+                }
+            },
+        }
+    }
+    let triangulated: Vec<DVec3> = placed.iter().flatten().map(|(p, _)| *p).collect();
+    if !single.is_empty() {
+        let Some((centre, radius)) = fit_sphere(&triangulated) else {
+            bail!(
+                "{} lights are seen on one sphere only, and the {} others do not lie on a \
+                 sphere to place them on (e.g. {}); place the spheres so that every light is \
+                 seen on two",
+                single.len(),
+                triangulated.len(),
+                images[single[0].0].display()
+            );
+        };
+        for (k, (o, d)) in single {
+            // The far meeting of the ray with the dome's sphere (the ray leaves from inside).
+            let oc = o - centre;
+            let b = oc.dot(d);
+            let disc = b * b - (oc.length_squared() - radius * radius);
+            if disc < 0.0 {
+                bail!(
+                    "{}: the light is seen on one sphere only, and its ray misses the sphere \
+                     through the other lights",
+                    images[k].display()
+                );
+            }
+            let p = o + d * (-b + disc.sqrt());
+            ctl.warn(&format!(
+                "{}: the light is seen on one sphere only; placed where its ray meets the \
+                 sphere through the other lights",
+                images[k].display()
+            ));
+            placed[k] = Some((p, None));
+        }
+    }
+    let mut records = Vec::with_capacity(images.len());
+    let mut rows_out = String::new();
+    let mut residuals = Vec::new();
+    for ((path, hls), p) in images.iter().zip(found).zip(&placed) {
+        let Some((pos, t)) = p else {
+            bail!("{}: the light was not placed", path.display());
+        };
+        rows_out.push_str(&format!("{:?} {:?} {:?}\n", pos.x, pos.y, pos.z));
+        if let Some(t) = t {
+            residuals.push(t.residual_rms);
+        }
+        records.push(LightRecord {
+            image: path.display().to_string(),
+            position: pos.to_array(),
+            placed_by: if t.is_some() { "triangulated" } else { "dome" },
+            highlights: hls,
+            residual_rms: t.map(|t| t.residual_rms),
+            residual_max: t.map(|t| t.residual_max),
+            spread_deg: t.map(|t| t.spread_deg),
+        });
+    }
+    residuals.sort_by(f64::total_cmp);
+    let positions: Vec<DVec3> = placed.iter().flatten().map(|(p, _)| *p).collect();
+    let report = NearCalibrationReport {
+        version: env!("CARGO_PKG_VERSION"),
+        k: camera.k(),
+        sphere_radius: config.radius,
+        spheres,
+        images: images.len(),
+        triangulated: residuals.len(),
+        residual_rms_median: residuals.get(residuals.len() / 2).copied().unwrap_or(0.0),
+        residual_rms_max: residuals.last().copied().unwrap_or(0.0),
+        dome: fit_sphere(&positions).map(|(c, r)| (c.to_array(), r)),
+        records,
+        conventions: "pixels: x right, y down, centre of the top-left pixel (0.5, 0.5); \
+                      positions: camera frame, x right, y up, z toward the camera, origin at \
+                      the centre of projection, in the spheres' radius's unit",
+        written: Vec::new(),
+    };
+    std::fs::create_dir_all(&dir)
+        .with_context(|| format!("{}: cannot create folder", dir.display()))?;
+    let mut written = vec![config.output.clone(), json_path.clone()];
+    if k_path.symlink_metadata().is_err() {
+        let text = camera.k().iter().fold(String::new(), |mut t, r| {
+            t.push_str(&format!("{:?} {:?} {:?}\n", r[0], r[1], r[2]));
+            t
+        });
+        symframe_io::write_bytes(&k_path, text.as_bytes())?;
+        written.push(k_path);
+    }
+    symframe_io::write_bytes(
+        &json_path,
+        (serde_json::to_string_pretty(&report)? + "\n").as_bytes(),
+    )?;
+    symframe_io::write_bytes(&config.output, rows_out.as_bytes())?;
+    Ok(NearCalibrationReport { written, ..report })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{synth_near, NearSynthConfig};
+
+    fn config(images: PathBuf, k_file: PathBuf, output: PathBuf) -> NearCalibrateConfig {
+        NearCalibrateConfig {
+            images,
+            k_file,
+            radius: 1.0,
+            spheres: Vec::new(),
+            output,
+            threshold: 0.3,
+            strict: false,
+            decode: DecodeOptions {
+                saturation: 0.995,
+                ..DecodeOptions::default()
+            },
+        }
+    }
+
+    /// `synth --near --chrome-sphere`'s calibration images give the lights' positions within
+    /// 1% of the dome's radius (the spheres 139 pixels in radius); prints the errors.
+    #[test]
+    fn chrome_spheres_of_a_near_synth_give_the_light_positions() {
+        let d = tempfile::tempdir().unwrap();
+        let data = d.path().join("near");
+        let synth = NearSynthConfig {
+            size: 640,
+            lights: 24,
+            chrome_spheres: true,
+            ..NearSynthConfig::new(&data)
+        };
+        synth_near(&synth, &Control::default()).unwrap();
+        let out = d.path().join("cal").join("light_positions.txt");
+        let cfg = config(
+            data.join("chrome").join("filenames.txt"),
+            data.join("K.txt"),
+            out.clone(),
+        );
+        let report = calibrate_near(&cfg, &Control::default()).unwrap();
+        assert_eq!(report.spheres.len(), 2);
+        let truth = symframe_io::near::read_positions(&data.join("light_positions.txt")).unwrap();
+        let got = symframe_io::near::read_positions(&out).unwrap();
+        assert_eq!(got.len(), truth.len());
+        let dome = synth.dome_ratio * crate::synth_near::PAIR_WIDTH;
+        let errors: Vec<f64> = got
+            .iter()
+            .zip(&truth)
+            .map(|(a, b)| (*a - *b).length() / dome)
+            .collect();
+        let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+        let max = errors.iter().copied().fold(0.0, f64::max);
+        println!(
+            "{} lights ({} triangulated): position error over the dome's radius: mean {:.3}%, \
+             max {:.3}%; rms residual median {:.4}, max {:.4}",
+            errors.len(),
+            report.triangulated,
+            100.0 * mean,
+            100.0 * max,
+            report.residual_rms_median,
+            report.residual_rms_max
+        );
+        assert!(max < 0.01, "max {max}");
+        // K.txt is copied beside the positions, and the folder reads as a near geometry.
+        let k = symframe_io::near::read_camera(&out.with_file_name("K.txt")).unwrap();
+        assert_eq!(k, synth.scene().camera);
+        // A different K.txt there is refused before anything is read.
+        let other = d.path().join("K2.txt");
+        std::fs::write(&other, "500 0 320\n0 500 160\n0 0 1\n").unwrap();
+        let e = calibrate_near(
+            &NearCalibrateConfig {
+                k_file: other,
+                ..cfg.clone()
+            },
+            &Control::default(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("a different camera"), "{e}");
+    }
+
+    #[test]
+    fn bad_settings_name_what_is_wrong() {
+        let d = tempfile::tempdir().unwrap();
+        let k = d.path().join("K.txt");
+        std::fs::write(&k, "500 0 320\n0 500 160\n0 0 1\n").unwrap();
+        let base = config(
+            d.path().to_path_buf(),
+            k.clone(),
+            d.path().join("o/pos.txt"),
+        );
+        let err = |c: &NearCalibrateConfig| {
+            format!("{:#}", calibrate_near(c, &Control::default()).unwrap_err())
+        };
+        let e = err(&NearCalibrateConfig {
+            output: d.path().join("o/lights.lp"),
+            ..base.clone()
+        });
+        assert!(e.contains(".txt file"), "{e}");
+        let e = err(&NearCalibrateConfig {
+            radius: 0.0,
+            ..base.clone()
+        });
+        assert!(e.contains("radius must be a positive number"), "{e}");
+        let e = err(&NearCalibrateConfig {
+            spheres: vec![Circle {
+                cx: 10.0,
+                cy: 10.0,
+                r: 5.0,
+            }],
+            ..base.clone()
+        });
+        assert!(e.contains("two or more chrome spheres"), "{e}");
+        std::fs::write(&k, "500 0 320\n0 500 160\n0 0\n").unwrap();
+        let e = err(&base);
+        assert!(e.contains("K.txt") && e.contains("3"), "{e}");
+    }
+}
