@@ -1,20 +1,32 @@
-//! `symframe calibrate`: flags to a [`CalibrateConfig`], the library's calibration, a summary.
+//! `symframe calibrate`: flags to a [`CalibrateConfig`] (light directions from one mirror
+//! sphere) or, with `--K`, a [`NearCalibrateConfig`] (light positions from two or more), the
+//! library's calibration, a summary.
 
 use anyhow::{bail, Result};
 use symframe_job::calibrate::{CircleDoesNotFit, SphereNotFound};
-use symframe_job::{calibrate, CalibrateConfig, CalibrationReport, Control};
+use symframe_job::{calibrate, calibrate_near, CalibrateConfig, Control, NearCalibrateConfig};
 
 use crate::cli::CalibrateArgs;
 
-/// Runs the command; returns the report (also written as JSON beside the `.lp`).
-pub fn run(args: &CalibrateArgs) -> Result<CalibrationReport> {
+/// Runs the command (the report is written as JSON beside the `.lp` or the positions).
+pub fn run(args: &CalibrateArgs) -> Result<()> {
     let decode = args.decode.options()?;
     if !(args.threshold > 0.0 && args.threshold < 1.0) {
         bail!("--threshold must be in (0, 1), got {}", args.threshold);
     }
+    if let Some(k) = &args.k {
+        return run_near(args, k, decode);
+    }
+    if args.sphere.len() > 1 {
+        bail!(
+            "--sphere is given {} times: several spheres place the lights' positions, which \
+             needs the camera (--K K.txt --sphere-radius R)",
+            args.sphere.len()
+        );
+    }
     let config = CalibrateConfig {
         images: args.images.clone(),
-        sphere: args.sphere,
+        sphere: args.sphere.first().copied(),
         output: args.output.clone(),
         threshold: args.threshold,
         strict: args.strict,
@@ -35,7 +47,7 @@ pub fn run(args: &CalibrateArgs) -> Result<CalibrationReport> {
             },
         })?;
     if !crate::progress::chatty() {
-        return Ok(report);
+        return Ok(());
     }
     let c = &report.sphere;
     if let Some(d) = &report.detection {
@@ -69,5 +81,67 @@ pub fn run(args: &CalibrateArgs) -> Result<CalibrationReport> {
             path.display()
         );
     }
-    Ok(report)
+    Ok(())
+}
+
+/// `calibrate --K`: light positions from two or more chrome spheres.
+fn run_near(
+    args: &CalibrateArgs,
+    k: &std::path::Path,
+    decode: symframe_io::DecodeOptions,
+) -> Result<()> {
+    if args.matte_sphere.is_some() {
+        bail!("--matte-sphere does not apply with --K (light positions)");
+    }
+    let Some(radius) = args.sphere_radius else {
+        bail!("--K needs the chrome spheres' radius: --sphere-radius R");
+    };
+    let config = NearCalibrateConfig {
+        images: args.images.clone(),
+        k_file: k.to_path_buf(),
+        radius,
+        spheres: args.sphere.clone(),
+        output: args.output.clone(),
+        threshold: args.threshold,
+        strict: args.strict,
+        decode,
+    };
+    let ctl = Control {
+        warning: &|line| eprintln!("symframe calibrate: warning: {line}"),
+        ..crate::control(&|_| {}, None)
+    };
+    let report = calibrate_near(&config, &ctl)?;
+    if !crate::progress::chatty() {
+        return Ok(());
+    }
+    for (i, s) in report.spheres.iter().enumerate() {
+        println!(
+            "symframe calibrate: sphere {} ({}): circle ({:.2}, {:.2}), radius {:.2} px; centre \
+             ({:.4}, {:.4}, {:.4}) from {} points of its outline",
+            i + 1,
+            s.circle_source,
+            s.circle.cx,
+            s.circle.cy,
+            s.circle.r,
+            s.centre[0],
+            s.centre[1],
+            s.centre[2],
+            s.outline_points
+        );
+    }
+    let written: Vec<String> = report
+        .written
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect();
+    println!(
+        "symframe calibrate: {} light positions ({} triangulated, rms distance to their rays: \
+         median {:.3e}, max {:.3e}); wrote {}",
+        report.images,
+        report.triangulated,
+        report.residual_rms_median,
+        report.residual_rms_max,
+        written.join(", ")
+    );
+    Ok(())
 }

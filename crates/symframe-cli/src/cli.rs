@@ -535,7 +535,9 @@ pub struct SynthArgs {
     /// become twice as wide, the sphere in the right half, 1/16 of it from its edges (a perfect
     /// mirror reflecting a lamp of 0.5 degrees and a dim room, anti-aliased, with a lens blur of
     /// 0.7 px; the lamp clips in integer formats). Its circle is recorded in scene.json; the
-    /// mask and ground truth cover the object only.
+    /// mask and ground truth cover the object only. With --near: two chrome spheres where the
+    /// object's are (the object taken away), under the same lights and camera, in `chrome/`
+    /// (for `symframe calibrate --K`).
     #[arg(long)]
     pub chrome_sphere: bool,
     /// With --chrome-sphere: a matte sphere (Lambertian, grey albedo 0.5) to the right of the
@@ -751,13 +753,24 @@ pub struct CalibrateArgs {
     pub images: PathBuf,
     /// The mirror sphere's circle in pixels: CX,CY,R with x right from the left edge, y down
     /// from the top edge, the centre of the top-left pixel at (0.5, 0.5). Without it the sphere
-    /// is looked for (and what was found is printed).
+    /// is looked for (and what was found is printed). With --K, once per chrome sphere (two or
+    /// more; none: they are looked for).
     #[arg(long, value_parser = parse_circle, allow_hyphen_values = true)]
-    pub sphere: Option<symframe::calibrate::Circle>,
+    pub sphere: Vec<symframe::calibrate::Circle>,
     /// The `.lp` file to write (image paths relative to its folder); `<stem>-highlights.png`
-    /// and `<stem>-calibration.json` are written beside it.
+    /// and `<stem>-calibration.json` are written beside it. With --K: the
+    /// `light_positions.txt` to write (one row per image), `<stem>-calibration.json` beside it
+    /// and `K.txt` where that folder has none.
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Light positions instead of directions: the camera's intrinsics (`K.txt`, OpenCV's 3 x 3
+    /// convention); two or more chrome spheres of --sphere-radius in the images are placed by
+    /// their outlines and each light triangulated from its reflections in them.
+    #[arg(long = "K", value_name = "K.txt", requires = "sphere_radius")]
+    pub k: Option<PathBuf>,
+    /// With --K: the chrome spheres' radius, in the unit the positions are written in.
+    #[arg(long, value_name = "R", requires = "k")]
+    pub sphere_radius: Option<f64>,
     /// A highlight is the pixels above this fraction of its peak (above the sphere's median).
     #[arg(long, default_value_t = 0.3)]
     pub threshold: f64,

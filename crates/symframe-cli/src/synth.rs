@@ -134,7 +134,7 @@ fn run_near(args: &SynthArgs) -> Result<PathBuf> {
         ("--tangent-angle", args.tangent_angle.is_some()),
         ("--bumps", args.bumps.is_some()),
         ("--relief", args.relief.is_some()),
-        ("--chrome-sphere", args.chrome_sphere),
+        ("--matte-sphere", args.matte_sphere),
         ("--intensity-spread", args.intensity_spread != 0.0),
     ];
     if let Some((flag, _)) = distant_only.iter().find(|(_, given)| *given) {
@@ -161,6 +161,7 @@ fn run_near(args: &SynthArgs) -> Result<PathBuf> {
     };
     config.exposure = args.exposure;
     config.seed = args.seed;
+    config.chrome_spheres = args.chrome_sphere;
     let bars = progress::Bars::default();
     let done = synth_near(&config, &crate::control(&|p| bars.update(p), None))?;
     drop(bars);

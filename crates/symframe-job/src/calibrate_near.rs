@@ -14,12 +14,24 @@ use serde::Serialize;
 use symframe::calibrate::{
     detect_spheres, find_highlight, outline_points, Circle, HighlightParams,
 };
-use symframe::near::chrome::{circle_rim, reflected_ray, sphere_from_rim, triangulate};
+use symframe::near::chrome::{
+    circle_rim, reflected_ray, sphere_from_rim, triangulate, Triangulation,
+};
 use symframe::near::{fit_sphere, Pinhole};
 use symframe_io::DecodeOptions;
 
 use crate::calibrate::{image_list, keep_rows, read_grey, DECODE_MEMORY, MAX_CALIBRATE_PIXELS};
 use crate::{Control, Interrupted};
+
+/// Rays toward a light less than this many degrees apart fix it poorly along them (a tenth of a
+/// degree of error in a ray moves it by a twentieth of its distance and more): it is placed on
+/// the sphere through the other lights instead.
+pub const DOME_SPREAD_DEG: f64 = 5.0;
+
+/// A light whose rays pass further from their meeting point than this many times the median of
+/// all lights' (a highlight partly hidden by the other sphere, a reflection of something else)
+/// is placed on the sphere through the other lights instead.
+pub const OUTLIER_RESIDUAL: f64 = 20.0;
 
 /// Everything a calibration of light positions needs.
 #[derive(Debug, Clone, PartialEq)]
@@ -39,8 +51,10 @@ pub struct NearCalibrateConfig {
     pub output: PathBuf,
     /// A highlight is the pixels above this fraction of its peak (above the sphere's median).
     pub threshold: f64,
-    /// Fail where a light is seen on fewer than two spheres (else it is placed on its one ray
-    /// where that meets the sphere through the other lights, with a warning).
+    /// Fail where a light is seen on fewer than two spheres, and triangulate every light seen
+    /// on two (else a light seen once, or whose rays are less than [`DOME_SPREAD_DEG`] apart or
+    /// far from meeting, is placed where they meet the sphere through the other lights, with a
+    /// warning).
     pub strict: bool,
     /// How images are decoded.
     pub decode: DecodeOptions,
@@ -69,8 +83,8 @@ pub struct LightRecord {
     pub image: String,
     /// The position written (camera frame).
     pub position: [f64; 3],
-    /// `triangulated` (two or more rays) or `dome` (one ray, met with the sphere through the
-    /// other lights).
+    /// `triangulated` (two or more rays) or `dome` (one ray, or rays that fix it poorly: each
+    /// met with the sphere through the other lights, the meetings averaged).
     pub placed_by: &'static str,
     /// Per sphere, the highlight's centre in pixels, or why none.
     pub highlights: Vec<Result<[f64; 2], String>>,
@@ -352,12 +366,13 @@ pub fn calibrate_near(
         found.extend(done);
     }
 
-    // Triangulated lights first; lights seen once are then placed on the sphere through them.
+    // Triangulated lights first; lights seen once, or whose rays fix them poorly, are then
+    // placed on the sphere through the others.
+    type Placed = (DVec3, Option<Triangulation>, &'static str);
     let centres: Vec<DVec3> = spheres.iter().map(|s| DVec3::from(s.centre)).collect();
-    let mut placed: Vec<Option<(DVec3, Option<symframe::near::chrome::Triangulation>)>> =
-        Vec::with_capacity(images.len());
-    let mut single: Vec<(usize, (DVec3, DVec3))> = Vec::new();
-    for (k, (path, hls)) in images.iter().zip(&found).enumerate() {
+    let mut placed: Vec<Option<Placed>> = Vec::with_capacity(images.len());
+    let mut all_rays = Vec::with_capacity(images.len());
+    for (path, hls) in images.iter().zip(&found) {
         let rays: Vec<(DVec3, DVec3)> = hls
             .iter()
             .zip(&centres)
@@ -381,69 +396,95 @@ pub fn calibrate_near(
         match rays.len() {
             0 => bail!("{}", why("the light is seen on no sphere")),
             1 if config.strict => bail!("{}", why("the light is seen on one sphere only")),
-            1 => {
-                single.push((k, rays[0]));
-                placed.push(None);
-            }
+            1 => placed.push(None),
             _ => match triangulate(&rays) {
-                Ok(t) => placed.push(Some((t.position, Some(t)))),
+                Ok(t) => placed.push(Some((t.position, Some(t), "triangulated"))),
                 Err(e) if config.strict => bail!("{}", why(&e)),
-                Err(_) => {
-                    // The widest-spread pair failed as a whole: the first ray alone.
-                    single.push((k, rays[0]));
-                    placed.push(None);
-                }
+                Err(_) => placed.push(None),
             },
         }
+        all_rays.push(rays);
     }
-    let triangulated: Vec<DVec3> = placed.iter().flatten().map(|(p, _)| *p).collect();
-    if !single.is_empty() {
-        let Some((centre, radius)) = fit_sphere(&triangulated) else {
+    // Rays that meet at a narrow angle, or far apart against the others, fix a light poorly
+    // along them: such lights join those seen once.
+    let mut residuals: Vec<f64> = placed
+        .iter()
+        .flatten()
+        .filter_map(|(_, t, _)| t.map(|t| t.residual_rms))
+        .collect();
+    residuals.sort_by(f64::total_cmp);
+    let median = residuals.get(residuals.len() / 2).copied().unwrap_or(0.0);
+    if !config.strict {
+        for p in placed.iter_mut() {
+            if let Some((_, Some(t), _)) = p {
+                if t.spread_deg < DOME_SPREAD_DEG || t.residual_rms > OUTLIER_RESIDUAL * median {
+                    *p = None;
+                }
+            }
+        }
+    }
+    let kept: Vec<DVec3> = placed.iter().flatten().map(|(p, _, _)| *p).collect();
+    let pending: Vec<usize> = (0..placed.len()).filter(|&k| placed[k].is_none()).collect();
+    if let Some(&first) = pending.first() {
+        let Some((centre, radius)) = fit_sphere(&kept) else {
             bail!(
-                "{} lights are seen on one sphere only, and the {} others do not lie on a \
-                 sphere to place them on (e.g. {}); place the spheres so that every light is \
-                 seen on two",
-                single.len(),
-                triangulated.len(),
-                images[single[0].0].display()
+                "{} lights are seen on one sphere only or fixed poorly by their rays, and the {} \
+                 others do not lie on a sphere to place them on (e.g. {}); place the spheres so \
+                 that every light is seen on two, far apart",
+                pending.len(),
+                kept.len(),
+                images[first].display()
             );
         };
-        for (k, (o, d)) in single {
-            // The far meeting of the ray with the dome's sphere (the ray leaves from inside).
-            let oc = o - centre;
-            let b = oc.dot(d);
-            let disc = b * b - (oc.length_squared() - radius * radius);
-            if disc < 0.0 {
-                bail!(
-                    "{}: the light is seen on one sphere only, and its ray misses the sphere \
-                     through the other lights",
-                    images[k].display()
-                );
+        for k in pending {
+            // Each ray's far meeting with the dome's sphere (the rays leave from inside it),
+            // averaged.
+            let mut sum = DVec3::ZERO;
+            for (o, d) in &all_rays[k] {
+                let oc = *o - centre;
+                let b = oc.dot(*d);
+                let disc = b * b - (oc.length_squared() - radius * radius);
+                if disc < 0.0 {
+                    bail!(
+                        "{}: the light is seen on one sphere only or fixed poorly by its rays, \
+                         and a ray misses the sphere through the other lights",
+                        images[k].display()
+                    );
+                }
+                sum += *o + *d * (-b + disc.sqrt());
             }
-            let p = o + d * (-b + disc.sqrt());
+            let p = sum / all_rays[k].len() as f64;
             ctl.warn(&format!(
-                "{}: the light is seen on one sphere only; placed where its ray meets the \
-                 sphere through the other lights",
-                images[k].display()
+                "{}: the light is seen on one sphere only or fixed poorly by its rays (rays {} \
+                 degrees apart at most); placed where they meet the sphere through the other \
+                 lights",
+                images[k].display(),
+                all_rays[k]
+                    .iter()
+                    .flat_map(|a| all_rays[k].iter().map(move |b| a.1.angle_between(b.1)))
+                    .fold(0.0f64, f64::max)
+                    .to_degrees()
+                    .round()
             ));
-            placed[k] = Some((p, None));
+            let t = triangulate(&all_rays[k]).ok();
+            placed[k] = Some((p, t, "dome"));
         }
     }
     let mut records = Vec::with_capacity(images.len());
     let mut rows_out = String::new();
     let mut residuals = Vec::new();
     for ((path, hls), p) in images.iter().zip(found).zip(&placed) {
-        let Some((pos, t)) = p else {
+        let Some((pos, t, placed_by)) = p else {
             bail!("{}: the light was not placed", path.display());
         };
         rows_out.push_str(&format!("{:?} {:?} {:?}\n", pos.x, pos.y, pos.z));
-        if let Some(t) = t {
+        if let (Some(t), &"triangulated") = (t, placed_by) {
             residuals.push(t.residual_rms);
         }
         records.push(LightRecord {
             image: path.display().to_string(),
             position: pos.to_array(),
-            placed_by: if t.is_some() { "triangulated" } else { "dome" },
+            placed_by,
             highlights: hls,
             residual_rms: t.map(|t| t.residual_rms),
             residual_max: t.map(|t| t.residual_max),
@@ -451,7 +492,7 @@ pub fn calibrate_near(
         });
     }
     residuals.sort_by(f64::total_cmp);
-    let positions: Vec<DVec3> = placed.iter().flatten().map(|(p, _)| *p).collect();
+    let positions: Vec<DVec3> = placed.iter().flatten().map(|(p, _, _)| *p).collect();
     let report = NearCalibrationReport {
         version: env!("CARGO_PKG_VERSION"),
         k: camera.k(),

@@ -364,3 +364,63 @@ fn matte_sphere_intensities_match_the_truth_and_estimates_agree() {
         diffs.len()
     );
 }
+
+/// `calibrate --K`: light positions from the two chrome spheres of `synth --near
+/// --chrome-sphere` (one row per image, K.txt beside them); several --sphere without --K, and
+/// --K without the spheres' radius, are refused naming what is missing.
+#[test]
+fn light_positions_from_two_chrome_spheres() {
+    let d = tempfile::tempdir().unwrap();
+    let data = d.path().join("near");
+    run_ok(&[
+        "synth",
+        "--near",
+        "--chrome-sphere",
+        "--size",
+        "160",
+        "--dome-lights",
+        "12",
+        "-o",
+        s(&data),
+    ]);
+    let out = d.path().join("cal").join("light_positions.txt");
+    let list = data.join("chrome").join("filenames.txt");
+    let k = data.join("K.txt");
+    let printed = run_ok(&[
+        "calibrate",
+        s(&list),
+        "--K",
+        s(&k),
+        "--sphere-radius",
+        "1",
+        "-o",
+        s(&out),
+    ]);
+    assert!(printed.contains("12 light positions"), "{printed}");
+    let rows = fs::read_to_string(&out).unwrap();
+    assert_eq!(rows.lines().count(), 12);
+    let truth = symframe_io::near::read_positions(&data.join("light_positions.txt")).unwrap();
+    let got = symframe_io::near::read_positions(&out).unwrap();
+    let worst = got
+        .iter()
+        .zip(&truth)
+        .map(|(a, b)| (*a - *b).length())
+        .fold(0.0, f64::max);
+    // Spheres 35 pixels in radius: within 5% of the dome's radius (8.4).
+    assert!(worst < 0.05 * 8.4, "{worst}");
+    assert!(out.with_file_name("K.txt").exists());
+    let o = symframe(&[
+        "calibrate",
+        s(&list),
+        "--sphere",
+        "40,40,30",
+        "--sphere",
+        "120,40,30",
+        "-o",
+        s(&d.path().join("x.lp")),
+    ]);
+    assert_one_line_error(&o, "needs the camera (--K K.txt --sphere-radius R)");
+    let o = symframe(&["calibrate", s(&list), "--K", s(&k), "-o", s(&out)]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--sphere-radius"), "{}", stderr(&o));
+}
