@@ -232,8 +232,18 @@ fn open_lp(lp: &Path) -> Result<Dataset> {
     } = lights::parse_lp(lp)?;
     let dir = parent_dir(lp);
     let (intensities, mut warnings) = lp_intensities(lp, &dir, images.len())?;
-    warnings.extend(convention_warning(lp, &lights));
-    warnings.extend(length_warning(lp, &lengths));
+    // Rows that are the positions of near lights: their distant directions are those from the
+    // centre of the sphere through them, as for light_positions.txt alone.
+    let from_positions = positions_of(&dir, &lights, &lengths)
+        .and_then(|p| near::directions_from_positions(lp, &p).ok());
+    let lights = match from_positions {
+        Some(directions) => directions,
+        None => {
+            warnings.extend(convention_warning(lp, &lights));
+            warnings.extend(length_warning(lp, &lengths));
+            lights
+        }
+    };
     Ok(Dataset {
         source: lp.to_path_buf(),
         lights,
@@ -272,20 +282,53 @@ fn convention_warning(path: &Path, lights: &[DVec3]) -> Option<Warning> {
 /// positions in millimetres or centimetres are not.
 const UNIT_FACTOR: f64 = 3.0;
 
+/// Whether most of the lengths as written are far from unit length ([`UNIT_FACTOR`]).
+fn mostly_far(lengths: &[f64]) -> bool {
+    let far = lengths
+        .iter()
+        .filter(|l| !(1.0 / UNIT_FACTOR..=UNIT_FACTOR).contains(*l))
+        .count();
+    far * 2 > lengths.len()
+}
+
+/// An `.lp`'s rows (unit `lights` and their `lengths` as written) as the positions of near
+/// lights, where they are: most of them far from unit length ([`UNIT_FACTOR`]) and `K.txt`
+/// beside the file in `dir` without `light_positions.txt` (a perspective camera whose lights'
+/// positions are in the `.lp`, as domes record them). `None` otherwise.
+fn positions_of(dir: &Path, lights: &[DVec3], lengths: &[f64]) -> Option<Vec<DVec3>> {
+    let beside = |name: &str| dir.join(name).symlink_metadata().is_ok();
+    (mostly_far(lengths) && beside(near::INTRINSICS) && !beside(near::POSITIONS)).then(|| {
+        lights
+            .iter()
+            .zip(lengths)
+            .map(|(l, &len)| *l * len)
+            .collect()
+    })
+}
+
+/// The rows of the `.lp` file `lp` as the positions of near lights, where they are (the rule
+/// of [`positions_of`]); `None` otherwise.
+pub(crate) fn lp_positions(lp: &Path) -> Result<Option<Vec<DVec3>>> {
+    let lights::LpFile {
+        lights, lengths, ..
+    } = lights::parse_lp(lp)?;
+    Ok(positions_of(&parent_dir(lp), &lights, &lengths))
+}
+
 /// A warning where most of a light file's vectors are far from unit length (lengths as written,
 /// `lengths`): they are read as directions and normalised, as every tool that reads `.lp`
 /// files does (relight's `parseLP`, the HSH fitter), but where they are the positions of near
 /// lights (ramamoorthyluxman/illumi-net reads `.lp` rows so, the distance being the vector's
 /// length) the direction from the scene's origin is right only there. Said, never silent.
 fn length_warning(path: &Path, lengths: &[f64]) -> Option<Warning> {
+    if !mostly_far(lengths) {
+        return None;
+    }
     let far: Vec<f64> = lengths
         .iter()
         .copied()
         .filter(|l| !(1.0 / UNIT_FACTOR..=UNIT_FACTOR).contains(l))
         .collect();
-    if far.len() * 2 <= lengths.len() {
-        return None;
-    }
     let min = far.iter().copied().fold(f64::INFINITY, f64::min);
     let max = far.iter().copied().fold(0.0, f64::max);
     let shown = |x: f64| {
@@ -301,7 +344,8 @@ fn length_warning(path: &Path, lengths: &[f64]) -> Option<Warning> {
             "{} of {} lights are far from unit length (lengths {} to {}): each is read as a \
              direction toward the light and normalised, as RTI tools read .lp rows; if these \
              are the positions of near lights (say in mm), symframe takes each light as \
-             distant, in its direction from the origin, which is right only at the origin",
+             distant, in its direction from the origin, which is right only at the origin; \
+             with the camera's K.txt beside the file they are read as positions",
             far.len(),
             lengths.len(),
             shown(min),

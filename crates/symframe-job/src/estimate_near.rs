@@ -294,4 +294,64 @@ mod tests {
             "near {e_near}, distant {e_far}"
         );
     }
+
+    /// An `.lp` whose rows are the lights' positions in hundredths (far from unit length),
+    /// with K.txt beside it, is estimated with near lights as light_positions.txt is.
+    #[test]
+    fn an_lp_of_positions_beside_k_is_estimated_with_near_lights() {
+        let d = tempfile::tempdir().unwrap();
+        let data = d.path().join("data");
+        let capture = NearSynthConfig {
+            size: 48,
+            lights: 60,
+            ..NearSynthConfig::new(&data)
+        };
+        synth_near(&capture, &Control::default()).unwrap();
+        let positions =
+            symframe_io::near::read_positions(&data.join("light_positions.txt")).unwrap();
+        let names = std::fs::read_to_string(data.join("filenames.txt")).unwrap();
+        let lp_dir = d.path().join("lp");
+        std::fs::create_dir(&lp_dir).unwrap();
+        let mut lp = format!("{}\n", positions.len());
+        for (name, p) in names.lines().zip(&positions) {
+            let q = *p * 100.0;
+            lp += &format!("../data/{name} {:?} {:?} {:?}\n", q.x, q.y, q.z);
+        }
+        std::fs::write(lp_dir.join("lights.lp"), lp).unwrap();
+        std::fs::copy(data.join("K.txt"), lp_dir.join("K.txt")).unwrap();
+        std::fs::copy(data.join("mask.png"), lp_dir.join("mask.png")).unwrap();
+        let mut config = EstimateConfig::new(lp_dir.join("lights.lp"), d.path().join("out"));
+        config.near.max_iterations = 3;
+        let done = match estimate(&config, &Control::default()).unwrap() {
+            EstimateOutcome::Maps(done) => *done,
+            EstimateOutcome::Shard(_) => unreachable!("not a shard"),
+        };
+        let report = done.report.near.clone().expect("near lights were used");
+        assert_eq!(report.lights, 60);
+        let (_, truth) = symframe_io::read_npy_f32(&data.join("gt_normals.npy")).unwrap();
+        let normals = done.maps.unwrap().normals;
+        let (mut sum, mut n) = (0.0, 0);
+        for (a, b) in normals.chunks_exact(3).zip(truth.chunks_exact(3)) {
+            let dot: f32 = a.iter().zip(b).map(|(x, y)| x * y).sum();
+            if dot.is_finite() && b[2] > 0.5 {
+                sum += (dot.min(1.0) as f64).acos().to_degrees();
+                n += 1;
+            }
+        }
+        let mean = sum / n as f64;
+        assert!(mean < 1.5, "mean normal error {mean} degrees");
+        // The depths are in the .lp's unit: a hundred times the scene's.
+        let (_, depth) = symframe_io::read_npy_f32(&d.path().join("out/depth.npy")).unwrap();
+        let far = capture.camera_ratio * crate::synth_near::PAIR_WIDTH * 100.0;
+        let seen: Vec<f32> = depth.into_iter().filter(|v| v.is_finite()).collect();
+        let median = {
+            let mut v = seen.clone();
+            v.sort_by(f32::total_cmp);
+            v[v.len() / 2] as f64
+        };
+        assert!(
+            (median / far - 1.0).abs() < 0.1,
+            "median depth {median}, object at {far}"
+        );
+    }
 }

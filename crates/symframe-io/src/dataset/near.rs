@@ -95,6 +95,20 @@ pub fn open_near_geometry(ds: &Dataset) -> Result<Option<NearGeometry>> {
         }
         return Ok(None);
     }
+    // An .lp whose rows are positions stands for light_positions.txt.
+    let lp_rows = if has_k && !has_pos && ds.source.is_file() {
+        let lp = ds
+            .source
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("lp"));
+        if lp {
+            super::lp_positions(&ds.source)?
+        } else {
+            None
+        }
+    } else {
+        None
+    };
     if !has_k {
         return Err(Error::invalid(
             &pos,
@@ -105,18 +119,22 @@ pub fn open_near_geometry(ds: &Dataset) -> Result<Option<NearGeometry>> {
             ),
         ));
     }
-    if !has_pos {
+    if !has_pos && lp_rows.is_none() {
         return Err(Error::invalid(
             &k,
             format!(
                 "a perspective camera is read with near lights only: {} is missing (one `x y z` \
-                 row per image, camera frame)",
+                 row per image, camera frame; or an .lp whose rows are the positions, most of \
+                 them far from unit length)",
                 pos.display()
             ),
         ));
     }
     let n = ds.images.len();
-    let positions = lights::parse_positions(&pos)?;
+    let (pos, positions) = match lp_rows {
+        Some(rows) => (ds.source.clone(), rows),
+        None => (pos.clone(), lights::parse_positions(&pos)?),
+    };
     let count = |path: &Path, got: usize, what: &str| -> Result<()> {
         if got == n {
             return Ok(());
@@ -313,6 +331,43 @@ mod tests {
         assert!((g.dome.unwrap().0 - c).length() < 1e-9);
         assert!(g.warnings.is_empty(), "{:?}", g.warnings);
         assert_eq!(g.files.len(), 4);
+    }
+
+    /// An `.lp` whose rows are positions (in mm: far from unit length) with K.txt beside it is
+    /// read as near lights: the positions as written, the distant directions from the dome's
+    /// centre, no warning; without K.txt its rows are directions, normalised and warned about.
+    #[test]
+    fn lp_rows_far_from_unit_length_are_positions_beside_k() {
+        let mm: Vec<DVec3> = dome(8).iter().map(|p| *p * 100.0).collect();
+        let lp_text = mm.iter().enumerate().fold("8\n".to_string(), |t, (i, p)| {
+            t + &format!("{i}.png {} {} {}\n", p.x, p.y, p.z)
+        });
+        let d = folder_with(8, &[("lights.lp", lp_text.clone()), (INTRINSICS, K.into())]);
+        let lp = d.path().join("lights.lp");
+        let ds = crate::open_dataset(&lp).unwrap();
+        assert!(ds.warnings.is_empty(), "{:?}", ds.warnings);
+        let c = DVec3::new(0.0, 0.0, -1200.0);
+        for (l, p) in ds.lights.iter().zip(&mm) {
+            assert!(l.angle_between(*p - c) < 1e-6, "{}", l.angle_between(*p - c));
+        }
+        let g = open_near_geometry(&ds).unwrap().unwrap();
+        for (l, p) in g.lights.iter().zip(&mm) {
+            assert!((l.position - *p).length() < 1e-9 * p.length());
+        }
+        assert_eq!(g.files[0], lp);
+        assert!(g.warnings.is_empty(), "{:?}", g.warnings);
+        // Without K.txt: directions from the origin, and the warning.
+        let d = folder_with(8, &[("lights.lp", lp_text)]);
+        let ds = crate::open_dataset(&d.path().join("lights.lp")).unwrap();
+        assert!(ds.lights[0].angle_between(mm[0]) < 1e-9);
+        assert!(
+            ds.warnings
+                .iter()
+                .any(|w| w.message.contains("far from unit length")),
+            "{:?}",
+            ds.warnings
+        );
+        assert_eq!(open_near_geometry(&ds).unwrap(), None);
     }
 
     #[test]
