@@ -141,6 +141,9 @@ pub enum ModelArg {
     /// glTF 2.0 metallic-roughness GGX with KHR_materials_anisotropy: base colour, metallic,
     /// roughness, anisotropy strength (direction = the tangent).
     Gltf,
+    /// Per pixel, Ward or glTF, whichever predicts the pixel's validation lights (one training
+    /// light in five, set aside) better; the choice is written to model.npy and model.png.
+    Auto,
 }
 
 impl ModelArg {
@@ -149,6 +152,7 @@ impl ModelArg {
         match self {
             ModelArg::Ward => symframe::FitModel::Ward,
             ModelArg::Gltf => symframe::FitModel::Gltf,
+            ModelArg::Auto => symframe::FitModel::Auto,
         }
     }
 
@@ -157,6 +161,7 @@ impl ModelArg {
     pub const DEFAULT: ModelArg = match symframe::appearance::fit::DEFAULT_MODEL {
         symframe::FitModel::Ward => ModelArg::Ward,
         symframe::FitModel::Gltf => ModelArg::Gltf,
+        symframe::FitModel::Auto => ModelArg::Auto,
     };
 }
 

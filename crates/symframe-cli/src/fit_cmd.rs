@@ -67,9 +67,13 @@ pub fn run(args: &FitArgs) -> Result<FitOutcome> {
             (Some(r), Some(p)) => format!("; held-out RMS {r:.4}, PSNR {p:.1} dB"),
             _ => String::new(),
         };
-        let model = match done.report.exposure {
-            Some(e) => format!("glTF, exposure {e:.4}"),
-            None => "Ward".into(),
+        let model = match (done.report.model, done.report.exposure) {
+            ("auto", Some(e)) => format!(
+                "Ward at {}, glTF at {} by validation lights, exposure {e:.4}",
+                s.ward_pixels, s.gltf_pixels
+            ),
+            (_, Some(e)) => format!("glTF, exposure {e:.4}"),
+            _ => "Ward".into(),
         };
         eprintln!(
             "symframe: {} pixels fitted ({model}; {} isotropic), {} without a frame, {} with too \

@@ -17,7 +17,10 @@
 //! narrow roughness `alpha_narrow = min(alpha_t, alpha_b)` gives `roughness = sqrt(alpha_narrow)`
 //! (glTF's `alpha = roughness^2`), and the anisotropy strength `s` solves
 //! `alpha_wide = alpha_narrow + s^2 (1 - alpha_narrow)` (the extension's stretch), its direction
-//! the axis of the wider highlight. From an estimate folder: grey base colour, roughness 0.5,
+//! the axis of the wider highlight. From an automatic fit (`--model auto`, both models' maps):
+//! the glTF parameters where the glTF model was chosen, the Ward pixels converted as above
+//! after dividing their albedos by the fit's light intensity (one glTF material needs one
+//! model; the conversion is approximate where Ward was chosen). From an estimate folder: grey base colour, roughness 0.5,
 //! metallic 0, and anisotropy strength = the estimate's anisotropy where it has a tangent.
 
 use std::path::{Path, PathBuf};
@@ -108,6 +111,61 @@ fn lum(c: &[f32]) -> f32 {
     0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
 }
 
+/// Converts the Ward parameters of `dir` (`kd`, `ks`, `alpha_t`, `alpha_b` `.npy`) into the
+/// glTF maps of `m` at every pixel that has them (the conversion of the module
+/// documentation), the albedos divided by `intensity` first (the light intensity of the glTF
+/// maps they join: a Ward fit's albedos carry the photographs' scale). Where the wider
+/// highlight is along the binormal, `m.tangents` is turned to it.
+fn convert_ward(dir: &Path, m: &mut Maps, intensity: f32) -> Result<()> {
+    let (w, h) = (m.w, m.h);
+    let kd = read_map(dir, "kd.npy", &[h, w, 3])?;
+    let ks = read_map(dir, "ks.npy", &[h, w, 3])?;
+    let at = read_map(dir, "alpha_t.npy", &[h, w])?;
+    let ab = read_map(dir, "alpha_b.npy", &[h, w])?;
+    let (base, metallic, roughness, strength) = (
+        &mut m.base,
+        &mut m.metallic,
+        &mut m.roughness,
+        &mut m.strength,
+    );
+    let (normals, tangents) = (&m.normals, &mut m.tangents);
+    for i in 0..w * h {
+        let d: [f32; 3] = std::array::from_fn(|c| kd[3 * i + c] / intensity);
+        let s: [f32; 3] = std::array::from_fn(|c| ks[3 * i + c] / intensity);
+        if !d.iter().chain(&s).all(|v| v.is_finite()) {
+            continue;
+        }
+        let (d, s) = (&d[..], &s[..]);
+        let (ld, ls) = (lum(d).max(0.0), lum(s).max(0.0));
+        let m = if ld + ls > 0.0 { ls / (ld + ls) } else { 0.0 };
+        metallic[i] = m;
+        for c in 0..3 {
+            base[3 * i + c] = (d[c] + m * (s[c] - d[c])).clamp(0.0, 1.0);
+        }
+        let (a_t, a_b) = (at[i] as f64, ab[i] as f64);
+        if !(a_t.is_finite() && a_b.is_finite()) {
+            continue;
+        }
+        let (narrow, wide) = (a_t.min(a_b).clamp(1e-4, 1.0), a_t.max(a_b).clamp(1e-4, 1.0));
+        roughness[i] = narrow.sqrt() as f32;
+        strength[i] = ((wide - narrow) / (1.0 - narrow).max(1e-9))
+            .sqrt()
+            .clamp(0.0, 1.0) as f32;
+        if a_b > a_t {
+            // The wider highlight is along the binormal n x t.
+            let nv = &normals[3 * i..3 * i + 3];
+            let t = &tangents[3 * i..3 * i + 3];
+            let b = [
+                nv[1] * t[2] - nv[2] * t[1],
+                nv[2] * t[0] - nv[0] * t[2],
+                nv[0] * t[1] - nv[1] * t[0],
+            ];
+            tangents[3 * i..3 * i + 3].copy_from_slice(&b);
+        }
+    }
+    Ok(())
+}
+
 /// Reads a fit folder (kd.npy present) or an estimate folder.
 pub fn read_maps(dir: &Path) -> Result<Maps> {
     let np = dir.join("normals.npy");
@@ -148,7 +206,7 @@ pub fn read_maps(dir: &Path) -> Result<Maps> {
                 }
             })
             .collect();
-        return Ok(Maps {
+        let mut m = Maps {
             w,
             h,
             base: fill(&g.base_color, 0.0),
@@ -159,62 +217,28 @@ pub fn read_maps(dir: &Path) -> Result<Maps> {
             tangents,
             fitted: true,
             light_intensity: Some(g.exposure),
-        });
+        };
+        if dir.join("kd.npy").is_file() {
+            // An automatic fit: its Ward pixels converted, in the glTF maps' light intensity.
+            convert_ward(dir, &mut m, g.exposure as f32)?;
+        }
+        return Ok(m);
     }
     if dir.join("kd.npy").is_file() {
-        let kd = read_map(dir, "kd.npy", &[h, w, 3])?;
-        let ks = read_map(dir, "ks.npy", &[h, w, 3])?;
-        let at = read_map(dir, "alpha_t.npy", &[h, w])?;
-        let ab = read_map(dir, "alpha_b.npy", &[h, w])?;
-        let mut base = vec![0.0; 3 * n];
-        let mut metallic = vec![0.0; n];
-        let mut roughness = vec![1.0; n];
-        let mut strength = vec![0.0; n];
-        let mut tangents = tangents;
-        for i in 0..n {
-            let (d, s) = (&kd[3 * i..3 * i + 3], &ks[3 * i..3 * i + 3]);
-            if !d.iter().chain(s).all(|v| v.is_finite()) {
-                continue;
-            }
-            let (ld, ls) = (lum(d).max(0.0), lum(s).max(0.0));
-            let m = if ld + ls > 0.0 { ls / (ld + ls) } else { 0.0 };
-            metallic[i] = m;
-            for c in 0..3 {
-                base[3 * i + c] = (d[c] + m * (s[c] - d[c])).clamp(0.0, 1.0);
-            }
-            let (a_t, a_b) = (at[i] as f64, ab[i] as f64);
-            if !(a_t.is_finite() && a_b.is_finite()) {
-                continue;
-            }
-            let (narrow, wide) = (a_t.min(a_b).clamp(1e-4, 1.0), a_t.max(a_b).clamp(1e-4, 1.0));
-            roughness[i] = narrow.sqrt() as f32;
-            strength[i] = ((wide - narrow) / (1.0 - narrow).max(1e-9))
-                .sqrt()
-                .clamp(0.0, 1.0) as f32;
-            if a_b > a_t {
-                // The wider highlight is along the binormal n x t.
-                let nv = &normals[3 * i..3 * i + 3];
-                let t = &tangents[3 * i..3 * i + 3];
-                let b = [
-                    nv[1] * t[2] - nv[2] * t[1],
-                    nv[2] * t[0] - nv[0] * t[2],
-                    nv[0] * t[1] - nv[1] * t[0],
-                ];
-                tangents[3 * i..3 * i + 3].copy_from_slice(&b);
-            }
-        }
-        Ok(Maps {
+        let mut m = Maps {
             w,
             h,
+            base: vec![0.0; 3 * n],
+            metallic: vec![0.0; n],
+            roughness: vec![1.0; n],
+            strength: vec![0.0; n],
             normals,
             tangents,
-            base,
-            metallic,
-            roughness,
-            strength,
             fitted: true,
             light_intensity: None,
-        })
+        };
+        convert_ward(dir, &mut m, 1.0)?;
+        Ok(m)
     } else {
         let aniso = if dir.join("anisotropy.npy").is_file() {
             read_map(dir, "anisotropy.npy", &[h, w])?

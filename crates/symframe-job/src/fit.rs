@@ -10,8 +10,8 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 use symframe::appearance::fit::{
-    holdout_lights, FitMaps, FitMethod, FitModel, FitParams, FitSummary, HoldoutError,
-    PixelOutcome, WardFit,
+    holdout_lights, ExposureChoice, FitMaps, FitMethod, FitModel, FitParams, FitSummary,
+    HoldoutError, PixelOutcome, WardFit, MODEL_GLTF, MODEL_WARD,
 };
 use symframe::appearance::gltf_fit::GltfFit;
 use symframe_io::fingerprint::Fingerprint;
@@ -123,7 +123,9 @@ pub struct FitReport {
     pub inputs: InputsRecord,
     /// The mask used, if any.
     pub mask: Option<PathBuf>,
-    /// The reflectance model fitted: `ward` or `gltf` (also in `parameters.model`).
+    /// The reflectance model fitted: `ward`, `gltf` or `auto` (also in `parameters.model`);
+    /// an automatic fit's choice per pixel is in `model.npy` and its counts in
+    /// `fit.ward_pixels` and `fit.gltf_pixels`.
     pub model: &'static str,
     /// The model in words, and its frame.
     pub model_description: &'static str,
@@ -132,6 +134,10 @@ pub struct FitReport {
     pub exposure: Option<f64>,
     /// Whether that exposure was chosen from the data (`true`) or given (`false`).
     pub exposure_chosen: Option<bool>,
+    /// How a chosen exposure was chosen: the intensities tried and the validation error of
+    /// each ([`symframe::appearance::fit::select_exposure`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub exposure_choice: Option<ExposureChoice>,
     /// Fit parameters, including the held-out light indices.
     pub parameters: FitParams,
     /// Light counts.
@@ -342,12 +348,13 @@ fn run(
     symframe::check_inputs(w, h, cache.n_lights(), ds.lights.len(), mask.as_deref())
         .with_context(|| ds.source.display().to_string())?;
     let mut exposure_chosen = false;
-    if params.model == FitModel::Gltf {
+    let mut exposure_choice = None;
+    if params.model.uses_gltf() {
         params.exposure = match config.exposure {
             Some(e) => e,
             None => {
                 exposure_chosen = true;
-                choose_exposure(
+                let choice = choose_exposure(
                     &cache,
                     &ds.lights,
                     &params,
@@ -355,7 +362,10 @@ fn run(
                     &tangents,
                     mask.as_deref(),
                 )
-                .with_context(|| ds.source.display().to_string())?
+                .with_context(|| ds.source.display().to_string())?;
+                let e = choice.exposure;
+                exposure_choice = Some(choice);
+                e
             }
         };
     }
@@ -402,8 +412,9 @@ fn run(
         mask: mask_path,
         model: params.model.name(),
         model_description: params.model.description(),
-        exposure: (params.model == FitModel::Gltf).then_some(params.exposure),
-        exposure_chosen: (params.model == FitModel::Gltf).then_some(exposure_chosen),
+        exposure: params.model.uses_gltf().then_some(params.exposure),
+        exposure_chosen: params.model.uses_gltf().then_some(exposure_chosen),
+        exposure_choice,
         lights: FitLights {
             input: ds.lights.len(),
             fitted: ds.lights.len() - params.holdout.len(),
@@ -442,9 +453,9 @@ const GLTF_MAPS: [&str; 4] = ["base_color", "metallic", "roughness", "anisotropy
 /// Pixels the exposure of a glTF fit is chosen from, at most.
 pub const EXPOSURE_PIXELS: usize = 2048;
 
-/// The light intensity of a glTF fit chosen from free-scale fits of up to
-/// [`EXPOSURE_PIXELS`] pixels (inside the mask, with a frame) spread evenly over the image,
-/// read tile by tile from the cache.
+/// The light intensity of a glTF fit chosen from up to [`EXPOSURE_PIXELS`] pixels (inside the
+/// mask, with a frame) spread evenly over the image, read tile by tile from the cache
+/// ([`symframe::appearance::fit::select_exposure`]).
 fn choose_exposure(
     cache: &symframe_io::TileCache,
     lights: &[glam::DVec3],
@@ -452,9 +463,9 @@ fn choose_exposure(
     normals: &[f32],
     tangents: &[f32],
     mask: Option<&[bool]>,
-) -> Result<f64> {
+) -> Result<ExposureChoice> {
     use rayon::prelude::*;
-    use symframe::appearance::fit::PixelFitter;
+    use symframe::appearance::fit::{PixelData, PixelFitter};
     use symframe::eval::vec_at;
     let grid = *cache.grid();
     let usable = |p: usize| mask.is_none_or(|m| m[p]) && vec_at(normals, p).is_some();
@@ -467,29 +478,32 @@ fn choose_exposure(
     }
     // The held-out lights stay out of this choice too.
     PixelFitter::new(lights, params)?;
-    let scales: Vec<_> = (0..grid.n_tiles())
+    let pixels: Vec<PixelData> = (0..grid.n_tiles())
         .into_par_iter()
         .flat_map_iter(|t| {
-            let mut fitter = PixelFitter::new(lights, params).expect("checked above");
             let mut scratch = Vec::new();
             let view = cache.tile(t, &mut scratch);
-            let mut rgb = vec![0.0f32; lights.len() * 3];
             let mut out = Vec::new();
             for (k, p) in grid.pixels(t).enumerate() {
                 if !chosen[p] {
                     continue;
                 }
-                view.pixel(k, &mut rgb);
-                let (Some(n), t) = (vec_at(normals, p), vec_at(tangents, p)) else {
+                let (Some(normal), tangent) = (vec_at(normals, p), vec_at(tangents, p)) else {
                     continue;
                 };
-                out.extend(fitter.scale(n, t, &rgb));
+                let mut rgb = vec![0.0f32; lights.len() * 3];
+                view.pixel(k, &mut rgb);
+                out.push(PixelData {
+                    normal,
+                    tangent,
+                    rgb,
+                });
             }
             cache.release(t);
             out
         })
         .collect();
-    symframe::appearance::gltf_fit::choose_exposure(&scales).with_context(|| {
+    symframe::appearance::fit::select_exposure(lights, params, &pixels).with_context(|| {
         "no pixel to choose the exposure of the glTF fit from; give it with --exposure"
     })
 }
@@ -504,6 +518,7 @@ fn fit_owned(name: &str) -> bool {
         || name == "viewer.html"
         || WARD_MAPS.contains(&stem)
         || GLTF_MAPS.contains(&stem)
+        || stem == "model"
 }
 
 /// Whether a fit writes (or removes) the file `name` of its output folder.
@@ -526,19 +541,26 @@ fn write_outputs(
     let staging = OutputSet::new(out, fit_owned)?;
     // The model's (name, data) maps: per pixel three values, then one.
     type Named<'a> = Vec<(&'a str, &'a [f32])>;
+    let ward: (Named, Named) = (
+        vec![("kd", &m.kd), ("ks", &m.ks)],
+        vec![("alpha_t", &m.alpha_t), ("alpha_b", &m.alpha_b)],
+    );
+    // An automatic fit writes both models' maps (NaN where the other model was chosen).
     let (maps3, maps1): (Named, Named) = match &maps.gltf {
-        None => (
-            vec![("kd", &m.kd), ("ks", &m.ks)],
-            vec![("alpha_t", &m.alpha_t), ("alpha_b", &m.alpha_b)],
-        ),
-        Some(g) => (
-            vec![("base_color", &g.base_color)],
-            vec![
+        None => ward,
+        Some(g) => {
+            let mut maps3: Named = vec![("base_color", &g.base_color)];
+            let mut maps1: Named = vec![
                 ("metallic", &g.metallic),
                 ("roughness", &g.roughness),
                 ("anisotropy_strength", &g.anisotropy),
-            ],
-        ),
+            ];
+            if maps.summary.ward_pixels > 0 {
+                maps3.extend(ward.0);
+                maps1.extend(ward.1);
+            }
+            (maps3, maps1)
+        }
     };
     let frames: [(&str, &[f32]); 2] = [("normals", &m.normals), ("tangents", &m.tangents)];
     for (name, data) in maps3.iter().chain(&frames) {
@@ -555,6 +577,21 @@ fn write_outputs(
         }
         symframe_io::write_npy_f32(&staging.path(&format!("{name}.npy")), &[h, w], data)?;
         symframe_io::write_exr_map(&staging.path(&format!("{name}.exr")), w, h, 1, data)?;
+    }
+    if report.parameters.model == FitModel::Auto {
+        // The choice per pixel: 0 none, 1 Ward, 2 glTF; the picture black, blue, orange.
+        let codes: Vec<f32> = maps.model.iter().map(|&c| c as f32).collect();
+        symframe_io::write_npy_f32(&staging.path("model.npy"), &[h, w], &codes)?;
+        let colours: Vec<f32> = maps
+            .model
+            .iter()
+            .flat_map(|&c| match c {
+                MODEL_WARD => [0.2, 0.45, 1.0],
+                MODEL_GLTF => [1.0, 0.55, 0.1],
+                _ => [0.0; 3],
+            })
+            .collect();
+        symframe_io::write_png8_rgb(&staging.path("model.png"), w, h, &colours, false)?;
     }
     // Albedo pictures: clamped and sRGB-encoded, black where nothing was fitted.
     for (name, data) in &maps3 {

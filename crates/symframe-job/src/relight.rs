@@ -79,6 +79,9 @@ pub enum FittedMaps {
     /// A glTF fit (`base_color`, `metallic`, `roughness`, `anisotropy_strength`, and the
     /// exposure from `fit.json`).
     Gltf(GltfMaps),
+    /// An automatic fit with both models: each pixel has either Ward or glTF parameters (the
+    /// other model's are NaN there); the frames are the same.
+    Mixed(WardMaps, GltfMaps),
 }
 
 impl FittedMaps {
@@ -86,7 +89,7 @@ impl FittedMaps {
     pub fn size(&self) -> (usize, usize) {
         match self {
             FittedMaps::Ward(m) => (m.width, m.height),
-            FittedMaps::Gltf(m) => (m.width, m.height),
+            FittedMaps::Gltf(m) | FittedMaps::Mixed(_, m) => (m.width, m.height),
         }
     }
 
@@ -95,6 +98,7 @@ impl FittedMaps {
         match self {
             FittedMaps::Ward(m) => Relighter::new(m, edits),
             FittedMaps::Gltf(m) => Relighter::gltf(m, edits),
+            FittedMaps::Mixed(w, g) => Relighter::of_fit(w, Some(g), edits),
         }
     }
 
@@ -102,16 +106,33 @@ impl FittedMaps {
     pub fn normals(&self) -> &[f32] {
         match self {
             FittedMaps::Ward(m) => &m.normals,
-            FittedMaps::Gltf(m) => &m.normals,
+            FittedMaps::Gltf(m) | FittedMaps::Mixed(_, m) => &m.normals,
+        }
+    }
+
+    /// Unit tangents, `H x W x 3` (NaN where isotropic).
+    pub fn tangents(&self) -> &[f32] {
+        match self {
+            FittedMaps::Ward(m) | FittedMaps::Mixed(m, _) => &m.tangents,
+            FittedMaps::Gltf(m) => &m.tangents,
         }
     }
 }
 
-/// Reads the maps of a fit folder of either model: a glTF fit where `base_color.npy` is
-/// there, else a Ward fit.
+/// Reads the maps of a fit folder of any model: both models' where `base_color.npy` and
+/// `kd.npy` are there (an automatic fit that chose each somewhere), a glTF fit where only
+/// `base_color.npy` is, else a Ward fit.
 pub fn read_fit_maps(dir: &Path) -> Result<FittedMaps> {
     if dir.join("base_color.npy").is_file() {
-        read_gltf_maps(dir).map(FittedMaps::Gltf)
+        let g = read_gltf_maps(dir)?;
+        if dir.join("kd.npy").is_file() {
+            let w = read_ward_maps(dir)?;
+            if (w.width, w.height) != (g.width, g.height) {
+                bail!("{}: the Ward and glTF maps disagree in size", dir.display());
+            }
+            return Ok(FittedMaps::Mixed(w, g));
+        }
+        Ok(FittedMaps::Gltf(g))
     } else {
         read_ward_maps(dir).map(FittedMaps::Ward)
     }

@@ -263,13 +263,20 @@ struct FitRows {
 impl Rows for FitRows {
     fn fill(&mut self, y0: usize, y1: usize, band: &mut Band) -> Result<()> {
         band.clear();
-        let (normals, tangents) = match &self.fitted {
-            FittedMaps::Ward(m) => (&m.normals, &m.tangents),
-            FittedMaps::Gltf(m) => (&m.normals, &m.tangents),
-        };
+        let (normals, tangents) = (self.fitted.normals(), self.fitted.tangents());
         for p in y0 * self.width..y1 * self.width {
+            // A mixed fit's glTF pixels are flagged 3 (its Ward pixels 2, as any model's).
+            let gltf_here = match &self.fitted {
+                FittedMaps::Mixed(_, g) => g.base_color[p * 3].is_finite(),
+                _ => false,
+            };
             let geom = match self.relighter.frame(p) {
-                Some((_, nrm, _)) => [nrm.x as f32, nrm.y as f32, nrm.z as f32, 2.0],
+                Some((_, nrm, _)) => [
+                    nrm.x as f32,
+                    nrm.y as f32,
+                    nrm.z as f32,
+                    if gltf_here { 3.0 } else { 2.0 },
+                ],
                 None => match finite3(normals, p) {
                     Some([x, y, z]) => [x, y, z, 1.0],
                     None => [0.0; 4],
@@ -284,20 +291,23 @@ impl Rows for FitRows {
             };
             // Albedos and roughnesses matter only where there is a model (the flag of `geom`).
             let (kd, ks) = match &self.fitted {
-                FittedMaps::Ward(m) => {
-                    let (d, s) = (&m.kd[p * 3..p * 3 + 3], &m.ks[p * 3..p * 3 + 3]);
-                    (
-                        [d[0], d[1], d[2], m.alpha_t[p]],
-                        [s[0], s[1], s[2], m.alpha_b[p]],
-                    )
-                }
-                FittedMaps::Gltf(m) => {
+                FittedMaps::Gltf(m) | FittedMaps::Mixed(_, m)
+                    if gltf_here || matches!(self.fitted, FittedMaps::Gltf(_)) =>
+                {
                     let c = &m.base_color[p * 3..p * 3 + 3];
                     (
                         [c[0], c[1], c[2], m.metallic[p]],
                         [m.roughness[p], m.anisotropy[p], 0.0, 0.0],
                     )
                 }
+                FittedMaps::Ward(m) | FittedMaps::Mixed(m, _) => {
+                    let (d, s) = (&m.kd[p * 3..p * 3 + 3], &m.ks[p * 3..p * 3 + 3]);
+                    (
+                        [d[0], d[1], d[2], m.alpha_t[p]],
+                        [s[0], s[1], s[2], m.alpha_b[p]],
+                    )
+                }
+                FittedMaps::Gltf(_) => unreachable!("matched above"),
             };
             let est = self.est.as_ref().map_or([0.0; 4], |e| e.texel(p));
             band.push([geom, frame, kd, ks, est]);
@@ -481,6 +491,12 @@ fn fit_source(config: &ViewConfig, notes: &mut Vec<String>) -> Result<Source> {
         FittedMaps::Gltf(m) => (
             vec!["relit", "normal", "tangent", "base_color"],
             "gltf",
+            m.exposure,
+        ),
+        // Ward's and glTF's maps both: the page shows each pixel's own model.
+        FittedMaps::Mixed(_, m) => (
+            vec!["relit", "normal", "tangent", "kd", "ks", "base_color"],
+            "auto",
             m.exposure,
         ),
     };

@@ -14,14 +14,15 @@
 precision highp float;
 precision highp int;
 
-uniform highp sampler2D uGeom;   // normal, flag (0 none, 1 normal only, 2 model)
+uniform highp sampler2D uGeom;   // normal, flag (0 none, 1 normal only, 2 model, 3 glTF in
+                                 // an automatic fit of both models)
 uniform highp sampler2D uFrame;  // shading tangent, 1 if from the tangent map
 uniform highp sampler2D uKd;     // Ward: kd, alpha_t; glTF: base colour, metallic
 uniform highp sampler2D uKs;     // Ward: ks, alpha_b; glTF: roughness, strength, 0, 0
 uniform highp sampler2D uEst;    // confidence, anisotropy, source, flags (1, 2, 4)
 uniform int uView;               // 0 relit, 1 normal, 2 tangent, 3 kd, 4 ks, 5 confidence,
                                  // 6 anisotropy, 7 source, 8 base colour
-uniform int uModel;              // 0 Ward, 1 glTF, 2 an estimate (no fitted material)
+uniform int uModel;              // 0 Ward (glTF where flag 3), 1 glTF, 2 an estimate
 uniform float uIntensity;        // glTF: the fitted light intensity
 uniform vec3 uLight;             // unit light direction, camera frame
 uniform float uGain;             // 2^exposure
@@ -167,14 +168,14 @@ void main() {
             if (flag > 0) {
                 c = srgb3(estimateShade(n, frame, uLight) * uGain);
             }
-        } else if (flag == 2) {
+        } else if (flag >= 2) {
             vec4 kd = texelFetch(uKd, p, 0);
             vec4 ks = texelFetch(uKs, p, 0);
             // The half floats are near unit length; renormalise, and keep t perpendicular to n.
             n = normalize(n);
             vec3 t = normalize(frame.xyz - dot(frame.xyz, n) * n);
             t = editedTangent(t, n, frame.w);
-            vec3 rad = uModel == 1
+            vec3 rad = uModel == 1 || flag == 3
                 ? uIntensity * gltf(n, t, min(kd.rgb * uDiffuse, 1.0), kd.a,
                                     min(ks.r * uRoughness, 1.0), frame.w > 0.5 ? ks.g : 0.0,
                                     uLight)
@@ -187,18 +188,18 @@ void main() {
         c = flag > 0 ? (n + 1.0) * 0.5 : vec3(0.0);
     } else if (uView == 2) {
         if (frame.w > 0.5) {
-            vec3 t = flag == 2 || uModel == 2 ? editedTangent(frame.xyz, normalize(n), frame.w)
+            vec3 t = flag >= 2 || uModel == 2 ? editedTangent(frame.xyz, normalize(n), frame.w)
                                               : frame.xyz;
             c = hue(2.0 * atan(t.y, t.x) / (2.0 * PI));
         }
     } else if (uView == 8) {
         // The glTF fit's base_color.png: clamped, sRGB-encoded, with the diffuse factor.
-        if (flag == 2) {
+        if (flag >= 2) {
             c = srgb3(texelFetch(uKd, p, 0).rgb * uDiffuse);
         }
     } else if (uView == 3 || uView == 4) {
         // The albedo pictures (kd.png, ks.png): clamped, sRGB-encoded, with the edits' factors.
-        if (flag == 2) {
+        if (flag >= 2) {
             c = uView == 3 ? srgb3(texelFetch(uKd, p, 0).rgb * uDiffuse)
                            : srgb3(texelFetch(uKs, p, 0).rgb * uSpecular);
         }

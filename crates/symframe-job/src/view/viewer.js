@@ -579,7 +579,7 @@
       p.className = "hint";
       p.textContent = data.model === "estimate"
         ? "An estimate has no material: grey Lambert (kd 0.5) plus a Ward lobe (ks 0.15), alpha 0.35 along the tangent and 0.12 across it (0.2 where there is no tangent), times the sliders' factors. The ball shows the light."
-        : `The fitted ${data.model === "gltf" ? "glTF metallic-roughness" : "anisotropic Ward"} model under the light (the ball), times 2^exposure, clamped, sRGB.`;
+        : `The fitted ${({ gltf: "glTF metallic-roughness", auto: "per-pixel (Ward or glTF, whichever predicted the validation lights better)" })[data.model] || "anisotropic Ward"} model under the light (the ball), times 2^exposure, clamped, sRGB.`;
       el.appendChild(p);
       el.appendChild(colourBar((t) => [srgb(t), srgb(t), srgb(t)], 0, 1, "radiance × 2^exposure (linear) → shown grey"));
     } else if (v === "normal") {
@@ -651,11 +651,12 @@
     lines.push("tangent" + (at(maps[1], 3) > 0.5 ? vec(maps[1]) : "     n/a (isotropic)"));
     if (data.model === "estimate") {
       // No fitted material.
-    } else if (flag === 2 && data.model === "gltf") {
+    } else if ((flag === 2 && data.model === "gltf") || flag === 3) {
       lines.push("base   " + vec(maps[2]));
       lines.push("metallic " + f(at(maps[2], 3)) + "  roughness " + f(at(maps[3], 0)));
       lines.push("anisotropy strength " + f(at(maps[3], 1)));
     } else if (flag === 2) {
+      if (data.model === "auto") lines.push("model   Ward (chosen by validation lights)");
       lines.push("kd     " + vec(maps[2]));
       lines.push("ks     " + vec(maps[3]));
       lines.push("alpha_t" + f(at(maps[2], 3)) + "  alpha_b" + f(at(maps[3], 3)));
@@ -685,6 +686,7 @@
     // Only the controls of the model: a glTF fit has no free specular albedo.
     if (data.model === "gltf") $("specularRow").hidden = true;
     $("modelNote").textContent = { ward: "Anisotropic Ward fit.", gltf: "glTF metallic-roughness fit.",
+                                   auto: "Per-pixel choice of Ward or glTF metallic-roughness (by validation lights); the specular factor edits the Ward pixels.",
                                    estimate: "An estimate's frames, shaded with a stand-in grey material." }[data.model] || "";
     const sel = $("viewSel");
     for (const v of data.views) sel.add(new Option(v, v));

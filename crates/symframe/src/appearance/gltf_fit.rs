@@ -204,6 +204,17 @@ pub struct PixelScale {
 /// `e c`, so that at most 1% of the pixels' base colours would exceed 1. `None` without any
 /// usable pixel.
 pub fn choose_exposure(pixels: &[PixelScale]) -> Option<f64> {
+    match exposure_bounds(pixels) {
+        (Some(d), Some(b)) => Some(d.max(b)),
+        (d, b) => d.or(b),
+    }
+}
+
+/// The two readings [`choose_exposure`] combines: the median intensity of the mostly
+/// dielectric pixels (when they are at least a quarter), and the 99th percentile of the
+/// brightest channel of `e c` (the lowest intensity that keeps 99% of the base colours within
+/// 1).
+pub fn exposure_bounds(pixels: &[PixelScale]) -> (Option<f64>, Option<f64>) {
     let quantile = |mut v: Vec<f64>, q: f64| -> Option<f64> {
         v.retain(|x| x.is_finite() && *x > 0.0);
         if v.is_empty() {
@@ -229,10 +240,7 @@ pub fn choose_exposure(pixels: &[PixelScale]) -> Option<f64> {
             .collect(),
         0.99,
     );
-    match (dielectric, brightest) {
-        (Some(d), Some(b)) => Some(d.max(b)),
-        (d, b) => d.or(b),
-    }
+    (dielectric, brightest)
 }
 
 /// The grid start and Levenberg-Marquardt search; returns the fit (its `sse` unset), the

@@ -219,6 +219,31 @@ impl Relighter {
         })
     }
 
+    /// The relighter of a fit of any model ([`FitModel`](crate::appearance::fit::FitModel)):
+    /// each pixel rendered with the model fitted there, its glTF parameters where `gltf` has
+    /// them, else its Ward parameters (an automatic fit has either at each pixel). The edits
+    /// apply as [`Relighter::new`] and [`Relighter::gltf`] apply them; a specular scale is
+    /// refused where there are glTF pixels.
+    pub fn of_fit(ward: &WardMaps, gltf: Option<&GltfMaps>, edits: &Edits) -> Result<Self> {
+        let mut out = Self::new(ward, edits)?;
+        let Some(g) = gltf else {
+            return Ok(out);
+        };
+        if (g.width, g.height) != (ward.width, ward.height) {
+            return Err(Error::BadParameter(format!(
+                "the glTF maps are {}x{} but the Ward maps {}x{}",
+                g.width, g.height, ward.width, ward.height
+            )));
+        }
+        let g = Self::gltf(g, edits)?;
+        for (w, g) in out.pixels.iter_mut().zip(g.pixels) {
+            if g.is_some() {
+                *w = g;
+            }
+        }
+        Ok(out)
+    }
+
     /// Width in pixels.
     pub fn width(&self) -> usize {
         self.width

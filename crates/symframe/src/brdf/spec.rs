@@ -19,6 +19,7 @@
 //! | `cook-torrance` (`ct`) | `kd` (0.5), `ks` (0.5), `m` (0.2), `ior` (1.5) |
 //! | `ashikhmin-shirley` (`as`) | `rd` (0.5), `rs` (0.05), `nu` (100), `nv` (10) |
 //! | `ggx` | `kd` (0.1), `f0` (0.9), `ax` (0.3), `ay` (0.1), `alpha` (sets both) |
+//! | `beckmann` | `kd` (0), `f0` (0.9), `ax` (0.25), `ay` (0.06), `alpha` (sets both) |
 //! | `gltf` | `base` (0.5), `metallic` (0), `roughness` (0.5), `anisotropy` (0) |
 //! | `merl` | `path` (required; the rest of the spec after `path=`, commas allowed) |
 //! | `merl-trilinear` | as `merl`, with trilinear interpolation between bins |
@@ -35,8 +36,8 @@
 
 use super::Brdf;
 use super::{
-    AshikhminShirley, BlinnPhong, CookTorrance, Ggx, GltfPbr, Lambertian, Merl, TorranceSparrow,
-    Ward,
+    AshikhminShirley, Beckmann, BlinnPhong, CookTorrance, Ggx, GltfPbr, Lambertian, Merl,
+    TorranceSparrow, Ward,
 };
 
 /// Formats a colour for a spec: one number when all channels are equal, else `r/g/b`. Uses
@@ -176,6 +177,7 @@ pub const MODEL_NAMES: &[&str] = &[
     "cook-torrance",
     "ashikhmin-shirley",
     "ggx",
+    "beckmann",
     "gltf",
     "merl",
     "merl-trilinear",
@@ -247,6 +249,15 @@ pub fn parse_model(spec: &str) -> Result<Box<dyn Brdf>, String> {
                 return Err(format!("ggx: f0={} must be at most 1", fmt_rgb(&f0)));
             }
             Ok(Box::new(Ggx::new(p.rgb("kd", 0.1)?, f0, ax, ay)))
+        }
+        "beckmann" => {
+            let p = Params::parse("beckmann", &["kd", "f0", "ax", "ay", "alpha"], rest)?;
+            let (ax, ay) = p.alpha_pair(0.25, 0.06)?;
+            let f0 = p.rgb("f0", 0.9)?;
+            if f0.iter().any(|&x| x > 1.0) {
+                return Err(format!("beckmann: f0={} must be at most 1", fmt_rgb(&f0)));
+            }
+            Ok(Box::new(Beckmann::new(p.rgb("kd", 0.0)?, f0, ax, ay)))
         }
         "gltf" => {
             let p = Params::parse(
@@ -334,6 +345,12 @@ mod tests {
             &Ggx::new([0.1; 3], [0.9; 3], 0.3, 0.1)
         ));
         assert_eq!(g.tangent_axis(), TangentAxis::X);
+        let bk = parse_model("beckmann:kd=0,f0=1/0.71/0.29,ax=0.25,ay=0.06").unwrap();
+        assert!(same_model(
+            bk.as_ref(),
+            &Beckmann::new([0.0; 3], [1.0, 0.71, 0.29], 0.25, 0.06)
+        ));
+        assert_eq!(bk.name(), "beckmann:kd=0,f0=1/0.71/0.29,ax=0.25,ay=0.06");
         let a = parse_model(" AS : rd = 0.1/0.2/0.3 , rs=0.05, nu=100, nv=10 ").unwrap();
         assert!(same_model(
             a.as_ref(),
