@@ -353,7 +353,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let s = relight::run(&quick(dir.path())).unwrap();
         assert!(dir.path().join("relight_side_by_side.png").is_file());
-        assert_eq!(s.figures.len(), 16);
+        assert_eq!(s.figures.len(), 30);
         for r in &s.figures {
             // Bounds that catch a broken fit; the report states the figures.
             assert!(
@@ -361,6 +361,8 @@ mod tests {
                 "{r:?}"
             );
             assert!(r.relit_psnr > 20.0, "{r:?}");
+            // No fireflies: nothing relit far above what the pixel was seen at.
+            assert!(r.relit_over_brightest < 4.0, "{r:?}");
         }
     }
 }
