@@ -348,7 +348,11 @@ mod tests {
         assert!(ds.warnings.is_empty(), "{:?}", ds.warnings);
         let c = DVec3::new(0.0, 0.0, -1200.0);
         for (l, p) in ds.lights.iter().zip(&mm) {
-            assert!(l.angle_between(*p - c) < 1e-6, "{}", l.angle_between(*p - c));
+            assert!(
+                l.angle_between(*p - c) < 1e-6,
+                "{}",
+                l.angle_between(*p - c)
+            );
         }
         let g = open_near_geometry(&ds).unwrap().unwrap();
         for (l, p) in g.lights.iter().zip(&mm) {
