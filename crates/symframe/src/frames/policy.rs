@@ -24,9 +24,6 @@ use crate::maps::PixelSource;
 /// Default smallest symmetry anisotropy for a tangent (`--min-anisotropy`).
 pub const DEFAULT_MIN_ANISOTROPY: f32 = 0.6;
 
-/// [`LobeSettings::plausible`]'s default.
-const LOBE_PLAUSIBLE: f64 = 0.005;
-
 /// Every setting of the estimator's choice of answer, grouped by the rule that reads it.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PolicySettings {
@@ -69,14 +66,18 @@ pub struct LobeSettings {
     /// pin down (a broad lobe whose tilt trades against its shape) may sit far from the
     /// symmetric centre, which the search then reads. Higher: more such lobes answer.
     pub noise_determined: f64,
-    /// A lobe leaving less than this is a plausible answer where the search doubts its own,
-    /// and its axis counts as a reading of the tangent by itself (at 1%, lobes on rough metal
-    /// bumps under 200 lights were 9.4 degrees off where the search was 6.1). Higher: more
-    /// doubtful searches replaced, more tangents from lobes that describe the pixel less well.
+    /// A lobe leaving less than this share beyond what the capture's noise leaves (its
+    /// expected share plus [`LobeSettings::noise_z`] standard deviations, [`NoiseShare`]) is a
+    /// plausible answer where the search doubts its own, and its axis counts as a reading of
+    /// the tangent by itself (at 1%, lobes on rough metal bumps under 200 lights were 9.4
+    /// degrees off where the search was 6.1). Higher: more doubtful searches replaced, more
+    /// tangents from lobes that describe the pixel less well.
     pub plausible: f64,
-    /// Where a diffuse term explains the pixel too, the lobe answers only if it leaves less
-    /// than this share of what the diffuse term leaves. Higher: broad lobes that pass the
-    /// diffuse test answer more often (and bias the Lambertian normal).
+    /// Where a diffuse term explains the pixel too, the lobe answers only if what it leaves
+    /// beyond the noise's expected share is less than this share of what the diffuse term
+    /// leaves beyond its own: the two models' misfits compared, not the noise both leave.
+    /// Higher: broad lobes that pass the diffuse test answer more often (and bias the
+    /// Lambertian normal).
     pub over_diffuse: f64,
     /// What fits of lobes that describe a noise-free material leave: above it, two lobes
     /// explain a pixel only where their residuals look like independent noise. Higher: pairs
@@ -107,7 +108,7 @@ impl Default for LobeSettings {
             explains: LOBE_EXPLAINS,
             noise_z: 3.09,
             noise_determined: 0.5f64.to_radians(),
-            plausible: LOBE_PLAUSIBLE,
+            plausible: 0.005,
             over_diffuse: 0.25,
             model_floor: 1e-4,
             noise_like_z: 3.09,
@@ -241,13 +242,10 @@ pub struct TangentSettings {
     /// Higher: the moments count as evidence only for strongly elongated highlights.
     pub min_moment_elongation: f64,
     /// Cosine of the largest angle between a fitted lobe's wide axis and a symmetry axis at
-    /// which the two agree (15 degrees). Higher: stricter agreement.
+    /// which the two agree (15 degrees). Higher: stricter agreement. A plausible lobe
+    /// ([`LobeSettings::plausible`]) that agrees gives a tangent whatever the slice's
+    /// anisotropy (noise and light errors blur the anisotropy first).
     pub axes_agree_cos: f64,
-    /// A fitted lobe that leaves less than this share of the energy unexplained is plausible
-    /// on its own: its agreement with a symmetry axis gives a tangent whatever the slice's
-    /// anisotropy (noise and light errors blur the anisotropy first). Higher: more tangents
-    /// from lobes that describe the pixel less well.
-    pub plausible_lobe_residual: f64,
 }
 
 impl Default for TangentSettings {
@@ -256,7 +254,6 @@ impl Default for TangentSettings {
             min_anisotropy: DEFAULT_MIN_ANISOTROPY as f64,
             min_moment_elongation: MIN_ELONGATION,
             axes_agree_cos: 15f64.to_radians().cos(),
-            plausible_lobe_residual: LOBE_PLAUSIBLE,
         }
     }
 }
@@ -266,8 +263,8 @@ impl Default for TangentSettings {
 pub struct LobeAxis {
     /// The lobe's wide axis (unit, perpendicular to its normal).
     pub tangent: DVec3,
-    /// The share of the samples' energy the lobe leaves unexplained.
-    pub residual: f64,
+    /// The lobe plausibly describes the pixel ([`LobeSettings::plausible`]).
+    pub plausible: bool,
     /// Whether the lobe is elongated enough, and wide enough for the rig to resolve, to have
     /// a wide axis at all.
     pub elongated: bool,
@@ -295,9 +292,7 @@ impl TangentEvidence {
         self.lobes.iter().flatten().any(|l| {
             let along = l.tangent.dot(self.axes[0]).abs();
             let across = l.tangent.dot(self.axes[1]).abs();
-            l.elongated
-                && along.max(across) >= s.axes_agree_cos
-                && (!plausible_only || l.residual < s.plausible_lobe_residual)
+            l.elongated && along.max(across) >= s.axes_agree_cos && (!plausible_only || l.plausible)
         })
     }
 }
@@ -323,6 +318,33 @@ pub fn tangent_confidence(s: &TangentSettings, e: &TangentEvidence, f0: f64, f45
     (if agreed { separation } else { 0.5 * separation }) as f32
 }
 
+/// What a capture's noise alone would leave of a fit's unexplained share: its expectation and
+/// standard deviation (both 0 for a noise-free capture). The fits' tests compare what they
+/// leave with it (docs/method.md, "Noise model").
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub(crate) struct NoiseShare {
+    /// The expected share.
+    pub(crate) expected: f64,
+    /// Its standard deviation.
+    pub(crate) sd: f64,
+}
+
+impl NoiseShare {
+    /// The share the noise leaves at most, `z` standard deviations above its expectation (a
+    /// one-sided test at the normal distribution's point `z`).
+    pub(crate) fn at(&self, z: f64) -> f64 {
+        self.expected + z * self.sd
+    }
+
+    /// What a lobe's fit leaves to its noise.
+    pub(crate) fn of_lobe(f: &LobeFit) -> Self {
+        Self {
+            expected: f.noise_share,
+            sd: f.noise_share_sd,
+        }
+    }
+}
+
 /// What a pixel offers the choice of its normal, gathered before the choice.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct NormalEvidence<'a> {
@@ -336,11 +358,10 @@ pub(crate) struct NormalEvidence<'a> {
     /// The share of the well-lit energy the Lambertian term leaves unexplained (default
     /// measure only).
     pub(crate) share: Option<f64>,
-    /// What the capture's noise alone would leave of that share, at
-    /// [`DiffuseSettings::noise_z`] standard deviations (where it was asked: the Lambertian fit
-    /// explains the pixel to [`DiffuseSettings::centre_fit`] and `share` is above
-    /// [`DiffuseSettings::pure_share`]).
-    pub(crate) diffuse_noise: Option<f64>,
+    /// What the capture's noise alone would leave of that share (where it was asked: the
+    /// Lambertian fit explains the pixel to [`DiffuseSettings::centre_fit`] and `share` is
+    /// above [`DiffuseSettings::pure_share`]).
+    pub(crate) diffuse_noise: Option<NoiseShare>,
     /// The highlight's half-maximum region holds at most [`LobeSettings::sharp_samples`]
     /// lights: a lobe narrower than the rig's spacing.
     pub(crate) sharp: bool,
@@ -386,9 +407,9 @@ pub(crate) fn choose_normal<'a>(
         None
     };
     // A broad lobe passes the diffuse test too, and biases the Lambertian normal: it answers
-    // only where it leaves much less than the diffuse term.
+    // only where it misfits much less than the diffuse term, beyond what the noise leaves.
     let lobe = lobe.filter(|f| match diffuse.and(e.share) {
-        Some(share) => f.residual < s.lobe.over_diffuse * share,
+        Some(share) => lobe_over_diffuse(&s.lobe, f, share, e.diffuse_noise),
         None => true,
     });
     // Nor where it barely improves on the robust Lambertian fit alone (the lobe model holds a
@@ -437,7 +458,26 @@ pub(crate) fn search_gives_way(
     f: &LobeFit,
     observed: impl FnOnce() -> bool,
 ) -> bool {
-    quality < s.search.doubtful && f.residual < s.lobe.plausible && f.normal.z > 0.0 && observed()
+    quality < s.search.doubtful && lobe_plausible(&s.lobe, f) && f.normal.z > 0.0 && observed()
+}
+
+/// Whether the lobe `f` plausibly describes the pixel: it leaves less than
+/// [`LobeSettings::plausible`] beyond what the noise leaves at [`LobeSettings::noise_z`].
+pub(crate) fn lobe_plausible(s: &LobeSettings, f: &LobeFit) -> bool {
+    f.residual < s.plausible + NoiseShare::of_lobe(f).at(s.noise_z)
+}
+
+/// Whether the lobe `f` describes the pixel much better than the diffuse term that leaves
+/// `share` (of which the noise leaves `diffuse_noise`): its misfit, beyond the noise's expected
+/// share, under [`LobeSettings::over_diffuse`] times the diffuse term's.
+fn lobe_over_diffuse(
+    s: &LobeSettings,
+    f: &LobeFit,
+    share: f64,
+    diffuse_noise: Option<NoiseShare>,
+) -> bool {
+    let diffuse_misfit = share - diffuse_noise.map_or(0.0, |n| n.expected);
+    f.residual - f.noise_share < s.over_diffuse * diffuse_misfit
 }
 
 /// The largest share of the energy the lobe `f` may leave and explain the pixel: the fixed
@@ -445,7 +485,7 @@ pub(crate) fn search_gives_way(
 /// share and the family's floor, plus [`LobeSettings::noise_z`] standard deviations).
 pub(crate) fn lobe_limit(s: &LobeSettings, f: &LobeFit) -> f64 {
     s.explains
-        .max(f.noise_share + s.model_floor + s.noise_z * f.noise_share_sd)
+        .max(NoiseShare::of_lobe(f).at(s.noise_z) + s.model_floor)
 }
 
 /// Whether the lobe `f` explains the pixel: it leaves less than [`LobeSettings::explains`],
@@ -465,10 +505,10 @@ pub(crate) fn pure_diffuse(
     s: &DiffuseSettings,
     fit: &BaselinePixel,
     share: Option<f64>,
-    noise_limit: Option<f64>,
+    noise: Option<NoiseShare>,
 ) -> bool {
     fit.confidence as f64 >= s.centre_fit
-        && share.is_some_and(|v| v < s.pure_share || noise_limit.is_some_and(|l| v < l))
+        && share.is_some_and(|v| v < s.pure_share || noise.is_some_and(|n| v < n.at(s.noise_z)))
 }
 
 /// Whether two lobes sharing a frame explain the pixel (docs/method.md, "Two lobes"): they
@@ -488,7 +528,7 @@ pub(crate) fn pair_explains(s: &LobeSettings, p: &LobePair, single: &LobeFit) ->
 /// Whether the base under a sharp coat is fitted on its own (the samples at the coat's level
 /// left out): the highlight is sharp and one lobe does not even plausibly explain the pixel.
 pub(crate) fn reads_base(s: &LobeSettings, highlight_count: u32, f: &LobeFit) -> bool {
-    highlight_count <= s.sharp_samples && f.residual >= s.plausible
+    highlight_count <= s.sharp_samples && !lobe_plausible(s, f)
 }
 
 /// The normal of a diffuse pixel's robust Lambertian fit, when the fit explains the samples
@@ -498,12 +538,13 @@ pub(crate) fn diffuse_centre(
     s: &DiffuseSettings,
     fit: &BaselinePixel,
     share: Option<f64>,
-    noise_limit: Option<f64>,
+    noise: Option<NoiseShare>,
 ) -> Option<DVec3> {
     fit.normal
         .filter(|_| fit.confidence as f64 >= s.centre_fit)
         .filter(|_| {
-            share.is_some_and(|v| v < s.specular_share || noise_limit.is_some_and(|l| v < l))
+            share
+                .is_some_and(|v| v < s.specular_share || noise.is_some_and(|n| v < n.at(s.noise_z)))
         })
 }
 
@@ -546,6 +587,11 @@ pub(crate) fn choose_fallback(
         .normal
         .filter(|_| lambert.confidence as f64 >= s.fallback.diffuse_fit);
     let lobe = lobe.filter(|f| f.normal.z > 0.0).and_then(|f| {
+        // Unlike within the reach, the shares themselves are compared, noise and all: a lobe
+        // that beats the diffuse term only once the noise is discounted fits the part of the
+        // highlight the rig sees no better than noise, which does not place a centre beyond
+        // it (glossy plastic on the narrow cap, 8-bit: 0.72 -> 1.22 degrees mean when the
+        // noise was discounted here too).
         let over_diffuse = diffuse.and(share).map(|v| s.lobe.over_diffuse * v);
         let limit = if centre_determined(&s.lobe, f) {
             lobe_limit(&s.lobe, f)
@@ -588,10 +634,10 @@ mod tests {
         }
     }
 
-    fn lobe(tangent: DVec3, residual: f64, elongated: bool) -> Option<LobeAxis> {
+    fn lobe(tangent: DVec3, plausible: bool, elongated: bool) -> Option<LobeAxis> {
         Some(LobeAxis {
             tangent,
-            residual,
+            plausible,
             elongated,
         })
     }
@@ -603,7 +649,7 @@ mod tests {
         // A round lobe has no axis to agree on.
         assert!(!has_tangent(
             &s,
-            &evidence(0.9, false, lobe(DVec3::X, 0.03, false))
+            &evidence(0.9, false, lobe(DVec3::X, false, false))
         ));
     }
 
@@ -614,18 +660,18 @@ mod tests {
         // A poor single-lobe fit (a coat and a base) whose wide axis agrees: a tangent.
         assert!(has_tangent(
             &s,
-            &evidence(0.7, false, lobe(DVec3::Y, 0.03, true))
+            &evidence(0.7, false, lobe(DVec3::Y, false, true))
         ));
         // ... but not when its axis is 30 degrees off both symmetry axes.
         let off = DVec3::new(30f64.to_radians().cos(), 30f64.to_radians().sin(), 0.0);
         assert!(!has_tangent(
             &s,
-            &evidence(0.7, false, lobe(off, 0.03, true))
+            &evidence(0.7, false, lobe(off, false, true))
         ));
         // Nor when the slice is not anisotropic enough.
         assert!(!has_tangent(
             &s,
-            &evidence(0.3, true, lobe(DVec3::Y, 0.03, true))
+            &evidence(0.3, true, lobe(DVec3::Y, false, true))
         ));
     }
 
@@ -634,11 +680,11 @@ mod tests {
         let s = TangentSettings::default();
         assert!(has_tangent(
             &s,
-            &evidence(0.2, false, lobe(DVec3::X, 0.001, true))
+            &evidence(0.2, false, lobe(DVec3::X, true, true))
         ));
         assert!(!has_tangent(
             &s,
-            &evidence(0.2, false, lobe(DVec3::X, 0.01, true))
+            &evidence(0.2, false, lobe(DVec3::X, false, true))
         ));
     }
 
@@ -808,23 +854,60 @@ mod tests {
     }
 
     #[test]
+    fn plausibility_and_the_comparison_with_a_diffuse_term_discount_the_noise() {
+        let s = LobeSettings::default();
+        let b = DVec3::new(0.1, 0.0, 1.0).normalize();
+        // 1% left: implausible from a noise-free capture, plausible where the noise expects
+        // 0.8% of it (with a spread of 0.05%).
+        let quiet = fitted(b, 0.01);
+        let noisy = LobeFit {
+            noise_share: 0.008,
+            noise_share_sd: 5e-4,
+            ..quiet
+        };
+        assert!(!lobe_plausible(&s, &quiet));
+        assert!(lobe_plausible(&s, &noisy));
+        assert!(reads_base(&s, 1, &quiet) && !reads_base(&s, 1, &noisy));
+        // Beside a diffuse term that leaves 1.2%: noise-free, the lobe's 1% is no better; where
+        // both leave mostly noise (0.8% expected of the lobe's, 1% of the diffuse term's), the
+        // lobe's misfit (0.2%) is the diffuse term's (0.2%) too.
+        let diffuse_noise = Some(NoiseShare {
+            expected: 0.01,
+            sd: 5e-4,
+        });
+        assert!(!lobe_over_diffuse(&s, &quiet, 0.012, None));
+        assert!(!lobe_over_diffuse(&s, &noisy, 0.012, diffuse_noise));
+        // A diffuse term that misfits by 2% beyond its noise: the lobe describes the pixel
+        // much better.
+        assert!(lobe_over_diffuse(&s, &noisy, 0.03, diffuse_noise));
+        assert!(!lobe_over_diffuse(&s, &quiet, 0.03, diffuse_noise));
+    }
+
+    #[test]
     fn a_lambertian_fit_leaving_only_noise_is_diffuse() {
         // Above the noise-free share, the noise test decides: under the noise's limit the
         // pixel is diffuse (no lobe fitted) and its Lambertian term answers; over it, not.
         let s = DiffuseSettings::default();
         let fit = lambertian(DVec3::Z, 0.995);
         let share = Some(10.0 * s.pure_share);
+        // A noise share whose limit at the test's z is `l`.
+        let limit = |l: f64| {
+            Some(NoiseShare {
+                expected: l - s.noise_z * 1e-6,
+                sd: 1e-6,
+            })
+        };
         assert!(!pure_diffuse(&s, &fit, share, None));
-        assert!(pure_diffuse(&s, &fit, share, Some(20.0 * s.pure_share)));
-        assert!(!pure_diffuse(&s, &fit, share, Some(5.0 * s.pure_share)));
+        assert!(pure_diffuse(&s, &fit, share, limit(20.0 * s.pure_share)));
+        assert!(!pure_diffuse(&s, &fit, share, limit(5.0 * s.pure_share)));
         let noisy = Some(2.0 * s.specular_share);
         assert_eq!(diffuse_centre(&s, &fit, noisy, None), None);
         assert_eq!(
-            diffuse_centre(&s, &fit, noisy, Some(3.0 * s.specular_share)),
+            diffuse_centre(&s, &fit, noisy, limit(3.0 * s.specular_share)),
             Some(DVec3::Z)
         );
         // A fit that does not explain the pixel is no diffuse answer, whatever the noise.
         let poor = lambertian(DVec3::Z, 0.9);
-        assert!(!pure_diffuse(&s, &poor, share, Some(1.0)));
+        assert!(!pure_diffuse(&s, &poor, share, limit(1.0)));
     }
 }

@@ -9,7 +9,8 @@ use symframe::eval::evaluate;
 use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{clip_point, Degradation, Noise, Scene, TangentField};
 use symframe::{
-    estimate_stack, EstimateMaps, EstimatorParams, NoiseModel, Quantisation, Rig, RigOptions,
+    estimate_stack, EstimateMaps, EstimatorParams, NoiseModel, PixelSource, Quantisation, Rig,
+    RigOptions,
 };
 
 /// The linear level of the smallest 8-bit sRGB value the reader counts as saturated (99.5%).
@@ -64,21 +65,46 @@ fn clipped_highlights_keep_their_normals_and_tangents() {
         clip_level: Some(srgb8_clip_level()),
         ..NoiseModel::default()
     };
-    let censored = eval(&run(&scene, &lights, &stack, told));
-    let dropped = eval(&run(&scene, &lights, &stack, NoiseModel::default()));
+    let (censored_maps, dropped_maps) = (
+        run(&scene, &lights, &stack, told),
+        run(&scene, &lights, &stack, NoiseModel::default()),
+    );
+    let (censored, dropped) = (eval(&censored_maps), eval(&dropped_maps));
+    // The share of the object's pixels answered within the rig's reach (not by a fallback).
+    let within_reach = |m: &EstimateMaps| {
+        let answered = |s: &u8| *s == PixelSource::Lobe as u8 || *s == PixelSource::Symmetry as u8;
+        let inside = scene.mask.iter().filter(|&&k| k).count();
+        let confident = m
+            .source
+            .iter()
+            .zip(&m.confidence)
+            .zip(&scene.mask)
+            .filter(|((s, c), &k)| k && answered(s) && **c > 0.5)
+            .count();
+        confident as f64 / inside as f64
+    };
     println!(
-        "censored: normal {:.3} tangents {:.1}% at {:.3}; dropped: normal {:.3} tangents {:.1}%",
+        "censored: normal {:.3} tangents {:.1}% at {:.3}, {:.1}% within reach; dropped: normal \
+         {:.3} tangents {:.1}% at {:.3}, {:.1}% within reach",
         censored.normal_error.mean,
         100.0 * censored.tangent_coverage,
         censored.tangent_error.mean,
+        100.0 * within_reach(&censored_maps),
         dropped.normal_error.mean,
-        100.0 * dropped.tangent_coverage
+        100.0 * dropped.tangent_coverage,
+        dropped.tangent_error.mean,
+        100.0 * within_reach(&dropped_maps),
     );
-    // Measured: censored 0.055 degrees, tangents on 100% at 0.08; dropped 0.055, tangents 0.6%.
+    // Measured: censored 0.055 degrees, tangents on 100% at 0.08.
     assert!(censored.normal_error.mean < 0.3, "{censored:?}");
     assert!(censored.tangent_coverage > 0.95, "{censored:?}");
     assert!(censored.tangent_error.mean < 1.0, "{censored:?}");
-    assert!(dropped.tangent_coverage < censored.tangent_coverage);
+    // Dropped, the clipped peak leaves the highlight's centre unobserved: its pixels are
+    // beyond the symmetry's reach and only the fallback (the lobe fitted to the flanks, at half
+    // confidence) answers them; censored, the symmetry reaches them.
+    // Measured: 64% of the object's pixels (the rim beyond the reach included) against 0.4%.
+    assert!(within_reach(&censored_maps) > 0.5);
+    assert!(within_reach(&dropped_maps) < 0.1 * within_reach(&censored_maps));
 }
 
 /// The mean normal error of the default estimator on a noise-free float sphere of `brdf`

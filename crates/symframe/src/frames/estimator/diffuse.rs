@@ -4,6 +4,7 @@
 
 use glam::DVec3;
 
+use crate::frames::policy::NoiseShare;
 use crate::frames::rig::Rig;
 use crate::noise::NoiseModel;
 
@@ -34,19 +35,17 @@ pub(super) fn unexplained_share(rig: &Rig, slice: &[f32], n: DVec3, min_cosine: 
 }
 
 /// What the capture's noise alone would leave of a Lambertian pixel's well-lit energy
-/// ([`unexplained_share`] over the same lights at normal `n`), as a share, `z` standard
-/// deviations above its expectation: each sample's channels carry the noise model's variance
-/// at their value (about a third of the grey each), the fit's five parameters (three albedos,
-/// the normal's two tilts) take their share, and a sum of squared Gaussian residuals has
-/// variance `2 sigma^4` per value.
-pub(super) fn diffuse_noise_limit(
+/// ([`unexplained_share`] over the same lights at normal `n`), as a share: each sample's
+/// channels carry the noise model's variance at their value (about a third of the grey each),
+/// the fit's five parameters (three albedos, the normal's two tilts) take their share, and a
+/// sum of squared Gaussian residuals has variance `2 sigma^4` per value.
+pub(super) fn diffuse_noise_share(
     rig: &Rig,
     slice: &[f32],
     n: DVec3,
     min_cosine: f64,
     noise: &NoiseModel,
-    z: f64,
-) -> f64 {
+) -> NoiseShare {
     let (mut expected, mut spread, mut energy, mut values) = (0.0, 0.0, 0.0, 0usize);
     for (s, l) in slice.chunks_exact(3).zip(rig.lights_in_camera()) {
         if n.dot(*l) < min_cosine || !s[0].is_finite() {
@@ -61,10 +60,13 @@ pub(super) fn diffuse_noise_limit(
         values += 3;
     }
     if energy <= 0.0 || values <= 5 {
-        return 0.0;
+        return NoiseShare::default();
     }
     let kept = (values - 5) as f64 / values as f64;
-    (expected * kept + z * spread.sqrt()) / energy
+    NoiseShare {
+        expected: expected * kept / energy,
+        sd: spread.sqrt() / energy,
+    }
 }
 
 #[cfg(test)]
@@ -110,8 +112,8 @@ mod tests {
         for _ in 0..draws {
             let s = noisy(&matte, 1.0 / peak);
             let share = unexplained_share(&rig, &s, n, min_cosine);
-            let limit = diffuse_noise_limit(&rig, &s, n, min_cosine, &noise, 3.09);
-            let expected = diffuse_noise_limit(&rig, &s, n, min_cosine, &noise, 0.0);
+            let share_noise = diffuse_noise_share(&rig, &s, n, min_cosine, &noise);
+            let (limit, expected) = (share_noise.at(3.09), share_noise.expected);
             assert!(share > settings.diffuse.pure_share, "{share}");
             assert!(share < limit, "{share} {limit}");
             ratio += share / expected / draws as f64;
@@ -126,7 +128,7 @@ mod tests {
         );
         let s = noisy(&glossy, 1.0 / peak);
         let share = unexplained_share(&rig, &s, n, min_cosine);
-        let limit = diffuse_noise_limit(&rig, &s, n, min_cosine, &noise, 3.09);
+        let limit = diffuse_noise_share(&rig, &s, n, min_cosine, &noise).at(3.09);
         assert!(share > 3.0 * limit, "{share} {limit}");
     }
 }

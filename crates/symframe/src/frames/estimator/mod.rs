@@ -15,8 +15,8 @@ use crate::error::Result;
 use crate::frames::lobe::{fit_lobe, fit_lobe_pair, LobeFit, LobeScratch, LobeStart};
 use crate::frames::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::frames::policy::{
-    self, has_tangent, tangent_confidence, LobeAxis, NormalChoice, NormalEvidence, PolicySettings,
-    TangentEvidence, TangentSettings, DEFAULT_MIN_ANISOTROPY,
+    self, has_tangent, tangent_confidence, LobeAxis, NoiseShare, NormalChoice, NormalEvidence,
+    PolicySettings, TangentEvidence, TangentSettings, DEFAULT_MIN_ANISOTROPY,
 };
 use crate::frames::rig::Rig;
 use crate::frames::symmetry::{default_min_domain, CosineMode, SymmetryTerm};
@@ -32,7 +32,7 @@ mod search;
 
 pub use confidence::CONFIDENT_WITHIN_DEG;
 use confidence::{unconfirmed, within_confident, JUDGE_LIGHTS};
-use diffuse::{diffuse_noise_limit, unexplained_share};
+use diffuse::{diffuse_noise_share, unexplained_share};
 use search::{brightest_sample, centre_observed, highlight_wider_along, TangentSearch};
 
 /// Parameters of the symmetry estimator.
@@ -258,13 +258,12 @@ impl<'a> Estimator<'a> {
             })
             .zip(fit.normal)
             .map(|(_, n)| {
-                diffuse_noise_limit(
+                diffuse_noise_share(
                     self.rig,
                     slice,
                     n,
                     self.policy.shadows.min_cosine,
                     &self.params.noise,
-                    self.policy.diffuse.noise_z,
                 )
             });
         let pure_diffuse = policy::pure_diffuse(&self.policy.diffuse, &fit, share, diffuse_noise);
@@ -428,10 +427,26 @@ impl<'a> Estimator<'a> {
         };
         let confidence = self.policy.fallback.confidence * confidence;
         let status = self.status_of(confidence);
+        let estimated = status == PixelStatus::Estimated;
+        // Beyond the reach the lobe is fitted to the part of the highlight the rig sees: its
+        // axes are the tangent's only where the rig samples halfway vectors at its centre, so
+        // that the samples show its shape about its peak (a highlight cut off before its peak
+        // fits an elongated lobe whatever the material), and then as sure as the fallback's
+        // normal (docs/method.md, "Fallbacks and the source map").
+        let lobe = lobe.filter(|f| {
+            estimated
+                && source == PixelSource::Lobe
+                && self.params.tangents
+                && self.lobe_has_tangent(f)
+                && self.rig.covered(f.normal)
+        });
         PixelEstimate {
             status,
             source,
-            normal: (status == PixelStatus::Estimated).then_some(normal),
+            normal: estimated.then_some(normal),
+            tangent: lobe.map(|f| f.tangent),
+            anisotropy: lobe.map_or(e.anisotropy, |f| f.elongation() as f32),
+            tangent_confidence: lobe.map_or(e.tangent_confidence, |_| confidence),
             confidence,
             ..e
         }
@@ -444,7 +459,7 @@ impl<'a> Estimator<'a> {
         slice: &[f32],
         objective: &O,
         fit: &BaselinePixel,
-        (share, diffuse_noise): (Option<f64>, Option<f64>),
+        (share, diffuse_noise): (Option<f64>, Option<NoiseShare>),
         moments: Option<HighlightMoments>,
         lobes: Lobes,
     ) -> PixelEstimate {
@@ -729,7 +744,7 @@ impl<'a> Estimator<'a> {
     fn lobe_axis(&self, f: &LobeFit) -> LobeAxis {
         LobeAxis {
             tangent: f.tangent,
-            residual: f.residual,
+            plausible: policy::lobe_plausible(&self.policy.lobe, f),
             elongated: self.lobe_has_tangent(f),
         }
     }
