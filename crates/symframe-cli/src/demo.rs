@@ -10,10 +10,9 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
-use symframe::brdf::ward::Ward;
-use symframe::brdf::Brdf;
-use symframe::frames::rig::uniform_cone_lights;
+use symframe::brdf::{Brdf, Ward};
 use symframe::render::{Scene, TangentField};
+use symframe::uniform_cone_lights;
 use symframe_io::ImageFormat;
 
 use glam::DVec3;

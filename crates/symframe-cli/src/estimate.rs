@@ -2,8 +2,7 @@
 //! one library call ([`symframe_job::estimate`], [`symframe_job::merge`]), a summary line.
 
 use anyhow::{bail, Result};
-use symframe::baselines::{Baseline, BaselineParams};
-use symframe::{EstimatorParams, Interpolation, RigOptions};
+use symframe::{Baseline, BaselineParams, EstimatorParams, Interpolation, RigOptions};
 use symframe_console::flags::decode_memory_bytes;
 use symframe_io::CacheOptions;
 use symframe_job::{EstimateConfig, EstimateOutcome, LightModel, MethodConfig, NearOptions};

@@ -1,7 +1,7 @@
 //! `symframe eval`: flags to an [`EvalConfig`], the library's evaluation, a summary table.
 
 use anyhow::{bail, Result};
-use symframe::eval::ErrorStats;
+use symframe::ErrorStats;
 use symframe_job::{evaluate_job, EvalConfig, EvalReport};
 
 use crate::cli::EvalArgs;

@@ -4,7 +4,7 @@
 
 use anyhow::{bail, Result};
 use glam::DVec3;
-use symframe::appearance::fit::{holdout_lights, FitParams};
+use symframe::{holdout_lights, FitParams};
 use symframe_io::CacheOptions;
 use symframe_job::{FitConfig, FitOutcome, RelightConfig, RelightOutcome, ViewConfig, ViewOutcome};
 

@@ -506,7 +506,7 @@ pub fn capture_noise(ds: &Dataset, opts: &DecodeOptions) -> Result<symframe::Noi
         v
     };
     let mut model = symframe::NoiseModel::default();
-    let mut samples: Option<symframe::noise::NoiseSamples> = None;
+    let mut samples: Option<symframe::NoiseSamples> = None;
     let mut first = None;
     // One row in memory at a time, read as the stack's loader reads it (header checks,
     // intensities); an image of another size than the first, or one that fails to decode
@@ -542,8 +542,8 @@ pub fn capture_noise(ds: &Dataset, opts: &DecodeOptions) -> Result<symframe::Noi
                 model.clip_level = (brightest > 0.0).then(|| linear / brightest);
             }
         }
-        let samples = samples.get_or_insert_with(|| symframe::noise::NoiseSamples::new(&model));
-        let step = symframe::noise::NoiseSamples::row_step(w, h);
+        let samples = samples.get_or_insert_with(|| symframe::NoiseSamples::new(&model));
+        let step = symframe::NoiseSamples::row_step(w, h);
         row.resize(w * 3, 0.0);
         // Rows are decoded in order; those after the last one sampled are not read.
         let last = if h == 0 { 0 } else { (h - 1) / step * step + 1 };

@@ -8,7 +8,7 @@ use std::path::{Component, Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
-use symframe::calibrate::{
+use symframe::{
     detect_sphere, find_highlight, matte_intensity, Circle, Highlight, HighlightError,
     HighlightParams, MatteError, MatteParams,
 };
@@ -32,7 +32,7 @@ pub struct CalibrateConfig {
     /// Fail on the first image without a single clear highlight (else drop it with a warning).
     pub strict: bool,
     /// A diffuse (matte, grey) sphere's circle: per light, its RGB intensity is measured there
-    /// ([`symframe::calibrate::matte_intensity`]) and written as `light_intensities.txt` beside
+    /// ([`symframe::matte_intensity`]) and written as `light_intensities.txt` beside
     /// the `.lp`, normalised to a mean of 1 over every light and channel.
     pub matte_sphere: Option<Circle>,
     /// How images are decoded.

@@ -2,7 +2,7 @@
 //! lights' positions from two or more chrome spheres seen by a pinhole camera, written as
 //! `light_positions.txt` with a JSON record beside it. The geometry (each sphere placed by its
 //! outline and radius, each light triangulated from its reflections) is
-//! [`symframe::near::chrome`]'s; the highlights and the spheres' outlines are
+//! [`symframe::chrome`]'s; the highlights and the spheres' outlines are
 //! [`symframe::calibrate`]'s. This module reads the images and writes the files.
 
 use std::path::{Path, PathBuf};
@@ -11,13 +11,10 @@ use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use rayon::prelude::*;
 use serde::Serialize;
-use symframe::calibrate::{
-    detect_spheres, find_highlight, outline_points, Circle, HighlightParams,
+use symframe::{
+    circle_rim, detect_spheres, find_highlight, fit_sphere, outline_points, reflected_ray,
+    sphere_from_rim, triangulate, Circle, HighlightParams, Pinhole, Triangulation,
 };
-use symframe::near::chrome::{
-    circle_rim, reflected_ray, sphere_from_rim, triangulate, Triangulation,
-};
-use symframe::near::{fit_sphere, Pinhole};
 use symframe_io::DecodeOptions;
 
 use crate::calibrate::{image_list, keep_rows, read_grey, DECODE_MEMORY, MAX_CALIBRATE_PIXELS};

@@ -9,12 +9,10 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
-use symframe::baselines::{Baseline, BaselineMethod, BaselineParams};
-use symframe::check_inputs;
-use symframe::maps::PixelCounts;
-use symframe::orientation::LightAxes;
-use symframe::{EstimateMaps, Estimator, EstimatorParams, PixelSource};
-use symframe::{Rig, RigOptions};
+use symframe::{
+    check_inputs, Baseline, BaselineMethod, BaselineParams, EstimateMaps, Estimator,
+    EstimatorParams, LightAxes, PixelCounts, PixelSource, Rig, RigOptions,
+};
 use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{
     CacheInfo, CacheOptions, Dataset, DecodeOptions, Fingerprints, Gamma, NormalPng, StampKind,

@@ -10,9 +10,10 @@ use std::path::Path;
 
 use anyhow::{bail, Result};
 use serde::Serialize;
-use symframe::integrate::IntegrateParams;
-use symframe::near::{depth_from_normals, mean_change_deg, NearMethod, NearParams};
-use symframe::{EstimateMaps, EstimatorParams, RigOptions};
+use symframe::{
+    depth_from_normals, mean_change_deg, EstimateMaps, EstimatorParams, IntegrateParams,
+    NearMethod, NearParams, RigOptions,
+};
 use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{NearGeometry, TileCache};
 

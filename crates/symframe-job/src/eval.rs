@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
 use serde::Serialize;
-use symframe::eval::{evaluate, normal_error_map, tangent_error_map, Evaluation};
+use symframe::{evaluate, normal_error_map, tangent_error_map, Evaluation};
 
 use crate::colorbar::{error_picture, Cell, Scale};
 

@@ -391,7 +391,7 @@ pub fn quad(w: usize, h: usize) -> Geometry {
 }
 
 /// The integrated mesh (`symframe integrate`), scaled like the quad (image width = 1).
-pub fn from_mesh(m: &symframe::integrate::Mesh, w: usize, h: usize) -> Geometry {
+pub fn from_mesh(m: &symframe::Mesh, w: usize, h: usize) -> Geometry {
     let s = 1.0 / w as f32;
     let (ox, oy) = (w as f32 / 2.0, h as f32 / 2.0);
     let mut g = Geometry {
@@ -628,7 +628,7 @@ pub fn export_gltf(config: &ExportConfig) -> Result<ExportOutcome> {
                 depth_path.display()
             );
         }
-        let dm = symframe::integrate::DepthMap {
+        let dm = symframe::DepthMap {
             width: w,
             height: h,
             depth,
@@ -638,7 +638,7 @@ pub fn export_gltf(config: &ExportConfig) -> Result<ExportOutcome> {
             regions: 0,
             pixels: 0,
         };
-        let mesh = symframe::integrate::mesh(&dm, &maps.normals, config.max_jump);
+        let mesh = symframe::mesh(&dm, &maps.normals, config.max_jump);
         if mesh.triangles.is_empty() {
             bail!("{}: the mesh has no triangles", depth_path.display());
         }

@@ -10,9 +10,7 @@ use std::time::Instant;
 use anyhow::Result;
 use glam::DVec3;
 use rayon::prelude::*;
-use symframe::maps::PixelCounts;
-use symframe::orientation::{AxesCheck, LightAxes};
-use symframe::{EstimateMaps, PixelSource};
+use symframe::{AxesCheck, EstimateMaps, LightAxes, PixelCounts, PixelSource};
 use symframe_io::{NormalPng, NpyRows, PngRows, TileGrid};
 
 use crate::estimate::Sources;

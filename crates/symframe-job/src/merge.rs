@@ -7,8 +7,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
-use symframe::maps::PixelCounts;
-use symframe::EstimateMaps;
+use symframe::{EstimateMaps, PixelCounts};
 use symframe_io::TileGrid;
 
 use crate::estimate::{result_warnings, TILES_DIR};

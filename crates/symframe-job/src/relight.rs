@@ -7,8 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use serde::Serialize;
-use symframe::appearance::relight::{tone_map, Edits, Relighter};
-use symframe::{GltfMaps, WardMaps};
+use symframe::{tone_map, Edits, GltfMaps, Relighter, WardMaps};
 
 use crate::outdir::{OutputDir, OutputSet};
 
@@ -330,7 +329,7 @@ fn write_relit(
         let name = format!("relit_{i:03}");
         let mut img = relighter.render(l);
         if let Some(hf) = heights {
-            let shadowed = symframe::render::shadow::cast_shadows(hf, w, h, l);
+            let shadowed = symframe::render::cast_shadows(hf, w, h, l);
             for (px, _) in img.chunks_exact_mut(3).zip(&shadowed).filter(|(_, &s)| s) {
                 px.fill(0.0);
             }

@@ -9,8 +9,8 @@ use glam::DVec3;
 use rayon::prelude::*;
 use serde_json::{json, Value};
 use symframe::brdf::{parse_model, Brdf, TangentAxis};
-use symframe::render::rigs::{diligent_lights, uniform_cone_lights};
-use symframe::render::{BumpParams, Degradation, Noise, Scene, TangentField};
+use symframe::render::{diligent_lights, BumpParams, Degradation, Noise, Scene, TangentField};
+use symframe::uniform_cone_lights;
 use symframe_io::ImageFormat;
 
 use crate::outdir::{OutputDir, Staging};

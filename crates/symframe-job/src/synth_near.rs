@@ -19,10 +19,8 @@ use glam::DVec3;
 use rayon::prelude::*;
 use serde_json::json;
 use symframe::brdf::{parse_model, Brdf};
-use symframe::near::Pinhole;
-use symframe::render::perspective::{dome_lights, Ball, NearScene};
-use symframe::render::NearMirrorBalls;
-use symframe::render::{Degradation, Noise};
+use symframe::render::{dome_lights, Ball, Degradation, NearMirrorBalls, NearScene, Noise};
+use symframe::Pinhole;
 use symframe_io::{ImageFormat, NearFiles};
 
 use crate::outdir::{OutputDir, Staging};

@@ -14,8 +14,7 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use symframe::method::{PixelMethod, Worker};
-use symframe::PixelRecord;
+use symframe::{PixelMethod, PixelRecord, Worker};
 use symframe_io::{TileCache, TileGrid};
 
 use symframe_io::TileFile;

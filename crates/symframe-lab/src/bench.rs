@@ -24,10 +24,9 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
-use symframe::baselines::{Baseline, BaselineParams};
-use symframe::brdf::ward::Ward;
-use symframe::frames::rig::uniform_cone_lights;
+use symframe::brdf::Ward;
 use symframe::render::{Scene, TangentField};
+use symframe::{uniform_cone_lights, Baseline, BaselineParams};
 use symframe_console::flags::{decode_memory_bytes, CacheFormatArg};
 use symframe_console::progress;
 use symframe_job::{EstimateConfig, EstimateOutcome, MethodConfig};

@@ -8,11 +8,12 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use glam::DVec3;
-use symframe::brdf::ward::Ward;
-use symframe::frames::rig::uniform_cone_lights;
-use symframe::frames::slice::gather_slice;
+use symframe::brdf::Ward;
 use symframe::render::Scene;
-use symframe::{Estimator, EstimatorParams, Interpolation, PixelScratch, Rig, RigOptions};
+use symframe::{
+    gather_slice, uniform_cone_lights, Estimator, EstimatorParams, Interpolation, PixelScratch,
+    Rig, RigOptions,
+};
 
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("estimate_pixel");

@@ -85,16 +85,54 @@ mod regions;
 pub mod render;
 pub mod stack;
 
-pub use appearance::fit::{fit_stack, FitMaps, FitMethod, FitModel, FitParams, GltfMaps, WardMaps};
-pub use appearance::relight::{Edits, Relighter};
-pub use baselines::{estimate_stack_baseline, Baseline, BaselineMethod, BaselineParams};
-pub use error::{Error, Result};
+// The library's surface: what a Rust user of the method needs, named at the root. The
+// reflectance models and the synthetic renderer are the two namespaces below it (`brdf`,
+// `render`).
+
+// Datasets and rigs: the measurement stack, its lights and their triangulation.
+pub use frames::rig::{uniform_cone_lights, Rig, RigOptions};
+pub use noise::{NoiseModel, NoiseSamples, Quantisation};
+pub use orientation::{AxesCheck, LightAxes};
+pub use stack::{check_inputs, Stack};
+
+// Estimating frames: the estimator, its parameters, the per-pixel interface and its drivers.
+pub use baselines::{
+    baseline_pixel, estimate_stack_baseline, estimate_stack_baseline_with, Baseline,
+    BaselineMethod, BaselineParams,
+};
 pub use frames::estimator::{
     estimate_stack, Estimator, EstimatorParams, Fallback, Interpolation, PixelScratch,
 };
-pub use frames::rig::{uniform_cone_lights, Rig, RigOptions};
+pub use frames::slice::{gather_pixel, gather_slice};
 pub use frames::symmetry::CosineMode;
+pub use method::{run_stack, PixelMethod, Worker};
+
+// The maps an estimate writes, and their error against ground truth.
+pub use eval::{evaluate, normal_error_map, tangent_error_map, vec_at, ErrorStats, Evaluation};
 pub use maps::{EstimateMaps, PixelCounts, PixelRecord, PixelSource, PixelStatus};
-pub use method::{run_stack, PixelMethod};
-pub use noise::{NoiseModel, NoiseSamples, Quantisation};
-pub use stack::{check_inputs, Stack};
+
+// Fitting a BRDF per pixel in the estimated frames, and relighting the fit.
+pub use appearance::fit::{
+    fit_stack, holdout_lights, select_exposure, ExposureChoice, FitMaps, FitMethod, FitModel,
+    FitParams, FitSummary, GltfMaps, HoldoutError, PixelData, PixelFitter, PixelOutcome, WardFit,
+    WardMaps, DEFAULT_MODEL, MODEL_GLTF, MODEL_WARD,
+};
+pub use appearance::gltf_fit::GltfFit;
+pub use appearance::relight::{image_psnr, tone_map, Edits, Relighter};
+
+// Depth from normals, and a mesh of it.
+pub use integrate::{integrate, mesh, shade, DepthMap, IntegrateParams, Mesh, Solver};
+
+// Light calibration: chrome and matte spheres.
+pub use calibrate::{
+    detect_sphere, detect_spheres, find_highlight, matte_intensity, outline_points, Circle,
+    Highlight, HighlightError, HighlightParams, MatteError, MatteParams,
+};
+
+// Near lights and perspective cameras.
+pub use near::chrome::{circle_rim, reflected_ray, sphere_from_rim, triangulate, Triangulation};
+pub use near::{
+    depth_from_normals, fit_sphere, mean_change_deg, NearMethod, NearParams, Pinhole, PointLight,
+};
+
+pub use error::{Error, Result};

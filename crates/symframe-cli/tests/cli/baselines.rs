@@ -7,11 +7,9 @@ use std::path::{Path, PathBuf};
 
 use crate::common::{sphere_dataset, stderr, symframe, Truth};
 
-use symframe::brdf::lambertian::Lambertian;
-use symframe::brdf::spec::parse_model;
-use symframe::brdf::Brdf;
-use symframe::eval::{evaluate, Evaluation};
+use symframe::brdf::{parse_model, Brdf, Lambertian};
 use symframe::render::Scene;
+use symframe::{evaluate, Evaluation};
 use symframe_io::{read_npy_f32, ImageFormat};
 
 /// A float EXR sphere dataset of `brdf` under `n_lights` lights up to 130 degrees from the

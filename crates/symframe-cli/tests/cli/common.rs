@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use symframe::brdf::Brdf;
-use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{Scene, TangentField};
+use symframe::uniform_cone_lights;
 use symframe_io::{write_lp_dataset, ImageFormat};
 
 /// The `symframe` binary under test: this build's, or the one `SYMFRAME_TEST_BIN` names (to
@@ -61,7 +61,7 @@ pub fn report_warnings(out: &Path) -> Vec<String> {
 /// A `size` x `size` anisotropic Ward sphere under `lights` lights as float EXR (decoding is
 /// exact), without ground truth; returns the `.lp` path.
 pub fn ward_sphere(dir: &Path, size: usize, lights: usize) -> PathBuf {
-    let brdf = symframe::brdf::ward::Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
+    let brdf = symframe::brdf::Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
     let truth = Truth {
         normals: false,
         tangents: false,

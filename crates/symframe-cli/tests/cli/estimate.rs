@@ -10,10 +10,9 @@ use crate::common::{
 };
 
 use glam::DVec3;
-use symframe::brdf::ward::Ward;
-use symframe::eval::evaluate;
-use symframe::frames::rig::uniform_cone_lights;
+use symframe::brdf::Ward;
 use symframe::render::{Scene, TangentField};
+use symframe::{evaluate, uniform_cone_lights};
 use symframe_io::{read_npy_f32, ImageFormat};
 
 /// A small anisotropic Ward sphere dataset in `.lp` form with ground truth, exposure 0.5

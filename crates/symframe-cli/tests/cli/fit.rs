@@ -11,10 +11,9 @@ use crate::common::{
 };
 
 use glam::DVec3;
-use symframe::appearance::relight::image_psnr;
-use symframe::brdf::ward::Ward;
-use symframe::frames::rig::uniform_cone_lights;
+use symframe::brdf::Ward;
 use symframe::render::Scene;
+use symframe::{image_psnr, uniform_cone_lights};
 use symframe_io::{read_npy_f32, write_npy_f32, DecodeOptions, ImageFormat};
 
 fn material() -> Ward {
@@ -497,7 +496,7 @@ fn cast_shadows_from_the_integrated_relief_raise_held_out_psnr_on_bumps() {
         "--solver",
         "poisson",
     ]);
-    let held = symframe::appearance::fit::holdout_lights(n_lights, k).unwrap();
+    let held = symframe::holdout_lights(n_lights, k).unwrap();
     let all = symframe_io::open_dataset(&p("d")).unwrap().lights;
     let rows: Vec<String> = held
         .iter()
@@ -537,7 +536,7 @@ fn cast_shadows_from_the_integrated_relief_raise_held_out_psnr_on_bumps() {
 
 #[test]
 fn gltf_fit_relight_and_export_reproduce_a_brushed_gltf_metal_at_any_exposure() {
-    use symframe::brdf::gltf::GltfPbr;
+    use symframe::brdf::GltfPbr;
     let tmp = tempfile::tempdir().unwrap();
     let p = |n: &str| tmp.path().join(n);
     let truth = GltfPbr::new([0.9, 0.7, 0.5], 1.0, 0.35, 0.6);

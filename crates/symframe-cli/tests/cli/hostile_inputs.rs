@@ -6,7 +6,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use crate::common::{assert_one_line_error, estimate, ok, report, s, stderr, symframe, Truth};
-use symframe::brdf::lambertian::Lambertian;
+use symframe::brdf::Lambertian;
 use symframe_io::{read_image, read_npy_f32, write_exr_channels, DecodeOptions, ImageFormat};
 
 /// A small Lambertian sphere as float EXR; returns the `.lp` path.

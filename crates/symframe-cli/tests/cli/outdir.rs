@@ -14,7 +14,7 @@ use crate::common::{
     self, estimate_tiled as estimate, ok, report, sphere_dataset, stderr, ward_sphere, Truth,
 };
 
-use symframe::brdf::ward::Ward;
+use symframe::brdf::Ward;
 use symframe_io::{read_npy_f32, ImageFormat};
 use symframe_job::check_output_set;
 

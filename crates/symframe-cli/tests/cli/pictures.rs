@@ -6,10 +6,9 @@ use std::fs;
 use std::path::Path;
 
 use glam::DVec3;
-use symframe::brdf::ward::Ward;
-use symframe::frames::rig::uniform_cone_lights;
+use symframe::brdf::Ward;
 use symframe::render::{Scene, TangentField};
-use symframe::{Estimator, EstimatorParams, Rig, RigOptions};
+use symframe::{uniform_cone_lights, Estimator, EstimatorParams, Rig, RigOptions};
 use symframe_io::{read_npy_f32, write_lp_dataset, ImageFormat};
 use symframe_job::pictures::{
     light_position, LEGEND_BAR, LIGHTS_DISC, LIGHT_DROPPED, LIGHT_USED, RESIDUAL_MAX,
@@ -250,7 +249,7 @@ fn the_demo_writes_error_pictures_whose_mean_it_prints() {
 
     let (_, normals) = read_npy_f32(&est.join("normals.npy")).unwrap();
     let (_, gt) = read_npy_f32(&out.join("dataset/gt_normals.npy")).unwrap();
-    let errors = symframe::eval::normal_error_map(&normals, &gt);
+    let errors = symframe::normal_error_map(&normals, &gt);
     let eval: serde_json::Value =
         serde_json::from_str(&fs::read_to_string(est.join("eval.json")).unwrap()).unwrap();
     let max = eval["normal_scale_max_deg"].as_f64().unwrap() as f32;

@@ -9,7 +9,7 @@ use crate::common::{
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use symframe::brdf::ward::Ward;
+use symframe::brdf::Ward;
 use symframe_io::{read_npy_f32, ImageFormat};
 
 const SIZE: usize = 40;

@@ -8,7 +8,7 @@ use std::path::Path;
 use crate::common::{s, symframe};
 
 use glam::DVec3;
-use symframe::eval::evaluate;
+use symframe::evaluate;
 use symframe::render::plane_frame;
 use symframe_io::read_npy_f32;
 

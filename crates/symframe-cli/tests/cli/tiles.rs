@@ -7,9 +7,9 @@ use std::path::{Path, PathBuf};
 
 use crate::common::{estimate_tiled as estimate, ok, report, s, stderr, symframe, ward_sphere};
 
-use symframe::baselines::{estimate_stack_baseline, Baseline};
-use symframe::frames::symmetry::CosineMode;
-use symframe::{estimate_stack, EstimatorParams, Rig, RigOptions};
+use symframe::{
+    estimate_stack, estimate_stack_baseline, Baseline, CosineMode, EstimatorParams, Rig, RigOptions,
+};
 use symframe_io::{read_npy_f32, DecodeOptions};
 
 const SIZE: usize = 40;
@@ -412,7 +412,7 @@ fn integer_caches_give_the_float_caches_maps_bit_for_bit() {
     use crate::common::{sphere_dataset, Truth};
     use symframe_io::ImageFormat;
     let tmp = tempfile::tempdir().unwrap();
-    let brdf = symframe::brdf::ward::Ward::new([0.4; 3], [0.3; 3], 0.15, 0.4);
+    let brdf = symframe::brdf::Ward::new([0.4; 3], [0.3; 3], 0.15, 0.4);
     let truth = Truth {
         normals: false,
         tangents: false,

@@ -12,7 +12,7 @@
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
-use symframe::near::{fit_sphere, Pinhole, PointLight};
+use symframe::{fit_sphere, Pinhole, PointLight};
 
 use super::Dataset;
 use crate::error::{Error, Result, Warning};

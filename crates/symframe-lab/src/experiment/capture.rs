@@ -21,13 +21,11 @@ use image::codecs::jpeg::JpegEncoder;
 use image::ExtendedColorType;
 use rayon::prelude::*;
 use serde::Serialize;
-use symframe::baselines::{estimate_stack_baseline, Baseline};
 use symframe::brdf::{Beckmann, Brdf, Ggx, Layered, Sheen, Woven};
-use symframe::eval::{evaluate, vec_at, Evaluation};
-use symframe::frames::rig::uniform_cone_lights;
-use symframe::render::{jitter_lights, rigs, Degradation, Noise, Scene, TangentField};
+use symframe::render::{diligent_lights, jitter_lights, Degradation, Noise, Scene, TangentField};
 use symframe::{
-    estimate_stack, EstimateMaps, EstimatorParams, NoiseModel, Quantisation, Rig, RigOptions, Stack,
+    estimate_stack, estimate_stack_baseline, evaluate, uniform_cone_lights, vec_at, Baseline,
+    EstimateMaps, EstimatorParams, Evaluation, NoiseModel, Quantisation, Rig, RigOptions, Stack,
 };
 use symframe_io::{decode_image, linear_to_srgb, DecodeOptions};
 
@@ -322,7 +320,7 @@ fn rig_lights(name: &str, quick: bool) -> Vec<DVec3> {
     match name {
         "dense" => uniform_cone_lights(if quick { 300 } else { 1000 }, 65.0),
         "sparse" => uniform_cone_lights(200, 65.0),
-        _ => rigs::diligent_lights(),
+        _ => diligent_lights(),
     }
 }
 

@@ -4,10 +4,8 @@
 use anyhow::Result;
 use glam::DVec3;
 use symframe::brdf::{Brdf, Ward};
-use symframe::eval::normal_error_map;
-use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{BumpParams, Scene, TangentField};
-use symframe::{Rig, RigOptions};
+use symframe::{normal_error_map, uniform_cone_lights, Rig, RigOptions};
 
 use super::plot::{self, md_table};
 use super::{Ctx, Section};
@@ -57,7 +55,7 @@ pub struct Row {
     /// Lights.
     pub lights: usize,
     /// Normal error against ground truth over pixels within 60 degrees of the view.
-    pub evaluation: symframe::eval::Evaluation,
+    pub evaluation: symframe::Evaluation,
     /// The facet measure, degrees.
     pub facet: f64,
 }

@@ -4,11 +4,8 @@
 use anyhow::Result;
 use rayon::prelude::*;
 use symframe::brdf::{AshikhminShirley, Brdf, Ward};
-use symframe::frames::estimator::{Estimator, EstimatorParams};
-use symframe::frames::rig::uniform_cone_lights;
-use symframe::frames::symmetry::CosineMode;
 use symframe::render::{plane_frame, Scene};
-use symframe::{Rig, RigOptions};
+use symframe::{uniform_cone_lights, CosineMode, Estimator, EstimatorParams, Rig, RigOptions};
 
 use super::plot::{self, fmt_opt, md_table};
 use super::{angle_deg, axis_angle_deg, max, mean, Ctx, Section};

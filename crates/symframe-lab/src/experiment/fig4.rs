@@ -3,13 +3,12 @@
 
 use anyhow::Result;
 use rayon::prelude::*;
-use symframe::baselines::{baseline_pixel, Baseline, BaselineParams};
 use symframe::brdf::{Brdf, CookTorrance, TorranceSparrow, Ward};
-use symframe::frames::estimator::{Estimator, EstimatorParams};
-use symframe::frames::rig::uniform_cone_lights;
-use symframe::frames::symmetry::CosineMode;
 use symframe::render::{plane_frame, Scene};
-use symframe::{Rig, RigOptions};
+use symframe::{
+    baseline_pixel, uniform_cone_lights, Baseline, BaselineParams, CosineMode, Estimator,
+    EstimatorParams, Rig, RigOptions,
+};
 
 use super::plot::{self, fmt_opt, md_table};
 use super::{angle_deg, mean, Ctx, Section};

@@ -6,12 +6,12 @@ use anyhow::Result;
 use glam::DVec3;
 use rayon::prelude::*;
 use serde::Serialize;
-use symframe::baselines::{estimate_stack_baseline, Baseline};
 use symframe::brdf::{AshikhminShirley, BlinnPhong, Brdf, CookTorrance, Ggx, Lambertian, Ward};
-use symframe::eval::{evaluate, normal_error_map, Evaluation};
-use symframe::frames::rig::uniform_cone_lights;
-use symframe::render::{rigs, BumpParams, Scene, TangentField};
-use symframe::{estimate_stack, EstimateMaps, EstimatorParams, Rig, RigOptions};
+use symframe::render::{diligent_lights, BumpParams, Scene, TangentField};
+use symframe::{
+    estimate_stack, estimate_stack_baseline, evaluate, normal_error_map, uniform_cone_lights,
+    Baseline, EstimateMaps, EstimatorParams, Evaluation, Rig, RigOptions,
+};
 
 use super::plot::{self, md_table};
 use super::{Ctx, Section};
@@ -32,7 +32,7 @@ fn rig_lights(name: &str, quick: bool) -> Vec<DVec3> {
     match name {
         "dense" => uniform_cone_lights(if quick { 500 } else { 1000 }, 65.0),
         "sparse" => uniform_cone_lights(200, 65.0),
-        _ => rigs::diligent_lights(),
+        _ => diligent_lights(),
     }
 }
 

@@ -66,7 +66,7 @@ pub fn estimate_and_evaluate(
     rig: &symframe::Rig,
     gt_normals: &[f32],
     gt_tangents: &[f32],
-) -> Result<(symframe::EstimateMaps, symframe::eval::Evaluation)> {
+) -> Result<(symframe::EstimateMaps, symframe::Evaluation)> {
     let maps = symframe::estimate_stack(
         stack,
         rig,
@@ -74,7 +74,7 @@ pub fn estimate_and_evaluate(
         symframe::EstimatorParams::default(),
         &|_| {},
     )?;
-    let e = symframe::eval::evaluate(
+    let e = symframe::evaluate(
         &maps.normals,
         &maps.tangents,
         gt_normals,

@@ -2,9 +2,8 @@
 
 use anyhow::Result;
 use symframe::brdf::{Brdf, Ward};
-use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{Degradation, Noise, Scene, TangentField};
-use symframe::{Rig, RigOptions};
+use symframe::{uniform_cone_lights, Rig, RigOptions};
 
 use super::plot::{self, md_table};
 use super::{Ctx, Section};

@@ -4,15 +4,12 @@
 //! degrees of the view.
 
 use glam::DVec3;
-use symframe::brdf::lambertian::Lambertian;
-use symframe::brdf::ward::Ward;
-use symframe::brdf::Brdf;
-use symframe::eval::Evaluation;
-use symframe::frames::estimator::Fallback;
-use symframe::frames::rig::uniform_cone_lights;
-use symframe::frames::symmetry::CosineMode;
+use symframe::brdf::{Brdf, Lambertian, Ward};
 use symframe::render::{BumpParams, Scene, TangentField};
-use symframe::{estimate_stack, EstimatorParams, Rig, RigOptions};
+use symframe::{
+    estimate_stack, uniform_cone_lights, CosineMode, EstimatorParams, Evaluation, Fallback, Rig,
+    RigOptions,
+};
 
 fn run(scene: &Scene, brdf: &dyn Brdf, n_lights: usize) -> Evaluation {
     run_with(scene, brdf, n_lights, EstimatorParams::default())
@@ -178,8 +175,8 @@ fn assert_paths_agree_with(
     let with_tangent = |m: &symframe::EstimateMaps| m.counts.with_tangent;
     assert!(estimated(&fast).abs_diff(estimated(&exact)) * 200 <= estimated(&exact));
     assert!(with_tangent(&fast).abs_diff(with_tangent(&exact)) * 200 <= estimated(&exact));
-    let normals = symframe::eval::normal_error_map(&fast.normals, &exact.normals);
-    let tangents = symframe::eval::tangent_error_map(&fast.tangents, &exact.tangents);
+    let normals = symframe::normal_error_map(&fast.normals, &exact.normals);
+    let tangents = symframe::tangent_error_map(&fast.tangents, &exact.tangents);
     let (n_median, n_p99, n) = median_and_p99(normals.into_iter());
     let (t_median, t_p99, t) = median_and_p99(tangents.into_iter());
     eprintln!(
@@ -270,7 +267,7 @@ fn normals_beyond_the_rigs_reach_are_discarded_with_the_compensated_measure() {
 
 fn beyond_reach(params: EstimatorParams) {
     let scene = Scene::sphere(32, TangentField::Circular);
-    let lights = symframe::render::rigs::diligent_lights();
+    let lights = symframe::render::diligent_lights();
     let stack = scene.render_stack(&Lambertian::new([0.7, 0.6, 0.5]), &lights);
     let rig = Rig::new(&lights, RigOptions::default()).unwrap();
     let maps = estimate_stack(&stack, &rig, Some(&scene.mask), params, &|_| {}).unwrap();

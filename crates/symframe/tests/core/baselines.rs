@@ -4,14 +4,12 @@
 //! off at the other (the paper's Figure 4).
 
 use glam::DVec3;
-use symframe::baselines::{estimate_stack_baseline_with, Baseline, BaselineParams};
-use symframe::brdf::lambertian::Lambertian;
-use symframe::brdf::spec::parse_model;
-use symframe::brdf::Brdf;
-use symframe::eval::{evaluate, Evaluation};
-use symframe::frames::rig::uniform_cone_lights;
+use symframe::brdf::{parse_model, Brdf, Lambertian};
 use symframe::render::{Scene, TangentField};
-use symframe::{estimate_stack_baseline, PixelStatus};
+use symframe::{
+    estimate_stack_baseline, estimate_stack_baseline_with, evaluate, uniform_cone_lights, Baseline,
+    BaselineParams, Evaluation, PixelStatus,
+};
 
 /// Lights spread uniformly over the paper's cone: up to 130 degrees from the view.
 fn rig(n: usize) -> Vec<DVec3> {

@@ -5,12 +5,10 @@
 
 use glam::DVec3;
 use symframe::brdf::{Brdf, Ggx};
-use symframe::eval::evaluate;
-use symframe::frames::rig::uniform_cone_lights;
 use symframe::render::{clip_point, Degradation, Noise, Scene, TangentField};
 use symframe::{
-    estimate_stack, EstimateMaps, EstimatorParams, NoiseModel, PixelSource, Quantisation, Rig,
-    RigOptions,
+    estimate_stack, evaluate, uniform_cone_lights, EstimateMaps, EstimatorParams, NoiseModel,
+    PixelSource, Quantisation, Rig, RigOptions,
 };
 
 /// The linear level of the smallest 8-bit sRGB value the reader counts as saturated (99.5%).

@@ -5,14 +5,12 @@
 //! estimator measures on these scenes (figures in the comments, `-- --nocapture` prints them).
 
 use glam::DVec3;
-use symframe::baselines::{estimate_stack_baseline, Baseline};
 use symframe::brdf::{Brdf, Ggx, Lambertian};
-use symframe::frames::estimator::Fallback;
-use symframe::frames::rig::uniform_cone_lights;
-use symframe::frames::slice::gather_pixel;
-use symframe::maps::PixelSource;
-use symframe::render::{rigs, BumpParams, Scene, TangentField};
-use symframe::{estimate_stack, EstimateMaps, Estimator, EstimatorParams, Rig, RigOptions};
+use symframe::render::{diligent_lights, BumpParams, Scene, TangentField};
+use symframe::{
+    estimate_stack, estimate_stack_baseline, gather_pixel, uniform_cone_lights, Baseline,
+    EstimateMaps, Estimator, EstimatorParams, Fallback, PixelSource, Rig, RigOptions,
+};
 
 /// Normal error figures over the pixels within 60 degrees of the view.
 #[derive(Debug)]
@@ -177,7 +175,7 @@ fn the_estimator_beats_the_highlight_centroid_on_glossy_materials() {
 fn narrow_rigs_fill_every_pixel_and_say_where_from() {
     // A DiLiGenT-like grid within 45 degrees reaches normals within ~22 degrees of the view.
     let scene = Scene::sphere(40, TangentField::Circular);
-    let lights = rigs::diligent_lights();
+    let lights = diligent_lights();
     let brdf = Lambertian::new([0.8; 3]);
     let filled = estimate(&scene, &brdf, &lights, EstimatorParams::default());
     // Measured: coverage 100%, mean 0.08 degrees (the Lambertian fallback is exact here).
@@ -234,7 +232,7 @@ fn isotropic_materials_get_no_tangents() {
     let rigs: [(&str, Vec<DVec3>, f64); 3] = [
         ("dense", dense(), 0.02),
         ("sparse", uniform_cone_lights(200, 65.0), 0.02),
-        ("narrow", rigs::diligent_lights(), 0.02),
+        ("narrow", diligent_lights(), 0.02),
     ];
     let materials: [Box<dyn Brdf>; 3] = [
         Box::new(Lambertian::new([0.8; 3])),

@@ -2,8 +2,9 @@
 //! and without a clip level: never a panic, and a normal is a unit vector facing the camera hemisphere or absent.
 
 use proptest::prelude::*;
-use symframe::frames::rig::uniform_cone_lights;
-use symframe::{Estimator, EstimatorParams, NoiseModel, PixelScratch, Rig, RigOptions};
+use symframe::{
+    uniform_cone_lights, Estimator, EstimatorParams, NoiseModel, PixelScratch, Rig, RigOptions,
+};
 
 fn check(n_lights: usize, slice: &[f32]) {
     let rig = Rig::new(&uniform_cone_lights(n_lights, 65.0), RigOptions::default()).unwrap();
