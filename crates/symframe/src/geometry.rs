@@ -4,38 +4,31 @@
 use glam::{DVec2, DVec3};
 
 /// The view vector of every pixel (orthographic camera looking down -z).
-pub const VIEW: DVec3 = DVec3::Z;
+pub(crate) const VIEW: DVec3 = DVec3::Z;
 
 /// The light that a halfway vector corresponds to for the fixed view: `l(h) = 2 (v.h) h - v`.
 #[inline]
-pub fn light_from_halfway(halfway: DVec3) -> DVec3 {
+pub(crate) fn light_from_halfway(halfway: DVec3) -> DVec3 {
     2.0 * halfway.z * halfway - VIEW
 }
 
 /// The halfway vector of a light for the fixed view, `normalize(l + v)`; `None` for `l = -v`.
 #[inline]
-pub fn halfway_from_light(light: DVec3) -> Option<DVec3> {
+pub(crate) fn halfway_from_light(light: DVec3) -> Option<DVec3> {
     (light + VIEW).try_normalize()
 }
 
-/// The stereographic projection of a unit halfway vector, `(h.x, h.y) / (1 + h.z)`: nearly
-/// even in angle over a 65-degree cone (its scale varies from 0.5 to 0.7).
+/// The unit vector whose stereographic projection `(h.x, h.y) / (1 + h.z)` is `s` (nearly even
+/// in angle over a 65-degree cone: its scale varies from 0.5 to 0.7).
 #[inline]
-pub fn stereographic(h: DVec3) -> DVec2 {
-    let k = 1.0 / (1.0 + h.z);
-    DVec2::new(h.x * k, h.y * k)
-}
-
-/// The unit vector whose stereographic projection is `s`.
-#[inline]
-pub fn from_stereographic(s: DVec2) -> DVec3 {
+pub(crate) fn from_stereographic(s: DVec2) -> DVec3 {
     let r2 = s.length_squared();
     DVec3::new(2.0 * s.x, 2.0 * s.y, 1.0 - r2) / (1.0 + r2)
 }
 
 /// An orthonormal tangent-plane basis (u, w) for a unit normal, continuous away from `n = -z`.
 #[inline]
-pub fn tangent_basis(n: DVec3) -> (DVec3, DVec3) {
+pub(crate) fn tangent_basis(n: DVec3) -> (DVec3, DVec3) {
     // Rotate the camera x and y axes along the great circle from z to n.
     let k = 1.0 / (1.0 + n.z);
     let u = DVec3::new(1.0 - n.x * n.x * k, -n.x * n.y * k, -n.x);

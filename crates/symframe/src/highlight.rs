@@ -12,7 +12,7 @@ use crate::geometry::tangent_basis;
 /// Samples at or above this fraction of the pixel's brightest grey value are "the highlight";
 /// each weighs by how far it rises above that level, so the mean follows the lobe's peak and
 /// a sample at the threshold enters with weight zero (no jump as it crosses).
-pub const HIGHLIGHT_LEVEL: f64 = 0.5;
+pub(crate) const HIGHLIGHT_LEVEL: f64 = 0.5;
 
 /// Fewest highlight samples for a tangent: the second moment of fewer points says more about
 /// where the lights happen to be than about the lobe.
@@ -21,11 +21,11 @@ const MIN_SAMPLES_FOR_TANGENT: u32 = 4;
 /// Smallest elongation of the highlight's second moment ([`HighlightMoments::elongation`])
 /// for it to show a wide axis: the estimator's default and the highlight-centroid baseline's
 /// tangent rule.
-pub const MIN_ELONGATION: f64 = 0.4;
+pub(crate) const MIN_ELONGATION: f64 = 0.4;
 
 /// The moments of a pixel's highlight.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct HighlightMoments {
+pub(crate) struct HighlightMoments {
     /// Unit intensity-weighted mean of the highlight samples' halfway vectors.
     pub normal: DVec3,
     /// Unit widest axis of the weighted second moment about `normal` (perpendicular to it).
@@ -44,7 +44,7 @@ pub struct HighlightMoments {
 impl HighlightMoments {
     /// Whether the highlight is elongated enough, over enough samples, for its widest axis to be
     /// a tangent (`min_elongation` in [0, 1]).
-    pub fn has_tangent(&self, min_elongation: f64) -> bool {
+    pub(crate) fn has_tangent(&self, min_elongation: f64) -> bool {
         self.count >= MIN_SAMPLES_FOR_TANGENT && self.elongation >= min_elongation
     }
 }
@@ -52,13 +52,14 @@ impl HighlightMoments {
 /// The moments of the highlight of one pixel: `samples` RGB (`halfways.len() * 3` values, NaN
 /// = invalid), `halfways` the unit halfway vector of each sample's light. `None` when no valid
 /// sample is brighter than zero. Allocation-free (two passes over the samples).
-pub fn highlight_moments(samples: &[f32], halfways: &[DVec3]) -> Option<HighlightMoments> {
+#[cfg(test)]
+pub(crate) fn highlight_moments(samples: &[f32], halfways: &[DVec3]) -> Option<HighlightMoments> {
     highlight_moments_by(samples, |i| Some(halfways[i]))
 }
 
 /// [`highlight_moments`] with the halfway vector of sample `i` given by `halfway(i)` (`None`:
 /// the sample has none, e.g. a light behind the view, and is left out).
-pub fn highlight_moments_by(
+pub(crate) fn highlight_moments_by(
     samples: &[f32],
     halfway: impl Fn(usize) -> Option<DVec3>,
 ) -> Option<HighlightMoments> {

@@ -4,40 +4,37 @@
 //! Frames: the camera frame has x = image right, y = image up, z = toward the camera; the view
 //! vector is `(0, 0, 1)` for every pixel (orthographic). Each pixel's local frame is (n, t, b).
 //!
-//! Where things live:
+//! What the crate offers, named at its root:
 //!
-//! - [`frames`]: the method, a pixel's frame from its samples: [`frames::rig`] (lights,
-//!   halfway vectors, triangulation, point location), [`frames::slice`] (per-pixel
-//!   interpolation), [`frames::symmetry`] (the symmetry distances), [`frames::objective`] (their
-//!   reference and fast implementations), [`frames::optim`] (Nelder-Mead) and [`frames::estimator`] (the per-pixel estimator and the
-//!   whole-stack pipeline).
-//! - [`highlight`]: the highlight's moments, read by the estimator (a start, evidence
-//!   of a tangent) and the highlight baselines alike.
-//! - [`geometry`]: halfway vectors for the fixed view, the stereographic projection, a
-//!   tangent-plane basis.
-//! - [`baselines`]: the photometric-stereo, max-reflectance and highlight-centroid baselines the
-//!   paper compares against.
-//! - [`appearance`]: per-pixel Ward or glTF metallic-roughness fits in the estimated frames
-//!   ([`appearance::fit`], [`appearance::gltf_fit`]) and rendering and editing them
-//!   ([`appearance::relight`]).
-//! - [`method`]: the [`PixelMethod`] interface and the in-memory driver [`run_stack`];
-//!   [`stack`] (the measurement stack); [`eval`] (error figures against ground truth);
-//!   [`error`].
-//! - [`brdf`] (reflectance models) and [`render`] (the synthetic renderer).
+//! - Datasets and rigs: a measurement [`Stack`] ([`check_inputs`]), its lights as a [`Rig`]
+//!   ([`RigOptions`], [`uniform_cone_lights`]), the capture's [`NoiseModel`], and a check of the
+//!   lights' axes ([`AxesCheck`]).
+//! - Estimating frames: the [`Estimator`] and its [`EstimatorParams`], run over a stack by
+//!   [`estimate_stack`]; the paper's baselines ([`Baseline`], [`estimate_stack_baseline`]); the
+//!   [`PixelMethod`] interface every per-pixel method implements, and its in-memory driver
+//!   [`run_stack`].
+//! - Maps: what an estimate holds per pixel ([`EstimateMaps`], [`PixelRecord`]) and its error
+//!   against ground truth ([`evaluate`], [`Evaluation`]).
+//! - Fit and relight: per-pixel Ward or glTF metallic-roughness fits in the estimated frames
+//!   ([`fit_stack`], [`FitParams`], [`FitMaps`]), rendered and edited by a [`Relighter`].
+//! - Integrate: a depth map from the normals ([`integrate()`], [`DepthMap`]) and its [`mesh()`].
+//! - Calibrate: light directions from chrome and matte spheres ([`find_highlight`],
+//!   [`detect_spheres`], [`matte_intensity`]); near lights and perspective cameras
+//!   ([`Pinhole`], [`PointLight`], [`NearMethod`], [`triangulate`]).
+//! - [`brdf`] (reflectance models) and [`render`] (the synthetic renderer that tests and
+//!   experiments measure against).
 //!
-//! Every per-pixel method (the estimator, each baseline, the Ward fitter) implements
-//! [`PixelMethod`]; [`run_stack`] runs one over an in-memory [`Stack`], and the `symframe-job`
-//! crate runs the same methods tile by tile from an on-disk cache. The method itself is written
-//! up in `docs/method.md`.
+//! The `symframe-job` crate runs the same methods tile by tile from an on-disk cache. The method
+//! itself is written up in `docs/method.md`.
 //!
 //! One pixel, from lights to frame: a rig, an estimator, and the pixel's samples in rig order.
 //!
 //! ```
-//! use symframe::brdf::ward::Ward;
+//! use symframe::brdf::Ward;
 //! use symframe::render::{plane_frame, Scene};
-//! use symframe::frames::rig::uniform_cone_lights;
-//! use symframe::frames::symmetry::CosineMode;
-//! use symframe::{Estimator, EstimatorParams, PixelStatus, Rig, RigOptions};
+//! use symframe::{
+//!     uniform_cone_lights, CosineMode, Estimator, EstimatorParams, PixelStatus, Rig, RigOptions,
+//! };
 //!
 //! // 600 lights over the default 65-degree cone; a brushed-metal patch whose normal is 30
 //! // degrees from the view, rendered as a one-pixel image per light.
@@ -66,24 +63,26 @@
 //! # Ok::<(), symframe::Error>(())
 //! ```
 
+#![warn(unreachable_pub)]
+
 pub mod appearance;
-pub mod baselines;
+mod baselines;
 pub mod brdf;
 pub mod calibrate;
-pub mod error;
+mod error;
 pub mod eval;
 pub mod frames;
-pub mod geometry;
-pub mod highlight;
+mod geometry;
+mod highlight;
 pub mod integrate;
-pub mod maps;
-pub mod method;
+mod maps;
+mod method;
 pub mod near;
-pub mod noise;
-pub mod orientation;
+mod noise;
+mod orientation;
 mod regions;
 pub mod render;
-pub mod stack;
+mod stack;
 
 // The library's surface: what a Rust user of the method needs, named at the root. The
 // reflectance models and the synthetic renderer are the two namespaces below it (`brdf`,

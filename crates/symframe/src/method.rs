@@ -103,7 +103,7 @@ pub fn run_stack<M: PixelMethod>(
 /// Copies the RGB samples of lights `lights` (in that order) out of a pixel's samples over
 /// every input light.
 #[inline]
-pub fn gather(lights: &[usize], all: &[f32], out: &mut [f32]) {
+pub(crate) fn gather(lights: &[usize], all: &[f32], out: &mut [f32]) {
     for (dst, &i) in out.chunks_exact_mut(3).zip(lights) {
         dst.copy_from_slice(&all[i * 3..i * 3 + 3]);
     }

@@ -200,7 +200,7 @@ impl NoiseSamples {
     }
 
     /// Which rows of a `width x rows` image are visited: every `row_step`-th from the first
-    /// (so that at most [`Self::PIXELS_PER_IMAGE`] pixels are).
+    /// (so that at most `PIXELS_PER_IMAGE` pixels are).
     pub fn row_step(width: usize, rows: usize) -> usize {
         (rows * width.max(1))
             .div_ceil(Self::PIXELS_PER_IMAGE)

@@ -21,7 +21,12 @@ pub struct Stack {
 
 /// Checks that `mask` (a mask, or an edit region: `what` names it in the error) covers
 /// `width x height` pixels.
-pub fn check_mask_size(mask: &[bool], width: usize, height: usize, what: &str) -> Result<()> {
+pub(crate) fn check_mask_size(
+    mask: &[bool],
+    width: usize,
+    height: usize,
+    what: &str,
+) -> Result<()> {
     if mask.len() != width * height {
         return Err(Error::BadMask(format!(
             "{what} has {} pixels but the images have {width}x{height} = {}",

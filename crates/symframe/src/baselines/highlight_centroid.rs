@@ -17,7 +17,7 @@ const CENTROID_MIN_ELONGATION: f64 = crate::highlight::MIN_ELONGATION;
 /// ([`highlight_moments`](crate::highlight::highlight_moments)). Strong on glossy materials under dense rigs; on diffuse surfaces it
 /// shares max-reflectance's bias (half the normal's angle from the view). Confidence: the
 /// highlight's contrast. Allocation-free.
-pub fn highlight_centroid_pixel(samples: &[f32], lights: &[DVec3]) -> BaselinePixel {
+pub(crate) fn highlight_centroid_pixel(samples: &[f32], lights: &[DVec3]) -> BaselinePixel {
     let Some(m) = highlight_moments_by(samples, |i| halfway_from_light(lights[i])) else {
         return BaselinePixel::empty(PixelStatus::NoData);
     };

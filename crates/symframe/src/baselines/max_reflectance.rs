@@ -9,7 +9,7 @@ use crate::maps::PixelStatus;
 
 /// Neighbours of the brightest sample (in halfway space) that the max-reflectance refinement
 /// fits over, besides the brightest sample itself.
-pub const MAX_REFLECTANCE_NEIGHBOURS: usize = 12;
+pub(crate) const MAX_REFLECTANCE_NEIGHBOURS: usize = 12;
 
 /// The max-reflectance ("specularity") method at one pixel: the normal is the halfway vector
 /// `h = normalize(l + v)` where the slice is brightest. Refinement between samples:
@@ -31,7 +31,7 @@ pub const MAX_REFLECTANCE_NEIGHBOURS: usize = 12;
 /// Confidence: the highlight's contrast, `1 - mean / max` of the valid grey values (near 1 for
 /// a sharp highlight, about 0.5 for a diffuse surface under lights spread over a wide cone).
 /// Allocation-free.
-pub fn max_reflectance_pixel(samples: &[f32], lights: &[DVec3]) -> BaselinePixel {
+pub(crate) fn max_reflectance_pixel(samples: &[f32], lights: &[DVec3]) -> BaselinePixel {
     let Some((j, max)) = brightest(samples) else {
         return BaselinePixel::empty(PixelStatus::NoData);
     };
@@ -94,7 +94,7 @@ fn peak_neighbours(
 /// centre of a Gaussian reconstruction of the lobe around the brightest sample; `None` where
 /// there is no valid sample, or the fit is degenerate or not a maximum near the brightest
 /// sample. Allocation-free.
-pub fn highlight_peak(samples: &[f32], lights: &[DVec3]) -> Option<DVec3> {
+pub(crate) fn highlight_peak(samples: &[f32], lights: &[DVec3]) -> Option<DVec3> {
     let (j, max) = brightest(samples)?;
     let hj = halfway_from_light(lights[j])?;
     let (near, _) = peak_neighbours(samples, lights, j, hj);

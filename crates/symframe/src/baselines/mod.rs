@@ -21,14 +21,14 @@ use crate::maps::{EstimateMaps, PixelRecord, PixelSource, PixelStatus};
 use crate::method::{run_stack, PixelMethod};
 use crate::stack::Stack;
 
-pub mod highlight_centroid;
-pub mod max_reflectance;
-pub mod woodham;
+pub(crate) mod highlight_centroid;
+pub(crate) mod max_reflectance;
+pub(crate) mod woodham;
 
-pub use highlight_centroid::highlight_centroid_pixel;
-pub use max_reflectance::{highlight_peak, max_reflectance_pixel, MAX_REFLECTANCE_NEIGHBOURS};
+pub(crate) use highlight_centroid::highlight_centroid_pixel;
+pub(crate) use max_reflectance::{highlight_peak, max_reflectance_pixel};
 pub(crate) use woodham::woodham_robust_greys;
-pub use woodham::{woodham_pixel, woodham_robust_pixel};
+pub(crate) use woodham::{woodham_pixel, woodham_robust_pixel};
 
 /// Which baseline to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -44,7 +44,7 @@ pub enum Baseline {
     /// value over its nearest neighbours in halfway space.
     MaxReflectance,
     /// The intensity-weighted mean (normal) and second moment (tangent axis) of the halfway
-    /// vectors of the brightest samples ([`crate::highlight`]).
+    /// vectors of the brightest samples (the `highlight` module).
     HighlightCentroid,
 }
 
@@ -357,7 +357,7 @@ pub fn estimate_stack_baseline_with(
 
 /// The unit light directions a baseline runs with: `lights` normalised; an error if there are
 /// none or one is zero or not finite.
-pub fn baseline_lights(lights: &[DVec3]) -> Result<Vec<DVec3>> {
+pub(crate) fn baseline_lights(lights: &[DVec3]) -> Result<Vec<DVec3>> {
     if lights.is_empty() {
         return Err(Error::NoLights);
     }

@@ -154,7 +154,7 @@ fn finish(eq: &NormalEquations, g: Option<DVec3>) -> BaselinePixel {
 /// light directions in the same order, `scratch` a buffer reused between pixels. Confidence:
 /// the uncentred R^2 of the fit, `1 - sum r_i^2 / sum I_i^2` over the samples used (1 for an
 /// exact Lambertian pixel). Allocation-free once `scratch` has grown (three values per light).
-pub fn woodham_pixel(
+pub(crate) fn woodham_pixel(
     samples: &[f32],
     lights: &[DVec3],
     params: &BaselineParams,
@@ -187,7 +187,7 @@ pub fn woodham_pixel(
 /// has `s = 0` and keeps every sample. Confidence: the uncentred R^2 of the final fit over the
 /// samples it used. Allocation-free once `scratch` has grown (one pass over the samples, three over
 /// the unshadowed ones; each grey value computed once).
-pub fn woodham_robust_pixel(
+pub(crate) fn woodham_robust_pixel(
     samples: &[f32],
     lights: &[DVec3],
     params: &BaselineParams,

@@ -5,7 +5,7 @@ use glam::DVec3;
 use std::f64::consts::PI;
 
 /// Unit direction from spherical angles about z.
-pub fn dir(theta: f64, phi: f64) -> DVec3 {
+pub(crate) fn dir(theta: f64, phi: f64) -> DVec3 {
     DVec3::new(
         theta.sin() * phi.cos(),
         theta.sin() * phi.sin(),
@@ -14,16 +14,16 @@ pub fn dir(theta: f64, phi: f64) -> DVec3 {
 }
 
 /// SplitMix64: a tiny deterministic generator for fixed-seed tests.
-pub struct Rng(u64);
+pub(crate) struct Rng(u64);
 
 impl Rng {
     /// A generator with the given seed.
-    pub fn new(seed: u64) -> Self {
+    pub(crate) fn new(seed: u64) -> Self {
         Rng(seed)
     }
 
     /// Uniform in `[0, 1)`.
-    pub fn next_f64(&mut self) -> f64 {
+    pub(crate) fn next_f64(&mut self) -> f64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -33,7 +33,7 @@ impl Rng {
     }
 
     /// Uniform on the open upper hemisphere (z > 0).
-    pub fn hemisphere(&mut self) -> DVec3 {
+    pub(crate) fn hemisphere(&mut self) -> DVec3 {
         let z = 1.0 - self.next_f64(); // (0, 1]
         let phi = 2.0 * PI * self.next_f64();
         let r = (1.0 - z * z).max(0.0).sqrt();
@@ -42,7 +42,7 @@ impl Rng {
 }
 
 /// A fixed grid over the closed upper hemisphere, including the normal and near-grazing rows.
-pub fn hemisphere_grid() -> Vec<DVec3> {
+pub(crate) fn hemisphere_grid() -> Vec<DVec3> {
     let mut out = vec![DVec3::Z];
     let thetas_deg: [f64; 14] = [
         1.0, 5.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 85.0, 89.0, 89.99, 89.999_999,
@@ -56,7 +56,7 @@ pub fn hemisphere_grid() -> Vec<DVec3> {
 }
 
 /// Pairs of directions: the full grid against itself plus random pairs.
-pub fn direction_pairs(seed: u64, n_random: usize) -> Vec<(DVec3, DVec3)> {
+pub(crate) fn direction_pairs(seed: u64, n_random: usize) -> Vec<(DVec3, DVec3)> {
     let grid = hemisphere_grid();
     let mut pairs = Vec::new();
     for (i, &a) in grid.iter().enumerate() {
@@ -82,14 +82,14 @@ pub fn direction_pairs(seed: u64, n_random: usize) -> Vec<(DVec3, DVec3)> {
 }
 
 /// `|a - b| <= rel * max(|a|, |b|) + abs` per channel.
-pub fn close(a: [f64; 3], b: [f64; 3], rel: f64, abs: f64) -> bool {
+pub(crate) fn close(a: [f64; 3], b: [f64; 3], rel: f64, abs: f64) -> bool {
     (0..3).all(|c| (a[c] - b[c]).abs() <= rel * a[c].abs().max(b[c].abs()) + abs)
 }
 
 /// Directional albedo `∫ f(l, v) (n·l) dω_l` per channel, integrated over halfway vectors
 /// (`dω_l = 4 (v·h) dω_h`) on a fixed midpoint grid with θ_h = (π/2) s², dense near the normal
 /// where specular lobes peak.
-pub fn directional_albedo(b: &dyn Brdf, v: DVec3, n: usize) -> [f64; 3] {
+pub(crate) fn directional_albedo(b: &dyn Brdf, v: DVec3, n: usize) -> [f64; 3] {
     let mut sum = [0.0; 3];
     for i in 0..n {
         let s = (i as f64 + 0.5) / n as f64;
@@ -118,7 +118,7 @@ pub fn directional_albedo(b: &dyn Brdf, v: DVec3, n: usize) -> [f64; 3] {
 
 /// The largest directional albedo over channels and the given view angles (degrees, taken at
 /// two azimuths: along x and along y).
-pub fn max_albedo(b: &dyn Brdf, view_deg: &[f64], n: usize) -> f64 {
+pub(crate) fn max_albedo(b: &dyn Brdf, view_deg: &[f64], n: usize) -> f64 {
     let mut m: f64 = 0.0;
     for &t in view_deg {
         for phi in [0.0, 0.5 * PI, 0.8] {
@@ -130,7 +130,7 @@ pub fn max_albedo(b: &dyn Brdf, view_deg: &[f64], n: usize) -> f64 {
 }
 
 /// Asserts the directional albedo stays below `1 + margin` for views from 0 to `max_view_deg`.
-pub fn assert_energy(b: &dyn Brdf, max_view_deg: f64, margin: f64) {
+pub(crate) fn assert_energy(b: &dyn Brdf, max_view_deg: f64, margin: f64) {
     let mut views = vec![0.0, 15.0, 30.0, 45.0, 60.0, 70.0, 80.0, 85.0];
     views.retain(|&t| t <= max_view_deg);
     let m = max_albedo(b, &views, 400);
@@ -142,7 +142,7 @@ pub fn assert_energy(b: &dyn Brdf, max_view_deg: f64, margin: f64) {
 }
 
 /// Asserts `f(l, v) = f(v, l)` to a relative tolerance.
-pub fn assert_reciprocal(b: &dyn Brdf, rel: f64) {
+pub(crate) fn assert_reciprocal(b: &dyn Brdf, rel: f64) {
     for (l, v) in direction_pairs(11, 3000) {
         let a = b.eval(l, v);
         let c = b.eval(v, l);
@@ -155,7 +155,7 @@ pub fn assert_reciprocal(b: &dyn Brdf, rel: f64) {
 }
 
 /// Asserts zero whenever either direction is at or below the horizon.
-pub fn assert_zero_below_horizon(b: &dyn Brdf) {
+pub(crate) fn assert_zero_below_horizon(b: &dyn Brdf) {
     let mut rng = Rng::new(5);
     let mut below = vec![
         DVec3::X,
@@ -177,7 +177,7 @@ pub fn assert_zero_below_horizon(b: &dyn Brdf) {
 }
 
 /// Asserts finite, non-negative values over all grid pairs and random pairs.
-pub fn assert_nonneg_finite(b: &dyn Brdf) {
+pub(crate) fn assert_nonneg_finite(b: &dyn Brdf) {
     let grid = hemisphere_grid();
     let mut pairs: Vec<(DVec3, DVec3)> = Vec::new();
     for &l in &grid {
@@ -198,7 +198,7 @@ pub fn assert_nonneg_finite(b: &dyn Brdf) {
 
 /// Asserts invariance under reflection across the x-z plane (y → -y) and the y-z plane (x → -x) of
 /// both directions, i.e. the `G_nt` / `G_nb` symmetries of docs/method.md ("The three symmetries").
-pub fn assert_mirror_symmetric(b: &dyn Brdf, rel: f64) {
+pub(crate) fn assert_mirror_symmetric(b: &dyn Brdf, rel: f64) {
     let ry = DVec3::new(1.0, -1.0, 1.0);
     let rx = DVec3::new(-1.0, 1.0, 1.0);
     for (l, v) in direction_pairs(17, 3000) {
@@ -215,7 +215,7 @@ pub fn assert_mirror_symmetric(b: &dyn Brdf, rel: f64) {
 }
 
 /// Asserts invariance under a rotation of both directions about the normal.
-pub fn assert_rotation_invariant(b: &dyn Brdf, rel: f64) {
+pub(crate) fn assert_rotation_invariant(b: &dyn Brdf, rel: f64) {
     let mut rng = Rng::new(23);
     for (l, v) in direction_pairs(19, 2000) {
         let a = 2.0 * PI * rng.next_f64();
@@ -231,7 +231,7 @@ pub fn assert_rotation_invariant(b: &dyn Brdf, rel: f64) {
 }
 
 /// Asserts that the model is NOT invariant under rotation about the normal (anisotropic).
-pub fn assert_not_rotation_invariant(b: &dyn Brdf) {
+pub(crate) fn assert_not_rotation_invariant(b: &dyn Brdf) {
     let v = dir(0.3, 0.0);
     let h_x = dir(0.25, 0.0);
     let h_y = dir(0.25, 0.5 * PI);
@@ -248,7 +248,7 @@ pub fn assert_not_rotation_invariant(b: &dyn Brdf) {
 /// The in-plane axis (in halfway-vector space around the normal) along which the specular
 /// highlight is wider, measured: compares the model at a halfway vector tilted along x with
 /// one tilted along y, with the view at the normal.
-pub fn measured_wide_axis(b: &dyn Brdf) -> super::TangentAxis {
+pub(crate) fn measured_wide_axis(b: &dyn Brdf) -> super::TangentAxis {
     let v = DVec3::Z;
     let t = 0.2;
     let hx = dir(t, 0.0);
@@ -268,7 +268,13 @@ pub fn measured_wide_axis(b: &dyn Brdf) -> super::TangentAxis {
 
 /// One pixel's samples (RGB per light) of `brdf` in the frame `(n, t, b = n x t)` (x = t, view
 /// `+z`) under `lights` of intensity `scale`: `scale f (n.l)`, 0 where the light is below.
-pub fn render_pixel(brdf: &dyn Brdf, n: DVec3, t: DVec3, lights: &[DVec3], scale: f64) -> Vec<f32> {
+pub(crate) fn render_pixel(
+    brdf: &dyn Brdf,
+    n: DVec3,
+    t: DVec3,
+    lights: &[DVec3],
+    scale: f64,
+) -> Vec<f32> {
     let b = n.cross(t);
     let local = |d: DVec3| DVec3::new(d.dot(t), d.dot(b), d.dot(n));
     let view = local(DVec3::Z);
