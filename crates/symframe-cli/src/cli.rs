@@ -748,6 +748,15 @@ pub struct IntegrateArgs {
     /// prediction by more than this many pixels times (1 + the predicted step).
     #[arg(long, default_value_t = 2.0)]
     pub max_jump: f64,
+    /// A pinhole camera's intrinsics (`K.txt`, OpenCV's 3 x 3 convention): a perspective depth
+    /// map (along the optical axis) and a mesh in the camera frame. Default: the camera a
+    /// near-light estimate's report.json records, else an orthographic height map.
+    #[arg(long = "K", value_name = "K.txt")]
+    pub camera: Option<PathBuf>,
+    /// With a camera: the depth of the object's centre along the optical axis (the depths'
+    /// unit), where the estimate wrote no depth.npy to scale by.
+    #[arg(long)]
+    pub distance: Option<f64>,
 }
 
 /// Flags of `symframe calibrate`.
@@ -826,6 +835,11 @@ pub struct ExportArgs {
     /// With --mesh: leave out triangles across depth jumps (as `integrate --max-jump`).
     #[arg(long, default_value_t = 2.0)]
     pub max_jump: f64,
+    /// With --mesh: the depth map is a perspective one through this camera (`K.txt`), the
+    /// mesh metric in the camera frame. Default: the camera recorded beside the depth map
+    /// (integrate.json, or a near-light estimate's report.json), else a height map.
+    #[arg(long = "K", value_name = "K.txt", requires = "mesh")]
+    pub k: Option<PathBuf>,
 }
 
 /// The y convention of `normals.png`.

@@ -16,6 +16,7 @@ pub fn run(args: &ExportArgs) -> Result<Vec<PathBuf>> {
         mesh: args.mesh,
         depth: args.depth.clone(),
         max_jump: args.max_jump,
+        camera: args.k.clone(),
     };
     let done = export_gltf(&config)?;
     if !crate::progress::chatty() {

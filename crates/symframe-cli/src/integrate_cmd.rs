@@ -2,7 +2,7 @@
 //! summary.
 
 use anyhow::{bail, Result};
-use symframe::integrate::{DepthMap, IntegrateParams, Solver};
+use symframe::{DepthMap, IntegrateParams, Solver};
 use symframe_job::{integrate_job, IntegrateConfig, IntegrateReport};
 
 use crate::cli::{IntegrateArgs, IntegrateSolverArg};
@@ -39,18 +39,25 @@ pub fn run(args: &IntegrateArgs) -> Result<(DepthMap, IntegrateReport)> {
         },
         use_confidence: !args.no_confidence,
         max_jump: args.max_jump,
+        camera: args.camera.clone(),
+        distance: args.distance,
     };
     let (depth, report) = integrate_job(&config)?;
     if !crate::progress::chatty() {
         return Ok((depth, report));
     }
     println!(
-        "symframe integrate: {} pixels ({} region(s)) by {} in {:.2} s ({} CG iterations{}), \
+        "symframe integrate: {} pixels ({} region(s)) by {}{} in {:.2} s ({} CG iterations{}), \
          mesh {} vertices, {} triangles ({} dropped at discontinuities), peak memory {} MiB; \
          wrote {}",
         report.pixels,
         report.regions,
         report.solver,
+        if report.camera.is_some() {
+            " through the pinhole camera"
+        } else {
+            ""
+        },
         report.integrate_s,
         report.cg_iterations,
         if report.reweight_iterations > 0 {

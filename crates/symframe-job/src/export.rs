@@ -42,6 +42,10 @@ pub struct ExportConfig {
     pub depth: Option<PathBuf>,
     /// With `mesh`: leave out triangles across depth jumps (as the integrate job's `max_jump`).
     pub max_jump: f64,
+    /// With `mesh`: the depth map is a perspective one through this camera (`K.txt`), the mesh
+    /// metric in the camera frame. `None`: the camera recorded beside the depth map
+    /// ([`crate::recorded_camera`]), else the depth map is a height map.
+    pub camera: Option<PathBuf>,
 }
 
 impl ExportConfig {
@@ -53,6 +57,7 @@ impl ExportConfig {
             mesh: false,
             depth: None,
             max_jump: 2.0,
+            camera: None,
         }
     }
 }
@@ -414,6 +419,41 @@ pub fn from_mesh(m: &symframe::Mesh, w: usize, h: usize) -> Geometry {
     g
 }
 
+/// A perspective mesh ([`symframe::near::perspective_mesh`]) as it is: camera-frame points in
+/// the depths' unit (glTF's y up and -z forward are the camera frame's), uv at pixel centres.
+pub fn from_camera_mesh(m: &symframe::Mesh, w: usize, h: usize) -> Geometry {
+    let mut g = Geometry {
+        positions: m.positions.clone(),
+        normals: m.normals.clone(),
+        tangents: Vec::with_capacity(m.positions.len()),
+        uvs: Vec::with_capacity(m.positions.len()),
+        indices: m.triangles.iter().flatten().copied().collect(),
+    };
+    for (n, px) in m.normals.iter().zip(&m.pixels) {
+        let (t, _) = vertex_frame(*n);
+        g.tangents.push([t[0], t[1], t[2], 1.0]);
+        g.uvs.push([
+            (px[0] as f32 + 0.5) / w as f32,
+            (px[1] as f32 + 0.5) / h as f32,
+        ]);
+    }
+    g
+}
+
+/// Whether `dir` holds the record of an orthographic integration (an `integrate.json` with no
+/// camera), whose `depth.npy` is a height map in pixel units.
+fn is_height_map(dir: &Path) -> Result<bool> {
+    let path = dir.join("integrate.json");
+    if !path.is_file() {
+        return Ok(false);
+    }
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let json: Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not valid JSON", path.display()))?;
+    Ok(json.get("camera").is_none_or(Value::is_null))
+}
+
 fn pad4(v: &mut Vec<u8>, fill: u8) {
     while v.len() & 3 != 0 {
         v.push(fill);
@@ -628,21 +668,48 @@ pub fn export_gltf(config: &ExportConfig) -> Result<ExportOutcome> {
                 depth_path.display()
             );
         }
-        let dm = symframe::DepthMap {
-            width: w,
-            height: h,
-            depth,
-            cg_iterations: 0,
-            reweight_iterations: 0,
-            energy: 0.0,
-            regions: 0,
-            pixels: 0,
-        };
-        let mesh = symframe::mesh(&dm, &maps.normals, config.max_jump);
-        if mesh.triangles.is_empty() {
-            bail!("{}: the mesh has no triangles", depth_path.display());
+        let beside = depth_path
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        let camera = crate::integrate::camera_for(config.camera.as_deref(), beside)?;
+        if camera.is_some() && is_height_map(beside)? {
+            bail!(
+                "{}: a height map of an orthographic integration (its integrate.json records no \
+                 camera); integrate with --K for a perspective depth map",
+                depth_path.display()
+            );
         }
-        from_mesh(&mesh, w, h)
+        if let Some((cam, _)) = camera {
+            let mesh = symframe::near::perspective_mesh(
+                &cam,
+                w,
+                h,
+                &depth,
+                &maps.normals,
+                config.max_jump,
+            );
+            if mesh.triangles.is_empty() {
+                bail!("{}: the mesh has no triangles", depth_path.display());
+            }
+            from_camera_mesh(&mesh, w, h)
+        } else {
+            let dm = symframe::DepthMap {
+                width: w,
+                height: h,
+                depth,
+                cg_iterations: 0,
+                reweight_iterations: 0,
+                energy: 0.0,
+                regions: 0,
+                pixels: 0,
+            };
+            let mesh = symframe::mesh(&dm, &maps.normals, config.max_jump);
+            if mesh.triangles.is_empty() {
+                bail!("{}: the mesh has no triangles", depth_path.display());
+            }
+            from_mesh(&mesh, w, h)
+        }
     } else {
         quad(w, h)
     };

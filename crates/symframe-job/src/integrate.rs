@@ -1,5 +1,11 @@
 //! The integrate job (`symframe integrate`): an estimate's normal map to a height map and a
 //! mesh (`depth.npy`, `depth.exr`, `depth.png`, `mesh.ply`, `integrate.json`).
+//!
+//! With a pinhole camera (`K.txt`, or the one a near-light estimate recorded in its report)
+//! the normals are integrated as a perspective depth map ([`perspective_depth`]): metric
+//! depths along the optical axis, scaled as the estimate's `depth.npy` (its median over each
+//! connected region kept) or, without one, so that the object's centre is at the given distance;
+//! the mesh is the surface points the pixels see, in the camera frame.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -7,7 +13,8 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
-use symframe::integrate::{integrate, mesh, shade, DepthMap, IntegrateParams, Mesh, Solver};
+use symframe::near::{perspective_depth, perspective_mesh, picture_heights, Pinhole};
+use symframe::{integrate, mesh, shade, DepthMap, IntegrateParams, Mesh, Solver};
 
 use crate::outdir::{OutputDir, OutputSet};
 
@@ -26,6 +33,13 @@ pub struct IntegrateConfig {
     /// Mesh: leave out triangles with an edge whose height step departs from the normals'
     /// prediction by more than this many pixels times (1 + the predicted step).
     pub max_jump: f64,
+    /// The camera's `K.txt` (OpenCV's intrinsics): a perspective depth map and mesh. `None`:
+    /// the camera the estimate's `report.json` records (a near-light estimate), else an
+    /// orthographic height map.
+    pub camera: Option<PathBuf>,
+    /// With a camera: the depth of the object's centre along the optical axis, in the unit the
+    /// depths are wanted in; needed where the estimate wrote no `depth.npy` to scale by.
+    pub distance: Option<f64>,
 }
 
 impl IntegrateConfig {
@@ -40,6 +54,8 @@ impl IntegrateConfig {
             },
             use_confidence: true,
             max_jump: 2.0,
+            camera: None,
+            distance: None,
         }
     }
 }
@@ -83,8 +99,55 @@ pub struct IntegrateReport {
     pub total_s: f64,
     /// Peak resident memory of the process, bytes (Linux).
     pub peak_rss_bytes: Option<u64>,
+    /// The pinhole camera of a perspective integration (absent for a height map).
+    pub camera: Option<CameraReport>,
     /// Units and frame of the outputs.
     pub conventions: &'static str,
+}
+
+/// The camera of a perspective integration, as `integrate.json` records it.
+#[derive(Debug, Clone, Serialize)]
+pub struct CameraReport {
+    /// The intrinsics, row-major, OpenCV's convention.
+    #[serde(rename = "K")]
+    pub k: [[f64; 3]; 3],
+    /// Where K came from: the K.txt read, or the estimate's report.json.
+    pub from: String,
+    /// How the depths were scaled: by the estimate's depth.npy, or the given distance.
+    pub scale: String,
+}
+
+/// The pinhole camera a folder's records name: `integrate.json`'s `camera` (a perspective
+/// integration) or `report.json`'s `near` section (a near-light estimate); `None` where neither
+/// records one. The file read comes with it.
+pub fn recorded_camera(dir: &Path) -> Result<Option<(Pinhole, PathBuf)>> {
+    for (file, section) in [("integrate.json", "camera"), ("report.json", "near")] {
+        let path = dir.join(file);
+        if !path.is_file() {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("{}: cannot read", path.display()))?;
+        let json: serde_json::Value = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not valid JSON", path.display()))?;
+        let Some(k) = json.get(section).and_then(|s| s.get("K")) else {
+            continue;
+        };
+        let k: [[f64; 3]; 3] = serde_json::from_value(k.clone())
+            .with_context(|| format!("{}: {section}.K is not a 3 x 3 matrix", path.display()))?;
+        let camera = Pinhole::from_k(k)
+            .map_err(|why| anyhow::anyhow!("{}: {section}.K: {why}", path.display()))?;
+        return Ok(Some((camera, path)));
+    }
+    Ok(None)
+}
+
+/// The camera a job is to use: the K.txt given, else the one `dir`'s records name.
+pub(crate) fn camera_for(given: Option<&Path>, dir: &Path) -> Result<Option<(Pinhole, PathBuf)>> {
+    match given {
+        Some(k) => Ok(Some((symframe_io::near::read_camera(k)?, k.to_path_buf()))),
+        None => recorded_camera(dir),
+    }
 }
 
 /// An estimate's maps: width, height, normals, confidence.
@@ -123,14 +186,26 @@ fn read_inputs(dir: &Path, use_confidence: bool) -> Result<Inputs> {
     Ok((w, h, normals, confidence))
 }
 
+/// What `integrate.json` says of a perspective integration's outputs.
+const PERSPECTIVE_CONVENTIONS: &str = "depth: distance along the optical axis in the unit of \
+    the estimate's depth.npy or the given distance, NaN outside; mesh: the surface point each \
+    pixel sees, camera frame (x right, y up, z toward the viewer, origin at the centre of \
+    projection), same unit";
+
 /// Writes a binary little-endian PLY: float x y z nx ny nz per vertex, triangles as
-/// `uchar 3, int a b c`.
-pub fn write_ply(path: &Path, m: &Mesh) -> Result<()> {
+/// `uchar 3, int a b c`; `camera_frame`: the vertices are metric camera-frame points (a
+/// perspective mesh), else pixel units.
+pub fn write_ply(path: &Path, m: &Mesh, camera_frame: bool) -> Result<()> {
     let file = std::fs::File::create(path)
         .with_context(|| format!("{}: cannot create", path.display()))?;
     let mut out = std::io::BufWriter::new(file);
+    let units = if camera_frame {
+        "camera frame in the depths' unit, origin at the centre of projection"
+    } else {
+        "pixel units"
+    };
     let header = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment symframe integrate: pixel units, x right, \
+        "ply\nformat binary_little_endian 1.0\ncomment symframe integrate: {units}, x right, \
          y up, z toward the camera\nelement vertex {}\nproperty float x\nproperty float y\n\
          property float z\nproperty float nx\nproperty float ny\nproperty float nz\n\
          element face {}\nproperty list uchar int vertex_indices\nend_header\n",
@@ -180,10 +255,16 @@ pub fn integrate_job(config: &IntegrateConfig) -> Result<(DepthMap, IntegrateRep
     // The output folder's lock and rules, as for every job: nothing there replaced that an
     // earlier integrate did not write, no input of the run replaced, no folder replaced.
     let out = OutputDir::lock(&config.output)?;
-    let inputs = [
+    let camera = camera_for(config.camera.as_deref(), &config.estimate)?;
+    let scale_by = match camera {
+        Some(_) => estimate_depth(&config.estimate)?,
+        None => None,
+    };
+    let mut inputs = vec![
         config.estimate.join("normals.npy"),
         config.estimate.join("confidence.npy"),
     ];
+    inputs.extend(scale_by.clone());
     let result = out
         .guard_inputs(
             &inputs,
@@ -191,7 +272,7 @@ pub fn integrate_job(config: &IntegrateConfig) -> Result<(DepthMap, IntegrateRep
             &|n| integrate_owned(n) || n == "integrate.json",
             &|_| false,
         )
-        .and_then(|()| integrate_into(config, &out, t0));
+        .and_then(|()| integrate_into(config, camera, scale_by.as_deref(), &out, t0));
     if result.is_err() {
         out.discard_unfinished();
     }
@@ -235,23 +316,48 @@ fn check_memory(normals: &Path) -> Result<()> {
 /// Reads, integrates and writes the set into the locked folder `out`.
 fn integrate_into(
     config: &IntegrateConfig,
+    camera: Option<(Pinhole, PathBuf)>,
+    scale_by: Option<&Path>,
     out: &OutputDir,
     t0: Instant,
 ) -> Result<(DepthMap, IntegrateReport)> {
     let solver = config.params.solver;
     let (w, h, normals, confidence) = read_inputs(&config.estimate, config.use_confidence)?;
     let t_int = Instant::now();
-    let depth = integrate(w, h, &normals, confidence.as_deref(), &config.params)
-        .with_context(|| format!("{}: cannot integrate", config.estimate.display()))?;
+    let (depth, m, camera_report) = match &camera {
+        None => {
+            let depth = integrate(w, h, &normals, confidence.as_deref(), &config.params)
+                .with_context(|| format!("{}: cannot integrate", config.estimate.display()))?;
+            let m = mesh(&depth, &normals, config.max_jump);
+            (depth, m, None)
+        }
+        Some((cam, from)) => {
+            let (depth, scale) =
+                integrate_perspective(config, cam, scale_by, w, h, &normals, &confidence)?;
+            let m = perspective_mesh(cam, w, h, &depth.depth, &normals, config.max_jump);
+            let report = CameraReport {
+                k: cam.k(),
+                from: from.display().to_string(),
+                scale,
+            };
+            (depth, m, Some(report))
+        }
+    };
     let integrate_s = t_int.elapsed().as_secs_f64();
-    let m = mesh(&depth, &normals, config.max_jump);
 
     let staging = OutputSet::new(out, integrate_owned)?;
     symframe_io::write_npy_f32(&staging.path("depth.npy"), &[h, w], &depth.depth)?;
     symframe_io::write_exr_map(&staging.path("depth.exr"), w, h, 1, &depth.depth)?;
-    let shaded: Vec<f32> = shade(&depth).iter().flat_map(|&v| [v; 3]).collect();
+    let picture = match &camera {
+        None => shade(&depth),
+        Some((cam, _)) => shade(&DepthMap {
+            depth: picture_heights(cam, &depth.depth),
+            ..depth.clone()
+        }),
+    };
+    let shaded: Vec<f32> = picture.iter().flat_map(|&v| [v; 3]).collect();
     symframe_io::write_png8_rgb(&staging.path("depth.png"), w, h, &shaded, true)?;
-    write_ply(&staging.path("mesh.ply"), &m)?;
+    write_ply(&staging.path("mesh.ply"), &m, camera.is_some())?;
     let report = IntegrateReport {
         version: env!("CARGO_PKG_VERSION"),
         estimate: config.estimate.display().to_string(),
@@ -277,10 +383,246 @@ fn integrate_into(
         integrate_s,
         total_s: t0.elapsed().as_secs_f64(),
         peak_rss_bytes: crate::peak_rss_bytes(),
-        conventions: "depth: height along +z (toward the camera) in pixel spacings, each \
-                      connected region's lowest point at 0, NaN outside; mesh: vertex at pixel \
-                      centre (x = col + 0.5, y = H - row - 0.5, z = depth), y up",
+        conventions: if camera_report.is_some() {
+            PERSPECTIVE_CONVENTIONS
+        } else {
+            "depth: height along +z (toward the camera) in pixel spacings, each connected \
+             region's lowest point at 0, NaN outside; mesh: vertex at pixel centre (x = col + \
+             0.5, y = H - row - 0.5, z = depth), y up"
+        },
+        camera: camera_report,
     };
     staging.commit("integrate.json", serde_json::to_value(&report)?, &|_| {})?;
     Ok((depth, report))
+}
+
+/// The depth map a near-light estimate wrote (`depth.npy`, its report.json having a `near`
+/// section); `None` for any other folder, whose `depth.npy`, if any, is not the estimate's.
+fn estimate_depth(dir: &Path) -> Result<Option<PathBuf>> {
+    let (report, depth) = (dir.join("report.json"), dir.join("depth.npy"));
+    if !(report.is_file() && depth.is_file()) {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(&report)
+        .with_context(|| format!("{}: cannot read", report.display()))?;
+    let json: serde_json::Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not valid JSON", report.display()))?;
+    Ok(json
+        .get("near")
+        .is_some_and(|n| !n.is_null())
+        .then_some(depth))
+}
+
+/// The perspective depth map of `normals` through `camera`, scaled by the estimate's depth map
+/// `scale_by` (each region's median kept) where there is one, else with the object's centre at
+/// the configured distance; with how it was scaled.
+fn integrate_perspective(
+    config: &IntegrateConfig,
+    camera: &Pinhole,
+    scale_by: Option<&Path>,
+    w: usize,
+    h: usize,
+    normals: &[f32],
+    confidence: &Option<Vec<f32>>,
+) -> Result<(DepthMap, String)> {
+    let has_normal = |p: usize| normals[3 * p..3 * p + 3].iter().all(|v| v.is_finite());
+    let (previous, centre, scale) = if let Some(dp) = scale_by {
+        let (shape, d) = symframe_io::read_npy_f32(dp)?;
+        if shape != [h, w] {
+            bail!(
+                "{}: shape {shape:?} does not match normals.npy ({h} x {w} expected)",
+                dp.display()
+            );
+        }
+        let previous: Vec<f32> = (0..w * h)
+            .map(|p| {
+                if has_normal(p) && d[p] > 0.0 {
+                    d[p]
+                } else {
+                    f32::NAN
+                }
+            })
+            .collect();
+        let scale = format!("each region's median depth that of {}", dp.display());
+        (previous, None, scale)
+    } else {
+        let Some(distance) = config.distance else {
+            bail!(
+                "{}: no depth map of a near-light estimate to scale the depths by; give the depth of the object's centre along the optical axis (--distance)",
+                config.estimate.display()
+            );
+        };
+        if !(distance.is_finite() && distance > 0.0) {
+            bail!("the object's distance must be a positive depth, got {distance}");
+        }
+        let previous: Vec<f32> = (0..w * h)
+            .map(|p| {
+                if has_normal(p) {
+                    distance as f32
+                } else {
+                    f32::NAN
+                }
+            })
+            .collect();
+        let scale = format!("the object's centre at depth {distance}");
+        (previous, Some(distance), scale)
+    };
+    let depth = perspective_depth(
+        camera,
+        w,
+        h,
+        normals,
+        confidence.as_deref(),
+        &previous,
+        centre,
+        &config.params,
+    )
+    .with_context(|| format!("{}: cannot integrate", config.estimate.display()))?;
+    Ok((depth, scale))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{
+        estimate, export_gltf, synth_near, Control, EstimateConfig, ExportConfig, NearSynthConfig,
+    };
+    use glam::DVec3;
+
+    /// Each mesh vertex's distance from the true surface point of its pixel, over the object's
+    /// width, with whether the pixel's true normal is within 60 degrees of its view.
+    fn vertex_errors(m: &Mesh, camera: &Pinhole, data: &Path) -> Vec<(f64, bool)> {
+        let (shape, truth) = symframe_io::read_npy_f32(&data.join("gt_depth.npy")).unwrap();
+        let (_, normals) = symframe_io::read_npy_f32(&data.join("gt_normals.npy")).unwrap();
+        let w = shape[1];
+        m.positions
+            .iter()
+            .zip(&m.pixels)
+            .map(|(p, px)| {
+                let (col, row) = (px[0] as usize, px[1] as usize);
+                let i = row * w + col;
+                let at = camera.point(col as f64, row as f64, truth[i] as f64);
+                let n = DVec3::from_array([0, 1, 2].map(|c| normals[3 * i + c] as f64));
+                let facing = n.dot(camera.view(col as f64, row as f64)) > 0.5;
+                let e = (DVec3::from_array(p.map(f64::from)) - at).length();
+                (e / crate::synth_near::PAIR_WIDTH, facing)
+            })
+            .collect()
+    }
+
+    /// A near render's normals integrated through its camera: the mesh lies on the true
+    /// surface, in the camera frame and the lights' unit, whether the depths are scaled by the
+    /// estimate's depth.npy or by the object's distance; export gltf --mesh builds the same mesh.
+    #[test]
+    fn a_near_estimate_integrates_to_its_surface_in_the_camera_frame() {
+        let d = tempfile::tempdir().unwrap();
+        let data = d.path().join("data");
+        let capture = NearSynthConfig {
+            size: 96,
+            lights: 80,
+            ..NearSynthConfig::new(&data)
+        };
+        synth_near(&capture, &Control::default()).unwrap();
+        let est = d.path().join("est");
+        let mut config = EstimateConfig::new(&data, &est);
+        config.near.max_iterations = 3;
+        estimate(&config, &Control::default()).unwrap();
+        let camera = capture.scene().camera;
+        let check = |m: &Mesh| {
+            let errors = vertex_errors(m, &camera, &data);
+            assert!(errors.len() > 2000, "{} vertices", errors.len());
+            let mean = errors.iter().map(|e| e.0).sum::<f64>() / errors.len() as f64;
+            let facing = errors
+                .iter()
+                .filter(|e| e.1)
+                .map(|e| e.0)
+                .fold(0.0, f64::max);
+            let within = errors.iter().filter(|e| e.0 < 0.01).count() as f64 / errors.len() as f64;
+            assert!(mean < 0.005, "mean vertex error {mean} of the width");
+            assert!(
+                facing < 0.01,
+                "largest within 60 degrees of the view {facing}"
+            );
+            assert!(within > 0.95, "{within} of the vertices within 1%");
+        };
+
+        // The camera the estimate's report records, scaled by its depth.npy.
+        let (_, report) = integrate_job(&IntegrateConfig::new(&est, d.path().join("int"))).unwrap();
+        let cam = report.camera.expect("a perspective integration");
+        assert_eq!(cam.k, camera.k());
+        assert!(cam.scale.contains("depth.npy"), "{}", cam.scale);
+        let (_, ours) = symframe_io::read_npy_f32(&d.path().join("int/depth.npy")).unwrap();
+        let (_, theirs) = symframe_io::read_npy_f32(&est.join("depth.npy")).unwrap();
+        for (a, b) in ours.iter().zip(&theirs).filter(|(a, _)| a.is_finite()) {
+            assert!((a / b - 1.0).abs() < 0.01, "integrate {a}, estimate {b}");
+        }
+        let m = perspective_mesh(&camera, 96, 48, &ours, &normals_of(&est), 2.0);
+        check(&m);
+        let ply = std::fs::read(d.path().join("int/mesh.ply")).unwrap();
+        assert!(String::from_utf8_lossy(&ply[..200]).contains("camera frame"));
+
+        // Without depth.npy: K.txt given, the depths scaled by the object's distance.
+        let bare = d.path().join("bare");
+        std::fs::create_dir(&bare).unwrap();
+        for f in std::fs::read_dir(&est).unwrap() {
+            let f = f.unwrap().path();
+            let name = f.file_name().unwrap().to_owned();
+            if f.extension().is_some_and(|e| e == "npy") && name != "depth.npy" {
+                std::fs::copy(&f, bare.join(name)).unwrap();
+            }
+        }
+        let mut config = IntegrateConfig::new(&bare, d.path().join("int2"));
+        config.camera = Some(data.join("K.txt"));
+        let e = integrate_job(&config).unwrap_err().to_string();
+        assert!(e.contains("--distance"), "{e}");
+        config.distance = Some(capture.camera_ratio * crate::synth_near::PAIR_WIDTH);
+        let (_, report) = integrate_job(&config).unwrap();
+        assert!(report.camera.unwrap().scale.contains("centre"));
+        let (_, depth) = symframe_io::read_npy_f32(&d.path().join("int2/depth.npy")).unwrap();
+        check(&perspective_mesh(
+            &camera,
+            96,
+            48,
+            &depth,
+            &normals_of(&est),
+            2.0,
+        ));
+
+        // export gltf --mesh: the perspective mesh in the camera frame, its bounds those of the
+        // integrated mesh.
+        let mut ex = ExportConfig::new(&est, d.path().join("asset.gltf"));
+        ex.mesh = true;
+        ex.depth = Some(d.path().join("int/depth.npy"));
+        let done = export_gltf(&ex).unwrap();
+        assert_eq!(done.vertices, m.positions.len());
+        let doc: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(d.path().join("asset.gltf")).unwrap()).unwrap();
+        let position = doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"]
+            .as_u64()
+            .unwrap() as usize;
+        let accessor = &doc["accessors"][position];
+        for (k, pick) in [("min", f32::min as fn(f32, f32) -> f32), ("max", f32::max)] {
+            for axis in 0..3 {
+                let want = m.positions.iter().map(|p| p[axis]).reduce(pick).unwrap();
+                let got = accessor[k][axis].as_f64().unwrap() as f32;
+                assert!((got - want).abs() < 1e-4, "{k}[{axis}]: {got} vs {want}");
+            }
+        }
+        // An orthographic height map is not read through a camera.
+        let mut ortho = IntegrateConfig::new(&bare, d.path().join("ortho"));
+        ortho.distance = None;
+        integrate_job(&ortho).unwrap();
+        let mut ex = ExportConfig::new(&bare, d.path().join("ortho.glb"));
+        ex.mesh = true;
+        ex.depth = Some(d.path().join("ortho/depth.npy"));
+        ex.camera = Some(data.join("K.txt"));
+        let e = export_gltf(&ex).unwrap_err().to_string();
+        assert!(e.contains("orthographic"), "{e}");
+    }
+
+    fn normals_of(dir: &Path) -> Vec<f32> {
+        symframe_io::read_npy_f32(&dir.join("normals.npy"))
+            .unwrap()
+            .1
+    }
 }

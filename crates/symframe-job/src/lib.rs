@@ -103,7 +103,9 @@ pub use calibrate_near::{calibrate_near, NearCalibrateConfig, NearCalibrationRep
 pub use estimate_near::{LightModel, NearOptions, NearReport};
 pub use eval::{evaluate_job, EvalConfig, EvalReport};
 pub use export::{export_gltf, ExportConfig, ExportOutcome};
-pub use integrate::{integrate_job, IntegrateConfig, IntegrateReport};
+pub use integrate::{
+    integrate_job, recorded_camera, CameraReport, IntegrateConfig, IntegrateReport,
+};
 pub use synth::{synth, RigSpec, SynthConfig, SynthOutcome, SynthShape};
 pub use synth_near::{synth_near, NearSynthConfig};
 

@@ -736,7 +736,8 @@ pub fn integrate(
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Mesh {
     /// Vertex positions `(x, y, z)`: x = column + 0.5, y = height - row - 0.5 (up), z = the
-    /// height; pixel units.
+    /// height; pixel units (a perspective mesh, [`crate::near::perspective_mesh`]: the
+    /// camera-frame points the pixels see, in the depths' unit).
     pub positions: Vec<[f32; 3]>,
     /// Unit vertex normals (the normal map's).
     pub normals: Vec<[f32; 3]>,

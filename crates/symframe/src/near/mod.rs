@@ -12,11 +12,13 @@
 mod camera;
 pub mod chrome;
 mod light;
+mod mesh;
 mod solve;
 
 pub use camera::Pinhole;
 pub use light::{fit_sphere, rotation_to_z, PointLight};
+pub use mesh::{perspective_mesh, picture_heights};
 pub use solve::{
-    depth_from_normals, estimate_near_stack, mean_change_deg, NearMethod, NearOutcome, NearParams,
-    NearScratch,
+    depth_from_normals, estimate_near_stack, mean_change_deg, perspective_depth, NearMethod,
+    NearOutcome, NearParams, NearScratch,
 };

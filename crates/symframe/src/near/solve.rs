@@ -23,7 +23,7 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::frames::estimator::{Estimator, EstimatorParams, PixelScratch};
 use crate::frames::rig::{Rig, RigOptions};
-use crate::integrate::{integrate, IntegrateParams};
+use crate::integrate::{integrate, DepthMap, IntegrateParams};
 use crate::maps::{EstimateMaps, PixelRecord, PixelStatus};
 use crate::method::{run_stack, PixelMethod};
 use crate::near::{rotation_to_z, Pinhole, PointLight};
@@ -261,6 +261,26 @@ pub fn depth_from_normals(
     centre: Option<f64>,
     params: &IntegrateParams,
 ) -> Result<Vec<f32>> {
+    perspective_depth(
+        camera, width, height, normals, confidence, previous, centre, params,
+    )
+    .map(|d| d.depth)
+}
+
+/// [`depth_from_normals`] with the integration's figures: the map's `depth` holds the metric
+/// depths along the optical axis (NaN where `previous` is), its counts those of the log-depth's
+/// solve.
+#[allow(clippy::too_many_arguments)]
+pub fn perspective_depth(
+    camera: &Pinhole,
+    width: usize,
+    height: usize,
+    normals: &[f32],
+    confidence: Option<&[f32]>,
+    previous: &[f32],
+    centre: Option<f64>,
+    params: &IntegrateParams,
+) -> Result<DepthMap> {
     let n = width * height;
     if normals.len() != 3 * n || previous.len() != n {
         return Err(Error::BadParameter(format!(
@@ -332,7 +352,10 @@ pub fn depth_from_normals(
             out[p] = (c + h_mid - heights.depth[p] as f64).exp() as f32;
         }
     }
-    Ok(out)
+    Ok(DepthMap {
+        depth: out,
+        ..heights
+    })
 }
 
 /// Smallest cosine between a pixel's normal and its view for its point to join the sphere fit
