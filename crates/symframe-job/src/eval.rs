@@ -1,12 +1,15 @@
 //! The evaluation job (`symframe eval`): compares an estimate (`normals.npy`, `tangents.npy`)
 //! with a synthetic dataset's ground truth (`gt_normals.npy`, optional `gt_tangents.npy` and
 //! `mask.png`); writes `eval.json` and error pictures with colour bars into the estimate folder.
+//! Only pixels whose true normal is within `max_angle` of the view count: of each pixel's own
+//! view where the dataset has a pinhole camera (`K.txt`), else of +z.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
+use glam::DVec3;
 use serde::Serialize;
-use symframe::{evaluate, normal_error_map, tangent_error_map, Evaluation};
+use symframe::{evaluate_in_views, normal_error_map, tangent_error_map, Evaluation};
 
 use crate::colorbar::{error_picture, Cell, Scale};
 
@@ -53,6 +56,9 @@ pub struct EvalReport {
     pub normal_scale_max_deg: f64,
     /// Top of the tangent-error picture's colour scale, degrees (none without tangent truth).
     pub tangent_scale_max_deg: Option<f64>,
+    /// The view the angle limit is measured from: `+z`, or each pixel's own through the
+    /// dataset's `K.txt`.
+    pub view: &'static str,
     /// The error figures.
     #[serde(flatten)]
     pub evaluation: Evaluation,
@@ -125,15 +131,21 @@ fn inside(mask: Option<&[bool]>, p: usize) -> bool {
 }
 
 /// The evaluated pixels: inside the mask, with a true normal within `max_angle_deg` of the
-/// view (as [`evaluate`] counts them).
-fn evaluated(gt_normals: &[f32], mask: Option<&[bool]>, max_angle_deg: f64) -> Vec<bool> {
+/// pixel's view (as [`evaluate_in_views`] counts them).
+fn evaluated(
+    gt_normals: &[f32],
+    mask: Option<&[bool]>,
+    max_angle_deg: f64,
+    view: &dyn Fn(usize) -> DVec3,
+) -> Vec<bool> {
     let cos_max = max_angle_deg.to_radians().cos();
     gt_normals
         .chunks_exact(3)
         .enumerate()
         .map(|(p, n)| {
-            let len = (n[0] as f64).hypot(n[1] as f64).hypot(n[2] as f64);
-            inside(mask, p) && len > 0.0 && n[2] as f64 / len >= cos_max
+            let n = DVec3::from_array([0, 1, 2].map(|c| n[c] as f64));
+            let len = n.length();
+            inside(mask, p) && len > 0.0 && n.dot(view(p)) / len >= cos_max
         })
         .collect()
 }
@@ -231,17 +243,29 @@ pub fn evaluate_job(config: &EvalConfig, ctl: &crate::Control) -> Result<EvalRep
     .and_then(|s| serde_json::from_str::<serde_json::Value>(&s).ok())
     .and_then(|v| v["method"].as_str().map(String::from));
 
-    let evaluation = evaluate(
+    // A perspective dataset (K.txt beside it): each pixel's own view; else the view is +z.
+    let k_path = dir.join("K.txt");
+    let camera = if k_path.is_file() {
+        Some(symframe_io::near::read_camera(&k_path)?)
+    } else {
+        None
+    };
+    let view = |p: usize| match &camera {
+        Some(c) => c.view((p % w) as f64, (p / w) as f64),
+        None => DVec3::Z,
+    };
+    let evaluation = evaluate_in_views(
         &normals,
         &tangents,
         &gt_normals,
         gt_tangents.as_deref(),
         mask.as_deref(),
         config.max_angle,
+        &view,
     );
     // Colour scales: the user's top, or a round number near the 95th percentile of the
     // evaluated pixels' errors (those outside still show, clipped to the top colour).
-    let keep = evaluated(&gt_normals, mask.as_deref(), config.max_angle);
+    let keep = evaluated(&gt_normals, mask.as_deref(), config.max_angle, &view);
     let scale_for = |errors: &[f32], cap: f64| match config.scale_max {
         Some(s) => Scale::fixed(s),
         None => Scale::rounded(p95(errors, &keep).unwrap_or(cap)).capped(cap),
@@ -279,6 +303,11 @@ pub fn evaluate_job(config: &EvalConfig, ctl: &crate::Control) -> Result<EvalRep
         method,
         normal_scale_max_deg: n_scale.max,
         tangent_scale_max_deg: t_pic.as_ref().map(|t| t.1),
+        view: if camera.is_some() {
+            "each pixel's own, through the dataset's K.txt"
+        } else {
+            "+z"
+        },
         evaluation,
     };
 
@@ -293,4 +322,49 @@ pub fn evaluate_job(config: &EvalConfig, ctl: &crate::Control) -> Result<EvalRep
     )?;
 
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{synth_near, Control, NearSynthConfig};
+
+    /// On a perspective dataset the 60-degree limit is taken from each pixel's own view: the
+    /// pixels counted are those whose true normal is within 60 degrees of the ray back to the
+    /// camera, not of +z.
+    #[test]
+    fn a_perspective_dataset_is_evaluated_in_each_pixels_view() {
+        let d = tempfile::tempdir().unwrap();
+        let data = d.path().join("data");
+        let capture = NearSynthConfig {
+            size: 64,
+            lights: 8,
+            ..NearSynthConfig::new(&data)
+        };
+        synth_near(&capture, &Control::default()).unwrap();
+        let est = d.path().join("est");
+        std::fs::create_dir(&est).unwrap();
+        std::fs::copy(data.join("gt_normals.npy"), est.join("normals.npy")).unwrap();
+        let report = evaluate_job(&EvalConfig::new(&data, &est), &Control::default()).unwrap();
+        assert!(report.view.contains("K.txt"));
+        let camera = capture.scene().camera;
+        let (_, gt) = symframe_io::read_npy_f32(&data.join("gt_normals.npy")).unwrap();
+        let count = |view: &dyn Fn(usize) -> DVec3| {
+            (0..gt.len() / 3)
+                .filter(|&p| {
+                    let n = DVec3::from_array([0, 1, 2].map(|c| gt[3 * p + c] as f64));
+                    n.is_finite() && n.dot(view(p)) >= 0.5
+                })
+                .count()
+        };
+        let own = count(&|p| camera.view((p % 64) as f64, (p / 64) as f64));
+        let along_z = count(&|_| DVec3::Z);
+        assert_eq!(report.evaluation.pixels, own);
+        assert_ne!(own, along_z);
+        assert!(report.evaluation.normal_error.mean < 1e-3);
+        // Without K.txt the view is +z, as for every distant-light dataset.
+        std::fs::remove_file(data.join("K.txt")).unwrap();
+        let report = evaluate_job(&EvalConfig::new(&data, &est), &Control::default()).unwrap();
+        assert_eq!((report.view, report.evaluation.pixels), ("+z", along_z));
+    }
 }

@@ -85,6 +85,29 @@ pub fn evaluate(
     mask: Option<&[bool]>,
     max_normal_angle_deg: f64,
 ) -> Evaluation {
+    evaluate_in_views(
+        normals,
+        tangents,
+        gt_normals,
+        gt_tangents,
+        mask,
+        max_normal_angle_deg,
+        &|_| DVec3::Z,
+    )
+}
+
+/// [`evaluate`] with each pixel's own view: `view(p)` is the unit vector from pixel `p`'s
+/// surface toward the camera (a pinhole camera's `view(col, row)`), and only pixels whose true
+/// normal is within `max_normal_angle_deg` of it are evaluated.
+pub fn evaluate_in_views(
+    normals: &[f32],
+    tangents: &[f32],
+    gt_normals: &[f32],
+    gt_tangents: Option<&[f32]>,
+    mask: Option<&[bool]>,
+    max_normal_angle_deg: f64,
+    view: &dyn Fn(usize) -> DVec3,
+) -> Evaluation {
     let cos_max = max_normal_angle_deg.to_radians().cos();
     let (mut ne, mut te, mut tse) = (Vec::new(), Vec::new(), Vec::new());
     let (mut pixels, mut swapped) = (0usize, 0usize);
@@ -95,7 +118,7 @@ pub fn evaluate(
         let Some(gn) = vec_at(gt_normals, p) else {
             continue;
         };
-        if gn.z < cos_max {
+        if gn.dot(view(p)) < cos_max {
             continue;
         }
         pixels += 1;

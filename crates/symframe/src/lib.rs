@@ -107,7 +107,10 @@ pub use frames::symmetry::CosineMode;
 pub use method::{run_stack, PixelMethod, Worker};
 
 // The maps an estimate writes, and their error against ground truth.
-pub use eval::{evaluate, normal_error_map, tangent_error_map, vec_at, ErrorStats, Evaluation};
+pub use eval::{
+    evaluate, evaluate_in_views, normal_error_map, tangent_error_map, vec_at, ErrorStats,
+    Evaluation,
+};
 pub use maps::{EstimateMaps, PixelCounts, PixelRecord, PixelSource, PixelStatus};
 
 // Fitting a BRDF per pixel in the estimated frames, and relighting the fit.
