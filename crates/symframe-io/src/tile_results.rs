@@ -235,7 +235,7 @@ fn records(b: &[u8]) -> std::result::Result<Vec<PixelRecord>, Problem> {
 
 /// Parses tile result bytes (any job, tile and size), for fuzzing the parser: the records, or
 /// the one-line reason they were refused.
-#[doc(hidden)]
+#[cfg(any(test, feature = "fuzzing"))]
 pub fn parse_tile_result_bytes(b: &[u8]) -> std::result::Result<Vec<PixelRecord>, String> {
     let field = |o: usize| {
         b.get(o..o + 8)

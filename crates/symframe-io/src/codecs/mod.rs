@@ -332,14 +332,12 @@ pub fn declared_size(path: &Path, bytes: &[u8], opts: &DecodeOptions) -> Result<
 }
 
 /// An 8-bit image's width, height, channels and interleaved samples ([`decode_8bit`]).
-#[doc(hidden)]
 pub type Samples8 = (usize, usize, usize, Vec<u8>);
 
 /// The samples of the 8-bit image file `path` (content `bytes`) as its decoder gives them
 /// (width, height, channels, every channel interleaved), before anything is made linear: what
 /// an integer tile cache stores. For timing and comparing decoders; `None` for an image of
 /// other samples.
-#[doc(hidden)]
 pub fn decode_8bit(path: &Path, bytes: &[u8]) -> Result<Option<Samples8>> {
     let ext = extension(path)?;
     let run = || -> Result<Option<Samples8>> {

@@ -8,7 +8,9 @@ use std::time::UNIX_EPOCH;
 use rayon::prelude::*;
 
 use super::codes::{LightCodes, LIGHT_RECORD_BYTES};
-use super::{verify, CacheFormat, TileGrid};
+#[cfg(any(test, feature = "fuzzing"))]
+use super::verify;
+use super::{CacheFormat, TileGrid};
 use crate::codecs::DecodeOptions;
 use crate::dataset::Dataset;
 use crate::error::{Error, Result, Warning};
@@ -205,7 +207,7 @@ impl Header {
 
 /// Checks a whole cache file's bytes as a reuse would, for fuzzing the header, table and
 /// warnings parsers: `None` if the header is refused, else the number of failing blocks.
-#[doc(hidden)]
+#[cfg(any(test, feature = "fuzzing"))]
 pub fn check_cache_bytes(b: &[u8]) -> Option<usize> {
     let h = Header::decode(b)?;
     if !(h.complete

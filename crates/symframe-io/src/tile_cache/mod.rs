@@ -89,7 +89,7 @@ mod view;
 use build::{build, repair};
 use codes::CodeTables;
 pub use grid::{TileGrid, TileRect};
-#[doc(hidden)]
+#[cfg(any(test, feature = "fuzzing"))]
 pub use header::check_cache_bytes;
 use header::{cache_stem, matches, read_header, read_warnings, Header, HEADER_BYTES};
 pub use header::{
