@@ -156,8 +156,8 @@ impl ModelArg {
         }
     }
 
-    /// The default of `--model`: the model that predicts held-out lights better on the
-    /// validation scenes (docs/validation.md, "Relighting").
+    /// The default of `--model`: the library's default model
+    /// ([`symframe::DEFAULT_MODEL`], the automatic choice per pixel).
     pub const DEFAULT: ModelArg = match symframe::appearance::fit::DEFAULT_MODEL {
         symframe::FitModel::Ward => ModelArg::Ward,
         symframe::FitModel::Gltf => ModelArg::Gltf,
@@ -600,14 +600,15 @@ pub struct FitArgs {
     /// How the images are decoded.
     #[command(flatten)]
     pub decode: DecodeFlags,
-    /// The reflectance model fitted per pixel (default: the one that predicts held-out lights
-    /// better on the validation scenes, docs/validation.md).
+    /// The reflectance model fitted per pixel (default: auto, each pixel's better predictor
+    /// of its validation lights; ward or gltf forces one model everywhere).
     #[arg(long, value_enum, default_value_t = ModelArg::DEFAULT)]
     pub model: ModelArg,
-    /// glTF model: the intensity of the lights in the images' units (a white diffuse surface
-    /// facing a light of intensity E has radiance E/pi), or `auto`: chosen from free-scale
-    /// fits of sampled pixels so that base colours fit in [0, 1]. Recorded in fit.json and
-    /// used by relight, view and export.
+    /// glTF and auto models: the intensity of the lights in the images' units (a white
+    /// diffuse surface facing a light of intensity E has radiance E/pi), or `auto`: the
+    /// candidate intensity whose fits of sampled pixels best predict their validation lights
+    /// (docs/method.md, "Choosing the exposure"). Recorded in fit.json and used by relight,
+    /// view and export.
     #[arg(long, default_value = "auto", value_parser = parse_exposure, value_name = "E|auto")]
     pub exposure: ExposureArg,
     /// glTF model: the smallest roughness the fit may return.

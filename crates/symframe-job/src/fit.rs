@@ -39,11 +39,12 @@ pub struct FitConfig {
     /// Lights left out of the fit (evenly spaced in input order) to judge it on; they replace
     /// `params.holdout`.
     pub holdout: usize,
-    /// The fit's parameters (`params.model` chooses the model).
+    /// The fit's parameters (`params.model` chooses the model; the default is the automatic
+    /// choice per pixel, [`symframe::DEFAULT_MODEL`]).
     pub params: FitParams,
-    /// glTF fit: the light intensity ([`FitParams::exposure`]); `None` chooses it from
-    /// free-scale fits of up to [`EXPOSURE_PIXELS`] pixels spread over the image
-    /// ([`symframe::appearance::gltf_fit::choose_exposure`]). Replaces `params.exposure`.
+    /// glTF or automatic fit: the light intensity ([`FitParams::exposure`]); `None` chooses
+    /// it by validation lights on up to [`EXPOSURE_PIXELS`] pixels spread over the image
+    /// ([`symframe::select_exposure`]). Replaces `params.exposure`.
     pub exposure: Option<f64>,
     /// Mask image (`None`: the dataset's `mask.png`, if any).
     pub mask: Option<PathBuf>,
@@ -56,7 +57,8 @@ pub struct FitConfig {
 }
 
 impl FitConfig {
-    /// Every default: no held-out lights, the default [`FitParams`] and cache.
+    /// Every default: no held-out lights, the default [`FitParams`] (the automatic model,
+    /// its exposure chosen from the data) and cache.
     pub fn new(
         input: impl Into<PathBuf>,
         frames: impl Into<PathBuf>,
@@ -135,7 +137,7 @@ pub struct FitReport {
     /// Whether that exposure was chosen from the data (`true`) or given (`false`).
     pub exposure_chosen: Option<bool>,
     /// How a chosen exposure was chosen: the intensities tried and the validation error of
-    /// each ([`symframe::appearance::fit::select_exposure`]).
+    /// each ([`symframe::select_exposure`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub exposure_choice: Option<ExposureChoice>,
     /// Fit parameters, including the held-out light indices.
@@ -455,7 +457,7 @@ pub const EXPOSURE_PIXELS: usize = 2048;
 
 /// The light intensity of a glTF fit chosen from up to [`EXPOSURE_PIXELS`] pixels (inside the
 /// mask, with a frame) spread evenly over the image, read tile by tile from the cache
-/// ([`symframe::appearance::fit::select_exposure`]).
+/// ([`symframe::select_exposure`]).
 fn choose_exposure(
     cache: &symframe_io::TileCache,
     lights: &[glam::DVec3],

@@ -1,5 +1,5 @@
-//! The job API on small rendered captures: the tiled fit equals the in-memory fit bit for bit,
-//! an interrupted fit resumes to the same maps, and an estimate's progress and stop flag work.
+//! The job API on small rendered captures: the tiled fit (the default, automatic model) equals
+//! the in-memory fit bit for bit, an interrupted fit resumes to the same maps, and an estimate's progress and stop flag work.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -64,8 +64,15 @@ fn the_tiled_fit_equals_the_in_memory_fit_and_resumes_after_a_stop() {
 
     let ds = symframe_io::open_dataset(&lp).unwrap();
     let stack = symframe_io::load_stack(&ds, &DecodeOptions::default(), &|| {}).unwrap();
+    // The default model, at the exposure the job chose by validation lights.
+    let exposure = resumed
+        .report
+        .exposure
+        .expect("the automatic fit has an exposure");
+    assert!(resumed.report.exposure_choice.is_some());
     let params = FitParams {
         holdout: holdout_lights(300, 6).unwrap(),
+        exposure,
         ..FitParams::default()
     };
     let maps = done.maps.as_ref().expect("kept by default");
@@ -82,9 +89,17 @@ fn the_tiled_fit_equals_the_in_memory_fit_and_resumes_after_a_stop() {
     let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&resumed.maps.ward.kd), bits(&memory.ward.kd));
     assert_eq!(bits(&resumed.maps.ward.alpha_t), bits(&memory.ward.alpha_t));
+    let (job_gltf, mem_gltf) = (resumed.maps.gltf.as_ref(), memory.gltf.as_ref());
+    let (job_gltf, mem_gltf) = (job_gltf.expect("glTF maps"), mem_gltf.expect("glTF maps"));
+    assert_eq!(bits(&job_gltf.base_color), bits(&mem_gltf.base_color));
+    assert_eq!(bits(&job_gltf.roughness), bits(&mem_gltf.roughness));
+    assert_eq!(resumed.maps.model, memory.model);
     assert_eq!(bits(&resumed.maps.residual), bits(&memory.residual));
     assert_eq!(resumed.maps.summary, memory.summary);
     assert!(memory.summary.anisotropic > 100, "{:?}", memory.summary);
+    // A Ward material: the automatic choice keeps Ward at most pixels.
+    let s = memory.summary;
+    assert!(s.ward_pixels > s.gltf_pixels, "{s:?}");
 }
 
 #[test]

@@ -359,19 +359,25 @@ fn fit<'py>(
     dict.set_item("report", to_python(py, &done.report)?)?;
     let m = done.maps;
     let (h, w) = (m.ward.height, m.ward.width);
-    match m.gltf {
-        Some(g) => {
-            dict.set_item("base_color", map_array(py, g.base_color, h, w, 3)?)?;
-            dict.set_item("metallic", map_array(py, g.metallic, h, w, 1)?)?;
-            dict.set_item("roughness", map_array(py, g.roughness, h, w, 1)?)?;
-            dict.set_item("anisotropy_strength", map_array(py, g.anisotropy, h, w, 1)?)?;
-        }
-        None => {
-            dict.set_item("kd", map_array(py, m.ward.kd, h, w, 3)?)?;
-            dict.set_item("ks", map_array(py, m.ward.ks, h, w, 3)?)?;
-            dict.set_item("alpha_t", map_array(py, m.ward.alpha_t, h, w, 1)?)?;
-            dict.set_item("alpha_b", map_array(py, m.ward.alpha_b, h, w, 1)?)?;
-        }
+    // An automatic fit returns both models' maps (NaN where the other was chosen) and the
+    // choice per pixel (`model`: 0 none, 1 Ward, 2 glTF, as model.npy).
+    let auto = config.params.model == symframe::FitModel::Auto;
+    if auto {
+        let codes: Vec<f32> = m.model.iter().map(|&c| c as f32).collect();
+        dict.set_item("model", map_array(py, codes, h, w, 1)?)?;
+    }
+    let ward = m.gltf.is_none() || auto;
+    if let Some(g) = m.gltf {
+        dict.set_item("base_color", map_array(py, g.base_color, h, w, 3)?)?;
+        dict.set_item("metallic", map_array(py, g.metallic, h, w, 1)?)?;
+        dict.set_item("roughness", map_array(py, g.roughness, h, w, 1)?)?;
+        dict.set_item("anisotropy_strength", map_array(py, g.anisotropy, h, w, 1)?)?;
+    }
+    if ward {
+        dict.set_item("kd", map_array(py, m.ward.kd, h, w, 3)?)?;
+        dict.set_item("ks", map_array(py, m.ward.ks, h, w, 3)?)?;
+        dict.set_item("alpha_t", map_array(py, m.ward.alpha_t, h, w, 1)?)?;
+        dict.set_item("alpha_b", map_array(py, m.ward.alpha_b, h, w, 1)?)?;
     }
     dict.set_item("normals", map_array(py, m.ward.normals, h, w, 3)?)?;
     dict.set_item("tangents", map_array(py, m.ward.tangents, h, w, 3)?)?;

@@ -301,10 +301,14 @@ def test_fit_and_relight_equal_the_command_line(capture, cli, tmp_path):
     symframe.estimate_path(capture, frames)
     cli("fit", capture, "--frames", frames, "-o", tmp_path / "fit_cli", "--holdout", "10")
     got = symframe.fit(capture, frames, tmp_path / "fit_py", holdout=10)
-    for name in ["base_color", "metallic", "roughness", "anisotropy_strength", "normals", "tangents"]:
+    for name in ["base_color", "metallic", "roughness", "anisotropy_strength", "kd", "ks",
+                 "alpha_t", "alpha_b", "model", "normals", "tangents"]:
         want = np.load(tmp_path / "fit_cli" / f"{name}.npy")
         assert np.array_equal(bits(got[name]), bits(want)), name
-    assert got["report"]["model"] == "gltf" and got["report"]["exposure"] > 0
+    # The default is the automatic choice: each fitted pixel Ward (1) or glTF (2).
+    assert got["report"]["model"] == "auto" and got["report"]["exposure"] > 0
+    codes = got["model"][np.isfinite(got["residual"])]
+    assert codes.size > 0 and np.isin(codes, [1, 2]).all()
     cli("fit", capture, "--frames", frames, "-o", tmp_path / "ward_cli", "--model", "ward",
         "--exposure", "2")
     ward = symframe.fit(capture, frames, tmp_path / "ward_py", model="ward", exposure=2.0)

@@ -190,9 +190,10 @@ fn a_new_fit_removes_the_old_fits_page() {
         "-o",
         s(&fit),
     ]));
-    // The default model's maps replace the Ward fit's.
+    // The default (automatic) fit's maps replace the Ward fit's: both models' maps and the
+    // choice per pixel.
     assert!(fit.join("base_color.npy").is_file() && !fit.join("viewer.html").exists());
-    assert!(!fit.join("kd.npy").exists());
+    assert!(fit.join("model.npy").is_file() && fit.join("kd.npy").is_file());
 }
 
 /// An estimate folder `dir/name` of a `size` x `size` sphere as `symframe estimate` writes it

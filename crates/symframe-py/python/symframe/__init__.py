@@ -231,17 +231,19 @@ def fit(
 
     ``path``: the capture; ``frames``: the output folder of :func:`estimate_path` for it (its
     tile cache is reused, so nothing is decoded again); ``out``: the output folder (maps as
-    ``.npy``, ``fit.json``). Options: ``model`` (``"gltf"``, the default: glTF 2.0
-    metallic-roughness with KHR_materials_anisotropy; ``"ward"``: anisotropic Ward),
-    ``exposure`` (glTF: the lights' intensity; ``None``, the default, chooses it from the
-    data), ``roughness_min``, ``holdout`` (lights left out of the fit to judge it),
+    ``.npy``, ``fit.json``). Options: ``model`` (``"auto"``, the default: per pixel
+    whichever of the two models below predicts the pixel's validation lights better;
+    ``"gltf"``: glTF 2.0 metallic-roughness with KHR_materials_anisotropy; ``"ward"``:
+    anisotropic Ward), ``exposure`` (glTF and auto: the lights' intensity; ``None``, the
+    default, chooses it from the data), ``roughness_min``, ``holdout`` (lights left out of the fit to judge it),
     ``max_iterations``, ``max_peak_ratio``, ``mask``, ``linear``, ``gamma``, ``saturation``, ``cache``,
     ``no_keep_cache``.
 
     Returns ``normals``, ``tangents``, ``residual``, ``holdout_residual``, ``report`` and the
     model's maps: glTF ``base_color`` (``H x W x 3``), ``metallic``, ``roughness``,
     ``anisotropy_strength`` (``H x W``); Ward ``kd``, ``ks`` (``H x W x 3``), ``alpha_t``,
-    ``alpha_b`` (``H x W``).
+    ``alpha_b`` (``H x W``); an automatic fit both (NaN where the other model was chosen)
+    and ``model`` (``H x W``: 0 not fitted, 1 Ward, 2 glTF).
     """
     return _native.fit(os.fspath(path), os.fspath(frames), os.fspath(out), progress, threads, options)
 

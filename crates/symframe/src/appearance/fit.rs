@@ -62,11 +62,10 @@ use crate::method::{run_stack, PixelMethod};
 use crate::stack::Stack;
 
 /// The reflectance model a fit estimates per pixel.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum FitModel {
     /// Anisotropic Ward (the paper's model): `kd`, `ks`, `alpha_t`, `alpha_b`.
-    #[default]
     Ward,
     /// glTF 2.0 metallic-roughness GGX with `KHR_materials_anisotropy`: base colour,
     /// metallic, roughness, anisotropy strength ([`super::gltf_fit`]).
@@ -125,16 +124,23 @@ impl std::str::FromStr for FitModel {
     }
 }
 
-/// The model `symframe fit --model` fits by default: the one that predicts held-out lights
-/// better on the validation scenes (docs/validation.md, "Relighting").
-pub const DEFAULT_MODEL: FitModel = FitModel::Gltf;
+/// The model fitted unless one is asked for (`symframe fit`, the fit job, the Python package,
+/// [`FitParams::default`], [`FitModel::default`]): the automatic choice per pixel, which
+/// predicts held-out lights as well as the better single model on nearly every material of
+/// the validation scenes (docs/validation.md, "Relighting").
+pub const DEFAULT_MODEL: FitModel = FitModel::Auto;
+
+impl Default for FitModel {
+    /// [`DEFAULT_MODEL`].
+    fn default() -> Self {
+        DEFAULT_MODEL
+    }
+}
 
 /// Parameters of the per-pixel fit.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FitParams {
-    /// The model fitted. `FitParams::default()` keeps the paper's Ward model (the library's
-    /// callers and tests rely on it); `symframe fit` and the Python package default to
-    /// [`DEFAULT_MODEL`].
+    /// The model fitted ([`DEFAULT_MODEL`] by default).
     #[serde(default)]
     pub model: FitModel,
     /// glTF model: the intensity of every light, in the units of the measurements (a white
@@ -172,7 +178,7 @@ fn default_roughness_min() -> f64 {
 impl Default for FitParams {
     fn default() -> Self {
         Self {
-            model: FitModel::Ward,
+            model: DEFAULT_MODEL,
             exposure: 1.0,
             roughness_min: default_roughness_min(),
             holdout: Vec::new(),
@@ -1487,6 +1493,14 @@ mod tests {
         crate::brdf::testutil::render_pixel(w, n, t, lights, 1.0)
     }
 
+    /// The default parameters with the Ward model forced (what `--model ward` asks for).
+    fn ward_params() -> FitParams {
+        FitParams {
+            model: FitModel::Ward,
+            ..FitParams::default()
+        }
+    }
+
     fn frame() -> (DVec3, DVec3) {
         let n = DVec3::new(0.3, -0.2, 0.9).normalize();
         let t = tangent_basis(n).0 * 0.6 + tangent_basis(n).1 * 0.8;
@@ -1499,7 +1513,7 @@ mod tests {
         let lights = uniform_cone_lights(200, 65.0);
         let w = Ward::new([0.3, 0.2, 0.1], [0.4, 0.5, 0.6], 0.3, 0.08);
         let rgb = render_pixel(&w, n, t, &lights);
-        let params = FitParams::default();
+        let params = ward_params();
         let mut f = PixelFitter::new(&lights, &params).unwrap();
         f.fit(n, Some(t), &rgb);
         let fit = WardFit {
@@ -1529,7 +1543,7 @@ mod tests {
         ] {
             let w = Ward::new(kd, ks, at, ab);
             let rgb = render_pixel(&w, n, t, &lights);
-            let params = FitParams::default();
+            let params = ward_params();
             let PixelOutcome::Fitted(fit, _) =
                 PixelFitter::new(&lights, &params)
                     .unwrap()
@@ -1555,7 +1569,7 @@ mod tests {
         let lights = uniform_cone_lights(400, 65.0);
         let w = Ward::isotropic([0.2, 0.3, 0.4], [0.5, 0.4, 0.3], 0.12);
         let rgb = render_pixel(&w, n, t, &lights);
-        let params = FitParams::default();
+        let params = ward_params();
         let PixelOutcome::Fitted(fit, _) = PixelFitter::new(&lights, &params)
             .unwrap()
             .fit(n, None, &rgb)
@@ -1580,7 +1594,7 @@ mod tests {
         }
         let params = FitParams {
             holdout: holdout_lights(300, 10).unwrap(),
-            ..FitParams::default()
+            ..ward_params()
         };
         let PixelOutcome::Fitted(fit, hold) =
             PixelFitter::new(&lights, &params)
@@ -1671,6 +1685,13 @@ mod tests {
                 "{model:?}: relit {relit_ratio}, truth {truth_ratio}"
             );
         }
+    }
+
+    #[test]
+    fn one_default_model() {
+        assert_eq!(FitModel::default(), DEFAULT_MODEL);
+        assert_eq!(FitParams::default().model, DEFAULT_MODEL);
+        assert_eq!(DEFAULT_MODEL, FitModel::Auto);
     }
 
     #[test]

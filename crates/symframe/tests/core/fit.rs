@@ -3,7 +3,7 @@
 //! data from other reflectance models (the fit's model error).
 
 use glam::DVec3;
-use symframe::appearance::fit::{fit_stack, holdout_lights, FitMaps, FitParams};
+use symframe::appearance::fit::{fit_stack, holdout_lights, FitMaps, FitModel, FitParams};
 use symframe::appearance::relight::{image_psnr, Edits, Relighter};
 use symframe::brdf::ward::Ward;
 use symframe::brdf::Brdf;
@@ -120,6 +120,7 @@ fn true_frames_recover_ward_parameters_and_relight_held_out_lights() {
     let holdout = holdout_lights(lights.len(), 20).unwrap();
     let params = FitParams {
         holdout: holdout.clone(),
+        model: FitModel::Ward,
         ..FitParams::default()
     };
     let fit = fit_stack(
@@ -173,6 +174,7 @@ fn estimated_frames_give_close_parameters_and_relighting() {
     let stack = scene.render_stack(&w, &lights);
     let params = FitParams {
         holdout: holdout.clone(),
+        model: FitModel::Ward,
         ..FitParams::default()
     };
     let fit = fit_stack(
@@ -218,6 +220,7 @@ fn other_models_held_out_psnr() {
     let rig = Rig::new(&train, RigOptions::default()).unwrap();
     let params = FitParams {
         holdout: holdout.clone(),
+        model: FitModel::Ward,
         ..FitParams::default()
     };
     for spec in [
@@ -260,7 +263,6 @@ fn other_models_held_out_psnr() {
 
 #[test]
 fn true_frames_recover_gltf_parameters_and_relight_held_out_lights() {
-    use symframe::appearance::fit::FitModel;
     use symframe::brdf::gltf::GltfPbr;
     let scene = Scene::sphere(24, TangentField::Circular);
     let g = GltfPbr::new([0.85, 0.6, 0.35], 1.0, 0.3, 0.55);
