@@ -3,11 +3,7 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
-use symframe::appearance::fit::FitParams;
-use symframe::appearance::relight::Edits;
-use symframe::frames::estimator::Fallback;
-use symframe::frames::symmetry::CosineMode;
-use symframe::{EstimatorParams, RigOptions};
+use symframe::{CosineMode, Edits, EstimatorParams, Fallback, FitParams, RigOptions};
 use symframe_console::flags::{default_decode_memory_mib, CacheFormatArg};
 use symframe_console::Globals;
 use symframe_io::{CacheOptions, DecodeOptions};
@@ -158,7 +154,7 @@ impl ModelArg {
 
     /// The default of `--model`: the library's default model
     /// ([`symframe::DEFAULT_MODEL`], the automatic choice per pixel).
-    pub const DEFAULT: ModelArg = match symframe::appearance::fit::DEFAULT_MODEL {
+    pub const DEFAULT: ModelArg = match symframe::DEFAULT_MODEL {
         symframe::FitModel::Ward => ModelArg::Ward,
         symframe::FitModel::Gltf => ModelArg::Gltf,
         symframe::FitModel::Auto => ModelArg::Auto,
@@ -771,7 +767,7 @@ pub struct CalibrateArgs {
     /// is looked for (and what was found is printed). With --K, once per chrome sphere (two or
     /// more; none: they are looked for).
     #[arg(long, value_parser = parse_circle, allow_hyphen_values = true)]
-    pub sphere: Vec<symframe::calibrate::Circle>,
+    pub sphere: Vec<symframe::Circle>,
     /// The `.lp` file to write (image paths relative to its folder); `<stem>-highlights.png`
     /// and `<stem>-calibration.json` are written beside it. With --K: the
     /// `light_positions.txt` to write (one row per image), `<stem>-calibration.json` beside it
@@ -796,15 +792,15 @@ pub struct CalibrateArgs {
     /// intensity is measured there and written as light_intensities.txt beside the .lp,
     /// normalised to a mean of 1 over all lights and channels.
     #[arg(long, value_parser = parse_circle, allow_hyphen_values = true, value_name = "CX,CY,R")]
-    pub matte_sphere: Option<symframe::calibrate::Circle>,
+    pub matte_sphere: Option<symframe::Circle>,
     /// How the images are decoded.
     #[command(flatten)]
     pub decode: DecodeFlags,
 }
 
 /// Parses a circle written `CX,CY,R` (`--sphere`, `--matte-sphere`).
-fn parse_circle(s: &str) -> Result<symframe::calibrate::Circle, String> {
-    symframe::calibrate::Circle::parse(s)
+fn parse_circle(s: &str) -> Result<symframe::Circle, String> {
+    symframe::Circle::parse(s)
 }
 
 /// Formats of `symframe export`.

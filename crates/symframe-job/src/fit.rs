@@ -9,11 +9,10 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
-use symframe::appearance::fit::{
-    holdout_lights, ExposureChoice, FitMaps, FitMethod, FitModel, FitParams, FitSummary,
+use symframe::{
+    holdout_lights, ExposureChoice, FitMaps, FitMethod, FitModel, FitParams, FitSummary, GltfFit,
     HoldoutError, PixelOutcome, WardFit, MODEL_GLTF, MODEL_WARD,
 };
-use symframe::appearance::gltf_fit::GltfFit;
 use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{
     CacheFormat, CacheOptions, Dataset, DecodeOptions, Fingerprints, StampKind, TileFile,
@@ -467,8 +466,8 @@ fn choose_exposure(
     mask: Option<&[bool]>,
 ) -> Result<ExposureChoice> {
     use rayon::prelude::*;
-    use symframe::appearance::fit::{PixelData, PixelFitter};
-    use symframe::eval::vec_at;
+    use symframe::vec_at;
+    use symframe::{PixelData, PixelFitter};
     let grid = *cache.grid();
     let usable = |p: usize| mask.is_none_or(|m| m[p]) && vec_at(normals, p).is_some();
     let count = (0..grid.width * grid.height).filter(|&p| usable(p)).count();
@@ -505,7 +504,7 @@ fn choose_exposure(
             out
         })
         .collect();
-    symframe::appearance::fit::select_exposure(lights, params, &pixels).with_context(|| {
+    symframe::select_exposure(lights, params, &pixels).with_context(|| {
         "no pixel to choose the exposure of the glTF fit from; give it with --exposure"
     })
 }

@@ -13,8 +13,10 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
-use symframe::near::{perspective_depth, perspective_mesh, picture_heights, Pinhole};
-use symframe::{integrate, mesh, shade, DepthMap, IntegrateParams, Mesh, Solver};
+use symframe::{
+    integrate, mesh, perspective_depth, perspective_mesh, picture_heights, shade, DepthMap,
+    IntegrateParams, Mesh, Pinhole, Solver,
+};
 
 use crate::outdir::{OutputDir, OutputSet};
 

@@ -4,10 +4,9 @@
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
-use symframe::appearance::fit::{fit_stack, holdout_lights, FitParams};
-use symframe::brdf::ward::Ward;
-use symframe::frames::rig::uniform_cone_lights;
+use symframe::brdf::Ward;
 use symframe::render::{Scene, TangentField};
+use symframe::{fit_stack, holdout_lights, uniform_cone_lights, FitParams};
 use symframe_io::{DecodeOptions, ImageFormat};
 use symframe_job::{
     estimate, fit, Control, EstimateConfig, EstimateOutcome, FitConfig, Interrupted, Stage,

@@ -14,8 +14,9 @@ use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray4, PyUnty
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
-use symframe::check_inputs;
-use symframe::{BaselineMethod, EstimateMaps, Estimator, PixelMethod, PixelRecord, Rig, Stack};
+use symframe::{
+    check_inputs, BaselineMethod, EstimateMaps, Estimator, PixelMethod, PixelRecord, Rig, Stack,
+};
 use symframe_io::DecodeOptions;
 use symframe_job::{EstimateConfig, EstimateOutcome, MethodConfig, Progress, Sources, Stage};
 
@@ -305,10 +306,7 @@ fn fit<'py>(
     let mut o = Options::new("fit", options);
     let d = symframe::FitParams::default();
     let holdout: usize = o.or("holdout", 0)?;
-    let model: String = o.or(
-        "model",
-        symframe::appearance::fit::DEFAULT_MODEL.name().to_string(),
-    )?;
+    let model: String = o.or("model", symframe::DEFAULT_MODEL.name().to_string())?;
     let exposure: Option<f64> = o.get("exposure")?;
     let roughness_min: f64 = o.or("roughness_min", d.roughness_min)?;
     let max_iterations: u32 = o.or("max_iterations", d.max_iterations)?;
@@ -473,7 +471,7 @@ fn integrate<'py>(
     out: PathBuf,
     options: Option<Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    use symframe::integrate::Solver;
+    use symframe::Solver;
     let mut o = Options::new("integrate", options);
     let mut config = symframe_job::IntegrateConfig::new(estimate, out);
     let solver: String = o.or("solver", "bilateral".to_string())?;
@@ -691,8 +689,7 @@ fn evaluate<'py>(
                 .map_err(|e| PyValueError::new_err(e.to_string()))
         })
         .transpose()?;
-    let e =
-        py.detach(|| symframe::eval::evaluate(&n, &t, &g, gt.as_deref(), m.as_deref(), max_angle));
+    let e = py.detach(|| symframe::evaluate(&n, &t, &g, gt.as_deref(), m.as_deref(), max_angle));
     to_python(py, &e)
 }
 

@@ -1219,7 +1219,8 @@ mod tests {
     /// `r` at a sub-pixel position under 120 lamps up to 130 degrees from the view, with the
     /// circle given (exact) and detected; 8-bit images (the lamp clipped) where `eight_bit`.
     fn mirror_ball_errors(r: f64, eight_bit: bool) -> [(f64, f64); 2] {
-        use crate::render::{rigs::uniform_cone_lights, MirrorBall};
+        use crate::frames::rig::uniform_cone_lights;
+        use crate::render::MirrorBall;
         let size = (2.0 * r + 12.0).ceil() as usize;
         let ball = MirrorBall::new(size as f64 / 2.0 + 0.37, size as f64 / 2.0 - 0.21, r);
         let lights = uniform_cone_lights(120, 65.0);

@@ -63,12 +63,12 @@
 //! # Ok::<(), symframe::Error>(())
 //! ```
 
-#![warn(unreachable_pub)]
+#![warn(unnameable_types)]
 
 pub mod appearance;
 mod baselines;
 pub mod brdf;
-pub mod calibrate;
+mod calibrate;
 mod error;
 pub mod eval;
 pub mod frames;
@@ -97,10 +97,11 @@ pub use stack::{check_inputs, Stack};
 // Estimating frames: the estimator, its parameters, the per-pixel interface and its drivers.
 pub use baselines::{
     baseline_pixel, estimate_stack_baseline, estimate_stack_baseline_with, Baseline,
-    BaselineMethod, BaselineParams,
+    BaselineMethod, BaselineParams, BaselinePixel,
 };
 pub use frames::estimator::{
-    estimate_stack, Estimator, EstimatorParams, Fallback, Interpolation, PixelScratch,
+    estimate_stack, Estimator, EstimatorParams, Fallback, Interpolation, PixelEstimate,
+    PixelScratch,
 };
 pub use frames::slice::{gather_pixel, gather_slice};
 pub use frames::symmetry::CosineMode;
@@ -116,8 +117,8 @@ pub use maps::{EstimateMaps, PixelCounts, PixelRecord, PixelSource, PixelStatus}
 // Fitting a BRDF per pixel in the estimated frames, and relighting the fit.
 pub use appearance::fit::{
     fit_stack, holdout_lights, select_exposure, ExposureChoice, FitMaps, FitMethod, FitModel,
-    FitParams, FitSummary, GltfMaps, HoldoutError, PixelData, PixelFitter, PixelOutcome, WardFit,
-    WardMaps, DEFAULT_MODEL, MODEL_GLTF, MODEL_WARD,
+    FitParams, FitStatus, FitSummary, GltfMaps, HoldoutError, PixelData, PixelFitter, PixelOutcome,
+    WardFit, WardMaps, DEFAULT_MODEL, MODEL_GLTF, MODEL_WARD,
 };
 pub use appearance::gltf_fit::GltfFit;
 pub use appearance::relight::{image_psnr, tone_map, Edits, Relighter};
@@ -128,13 +129,15 @@ pub use integrate::{integrate, mesh, shade, DepthMap, IntegrateParams, Mesh, Sol
 // Light calibration: chrome and matte spheres.
 pub use calibrate::{
     detect_sphere, detect_spheres, find_highlight, matte_intensity, outline_points, Circle,
-    Highlight, HighlightError, HighlightParams, MatteError, MatteParams,
+    Detection, Highlight, HighlightError, HighlightParams, MatteError, MatteParams,
 };
 
 // Near lights and perspective cameras.
 pub use near::chrome::{circle_rim, reflected_ray, sphere_from_rim, triangulate, Triangulation};
 pub use near::{
-    depth_from_normals, fit_sphere, mean_change_deg, NearMethod, NearParams, Pinhole, PointLight,
+    depth_from_normals, estimate_near_stack, fit_sphere, mean_change_deg, perspective_depth,
+    perspective_mesh, picture_heights, NearMethod, NearOutcome, NearParams, NearScratch, Pinhole,
+    PointLight,
 };
 
 pub use error::{Error, Result};

@@ -1097,7 +1097,7 @@ impl PixelFitter<'_> {
     /// A free-scale glTF fit of one pixel (its own light intensity), on the training samples,
     /// for choosing the exposure ([`gltf_fit::choose_exposure`]); `None` where the pixel would
     /// not be fitted.
-    pub fn scale(
+    pub(crate) fn scale(
         &mut self,
         normal: DVec3,
         tangent: Option<DVec3>,

@@ -158,6 +158,7 @@ fn facet_visible(w: DVec3, h: DVec3) -> bool {
 
 /// Smith `G1(w, h)` for Beckmann.
 #[inline]
+#[cfg(test)]
 pub fn smith_g1_beckmann(w: DVec3, h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
     if !facet_visible(w, h) {
         return 0.0;
@@ -167,6 +168,7 @@ pub fn smith_g1_beckmann(w: DVec3, h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 
 
 /// Smith `G1(w, h)` for GGX.
 #[inline]
+#[cfg(test)]
 pub fn smith_g1_ggx(w: DVec3, h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
     if !facet_visible(w, h) {
         return 0.0;
@@ -239,6 +241,7 @@ pub fn fresnel_dielectric(cos_theta: f64, eta: f64) -> f64 {
 
 /// The relative index of refraction whose normal-incidence Fresnel reflectance is `f0`
 /// (`f0 = ((η-1)/(η+1))²`), for `f0` in `[0, 1)`.
+#[cfg(test)]
 pub fn ior_from_f0(f0: f64) -> f64 {
     let s = f0.clamp(0.0, 1.0 - 1e-12).sqrt();
     (1.0 + s) / (1.0 - s)

@@ -43,23 +43,23 @@ pub trait Brdf: Send + Sync {
     fn name(&self) -> String;
 }
 
-pub mod ashikhmin_shirley;
-pub mod beckmann;
-pub mod blinn_phong;
-pub mod cook_torrance;
-pub mod ggx;
-pub mod gltf;
-pub mod lambertian;
-pub mod layered;
-pub mod merl;
-pub mod microfacet;
-pub mod sheen;
+pub(crate) mod ashikhmin_shirley;
+pub(crate) mod beckmann;
+pub(crate) mod blinn_phong;
+pub(crate) mod cook_torrance;
+pub(crate) mod ggx;
+pub(crate) mod gltf;
+pub(crate) mod lambertian;
+pub(crate) mod layered;
+pub(crate) mod merl;
+pub(crate) mod microfacet;
+pub(crate) mod sheen;
 pub mod spec;
 #[cfg(test)]
 pub(crate) mod testutil;
-pub mod torrance_sparrow;
-pub mod ward;
-pub mod woven;
+pub(crate) mod torrance_sparrow;
+pub(crate) mod ward;
+pub(crate) mod woven;
 
 pub use ashikhmin_shirley::AshikhminShirley;
 pub use beckmann::Beckmann;

@@ -20,9 +20,9 @@ use crate::stack::Stack;
 
 mod mirror_ball;
 mod near_mirror;
-pub mod noise;
-pub mod perspective;
-pub mod rigs;
+pub(crate) mod noise;
+pub(crate) mod perspective;
+pub(crate) mod rigs;
 pub mod shadow;
 mod shapes;
 mod tangent;

@@ -3,8 +3,6 @@
 
 use glam::DVec3;
 
-pub use crate::frames::rig::uniform_cone_lights;
-
 /// Number of columns of the DiLiGenT-like grid ([`diligent_lights`]).
 pub const DILIGENT_COLS: usize = 12;
 /// Number of rows of the DiLiGenT-like grid ([`diligent_lights`]).

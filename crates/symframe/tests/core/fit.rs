@@ -3,13 +3,12 @@
 //! data from other reflectance models (the fit's model error).
 
 use glam::DVec3;
-use symframe::appearance::fit::{fit_stack, holdout_lights, FitMaps, FitModel, FitParams};
-use symframe::appearance::relight::{image_psnr, Edits, Relighter};
-use symframe::brdf::ward::Ward;
-use symframe::brdf::Brdf;
-use symframe::frames::rig::uniform_cone_lights;
+use symframe::brdf::{Brdf, Ward};
 use symframe::render::{Scene, TangentField};
-use symframe::{estimate_stack, EstimatorParams, Rig, RigOptions};
+use symframe::{
+    estimate_stack, fit_stack, holdout_lights, image_psnr, uniform_cone_lights, Edits,
+    EstimatorParams, FitMaps, FitModel, FitParams, Relighter, Rig, RigOptions,
+};
 
 /// Pixels inside the sphere whose normal is within 60 degrees of the view.
 fn evaluated(scene: &Scene) -> Vec<usize> {
@@ -263,7 +262,7 @@ fn other_models_held_out_psnr() {
 
 #[test]
 fn true_frames_recover_gltf_parameters_and_relight_held_out_lights() {
-    use symframe::brdf::gltf::GltfPbr;
+    use symframe::brdf::GltfPbr;
     let scene = Scene::sphere(24, TangentField::Circular);
     let g = GltfPbr::new([0.85, 0.6, 0.35], 1.0, 0.3, 0.55);
     let lights = uniform_cone_lights(400, 65.0);

@@ -30,7 +30,6 @@ mod confidence;
 mod diffuse;
 mod search;
 
-pub use confidence::CONFIDENT_WITHIN_DEG;
 use confidence::{unconfirmed, within_confident, JUDGE_LIGHTS};
 use diffuse::{diffuse_noise_share, unexplained_share};
 use search::{brightest_sample, centre_observed, highlight_wider_along, TangentSearch};

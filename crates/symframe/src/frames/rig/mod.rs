@@ -11,7 +11,7 @@ mod grid;
 mod locate;
 mod walk;
 
-pub use grid::{Coverage, StereoGrid};
+pub use grid::Coverage;
 pub use locate::Location;
 use locate::{triangulate, LocateGrid, Triangle};
 pub use walk::FastLocator;
@@ -243,13 +243,13 @@ impl Rig {
 
     /// Point location in single precision for the fast path.
     #[inline]
-    pub fn fast(&self) -> &FastLocator {
+    pub(crate) fn fast(&self) -> &FastLocator {
         &self.fast
     }
 
     /// Which halfway vectors lie well inside the sampled region: the symmetry domains' edge.
     #[inline]
-    pub fn coverage(&self) -> &Coverage {
+    pub(crate) fn coverage(&self) -> &Coverage {
         &self.coverage
     }
 
@@ -300,7 +300,7 @@ impl Rig {
     /// Locates a unit halfway vector in the triangulation and returns its spherical barycentric
     /// weights; `None` outside the sampled region (the spherical triangles' union).
     #[inline]
-    pub fn locate(&self, halfway: DVec3) -> Option<Location> {
+    pub(crate) fn locate(&self, halfway: DVec3) -> Option<Location> {
         self.grid
             .candidates(DVec2::new(halfway.x, halfway.y))
             .iter()
@@ -309,7 +309,8 @@ impl Rig {
 
     /// The same lookup as [`Rig::locate`] by testing every triangle: the reference that tests
     /// check the grid against.
-    pub fn locate_by_scan(&self, halfway: DVec3) -> Option<Location> {
+    #[cfg(test)]
+    pub(crate) fn locate_by_scan(&self, halfway: DVec3) -> Option<Location> {
         self.triangles.iter().find_map(|tri| tri.weights(halfway))
     }
 }
