@@ -11,7 +11,7 @@ use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use symframe::{
     check_inputs, Baseline, BaselineMethod, BaselineParams, EstimateMaps, Estimator,
-    EstimatorParams, LightAxes, PixelCounts, PixelSource, Rig, RigOptions,
+    EstimatorParams, PixelCounts, Rig, RigOptions,
 };
 use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{
@@ -20,15 +20,15 @@ use symframe_io::{
 };
 
 use crate::estimate_near::{run_near_rounds, LightModel, NearOptions, NearReport};
-use crate::maps_out::{write_estimate_outputs, TileResults, WriteOptions};
+use crate::maps_out::{
+    result_warnings, write_estimate_outputs, Sources, TileResults, WriteOptions,
+};
 use crate::merge::{write_manifest, ShardManifest, MANIFEST, MANIFEST_FORMAT, MANIFEST_VERSION};
 use crate::outdir::OutputDir;
 use crate::pictures::LightsPlot;
-use crate::tiles::{peak_rss_bytes, run_tiles, shard_tiles, tile_path};
+use crate::tiles::{peak_rss_bytes, run_tiles, shard_tiles, tile_path, TILES_DIR};
 use crate::{Checkpoint, Control, Interrupted, Progress, Stage};
 
-/// Folder of the per-tile result files inside an output folder.
-pub const TILES_DIR: &str = ".symframe-tiles";
 /// Default folder of the tile cache inside an output folder.
 pub const CACHE_DIR: &str = ".symframe-cache";
 
@@ -228,51 +228,6 @@ impl InputsRecord {
             fingerprint: format!("{:016x}", f.inputs),
             images_by: f.kind,
         }
-    }
-}
-
-/// One code of the source map, as recorded in the report.
-#[derive(Debug, Clone, Serialize)]
-pub struct SourceCount {
-    /// The code in `source.npy`.
-    pub code: u8,
-    /// Its name.
-    pub name: &'static str,
-    /// What it means.
-    pub description: &'static str,
-    /// Pixels with this code.
-    pub pixels: usize,
-}
-
-/// The source map's legend with per-source pixel counts.
-#[derive(Debug, Clone, Serialize)]
-pub struct Sources(pub Vec<SourceCount>);
-
-impl Sources {
-    /// The legend and counts of a source map (codes of [`PixelSource`]).
-    pub fn of(source: &[u8]) -> Self {
-        let mut counts = [0usize; PixelSource::ALL.len()];
-        for &c in source {
-            if let Some(n) = counts.get_mut(c as usize) {
-                *n += 1;
-            }
-        }
-        Self::from_counts(&counts)
-    }
-
-    /// The legend with `counts[code]` pixels per code (codes without a count: 0).
-    pub fn from_counts(counts: &[usize]) -> Self {
-        Sources(
-            PixelSource::legend()
-                .iter()
-                .map(|&(code, name, description)| SourceCount {
-                    code,
-                    name,
-                    description,
-                    pixels: counts.get(code as usize).copied().unwrap_or(0),
-                })
-                .collect(),
-        )
     }
 }
 
@@ -609,39 +564,6 @@ pub fn estimate(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcom
 /// The warnings collected so far (a poisoned lock still holds them).
 pub(crate) fn lock_warnings(w: &Mutex<Vec<String>>) -> std::sync::MutexGuard<'_, Vec<String>> {
     w.lock().unwrap_or_else(|e| e.into_inner())
-}
-
-/// The loud warnings about a finished job's maps: nothing estimated, or (given `beyond`, the
-/// number of estimated normals whose symmetry centre `h = n` the rig does not cover) most
-/// normals beyond the rig's reach, where only the fallbacks answer; and normals that fit
-/// together as a surface only with the lights' axes turned or reflected (`axes`).
-pub(crate) fn result_warnings(
-    counts: &PixelCounts,
-    beyond: Option<usize>,
-    axes: LightAxes,
-) -> Vec<String> {
-    let mut w = Vec::new();
-    if let Some(mapping) = axes.mapping() {
-        w.push(format!(
-            "the lights' convention looks wrong: the normals fit together as one surface facing \
-             out of its outline only with each light read as {mapping}; check the light file \
-             (symframe's lights: x to the image's right, y up the image, z toward the camera)"
-        ));
-    }
-    if counts.estimated == 0 {
-        w.push(format!(
-            "0 pixels estimated ({} discarded, {} culled, {} without data): the maps are empty",
-            counts.discarded, counts.culled, counts.no_data
-        ));
-    } else if let Some(beyond) = beyond.filter(|&b| b * 2 > counts.estimated) {
-        w.push(format!(
-            "most pixels beyond the rig's reach: {beyond} of {} estimated normals are where no \
-             light pair is symmetric about them, filled by the fallbacks (see source.npy; a \
-             rig with lights farther from the view reaches them)",
-            counts.estimated
-        ));
-    }
-    w
 }
 
 /// The near-light geometry the job uses: the dataset's positions and camera unless the

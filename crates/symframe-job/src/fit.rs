@@ -20,9 +20,10 @@ use symframe_io::{
 
 use crate::estimate::{
     cache_dir, fingerprint_lights, fingerprint_mask, lock_warnings, open_cache, read_mask,
-    remove_cache, CacheConfig, CacheReport, InputsRecord, CACHE_DIR, TILES_DIR,
+    remove_cache, CacheConfig, CacheReport, InputsRecord, CACHE_DIR,
 };
 use crate::outdir::{OutputDir, OutputSet};
+use crate::tiles::TILES_DIR;
 use crate::tiles::{read_tiles, run_tiles, tile_path, TileCounts, TileRecord};
 use crate::{Checkpoint, Control, Interrupted};
 

@@ -80,16 +80,18 @@ use std::sync::atomic::AtomicBool;
 
 pub use estimate::{
     estimate, BaselineParameters, CacheConfig, CacheReport, Done, EstimateConfig, EstimateOutcome,
-    InputsRecord, LightCounts, MethodConfig, MethodParameters, Report, Shard, SourceCount, Sources,
-    SymmetryParameters, TileReport, Timings, CACHE_DIR, TILES_DIR,
+    InputsRecord, LightCounts, MethodConfig, MethodParameters, Report, Shard, SymmetryParameters,
+    TileReport, Timings, CACHE_DIR,
 };
 pub use fit::{fit, FitConfig, FitLights, FitOutcome, FitReport, FitTimings};
+pub use maps_out::{SourceCount, Sources};
 pub use merge::{merge, MergeOutcome, ShardManifest, MANIFEST};
 pub use outdir::{check_output_set, OutputDir, OutputSet, Staging, LOCK_FILE};
 pub use relight::{
     read_fit_maps, read_gltf_maps, read_ward_maps, relight, FittedMaps, RelightConfig,
     RelightOutcome,
 };
+pub use tiles::TILES_DIR;
 pub use tiles::{peak_rss_bytes, shard_tiles, TileCounts};
 pub use view::{
     write_viewer, PyramidOutcome, ViewConfig, ViewOutcome, DEFAULT_PYRAMID_ABOVE, DEFAULT_TILE_SIZE,

@@ -10,13 +10,91 @@ use std::time::Instant;
 use anyhow::Result;
 use glam::DVec3;
 use rayon::prelude::*;
+use serde::Serialize;
 use symframe::{AxesCheck, EstimateMaps, LightAxes, PixelCounts, PixelSource};
 use symframe_io::{NormalPng, NpyRows, PngRows, TileGrid};
 
-use crate::estimate::Sources;
 use crate::outdir::{OutputDir, OutputSet};
 use crate::pictures::LightsPlot;
 use crate::{Checkpoint, Control};
+
+/// One code of the source map, as recorded in the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct SourceCount {
+    /// The code in `source.npy`.
+    pub code: u8,
+    /// Its name.
+    pub name: &'static str,
+    /// What it means.
+    pub description: &'static str,
+    /// Pixels with this code.
+    pub pixels: usize,
+}
+
+/// The source map's legend with per-source pixel counts.
+#[derive(Debug, Clone, Serialize)]
+pub struct Sources(pub Vec<SourceCount>);
+
+impl Sources {
+    /// The legend and counts of a source map (codes of [`PixelSource`]).
+    pub fn of(source: &[u8]) -> Self {
+        let mut counts = [0usize; PixelSource::ALL.len()];
+        for &c in source {
+            if let Some(n) = counts.get_mut(c as usize) {
+                *n += 1;
+            }
+        }
+        Self::from_counts(&counts)
+    }
+
+    /// The legend with `counts[code]` pixels per code (codes without a count: 0).
+    pub fn from_counts(counts: &[usize]) -> Self {
+        Sources(
+            PixelSource::legend()
+                .iter()
+                .map(|&(code, name, description)| SourceCount {
+                    code,
+                    name,
+                    description,
+                    pixels: counts.get(code as usize).copied().unwrap_or(0),
+                })
+                .collect(),
+        )
+    }
+}
+
+/// The loud warnings about a finished job's maps: nothing estimated, or (given `beyond`, the
+/// number of estimated normals whose symmetry centre `h = n` the rig does not cover) most
+/// normals beyond the rig's reach, where only the fallbacks answer; and normals that fit
+/// together as a surface only with the lights' axes turned or reflected (`axes`).
+pub(crate) fn result_warnings(
+    counts: &PixelCounts,
+    beyond: Option<usize>,
+    axes: LightAxes,
+) -> Vec<String> {
+    let mut w = Vec::new();
+    if let Some(mapping) = axes.mapping() {
+        w.push(format!(
+            "the lights' convention looks wrong: the normals fit together as one surface facing \
+             out of its outline only with each light read as {mapping}; check the light file \
+             (symframe's lights: x to the image's right, y up the image, z toward the camera)"
+        ));
+    }
+    if counts.estimated == 0 {
+        w.push(format!(
+            "0 pixels estimated ({} discarded, {} culled, {} without data): the maps are empty",
+            counts.discarded, counts.culled, counts.no_data
+        ));
+    } else if let Some(beyond) = beyond.filter(|&b| b * 2 > counts.estimated) {
+        w.push(format!(
+            "most pixels beyond the rig's reach: {beyond} of {} estimated normals are where no \
+             light pair is symmetric about them, filled by the fallbacks (see source.npy; a \
+             rig with lights farther from the view reaches them)",
+            counts.estimated
+        ));
+    }
+    w
+}
 
 /// The result files of a finished job's tiles: the grid, the job's fingerprint, and where
 /// tile `t`'s file is.

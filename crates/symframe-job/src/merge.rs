@@ -10,10 +10,9 @@ use serde::{Deserialize, Serialize};
 use symframe::{EstimateMaps, PixelCounts};
 use symframe_io::TileGrid;
 
-use crate::estimate::{result_warnings, TILES_DIR};
-use crate::maps_out::{write_estimate_outputs, TileResults, WriteOptions};
+use crate::maps_out::{result_warnings, write_estimate_outputs, TileResults, WriteOptions};
 use crate::outdir::OutputDir;
-use crate::tiles::{peak_rss_bytes, tile_path};
+use crate::tiles::{peak_rss_bytes, tile_path, TILES_DIR};
 use crate::{Checkpoint, Control, Interrupted, Progress, Stage};
 
 /// A shard's manifest, written once all its tiles are done.

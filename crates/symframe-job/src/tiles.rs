@@ -21,6 +21,9 @@ use symframe_io::TileFile;
 
 use crate::{Control, Interrupted, Progress, Stage};
 
+/// Folder of the per-tile result files inside an output folder.
+pub const TILES_DIR: &str = ".symframe-tiles";
+
 /// A per-pixel result that can be stored in a tile result file.
 pub(crate) trait TileRecord: Sized + Send {
     /// Writes tile `t`'s records atomically to `path`, tagged with the job's fingerprint.
