@@ -138,7 +138,7 @@ impl Circle {
 
 /// The light direction (surface toward light) whose mirror reflection about `n` is the view
 /// `(0, 0, 1)`: `l = 2 (n . v) n - v`.
-pub fn light_from_normal(n: DVec3) -> DVec3 {
+pub(crate) fn light_from_normal(n: DVec3) -> DVec3 {
     (2.0 * n.z * n - DVec3::Z).normalize()
 }
 

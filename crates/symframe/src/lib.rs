@@ -63,7 +63,8 @@
 //! # Ok::<(), symframe::Error>(())
 //! ```
 
-#![warn(unnameable_types)]
+#![deny(unnameable_types)]
+#![deny(unreachable_pub)]
 
 pub mod appearance;
 mod baselines;

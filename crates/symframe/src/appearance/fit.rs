@@ -234,14 +234,14 @@ impl FitParams {
 }
 
 /// One training light in this many is a validation light ([`validation_lights`]).
-pub const VALIDATION_EVERY: usize = 5;
+pub(crate) const VALIDATION_EVERY: usize = 5;
 
 /// Which lights choose between fits (the exposure of a glTF fit, the model of an automatic
 /// fit): one in [`VALIDATION_EVERY`] of the lights not in `holdout`, counted in input order
 /// (the third of every five), so deterministic and spread over the rig like the held-out
 /// lights. A fit that chooses fits its candidates on the other training lights and keeps the
 /// one with the smallest squared error on these.
-pub fn validation_lights(n_lights: usize, holdout: &[usize]) -> Vec<bool> {
+pub(crate) fn validation_lights(n_lights: usize, holdout: &[usize]) -> Vec<bool> {
     let mut held = vec![false; n_lights];
     for &i in holdout {
         if i < n_lights {
@@ -428,7 +428,7 @@ pub struct FitSummary {
 }
 
 /// [`FitMaps::model`] where a pixel was not fitted.
-pub const MODEL_NONE: u8 = 0;
+pub(crate) const MODEL_NONE: u8 = 0;
 /// [`FitMaps::model`] where a pixel's model is Ward.
 pub const MODEL_WARD: u8 = 1;
 /// [`FitMaps::model`] where a pixel's model is glTF.
@@ -1149,10 +1149,10 @@ pub struct ExposureChoice {
 
 /// [`select_exposure`] keeps the lowest intensity whose validation RMS is within this share of
 /// the best one's.
-pub const EXPOSURE_TOLERANCE: f64 = 0.05;
+pub(crate) const EXPOSURE_TOLERANCE: f64 = 0.05;
 
 /// Pixels [`select_exposure`] judges each candidate intensity on, at most.
-pub const EXPOSURE_JUDGED_PIXELS: usize = 512;
+pub(crate) const EXPOSURE_JUDGED_PIXELS: usize = 512;
 
 /// The light intensity of a glTF fit (or of an automatic fit's glTF part) from sampled
 /// pixels: the candidates are the lowest intensity that keeps 99% of the pixels' base colours
@@ -1478,7 +1478,7 @@ impl FitMaps {
 }
 
 /// `20 log10(peak / rms)`, infinite for a zero error.
-pub fn psnr_db(peak: f64, rms: f64) -> f64 {
+pub(crate) fn psnr_db(peak: f64, rms: f64) -> f64 {
     20.0 * (peak / rms).log10()
 }
 

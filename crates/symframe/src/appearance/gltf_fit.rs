@@ -188,7 +188,7 @@ pub(crate) fn fit_exposure(
 /// The result of a free-scale fit of one pixel
 /// ([`PixelFitter::scale`](super::fit::PixelFitter::scale)).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PixelScale {
+pub(crate) struct PixelScale {
     /// The pixel's own best light intensity.
     pub exposure: f64,
     /// Light intensity times base colour, per channel.
@@ -203,7 +203,7 @@ pub struct PixelScale {
 /// metal's does not), when at least a quarter of the pixels are, raised if needed to the 99th percentile of the brightest channel of
 /// `e c`, so that at most 1% of the pixels' base colours would exceed 1. `None` without any
 /// usable pixel.
-pub fn choose_exposure(pixels: &[PixelScale]) -> Option<f64> {
+pub(crate) fn choose_exposure(pixels: &[PixelScale]) -> Option<f64> {
     match exposure_bounds(pixels) {
         (Some(d), Some(b)) => Some(d.max(b)),
         (d, b) => d.or(b),
@@ -214,7 +214,7 @@ pub fn choose_exposure(pixels: &[PixelScale]) -> Option<f64> {
 /// dielectric pixels (when they are at least a quarter), and the 99th percentile of the
 /// brightest channel of `e c` (the lowest intensity that keeps 99% of the base colours within
 /// 1).
-pub fn exposure_bounds(pixels: &[PixelScale]) -> (Option<f64>, Option<f64>) {
+pub(crate) fn exposure_bounds(pixels: &[PixelScale]) -> (Option<f64>, Option<f64>) {
     let quantile = |mut v: Vec<f64>, q: f64| -> Option<f64> {
         v.retain(|x| x.is_finite() && *x > 0.0);
         if v.is_empty() {

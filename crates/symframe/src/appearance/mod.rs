@@ -3,5 +3,5 @@
 //! and editing them under new lights ([`relight`]).
 
 pub mod fit;
-pub mod gltf_fit;
+pub(crate) mod gltf_fit;
 pub mod relight;

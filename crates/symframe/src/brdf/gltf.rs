@@ -44,7 +44,7 @@ pub struct GltfPbr {
 }
 
 /// The Fresnel reflectance at normal incidence of the dielectric (`ior = 1.5`).
-pub const DIELECTRIC_F0: f64 = 0.04;
+pub(crate) const DIELECTRIC_F0: f64 = 0.04;
 
 impl GltfPbr {
     /// A glTF material. Panics if a parameter is outside its range (see the fields).

@@ -36,17 +36,17 @@ use std::io::{BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 
 /// Number of `θ_h` bins.
-pub const RES_THETA_H: usize = 90;
+pub(crate) const RES_THETA_H: usize = 90;
 /// Number of `θ_d` bins.
-pub const RES_THETA_D: usize = 90;
+pub(crate) const RES_THETA_D: usize = 90;
 /// Number of `φ_d` bins over `[0, π)`.
-pub const RES_PHI_D: usize = 180;
+pub(crate) const RES_PHI_D: usize = 180;
 /// Values per channel: `90 · 90 · 180 = 1,458,000`.
-pub const CHANNEL_LEN: usize = RES_THETA_H * RES_THETA_D * RES_PHI_D;
+pub(crate) const CHANNEL_LEN: usize = RES_THETA_H * RES_THETA_D * RES_PHI_D;
 /// Per-channel factors from stored values to BRDF values (1/sr).
-pub const SCALE: [f64; 3] = [1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0];
+pub(crate) const SCALE: [f64; 3] = [1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0];
 /// Size of a valid file in bytes: 12-byte header plus `3 · 1,458,000` doubles.
-pub const FILE_LEN: u64 = 12 + 8 * 3 * CHANNEL_LEN as u64;
+pub(crate) const FILE_LEN: u64 = 12 + 8 * 3 * CHANNEL_LEN as u64;
 
 /// Errors reading or writing a MERL `.binary` file; each names the file.
 #[derive(Debug, thiserror::Error)]
@@ -114,7 +114,7 @@ impl std::fmt::Debug for Merl {
 
 /// Rusinkiewicz half/difference angles `(θ_h, φ_h, θ_d, φ_d)` of a light/view pair, computed
 /// as in `BRDFRead.cpp` (`l` plays the role of the "in" direction). `l + v` must be non-zero.
-pub fn half_diff_angles(l: DVec3, v: DVec3) -> (f64, f64, f64, f64) {
+pub(crate) fn half_diff_angles(l: DVec3, v: DVec3) -> (f64, f64, f64, f64) {
     let h = (l + v).normalize();
     let theta_h = h.z.clamp(-1.0, 1.0).acos();
     let phi_h = h.y.atan2(h.x);
@@ -131,7 +131,7 @@ pub fn half_diff_angles(l: DVec3, v: DVec3) -> (f64, f64, f64, f64) {
 
 /// The light and view directions with the given half/difference angles (the inverse of
 /// [`half_diff_angles`]).
-pub fn from_half_diff(theta_h: f64, phi_h: f64, theta_d: f64, phi_d: f64) -> (DVec3, DVec3) {
+pub(crate) fn from_half_diff(theta_h: f64, phi_h: f64, theta_d: f64, phi_d: f64) -> (DVec3, DVec3) {
     let (sh, ch) = theta_h.sin_cos();
     let (sp, cp) = phi_h.sin_cos();
     let h = DVec3::new(sh * cp, sh * sp, ch);
@@ -181,13 +181,13 @@ fn flat(i_h: usize, i_d: usize, i_p: usize) -> usize {
 }
 
 /// The table index (within a channel) for a light/view pair, both above the horizon.
-pub fn table_index(l: DVec3, v: DVec3) -> usize {
+pub(crate) fn table_index(l: DVec3, v: DVec3) -> usize {
     let (th, _, td, pd) = half_diff_angles(l, v);
     flat(theta_h_index(th), theta_d_index(td), phi_d_index(pd))
 }
 
 /// Bin-centre angles `(θ_h, θ_d, φ_d)` of a bin.
-pub fn bin_centre(i_h: usize, i_d: usize, i_p: usize) -> (f64, f64, f64) {
+pub(crate) fn bin_centre(i_h: usize, i_d: usize, i_p: usize) -> (f64, f64, f64) {
     let s = (i_h as f64 + 0.5) / RES_THETA_H as f64;
     (
         FRAC_PI_2 * s * s,

@@ -29,7 +29,7 @@ use std::f64::consts::PI;
 
 /// The normalised halfway vector `normalize(l + v)`, or `None` when `l + v` is (nearly) zero.
 #[inline]
-pub fn half_vector(l: DVec3, v: DVec3) -> Option<DVec3> {
+pub(crate) fn half_vector(l: DVec3, v: DVec3) -> Option<DVec3> {
     let h = l + v;
     let len2 = h.length_squared();
     if len2 > 1e-300 {
@@ -42,21 +42,21 @@ pub fn half_vector(l: DVec3, v: DVec3) -> Option<DVec3> {
 /// `cosθ_d = l·h = v·h`, computed symmetrically as `|l + v| / 2` (for unit `l`, `v`), so
 /// that a model using it is reciprocal to the last bit.
 #[inline]
-pub fn cos_theta_d(l: DVec3, v: DVec3) -> f64 {
+pub(crate) fn cos_theta_d(l: DVec3, v: DVec3) -> f64 {
     (0.5 * (l + v).length()).min(1.0)
 }
 
 /// A Lambertian term plus a grey lobe scaled per channel, `kd / π + ks s`: the shape of every
 /// diffuse-plus-specular model here (Ward, Blinn-Phong, Torrance-Sparrow, Cook-Torrance).
 #[inline]
-pub fn diffuse_plus_lobe(kd: &[f64; 3], ks: &[f64; 3], lobe: f64) -> [f64; 3] {
+pub(crate) fn diffuse_plus_lobe(kd: &[f64; 3], ks: &[f64; 3], lobe: f64) -> [f64; 3] {
     std::array::from_fn(|c| kd[c] / std::f64::consts::PI + ks[c] * lobe)
 }
 
 /// The halfway vector of two directions that are both above the horizon (`z > 0`), or `None`
 /// when either is at or below it. Every model uses this to return zero below the horizon.
 #[inline]
-pub fn half_vector_above(l: DVec3, v: DVec3) -> Option<DVec3> {
+pub(crate) fn half_vector_above(l: DVec3, v: DVec3) -> Option<DVec3> {
     if l.z > 0.0 && v.z > 0.0 {
         half_vector(l, v)
     } else {
@@ -67,7 +67,7 @@ pub fn half_vector_above(l: DVec3, v: DVec3) -> Option<DVec3> {
 /// `tan²θ_h (cos²φ_h/α_x² + sin²φ_h/α_y²) = (h_x²/α_x² + h_y²/α_y²) / h_z²`: the anisotropic
 /// "slope" exponent shared by Ward and Beckmann. `h_z` must be positive.
 #[inline]
-pub fn aniso_slope2(h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
+pub(crate) fn aniso_slope2(h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
     let sx = h.x / alpha_x;
     let sy = h.y / alpha_y;
     (sx * sx + sy * sy) / (h.z * h.z)
@@ -75,7 +75,7 @@ pub fn aniso_slope2(h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
 
 /// Anisotropic Beckmann distribution `D(h)` (1/sr), zero for `h_z <= 0`.
 #[inline]
-pub fn beckmann_d(h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
+pub(crate) fn beckmann_d(h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
     if h.z <= 0.0 {
         return 0.0;
     }
@@ -85,7 +85,7 @@ pub fn beckmann_d(h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
 
 /// Anisotropic GGX (Trowbridge-Reitz) distribution `D(h)` (1/sr), zero for `h_z <= 0`.
 #[inline]
-pub fn ggx_d(h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
+pub(crate) fn ggx_d(h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
     if h.z <= 0.0 {
         return 0.0;
     }
@@ -110,7 +110,7 @@ fn smith_a(w: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
 
 /// Complementary error function, Numerical Recipes `erfcc` (Chebyshev fit, relative error
 /// below 1.2e-7 everywhere).
-pub fn erfc(x: f64) -> f64 {
+pub(crate) fn erfc(x: f64) -> f64 {
     let z = x.abs();
     let t = 1.0 / (1.0 + 0.5 * z);
     let poly = -z * z - 1.265_512_23
@@ -131,7 +131,7 @@ pub fn erfc(x: f64) -> f64 {
 
 /// Smith `Λ(w)` for the anisotropic Beckmann distribution; `w_z` must be positive.
 #[inline]
-pub fn beckmann_lambda(w: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
+pub(crate) fn beckmann_lambda(w: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
     let a = smith_a(w, alpha_x, alpha_y);
     if !a.is_finite() || a > 26.0 {
         // exp(-a²) underflows: Λ is exactly representable as 0.
@@ -143,7 +143,7 @@ pub fn beckmann_lambda(w: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
 
 /// Smith `Λ(w)` for the anisotropic GGX distribution; `w_z` must be positive.
 #[inline]
-pub fn ggx_lambda(w: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
+pub(crate) fn ggx_lambda(w: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
     let px = alpha_x * w.x;
     let py = alpha_y * w.y;
     let t2 = (px * px + py * py) / (w.z * w.z); // α² tan²θ
@@ -159,7 +159,7 @@ fn facet_visible(w: DVec3, h: DVec3) -> bool {
 /// Smith `G1(w, h)` for Beckmann.
 #[inline]
 #[cfg(test)]
-pub fn smith_g1_beckmann(w: DVec3, h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
+pub(crate) fn smith_g1_beckmann(w: DVec3, h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
     if !facet_visible(w, h) {
         return 0.0;
     }
@@ -169,7 +169,7 @@ pub fn smith_g1_beckmann(w: DVec3, h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 
 /// Smith `G1(w, h)` for GGX.
 #[inline]
 #[cfg(test)]
-pub fn smith_g1_ggx(w: DVec3, h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
+pub(crate) fn smith_g1_ggx(w: DVec3, h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
     if !facet_visible(w, h) {
         return 0.0;
     }
@@ -178,7 +178,13 @@ pub fn smith_g1_ggx(w: DVec3, h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
 
 /// Height-correlated Smith `G2(l, v, h) = 1 / (1 + Λ(l) + Λ(v))` for GGX (Heitz 2014, eq. 99).
 #[inline]
-pub fn smith_g2_ggx_correlated(l: DVec3, v: DVec3, h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
+pub(crate) fn smith_g2_ggx_correlated(
+    l: DVec3,
+    v: DVec3,
+    h: DVec3,
+    alpha_x: f64,
+    alpha_y: f64,
+) -> f64 {
     if !facet_visible(l, h) || !facet_visible(v, h) {
         return 0.0;
     }
@@ -187,7 +193,7 @@ pub fn smith_g2_ggx_correlated(l: DVec3, v: DVec3, h: DVec3, alpha_x: f64, alpha
 
 /// Height-correlated Smith `G2(l, v, h) = 1 / (1 + Λ(l) + Λ(v))` for Beckmann.
 #[inline]
-pub fn smith_g2_beckmann_correlated(
+pub(crate) fn smith_g2_beckmann_correlated(
     l: DVec3,
     v: DVec3,
     h: DVec3,
@@ -202,7 +208,7 @@ pub fn smith_g2_beckmann_correlated(
 
 /// V-cavity `G1(w, h) = min(1, 2 (n·h)(n·w) / (w·h))` (Heitz 2014, section 4).
 #[inline]
-pub fn vcavity_g1(w: DVec3, h: DVec3) -> f64 {
+pub(crate) fn vcavity_g1(w: DVec3, h: DVec3) -> f64 {
     if !facet_visible(w, h) || h.z <= 0.0 {
         return 0.0;
     }
@@ -212,13 +218,13 @@ pub fn vcavity_g1(w: DVec3, h: DVec3) -> f64 {
 /// Torrance-Sparrow / Cook-Torrance V-cavity shadowing-masking
 /// `G = min(1, 2 (n·h)(n·v)/(v·h), 2 (n·h)(n·l)/(l·h))`, symmetric in `l` and `v`.
 #[inline]
-pub fn vcavity_g(l: DVec3, v: DVec3, h: DVec3) -> f64 {
+pub(crate) fn vcavity_g(l: DVec3, v: DVec3, h: DVec3) -> f64 {
     vcavity_g1(l, h).min(vcavity_g1(v, h))
 }
 
 /// Schlick's Fresnel approximation `F0 + (1 - F0)(1 - cosθ)⁵` for `cosθ` in `[0, 1]`.
 #[inline]
-pub fn fresnel_schlick(cos_theta: f64, f0: f64) -> f64 {
+pub(crate) fn fresnel_schlick(cos_theta: f64, f0: f64) -> f64 {
     let m = (1.0 - cos_theta).clamp(0.0, 1.0);
     let m2 = m * m;
     f0 + (1.0 - f0) * m2 * m2 * m
@@ -227,7 +233,7 @@ pub fn fresnel_schlick(cos_theta: f64, f0: f64) -> f64 {
 /// Exact unpolarised Fresnel reflectance of a dielectric interface with relative index of
 /// refraction `eta` (Cook & Torrance 1982 form), for `cosθ` in `[0, 1]`.
 #[inline]
-pub fn fresnel_dielectric(cos_theta: f64, eta: f64) -> f64 {
+pub(crate) fn fresnel_dielectric(cos_theta: f64, eta: f64) -> f64 {
     let c = cos_theta.clamp(0.0, 1.0);
     let g2 = eta * eta + c * c - 1.0;
     if g2 <= 0.0 {
@@ -242,7 +248,7 @@ pub fn fresnel_dielectric(cos_theta: f64, eta: f64) -> f64 {
 /// The relative index of refraction whose normal-incidence Fresnel reflectance is `f0`
 /// (`f0 = ((η-1)/(η+1))²`), for `f0` in `[0, 1)`.
 #[cfg(test)]
-pub fn ior_from_f0(f0: f64) -> f64 {
+pub(crate) fn ior_from_f0(f0: f64) -> f64 {
     let s = f0.clamp(0.0, 1.0 - 1e-12).sqrt();
     (1.0 + s) / (1.0 - s)
 }

@@ -169,7 +169,7 @@ impl Params {
 }
 
 /// The model names accepted by [`parse_model`] (canonical spellings).
-pub const MODEL_NAMES: &[&str] = &[
+pub(crate) const MODEL_NAMES: &[&str] = &[
     "lambertian",
     "ward",
     "blinn-phong",

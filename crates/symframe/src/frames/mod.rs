@@ -8,11 +8,11 @@
 //! and [`estimator`] (the per-pixel search, confidence, anisotropy and fallbacks, and the
 //! whole-stack pipeline).
 
-pub mod estimator;
-pub mod lobe;
-pub mod objective;
-pub mod optim;
-pub mod policy;
+pub(crate) mod estimator;
+pub(crate) mod lobe;
+pub(crate) mod objective;
+pub(crate) mod optim;
+pub(crate) mod policy;
 pub mod rig;
-pub mod slice;
-pub mod symmetry;
+pub(crate) mod slice;
+pub(crate) mod symmetry;

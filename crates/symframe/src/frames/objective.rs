@@ -26,7 +26,7 @@ use crate::frames::symmetry::{
 
 /// Which lights an evaluation sums over.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Level {
+pub(crate) enum Level {
     /// The first `m` valid lights of [`Rig::query_order`], an evenly spread subset: for
     /// locating the minimum. The reference path sums over every light here too.
     Coarse(usize),
@@ -35,7 +35,7 @@ pub enum Level {
 }
 
 /// A pixel's symmetry objective.
-pub trait Objective {
+pub(crate) trait Objective {
     /// How many valid lights an evaluation at `level` visits (domains scale with it).
     fn queries(&self, level: Level) -> usize;
     /// The `SD_n` sums at a candidate normal.
@@ -51,7 +51,7 @@ pub trait Objective {
 /// over the same prefix of [`Rig::query_order`] as the fast path's, so the two run the same
 /// search and differ only in how they read the slice.
 #[derive(Debug, Clone)]
-pub struct ExactObjective<'a> {
+pub(crate) struct ExactObjective<'a> {
     rig: &'a Rig,
     slice: ExactSlice<'a>,
     /// The valid lights in query order.
@@ -60,7 +60,7 @@ pub struct ExactObjective<'a> {
 
 impl<'a> ExactObjective<'a> {
     /// The objective of one pixel's slice (rig order, `rig.n_used() * 3` values, NaN = invalid).
-    pub fn new(rig: &'a Rig, samples: &'a [f32]) -> Self {
+    pub(crate) fn new(rig: &'a Rig, samples: &'a [f32]) -> Self {
         let order = rig
             .query_order()
             .iter()
@@ -115,7 +115,7 @@ impl Objective for ExactObjective<'_> {
 
 /// Per-thread buffers of the fast path, reused from pixel to pixel.
 #[derive(Debug, Clone)]
-pub struct FastScratch {
+pub(crate) struct FastScratch {
     /// The pixel's samples in rig order as RGB_ lanes (NaN where invalid): what the lookups read.
     lanes: Vec<Vec4>,
     hx: Vec<f32>,
@@ -127,7 +127,7 @@ pub struct FastScratch {
 
 impl FastScratch {
     /// Buffers sized for `rig`.
-    pub fn new(rig: &Rig) -> Self {
+    pub(crate) fn new(rig: &Rig) -> Self {
         let n = rig.n_used();
         Self {
             lanes: Vec::with_capacity(n),
@@ -142,7 +142,7 @@ impl FastScratch {
     /// Prepares the fast objective of one pixel's slice (rig order, `rig.n_used() * 3` values,
     /// NaN = invalid): lays out its samples for the lookups, and its valid lights coarse subset
     /// first.
-    pub fn prepare<'a>(&'a mut self, rig: &'a Rig, samples: &[f32]) -> FastObjective<'a> {
+    pub(crate) fn prepare<'a>(&'a mut self, rig: &'a Rig, samples: &[f32]) -> FastObjective<'a> {
         self.lanes.clear();
         let mut all_valid = true;
         self.lanes.extend(samples.chunks_exact(3).map(|s| {
@@ -258,7 +258,7 @@ impl Focus {
 /// The fast objective of one pixel (see the module documentation); made by
 /// [`FastScratch::prepare`].
 #[derive(Debug, Clone, Copy)]
-pub struct FastObjective<'a> {
+pub(crate) struct FastObjective<'a> {
     locator: &'a FastLocator,
     coverage: &'a Coverage,
     lanes: &'a [Vec4],

@@ -6,7 +6,7 @@
 
 /// Stopping rules for [`nelder_mead`].
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct NelderMeadOptions {
+pub(crate) struct NelderMeadOptions {
     /// Maximum number of objective evaluations.
     pub max_evals: u32,
     /// Stop when every vertex is within this distance of the best one (parameter units).
@@ -27,7 +27,7 @@ impl Default for NelderMeadOptions {
 
 /// The result of a minimisation.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Minimum<const N: usize> {
+pub(crate) struct Minimum<const N: usize> {
     /// The best point found.
     pub x: [f64; N],
     /// The objective there.
@@ -38,7 +38,7 @@ pub struct Minimum<const N: usize> {
 
 /// Minimises `f` from `x0` with an initial simplex of axis steps `step` (standard coefficients:
 /// reflection 1, expansion 2, contraction 1/2, shrink 1/2).
-pub fn nelder_mead<const N: usize, F>(
+pub(crate) fn nelder_mead<const N: usize, F>(
     mut f: F,
     x0: [f64; N],
     step: [f64; N],

@@ -22,11 +22,11 @@ use crate::highlight::MIN_ELONGATION;
 use crate::maps::PixelSource;
 
 /// Default smallest symmetry anisotropy for a tangent (`--min-anisotropy`).
-pub const DEFAULT_MIN_ANISOTROPY: f32 = 0.6;
+pub(crate) const DEFAULT_MIN_ANISOTROPY: f32 = 0.6;
 
 /// Every setting of the estimator's choice of answer, grouped by the rule that reads it.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct PolicySettings {
+pub(crate) struct PolicySettings {
     /// When a fitted lobe (one, or two sharing a frame) is the answer.
     pub lobe: LobeSettings,
     /// When a pixel is diffuse, and its Lambertian term the answer.
@@ -43,7 +43,7 @@ pub struct PolicySettings {
 
 /// When a fitted lobe is the answer (docs/method.md, "Lobe fit" and "Two lobes").
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LobeSettings {
+pub(crate) struct LobeSettings {
     /// A lobe leaving less than this share of the pixel's energy unexplained is the answer
     /// (source `lobe`), as is one that leaves no more than the capture's noise does (see
     /// [`LobeSettings::noise_z`]); one leaving more is no evidence, and the symmetry search
@@ -121,7 +121,7 @@ impl Default for LobeSettings {
 
 /// When a pixel is diffuse (docs/method.md, "Default measure").
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct DiffuseSettings {
+pub(crate) struct DiffuseSettings {
     /// A pixel whose Lambertian fit leaves less than this share of its energy unexplained is
     /// diffuse: no lobe is fitted (1% RMS noise leaves 1e-4), as is one whose fit leaves no
     /// more than the capture's noise would (see [`DiffuseSettings::noise_z`]). Higher: more
@@ -164,7 +164,7 @@ impl Default for DiffuseSettings {
 
 /// When the symmetry search doubts its answer, or another start overrules it.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SearchSettings {
+pub(crate) struct SearchSettings {
     /// A symmetry answer whose quality `coverage / (1 + SD / symmetry_scale)` is below this is
     /// doubtful: a plausible lobe answers instead. Higher: more searches replaced by lobes.
     pub doubtful: f64,
@@ -187,7 +187,7 @@ impl Default for SearchSettings {
 
 /// Which samples are cast shadows (docs/method.md, "Cast shadows").
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ShadowSettings {
+pub(crate) struct ShadowSettings {
     /// Shadows are looked for only where a robust Lambertian fit explains the pixel this well
     /// (uncentred R^2). Higher: fewer pixels searched for shadows.
     pub diffuse_fit: f64,
@@ -212,7 +212,7 @@ impl Default for ShadowSettings {
 
 /// What answers beyond the rig's reach (docs/method.md, "Fallbacks and the source map").
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FallbackSettings {
+pub(crate) struct FallbackSettings {
     /// The robust Lambertian fit answers when its uncentred R^2 is at least this. Higher: more
     /// such pixels left to the highlight.
     pub diffuse_fit: f64,
@@ -233,7 +233,7 @@ impl Default for FallbackSettings {
 /// The settings of the tangent decision, each with its effect. The defaults are the
 /// estimator's; `--min-anisotropy` sets [`TangentSettings::min_anisotropy`].
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TangentSettings {
+pub(crate) struct TangentSettings {
     /// Smallest symmetry anisotropy `(f45 - f0) / (f45 + f0)` of the slice (`f0`, `f45`: the
     /// tangent objective at the answer's axes and 45 degrees away) for a tangent. Higher: fewer
     /// tangents, none from weakly anisotropic slices.
@@ -260,7 +260,7 @@ impl Default for TangentSettings {
 
 /// A fitted lobe's reading of the highlight's axes, as the tangent decision needs it.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LobeAxis {
+pub(crate) struct LobeAxis {
     /// The lobe's wide axis (unit, perpendicular to its normal).
     pub tangent: DVec3,
     /// The lobe plausibly describes the pixel ([`LobeSettings::plausible`]).
@@ -272,7 +272,7 @@ pub struct LobeAxis {
 
 /// What a pixel's data say about its tangent, gathered once.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TangentEvidence {
+pub(crate) struct TangentEvidence {
     /// The symmetry anisotropy of the slice at the answer's frame (see
     /// [`TangentSettings::min_anisotropy`]).
     pub anisotropy: f64,
@@ -298,7 +298,7 @@ impl TangentEvidence {
 }
 
 /// Whether the data determine a tangent at this pixel (see the module's rule).
-pub fn has_tangent(s: &TangentSettings, e: &TangentEvidence) -> bool {
+pub(crate) fn has_tangent(s: &TangentSettings, e: &TangentEvidence) -> bool {
     let anisotropic = e.anisotropy >= s.min_anisotropy;
     let axis_read = e.moments_elongated || e.lobe_agrees(s, false);
     (anisotropic && axis_read) || e.lobe_agrees(s, true)
@@ -309,7 +309,12 @@ pub fn has_tangent(s: &TangentSettings, e: &TangentEvidence) -> bool {
 /// slice, towards 1 where the slice is exactly symmetric about the answer's axes and far from
 /// it about any other pair), halved where no independent reading of the highlight puts its
 /// wide axis along them. Model-free: the same measure of the data for every source.
-pub fn tangent_confidence(s: &TangentSettings, e: &TangentEvidence, f0: f64, f45: f64) -> f32 {
+pub(crate) fn tangent_confidence(
+    s: &TangentSettings,
+    e: &TangentEvidence,
+    f0: f64,
+    f45: f64,
+) -> f32 {
     if !(f0.is_finite() && f45.is_finite()) || f45 <= 0.0 {
         return 0.0;
     }

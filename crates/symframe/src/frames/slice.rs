@@ -27,7 +27,7 @@ pub fn gather_pixel(rig: &Rig, samples: &[f32], out: &mut [f32]) {
 /// The slice's RGB value at a unit halfway vector; `None` where there is no data (outside the
 /// sampled region, or a corner sample is invalid).
 #[inline]
-pub fn interpolate(rig: &Rig, slice: &[f32], halfway: DVec3) -> Option<[f64; 3]> {
+pub(crate) fn interpolate(rig: &Rig, slice: &[f32], halfway: DVec3) -> Option<[f64; 3]> {
     let loc = rig.locate(halfway)?;
     let mut out = [0.0f64; 3];
     for k in 0..3 {
@@ -42,7 +42,7 @@ pub fn interpolate(rig: &Rig, slice: &[f32], halfway: DVec3) -> Option<[f64; 3]>
 }
 
 /// A pixel's slice as the symmetry objective reads it: the value at any halfway vector.
-pub trait SliceLookup {
+pub(crate) trait SliceLookup {
     /// RGB radiance at a unit halfway vector, `None` where there is no data.
     fn value(&self, halfway: DVec3) -> Option<[f64; 3]>;
 }
@@ -50,7 +50,7 @@ pub trait SliceLookup {
 /// The reference reconstruction: triangle location and spherical barycentric weights at every
 /// query ([`interpolate`]).
 #[derive(Debug, Clone, Copy)]
-pub struct ExactSlice<'a> {
+pub(crate) struct ExactSlice<'a> {
     /// The rig.
     pub rig: &'a Rig,
     /// The pixel's samples in rig order.

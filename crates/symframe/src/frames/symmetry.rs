@@ -11,7 +11,7 @@ use crate::geometry::light_from_halfway;
 
 /// The three reflections of the halfway vector in a frame (n, t, b = n x t).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Symmetry {
+pub(crate) enum Symmetry {
     /// Reflect across the n-t plane: `h' = h - 2 (h.b) b`.
     Nt,
     /// Reflect across the n-b plane: `h' = h - 2 (h.t) t`.
@@ -23,7 +23,7 @@ pub enum Symmetry {
 impl Symmetry {
     /// Applies the reflection to a halfway vector given the frame.
     #[inline]
-    pub fn reflect(self, h: DVec3, n: DVec3, t: DVec3, b: DVec3) -> DVec3 {
+    pub(crate) fn reflect(self, h: DVec3, n: DVec3, t: DVec3, b: DVec3) -> DVec3 {
         match self {
             Symmetry::Nt => h - 2.0 * h.dot(b) * b,
             Symmetry::Nb => h - 2.0 * h.dot(t) * t,
@@ -62,7 +62,7 @@ pub enum CosineMode {
 
 /// A candidate local frame in the camera frame: normal, tangent and binormal `b = n x t`.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Frame {
+pub(crate) struct Frame {
     /// Unit normal.
     pub n: DVec3,
     /// Unit tangent, perpendicular to `n`.
@@ -74,7 +74,7 @@ pub struct Frame {
 impl Frame {
     /// The frame of a normal and a tangent (`b = n x t`).
     #[inline]
-    pub fn new(n: DVec3, t: DVec3) -> Self {
+    pub(crate) fn new(n: DVec3, t: DVec3) -> Self {
         Self {
             n,
             t,
@@ -85,7 +85,7 @@ impl Frame {
 
 /// The sums of one symmetry distance over its domain.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct SymmetryTerm {
+pub(crate) struct SymmetryTerm {
     /// Sum of squared differences (numerator of Equation 2).
     pub numerator: f64,
     /// Sum of squared reference values (denominator of Equation 2).
@@ -96,13 +96,13 @@ pub struct SymmetryTerm {
 
 /// The value a symmetry distance takes when its domain is (too) small: larger than any ratio a
 /// real slice produces, so the optimiser walks away from it.
-pub const EMPTY_DISTANCE: f64 = 1.0e3;
+pub(crate) const EMPTY_DISTANCE: f64 = 1.0e3;
 
 impl SymmetryTerm {
     /// The ratio `numerator / denominator`, or [`EMPTY_DISTANCE`] when the domain has fewer
     /// than `min_count` lights or no signal.
     #[inline]
-    pub fn distance(&self, min_count: u32) -> f64 {
+    pub(crate) fn distance(&self, min_count: u32) -> f64 {
         if self.count < min_count.max(1) || self.denominator <= 0.0 {
             EMPTY_DISTANCE
         } else {
@@ -117,7 +117,7 @@ impl SymmetryTerm {
 /// The domain is the lights with `n.l > 0` whose reflected halfway vector is inside the cone
 /// and [covered](Rig::covered), maps to a light with `n.G(l) > 0`, and has data in the slice.
 #[inline]
-pub fn symmetry_term<L: SliceLookup>(
+pub(crate) fn symmetry_term<L: SliceLookup>(
     rig: &Rig,
     slice: &[f32],
     lookup: &L,
@@ -130,7 +130,7 @@ pub fn symmetry_term<L: SliceLookup>(
 
 /// [`symmetry_term`] summed over the given lights only (rig indices), e.g. a coarse subset.
 #[inline]
-pub fn symmetry_term_over<L: SliceLookup>(
+pub(crate) fn symmetry_term_over<L: SliceLookup>(
     rig: &Rig,
     slice: &[f32],
     lookup: &L,
@@ -203,7 +203,7 @@ pub fn symmetry_term_over<L: SliceLookup>(
 /// The smallest domain (in lights) that counts as non-empty for a rig: a share of the rig's
 /// lights, so sparse rigs are not all discarded while degenerate one- or two-light domains never
 /// produce spurious zero distances (docs/method.md, "Symmetry distances and the domain rule").
-pub fn default_min_domain(n_used: usize) -> u32 {
+pub(crate) fn default_min_domain(n_used: usize) -> u32 {
     ((n_used as f64 * 0.015).ceil() as u32).clamp(6, 30)
 }
 

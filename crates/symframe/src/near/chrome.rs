@@ -21,7 +21,7 @@ use crate::calibrate::Circle;
 use crate::near::Pinhole;
 
 /// The camera ray (unit) through image point `(x, y)` in [`Circle`]'s pixel convention.
-pub fn pixel_ray(camera: &Pinhole, x: f64, y: f64) -> DVec3 {
+pub(crate) fn pixel_ray(camera: &Pinhole, x: f64, y: f64) -> DVec3 {
     camera.ray(x - 0.5, y - 0.5).normalize()
 }
 
@@ -166,7 +166,7 @@ pub struct Triangulation {
 /// The narrowest angle (degrees) that two rays toward a light may make for [`triangulate`] to
 /// place it: below it, an error of a tenth of a degree in a ray moves the light along the rays
 /// by more than a twentieth of its distance.
-pub const MIN_SPREAD_DEG: f64 = 2.0;
+pub(crate) const MIN_SPREAD_DEG: f64 = 2.0;
 
 /// The point closest to the rays `(origin, unit direction)` in least squares, which must lie
 /// ahead of every origin. Why not where fewer than two rays are given, no two are at least

@@ -137,7 +137,7 @@ fn solve4(mut a: [[f64; 4]; 4], mut b: [f64; 4]) -> Option<[f64; 4]> {
 
 /// The rotation that takes the unit vector `v` to +z along the great circle between them (the
 /// identity for `v = z`); for `v = -z`, the half turn about x.
-pub fn rotation_to_z(v: DVec3) -> DMat3 {
+pub(crate) fn rotation_to_z(v: DVec3) -> DMat3 {
     let c = v.z;
     if c < -1.0 + 1e-12 {
         return DMat3::from_rotation_x(std::f64::consts::PI);

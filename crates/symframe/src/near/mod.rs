@@ -10,13 +10,14 @@
 //! perspective cameras") says how the two meet.
 
 mod camera;
-pub mod chrome;
+pub(crate) mod chrome;
 mod light;
 mod mesh;
 mod solve;
 
 pub use camera::Pinhole;
-pub use light::{fit_sphere, rotation_to_z, PointLight};
+pub(crate) use light::rotation_to_z;
+pub use light::{fit_sphere, PointLight};
 pub use mesh::{perspective_mesh, picture_heights};
 pub use solve::{
     depth_from_normals, estimate_near_stack, mean_change_deg, perspective_depth, NearMethod,

@@ -31,10 +31,10 @@ pub use mirror_ball::MirrorBall;
 pub use near_mirror::NearMirrorBalls;
 pub use noise::{clip_point, jitter_lights, Degradation, Noise, Rng};
 pub use perspective::{dome_lights, Ball, NearScene};
-pub use rigs::{diligent_lights, grid_lights};
+pub use rigs::diligent_lights;
 pub use shadow::cast_shadows;
 pub use shapes::{plane_frame, Bump, BumpParams};
-pub use tangent::{image_position, project_to_tangent_plane, TangentField, TangentFn};
+pub use tangent::{TangentField, TangentFn};
 
 /// A surface seen by the camera: per pixel, a normal and a tangent (camera frame), inside a
 /// mask, and for height fields the surface height (which casts shadows).

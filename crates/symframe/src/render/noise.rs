@@ -179,7 +179,7 @@ impl fmt::Display for Noise {
 }
 
 /// Clips every sample to `[0, level]` (a sensor's black level and saturation); NaN stays NaN.
-pub fn clip(img: &mut [f32], level: f32) {
+pub(crate) fn clip(img: &mut [f32], level: f32) {
     for v in img.iter_mut() {
         if !v.is_nan() {
             *v = v.clamp(0.0, level);
@@ -190,7 +190,7 @@ pub fn clip(img: &mut [f32], level: f32) {
 /// Marks saturated pixels the way the dataset reader does: a pixel (RGB triple) with any
 /// channel at or above `level` becomes `+inf` (censored) in all three channels. Returns how
 /// many pixels were marked.
-pub fn mark_saturated(img: &mut [f32], level: f32) -> usize {
+pub(crate) fn mark_saturated(img: &mut [f32], level: f32) -> usize {
     let mut n = 0;
     for px in img.chunks_exact_mut(3) {
         if px.iter().any(|&v| v >= level) {
@@ -207,7 +207,7 @@ pub fn mark_saturated(img: &mut [f32], level: f32) -> usize {
 ///
 /// # Panics
 /// If `bits` is not in `1..=24`.
-pub fn quantise(img: &mut [f32], bits: u32) {
+pub(crate) fn quantise(img: &mut [f32], bits: u32) {
     assert!((1..=24).contains(&bits), "quantise: bits must be 1..=24");
     let m = ((1u32 << bits) - 1) as f32;
     for v in img.iter_mut() {
@@ -220,7 +220,7 @@ pub fn quantise(img: &mut [f32], bits: u32) {
 /// sRGB quantisation as an 8-bit (or `bits`-bit) sRGB file stores a linear image and a reader
 /// decodes it: each sample clamped to `[0, 1]`, sRGB-encoded, rounded to `2^bits` levels and
 /// decoded back to linear (the steps are finest in the darks). NaN stays NaN.
-pub fn quantise_srgb(img: &mut [f32], bits: u32) {
+pub(crate) fn quantise_srgb(img: &mut [f32], bits: u32) {
     assert!(
         (1..=24).contains(&bits),
         "bits must be in 1..=24, got {bits}"

@@ -4,11 +4,11 @@
 use glam::DVec3;
 
 /// Number of columns of the DiLiGenT-like grid ([`diligent_lights`]).
-pub const DILIGENT_COLS: usize = 12;
+pub(crate) const DILIGENT_COLS: usize = 12;
 /// Number of rows of the DiLiGenT-like grid ([`diligent_lights`]).
-pub const DILIGENT_ROWS: usize = 8;
+pub(crate) const DILIGENT_ROWS: usize = 8;
 /// Largest angle between a light of the DiLiGenT-like grid and the view, in degrees.
-pub const DILIGENT_MAX_ANGLE_DEG: f64 = 45.0;
+pub(crate) const DILIGENT_MAX_ANGLE_DEG: f64 = 45.0;
 
 /// A DiLiGenT-like rig: 96 lights on a regular 12 x 8 grid (12 across, 8 down) of LED
 /// positions on a plane facing the object, like the LED board of the DiLiGenT benchmark (Shi
@@ -26,7 +26,7 @@ pub fn diligent_lights() -> Vec<DVec3> {
 ///
 /// # Panics
 /// If `cols` or `rows` is 0, or `max_angle_deg` is not in `(0, 90)`.
-pub fn grid_lights(cols: usize, rows: usize, max_angle_deg: f64) -> Vec<DVec3> {
+pub(crate) fn grid_lights(cols: usize, rows: usize, max_angle_deg: f64) -> Vec<DVec3> {
     assert!(cols > 0 && rows > 0, "grid_lights: empty grid");
     assert!(
         max_angle_deg > 0.0 && max_angle_deg < 90.0,

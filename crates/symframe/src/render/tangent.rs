@@ -50,7 +50,7 @@ impl PartialEq for TangentField {
 
 /// Normalised image coordinates of the centre of pixel `(col, row)` in a `width x height` image:
 /// `(0, 0)` at the image centre, x right, y up, the larger half-side scaled to 1.
-pub fn image_position(width: usize, height: usize, col: usize, row: usize) -> (f64, f64) {
+pub(super) fn image_position(width: usize, height: usize, col: usize, row: usize) -> (f64, f64) {
     let half = width.max(height).max(1) as f64 / 2.0;
     (
         (col as f64 + 0.5 - width as f64 / 2.0) / half,
@@ -61,7 +61,7 @@ pub fn image_position(width: usize, height: usize, col: usize, row: usize) -> (f
 /// The orthogonal projection of `d` onto the plane perpendicular to the unit vector `n`,
 /// normalised, falling back to the projections of camera x and y when it (nearly) vanishes,
 /// i.e. when less than `1e-6` of the direction's length is left.
-pub fn project_to_tangent_plane(d: DVec3, n: DVec3) -> DVec3 {
+pub(super) fn project_to_tangent_plane(d: DVec3, n: DVec3) -> DVec3 {
     [d, DVec3::X, DVec3::Y]
         .into_iter()
         .find_map(|a| {

@@ -211,7 +211,7 @@ pub(super) fn unconfirmed(judged: &SymmetryJudgement, own: f64) -> f64 {
 
 /// The angle (degrees) confidence is about: a pixel's confidence is the probability that its
 /// normal is within this of the truth.
-pub const CONFIDENT_WITHIN_DEG: f64 = 1.0;
+pub(super) const CONFIDENT_WITHIN_DEG: f64 = 1.0;
 
 /// The probability that a normal whose error is a two-dimensional normal variable of total
 /// standard deviation `sd` (radians) is within [`CONFIDENT_WITHIN_DEG`] of the truth:

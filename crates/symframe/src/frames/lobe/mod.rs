@@ -36,7 +36,7 @@ mod kernel;
 mod lanes;
 mod pair;
 
-pub use pair::{fit_lobe_pair, LobePair};
+pub(crate) use pair::{fit_lobe_pair, LobePair};
 
 use kernel::Subset;
 
@@ -58,7 +58,7 @@ const P: usize = 7;
 
 /// A lobe fitted to one pixel.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LobeFit {
+pub(crate) struct LobeFit {
     /// Unit normal: the lobe's centre.
     pub normal: DVec3,
     /// Unit tangent: the lobe's wider axis (perpendicular to `normal`).
@@ -101,13 +101,13 @@ pub struct LobeFit {
 impl LobeFit {
     /// Full width at half maximum of the lobe along its wider axis (slope units): where
     /// `(1 + q / k)^-k` falls to 1/2.
-    pub fn full_width(&self) -> f64 {
+    pub(crate) fn full_width(&self) -> f64 {
         let k = self.shape;
         2.0 * self.alpha[0] * (k * (2f64.powf(1.0 / k) - 1.0)).sqrt()
     }
 
     /// `(a_t - a_b) / (a_t + a_b)`: 0 for a round lobe, towards 1 for a brushed one.
-    pub fn elongation(&self) -> f64 {
+    pub(crate) fn elongation(&self) -> f64 {
         (self.alpha[0] - self.alpha[1]) / (self.alpha[0] + self.alpha[1])
     }
 }
@@ -363,7 +363,7 @@ const LIGHT_DRAWS: u64 = 8;
 
 /// Per-thread buffers of [`fit_lobe`], reused from pixel to pixel.
 #[derive(Debug, Clone, Default)]
-pub struct LobeScratch {
+pub(crate) struct LobeScratch {
     fine: Subset,
     coarse: Subset,
     buffers: Buffers,
@@ -454,7 +454,7 @@ const BROAD_START: (f64, f64) = (0.3, 0.1);
 
 /// Where the fit starts: a normal, a tangent and the widths along it and across (slope units).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LobeStart {
+pub(crate) struct LobeStart {
     /// Unit normal.
     pub normal: DVec3,
     /// Unit tangent.
@@ -813,7 +813,7 @@ fn search_subset(
 /// the capture's noise model, for [`LobeFit::noise_share`], and its lights' uncertainty, for
 /// [`LobeFit::light_sd`]. `None` where fewer than eight samples are valid or nothing is lit.
 /// Allocation-free once `scratch` has grown to the rig.
-pub fn fit_lobe(
+pub(crate) fn fit_lobe(
     samples: &[f32],
     rig: &Rig,
     start: LobeStart,

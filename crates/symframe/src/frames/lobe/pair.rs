@@ -33,7 +33,7 @@ const P: usize = 8;
 
 /// Two lobes sharing one frame, fitted to one pixel.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LobePair {
+pub(crate) struct LobePair {
     /// Unit normal: the shared centre.
     pub normal: DVec3,
     /// Unit tangent of the shared frame (the first axis of both lobes' widths).
@@ -84,7 +84,7 @@ impl LobePair {
     /// noise; where it does not, the test is the stricter for it). The level's quantile for
     /// the residual's degrees of freedom `q` is `chi2 / 3 + 50 / q` (within 2% of F(3, q)'s
     /// 0.1% point for q >= 30).
-    pub fn significant(&self) -> bool {
+    pub(crate) fn significant(&self) -> bool {
         let dof = self.samples as f64 - 13.0;
         if dof < 8.0 {
             return false;
@@ -97,7 +97,7 @@ impl LobePair {
     /// The pair read as one lobe for the estimator's rules: its frame, with the widths and the
     /// wide axis of the lobe that gives the tangent (the stronger of those `elongated` accepts,
     /// the stronger lobe where neither is), and the pair's residual.
-    pub fn as_lobe(&self, elongated: impl Fn(&LobeFit) -> bool) -> LobeFit {
+    pub(crate) fn as_lobe(&self, elongated: impl Fn(&LobeFit) -> bool) -> LobeFit {
         let b = self.normal.cross(self.tangent);
         let lobe = |x: usize| {
             let [at, ab] = self.alpha[x];
@@ -556,7 +556,11 @@ const BROAD_START: f64 = 0.3;
 /// chose (those it left out as cast shadows included) (call it right after, for the same pixel and `rig`), from the one lobe `single` it fitted: the
 /// second lobe starts crossed (the first's widths swapped: a woven cross), as a sharp round
 /// coat, and as a broad round lobe; the best fit is kept. `None` where the samples are too few.
-pub fn fit_lobe_pair(single: &LobeFit, rig: &Rig, scratch: &mut LobeScratch) -> Option<LobePair> {
+pub(crate) fn fit_lobe_pair(
+    single: &LobeFit,
+    rig: &Rig,
+    scratch: &mut LobeScratch,
+) -> Option<LobePair> {
     let (lights, halfways) = (rig.lights_in_camera(), rig.halfway_in_camera());
     let LobeScratch {
         fine,

@@ -9,7 +9,7 @@ use crate::geometry::from_stereographic;
 /// `s = (h.x, h.y) / (1 + h.z)`, slightly wider than the cone: the cells of [`Coverage`] and
 /// [`FastLocator`](super::FastLocator).
 #[derive(Debug, Clone, Copy)]
-pub struct StereoGrid {
+pub(crate) struct StereoGrid {
     /// Cells per side.
     pub(crate) size: usize,
     /// Cells per stereographic unit.
@@ -78,7 +78,7 @@ impl StereoGrid {
 /// short of the region's edge, where the hull's long thin triangles interpolate worst, and a
 /// normal just beyond the rig's reach is not propped up by the last sliver of data.
 #[derive(Debug, Clone)]
-pub struct Coverage {
+pub(crate) struct Coverage {
     /// The cells.
     pub(crate) grid: StereoGrid,
     /// Per cell (row-major): whether it is covered.

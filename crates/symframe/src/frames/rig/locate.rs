@@ -18,7 +18,7 @@ pub(super) struct Triangle {
 
 /// A located query: the triangle's corners (rig light indices) and their weights (sum 1).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Location {
+pub(crate) struct Location {
     /// Rig light indices of the triangle's corners.
     pub vertices: [u32; 3],
     /// Interpolation weights of the corners.

@@ -11,10 +11,10 @@ mod grid;
 mod locate;
 mod walk;
 
-pub use grid::Coverage;
-pub use locate::Location;
+pub(crate) use grid::Coverage;
+pub(crate) use locate::Location;
 use locate::{triangulate, LocateGrid, Triangle};
-pub use walk::FastLocator;
+pub(crate) use walk::FastLocator;
 
 /// Options for building a rig.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -17,7 +17,7 @@ use super::locate::{LocateGrid, Triangle};
 /// smaller than the triangles, so most queries take one step). Hand-written: it is the method's
 /// hot loop, and one 64-byte triangle per step keeps it in cache.
 #[derive(Debug, Clone)]
-pub struct FastLocator {
+pub(crate) struct FastLocator {
     /// The cells.
     pub(crate) grid: StereoGrid,
     /// Per cell: the triangle holding its centre, or the nearest one, or the sentinel (the last
