@@ -455,15 +455,11 @@ pub struct Detection {
     pub roundness: f64,
 }
 
-/// Finds a mirror sphere from the mean of all images (`width x height` grey values, `NaN` =
-/// saturated somewhere) and the brightest point of each image (pixel indices). See the module
-/// documentation. `Err` says why none was found.
-pub fn detect_sphere(
-    width: usize,
-    height: usize,
-    mean: &[f32],
-    brightest: &[usize],
-) -> Result<Detection, String> {
+/// The connected regions of the mean image `mean` (`width x height`) brighter than its
+/// background, the median of the image's border (non-finite values count as the brightest):
+/// each pixel's label ([`OUTSIDE`] for the background), each region's size, and the image's
+/// largest finite value.
+fn bright_regions(width: usize, height: usize, mean: &[f32]) -> Result<BrightRegions, String> {
     if width < 3 || height < 3 || mean.len() != width * height {
         return Err("the images are too small to find a sphere in".into());
     }
@@ -475,14 +471,7 @@ pub fn detect_sphere(
         .filter(|v| v.is_finite())
         .cloned()
         .fold(0.0f32, f32::max) as f64;
-    let value = |i: usize| -> f64 {
-        if mean[i].is_finite() {
-            mean[i] as f64
-        } else {
-            top
-        }
-    };
-    // The background's level: the median of the image border.
+    let value = |i: usize| finite_or(mean, top, i);
     let mut border: Vec<f64> = (0..width * height)
         .filter(|&i| {
             let (r, c) = (i / width, i % width);
@@ -495,6 +484,32 @@ pub fn detect_sphere(
     let threshold = level + 1e-3 * (top - level).max(0.0) + 1e-9 * top;
     let on = |i: usize| value(i) > threshold;
     let (label, sizes) = label_regions(width, height, on).ok_or("the images are too large")?;
+    Ok((label, sizes, top))
+}
+
+/// Labels, region sizes and the largest value of [`bright_regions`].
+type BrightRegions = (Vec<u32>, Vec<usize>, f64);
+
+/// `mean[i]`, or `top` where it is not finite (a clipped or broken pixel counts as bright).
+fn finite_or(mean: &[f32], top: f64, i: usize) -> f64 {
+    if mean[i].is_finite() {
+        mean[i] as f64
+    } else {
+        top
+    }
+}
+
+/// Finds a mirror sphere from the mean of all images (`width x height` grey values, `NaN` =
+/// saturated somewhere) and the brightest point of each image (pixel indices). See the module
+/// documentation. `Err` says why none was found.
+pub fn detect_sphere(
+    width: usize,
+    height: usize,
+    mean: &[f32],
+    brightest: &[usize],
+) -> Result<Detection, String> {
+    let (label, sizes, top) = bright_regions(width, height, mean)?;
+    let value = |i: usize| finite_or(mean, top, i);
     if sizes.is_empty() {
         return Err("nothing in the images is brighter than their border".into());
     }
@@ -588,36 +603,8 @@ pub fn detect_spheres(
     brightest: &[usize],
     min_share: f64,
 ) -> Result<Vec<Detection>, String> {
-    if width < 3 || height < 3 || mean.len() != width * height {
-        return Err("the images are too small to find a sphere in".into());
-    }
-    if mean.len() >= u32::MAX as usize {
-        return Err("the images are too large to find a sphere in".into());
-    }
-    let top = mean
-        .iter()
-        .filter(|v| v.is_finite())
-        .cloned()
-        .fold(0.0f32, f32::max) as f64;
-    let value = |i: usize| -> f64 {
-        if mean[i].is_finite() {
-            mean[i] as f64
-        } else {
-            top
-        }
-    };
-    let mut border: Vec<f64> = (0..width * height)
-        .filter(|&i| {
-            let (r, c) = (i / width, i % width);
-            r < 2 || c < 2 || r + 2 >= height || c + 2 >= width
-        })
-        .map(value)
-        .collect();
-    border.sort_by(f64::total_cmp);
-    let level = border[border.len() / 2];
-    let threshold = level + 1e-3 * (top - level).max(0.0) + 1e-9 * top;
-    let on = |i: usize| value(i) > threshold;
-    let (label, sizes) = label_regions(width, height, on).ok_or("the images are too large")?;
+    let (label, sizes, top) = bright_regions(width, height, mean)?;
+    let value = |i: usize| finite_or(mean, top, i);
     let mut votes = vec![0usize; sizes.len()];
     for &b in brightest {
         if let Some(&l) = label.get(b) {
