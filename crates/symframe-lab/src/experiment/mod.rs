@@ -11,6 +11,7 @@ mod fig10;
 mod fig3;
 mod fig4;
 pub mod materials;
+mod near;
 mod noise;
 pub mod plot;
 mod relight;
@@ -86,7 +87,7 @@ pub fn estimate_and_evaluate(
 }
 
 fn experiments(which: ExperimentArg) -> Vec<(&'static str, RunFn)> {
-    let all: [(&str, RunFn); 7] = [
+    let all: [(&str, RunFn); 8] = [
         ("fig3", |c| parts(fig3::run(c)?)),
         ("fig4", |c| parts(fig4::run(c)?)),
         ("fig10", |c| parts(fig10::run(c)?)),
@@ -94,6 +95,7 @@ fn experiments(which: ExperimentArg) -> Vec<(&'static str, RunFn)> {
         ("relight", |c| parts(relight::run(c)?)),
         ("materials", |c| parts(materials::run(c)?)),
         ("capture", |c| parts(capture::run(c)?)),
+        ("near", |c| parts(near::run(c)?)),
     ];
     let name = match which {
         ExperimentArg::Fig3 => "fig3",
@@ -103,6 +105,7 @@ fn experiments(which: ExperimentArg) -> Vec<(&'static str, RunFn)> {
         ExperimentArg::Relight => "relight",
         ExperimentArg::Materials => "materials",
         ExperimentArg::Capture => "capture",
+        ExperimentArg::Near => "near",
         ExperimentArg::All => return all.to_vec(),
     };
     all.into_iter().filter(|(n, _)| *n == name).collect()
@@ -293,6 +296,40 @@ mod tests {
     }
 
     #[test]
+    fn near_the_near_model_beats_the_distant_one_under_a_close_dome() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = near::run(&quick(dir.path())).unwrap();
+        assert_eq!(pngs(dir.path(), "near_"), 1);
+        let row = |material: &str, ratio: f64, model: &str| {
+            s.figures
+                .iter()
+                .find(|r| (r.material, r.dome_ratio, r.model) == (material, ratio, model))
+                .unwrap()
+        };
+        for material in ["glossy plastic", "brushed metal"] {
+            let (near, far) = (row(material, 2.0, "near"), row(material, 2.0, "distant"));
+            // Bounds that catch a broken model at this size; the report states the figures.
+            assert!(
+                near.normal_mean < 1.5 && near.normal_mean < far.normal_mean / 3.0,
+                "{near:?} {far:?}"
+            );
+            assert!(
+                near.coverage > 0.98 && near.depth_error_pct < 1.0,
+                "{near:?}"
+            );
+            assert!(
+                near.depth_error_pct < far.depth_error_pct,
+                "{near:?} {far:?}"
+            );
+        }
+        // No tangent on the isotropic plastic; the brushed metal's within a few degrees.
+        assert!(row("glossy plastic", 2.0, "near").tangent_share < 0.02);
+        let brushed = row("brushed metal", 2.0, "near");
+        assert!(brushed.tangent_mean.unwrap() < 3.0, "{brushed:?}");
+        assert!(s.markdown.contains("## Near lights"));
+    }
+
+    #[test]
     fn fig3_ward_is_within_a_degree_at_the_papers_operating_point() {
         let dir = tempfile::tempdir().unwrap();
         let s = fig3::run(&quick(dir.path())).unwrap();
@@ -353,7 +390,8 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let s = relight::run(&quick(dir.path())).unwrap();
         assert!(dir.path().join("relight_side_by_side.png").is_file());
-        assert_eq!(s.figures.len(), 30);
+        // 14 materials (10 spheres, car paint, woven satin, the bumps two ways), 3 fits each.
+        assert_eq!(s.figures.len(), 42);
         for r in &s.figures {
             // Bounds that catch a broken fit; the report states the figures.
             assert!(
@@ -361,8 +399,14 @@ mod tests {
                 "{r:?}"
             );
             assert!(r.relit_psnr > 20.0, "{r:?}");
-            // No fireflies: nothing relit far above what the pixel was seen at.
-            assert!(r.relit_over_brightest < 4.0, "{r:?}");
+            // No fireflies: nothing relit far above what the pixel was seen at (4 times; with
+            // the default, automatic fit, twice), unless the truth itself rises as high (a
+            // sharp highlight between the training lights), to within 5%.
+            let allowed = if r.fit == "auto" { 2.0 } else { 4.0 };
+            assert!(
+                r.relit_over_brightest <= 1.05 * r.truth_over_brightest.max(allowed),
+                "{r:?}"
+            );
         }
     }
 }

@@ -15,14 +15,17 @@ use symframe::appearance::fit::{
 };
 use symframe::appearance::relight::{image_psnr, tone_map, Edits, Relighter};
 use symframe::brdf::spec::parse_model;
+use symframe::brdf::{Brdf, Ggx, Layered, Woven};
 use symframe::eval::vec_at;
 use symframe::frames::rig::uniform_cone_lights;
-use symframe::render::{Scene, TangentField};
+use symframe::integrate::{integrate, IntegrateParams};
+use symframe::render::shadow::cast_shadows;
+use symframe::render::{BumpParams, Scene, TangentField};
 use symframe::{estimate_stack, EstimatorParams, Rig, RigOptions, Stack};
 
-/// Models rendered: a brushed Ward material (the Ward fit's own family), two GGX plastics, a
-/// glTF plastic and a brushed glTF metal (the glTF fit's family), and five that neither fit
-/// represents exactly (a brushed GGX metal with a diffuse base, Cook-Torrance,
+/// Models rendered on the sphere: a brushed Ward material (the Ward fit's own family), two GGX
+/// plastics, a glTF plastic and a brushed glTF metal (the glTF fit's family), and five that
+/// neither fit represents exactly (a brushed GGX metal with a diffuse base, Cook-Torrance,
 /// Ashikhmin-Shirley, Beckmann brushed gold and a rougher GGX plastic).
 const MODELS: [&str; 10] = [
     "ward:kd=0.4/0.3/0.2,ks=0.3/0.45/0.6,ax=0.08,ay=0.3",
@@ -37,8 +40,72 @@ const MODELS: [&str; 10] = [
     "ggx:kd=0.4/0.25/0.15,f0=0.04,alpha=0.3",
 ];
 
+/// One material of the experiment: a label, its BRDF, whether it is rendered on the bumpy
+/// surface (with cast shadows) instead of the sphere, and whether the fit leaves out the
+/// samples the relief integrated from the estimated normals shadows.
+struct Material {
+    label: String,
+    brdf: Box<dyn Brdf>,
+    bumpy: bool,
+    drop_shadowed: bool,
+}
+
+/// Every material: [`MODELS`] on the sphere, then the two-lobe and woven materials of the
+/// capture sweep (car paint: a sharp isotropic clear coat over a brushed metallic base; woven
+/// satin: two perpendicular anisotropic lobes over a diffuse base) on the sphere, and a
+/// brushed GGX metal with a diffuse base on the bumpy surface, shadows on.
+fn materials() -> Result<Vec<Material>> {
+    let mut m = Vec::new();
+    for spec in MODELS {
+        let brdf = parse_model(spec).map_err(anyhow::Error::msg)?;
+        m.push(Material {
+            label: format!("`{}`", brdf.name()),
+            brdf,
+            bumpy: false,
+            drop_shadowed: false,
+        });
+    }
+    m.push(Material {
+        label: "car paint (coat 0.03 over brushed GGX 0.35 / 0.12)".into(),
+        brdf: Box::new(Layered::new(
+            0.03,
+            1.5,
+            Box::new(Ggx::new([0.05, 0.08, 0.25], [0.5, 0.5, 0.6], 0.35, 0.12)),
+        )),
+        bumpy: false,
+        drop_shadowed: false,
+    });
+    m.push(Material {
+        label: "woven satin (lobes 0.35 / 0.08 and 0.08 / 0.35, weft 0.5)".into(),
+        brdf: Box::new(Woven::new([0.25, 0.08, 0.08], [0.05; 3], 0.35, 0.08, 0.5)),
+        bumpy: false,
+        drop_shadowed: false,
+    });
+    let bumpy = || Box::new(Ggx::new([0.3, 0.22, 0.15], [0.5; 3], 0.3, 0.08));
+    m.push(Material {
+        label: "bumps, brushed GGX 0.3 / 0.08 (kd 0.3, f0 0.5), every sample".into(),
+        brdf: bumpy(),
+        bumpy: true,
+        drop_shadowed: false,
+    });
+    m.push(Material {
+        label: "the same, shadowed samples left out".into(),
+        brdf: bumpy(),
+        bumpy: true,
+        drop_shadowed: true,
+    });
+    Ok(m)
+}
+
 /// The fits compared on every model.
 const FITS: [FitModel; 3] = [FitModel::Ward, FitModel::Gltf, FitModel::Auto];
+
+/// The bumpy surface: the bumps of the materials experiment.
+const BUMPS: BumpParams = BumpParams {
+    count: 10,
+    relief: 1.0,
+    seed: 5,
+};
 
 /// One model's figures.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -59,10 +126,15 @@ pub struct Row {
     pub holdout_psnr_true_frames: f64,
     /// Mean PSNR of whole relit images under the held-out lights, dB.
     pub relit_psnr: f64,
+    /// Held-out lights judged (those that light some of the judged pixels).
+    pub lights_judged: usize,
     /// The lowest of those PSNRs (the worst held-out light), dB.
     pub relit_worst: f64,
     /// The largest relit value over the brightest training sample of its pixel.
     pub relit_over_brightest: f64,
+    /// The same of the true renders: how far the truth itself rises above what the training
+    /// lights saw (a sharp highlight falling between them).
+    pub truth_over_brightest: f64,
 }
 
 /// Runs the experiment; writes `relight_side_by_side.png` into `out` and returns the markdown
@@ -74,16 +146,18 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
     let holdout = holdout_lights(n_lights, k)?;
     let train: Vec<usize> = (0..n_lights).filter(|i| !holdout.contains(i)).collect();
     let train_lights: Vec<DVec3> = train.iter().map(|&i| lights[i]).collect();
-    let scene = Scene::sphere(size, TangentField::Circular);
+    let sphere = Scene::sphere(size, TangentField::Circular);
+    let bumps = Scene::bumps(size, &BUMPS, TangentField::Swirl(30.0));
     let cos60 = 60f64.to_radians().cos();
-    let within: Vec<bool> = (0..scene.n_pixels())
-        .map(|p| scene.mask[p] && scene.normals_in_camera[p].z >= cos60)
-        .collect();
     let mut rows = Vec::new();
     let mut picture = None;
     let mut ward_fit: Option<FitMaps> = None;
-    for spec in MODELS {
-        let brdf = parse_model(spec).map_err(anyhow::Error::msg)?;
+    let materials = materials()?;
+    for mat in &materials {
+        let (scene, brdf) = (if mat.bumpy { &bumps } else { &sphere }, &mat.brdf);
+        let within: Vec<bool> = (0..scene.n_pixels())
+            .map(|p| scene.mask[p] && scene.normals_in_camera[p].z >= cos60)
+            .collect();
         let stack = scene.render_stack(brdf.as_ref(), &lights);
         // Frames from the training lights only: the held-out lights are never seen.
         let mut train_stack = Stack::zeros(size, size, train.len());
@@ -98,6 +172,33 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
             EstimatorParams::default(),
             &|_| {},
         )?;
+        // The bumpy surface's cast shadows, as `symframe relight --shadows` casts them: from
+        // the relief integrated from the estimated normals.
+        let heights: Option<Vec<f64>> = if mat.bumpy {
+            let depth = integrate(
+                size,
+                size,
+                &frames.normals,
+                Some(&frames.confidence),
+                &IntegrateParams::default(),
+            )?;
+            Some(depth.depth.iter().map(|&z| z as f64).collect())
+        } else {
+            None
+        };
+        // The samples fitted: on the bumps, optionally without those the relief hides from
+        // their light (a shadowed sample measures the relief, not the reflectance).
+        let mut samples = stack.clone();
+        if let (true, Some(hf)) = (mat.drop_shadowed, &heights) {
+            for (i, &l) in lights.iter().enumerate() {
+                let mut img = samples.image(i);
+                let shadowed = cast_shadows(hf, size, size, l);
+                for (px, _) in img.chunks_exact_mut(3).zip(&shadowed).filter(|p| *p.1) {
+                    px.fill(f32::NAN);
+                }
+                samples.set_image(i, &img);
+            }
+        }
         // Each pixel's brightest training sample.
         let brightest: Vec<f32> = (0..scene.n_pixels())
             .map(|p| {
@@ -123,14 +224,14 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
                         Some(PixelData {
                             normal: vec_at(&frames.normals, p)?,
                             tangent: vec_at(&frames.tangents, p),
-                            rgb: stack.pixel(p).to_vec(),
+                            rgb: samples.pixel(p).to_vec(),
                         })
                     })
                     .collect();
                 params.exposure = select_exposure(&lights, &params, &pixels)?.exposure;
             }
             let fit = fit_stack(
-                &stack,
+                &samples,
                 &lights,
                 &frames.normals,
                 &frames.tangents,
@@ -139,7 +240,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
                 &|_| {},
             )?;
             let true_frames = fit_stack(
-                &stack,
+                &samples,
                 &lights,
                 &scene.gt_normals(),
                 &scene.gt_tangents(),
@@ -148,24 +249,41 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
                 &|_| {},
             )?;
             let relighter = Relighter::of_fit(&fit.ward, fit.gltf.as_ref(), &Edits::default())?;
-            let mut over = 0.0f64;
+            let (mut over, mut truth_over) = (0.0f64, 0.0f64);
+            // The held-out lights that light some of the judged pixels (on the bumps, a light
+            // below the plane's horizon lights nothing: its PSNR is undefined).
             let psnrs: Vec<f64> = holdout
                 .iter()
+                .filter(|&&i| {
+                    let truth = stack.image(i);
+                    (0..scene.n_pixels())
+                        .any(|p| within[p] && truth[3 * p..3 * p + 3].iter().any(|&v| v > 0.0))
+                })
                 .map(|&i| {
-                    let relit = relighter.render(lights[i]);
-                    for (p, px) in relit.chunks_exact(3).enumerate() {
+                    let mut relit = relighter.render(lights[i]);
+                    if let Some(hf) = &heights {
+                        let shadowed = cast_shadows(hf, size, size, lights[i]);
+                        for (px, _) in relit.chunks_exact_mut(3).zip(&shadowed).filter(|p| *p.1) {
+                            px.fill(0.0);
+                        }
+                    }
+                    let truth = stack.image(i);
+                    for (p, (px, tx)) in
+                        relit.chunks_exact(3).zip(truth.chunks_exact(3)).enumerate()
+                    {
                         if within[p] {
                             let bound = brightest[p].max(1e-3 * peak) as f64;
-                            for &v in px {
+                            for (&v, &t) in px.iter().zip(tx) {
                                 over = over.max(v as f64 / bound);
+                                truth_over = truth_over.max(t as f64 / bound);
                             }
                         }
                     }
-                    image_psnr(&relit, &stack.image(i), Some(&within))
+                    image_psnr(&relit, &truth, Some(&within))
                 })
                 .collect();
             rows.push(Row {
-                model: brdf.name(),
+                model: mat.label.clone(),
                 fit: model.name().into(),
                 exposure: model.uses_gltf().then_some(params.exposure),
                 pixels: [fit.summary.ward_pixels, fit.summary.gltf_pixels],
@@ -173,8 +291,10 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
                 holdout_psnr: fit.summary.holdout_psnr_db.unwrap_or(f64::NAN),
                 holdout_psnr_true_frames: true_frames.summary.holdout_psnr_db.unwrap_or(f64::NAN),
                 relit_psnr: psnrs.iter().sum::<f64>() / psnrs.len() as f64,
+                lights_judged: psnrs.len(),
                 relit_worst: psnrs.iter().copied().fold(f64::INFINITY, f64::min),
                 relit_over_brightest: over,
+                truth_over_brightest: truth_over,
             });
             if model == FitModel::Ward {
                 ward_fit = Some(fit);
@@ -223,22 +343,30 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
         md,
         "A {size} x {size} sphere (circular tangent field) under {n_lights} lights uniform over the \
          65-degree cone; {k} evenly spread lights are held out of both the frame estimate \
-         (symmetry method, default settings) and the fit. Each model is fitted three times: \
-         anisotropic Ward (`symframe fit --model ward`), glTF metallic-roughness with \
-         `KHR_materials_anisotropy` (`--model gltf`) and the automatic choice per pixel \
-         (`--model auto`: whichever predicts the pixel's validation lights, one training light \
-         in five, better), the glTF part's light intensity chosen as `symframe fit` chooses it \
-         (by validation lights; the renders' is 1). PSNR = `20 log10(peak / RMS)` with the peak \
-         the largest true value; \"held-out samples\" is over every fitted pixel (fitted in the \
-         estimated frames, and for comparison in the true ones), \"relit\" over whole relit \
-         images against true renders under the held-out lights (pixels within 60 degrees of the \
-         view): their mean and the worst light. \"max / brightest\" is the largest relit value \
-         over the brightest training sample of its pixel (at least 0.1% of the brightest \
-         anywhere).\n"
+         (symmetry method, default settings) and the fit. After the ten single-lobe models: car \
+         paint (a sharp isotropic clear coat over a brushed metallic base) and woven satin (two \
+         perpendicular anisotropic lobes), then a brushed material on a {size} x {size} bumpy \
+         surface ({} bumps, relief {}, swirling tangents) with cast shadows in the training \
+         images and the true renders, its relit images shadowed by the relief integrated from \
+         the estimated normals (Poisson), as `symframe relight --shadows` shadows them; the \
+         bumps are fitted on every sample, then without the samples that relief shadows (a \
+         shadowed sample is dark whatever the reflectance). Each material is fitted three times: anisotropic Ward \
+         (`symframe fit --model ward`), glTF metallic-roughness with `KHR_materials_anisotropy` \
+         (`--model gltf`) and the automatic choice per pixel (`--model auto`, the default: \
+         whichever predicts the pixel's validation lights, one training light in five, better), \
+         the glTF part's light intensity chosen as `symframe fit` chooses it (by validation \
+         lights; the renders' is 1). PSNR = `20 log10(peak / RMS)` with the peak the largest \
+         true value; \"held-out samples\" is over every fitted pixel (fitted in the estimated \
+         frames, and for comparison in the true ones), \"relit\" over whole relit images \
+         against true renders under the held-out lights (pixels within 60 degrees of the \
+         view), each image with its own peak: their mean and the worst light. \"max / \
+         brightest\" is the largest relit value over the brightest training sample of its \
+         pixel (at least 0.1% of the brightest anywhere).\n",
+        BUMPS.count, BUMPS.relief
     )?;
     writeln!(
         md,
-        "| model | fit | exposure | Ward / glTF pixels | training RMS | held-out samples PSNR \
+        "| material | fit | exposure | Ward / glTF pixels | training RMS | held-out samples PSNR \
          (dB) | the same, true frames (dB) | relit PSNR mean (dB) | relit, worst light (dB) | \
          max / brightest |"
     )?;
@@ -250,7 +378,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
         let exposure = r.exposure.map_or("-".into(), |e| format!("{e:.3}"));
         writeln!(
             md,
-            "| `{}` | {} | {exposure} | {} / {} | {:.4} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} |",
+            "| {} | {} | {exposure} | {} / {} | {:.4} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} |",
             r.model,
             r.fit,
             r.pixels[0],
@@ -263,6 +391,19 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
             r.relit_over_brightest
         )?;
     }
+    let bump_lights = rows
+        .iter()
+        .zip(materials.iter().flat_map(|m| [m.bumpy; FITS.len()]))
+        .filter(|(_, bumpy)| *bumpy)
+        .map(|(r, _)| r.lights_judged)
+        .min();
+    if let Some(n) = bump_lights {
+        writeln!(
+            md,
+            "\nThe bumpy surface is judged under the {n} of the {k} held-out lights that light it \
+             (the others are below its plane's horizon: every pixel in shadow, true and relit)."
+        )?;
+    }
     let mean = |fit: &str| {
         let v: Vec<f64> = rows
             .iter()
@@ -271,30 +412,68 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
             .collect();
         v.iter().sum::<f64>() / v.len() as f64
     };
-    // Per material: the automatic choice against the better single model.
+    // Per material: the automatic choice against the better single model, and how far each
+    // fit's worst light falls below its mean.
+    writeln!(
+        md,
+        "\nPer material, the automatic choice (the default) against the better single model, \
+         and each fit's worst held-out light below its own mean:\n"
+    )?;
+    writeln!(
+        md,
+        "| material | better single (dB) | auto (dB) | auto - better (dB) | worst below mean: \
+         Ward / glTF / auto (dB) | max / brightest: auto, truth |"
+    )?;
+    writeln!(md, "| --- | --- | --- | --- | --- | --- |")?;
     let (mut within_1db, mut worst_gap) = (0, f64::NEG_INFINITY);
     for m in rows.chunks_exact(FITS.len()) {
         let best = m[0].relit_psnr.max(m[1].relit_psnr);
         let gap = best - m[2].relit_psnr;
         within_1db += usize::from(gap <= 1.0);
         worst_gap = worst_gap.max(gap);
+        let drop = |r: &Row| r.relit_psnr - r.relit_worst;
+        writeln!(
+            md,
+            "| {} | {best:.1} | {:.1} | {:+.1} | {:.1} / {:.1} / {:.1} | {:.2}, {:.2} |",
+            m[2].model,
+            m[2].relit_psnr,
+            -gap,
+            drop(&m[0]),
+            drop(&m[1]),
+            drop(&m[2]),
+            m[2].relit_over_brightest,
+            m[2].truth_over_brightest
+        )?;
     }
     let over = rows
         .iter()
         .map(|r| r.relit_over_brightest)
         .fold(0.0, f64::max);
+    // Relit values above twice the brightest training sample where the truth stays lower.
+    let fireflies = rows
+        .iter()
+        .filter(|r| r.relit_over_brightest > 2.0f64.max(r.truth_over_brightest))
+        .count();
+    let steady = rows
+        .chunks_exact(FITS.len())
+        .filter(|m| m[2].relit_psnr - m[2].relit_worst <= 6.0)
+        .count();
     let default = symframe::appearance::fit::DEFAULT_MODEL.name();
     writeln!(
         md,
-        "\nMean relit PSNR over the models: Ward {:.1} dB, glTF {:.1} dB, automatic {:.1} dB. \
-         The automatic choice is within 1 dB of the better single model on {within_1db} of the {} \
-         models (at most {worst_gap:.1} dB below it); no relit value is above {over:.2} times \
-         the brightest training sample of its pixel. `symframe fit --model` defaults to \
+        "\nMean relit PSNR over the materials: Ward {:.1} dB, glTF {:.1} dB, automatic {:.1} dB. \
+         The automatic choice is within 1 dB of the better single model on {within_1db} of the \
+         {} materials (at most {worst_gap:.1} dB below it), and its worst light is within 6 dB \
+         of its mean on {steady}. No relit value is above {over:.2} times the brightest \
+         training sample of its pixel; {fireflies} of the {} fits relight a value above twice \
+         that sample where the true renders stay lower (a sharp highlight falling between the \
+         training lights takes the truth itself above it). `symframe fit --model` defaults to \
          `{default}`.",
         mean("ward"),
         mean("gltf"),
         mean("auto"),
-        MODELS.len()
+        materials.len(),
+        rows.len()
     )?;
     if let Some([truth, relit, edited]) = picture {
         let path = out.join("relight_side_by_side.png");
