@@ -13,7 +13,8 @@
 //! 16-bit linear PNG), whose tile cache is then `u8` or `u16` by default. The figures are also
 //! written to `bench.json` in `--dir` (`total_s`, `decode_s`, `estimate_s`, `peak_rss_bytes`,
 //! `cache_bytes`, `woodham_s`, ...). `symframe-lab bench scaling` ([`scaling`]) sweeps size,
-//! lights and threads with the same dataset and run code.
+//! lights and threads with the same dataset and run code. `--near` ([`run_near`]) times the
+//! near-light estimate of a dome capture against the distant-light one on the same images.
 
 pub mod scaling;
 
@@ -29,7 +30,7 @@ use symframe::render::{Scene, TangentField};
 use symframe::{uniform_cone_lights, Baseline, BaselineParams};
 use symframe_console::flags::{decode_memory_bytes, CacheFormatArg};
 use symframe_console::progress;
-use symframe_job::{EstimateConfig, EstimateOutcome, MethodConfig};
+use symframe_job::{EstimateConfig, EstimateOutcome, LightModel, MethodConfig, NearSynthConfig};
 
 use crate::cli::{BenchArgs, BenchFormat};
 
@@ -322,6 +323,9 @@ fn print_figures(name: &str, f: &Figures) {
 
 /// Runs the benchmark.
 pub fn run(args: &BenchArgs) -> Result<()> {
+    if args.near {
+        return run_near(args);
+    }
     let (width, height) = (
         args.width.unwrap_or(args.size),
         args.height.unwrap_or(args.size),
@@ -399,6 +403,129 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         );
         json["woodham_s"] = base.estimate_s.into();
     }
+    let out = args.dir.join("bench.json");
+    fs::write(&out, serde_json::to_string_pretty(&json)? + "\n")
+        .with_context(|| format!("{}: cannot write", out.display()))?;
+    println!("    figures written to {}", out.display());
+    Ok(())
+}
+
+/// The near-light benchmark: renders the dome capture of `symframe synth --near` once (`--size`
+/// wide, `--lights` lights), then times its estimate with near lights (rounds of per-tile rigs
+/// and depth) and with distant ones (`--light-model distant`) on the same tile cache, and the
+/// paper's distant-light sphere of about as many pixels under as many lights.
+pub fn run_near(args: &BenchArgs) -> Result<()> {
+    let (width, n) = (args.size, args.lights);
+    if !(16..=2048).contains(&width) || !(16..=10_000).contains(&n) {
+        bail!("with --near, --size must be in [16, 2048] and --lights in [16, 10000]");
+    }
+    let tag = format!("near-{width}px-{n}lights");
+    let data = args.dir.join(format!("data-{tag}"));
+    if data.join("light_positions.txt").is_file() {
+        eprintln!("bench: reusing the dataset in {}", data.display());
+    } else {
+        eprintln!(
+            "bench: rendering {n} near-light images into {} (once)",
+            data.display()
+        );
+        let capture = NearSynthConfig {
+            size: width,
+            lights: n,
+            force: true,
+            ..NearSynthConfig::new(&data)
+        };
+        let bars = progress::Bars::default();
+        let show = |p| bars.update(p);
+        symframe_job::synth_near(&capture, &symframe_console::control(&show, None))?;
+    }
+    let mut runs = Vec::new();
+    for (name, model) in [("near", LightModel::Near), ("distant", LightModel::Distant)] {
+        let mut config = symmetry_config(
+            &data,
+            args.dir.join(format!("out-{tag}-{name}")),
+            args.dir.join(format!("cache-{tag}")),
+            args.cold && name == "near",
+            args.decode_memory,
+            args.cache_format,
+        )?;
+        config.near.model = model;
+        runs.push(run_estimate(&config)?);
+    }
+    // A distant-light capture of about as many pixels: the paper's brushed sphere, its side
+    // chosen so that its disc holds the near capture's mask, under as many lights.
+    let side = ((runs[0].mask_pixels * 4.0 / std::f64::consts::PI)
+        .sqrt()
+        .round() as usize)
+        .max(8);
+    let sphere_tag = format!("{side}px-{n}lights");
+    let lp = dataset(&args.dir.join(format!("data-{sphere_tag}")), side, n)?;
+    let config = symmetry_config(
+        &lp,
+        args.dir.join(format!("out-{sphere_tag}-symmetry")),
+        args.dir.join(format!("cache-{sphere_tag}")),
+        args.cold,
+        args.decode_memory,
+        args.cache_format,
+    )?;
+    let sphere = run_estimate(&config)?;
+    let (near, far) = (&runs[0], &runs[1]);
+    println!(
+        "bench --near: {width}x{} pixels, {n} lights on a dome, {} threads",
+        width / 2,
+        rayon::current_num_threads()
+    );
+    print_figures("near", near);
+    print_figures("distant", far);
+    print_figures("sphere", &sphere);
+    let ratio = near.estimate_s / far.estimate_s;
+    println!("    ratio: near / distant estimation time on the same images {ratio:.2}x");
+    let capture_ratio = near.pixels_per_s().recip() / sphere.pixels_per_s().recip();
+    println!(
+        "    ratio: near / a distant-light capture ({side}x{side} sphere, {n} lights) time per \
+         pixel {capture_ratio:.2}x"
+    );
+    // What each run's time is made of: the near rounds, and the estimator's work per pixel
+    // (the distant model's lights do not fit these images, which costs it more per pixel).
+    let report_at = |out: &str| -> Result<serde_json::Value> {
+        let p = args.dir.join(out).join("report.json");
+        let text =
+            fs::read_to_string(&p).with_context(|| format!("{}: cannot read", p.display()))?;
+        Ok(serde_json::from_str(&text)?)
+    };
+    let (rn, rf) = (
+        report_at(&format!("out-{tag}-near"))?,
+        report_at(&format!("out-{tag}-distant"))?,
+    );
+    let rounds = rn.pointer("/near/iterations").and_then(|v| v.as_u64());
+    let evals = |r: &serde_json::Value| r["evals_per_pixel"].as_f64().unwrap_or(f64::NAN);
+    println!(
+        "    near: {} rounds, {:.0} objective evaluations per pixel in the last; distant: {:.0} \
+         per pixel",
+        rounds.unwrap_or(0),
+        evals(&rn),
+        evals(&rf)
+    );
+    let json = serde_json::json!({
+        "near": true,
+        "width": width,
+        "height": width / 2,
+        "lights": n,
+        "threads": rayon::current_num_threads(),
+        "near_estimate_s": near.estimate_s,
+        "distant_estimate_s": far.estimate_s,
+        "near_total_s": near.wall_s,
+        "distant_total_s": far.wall_s,
+        "near_peak_rss_bytes": near.peak_rss_bytes,
+        "distant_peak_rss_bytes": far.peak_rss_bytes,
+        "near_over_distant": ratio,
+        "near_rounds": rounds,
+        "near_evals_per_pixel_last_round": evals(&rn),
+        "distant_evals_per_pixel": evals(&rf),
+        "sphere_side": side,
+        "sphere_estimate_s": sphere.estimate_s,
+        "sphere_evals_per_pixel": evals(&report_at(&format!("out-{sphere_tag}-symmetry"))?),
+        "near_over_distant_capture_per_pixel": capture_ratio,
+    });
     let out = args.dir.join("bench.json");
     fs::write(&out, serde_json::to_string_pretty(&json)? + "\n")
         .with_context(|| format!("{}: cannot write", out.display()))?;

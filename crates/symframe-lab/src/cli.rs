@@ -53,6 +53,9 @@ pub enum ExperimentArg {
     /// light-direction error swept over one-lobe, two-lobe, woven, sheen and off-family
     /// materials, against the baselines.
     Capture,
+    /// Near lights: the distant and the near-light model against the dome's radius over the
+    /// object's size, on a plastic, a brushed and a two-lobe material.
+    Near,
     /// Every experiment, then the report `<output>.md` (e.g. docs/validation.md).
     All,
 }
@@ -141,6 +144,12 @@ pub struct BenchArgs {
     /// still built, so decoding and memory are measured at full size in a fraction of the time.
     #[arg(long, value_name = "K/N")]
     pub tiles: Option<Shard>,
+    /// Near lights: the capture of `symframe synth --near` (--size wide, half as high: two
+    /// spheres under --lights point lights on a dome, light_positions.txt and K.txt), estimated
+    /// with near lights and then with distant ones on the same cache, then the paper's
+    /// distant-light sphere of about as many pixels under as many lights; the time ratios.
+    #[arg(long, conflicts_with_all = ["width", "height", "format", "tiles"])]
+    pub near: bool,
 }
 
 /// Flags of `symframe-lab bench scaling`.
