@@ -26,9 +26,9 @@
 //!   [`evaluate_job`] with an [`EvalConfig`]: an estimate against that truth.
 //!
 //! ```
-//! use symframe::brdf::ward::Ward;
+//! use symframe::brdf::Ward;
 //! use symframe::render::{Scene, TangentField};
-//! use symframe::frames::rig::uniform_cone_lights;
+//! use symframe::uniform_cone_lights;
 //! use symframe_job::{estimate, Control, EstimateConfig, EstimateOutcome};
 //!
 //! # fn main() -> anyhow::Result<()> {
