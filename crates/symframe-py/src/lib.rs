@@ -250,7 +250,7 @@ fn estimate_path<'py>(
         shard: options::shard(&mut o)?,
         normal_png: symframe_io::NormalPng::OpenGl,
         keep_maps: true,
-        near: Default::default(),
+        near: options::near(&mut o)?,
     };
     o.finish()?;
     let outcome = run_job(py, progress, threads, |ctl| {
@@ -267,6 +267,13 @@ fn estimate_path<'py>(
             })?;
             dict.set_item("report", json_to_py(py, &text)?)?;
             put_maps(py, &dict, kept(done.maps)?)?;
+            // Near lights: the depth map along the optical axis the rounds ended with.
+            let depth = config.output.join("depth.npy");
+            if done.report.near.is_some() && depth.is_file() {
+                let (shape, d) = symframe_io::read_npy_f32(&depth)
+                    .map_err(|e| SymframeError::new_err(e.to_string()))?;
+                dict.set_item("depth", map_array(py, d, shape[0], shape[1], 1)?)?;
+            }
         }
         EstimateOutcome::Shard(report) => {
             dict.set_item("report", to_python(py, &*report)?)?;

@@ -12,7 +12,7 @@ use symframe::{
     Baseline, BaselineParams, CosineMode, EstimatorParams, Fallback, Interpolation, RigOptions,
 };
 use symframe_io::{CacheOptions, DecodeOptions, Gamma};
-use symframe_job::{CacheConfig, MethodConfig, Shard};
+use symframe_job::{CacheConfig, LightModel, MethodConfig, NearOptions, Shard};
 
 /// The keyword options of one call; every key must be read by the end ([`Options::finish`]).
 pub struct Options<'py> {
@@ -273,4 +273,40 @@ pub fn shard(o: &mut Options) -> PyResult<Option<Shard>> {
     let s: Option<String> = o.get("tiles")?;
     s.map(|s| s.parse::<Shard>().map_err(|e| bad(format!("tiles: {e}"))))
         .transpose()
+}
+
+/// Near lights (`light_model`: `"auto"`, `"near"` or `"distant"`; `distance`, `rig_tile`,
+/// `rounds`), as `--light-model`, `--distance`, `--rig-tile` and `--rounds`.
+pub fn near(o: &mut Options) -> PyResult<NearOptions> {
+    let d = NearOptions::default();
+    let model: String = o.or("light_model", "auto".to_string())?;
+    let model = match model.as_str() {
+        "auto" => LightModel::Auto,
+        "near" => LightModel::Near,
+        "distant" => LightModel::Distant,
+        other => {
+            return Err(bad(format!(
+                "light_model must be 'auto', 'near' or 'distant', got '{other}'"
+            )))
+        }
+    };
+    let distance: Option<f64> = o.get("distance")?;
+    if distance.is_some_and(|v| !(v.is_finite() && v > 0.0)) {
+        return Err(bad(format!(
+            "distance must be a positive depth, got {}",
+            distance.unwrap_or_default()
+        )));
+    }
+    let tile: usize = o.or("rig_tile", d.tile)?;
+    let rounds: usize = o.or("rounds", d.max_iterations)?;
+    if tile == 0 || rounds == 0 {
+        return Err(bad("rig_tile and rounds must be at least 1".to_string()));
+    }
+    Ok(NearOptions {
+        model,
+        distance,
+        tile,
+        max_iterations: rounds,
+        ..d
+    })
 }

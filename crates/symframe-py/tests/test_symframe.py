@@ -394,3 +394,31 @@ def test_integrate_equals_the_command_line(capture, cli, tmp_path):
     assert (tmp_path / "int_py" / "mesh.ply").read_bytes() == (tmp_path / "int_cli" / "mesh.ply").read_bytes()
     with pytest.raises(ValueError, match="solver must be poisson or bilateral"):
         symframe.integrate(frames, tmp_path / "bad", solver="multigrid")
+
+
+def test_near_lights_are_honoured_as_the_command_line_honours_them(cli, tmp_path):
+    data = tmp_path / "near"
+    cli("synth", "--near", "--size", "48", "--dome-lights", "60", "-o", data)
+    cli("estimate", data, "-o", tmp_path / "cli", "--rounds", "3", "--rig-tile", "2")
+    got = symframe.estimate_path(data, tmp_path / "py", rounds=3, rig_tile=2)
+    assert_same_maps(got, cli_maps(tmp_path / "cli"))
+    near = got["report"]["near"]
+    assert near["rig_tile"] == 2 and 2 <= near["iterations"] <= 3
+    want = np.load(tmp_path / "cli" / "depth.npy")
+    assert got["depth"].shape == want.shape == (24, 48)
+    assert np.array_equal(bits(got["depth"]), bits(want))
+    # The depths are about the object's distance (the dome's centre, 3 widths of 4.2 away).
+    assert abs(np.nanmedian(got["depth"]) / 12.6 - 1) < 0.1
+    # The distant model reads the same folder with the light file's directions: no depth.
+    far = symframe.estimate_path(data, tmp_path / "far", light_model="distant")
+    assert "near" not in far["report"] and "depth" not in far
+    truth = np.load(data / "gt_normals.npy")
+
+    def error(normals):
+        dot = np.clip(np.sum(normals * truth, axis=2), -1, 1)
+        keep = np.isfinite(dot) & (truth[..., 2] > 0.5)
+        return np.degrees(np.arccos(dot[keep])).mean()
+
+    assert error(got["normals"]) < error(far["normals"]) / 3
+    with pytest.raises(ValueError, match="light_model must be"):
+        symframe.estimate_path(data, tmp_path / "bad", light_model="far")

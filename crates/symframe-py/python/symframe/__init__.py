@@ -151,7 +151,16 @@ def estimate_path(
     then only ``report`` is returned), ``tile_size``, ``decode_memory`` (MiB), ``cache_format``
     (``"auto"``, ``"u8"``, ``"u16"``, ``"f32"`` or ``"f16"``, as ``--cache-format``).
 
-    Returns the maps as :func:`estimate` does and ``report``: the content of ``report.json``.
+    Near lights: where the folder holds ``light_positions.txt`` and ``K.txt`` they are used as
+    ``symframe estimate`` uses them (the normals and tangents in the camera frame); options
+    ``light_model`` (``"auto"``, ``"near"`` or ``"distant"``), ``distance`` (the depth of the
+    object's centre along the optical axis, in the positions' unit; default the centre of the
+    sphere through the lights), ``rig_tile`` and ``rounds``, as ``--light-model``,
+    ``--distance``, ``--rig-tile`` and ``--rounds``.
+
+    Returns the maps as :func:`estimate` does and ``report``: the content of ``report.json``
+    (with near lights its ``near`` section, and ``depth``: ``H x W`` float32, the depth along
+    the optical axis, NaN outside the mask).
     """
     if out is not None:
         return _native.estimate_path(os.fspath(path), os.fspath(out), progress, threads, options)

@@ -100,6 +100,10 @@ def estimate_path(
     tile_size: int = 32,
     decode_memory: int = 1024,
     cache_format: str = "auto",
+    light_model: str = "auto",
+    distance: Optional[float] = None,
+    rig_tile: int = 4,
+    rounds: int = 5,
 ) -> Maps:
     """The tiled, resumable `symframe estimate` job."""
 
