@@ -1,7 +1,8 @@
 //! The calibration job (`symframe calibrate`): light directions from a mirror sphere in the
 //! images, written as an `.lp` file, with a picture of the detected highlights and a JSON
-//! record beside it. The per-image highlight and the sphere detection are
-//! [`symframe::calibrate`]'s; this module reads the images and writes the files.
+//! record beside it. The per-image highlight and the sphere detection are the core crate's
+//! ([`symframe::find_highlight`], [`symframe::detect_spheres`]); this module reads the images
+//! and writes the files.
 
 use std::path::{Component, Path, PathBuf};
 

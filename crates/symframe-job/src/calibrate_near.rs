@@ -2,8 +2,8 @@
 //! lights' positions from two or more chrome spheres seen by a pinhole camera, written as
 //! `light_positions.txt` with a JSON record beside it. The geometry (each sphere placed by its
 //! outline and radius, each light triangulated from its reflections) is
-//! [`symframe::chrome`]'s; the highlights and the spheres' outlines are
-//! [`symframe::calibrate`]'s. This module reads the images and writes the files.
+//! the core crate's ([`symframe::sphere_from_rim`], [`symframe::triangulate`]); the highlights
+//! and the spheres' outlines too. This module reads the images and writes the files.
 
 use std::path::{Path, PathBuf};
 

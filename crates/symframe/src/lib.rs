@@ -95,19 +95,19 @@
 #![deny(unnameable_types)]
 #![deny(unreachable_pub)]
 
-pub mod appearance;
+mod appearance;
 mod baselines;
 pub mod brdf;
 mod calibrate;
 mod error;
-pub mod eval;
-pub mod frames;
+mod eval;
+mod frames;
 mod geometry;
 mod highlight;
-pub mod integrate;
+mod integrate;
 mod maps;
 mod method;
-pub mod near;
+mod near;
 mod noise;
 mod orientation;
 mod regions;

@@ -8,11 +8,10 @@ use anyhow::{Context, Result};
 use glam::DVec3;
 use serde::Serialize;
 use symframe::brdf::{parse_model, Brdf, Ggx, Layered};
-use symframe::near::{estimate_near_stack, perspective_depth, NearParams};
 use symframe::render::{dome_lights, NearScene};
 use symframe::{
-    estimate_stack, evaluate_in_views, fit_sphere, EstimatorParams, Evaluation, IntegrateParams,
-    Rig, RigOptions, Stack,
+    estimate_near_stack, estimate_stack, evaluate_in_views, fit_sphere, perspective_depth,
+    EstimatorParams, Evaluation, IntegrateParams, NearParams, Rig, RigOptions, Stack,
 };
 use symframe_job::synth_near::PAIR_WIDTH;
 use symframe_job::NearSynthConfig;

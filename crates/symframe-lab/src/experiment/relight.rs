@@ -10,18 +10,13 @@ use super::{Ctx, Section};
 
 use anyhow::Result;
 use glam::DVec3;
-use symframe::appearance::fit::{
-    fit_stack, holdout_lights, select_exposure, FitMaps, FitModel, FitParams, PixelData,
+use symframe::brdf::{parse_model, Brdf, Ggx, Layered, Woven};
+use symframe::render::{cast_shadows, BumpParams, Scene, TangentField};
+use symframe::{
+    estimate_stack, fit_stack, holdout_lights, image_psnr, integrate, select_exposure, tone_map,
+    uniform_cone_lights, vec_at, Edits, EstimatorParams, FitMaps, FitModel, FitParams,
+    IntegrateParams, PixelData, Relighter, Rig, RigOptions, Stack,
 };
-use symframe::appearance::relight::{image_psnr, tone_map, Edits, Relighter};
-use symframe::brdf::spec::parse_model;
-use symframe::brdf::{Brdf, Ggx, Layered, Woven};
-use symframe::eval::vec_at;
-use symframe::frames::rig::uniform_cone_lights;
-use symframe::integrate::{integrate, IntegrateParams};
-use symframe::render::shadow::cast_shadows;
-use symframe::render::{BumpParams, Scene, TangentField};
-use symframe::{estimate_stack, EstimatorParams, Rig, RigOptions, Stack};
 
 /// Models rendered on the sphere: a brushed Ward material (the Ward fit's own family), two GGX
 /// plastics, a glTF plastic and a brushed glTF metal (the glTF fit's family), and five that
@@ -458,7 +453,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
         .chunks_exact(FITS.len())
         .filter(|m| m[2].relit_psnr - m[2].relit_worst <= 6.0)
         .count();
-    let default = symframe::appearance::fit::DEFAULT_MODEL.name();
+    let default = symframe::DEFAULT_MODEL.name();
     writeln!(
         md,
         "\nMean relit PSNR over the materials: Ward {:.1} dB, glTF {:.1} dB, automatic {:.1} dB. \

@@ -2,6 +2,6 @@
 //! [`gltf_fit`]) and rendering
 //! and editing them under new lights ([`relight`]).
 
-pub mod fit;
+pub(crate) mod fit;
 pub(crate) mod gltf_fit;
-pub mod relight;
+pub(crate) mod relight;

@@ -54,7 +54,7 @@ pub(crate) mod layered;
 pub(crate) mod merl;
 pub(crate) mod microfacet;
 pub(crate) mod sheen;
-pub mod spec;
+pub(crate) mod spec;
 #[cfg(test)]
 pub(crate) mod testutil;
 pub(crate) mod torrance_sparrow;

@@ -13,6 +13,6 @@ pub(crate) mod lobe;
 pub(crate) mod objective;
 pub(crate) mod optim;
 pub(crate) mod policy;
-pub mod rig;
+pub(crate) mod rig;
 pub(crate) mod slice;
 pub(crate) mod symmetry;

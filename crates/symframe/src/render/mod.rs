@@ -23,7 +23,7 @@ mod near_mirror;
 pub(crate) mod noise;
 pub(crate) mod perspective;
 pub(crate) mod rigs;
-pub mod shadow;
+pub(crate) mod shadow;
 mod shapes;
 mod tangent;
 
