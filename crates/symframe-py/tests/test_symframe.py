@@ -363,13 +363,14 @@ def test_view_writes_the_command_lines_page(capture, cli, tmp_path):
     cli("view", fit_dir, "-o", tmp_path / "cli.html")
     text = Path(page).read_text()
     assert text == (tmp_path / "cli.html").read_text()
-    assert "#version 300 es" in text and '"views":["relit","normal","tangent","base_color",' \
-        '"confidence","anisotropy","source"]' in text
+    # The default (automatic) fit holds both models' maps.
+    assert "#version 300 es" in text and '"views":["relit","normal","tangent","kd","ks",' \
+        '"base_color","confidence","anisotropy","source"]' in text
     # Without the estimate's folder: a warning, and a page of the fit's views only.
     frames.rename(tmp_path / "moved")
     with pytest.warns(UserWarning, match="--frames"):
         page = symframe.view(fit_dir, tmp_path / "no_est.html")
-    assert '"views":["relit","normal","tangent","base_color"]' in Path(page).read_text()
+    assert '"views":["relit","normal","tangent","kd","ks","base_color"]' in Path(page).read_text()
     assert symframe.view(fit_dir, tmp_path / "v.html", frames=tmp_path / "moved").endswith("v.html")
     # An estimate folder opens on its own maps.
     page = symframe.view(tmp_path / "moved", tmp_path / "est.html")
