@@ -538,6 +538,26 @@ const SHADOW_LEVEL: f64 = 1e-3;
 /// The parameters a microfacet lobe is fitted with (`m = 0`).
 const MICROFACET: [bool; P] = [true, true, true, true, true, true, false];
 
+/// A fit leaving no more than what the capture's noise leaves, at this many standard
+/// deviations above its expectation (the one-sided 0.1% point of the normal distribution, as
+/// the estimator's acceptance), is as good as the samples allow: it is not retried from other
+/// starts, nor given the foreshortening exponent (neither could be told from noise). Higher:
+/// fewer retries on noisy captures, faster.
+const SETTLED_Z: f64 = 3.09;
+
+/// The sum of squared residuals the capture's noise alone leaves on `data` (grey values, each
+/// the sum of three channels of about a third of it), `z` standard deviations above its
+/// expectation; 0 for a noise-free capture.
+fn noise_cost(data: &Subset, noise: &NoiseModel, z: f64) -> f64 {
+    let (mut sum, mut sum2) = (0.0, 0.0);
+    for i in 0..data.len() {
+        let v = 3.0 * noise.variance(data.value(i).max(0.0) / 3.0);
+        sum += v;
+        sum2 += v * v;
+    }
+    sum + z * (2.0 * sum2).sqrt()
+}
+
 /// The foreshortening exponent is looked for only where the microfacet lobe leaves more than
 /// this share of the energy unexplained.
 const FORESHORTENING_FLOOR: f64 = 1e-6;
@@ -767,6 +787,7 @@ fn search_subset(
     data: &mut Subset,
     starts: &[LobeStart],
     relative: f64,
+    noise: f64,
     buffers: &mut Buffers,
 ) -> Option<(State, [bool; P], Linear, u32)> {
     buffers.fit(data);
@@ -774,7 +795,7 @@ fn search_subset(
     let mut evals = 0;
     let mut best: Option<(State, Linear)> = None;
     for (k, s) in starts.iter().enumerate() {
-        if k > 0 && best.is_some_and(|b| b.1.cost <= RETRY_RESIDUAL * syy) {
+        if k > 0 && best.is_some_and(|b| b.1.cost <= (RETRY_RESIDUAL * syy).max(noise)) {
             break;
         }
         let (state, linear, e) =
@@ -797,7 +818,7 @@ fn search_subset(
     // A lobe that is not a microfacet one (Ward's, Phong's) leaves a foreshortening the model
     // above lacks: free `m` (from the microfacet answer), and keep it where it explains more.
     let mut free = MICROFACET;
-    if linear.cost > FORESHORTENING_FLOOR * syy {
+    if linear.cost > (FORESHORTENING_FLOOR * syy).max(noise) {
         let (free_m, linear_m, e) =
             levenberg_marquardt(data, state, Some(linear), [true; P], relative, buffers);
         evals += e;
@@ -933,8 +954,9 @@ pub(crate) fn fit_lobe(
     } else {
         RELATIVE_GAIN
     };
+    let settled = noise_cost(searched, noise, SETTLED_Z);
     let (mut state, free, mut linear, mut evals) =
-        search_subset(searched, starts, relative, buffers)?;
+        search_subset(searched, starts, relative, settled, buffers)?;
     // The polish on the whole subset, from the coarse answer (a few iterations).
     if polish {
         // Where no sample went, the linear part the trimming found is the polish's start.
