@@ -788,13 +788,28 @@ pub fn mesh(depth: &DepthMap, normals: &[f32], max_jump: f64) -> Mesh {
         let step = depth.depth[b] as f64 - depth.depth[a] as f64;
         (step - predicted).abs() <= max_jump * (1.0 + predicted.abs())
     };
+    triangulate_grid(w, h, &index, continuous, &mut m);
+    m
+}
+
+/// The triangles of a mesh on a `w` x `h` pixel grid whose vertices `index` numbers (`u32::MAX`
+/// where a pixel has none): two per 2 x 2 block, one where only three of its pixels have a
+/// vertex, counter-clockwise seen from the camera; a triangle with an edge that is not
+/// `continuous` (a depth discontinuity) is left out and counted in `m.dropped`.
+pub(crate) fn triangulate_grid(
+    w: usize,
+    h: usize,
+    index: &[u32],
+    continuous: impl Fn(usize, usize) -> bool,
+    m: &mut Mesh,
+) {
+    let ok = |i: usize| index[i] != u32::MAX;
     for r in 0..h.saturating_sub(1) {
         for q in 0..w.saturating_sub(1) {
             let a = r * w + q; // top left
             let b = a + 1; // top right
             let c = a + w; // bottom left
             let d = c + 1; // bottom right
-            let ok = |i: usize| index[i] != u32::MAX;
             let tris: &[[usize; 3]] = match (ok(a), ok(b), ok(c), ok(d)) {
                 (true, true, true, true) => &[[a, c, b], [b, c, d]],
                 (true, true, true, false) => &[[a, c, b]],
@@ -812,7 +827,6 @@ pub fn mesh(depth: &DepthMap, normals: &[f32], max_jump: f64) -> Mesh {
             }
         }
     }
-    m
 }
 
 /// Shades a height map for a picture: Lambertian under a light from the upper left

@@ -4,7 +4,7 @@
 
 use glam::DVec3;
 
-use crate::integrate::Mesh;
+use crate::integrate::{triangulate_grid, Mesh};
 use crate::near::Pinhole;
 
 /// Smallest cosine between a normal and the ray to its pixel used to predict the depth's slope:
@@ -66,30 +66,7 @@ pub fn perspective_mesh(
         let step = focal * ((depth[b] as f64).ln() - (depth[a] as f64).ln());
         (step - predicted).abs() <= max_jump * (1.0 + predicted.abs())
     };
-    for r in 0..h.saturating_sub(1) {
-        for q in 0..w.saturating_sub(1) {
-            let a = r * w + q; // top left
-            let b = a + 1; // top right
-            let c = a + w; // bottom left
-            let d = c + 1; // bottom right
-            let ok = |i: usize| index[i] != u32::MAX;
-            let tris: &[[usize; 3]] = match (ok(a), ok(b), ok(c), ok(d)) {
-                (true, true, true, true) => &[[a, c, b], [b, c, d]],
-                (true, true, true, false) => &[[a, c, b]],
-                (false, true, true, true) => &[[b, c, d]],
-                (true, false, true, true) => &[[a, c, d]],
-                (true, true, false, true) => &[[a, d, b]],
-                _ => &[],
-            };
-            for t in tris {
-                if continuous(t[0], t[1]) && continuous(t[1], t[2]) && continuous(t[2], t[0]) {
-                    m.triangles.push(t.map(|i| index[i]));
-                } else {
-                    m.dropped += 1;
-                }
-            }
-        }
-    }
+    triangulate_grid(w, h, &index, continuous, &mut m);
     m
 }
 
