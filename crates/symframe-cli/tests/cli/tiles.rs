@@ -8,7 +8,8 @@ use std::path::{Path, PathBuf};
 use crate::common::{estimate_tiled as estimate, ok, report, s, stderr, symframe, ward_sphere};
 
 use symframe::{
-    estimate_stack, estimate_stack_baseline, Baseline, CosineMode, EstimatorParams, Rig, RigOptions,
+    estimate_stack, estimate_stack_baseline, Baseline, CosineMode, EstimatorParams, NoiseModel,
+    Rig, RigOptions,
 };
 use symframe_io::{read_npy_f32, DecodeOptions};
 
@@ -88,6 +89,11 @@ fn tiled_result_equals_the_in_memory_result_exactly() {
             flags.extend(["--decode-memory", "1"]);
         }
         ok(&estimate(&lp, &out, &flags));
+        // The job reads the capture's noise model from its images (report.json records it);
+        // the in-memory run is given the same one.
+        let r = report(&out);
+        let noise: NoiseModel = serde_json::from_value(r["parameters"]["noise"].clone()).unwrap();
+        let params = EstimatorParams { noise, ..params };
         let maps = estimate_stack(&stack, &rig, Some(&mask), params, &|_| {}).unwrap();
         for (name, want) in MAPS.iter().zip([
             &maps.normals,
@@ -98,7 +104,6 @@ fn tiled_result_equals_the_in_memory_result_exactly() {
             let (_, got) = read_npy_f32(&out.join(name)).unwrap();
             assert!(same_bits(&got, want), "{name} ({flags:?})");
         }
-        let r = report(&out);
         assert_eq!(r["pixels"], serde_json::to_value(maps.counts).unwrap());
         assert_eq!(r["tiles"]["size"], 8);
         assert_eq!(r["tiles"]["count"], TILES);
