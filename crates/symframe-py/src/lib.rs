@@ -569,6 +569,17 @@ impl Dataset {
         self.ds.source.clone()
     }
 
+    /// The capture's noise model as the command line reads it from the images (quantisation,
+    /// clip level, shot and read noise: report.json's `parameters.noise`), a dict to pass as
+    /// `estimate(..., noise=...)` so that an in-memory estimate equals `estimate_path`'s.
+    #[getter]
+    fn noise<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let model = py
+            .detach(|| symframe_io::capture_noise(&self.ds, &self.decode))
+            .map_err(|e| to_py(e.into()))?;
+        to_python(py, &model)
+    }
+
     /// Decodes every image: `N x H x W x 3` float32, linear, divided by the light intensities,
     /// NaN where saturated or non-finite.
     #[pyo3(signature = (progress=None, threads=None))]

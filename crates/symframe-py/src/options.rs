@@ -97,14 +97,15 @@ fn bad(msg: String) -> PyErr {
 }
 
 /// The method and its parameters (`method`, `theta_d_max`, `min_confidence`, `min_anisotropy`,
-/// `light_error`, `min_domain`, `cosine`, `cosine_power`, `fallback`, `no_tangents`,
+/// `light_error`, `noise`, `min_domain`, `cosine`, `cosine_power`, `fallback`, `no_tangents`,
 /// `reference`).
 pub fn method(o: &mut Options) -> PyResult<MethodConfig> {
     let d = EstimatorParams::default();
     let theta_d_max = o.or("theta_d_max", RigOptions::default().theta_d_max_deg)?;
     let min_confidence: f32 = o.or("min_confidence", d.min_confidence)?;
     let min_anisotropy: f32 = o.or("min_anisotropy", d.min_anisotropy)?;
-    let light_error: f64 = o.or("light_error", 0.0)?;
+    let light_error: Option<f64> = o.get("light_error")?;
+    let noise = noise_model(o)?;
     let min_domain: Option<u32> = o.get("min_domain")?;
     let cosine: String = o.or("cosine", "auto".to_string())?;
     let cosine_power: f64 = o.or("cosine_power", 0.5)?;
@@ -126,6 +127,7 @@ pub fn method(o: &mut Options) -> PyResult<MethodConfig> {
             return Err(bad(format!("{name} must be in [0, 1], got {v}")));
         }
     }
+    let light_error = light_error.unwrap_or(noise.light_error_deg);
     if !(0.0..=10.0).contains(&light_error) {
         return Err(bad(format!(
             "light_error must be in [0, 10] degrees, got {light_error}"
@@ -181,7 +183,7 @@ pub fn method(o: &mut Options) -> PyResult<MethodConfig> {
                 min_anisotropy,
                 noise: symframe::NoiseModel {
                     light_error_deg: light_error,
-                    ..d.noise
+                    ..noise
                 },
                 tangents: !no_tangents,
                 interpolation: if reference {
@@ -197,6 +199,20 @@ pub fn method(o: &mut Options) -> PyResult<MethodConfig> {
             params: BaselineParams::default(),
         },
     })
+}
+
+/// The capture's noise model (`noise`: a dict as `Dataset.noise` gives it and report.json's
+/// `parameters.noise` records it), or the noise-free default.
+fn noise_model(o: &mut Options) -> PyResult<symframe::NoiseModel> {
+    let Some(d) = o.get::<Bound<'_, PyDict>>("noise")? else {
+        return Ok(symframe::NoiseModel::default());
+    };
+    let text: String = d
+        .py()
+        .import("json")?
+        .call_method1("dumps", (d,))?
+        .extract()?;
+    serde_json::from_str(&text).map_err(|e| bad(format!("noise: {e}")))
 }
 
 /// How images are decoded (`gamma`, `linear` its alias for `gamma="linear"`, `saturation`).

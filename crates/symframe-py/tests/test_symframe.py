@@ -90,10 +90,13 @@ def test_light_error_reaches_the_job_and_lowers_the_confidence(capture, cli, tmp
 def test_in_memory_estimate_equals_the_tiled_job(capture, tmp_path):
     ds = symframe.load(capture)
     calls = []
-    got = symframe.estimate(ds.images(), ds.lights, ds.mask,
+    got = symframe.estimate(ds.images(), ds.lights, ds.mask, noise=ds.noise,
                             progress=lambda stage, done, total: calls.append((stage, done, total)))
     want = symframe.estimate_path(capture, tmp_path / "out")
     assert_same_maps(got, want)
+    assert ds.noise == want["report"]["parameters"]["noise"]
+    with pytest.raises(ValueError, match="noise"):
+        symframe.estimate(ds.images(), ds.lights, ds.mask, noise={"shot": "much"})
     assert got["report"]["pixels"] == want["report"]["pixels"]
     assert got["report"]["sources"] == want["report"]["sources"]
     assert calls and calls[-1][1] == calls[-1][2]

@@ -111,7 +111,9 @@ def estimate(
     Options (the command line's flags of the method): ``method`` (``"symmetry"``, or a
     baseline: ``"woodham"``, ``"woodham-robust"``, ``"max-reflectance"``,
     ``"highlight-centroid"``), ``theta_d_max``, ``min_confidence``, ``min_anisotropy``,
-    ``light_error`` (the lights' RMS error in degrees: the confidence counts it), ``min_domain``, ``cosine`` (``"auto"``, ``"cross"``, ``"raw"``, ``"compensated"``),
+    ``light_error`` (the lights' RMS error in degrees: the confidence counts it), ``noise`` (the
+    capture's noise model, a dict as :attr:`Dataset.noise` reads it from the images; default
+    noise-free), ``min_domain``, ``cosine`` (``"auto"``, ``"cross"``, ``"raw"``, ``"compensated"``),
     ``cosine_power``, ``fallback`` (``"auto"``, ``"none"``), ``no_tangents``, ``reference``;
     ``threads`` (worker threads, default all cores).
 
@@ -119,7 +121,8 @@ def estimate(
     ``confidence``, ``anisotropy``, ``tangent_confidence`` (``H x W`` float32; the last 0 where
     there is no tangent), ``source`` (``H x W`` uint8: 0 none, 1 symmetry, 2 Lambertian,
     3 highlight, 4 lobe) and ``report`` (method, parameters, light and pixel
-    counts). The maps equal those of :func:`estimate_path` on the same data bit for bit.
+    counts). With ``noise=ds.noise`` the maps equal those of :func:`estimate_path` on the same
+    data bit for bit (the command line reads the noise model from the images).
     """
     images = _float_array("images", images, 4, 3, np.float32)
     lights = _float_array("lights", lights, 2, 3, np.float64)

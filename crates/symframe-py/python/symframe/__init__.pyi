@@ -32,6 +32,9 @@ class Dataset:
     @property
     def source(self) -> str:
         """The file or folder the dataset was opened from."""
+    @property
+    def noise(self) -> Dict[str, Any]:
+        """The capture's noise model as the command line reads it (pass to estimate(noise=))."""
     def images(
         self, progress: Optional[Progress] = None, threads: Optional[int] = None
     ) -> npt.NDArray[np.float32]:
@@ -62,7 +65,8 @@ def estimate(
     theta_d_max: float = 65.0,
     min_confidence: float = 0.0,
     min_anisotropy: float = 0.6,
-    light_error: float = 0.0,
+    light_error: Optional[float] = None,
+    noise: Optional[Dict[str, Any]] = None,
     min_domain: Optional[int] = None,
     cosine: str = "auto",
     cosine_power: float = 0.5,
@@ -82,7 +86,8 @@ def estimate_path(
     theta_d_max: float = 65.0,
     min_confidence: float = 0.0,
     min_anisotropy: float = 0.6,
-    light_error: float = 0.0,
+    light_error: Optional[float] = None,
+    noise: Optional[Dict[str, Any]] = None,
     min_domain: Optional[int] = None,
     cosine: str = "auto",
     cosine_power: float = 0.5,
