@@ -545,17 +545,25 @@ const MICROFACET: [bool; P] = [true, true, true, true, true, true, false];
 /// fewer retries on noisy captures, faster.
 const SETTLED_Z: f64 = 3.09;
 
-/// The sum of squared residuals the capture's noise alone leaves on `data` (grey values, each
-/// the sum of three channels of about a third of it), `z` standard deviations above its
-/// expectation; 0 for a noise-free capture.
+/// The sum of squared residuals the capture's noise alone leaves on `data`, `z` standard
+/// deviations above its expectation ([`noise_variances`]); 0 for a noise-free capture.
 fn noise_cost(data: &Subset, noise: &NoiseModel, z: f64) -> f64 {
+    let (sum, sum2) = noise_variances(data, noise, &[]);
+    sum + z * (2.0 * sum2).sqrt()
+}
+
+/// The sum of the samples' noise variances over `data` and the sum of their squares: each grey
+/// value is the sum of three channels of about a third of it, each with the noise model's
+/// variance, plus what the lights' error adds to sample `i` (`light_var[i]`, 0 beyond it).
+fn noise_variances(data: &Subset, noise: &NoiseModel, light_var: &[f64]) -> (f64, f64) {
     let (mut sum, mut sum2) = (0.0, 0.0);
     for i in 0..data.len() {
-        let v = 3.0 * noise.variance(data.value(i).max(0.0) / 3.0);
+        let y = data.value(i).max(0.0);
+        let v = 3.0 * noise.variance(y / 3.0) + light_var.get(i).copied().unwrap_or(0.0);
         sum += v;
         sum2 += v * v;
     }
-    sum + z * (2.0 * sum2).sqrt()
+    (sum, sum2)
 }
 
 /// The foreshortening exponent is looked for only where the microfacet lobe leaves more than
@@ -1048,14 +1056,7 @@ pub(crate) fn fit_lobe(
     // What the noise alone would leave (docs/method.md, "Noise model"): a grey is the sum of
     // three channels, each about a third of it.
     let (noise_share, noise_share_sd) = {
-        let (mut sum, mut sum2) = (0.0, 0.0);
-        for i in 0..fine.len() {
-            let y = fine.value(i).max(0.0);
-            let v =
-                3.0 * noise.variance(y / 3.0) + buffers.light_var.get(i).copied().unwrap_or(0.0);
-            sum += v;
-            sum2 += v * v;
-        }
+        let (sum, sum2) = noise_variances(fine, noise, &buffers.light_var);
         let parameters = free.iter().filter(|f| **f).count() + linear.set.count_ones() as usize;
         let n = fine.len() as f64;
         let kept = ((n - parameters as f64) / n).max(0.0);
