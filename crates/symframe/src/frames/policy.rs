@@ -69,9 +69,9 @@ pub(crate) struct LobeSettings {
     /// A lobe leaving less than this share beyond what the capture's noise leaves (its
     /// expected share plus [`LobeSettings::noise_z`] standard deviations, [`NoiseShare`]) is a
     /// plausible answer where the search doubts its own, and its axis counts as a reading of
-    /// the tangent by itself (at 1%, lobes on rough metal bumps under 200 lights were 9.4
-    /// degrees off where the search was 6.1). Higher: more doubtful searches replaced, more
-    /// tangents from lobes that describe the pixel less well.
+    /// the tangent by itself (docs/method.md, "Default measure", has what a looser share
+    /// cost). Higher: more doubtful searches replaced, more tangents from lobes that describe
+    /// the pixel less well.
     pub plausible: f64,
     /// Where a diffuse term explains the pixel too, the lobe answers only if what it leaves
     /// beyond the noise's expected share is less than this share of what the diffuse term
@@ -595,8 +595,7 @@ pub(crate) fn choose_fallback(
         // Unlike within the reach, the shares themselves are compared, noise and all: a lobe
         // that beats the diffuse term only once the noise is discounted fits the part of the
         // highlight the rig sees no better than noise, which does not place a centre beyond
-        // it (glossy plastic on the narrow cap, 8-bit: 0.72 -> 1.22 degrees mean when the
-        // noise was discounted here too).
+        // it (docs/method.md, "The policy's settings", has what discounting it here cost).
         let over_diffuse = diffuse.and(share).map(|v| s.lobe.over_diffuse * v);
         let limit = if centre_determined(&s.lobe, f) {
             lobe_limit(&s.lobe, f)
