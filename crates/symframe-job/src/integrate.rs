@@ -14,7 +14,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 use symframe::{
-    integrate, mesh, perspective_depth, perspective_mesh, picture_heights, shade, DepthMap,
+    integrate, mesh, perspective_depth, perspective_mesh, picture_heights, DepthMap,
     IntegrateParams, Mesh, Pinhole, Solver,
 };
 
@@ -351,11 +351,8 @@ fn integrate_into(
     symframe_io::write_npy_f32(&staging.path("depth.npy"), &[h, w], &depth.depth)?;
     symframe_io::write_exr_map(&staging.path("depth.exr"), w, h, 1, &depth.depth)?;
     let picture = match &camera {
-        None => shade(&depth),
-        Some((cam, _)) => shade(&DepthMap {
-            depth: picture_heights(cam, &depth.depth),
-            ..depth.clone()
-        }),
+        None => shade(w, h, &depth.depth),
+        Some((cam, _)) => shade(w, h, &picture_heights(cam, &depth.depth)),
     };
     let shaded: Vec<f32> = picture.iter().flat_map(|&v| [v; 3]).collect();
     symframe_io::write_png8_rgb(&staging.path("depth.png"), w, h, &shaded, true)?;
@@ -396,6 +393,49 @@ fn integrate_into(
     };
     staging.commit("integrate.json", serde_json::to_value(&report)?, &|_| {})?;
     Ok((depth, report))
+}
+
+/// Shades a `w` x `h` height map for a picture (`depth.png`): Lambertian under a light from the
+/// upper left (`(-1, 1, 2)` normalised), 0.15 ambient, values in [0, 1], NaN outside.
+fn shade(w: usize, h: usize, z: &[f32]) -> Vec<f32> {
+    let l = {
+        let v = [-1.0f64, 1.0, 2.0];
+        let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        [v[0] / n, v[1] / n, v[2] / n]
+    };
+    (0..w * h)
+        .map(|i| {
+            if !z[i].is_finite() {
+                return f32::NAN;
+            }
+            let (r, q) = (i / w, i % w);
+            let at = |rr: usize, qq: usize| z[rr * w + qq];
+            // Central differences where both sides exist, one-sided otherwise.
+            let diff = |a: Option<f32>, b: Option<f32>, c: f32| -> f64 {
+                match (a.filter(|v| v.is_finite()), b.filter(|v| v.is_finite())) {
+                    (Some(a), Some(b)) => (b as f64 - a as f64) / 2.0,
+                    (Some(a), None) => c as f64 - a as f64,
+                    (None, Some(b)) => b as f64 - c as f64,
+                    (None, None) => 0.0,
+                }
+            };
+            let dzdq = diff(
+                (q > 0).then(|| at(r, q - 1)),
+                (q + 1 < w).then(|| at(r, q + 1)),
+                z[i],
+            );
+            let dzdr = diff(
+                (r > 0).then(|| at(r - 1, q)),
+                (r + 1 < h).then(|| at(r + 1, q)),
+                z[i],
+            );
+            // n = (-dz/dx, -dz/dy, 1) with y = -row.
+            let (nx, ny, nz) = (-dzdq, dzdr, 1.0);
+            let len = (nx * nx + ny * ny + nz * nz).sqrt();
+            let d = ((nx * l[0] + ny * l[1] + nz * l[2]) / len).max(0.0);
+            (0.15 + 0.85 * d) as f32
+        })
+        .collect()
 }
 
 /// The depth map a near-light estimate wrote (`depth.npy`, its report.json having a `near`
@@ -490,6 +530,27 @@ mod tests {
         estimate, export_gltf, synth_near, Control, EstimateConfig, ExportConfig, NearSynthConfig,
     };
     use glam::DVec3;
+
+    /// The shaded picture is NaN exactly where the heights are and within [0, 1] elsewhere.
+    #[test]
+    fn shading_is_bounded_and_keeps_the_holes() {
+        let (w, h) = (8, 6);
+        let z: Vec<f32> = (0..w * h)
+            .map(|i| match i % 7 {
+                0 => f32::NAN,
+                k => (k * k) as f32 * 0.3 - (i / w) as f32,
+            })
+            .collect();
+        let s = shade(w, h, &z);
+        assert_eq!(s.len(), z.len());
+        assert!(s
+            .iter()
+            .zip(&z)
+            .all(|(s, z)| s.is_nan() == z.is_nan() && (s.is_nan() || (0.0..=1.0).contains(s))));
+        // A flat patch faces the view: 0.15 + 0.85 * l.z.
+        let flat = shade(3, 3, &[1.0; 9]);
+        assert!((flat[4] - (0.15 + 0.85 * 2.0 / 6f64.sqrt()) as f32).abs() < 1e-6);
+    }
 
     /// Each mesh vertex's distance from the true surface point of its pixel, over the object's
     /// width, with whether the pixel's true normal is within 60 degrees of its view.

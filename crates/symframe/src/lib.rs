@@ -154,7 +154,7 @@ pub use appearance::gltf_fit::GltfFit;
 pub use appearance::relight::{image_psnr, tone_map, Edits, Relighter};
 
 // Depth from normals, and a mesh of it.
-pub use integrate::{integrate, mesh, shade, DepthMap, IntegrateParams, Mesh, Solver};
+pub use integrate::{integrate, mesh, DepthMap, IntegrateParams, Mesh, Solver};
 
 // Light calibration: chrome and matte spheres.
 pub use calibrate::{

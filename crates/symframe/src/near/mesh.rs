@@ -72,7 +72,7 @@ pub fn perspective_mesh(
 
 /// Heights in pixel spacings for a picture of a perspective depth map: `-f ln z` (f the mean
 /// focal length), whose slopes are the surface's in pixel units where the rays are near the
-/// axis, so [`crate::integrate::shade`] shades it as it shades a height map.
+/// axis, so the integrate job's picture shades it as it shades a height map.
 pub fn picture_heights(camera: &Pinhole, depth: &[f32]) -> Vec<f32> {
     let focal = 0.5 * (camera.fx + camera.fy);
     depth

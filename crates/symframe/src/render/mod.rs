@@ -34,7 +34,7 @@ pub use perspective::{dome_lights, Ball, NearScene};
 pub use rigs::diligent_lights;
 pub use shadow::cast_shadows;
 pub use shapes::{plane_frame, Bump, BumpParams};
-pub use tangent::{TangentField, TangentFn};
+pub use tangent::TangentField;
 
 /// A surface seen by the camera: per pixel, a normal and a tangent (camera frame), inside a
 /// mask, and for height fields the surface height (which casts shadows).

@@ -13,10 +13,6 @@ use std::fmt;
 
 use glam::DVec3;
 
-/// A user-supplied field: `f(normal, x, y)` returns a direction that is projected onto the
-/// tangent plane (it need be neither unit nor perpendicular to the normal).
-pub type TangentFn = fn(DVec3, f64, f64) -> DVec3;
-
 /// How the tangent direction varies over a surface.
 #[derive(Debug, Clone, Copy)]
 pub enum TangentField {
@@ -30,8 +26,10 @@ pub enum TangentField {
     /// A spiral: the image-plane circle direction `(-y, x, 0)` rotated toward the radial one by
     /// the given angle in degrees (0 = circles about the image centre, 90 = radial).
     Swirl(f64),
-    /// Any function of the normal and the normalised image position.
-    Function(TangentFn),
+    /// Any function of the normal and the normalised image position: `f(normal, x, y)` returns
+    /// a direction that is projected onto the tangent plane (it need be neither unit nor
+    /// perpendicular to the normal).
+    Function(fn(DVec3, f64, f64) -> DVec3),
 }
 
 impl PartialEq for TangentField {
