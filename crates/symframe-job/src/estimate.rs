@@ -1,22 +1,29 @@
 //! The estimation job: a capture in, normal/tangent maps, pictures and a report out (or, for a
 //! shard, its tile results and manifest).
 
+mod cache;
+mod report;
+
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
 use glam::DVec3;
-use serde::{Deserialize, Serialize};
 use symframe::{
-    check_inputs, Baseline, BaselineMethod, BaselineParams, EstimateMaps, Estimator,
-    EstimatorParams, PixelCounts, Rig, RigOptions,
+    check_inputs, Baseline, BaselineMethod, BaselineParams, Estimator, EstimatorParams,
+    PixelCounts, Rig, RigOptions,
 };
 use symframe_io::fingerprint::Fingerprint;
-use symframe_io::{
-    CacheInfo, CacheOptions, Dataset, DecodeOptions, Fingerprints, Gamma, NormalPng, StampKind,
-    TileCache, TileGrid,
+use symframe_io::{Dataset, DecodeOptions, NormalPng, TileCache, TileGrid};
+
+pub(crate) use cache::{
+    cache_dir, fingerprint_lights, fingerprint_mask, open_cache, read_mask, remove_cache,
+};
+pub use cache::{CacheConfig, CACHE_DIR};
+pub use report::{
+    BaselineParameters, CacheReport, Done, EstimateOutcome, InputsRecord, LightCounts,
+    MethodParameters, Report, SymmetryParameters, TileReport, Timings,
 };
 
 use crate::estimate_near::{run_near_rounds, LightModel, NearOptions, NearReport};
@@ -27,10 +34,7 @@ use crate::merge::{write_manifest, ShardManifest, MANIFEST, MANIFEST_FORMAT, MAN
 use crate::outdir::OutputDir;
 use crate::pictures::LightsPlot;
 use crate::tiles::{peak_rss_bytes, run_tiles, shard_tiles, tile_path, TILES_DIR};
-use crate::{Checkpoint, Control, Interrupted, Progress, Stage};
-
-/// Default folder of the tile cache inside an output folder.
-pub const CACHE_DIR: &str = ".symframe-cache";
+use crate::{Checkpoint, Control, Interrupted};
 
 /// Which method estimates the frames, with its parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -69,18 +73,6 @@ impl MethodConfig {
             MethodConfig::Baseline { method, .. } => method.name(),
         }
     }
-}
-
-/// Where the decoded images are cached and how.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
-pub struct CacheConfig {
-    /// Cache folder (`None`: `.symframe-cache` inside the output folder). A cache of the same
-    /// inputs there is reused; several jobs (shards) may share one folder.
-    pub dir: Option<PathBuf>,
-    /// Remove the cache once the job has finished (default: keep it for reruns).
-    pub remove_after: bool,
-    /// Tile size and decoding memory.
-    pub options: CacheOptions,
 }
 
 /// One shard of a sharded job: the K-th (1-based) of N disjoint sets of tiles.
@@ -165,195 +157,6 @@ impl EstimateConfig {
     }
 }
 
-/// The cache folder of `cache` for a job writing into `output`.
-pub(crate) fn cache_dir(cache: &CacheConfig, output: &Path) -> PathBuf {
-    cache.dir.clone().unwrap_or_else(|| output.join(CACHE_DIR))
-}
-
-/// What `report.json` records about a run.
-#[derive(Debug, Clone, Serialize)]
-pub struct Report {
-    /// symframe version.
-    pub version: &'static str,
-    /// The input as given.
-    pub input: PathBuf,
-    /// The capture's fingerprint, which `fit` checks its own input against.
-    pub inputs: InputsRecord,
-    /// The mask used, if any.
-    pub mask: Option<PathBuf>,
-    /// The estimation method: `symmetry`, `woodham`, `woodham-robust` or `max-reflectance`.
-    pub method: &'static str,
-    /// Parameters in force (the method's own).
-    pub parameters: MethodParameters,
-    /// Light counts.
-    pub lights: LightCounts,
-    /// Image size.
-    pub width: usize,
-    /// Image size.
-    pub height: usize,
-    /// What happened to the pixels.
-    pub pixels: PixelCounts,
-    /// Which measure each pixel's normal comes from (`source.npy`): the legend and counts.
-    pub sources: Sources,
-    /// Mean symmetry-objective evaluations per estimated pixel.
-    pub evals_per_pixel: f64,
-    /// How the image was split into tiles and what this run did with them.
-    pub tiles: TileReport,
-    /// The on-disk tile cache of the decoded images.
-    pub cache: CacheReport,
-    /// Wall-clock seconds per stage, and peak memory.
-    pub timings: Timings,
-    /// Every warning of the run, as printed (inputs, recomputed tiles, suspicious results).
-    pub warnings: Vec<String>,
-    /// The camera and light model of a near-light run (absent for distant lights).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub near: Option<NearReport>,
-}
-
-/// The capture a job read, as its report records it: the path-free inputs fingerprint (see
-/// [`Fingerprints::inputs`]), so that a later job on the maps can tell whether it reads the
-/// same capture (a copy of it included).
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct InputsRecord {
-    /// The fingerprint (hex).
-    pub fingerprint: String,
-    /// How the images entered it: by `content` or by `size_and_mtime` (`--trust-mtime`).
-    pub images_by: StampKind,
-}
-
-impl InputsRecord {
-    /// The record of `f`.
-    pub fn of(f: &Fingerprints) -> Self {
-        Self {
-            fingerprint: format!("{:016x}", f.inputs),
-            images_by: f.kind,
-        }
-    }
-}
-
-/// Tiles as recorded in the report.
-#[derive(Debug, Clone, Serialize)]
-pub struct TileReport {
-    /// Tile side in pixels.
-    pub size: usize,
-    /// Tiles of the whole image.
-    pub count: usize,
-    /// `K/N` for a shard, else absent.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub shard: Option<String>,
-    /// Tiles this run was asked for (all, or the shard's).
-    pub this_run: usize,
-    /// Tiles estimated by this run.
-    pub computed: usize,
-    /// Tiles found finished by an interrupted earlier run of the same job and reused.
-    pub reused: usize,
-}
-
-/// The tile cache as recorded in the report.
-#[derive(Debug, Clone, Serialize)]
-pub struct CacheReport {
-    /// Where it is, its size, whether it was reused (`hit`), what was decoded.
-    #[serde(flatten)]
-    pub info: CacheInfo,
-    /// Whether it is kept after the run.
-    pub kept: bool,
-}
-
-/// The parameters of whichever method ran, as recorded in the report.
-#[derive(Debug, Clone, Serialize)]
-#[serde(untagged)]
-pub enum MethodParameters {
-    /// The symmetry method's.
-    Symmetry(SymmetryParameters),
-    /// A baseline's.
-    Baseline(BaselineParameters),
-}
-
-/// Baseline parameters as recorded in the report.
-#[derive(Debug, Clone, Serialize)]
-pub struct BaselineParameters {
-    /// Shadow threshold, outlier rule.
-    #[serde(flatten)]
-    pub baseline: BaselineParams,
-    /// 8-bit inputs read as linear.
-    pub linear_8bit: bool,
-    /// The transfer curve of integer inputs (`auto`: 8-bit sRGB, 16-bit linear).
-    pub gamma: Gamma,
-    /// Saturation threshold (fraction of the integer maximum).
-    pub saturation: f32,
-    /// The EXR layer read (absent: the default layer).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub exr_layer: Option<String>,
-}
-
-/// Symmetry-method parameters as recorded in the report.
-#[derive(Debug, Clone, Serialize)]
-pub struct SymmetryParameters {
-    /// Light cone half-angle in halfway space, degrees.
-    pub theta_d_max_deg: f64,
-    /// Estimator parameters.
-    #[serde(flatten)]
-    pub estimator: EstimatorParams,
-    /// The domain threshold actually used.
-    pub min_domain_used: u32,
-    /// 8-bit inputs read as linear.
-    pub linear_8bit: bool,
-    /// The transfer curve of integer inputs (`auto`: 8-bit sRGB, 16-bit linear).
-    pub gamma: Gamma,
-    /// Saturation threshold (fraction of the integer maximum).
-    pub saturation: f32,
-    /// The EXR layer read (absent: the default layer).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub exr_layer: Option<String>,
-}
-
-/// Light counts.
-#[derive(Debug, Clone, Serialize)]
-pub struct LightCounts {
-    /// Lights in the input.
-    pub input: usize,
-    /// Lights used: inside the cone for the symmetry method, all of them for a baseline.
-    pub used: usize,
-    /// Lights outside the cone, dropped (0 for a baseline).
-    pub dropped: usize,
-}
-
-/// Seconds per stage.
-#[derive(Debug, Clone, Serialize)]
-pub struct Timings {
-    /// Decoding the images into the tile cache, or opening it.
-    pub load_s: f64,
-    /// Building the rig (0 for a baseline: it has none).
-    pub rig_s: f64,
-    /// Estimating.
-    pub estimate_s: f64,
-    /// Writing the outputs.
-    pub write_s: f64,
-    /// Everything.
-    pub total_s: f64,
-    /// Peak resident memory of the process in bytes (`VmHWM`; Linux only).
-    pub peak_rss_bytes: Option<u64>,
-}
-
-/// A finished job's maps and report.
-#[derive(Debug, Clone)]
-pub struct Done {
-    /// The maps written, when [`EstimateConfig::keep_maps`] asked for them (the report has
-    /// the counts either way).
-    pub maps: Option<EstimateMaps>,
-    /// The report written.
-    pub report: Report,
-}
-
-/// What an estimation job produced.
-#[derive(Debug, Clone)]
-pub enum EstimateOutcome {
-    /// A full run: the maps and the report, written.
-    Maps(Box<Done>),
-    /// A shard: its tile results and manifest written, no maps; the shard's own report.
-    Shard(Box<Report>),
-}
-
 /// The method built for a dataset: the estimator's rig, or a baseline with its lights.
 enum Plan {
     Symmetry(Box<Rig>, EstimatorParams),
@@ -382,6 +185,78 @@ impl Plan {
             Plan::Baseline(b) => b.unit_lights().len(),
         }
     }
+
+    /// Gives the estimator the capture's noise model, unless the caller gave one: its clip
+    /// level censors the clipped samples (docs/method.md, "Noise model"); report.json records
+    /// it. The lights' uncertainty is the caller's (`--light-error`): the images cannot tell it.
+    fn take_capture_noise(&mut self, ds: &Dataset, decode: &DecodeOptions) -> Result<()> {
+        if let Plan::Symmetry(_, params) = self {
+            let light_error_deg = params.noise.light_error_deg;
+            let told = symframe::NoiseModel {
+                light_error_deg: 0.0,
+                ..params.noise
+            };
+            if told == symframe::NoiseModel::default() {
+                params.noise = symframe::NoiseModel {
+                    light_error_deg,
+                    ..symframe_io::capture_noise(ds, decode)?
+                };
+            }
+        }
+        Ok(())
+    }
+
+    /// What `report.json` records of the method: its parameters (with the decoding's) and the
+    /// lights it used.
+    fn record(&self, decode: &DecodeOptions) -> (MethodParameters, LightCounts) {
+        match self {
+            Plan::Symmetry(rig, params) => (
+                MethodParameters::Symmetry(SymmetryParameters {
+                    theta_d_max_deg: rig.theta_d_max_deg(),
+                    estimator: *params,
+                    min_domain_used: Estimator::new(rig, *params).min_domain(),
+                    linear_8bit: !decode.gamma.srgb(8),
+                    gamma: decode.gamma,
+                    saturation: decode.saturation,
+                    exr_layer: decode.exr_layer.clone(),
+                }),
+                LightCounts {
+                    input: rig.n_input(),
+                    used: rig.n_used(),
+                    dropped: rig.n_dropped(),
+                },
+            ),
+            Plan::Baseline(b) => (
+                MethodParameters::Baseline(BaselineParameters {
+                    baseline: *b.params(),
+                    linear_8bit: !decode.gamma.srgb(8),
+                    gamma: decode.gamma,
+                    saturation: decode.saturation,
+                    exr_layer: decode.exr_layer.clone(),
+                }),
+                LightCounts {
+                    input: b.unit_lights().len(),
+                    used: b.unit_lights().len(),
+                    dropped: 0,
+                },
+            ),
+        }
+    }
+
+    /// Which of the dataset's `n` lights the method uses: the rig's (the others are outside
+    /// its cone), or every one for a baseline.
+    fn used_lights(&self, n: usize) -> Vec<bool> {
+        match self {
+            Plan::Symmetry(rig, _) => {
+                let mut used = vec![false; n];
+                for &i in rig.input_index() {
+                    used[i] = true;
+                }
+                used
+            }
+            Plan::Baseline(_) => vec![true; n],
+        }
+    }
 }
 
 /// Runs `method` over `tiles`: the one place the plan's two kinds meet the generic driver.
@@ -405,35 +280,6 @@ fn run_plan(
             ctl,
         ),
         Plan::Baseline(b) => run_tiles(cache, b, mask, job, tiles, dir, ctl),
-    }
-}
-
-/// Feeds a mask (or its absence) into a fingerprint.
-pub(crate) fn fingerprint_mask(f: &mut Fingerprint, mask: Option<&[bool]>) {
-    match mask {
-        None => {
-            f.u64(0);
-        }
-        Some(m) => {
-            f.u64(1);
-            for chunk in m.chunks(64) {
-                let bits = chunk
-                    .iter()
-                    .enumerate()
-                    .fold(0u64, |a, (k, &b)| a | ((b as u64) << k));
-                f.u64(bits);
-            }
-        }
-    }
-}
-
-/// Feeds light directions into a fingerprint.
-pub(crate) fn fingerprint_lights<'a>(
-    f: &mut Fingerprint,
-    lights: impl IntoIterator<Item = &'a DVec3>,
-) {
-    for l in lights {
-        f.f64(l.x).f64(l.y).f64(l.z);
     }
 }
 
@@ -472,61 +318,6 @@ fn job_fingerprint(cache: &TileCache, plan: &Plan, mask: Option<&[bool]>) -> Res
     }
     fingerprint_mask(&mut f, mask);
     Ok(f.finish())
-}
-
-/// Opens (or builds) the tile cache of `ds` in `dir`, reporting decoding progress and the
-/// loader's warnings about the inputs. The dataset's fingerprints are computed first and given
-/// to `check`, so a job can refuse its inputs before anything is decoded.
-pub(crate) fn open_cache(
-    ds: &Dataset,
-    decode: &DecodeOptions,
-    dir: &Path,
-    options: CacheOptions,
-    ctl: &Control,
-    check: &dyn Fn(&Fingerprints) -> Result<()>,
-) -> Result<(TileCache, CacheInfo, Fingerprints)> {
-    // Image sizes are compared from the headers first (`dataset_fingerprints`): one of another
-    // size fails before any is read whole.
-    let fps = symframe_io::dataset_fingerprints(ds, decode, options.trust_mtime, options.format)?;
-    check(&fps)?;
-    let decoded = AtomicU64::new(0);
-    let total = ds.images.len() as u64;
-    let (cache, info) =
-        TileCache::open_or_build_with(ds, decode, dir, options, Some(fps), ctl.stop, &|| {
-            let n = decoded.fetch_add(1, Ordering::SeqCst) + 1;
-            ctl.report(Progress::new(Stage::Decoding, n, total));
-        })
-        .map_err(|e| match e {
-            symframe_io::Error::Interrupted => anyhow::Error::from(Interrupted),
-            e => e.into(),
-        })?;
-    for w in &info.warnings {
-        ctl.warn(&w.to_string());
-    }
-    Ok((cache, info, fps))
-}
-
-/// Reads the mask of a job (`mask`, else the dataset's) at the cache's image size.
-pub(crate) fn read_mask(
-    mask: &Option<PathBuf>,
-    ds: &Dataset,
-    grid: &TileGrid,
-) -> Result<(Option<PathBuf>, Option<Vec<bool>>)> {
-    let path = mask.clone().or_else(|| ds.mask.clone());
-    let mask = match &path {
-        Some(p) => Some(symframe_io::read_mask(p, grid.width, grid.height)?),
-        None => None,
-    };
-    Ok((path, mask))
-}
-
-/// Removes the cache file of a finished job (and its folder, when nothing else is left in it).
-pub(crate) fn remove_cache(cache_path: &Path, dir: &Path) -> Result<()> {
-    std::fs::remove_file(cache_path)
-        .with_context(|| format!("{}: cannot remove", cache_path.display()))?;
-    let _ = std::fs::remove_file(cache_path.with_extension("lock"));
-    let _ = std::fs::remove_dir(dir);
-    Ok(())
 }
 
 /// Runs an estimation job: decodes the images once into the tile cache (or reuses it),
@@ -628,22 +419,7 @@ fn run(
         &|_| false,
     )?;
     let mut plan = Plan::new(&config.method, &ds)?;
-    if let Plan::Symmetry(_, params) = &mut plan {
-        // The capture's noise model, unless the caller gave one: its clip level censors the
-        // clipped samples (docs/method.md, "Noise model"); report.json records it.
-        // The lights' uncertainty is the caller's (`--light-error`): the images cannot tell it.
-        let light_error_deg = params.noise.light_error_deg;
-        let told = symframe::NoiseModel {
-            light_error_deg: 0.0,
-            ..params.noise
-        };
-        if told == symframe::NoiseModel::default() {
-            params.noise = symframe::NoiseModel {
-                light_error_deg,
-                ..symframe_io::capture_noise(&ds, &config.decode)?
-            };
-        }
-    }
+    plan.take_capture_noise(&ds, &config.decode)?;
     let rig_s = t0.elapsed().as_secs_f64();
 
     let t_load = Instant::now();
@@ -673,28 +449,7 @@ fn run(
     .with_context(blame)?;
     let job = job_fingerprint(&cache, &plan, mask.as_deref())?;
     let tiles_dir = config.output.join(TILES_DIR);
-    if let Some(s) = config.shard.filter(|s| s.n > grid.n_tiles()) {
-        anyhow::bail!(
-            "--tiles {}/{}: the image has {} tiles of {} px, so at most {} shards (or a smaller \
-             --tile-size)",
-            s.k,
-            s.n,
-            grid.n_tiles(),
-            grid.tile,
-            grid.n_tiles()
-        );
-    }
-    let my_tiles = match config.shard {
-        Some(s) => shard_tiles(grid.n_tiles(), s.k, s.n),
-        None => (0..grid.n_tiles()).collect(),
-    };
-    if config.shard.is_some() {
-        // The manifest says "complete": an earlier one goes until this shard is.
-        let m = config.output.join(MANIFEST);
-        if m.exists() {
-            std::fs::remove_file(&m).with_context(|| format!("{}: cannot remove", m.display()))?;
-        }
-    }
+    let my_tiles = tiles_of_run(config, &grid)?;
     let t_est = Instant::now();
     let (counts, job, near) = match (&geometry, &plan) {
         (Some(g), Plan::Symmetry(rig, params)) => {
@@ -732,45 +487,13 @@ fn run(
     let cache_path = cache.path().to_path_buf();
     drop(cache);
 
-    let (decode, method) = (&config.decode, &config.method);
-    let (parameters, lights) = match &plan {
-        Plan::Symmetry(rig, params) => (
-            MethodParameters::Symmetry(SymmetryParameters {
-                theta_d_max_deg: rig.theta_d_max_deg(),
-                estimator: *params,
-                min_domain_used: Estimator::new(rig, *params).min_domain(),
-                linear_8bit: !decode.gamma.srgb(8),
-                gamma: decode.gamma,
-                saturation: decode.saturation,
-                exr_layer: decode.exr_layer.clone(),
-            }),
-            LightCounts {
-                input: rig.n_input(),
-                used: rig.n_used(),
-                dropped: rig.n_dropped(),
-            },
-        ),
-        Plan::Baseline(b) => (
-            MethodParameters::Baseline(BaselineParameters {
-                baseline: *b.params(),
-                linear_8bit: !decode.gamma.srgb(8),
-                gamma: decode.gamma,
-                saturation: decode.saturation,
-                exr_layer: decode.exr_layer.clone(),
-            }),
-            LightCounts {
-                input: b.unit_lights().len(),
-                used: b.unit_lights().len(),
-                dropped: 0,
-            },
-        ),
-    };
+    let (parameters, lights) = plan.record(&config.decode);
     let mut report = Report {
         version: env!("CARGO_PKG_VERSION"),
         input: config.input.clone(),
         inputs: InputsRecord::of(&fps),
         mask: mask_path,
-        method: method.name(),
+        method: config.method.name(),
         parameters,
         lights,
         width: grid.width,
@@ -805,20 +528,8 @@ fn run(
     if let Some(shard) = config.shard {
         // Shard: the tile results stay; a manifest says they are complete. Its report counts
         // the shard's pixels.
-        let mut pixels = PixelCounts::default();
-        let mut evals = 0u64;
-        let mut source = Vec::new();
-        for &t in &my_tiles {
-            let path = tile_path(&tiles_dir, t);
-            for r in symframe_io::read_tile_result(&path, job, t, grid.tile_pixels(t))? {
-                pixels.add(r.status, r.has_tangent());
-                evals += r.evals as u64;
-                source.push(r.source as u8);
-            }
-        }
-        report.pixels = pixels;
-        report.sources = Sources::of(&source);
-        report.evals_per_pixel = evals as f64 / pixels.estimated.max(1) as f64;
+        (report.pixels, report.sources, report.evals_per_pixel) =
+            shard_summary(&tiles_dir, job, &grid, &my_tiles)?;
         report.timings.total_s = t0.elapsed().as_secs_f64();
         report.timings.peak_rss_bytes = peak_rss_bytes();
         report.warnings = lock_warnings(warnings).clone();
@@ -848,16 +559,7 @@ fn run(
         Plan::Baseline(_) => true,
     };
     // The rig for `lights.png`: every input light, used or dropped.
-    let used: Vec<bool> = match &plan {
-        Plan::Symmetry(rig, _) => {
-            let mut used = vec![false; ds.lights.len()];
-            for &i in rig.input_index() {
-                used[i] = true;
-            }
-            used
-        }
-        Plan::Baseline(_) => vec![true; ds.lights.len()],
-    };
+    let used = plan.used_lights(ds.lights.len());
     let lights_plot = LightsPlot {
         lights: &ds.lights,
         used: &used,
@@ -905,6 +607,54 @@ fn run(
         remove_cache(&cache_path, &cache_dir)?;
     }
     Ok(EstimateOutcome::Maps(Box::new(Done { maps, report })))
+}
+
+/// The tiles this run estimates: a shard's share (an error where there are fewer tiles than
+/// shards), else every tile. A shard's earlier manifest is removed first: a manifest says its
+/// tiles are complete.
+fn tiles_of_run(config: &EstimateConfig, grid: &TileGrid) -> Result<Vec<usize>> {
+    let Some(s) = config.shard else {
+        return Ok((0..grid.n_tiles()).collect());
+    };
+    if s.n > grid.n_tiles() {
+        anyhow::bail!(
+            "--tiles {}/{}: the image has {} tiles of {} px, so at most {} shards (or a smaller \
+             --tile-size)",
+            s.k,
+            s.n,
+            grid.n_tiles(),
+            grid.tile,
+            grid.n_tiles()
+        );
+    }
+    let tiles = shard_tiles(grid.n_tiles(), s.k, s.n);
+    let m = config.output.join(MANIFEST);
+    if m.exists() {
+        std::fs::remove_file(&m).with_context(|| format!("{}: cannot remove", m.display()))?;
+    }
+    Ok(tiles)
+}
+
+/// A shard's pixel counts, sources and evaluations per estimated pixel, from its tile results.
+fn shard_summary(
+    tiles_dir: &Path,
+    job: u64,
+    grid: &TileGrid,
+    tiles: &[usize],
+) -> Result<(PixelCounts, Sources, f64)> {
+    let mut pixels = PixelCounts::default();
+    let mut evals = 0u64;
+    let mut source = Vec::new();
+    for &t in tiles {
+        let path = tile_path(tiles_dir, t);
+        for r in symframe_io::read_tile_result(&path, job, t, grid.tile_pixels(t))? {
+            pixels.add(r.status, r.has_tangent());
+            evals += r.evals as u64;
+            source.push(r.source as u8);
+        }
+    }
+    let per_pixel = evals as f64 / pixels.estimated.max(1) as f64;
+    Ok((pixels, Sources::of(&source), per_pixel))
 }
 
 /// The files of an estimate's output set (`write_estimate_outputs`), the report last.
