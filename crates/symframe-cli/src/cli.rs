@@ -137,9 +137,16 @@ pub enum ModelArg {
     /// glTF 2.0 metallic-roughness GGX with KHR_materials_anisotropy: base colour, metallic,
     /// roughness, anisotropy strength (direction = the tangent).
     Gltf,
-    /// Per pixel, Ward or glTF, whichever predicts the pixel's validation lights (one training
-    /// light in five, set aside) better; the choice is written to model.npy and model.png.
+    /// Per pixel, Ward, glTF, clear coat or woven, whichever predicts the pixel's validation
+    /// lights (one training light in five, set aside) best; the choice is written to model.npy
+    /// and model.png.
     Auto,
+    /// A sharp isotropic clear coat over an anisotropic GGX base (car paint, lacquered
+    /// brushed metal): lobes_kd, lobes_ka (base), lobes_kb (coat), lobes_alpha_t/_b/_c.
+    Clearcoat,
+    /// Two perpendicular anisotropic GGX lobes over a diffuse base (woven satin: warp and
+    /// weft): lobes_kd, lobes_ka (warp), lobes_kb (weft), lobes_alpha_t/_b.
+    Woven,
 }
 
 impl ModelArg {
@@ -149,6 +156,8 @@ impl ModelArg {
             ModelArg::Ward => symframe::FitModel::Ward,
             ModelArg::Gltf => symframe::FitModel::Gltf,
             ModelArg::Auto => symframe::FitModel::Auto,
+            ModelArg::Clearcoat => symframe::FitModel::Clearcoat,
+            ModelArg::Woven => symframe::FitModel::Woven,
         }
     }
 
@@ -158,6 +167,8 @@ impl ModelArg {
         symframe::FitModel::Ward => ModelArg::Ward,
         symframe::FitModel::Gltf => ModelArg::Gltf,
         symframe::FitModel::Auto => ModelArg::Auto,
+        symframe::FitModel::Clearcoat => ModelArg::Clearcoat,
+        symframe::FitModel::Woven => ModelArg::Woven,
     };
 }
 

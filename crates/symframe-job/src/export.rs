@@ -22,6 +22,15 @@
 //! after dividing their albedos by the fit's light intensity (one glTF material needs one
 //! model; the conversion is approximate where Ward was chosen). From an estimate folder: grey base colour, roughness 0.5,
 //! metallic 0, and anisotropy strength = the estimate's anisotropy where it has a tangent.
+//!
+//! Two-lobe pixels (`--model clearcoat`, `woven`, or chosen by `auto`) are converted the same
+//! way, their GGX roughnesses taken as glTF's `alpha` directly. A clear-coat pixel's base
+//! (`lobes_kd`, `lobes_ka`, `lobes_alpha_t`, `lobes_alpha_b`) becomes the metallic-roughness
+//! material with its anisotropy, and its coat `KHR_materials_clearcoat`: factor
+//! `kc / 0.04` (the coat's reflectance over that of glTF's index-1.5 coat, clamped to 1) and
+//! roughness `sqrt(alpha_c)`, in one texture (R factor, G roughness) written only when some
+//! pixel has a coat. glTF has no second anisotropic lobe: a woven pixel becomes one lobe with
+//! both lobes' reflectance, stretched along the stronger lobe's wide axis (approximate).
 
 use std::path::{Path, PathBuf};
 
@@ -98,6 +107,9 @@ pub struct Maps {
     /// For a glTF fit: the light intensity it was fitted under (`fit.json`'s `exposure`);
     /// `None` for a Ward fit (converted) or an estimate.
     pub light_intensity: Option<f64>,
+    /// `KHR_materials_clearcoat` factor and roughness per pixel (`H x W` each), where some
+    /// pixel has a clear-coat model; 0 elsewhere.
+    pub clearcoat: Option<(Vec<f32>, Vec<f32>)>,
 }
 
 fn read_map(dir: &Path, name: &str, shape: &[usize]) -> Result<Vec<f32>> {
@@ -127,46 +139,92 @@ fn convert_ward(dir: &Path, m: &mut Maps, intensity: f32) -> Result<()> {
     let ks = read_map(dir, "ks.npy", &[h, w, 3])?;
     let at = read_map(dir, "alpha_t.npy", &[h, w])?;
     let ab = read_map(dir, "alpha_b.npy", &[h, w])?;
-    let (base, metallic, roughness, strength) = (
-        &mut m.base,
-        &mut m.metallic,
-        &mut m.roughness,
-        &mut m.strength,
-    );
-    let (normals, tangents) = (&m.normals, &mut m.tangents);
     for i in 0..w * h {
         let d: [f32; 3] = std::array::from_fn(|c| kd[3 * i + c] / intensity);
         let s: [f32; 3] = std::array::from_fn(|c| ks[3 * i + c] / intensity);
-        if !d.iter().chain(&s).all(|v| v.is_finite()) {
+        put_lobe(m, i, d, s, at[i] as f64, ab[i] as f64);
+    }
+    Ok(())
+}
+
+/// Pixel `i` of `m` as a metallic-roughness material of diffuse albedo `d` and specular
+/// reflectance `s` (the module documentation's conversion), roughness `a_t` along the tangent
+/// and `a_b` along the binormal (glTF's `alpha`); where the wider one is along the binormal,
+/// `m.tangents` is turned to it. Nothing where a value is not finite.
+fn put_lobe(m: &mut Maps, i: usize, d: [f32; 3], s: [f32; 3], a_t: f64, a_b: f64) {
+    if !d.iter().chain(&s).all(|v| v.is_finite()) {
+        return;
+    }
+    let (ld, ls) = (lum(&d).max(0.0), lum(&s).max(0.0));
+    let metal = if ld + ls > 0.0 { ls / (ld + ls) } else { 0.0 };
+    m.metallic[i] = metal;
+    for c in 0..3 {
+        m.base[3 * i + c] = (d[c] + metal * (s[c] - d[c])).clamp(0.0, 1.0);
+    }
+    if !(a_t.is_finite() && a_b.is_finite()) {
+        return;
+    }
+    let (narrow, wide) = (a_t.min(a_b).clamp(1e-4, 1.0), a_t.max(a_b).clamp(1e-4, 1.0));
+    m.roughness[i] = narrow.sqrt() as f32;
+    m.strength[i] = ((wide - narrow) / (1.0 - narrow).max(1e-9))
+        .sqrt()
+        .clamp(0.0, 1.0) as f32;
+    if a_b > a_t {
+        // The wider highlight is along the binormal n x t.
+        let nv = &m.normals[3 * i..3 * i + 3];
+        let t = &m.tangents[3 * i..3 * i + 3];
+        let b = [
+            nv[1] * t[2] - nv[2] * t[1],
+            nv[2] * t[0] - nv[0] * t[2],
+            nv[0] * t[1] - nv[1] * t[0],
+        ];
+        m.tangents[3 * i..3 * i + 3].copy_from_slice(&b);
+    }
+}
+
+/// glTF's clear coat reflects 4% at normal incidence (index 1.5): a coat factor of 1.
+const GLTF_COAT_F0: f32 = 0.04;
+
+/// Converts the two-lobe pixels of `dir` ([`crate::relight::read_lobe_maps`]) into the glTF
+/// maps of `m` (the module documentation's conversion), the reflectances divided by
+/// `intensity` first (as [`convert_ward`]'s); sets `m.clearcoat` where some pixel has a coat.
+fn convert_lobes(dir: &Path, m: &mut Maps, intensity: f32) -> Result<()> {
+    let Some(l) = crate::relight::read_lobe_maps(dir)? else {
+        return Ok(());
+    };
+    if (l.width, l.height) != (m.w, m.h) {
+        bail!("{}: the maps disagree in size", dir.display());
+    }
+    let n = m.w * m.h;
+    let (mut factor, mut rough) = (vec![0.0f32; n], vec![0.0f32; n]);
+    let mut coated = false;
+    for i in 0..n {
+        let Some(p) = l.model(i) else {
             continue;
+        };
+        let k = |v: [f64; 3]| -> [f32; 3] { v.map(|x| x as f32 / intensity) };
+        let (d, ka, kb) = (k(p.kd), k(p.ka), k(p.kb));
+        match p.kind {
+            symframe::LobeKind::Clearcoat => {
+                put_lobe(m, i, d, ka, p.alpha_t, p.alpha_b);
+                factor[i] = (lum(&kb) / GLTF_COAT_F0).clamp(0.0, 1.0);
+                rough[i] = (p.alpha_c.clamp(0.0, 1.0) as f32).sqrt();
+                coated = true;
+            }
+            symframe::LobeKind::Woven => {
+                let s: [f32; 3] = std::array::from_fn(|c| ka[c] + kb[c]);
+                // The weft lobe has the roughnesses swapped.
+                let (a_t, a_b) = if lum(&kb) > lum(&ka) {
+                    (p.alpha_b, p.alpha_t)
+                } else {
+                    (p.alpha_t, p.alpha_b)
+                };
+                put_lobe(m, i, d, s, a_t, a_b);
+            }
         }
-        let (d, s) = (&d[..], &s[..]);
-        let (ld, ls) = (lum(d).max(0.0), lum(s).max(0.0));
-        let m = if ld + ls > 0.0 { ls / (ld + ls) } else { 0.0 };
-        metallic[i] = m;
-        for c in 0..3 {
-            base[3 * i + c] = (d[c] + m * (s[c] - d[c])).clamp(0.0, 1.0);
-        }
-        let (a_t, a_b) = (at[i] as f64, ab[i] as f64);
-        if !(a_t.is_finite() && a_b.is_finite()) {
-            continue;
-        }
-        let (narrow, wide) = (a_t.min(a_b).clamp(1e-4, 1.0), a_t.max(a_b).clamp(1e-4, 1.0));
-        roughness[i] = narrow.sqrt() as f32;
-        strength[i] = ((wide - narrow) / (1.0 - narrow).max(1e-9))
-            .sqrt()
-            .clamp(0.0, 1.0) as f32;
-        if a_b > a_t {
-            // The wider highlight is along the binormal n x t.
-            let nv = &normals[3 * i..3 * i + 3];
-            let t = &tangents[3 * i..3 * i + 3];
-            let b = [
-                nv[1] * t[2] - nv[2] * t[1],
-                nv[2] * t[0] - nv[0] * t[2],
-                nv[0] * t[1] - nv[1] * t[0],
-            ];
-            tangents[3 * i..3 * i + 3].copy_from_slice(&b);
-        }
+    }
+    if coated {
+        m.clearcoat = Some((factor, rough));
     }
     Ok(())
 }
@@ -222,14 +280,19 @@ pub fn read_maps(dir: &Path) -> Result<Maps> {
             tangents,
             fitted: true,
             light_intensity: Some(g.exposure),
+            clearcoat: None,
         };
         if dir.join("kd.npy").is_file() {
             // An automatic fit: its Ward pixels converted, in the glTF maps' light intensity.
             convert_ward(dir, &mut m, g.exposure as f32)?;
         }
+        convert_lobes(dir, &mut m, g.exposure as f32)?;
         return Ok(m);
     }
-    if dir.join("kd.npy").is_file() {
+    let lobes = dir
+        .join(format!("{}.npy", crate::relight::LOBE_MAPS[0]))
+        .is_file();
+    if dir.join("kd.npy").is_file() || lobes {
         let mut m = Maps {
             w,
             h,
@@ -241,8 +304,12 @@ pub fn read_maps(dir: &Path) -> Result<Maps> {
             tangents,
             fitted: true,
             light_intensity: None,
+            clearcoat: None,
         };
-        convert_ward(dir, &mut m, 1.0)?;
+        if dir.join("kd.npy").is_file() {
+            convert_ward(dir, &mut m, 1.0)?;
+        }
+        convert_lobes(dir, &mut m, 1.0)?;
         Ok(m)
     } else {
         let aniso = if dir.join("anisotropy.npy").is_file() {
@@ -270,6 +337,7 @@ pub fn read_maps(dir: &Path) -> Result<Maps> {
             tangents,
             fitted: false,
             light_intensity: None,
+            clearcoat: None,
         })
     }
 }
@@ -349,6 +417,19 @@ pub fn textures(m: &Maps, quad: bool) -> [Vec<u8>; 4] {
         ]);
     }
     [base, mr, normal, aniso]
+}
+
+/// The `KHR_materials_clearcoat` texture of `m`, as RGB bytes (R factor, G roughness, B 0),
+/// where it has a coat.
+pub fn clearcoat_texture(m: &Maps) -> Option<Vec<u8>> {
+    let (factor, rough) = m.clearcoat.as_ref()?;
+    Some(
+        factor
+            .iter()
+            .zip(rough)
+            .flat_map(|(&f, &r)| [byte(f), byte(r), 0])
+            .collect(),
+    )
 }
 
 /// The estimate's tangents as a glTF `KHR_materials_anisotropy` texture for a surface whose
@@ -461,7 +542,9 @@ fn pad4(v: &mut Vec<u8>, fill: u8) {
 }
 
 /// Builds the glTF document and its binary buffer; `images` are PNG files, embedded in the
-/// buffer (`embed`, for .glb) or referenced by their file name.
+/// buffer (`embed`, for .glb) or referenced by their file name: base colour,
+/// metallic-roughness, normal, anisotropy and, when there is a fifth, the clear coat's (R
+/// factor, G roughness), which adds `KHR_materials_clearcoat`.
 pub fn document(
     g: &Geometry,
     images: &[(&str, &Path)],
@@ -575,6 +658,16 @@ pub fn document(
             }
         },
     });
+    let mut used = vec!["KHR_materials_anisotropy"];
+    if images.len() > 4 {
+        material["extensions"]["KHR_materials_clearcoat"] = json!({
+            "clearcoatFactor": 1.0,
+            "clearcoatTexture": tex(4),
+            "clearcoatRoughnessFactor": 1.0,
+            "clearcoatRoughnessTexture": tex(4),
+        });
+        used.push("KHR_materials_clearcoat");
+    }
     if let Some(e) = light_intensity {
         material["extras"] = json!({ "symframe": { "lightIntensity": e } });
     }
@@ -590,7 +683,7 @@ pub fn document(
     }
     let doc = json!({
         "asset": { "version": "2.0", "generator": format!("symframe {}", env!("CARGO_PKG_VERSION")) },
-        "extensionsUsed": ["KHR_materials_anisotropy"],
+        "extensionsUsed": used,
         "scene": 0,
         "scenes": [{ "nodes": [0] }],
         "nodes": [{ "mesh": 0, "name": "symframe" }],
@@ -718,7 +811,18 @@ pub fn export_gltf(config: &ExportConfig) -> Result<ExportOutcome> {
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_else(|| "asset".into());
-    let names = ["basecolor", "metallicroughness", "normal", "anisotropy"];
+    let coat = clearcoat_texture(&maps);
+    let names: &[&str] = if coat.is_some() {
+        &[
+            "basecolor",
+            "metallicroughness",
+            "normal",
+            "anisotropy",
+            "clearcoat",
+        ]
+    } else {
+        &["basecolor", "metallicroughness", "normal", "anisotropy"]
+    };
     let bin_name = format!("{stem}.bin");
     // The asset's files, the .gltf or .glb last (the textures and buffer it names go in first).
     let mut targets: Vec<PathBuf> = Vec::new();
@@ -750,7 +854,10 @@ pub fn export_gltf(config: &ExportConfig) -> Result<ExportOutcome> {
     let staging = Staging::new(&out_dir)?;
     let [base, mr, normal, aniso] = textures(&maps, !config.mesh);
     let mut images = Vec::new();
-    for (name, bytes) in names.iter().zip([&base, &mr, &normal, &aniso]) {
+    for (name, bytes) in names
+        .iter()
+        .zip([&base, &mr, &normal, &aniso].into_iter().chain(&coat))
+    {
         let p = staging.0.join(format!("{stem}_{name}.png"));
         symframe_io::write_png_rgb8(&p, w, h, bytes)?;
         images.push((*name, p));
@@ -1070,6 +1177,7 @@ mod tests {
             strength: vec![0.8, 0.3],
             fitted: true,
             light_intensity: None,
+            clearcoat: None,
         };
         let [base, mr, normal, aniso] = textures(&m, true);
         assert_eq!(&normal[..3], &[128, 128, 255]);
@@ -1104,6 +1212,7 @@ mod tests {
             strength: vec![0.5, 0.0, 1.0],
             fitted: false,
             light_intensity: None,
+            clearcoat: None,
         };
         assert_eq!(textures(&m, true)[3], rgb);
     }

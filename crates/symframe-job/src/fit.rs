@@ -11,7 +11,8 @@ use anyhow::{bail, Context, Result};
 use serde::Serialize;
 use symframe::{
     holdout_lights, ExposureChoice, FitMaps, FitMethod, FitModel, FitParams, FitSummary, GltfFit,
-    HoldoutError, PixelOutcome, WardFit, MODEL_GLTF, MODEL_WARD,
+    HoldoutError, LobeFit, LobeKind, LobeModel, PixelOutcome, WardFit, MODEL_CLEARCOAT, MODEL_GLTF,
+    MODEL_WARD, MODEL_WOVEN,
 };
 use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{
@@ -125,9 +126,10 @@ pub struct FitReport {
     pub inputs: InputsRecord,
     /// The mask used, if any.
     pub mask: Option<PathBuf>,
-    /// The reflectance model fitted: `ward`, `gltf` or `auto` (also in `parameters.model`);
-    /// an automatic fit's choice per pixel is in `model.npy` and its counts in
-    /// `fit.ward_pixels` and `fit.gltf_pixels`.
+    /// The reflectance model fitted: `ward`, `gltf`, `auto`, `clearcoat` or `woven` (also in
+    /// `parameters.model`); the model of each pixel of an automatic or two-lobe fit is in
+    /// `model.npy` and the counts in `fit.ward_pixels`, `fit.gltf_pixels`,
+    /// `fit.clearcoat_pixels` and `fit.woven_pixels`.
     pub model: &'static str,
     /// The model in words, and its frame.
     pub model_description: &'static str,
@@ -451,6 +453,7 @@ fn run(
 /// The parameter maps of each model (without extension; `.npy` and `.exr` are written).
 const WARD_MAPS: [&str; 4] = ["kd", "ks", "alpha_t", "alpha_b"];
 const GLTF_MAPS: [&str; 4] = ["base_color", "metallic", "roughness", "anisotropy_strength"];
+use crate::relight::LOBE_MAPS;
 
 /// Pixels the exposure of a glTF fit is chosen from, at most.
 pub const EXPOSURE_PIXELS: usize = 2048;
@@ -520,6 +523,7 @@ fn fit_owned(name: &str) -> bool {
         || name == "viewer.html"
         || WARD_MAPS.contains(&stem)
         || GLTF_MAPS.contains(&stem)
+        || LOBE_MAPS.contains(&stem)
         || stem == "model"
 }
 
@@ -547,8 +551,14 @@ fn write_outputs(
         vec![("kd", &m.kd), ("ks", &m.ks)],
         vec![("alpha_t", &m.alpha_t), ("alpha_b", &m.alpha_b)],
     );
-    // An automatic fit writes both models' maps (NaN where the other model was chosen).
-    let (maps3, maps1): (Named, Named) = match &maps.gltf {
+    // An automatic fit writes each model's maps that it chose somewhere (NaN where another
+    // model was chosen); a two-lobe fit only the two-lobe maps.
+    let lobes_only = matches!(
+        report.parameters.model,
+        FitModel::Clearcoat | FitModel::Woven
+    );
+    let (mut maps3, mut maps1): (Named, Named) = match &maps.gltf {
+        None if lobes_only => (Vec::new(), Vec::new()),
         None => ward,
         Some(g) => {
             let mut maps3: Named = vec![("base_color", &g.base_color)];
@@ -564,6 +574,23 @@ fn write_outputs(
             (maps3, maps1)
         }
     };
+    let s = &maps.summary;
+    if let Some(l) = maps
+        .lobes
+        .as_ref()
+        .filter(|_| lobes_only || s.clearcoat_pixels + s.woven_pixels > 0)
+    {
+        maps3.extend([
+            (LOBE_MAPS[0], &l.kd[..]),
+            (LOBE_MAPS[1], &l.ka),
+            (LOBE_MAPS[2], &l.kb),
+        ]);
+        maps1.extend([
+            (LOBE_MAPS[3], &l.alpha_t[..]),
+            (LOBE_MAPS[4], &l.alpha_b),
+            (LOBE_MAPS[5], &l.alpha_c),
+        ]);
+    }
     let frames: [(&str, &[f32]); 2] = [("normals", &m.normals), ("tangents", &m.tangents)];
     for (name, data) in maps3.iter().chain(&frames) {
         symframe_io::write_npy_f32(&staging.path(&format!("{name}.npy")), &[h, w, 3], data)?;
@@ -580,8 +607,9 @@ fn write_outputs(
         symframe_io::write_npy_f32(&staging.path(&format!("{name}.npy")), &[h, w], data)?;
         symframe_io::write_exr_map(&staging.path(&format!("{name}.exr")), w, h, 1, data)?;
     }
-    if report.parameters.model == FitModel::Auto {
-        // The choice per pixel: 0 none, 1 Ward, 2 glTF; the picture black, blue, orange.
+    if report.parameters.model.uses_lobes() {
+        // The model per pixel: 0 none, 1 Ward, 2 glTF, 3 clear coat, 4 woven; the picture
+        // black, blue, orange, green, magenta.
         let codes: Vec<f32> = maps.model.iter().map(|&c| c as f32).collect();
         symframe_io::write_npy_f32(&staging.path("model.npy"), &[h, w], &codes)?;
         let colours: Vec<f32> = maps
@@ -590,6 +618,8 @@ fn write_outputs(
             .flat_map(|&c| match c {
                 MODEL_WARD => [0.2, 0.45, 1.0],
                 MODEL_GLTF => [1.0, 0.55, 0.1],
+                MODEL_CLEARCOAT => [0.2, 0.8, 0.3],
+                MODEL_WOVEN => [0.85, 0.25, 0.8],
                 _ => [0.0; 3],
             })
             .collect();
@@ -610,16 +640,19 @@ fn write_outputs(
 /// Per-tile fit results: a 40-byte header (magic `SYMFFITR`, format version, the job's
 /// fingerprint, the tile index, the pixel count), then [`FIT_RECORD`] bytes per pixel
 /// (little-endian): outcome (1 byte: 0 masked, 1 no frame, 2 too few samples, 3 fitted Ward,
-/// 4 fitted glTF), isotropic (1 byte), 6 padding, `kd` and `ks` (6 x f64), `alpha_t`,
-/// `alpha_b` (glTF: base colour, metallic, roughness, strength, 0, 0), training SSE
-/// (f64), training samples (u64), iterations (u32, 4 padding), held-out SSE (f64), held-out
-/// samples (u64), held-out peak (f64). Doubles, so the summary sums are those of an in-memory
+/// 4 fitted glTF, 5 fitted clear coat, 6 fitted woven), isotropic (1 byte), 6 padding, twelve
+/// parameters (f64: Ward `kd`, `ks`, `alpha_t`, `alpha_b`, 0 x 4; glTF base colour, metallic,
+/// roughness, strength, 0 x 5; two-lobe `kd`, `ka`, `kb`, `alpha_t`, `alpha_b`, `alpha_c`),
+/// training SSE (f64), training samples (u64), iterations (u32, 4 padding), held-out SSE
+/// (f64), held-out samples (u64), held-out peak (f64). Doubles, so the summary sums are those of an in-memory
 /// fit bit for bit.
 const FIT_MAGIC: &[u8; 8] = b"SYMFFITR";
 /// Format version of fit tile files.
-const FIT_TILE_VERSION: u32 = 2;
+const FIT_TILE_VERSION: u32 = 3;
 const FIT_HEADER: usize = 40;
-const FIT_RECORD: usize = 120;
+const FIT_RECORD: usize = 152;
+/// Parameters per record.
+const FIT_PARAMS: usize = 12;
 
 fn fit_header(job: u64, t: usize, n: usize) -> [u8; FIT_HEADER] {
     let mut b = [0u8; FIT_HEADER];
@@ -634,7 +667,10 @@ fn fit_header(job: u64, t: usize, n: usize) -> [u8; FIT_HEADER] {
 fn encode(r: &Option<PixelOutcome>, b: &mut Vec<u8>) {
     let start = b.len();
     // (tag, isotropic, eight parameters, sse, samples, iterations, held-out error)
-    type Fitted<'a> = (bool, [f64; 8], f64, usize, u32, &'a HoldoutError);
+    type Fitted<'a> = (bool, [f64; FIT_PARAMS], f64, usize, u32, &'a HoldoutError);
+    let pad = |v: &[f64]| -> [f64; FIT_PARAMS] {
+        std::array::from_fn(|i| v.get(i).copied().unwrap_or(0.0))
+    };
     let (tag, fitted): (u8, Option<Fitted>) = match r {
         None => (0, None),
         Some(PixelOutcome::NoFrame) => (1, None),
@@ -643,9 +679,9 @@ fn encode(r: &Option<PixelOutcome>, b: &mut Vec<u8>) {
             3,
             Some((
                 f.isotropic,
-                [
+                pad(&[
                     f.kd[0], f.kd[1], f.kd[2], f.ks[0], f.ks[1], f.ks[2], f.alpha_t, f.alpha_b,
-                ],
+                ]),
                 f.sse,
                 f.samples,
                 f.iterations,
@@ -656,22 +692,34 @@ fn encode(r: &Option<PixelOutcome>, b: &mut Vec<u8>) {
             4,
             Some((
                 f.isotropic,
-                [
+                pad(&[
                     f.base_color[0],
                     f.base_color[1],
                     f.base_color[2],
                     f.metallic,
                     f.roughness,
                     f.anisotropy,
-                    0.0,
-                    0.0,
-                ],
+                ]),
                 f.sse,
                 f.samples,
                 f.iterations,
                 h,
             )),
         ),
+        Some(PixelOutcome::FittedLobes(f, h)) => {
+            let m = &f.model;
+            let mut v = Vec::with_capacity(FIT_PARAMS);
+            v.extend(m.kd.iter().chain(&m.ka).chain(&m.kb));
+            v.extend([m.alpha_t, m.alpha_b, m.alpha_c]);
+            let tag = match m.kind {
+                LobeKind::Clearcoat => 5,
+                LobeKind::Woven => 6,
+            };
+            (
+                tag,
+                Some((f.isotropic, pad(&v), f.sse, f.samples, f.iterations, h)),
+            )
+        }
     };
     b.extend_from_slice(&[tag, fitted.is_some_and(|f| f.0) as u8]);
     b.resize(start + 8, 0);
@@ -692,11 +740,21 @@ fn encode(r: &Option<PixelOutcome>, b: &mut Vec<u8>) {
 fn decode(r: &[u8]) -> Option<Option<PixelOutcome>> {
     let f64_at = |o: usize| f64::from_le_bytes(r[o..o + 8].try_into().unwrap_or_default());
     let u64_at = |o: usize| u64::from_le_bytes(r[o..o + 8].try_into().unwrap_or_default());
-    // The held-out error sits at the same place for both models.
+    // The parameters, then the figures, at the same places for every model.
+    let par = |i: usize| f64_at(8 + 8 * i);
+    let (sse, samples) = (
+        f64_at(8 + 8 * FIT_PARAMS),
+        u64_at(16 + 8 * FIT_PARAMS) as usize,
+    );
+    let iterations = u32::from_le_bytes(
+        r[24 + 8 * FIT_PARAMS..28 + 8 * FIT_PARAMS]
+            .try_into()
+            .unwrap_or_default(),
+    );
     let hold = || HoldoutError {
-        sse: f64_at(96),
-        samples: u64_at(104) as usize,
-        peak: f64_at(112),
+        sse: f64_at(32 + 8 * FIT_PARAMS),
+        samples: u64_at(40 + 8 * FIT_PARAMS) as usize,
+        peak: f64_at(48 + 8 * FIT_PARAMS),
     };
     Some(match r[0] {
         0 => None,
@@ -704,29 +762,51 @@ fn decode(r: &[u8]) -> Option<Option<PixelOutcome>> {
         2 => Some(PixelOutcome::TooFewSamples),
         3 => {
             let fit = WardFit {
-                kd: [f64_at(8), f64_at(16), f64_at(24)],
-                ks: [f64_at(32), f64_at(40), f64_at(48)],
-                alpha_t: f64_at(56),
-                alpha_b: f64_at(64),
+                kd: [par(0), par(1), par(2)],
+                ks: [par(3), par(4), par(5)],
+                alpha_t: par(6),
+                alpha_b: par(7),
                 isotropic: r[1] != 0,
-                sse: f64_at(72),
-                samples: u64_at(80) as usize,
-                iterations: u32::from_le_bytes(r[88..92].try_into().unwrap_or_default()),
+                sse,
+                samples,
+                iterations,
             };
             Some(PixelOutcome::Fitted(fit, hold()))
         }
         4 => {
             let fit = GltfFit {
-                base_color: [f64_at(8), f64_at(16), f64_at(24)],
-                metallic: f64_at(32),
-                roughness: f64_at(40),
-                anisotropy: f64_at(48),
+                base_color: [par(0), par(1), par(2)],
+                metallic: par(3),
+                roughness: par(4),
+                anisotropy: par(5),
                 isotropic: r[1] != 0,
-                sse: f64_at(72),
-                samples: u64_at(80) as usize,
-                iterations: u32::from_le_bytes(r[88..92].try_into().unwrap_or_default()),
+                sse,
+                samples,
+                iterations,
             };
             Some(PixelOutcome::FittedGltf(fit, hold()))
+        }
+        tag @ (5 | 6) => {
+            let fit = LobeFit {
+                model: LobeModel {
+                    kind: if tag == 5 {
+                        LobeKind::Clearcoat
+                    } else {
+                        LobeKind::Woven
+                    },
+                    kd: [par(0), par(1), par(2)],
+                    ka: [par(3), par(4), par(5)],
+                    kb: [par(6), par(7), par(8)],
+                    alpha_t: par(9),
+                    alpha_b: par(10),
+                    alpha_c: par(11),
+                },
+                isotropic: r[1] != 0,
+                sse,
+                samples,
+                iterations,
+            };
+            Some(PixelOutcome::FittedLobes(fit, hold()))
         }
         _ => return None,
     })
@@ -827,21 +907,50 @@ mod tests {
             sse: 2e-7,
             iterations: 3,
         };
+        let coat = LobeFit {
+            model: LobeModel {
+                kind: LobeKind::Clearcoat,
+                kd: [0.05, 0.08, 0.25],
+                ka: [0.5, 0.5, 1.0 / 3.0],
+                kb: [0.04; 3],
+                alpha_t: 0.35,
+                alpha_b: 0.12,
+                alpha_c: 0.03,
+            },
+            isotropic: false,
+            samples: 700,
+            sse: 3e-5,
+            iterations: 9,
+        };
+        // A woven fit has no coat roughness (NaN): compared by its printed form.
+        let woven = LobeFit {
+            model: LobeModel {
+                kind: LobeKind::Woven,
+                alpha_c: f64::NAN,
+                ..coat.model
+            },
+            isotropic: true,
+            ..coat
+        };
         let recs = vec![
             None,
             Some(PixelOutcome::NoFrame),
             Some(PixelOutcome::TooFewSamples),
             Some(PixelOutcome::Fitted(fit, hold)),
             Some(PixelOutcome::FittedGltf(gltf, hold)),
+            Some(PixelOutcome::FittedLobes(coat, hold)),
+            Some(PixelOutcome::FittedLobes(woven, hold)),
         ];
         let p = tile_path(d.path(), 3);
-        let check = |job| <Option<PixelOutcome>>::check(&p, job, 3, 5);
+        let check = |job| <Option<PixelOutcome>>::check(&p, job, 3, 7);
         assert!(matches!(check(5), TileFile::Missing));
         <Option<PixelOutcome>>::write(&p, 5, 3, &recs).unwrap();
         assert!(matches!(check(5), TileFile::Done));
         assert!(matches!(check(6), TileFile::Stale));
-        assert_eq!(<Option<PixelOutcome>>::read(&p, 5, 3, 5).unwrap(), recs);
-        let e = <Option<PixelOutcome>>::read(&p, 6, 3, 5)
+        let back = <Option<PixelOutcome>>::read(&p, 5, 3, 7).unwrap();
+        assert_eq!(back[..6], recs[..6]);
+        assert_eq!(format!("{:?}", back[6]), format!("{:?}", recs[6]));
+        let e = <Option<PixelOutcome>>::read(&p, 6, 3, 7)
             .unwrap_err()
             .to_string();
         assert!(e.contains("not the fit result of tile 3"), "{e}");

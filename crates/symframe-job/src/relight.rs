@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use serde::Serialize;
-use symframe::{tone_map, Edits, GltfMaps, Relighter, WardMaps};
+use symframe::{tone_map, Edits, GltfMaps, LobeMaps, Relighter, WardMaps};
 
 use crate::outdir::{OutputDir, OutputSet};
 
@@ -120,8 +120,34 @@ impl FittedMaps {
 
 /// Reads the maps of a fit folder of any model: both models' where `base_color.npy` and
 /// `kd.npy` are there (an automatic fit that chose each somewhere), a glTF fit where only
-/// `base_color.npy` is, else a Ward fit.
+/// `base_color.npy` is, a Ward fit where only `kd.npy` is; a two-lobe fit's folder, which has
+/// neither, reads as a Ward fit without parameters in its frames (its models are
+/// [`read_lobe_maps`]'s).
 pub fn read_fit_maps(dir: &Path) -> Result<FittedMaps> {
+    if !dir.join("base_color.npy").is_file()
+        && !dir.join("kd.npy").is_file()
+        && dir.join(format!("{}.npy", LOBE_MAPS[0])).is_file()
+    {
+        let normals_path = dir.join("normals.npy");
+        let (shape, normals) = symframe_io::read_npy_f32(&normals_path)?;
+        let [h, w, 3] = shape[..] else {
+            bail!(
+                "{}: shape {shape:?} is not an H x W x 3 map",
+                normals_path.display()
+            );
+        };
+        let n = w * h;
+        return Ok(FittedMaps::Ward(WardMaps {
+            width: w,
+            height: h,
+            tangents: read_map(dir, "tangents", &[h, w, 3])?,
+            normals,
+            kd: vec![f32::NAN; 3 * n],
+            ks: vec![f32::NAN; 3 * n],
+            alpha_t: vec![f32::NAN; n],
+            alpha_b: vec![f32::NAN; n],
+        }));
+    }
     if dir.join("base_color.npy").is_file() {
         let g = read_gltf_maps(dir)?;
         if dir.join("kd.npy").is_file() {
@@ -135,6 +161,74 @@ pub fn read_fit_maps(dir: &Path) -> Result<FittedMaps> {
     } else {
         read_ward_maps(dir).map(FittedMaps::Ward)
     }
+}
+
+/// The two-lobe maps of a fit folder (without extension; `.npy` and `.exr` are written):
+/// diffuse albedo, the two lobes' reflectances (`H x W x 3`), then the roughnesses along the
+/// tangent and the binormal and the coat's (`H x W`). Which model each pixel has is in
+/// `model.npy` ([`symframe::MODEL_CLEARCOAT`], [`symframe::MODEL_WOVEN`]).
+pub const LOBE_MAPS: [&str; 6] = [
+    "lobes_kd",
+    "lobes_ka",
+    "lobes_kb",
+    "lobes_alpha_t",
+    "lobes_alpha_b",
+    "lobes_alpha_c",
+];
+
+/// Reads the two-lobe maps of a fit folder (a clear-coat, woven or automatic fit), `None`
+/// where it has none.
+pub fn read_lobe_maps(dir: &Path) -> Result<Option<LobeMaps>> {
+    let first = dir.join(format!("{}.npy", LOBE_MAPS[0]));
+    if !first.is_file() {
+        return Ok(None);
+    }
+    let (shape, kd) = symframe_io::read_npy_f32(&first)?;
+    let [h, w, 3] = shape[..] else {
+        bail!(
+            "{}: shape {shape:?} is not an H x W x 3 map",
+            first.display()
+        );
+    };
+    let kind = read_map(dir, "model", &[h, w])?
+        .iter()
+        .map(|&c| {
+            if (0.0..=255.0).contains(&c) {
+                c as u8
+            } else {
+                0
+            }
+        })
+        .collect();
+    let maps = LobeMaps {
+        width: w,
+        height: h,
+        normals: read_map(dir, "normals", &[h, w, 3])?,
+        tangents: read_map(dir, "tangents", &[h, w, 3])?,
+        kind,
+        kd,
+        ka: read_map(dir, LOBE_MAPS[1], &[h, w, 3])?,
+        kb: read_map(dir, LOBE_MAPS[2], &[h, w, 3])?,
+        alpha_t: read_map(dir, LOBE_MAPS[3], &[h, w])?,
+        alpha_b: read_map(dir, LOBE_MAPS[4], &[h, w])?,
+        alpha_c: read_map(dir, LOBE_MAPS[5], &[h, w])?,
+    };
+    maps.check().with_context(|| format!("{}", dir.display()))?;
+    Ok(Some(maps))
+}
+
+/// The relighter of a fit folder: [`FittedMaps::relighter`] with the two-lobe pixels of
+/// [`read_lobe_maps`] rendered with their models.
+pub fn fit_relighter(maps: &FittedMaps, dir: &Path, edits: &Edits) -> Result<Relighter> {
+    let r = maps
+        .relighter(edits)
+        .with_context(|| dir.display().to_string())?;
+    Ok(match read_lobe_maps(dir)? {
+        Some(l) => r
+            .with_lobes(&l, edits)
+            .with_context(|| dir.display().to_string())?,
+        None => r,
+    })
 }
 
 /// Reads the fitted glTF maps of `dir` and the exposure its `fit.json` records.
@@ -260,9 +354,7 @@ pub fn relight(config: &RelightConfig) -> Result<RelightOutcome> {
             None => None,
         },
     };
-    let relighter = maps
-        .relighter(&edits)
-        .with_context(|| config.fit_dir.display().to_string())?;
+    let relighter = fit_relighter(&maps, &config.fit_dir, &edits)?;
     let heights = match &config.shadows {
         Some(p) => {
             let (shape, depth) = symframe_io::read_npy_f32(p)?;

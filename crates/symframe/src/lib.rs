@@ -147,10 +147,12 @@ pub use maps::{EstimateMaps, PixelCounts, PixelRecord, PixelSource, PixelStatus}
 // Fitting a BRDF per pixel in the estimated frames, and relighting the fit.
 pub use appearance::fit::{
     fit_stack, holdout_lights, select_exposure, ExposureChoice, FitMaps, FitMethod, FitModel,
-    FitParams, FitStatus, FitSummary, GltfMaps, HoldoutError, PixelData, PixelFitter, PixelOutcome,
-    WardFit, WardMaps, DEFAULT_MODEL, MODEL_GLTF, MODEL_WARD,
+    FitParams, FitStatus, FitSummary, GltfMaps, HoldoutError, LobeMaps, PixelData, PixelFitter,
+    PixelOutcome, WardFit, WardMaps, DEFAULT_MODEL, MODEL_CLEARCOAT, MODEL_GLTF, MODEL_WARD,
+    MODEL_WOVEN,
 };
 pub use appearance::gltf_fit::GltfFit;
+pub use appearance::lobe_fit::{LobeFit, LobeKind, LobeModel};
 pub use appearance::relight::{image_psnr, tone_map, Edits, Relighter};
 
 // Depth from normals, and a mesh of it.

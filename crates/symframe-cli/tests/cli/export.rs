@@ -49,7 +49,12 @@ fn check_layout(doc: &serde_json::Value, bin_len: usize) {
     let m = &doc["materials"][0];
     assert!(m["extensions"]["KHR_materials_anisotropy"]["anisotropyTexture"].is_object());
     assert_eq!(doc["extensionsUsed"][0], "KHR_materials_anisotropy");
-    assert_eq!(doc["images"].as_array().unwrap().len(), 4);
+    // A fifth texture, the clear coat's, where some pixel has a clear-coat model.
+    let coat = m["extensions"]["KHR_materials_clearcoat"].is_object();
+    assert_eq!(
+        doc["images"].as_array().unwrap().len(),
+        if coat { 5 } else { 4 }
+    );
 }
 
 /// Runs the Khronos validator on `files` when it is installed; returns whether it ran.
@@ -141,4 +146,98 @@ fn fits_and_estimates_export_as_valid_gltf() {
     assert_one_line_error(&o, "normals.npy");
     let o = symframe(&["export", "gltf", s(&fit), "--mesh", "-o", s(&glb)]);
     assert_one_line_error(&o, "depth.npy");
+}
+
+/// A clear-coat fit exports `KHR_materials_clearcoat` beside `KHR_materials_anisotropy` (its
+/// factor and roughness in one texture, R and G), the relight job renders it, and a woven fit
+/// (which glTF cannot carry as two lobes) exports without a coat; the validator, when
+/// installed, accepts both.
+#[test]
+fn two_lobe_fits_export_the_clear_coat() {
+    let tmp = tempfile::tempdir().unwrap();
+    let t = tmp.path();
+    let (data, est) = (t.join("data"), t.join("est"));
+    run_ok(&["synth", "-o", s(&data), "--size", "24", "--rig", "cone:120"]);
+    run_ok(&["estimate", s(&data), "-o", s(&est)]);
+    let coat_fit = t.join("coat");
+    run_ok(&[
+        "fit",
+        s(&data),
+        "--frames",
+        s(&est),
+        "-o",
+        s(&coat_fit),
+        "--model",
+        "clearcoat",
+    ]);
+    let report: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(coat_fit.join("fit.json")).unwrap()).unwrap();
+    assert_eq!(report["model"], "clearcoat");
+    assert!(report["fit"]["clearcoat_pixels"].as_u64().unwrap() > 0);
+    for name in ["lobes_kd", "lobes_ka", "lobes_kb", "lobes_alpha_c", "model"] {
+        assert!(coat_fit.join(format!("{name}.npy")).is_file(), "{name}");
+    }
+    assert!(!coat_fit.join("kd.npy").exists() && !coat_fit.join("base_color.npy").exists());
+
+    let glb = t.join("coat.glb");
+    run_ok(&["export", "gltf", s(&coat_fit), "-o", s(&glb)]);
+    let (doc, bin) = glb_chunks(&glb);
+    check_layout(&doc, bin.len());
+    let coat = &doc["materials"][0]["extensions"]["KHR_materials_clearcoat"];
+    assert_eq!(coat["clearcoatTexture"]["index"], 4, "{doc}");
+    assert_eq!(coat["clearcoatRoughnessTexture"]["index"], 4, "{doc}");
+    let used: Vec<&str> = doc["extensionsUsed"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    assert_eq!(
+        used,
+        ["KHR_materials_anisotropy", "KHR_materials_clearcoat"]
+    );
+    let gltf = t.join("out/coat.gltf");
+    run_ok(&["export", "gltf", s(&coat_fit), "-o", s(&gltf)]);
+    let img = symframe_io::read_image(
+        &t.join("out/coat_clearcoat.png"),
+        &symframe_io::DecodeOptions::default(),
+    )
+    .unwrap();
+    assert_eq!((img.width, img.height), (24, 24));
+
+    // The relight job renders the two-lobe pixels: the sphere is lit.
+    let relit = t.join("relit");
+    run_ok(&[
+        "relight",
+        s(&coat_fit),
+        "-o",
+        s(&relit),
+        "--light",
+        "0.2,0.1,1",
+    ]);
+    let exr = fs::read_dir(&relit)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "exr"))
+        .unwrap();
+    let lit = symframe_io::read_image(&exr, &symframe_io::DecodeOptions::default()).unwrap();
+    assert!(lit.data.iter().any(|&v| v > 0.0));
+
+    let woven_fit = t.join("woven");
+    run_ok(&[
+        "fit",
+        s(&data),
+        "--frames",
+        s(&est),
+        "-o",
+        s(&woven_fit),
+        "--model",
+        "woven",
+    ]);
+    let woven_glb = t.join("woven.glb");
+    run_ok(&["export", "gltf", s(&woven_fit), "-o", s(&woven_glb)]);
+    let (doc, bin) = glb_chunks(&woven_glb);
+    check_layout(&doc, bin.len());
+    assert!(doc["materials"][0]["extensions"]["KHR_materials_clearcoat"].is_null());
+    validate(&[&glb, &gltf, &woven_glb]);
 }

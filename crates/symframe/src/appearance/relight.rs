@@ -13,7 +13,8 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::appearance::fit::{GltfMaps, WardMaps};
+use crate::appearance::fit::{GltfMaps, LobeMaps, WardMaps};
+use crate::appearance::lobe_fit::LobeModel;
 use crate::brdf::gltf::GltfPbr;
 use crate::brdf::ward::Ward;
 use crate::brdf::Brdf;
@@ -86,6 +87,7 @@ impl Edits {
 enum Material {
     Ward(Ward),
     Gltf(GltfPbr, f64),
+    Lobes(LobeModel),
 }
 
 /// One pixel's model: its frame and its material.
@@ -109,6 +111,7 @@ impl PixelModel {
         let (f, e) = match &self.material {
             Material::Ward(w) => (w.eval(local(l), local(DVec3::Z)), 1.0),
             Material::Gltf(g, e) => (g.eval(local(l), local(DVec3::Z)), *e),
+            Material::Lobes(m) => (m.eval(local(l), local(DVec3::Z)), 1.0),
         };
         f.map(|v| (e * v * nl) as f32)
     }
@@ -242,6 +245,49 @@ impl Relighter {
             }
         }
         Ok(out)
+    }
+
+    /// This relighter with the pixels of `lobes` that have a two-lobe model rendered with it
+    /// (an automatic or two-lobe fit), `edits` applied: the diffuse scale multiplies `kd`,
+    /// the specular scale both lobes' reflectances, the roughness scale every roughness; the
+    /// tangent rotation turns the frame as for the other models.
+    pub fn with_lobes(mut self, lobes: &LobeMaps, edits: &Edits) -> Result<Self> {
+        lobes.check()?;
+        edits.check(lobes.width, lobes.height)?;
+        if (lobes.width, lobes.height) != (self.width, self.height) {
+            return Err(Error::BadParameter(format!(
+                "the two-lobe maps are {}x{} but the other maps {}x{}",
+                lobes.width, lobes.height, self.width, self.height
+            )));
+        }
+        let (sin, cos) = edits.tangent_rotation_deg.to_radians().sin_cos();
+        for (p, px) in self.pixels.iter_mut().enumerate() {
+            let Some(m) = lobes.model(p) else {
+                continue;
+            };
+            let Some(n) = vec_at(&lobes.normals, p).filter(|n| n.z > 0.0) else {
+                continue;
+            };
+            let (t, anisotropic) = edited_frame(&lobes.tangents, n, p, edits, sin, cos);
+            let r = edits.roughness_scale;
+            let m = LobeModel {
+                kd: m.kd.map(|v| v * edits.diffuse_scale),
+                ka: m.ka.map(|v| v * edits.specular_scale),
+                kb: m.kb.map(|v| v * edits.specular_scale),
+                alpha_t: m.alpha_t * r,
+                alpha_b: m.alpha_b * r,
+                alpha_c: m.alpha_c * r,
+                ..m
+            };
+            *px = Some(PixelModel {
+                t,
+                b: n.cross(t),
+                n,
+                anisotropic,
+                material: Material::Lobes(m),
+            });
+        }
+        Ok(self)
     }
 
     /// Width in pixels.
