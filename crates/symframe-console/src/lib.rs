@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::OnceLock;
 
 use clap::{Args, Parser};
-use symframe_job::{Checkpoint, Control, Interrupted, Progress};
+use symframe_job::{one_line, Checkpoint, Control, Interrupted, Progress};
 
 /// The flags every subcommand takes: flatten into the program's top-level parser.
 #[derive(Debug, Clone, Args)]
@@ -143,28 +143,5 @@ pub fn main<C: Parser>(
         // One line: the context chain joined, outermost first.
         eprintln!("{name}: error: {}", one_line(&e));
         std::process::exit(1);
-    }
-}
-
-/// The error and its causes on one line, outermost first (each error's message leaves its
-/// cause to the chain); a codec's multi-line message is folded onto the line.
-pub fn one_line(e: &anyhow::Error) -> String {
-    let parts: Vec<String> = e.chain().map(|c| c.to_string()).collect();
-    parts
-        .join(": ")
-        .split_whitespace()
-        .collect::<Vec<_>>()
-        .join(" ")
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_chain_is_joined_on_one_line() {
-        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "no such\nfile");
-        let e = anyhow::Error::new(io).context("a.exr: cannot read");
-        assert_eq!(one_line(&e), "a.exr: cannot read: no such file");
     }
 }

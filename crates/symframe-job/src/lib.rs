@@ -124,6 +124,18 @@ impl std::fmt::Display for Interrupted {
 
 impl std::error::Error for Interrupted {}
 
+/// A job error and its causes on one line, outermost first (each error's message leaves its
+/// cause to the chain), a codec's multi-line message folded onto it: how the command line and
+/// the Python package report an error.
+pub fn one_line(e: &anyhow::Error) -> String {
+    let parts: Vec<String> = e.chain().map(|c| c.to_string()).collect();
+    parts
+        .join(": ")
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 /// A stage of a job, as reported to the progress callback.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Stage {
@@ -216,5 +228,17 @@ impl Control<'_> {
 
     fn warn(&self, line: &str) {
         (self.warning)(line)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_chain_is_joined_on_one_line() {
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "no such\nfile");
+        let e = anyhow::Error::new(io).context("a.exr: cannot read");
+        assert_eq!(one_line(&e), "a.exr: cannot read: no such file");
     }
 }

@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use pyo3::exceptions::{PyKeyboardInterrupt, PyUserWarning, PyValueError};
 use pyo3::prelude::*;
-use symframe_job::{Control, Interrupted, Progress};
+use symframe_job::{one_line, Control, Interrupted, Progress};
 
 use crate::SymframeError;
 
@@ -21,16 +21,6 @@ use crate::SymframeError;
 const POLL: Duration = Duration::from_millis(50);
 /// Least time between two progress calls of one stage (the first and last always come).
 const THROTTLE: Duration = Duration::from_millis(100);
-
-/// The error and its causes on one line, outermost first, as the command line prints them.
-pub fn one_line(e: &anyhow::Error) -> String {
-    let parts: Vec<String> = e.chain().map(|c| c.to_string()).collect();
-    parts
-        .join(": ")
-        .split_whitespace()
-        .collect::<Vec<_>>()
-        .join(" ")
-}
 
 /// A job error as a Python exception.
 pub fn to_py(e: anyhow::Error) -> PyErr {
