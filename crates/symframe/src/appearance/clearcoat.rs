@@ -44,21 +44,55 @@ pub(crate) fn ggx_lobe(l: DVec3, v: DVec3, h: DVec3, alpha_x: f64, alpha_y: f64)
         / (4.0 * l.z * v.z)
 }
 
+/// What of [`basis`] does not depend on the roughnesses (the half-vector and the coat's
+/// Fresnel factors), computed once per sample by a fit that evaluates many roughnesses.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Fixed {
+    /// The half-vector.
+    pub h: DVec3,
+    /// `T(n.l) T(n.v)`: the base seen through the coat both ways.
+    pub through: f64,
+    /// `F(l.h) / F(1)`: the coat's Fresnel factor over its normal-incidence value.
+    pub coat: f64,
+}
+
+/// [`Fixed`] at local directions `l`, `v`; `None` below the horizon.
+#[inline]
+pub(crate) fn fixed(l: DVec3, v: DVec3) -> Option<Fixed> {
+    let h = half_vector_above(l, v)?;
+    Some(Fixed {
+        h,
+        through: (1.0 - fresnel_dielectric(l.z, COAT_IOR))
+            * (1.0 - fresnel_dielectric(v.z, COAT_IOR)),
+        coat: fresnel_dielectric(cos_theta_d(l, v), COAT_IOR) / fresnel_dielectric(1.0, COAT_IOR),
+    })
+}
+
+/// [`basis`] from its roughness-free part `f` (of the same `l`, `v`).
+#[inline]
+pub(crate) fn basis_at(
+    l: DVec3,
+    v: DVec3,
+    f: &Fixed,
+    alpha_t: f64,
+    alpha_b: f64,
+    alpha_c: f64,
+) -> [f64; 3] {
+    [
+        f.through / PI,
+        f.through * ggx_lobe(l, v, f.h, alpha_t, alpha_b),
+        f.coat * ggx_lobe(l, v, f.h, alpha_c, alpha_c),
+    ]
+}
+
 /// The three functions the reflectances multiply, `[kd, ks, kc]`'s, at local directions
 /// `l`, `v` (z = normal): `f = kd b[0] + ks b[1] + kc b[2]`. Zero below the horizon.
 #[inline]
 pub(crate) fn basis(l: DVec3, v: DVec3, alpha_t: f64, alpha_b: f64, alpha_c: f64) -> [f64; 3] {
-    let Some(h) = half_vector_above(l, v) else {
-        return [0.0; 3];
-    };
-    let through =
-        (1.0 - fresnel_dielectric(l.z, COAT_IOR)) * (1.0 - fresnel_dielectric(v.z, COAT_IOR));
-    let coat = fresnel_dielectric(cos_theta_d(l, v), COAT_IOR) / fresnel_dielectric(1.0, COAT_IOR);
-    [
-        through / PI,
-        through * ggx_lobe(l, v, h, alpha_t, alpha_b),
-        coat * ggx_lobe(l, v, h, alpha_c, alpha_c),
-    ]
+    match fixed(l, v) {
+        Some(f) => basis_at(l, v, &f, alpha_t, alpha_b, alpha_c),
+        None => [0.0; 3],
+    }
 }
 
 #[cfg(test)]

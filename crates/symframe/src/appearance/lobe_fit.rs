@@ -126,6 +126,8 @@ type P = [f64; 3];
 /// Per-thread buffers.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct Scratch {
+    /// Per sample, what of the basis does not depend on the roughnesses.
+    fixed: Vec<Option<clearcoat::Fixed>>,
     /// `b (n.l)` per sample at the point of the last [`project`].
     cols: Vec<[f64; 3]>,
     r: Vec<f64>,
@@ -250,6 +252,7 @@ fn solve(a: &mut [[f64; 4]; 3], n: usize) -> Option<[f64; 3]> {
 fn project(
     kind: LobeKind,
     samples: &[GltfSample],
+    fixed: &[Option<clearcoat::Fixed>],
     v: DVec3,
     iso: bool,
     p: P,
@@ -261,10 +264,11 @@ fn project(
     let mut g = [[0.0f64; 3]; 3];
     let mut r = [[0.0f64; 3]; 3];
     cols.clear();
-    for s in samples {
-        let mut b = match kind {
-            LobeKind::Clearcoat => clearcoat::basis(s.l, v, at, ab, ac),
-            LobeKind::Woven => woven::basis(s.l, v, at, ab),
+    for (s, f) in samples.iter().zip(fixed) {
+        let mut b = match (kind, f) {
+            (_, None) => [0.0; 3],
+            (LobeKind::Clearcoat, Some(f)) => clearcoat::basis_at(s.l, v, f, at, ab, ac),
+            (LobeKind::Woven, Some(f)) => woven::basis_at(s.l, v, f.h, at, ab),
         };
         if kind == LobeKind::Woven && iso {
             b[2] = 0.0;
@@ -326,9 +330,15 @@ pub(crate) fn fit_samples(
     let bound = params.max_peak_ratio * brightest;
     let (lo, hi) = (params.alpha_min.ln(), params.alpha_max.min(1.0).ln());
     let free = free_params(kind, iso);
+    // What of the basis does not depend on the roughnesses, once per sample (the coat's
+    // Fresnel factors are unused by the woven model).
+    let mut fixed_buf = std::mem::take(&mut scratch.fixed);
+    fixed_buf.clear();
+    fixed_buf.extend(samples.iter().map(|s| clearcoat::fixed(s.l, v)));
+    let fixed = &fixed_buf[..];
     let clamp = |p: P| -> P { p.map(|x| x.clamp(lo, hi)) };
     let cost_at = |p: P, cols: &mut Vec<[f64; 3]>| {
-        project(kind, samples, v, iso, clamp(p), bound, cols, None).1
+        project(kind, samples, fixed, v, iso, clamp(p), bound, cols, None).1
     };
 
     // Start: a coarse grid, the tangent's roughness the wider.
@@ -355,6 +365,7 @@ pub(crate) fn fit_samples(
     let mut cur = project(
         kind,
         samples,
+        fixed,
         v,
         iso,
         p,
@@ -374,7 +385,17 @@ pub(crate) fn fit_samples(
             let h = 1e-6 * if p[j] + 1e-6 > hi { -1.0 } else { 1.0 };
             q[j] += h;
             let (rj, r0) = (&mut scratch.rj[j], &scratch.r);
-            project(kind, samples, v, iso, q, bound, &mut scratch.cols, Some(rj));
+            project(
+                kind,
+                samples,
+                fixed,
+                v,
+                iso,
+                q,
+                bound,
+                &mut scratch.cols,
+                Some(rj),
+            );
             for (a, b) in rj.iter_mut().zip(r0) {
                 *a = (*a - b) / h;
             }
@@ -436,6 +457,7 @@ pub(crate) fn fit_samples(
                 cur = project(
                     kind,
                     samples,
+                    fixed,
                     v,
                     iso,
                     p,
@@ -456,7 +478,18 @@ pub(crate) fn fit_samples(
             }
         }
     }
-    let (coef, _) = project(kind, samples, v, iso, p, bound, &mut scratch.cols, None);
+    let (coef, _) = project(
+        kind,
+        samples,
+        fixed,
+        v,
+        iso,
+        p,
+        bound,
+        &mut scratch.cols,
+        None,
+    );
+    scratch.fixed = fixed_buf;
     let (at, ab, ac) = alphas(kind, iso, p);
     let fit = LobeFit {
         model: LobeModel {

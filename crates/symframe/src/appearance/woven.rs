@@ -35,9 +35,15 @@ use crate::brdf::microfacet::half_vector_above;
 /// `v` (z = normal): `f = kd b[0] + kw b[1] + kf b[2]`. Zero below the horizon.
 #[inline]
 pub(crate) fn basis(l: DVec3, v: DVec3, alpha_t: f64, alpha_b: f64) -> [f64; 3] {
-    let Some(h) = half_vector_above(l, v) else {
-        return [0.0; 3];
-    };
+    match half_vector_above(l, v) {
+        Some(h) => basis_at(l, v, h, alpha_t, alpha_b),
+        None => [0.0; 3],
+    }
+}
+
+/// [`basis`] at the half-vector `h` of `l` and `v` (above the horizon).
+#[inline]
+pub(crate) fn basis_at(l: DVec3, v: DVec3, h: DVec3, alpha_t: f64, alpha_b: f64) -> [f64; 3] {
     [
         1.0 / PI,
         ggx_lobe(l, v, h, alpha_t, alpha_b),
