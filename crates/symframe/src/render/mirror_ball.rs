@@ -118,19 +118,7 @@ impl MirrorBall {
                     let span = 2.0 / (self.r * nz);
                     d.dot(light).clamp(-1.0, 1.0).acos() < self.lamp_radius + 2.0 * span
                 };
-                let points: Vec<(f64, f64)> = if fine {
-                    (0..k * k)
-                        .map(|q| {
-                            let (i, j) = (q / k, q % k);
-                            (
-                                col as f64 + (j as f64 + 0.5) / k as f64,
-                                row as f64 + (i as f64 + 0.5) / k as f64,
-                            )
-                        })
-                        .collect()
-                } else {
-                    vec![(x, y)]
-                };
+                let points = pixel_points(col, row, k, fine);
                 let share = 1.0 / points.len() as f64;
                 let mut sum = 0.0;
                 let mut lit = false;
@@ -240,6 +228,23 @@ pub(super) fn blur(img: &mut [f32], width: usize, height: usize, sigma: f64) {
     let mut tmp = vec![0f32; img.len()];
     pass(img, &mut tmp, true);
     pass(&tmp, img, false);
+}
+
+/// Where pixel `(col, row)` is sampled: its centre, or with `fine` a `k` x `k` grid of points
+/// at the centres of its sub-pixels.
+pub(super) fn pixel_points(col: usize, row: usize, k: usize, fine: bool) -> Vec<(f64, f64)> {
+    if !fine {
+        return vec![(col as f64 + 0.5, row as f64 + 0.5)];
+    }
+    (0..k * k)
+        .map(|q| {
+            let (i, j) = (q / k, q % k);
+            (
+                col as f64 + (j as f64 + 0.5) / k as f64,
+                row as f64 + (i as f64 + 0.5) / k as f64,
+            )
+        })
+        .collect()
 }
 
 #[cfg(test)]

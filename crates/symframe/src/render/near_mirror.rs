@@ -18,7 +18,7 @@
 
 use glam::DVec3;
 
-use super::mirror_ball::{blur, splat};
+use super::mirror_ball::{blur, pixel_points, splat};
 use crate::near::Pinhole;
 
 /// Mirror spheres before a pinhole camera, and what they reflect.
@@ -173,19 +173,7 @@ impl NearMirrorBalls {
                         let own = (self.lamp_radius / to.length()).min(1.0).asin();
                         r.angle_between(to) < own + 2.0 * span
                     });
-                let points: Vec<(f64, f64)> = if rim {
-                    (0..k * k)
-                        .map(|q| {
-                            let (i, j) = (q / k, q % k);
-                            (
-                                col as f64 + (j as f64 + 0.5) / k as f64,
-                                row as f64 + (i as f64 + 0.5) / k as f64,
-                            )
-                        })
-                        .collect()
-                } else {
-                    vec![(x, y)]
-                };
+                let points = pixel_points(col, row, k, rim);
                 let share = 1.0 / points.len() as f64;
                 room[row * width + col] = points
                     .iter()
