@@ -111,7 +111,8 @@ impl NoiseModel {
     }
 
     /// Estimates shot and read noise from images (`width x height`, RGB, linear): the images'
-    /// [`NoiseSamples`], fitted ([`NoiseModel::fit`]). Keeps `quantisation` and `clip_level`.
+    /// [`NoiseSamples`], fitted ([`NoiseModel::fit`], which also finds a float capture's clip
+    /// level).
     pub fn estimate<'a>(
         self,
         images: impl Iterator<Item = &'a [f32]>,
@@ -128,8 +129,14 @@ impl NoiseModel {
     /// Shot and read noise from `samples`: per level bin a robust variance (the median
     /// absolute deviation's) less the quantisation's, fitted by `shot * v + read` over the
     /// bins by least squares. On small or strongly curved images (a highlight a few pixels
-    /// wide) the signal's curvature inflates it. Keeps `quantisation` and `clip_level`.
+    /// wide) the signal's curvature inflates it. Keeps `quantisation` and `clip_level`; a float
+    /// capture without a clip level takes one where its samples show a clipped plateau
+    /// ([`NoiseSamples::clip_plateau`]: a float file made from one exposure clips where the
+    /// sensor did).
     pub fn fit(mut self, samples: &mut NoiseSamples) -> Self {
+        if self.quantisation == Quantisation::Float && self.clip_level.is_none() {
+            self.clip_level = samples.clip_plateau();
+        }
         // Per bin: (level, noise variance) from the MAD of the second differences; a second
         // difference of independent noise has 1.5 times the samples' variance.
         let mut points: Vec<(f64, f64)> = Vec::new();
@@ -170,6 +177,10 @@ pub struct NoiseSamples {
     top: f64,
     diffs: Vec<Vec<f32>>,
     levels: Vec<Vec<f32>>,
+    /// The largest sample seen, and the samples within [`Self::PLATEAU_BAND`] below it (it
+    /// included): where a float capture clipped, and how many samples say so.
+    max: f32,
+    near_max: Vec<f32>,
 }
 
 impl NoiseSamples {
@@ -178,12 +189,53 @@ impl NoiseSamples {
     /// Pixels of one image visited at most (rows are skipped evenly beyond).
     const PIXELS_PER_IMAGE: usize = 4 << 20;
 
+    /// A clipped plateau is told from the top of a smooth highlight by the samples within this
+    /// share below the largest value: a smooth top puts more samples there than at any one
+    /// value (the more the wider the share); a clip puts every sample beyond it at one value.
+    /// Wider than an 8-bit step from about a quarter of full scale up, and than sixteen
+    /// half-float steps, so quantised float files are not taken as clipped.
+    const PLATEAU_BAND: f32 = 1.0 / 64.0;
+    /// Fewest samples at the largest value that make a plateau.
+    const PLATEAU_MIN: usize = 8;
+
     /// Empty bins for a capture of `model`'s clip level.
     pub fn new(model: &NoiseModel) -> Self {
         Self {
             top: model.clip_level.map_or(1.0, |c| c as f64),
             diffs: vec![Vec::new(); Self::BINS],
             levels: vec![Vec::new(); Self::BINS],
+            max: 0.0,
+            near_max: Vec::new(),
+        }
+    }
+
+    /// The level at which the samples show a clipped plateau: at least
+    /// [`Self::PLATEAU_MIN`] samples at exactly the largest value, and more there than in the
+    /// whole band [`Self::PLATEAU_BAND`] below it. `None` where they do not.
+    pub fn clip_plateau(&self) -> Option<f32> {
+        let at = self.near_max.iter().filter(|&&v| v == self.max).count();
+        let floor = self.max * (1.0 - Self::PLATEAU_BAND);
+        let below = self
+            .near_max
+            .iter()
+            .filter(|&&v| v < self.max && v >= floor)
+            .count();
+        (self.max > 0.0 && at >= Self::PLATEAU_MIN && at > below).then_some(self.max)
+    }
+
+    /// Keeps `v` where it is within the band below the largest value so far.
+    fn add_top(&mut self, v: f32) {
+        if !(v.is_finite() && v >= self.max * (1.0 - Self::PLATEAU_BAND)) {
+            return;
+        }
+        self.near_max.push(v);
+        if v > self.max {
+            self.max = v;
+            // The band moved up: drop what fell out of it, now and then (amortised).
+            if self.near_max.len() >= 64 {
+                let floor = v * (1.0 - Self::PLATEAU_BAND);
+                self.near_max.retain(|&x| x >= floor);
+            }
         }
     }
 
@@ -221,6 +273,13 @@ impl NoiseSamples {
             let t = (v / 1e-4).ln() / (top / 1e-4).ln();
             Some(((t * Self::BINS as f64) as usize).min(Self::BINS - 1))
         };
+        for p in 0..w {
+            if mask.is_none_or(|m| m[p]) {
+                for c in 0..ch {
+                    self.add_top(row[ch * p + c]);
+                }
+            }
+        }
         for p in 1..w.saturating_sub(1) {
             if let Some(m) = mask {
                 if !(m[p - 1] && m[p] && m[p + 1]) {
@@ -293,6 +352,63 @@ mod tests {
         assert_eq!(out, [0.2, 0.3, 0.4, 0.9, 0.9, 0.9, 0.9, 0.9, 0.9]);
         assert!(!m.censor(&[0.1, 0.2, 0.3], &mut out) && out.is_empty());
         assert!(!NoiseModel::default().censor(&slice, &mut out));
+    }
+
+    /// Images of a smooth highlight (a Gaussian bump peaking at `peak`), float, with shot noise
+    /// of 4,000 electrons at 1 and each sample passed through `store`.
+    fn highlights(peak: f32, store: impl Fn(f32) -> f32) -> (usize, Vec<Vec<f32>>) {
+        let (w, h) = (96, 96);
+        let d = Degradation {
+            noise: Noise::Shot { photons: 4000.0 },
+            seed: 9,
+            ..Degradation::default()
+        };
+        let images = (0..4)
+            .map(|i| {
+                let c = (20.0 + 15.0 * i as f32, 40.0 + 10.0 * i as f32);
+                let mut v: Vec<f32> = (0..w * h)
+                    .flat_map(|p| {
+                        let (x, y) = ((p % w) as f32 - c.0, (p / w) as f32 - c.1);
+                        [0.05 + peak * (-(x * x + y * y) / 200.0).exp(); 3]
+                    })
+                    .collect();
+                d.apply(&mut v, i);
+                v.iter_mut().for_each(|s| *s = store(*s));
+                v
+            })
+            .collect();
+        (w, images)
+    }
+
+    #[test]
+    fn a_float_capture_s_clip_is_found_where_it_clipped() {
+        let clip_level = |images: &[Vec<f32>], w: usize| {
+            NoiseModel::default()
+                .estimate(images.iter().map(|v| &v[..]), w, None)
+                .clip_level
+        };
+        // Clipped at 0.8 (a fifth of each highlight's area beyond it): found.
+        let (w, clipped) = highlights(1.5, |v| v.min(0.8));
+        assert_eq!(clip_level(&clipped, w), Some(0.8));
+        // The same highlights unclipped, as float32, as half floats (ties at the top), and as
+        // 8-bit levels in a float file: no clip.
+        let (w, smooth) = highlights(0.7, |v| v);
+        assert_eq!(clip_level(&smooth, w), None);
+        let (w, half) = highlights(0.7, |v| {
+            let step = 2f32.powi(v.log2().floor() as i32 - 10);
+            (v / step).round() * step
+        });
+        assert_eq!(clip_level(&half, w), None);
+        let (w, bytes) = highlights(0.7, |v| (v * 255.0).round() / 255.0);
+        assert_eq!(clip_level(&bytes, w), None);
+        // An integer capture's clip level is the decoder's, never replaced.
+        let told = NoiseModel {
+            quantisation: Quantisation::Linear(16),
+            clip_level: Some(0.9),
+            ..NoiseModel::default()
+        };
+        let m = told.estimate(clipped.iter().map(|v| &v[..]), w, None);
+        assert_eq!(m.clip_level, Some(0.9));
     }
 
     #[test]

@@ -520,8 +520,9 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
             // What the decoder tells the estimator: the clip level of integer files, and for
             // a JPEG its 8-bit sRGB samples (the compression is not known to it); the shot and
             // read noise estimated from four of the images as `estimate` does
-            // (`symframe_io::capture_noise`); and what the lights' calibration reports: their
-            // RMS error.
+            // (`symframe_io::capture_noise`), and with them a float capture's clip level where
+            // the samples show a clipped plateau; and what the lights' calibration reports:
+            // their RMS error.
             let told = NoiseModel {
                 clip_level: d.saturation,
                 quantisation: match (cond.bits, cond.srgb) {
@@ -711,7 +712,9 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
          bits linear), for JPEG captures the 8-bit image encoded at the given quality by the \
          `image` crate's encoder (4:4:4, no chroma subsampling) and decoded by symframe's \
          reader, the reader's saturation rule (a pixel with a raw value at 99.5% of the \
-         maximum is unknown under that light), and light directions given to every method \
+         maximum is unknown under that light; a float capture's clip level is found from the \
+         plateau of its samples at one value, docs/method.md \"Noise model\"), and light \
+         directions given to every method \
          each off by the stated angle in a random direction. The reference capture is {}, \
          stored losslessly (as a PNG). Rigs: dense = {} lights uniform over the 65-degree cone (a 130-degree cap), sparse = \
          200, narrow = the DiLiGenT-like 96-light grid within 45 degrees. The estimator runs \

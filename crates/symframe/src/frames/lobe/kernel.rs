@@ -220,6 +220,22 @@ impl Subset {
 }
 
 impl Subset {
+    /// Makes the samples `from`'s weighted by `weights` (one per sample, without the padding):
+    /// each value and each basis function scaled by the weight's root, so that the fit's sum of
+    /// squares becomes `sum w_i r_i^2` (a weighted least squares, the variable projection
+    /// unchanged).
+    pub(super) fn weighted(&mut self, from: &Subset, weights: &[f64]) {
+        self.clone_from(from);
+        for (i, &w) in weights.iter().enumerate().take(self.len) {
+            let root = w.max(0.0).sqrt();
+            self.y[i] *= root;
+            self.w[i] *= root;
+        }
+        self.id = next_id();
+    }
+}
+
+impl Subset {
     /// Turns every sample's light by a random angle (each of its two components normal with
     /// standard deviation `sd / sqrt(2)` radians: `sd` the RMS angle) from the stream `seed`,
     /// and recomputes its halfway vector and Fresnel weight: the samples as a calibration off
