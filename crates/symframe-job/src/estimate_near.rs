@@ -10,10 +10,7 @@ use std::path::Path;
 
 use anyhow::{bail, Result};
 use serde::Serialize;
-use symframe::{
-    depth_from_normals, mean_change_deg, EstimateMaps, EstimatorParams, IntegrateParams,
-    NearMethod, NearParams, RigOptions,
-};
+use symframe::{EstimatorParams, NearMethod, NearParams, PixelRecord, RigOptions};
 use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{NearGeometry, TileCache};
 
@@ -87,11 +84,26 @@ pub struct NearReport {
     pub distance: f64,
     /// Where the distance came from: `given` or `the centre of the sphere through the lights`.
     pub distance_from: &'static str,
-    /// Side of a rig's tile, pixels.
+    /// Side of the largest rig tile, pixels.
     pub rig_tile: usize,
-    /// Rounds run.
+    /// Tiles are halved while a pixel's halfway vectors may be further than this from its
+    /// rig's, degrees (`null`: fixed tiles).
+    pub rig_bound_deg: Option<f64>,
+    /// The largest such angle over the last round's tiles on the depth map written, degrees.
+    pub rig_bound_measured_deg: f64,
+    /// Tiles (rigs) of the last round.
+    pub rig_tiles: usize,
+    /// Rigs built over all rounds.
+    pub rigs_built: usize,
+    /// Rounds run, the last (every pixel) included.
     pub iterations: usize,
-    /// Mean change of the normals per round after the first, degrees.
+    /// Rounds before the last that estimated one pixel per tile.
+    pub coarse_rounds: usize,
+    /// Pixels estimated once more after the last round (their tile's rig moved too far on
+    /// the last depth map).
+    pub refined_pixels: usize,
+    /// Mean change of the normals per round after the first, degrees (a coarse round's
+    /// normals spread over every pixel).
     pub changes_deg: Vec<f64>,
     /// Whether the last change was under the tolerance.
     pub settled: bool,
@@ -145,96 +157,79 @@ pub(crate) fn run_near_rounds(
         tile: options.tile,
         max_iterations: options.max_iterations.max(1),
         tolerance_deg: options.tolerance_deg,
+        ..NearParams::default()
     };
-    let inside = |p: usize| mask.is_none_or(|m| m[p]);
-    let mut depth: Vec<f32> = (0..w * h)
-        .map(|p| if inside(p) { distance as f32 } else { f32::NAN })
-        .collect();
-    let mut previous: Option<Vec<f32>> = None;
-    let mut changes = Vec::new();
-    let mut round = 0;
-    loop {
-        round += 1;
-        let method = NearMethod::new(
-            geometry.camera,
-            &geometry.lights,
-            w,
-            h,
-            &depth,
-            mask,
-            &params,
-        )?;
-        // Each round's results depend on its depths: its own fingerprint.
-        let mut f = Fingerprint::new();
-        f.u64(base_job)
-            .str("near")
-            .u64(params.tile as u64)
-            .u64(round as u64);
-        for d in &depth {
-            f.bytes(&d.to_le_bytes());
-        }
-        let job = f.finish();
-        let counts = run_tiles(cache, &method, mask, job, tiles, dir, ctl)?;
-        let mut maps = EstimateMaps::empty(w, h);
-        for &t in tiles {
-            let records =
-                symframe_io::read_tile_result(&tile_path(dir, t), job, t, grid.tile_pixels(t))?;
-            for (p, r) in grid.pixels(t).zip(&records) {
-                maps.put(p, r);
+    let mut last = None;
+    let outcome = params.rounds(
+        &geometry.camera,
+        &geometry.lights,
+        w,
+        h,
+        mask,
+        distance,
+        &mut |method: &NearMethod<'_>,
+              round: usize,
+              stage: &'static str|
+         -> Result<Vec<PixelRecord>> {
+            // Each round's results depend on its depths and what it estimates: its own
+            // fingerprint.
+            let mut f = Fingerprint::new();
+            f.u64(base_job)
+                .str("near rounds")
+                .str(stage)
+                .u64(params.tile as u64)
+                .u64(round as u64);
+            for d in method.depth() {
+                f.bytes(&d.to_le_bytes());
             }
-        }
-        let change = previous
-            .as_ref()
-            .map(|prev| mean_change_deg(prev, &maps.normals));
-        changes.extend(change);
-        let settled = change.is_some_and(|c| c < params.tolerance_deg);
-        let next = depth_from_normals(
-            &geometry.camera,
-            w,
-            h,
-            &maps.normals,
-            Some(&maps.confidence),
-            &depth,
-            Some(distance),
-            &IntegrateParams::default(),
-        )?;
-        if settled || round == params.max_iterations {
-            let depth = next
-                .iter()
-                .enumerate()
-                .map(|(p, &d)| if inside(p) { d } else { f32::NAN })
-                .collect();
-            let report = NearReport {
-                model: "pinhole camera, point lights",
-                k: geometry.camera.k(),
-                camera_frame: "x right, y up, z toward the viewer, origin at the centre of \
-                               projection; normals and tangents in this frame",
-                lights: geometry.lights.len(),
-                led_falloff: geometry.lights.iter().any(|l| l.principal.is_some()),
-                files: geometry
-                    .files
-                    .iter()
-                    .map(|p| p.display().to_string())
-                    .collect(),
-                dome: geometry.dome.map(|(c, r)| (c.to_array(), r)),
-                distance,
-                distance_from,
-                rig_tile: params.tile,
-                iterations: round,
-                changes_deg: changes,
-                settled,
-                depth: "depth.npy",
-            };
-            return Ok(NearRun {
-                counts,
-                job,
-                report,
-                depth,
-            });
-        }
-        depth = next;
-        previous = Some(maps.normals);
-    }
+            let job = f.finish();
+            let counts = run_tiles(cache, method, mask, job, tiles, dir, ctl)?;
+            let mut records = vec![PixelRecord::MASKED; w * h];
+            for &t in tiles {
+                let got =
+                    symframe_io::read_tile_result(&tile_path(dir, t), job, t, grid.tile_pixels(t))?;
+                for (p, r) in grid.pixels(t).zip(got) {
+                    records[p] = r;
+                }
+            }
+            last = Some((counts, job));
+            Ok(records)
+        },
+    )?;
+    let (counts, job) = last.ok_or_else(|| anyhow::anyhow!("no estimation round ran"))?;
+    let report = NearReport {
+        model: "pinhole camera, point lights",
+        k: geometry.camera.k(),
+        camera_frame: "x right, y up, z toward the viewer, origin at the centre of \
+                       projection; normals and tangents in this frame",
+        lights: geometry.lights.len(),
+        led_falloff: geometry.lights.iter().any(|l| l.principal.is_some()),
+        files: geometry
+            .files
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect(),
+        dome: geometry.dome.map(|(c, r)| (c.to_array(), r)),
+        distance,
+        distance_from,
+        rig_tile: params.tile,
+        rig_bound_deg: params.rig_bound_deg,
+        rig_bound_measured_deg: outcome.rig_bound_deg,
+        rig_tiles: outcome.tiles,
+        rigs_built: outcome.rigs_built,
+        iterations: outcome.iterations,
+        coarse_rounds: outcome.coarse_rounds,
+        refined_pixels: outcome.refined_pixels,
+        settled: outcome.settled,
+        changes_deg: outcome.changes_deg,
+        depth: "depth.npy",
+    };
+    Ok(NearRun {
+        counts,
+        job,
+        report,
+        depth: outcome.depth,
+    })
 }
 
 #[cfg(test)]
@@ -278,7 +273,8 @@ mod tests {
         let report = near.report.near.clone().expect("near lights were used");
         assert_eq!(report.lights, 60);
         assert_eq!(report.k, capture.scene().camera.k());
-        assert!(report.iterations >= 2 && report.changes_deg.len() == report.iterations - 1);
+        assert!(report.iterations >= 2 && report.coarse_rounds == report.iterations - 1);
+        assert_eq!(report.changes_deg.len(), report.coarse_rounds - 1);
         assert!(d.path().join("near/depth.npy").is_file());
         let json = std::fs::read_to_string(d.path().join("near/report.json")).unwrap();
         assert!(json.contains("\"near\"") && json.contains("\"K\""));

@@ -14,6 +14,7 @@ pub(crate) mod chrome;
 mod light;
 mod mesh;
 mod solve;
+mod tiling;
 
 pub use camera::Pinhole;
 pub(crate) use light::rotation_to_z;

@@ -4,18 +4,25 @@
 //! A pixel's lights are exact for its own surface point `p`: their directions `l_i =
 //! normalize(L_i - p)`, their irradiances `E_i(p)` ([`PointLight::at`]) and the view `v =
 //! normalize(-p)`. The estimator assumes one set of light directions for every pixel and the
-//! view along +z, so each tile of `tile x tile` pixels gets its own rig: the lights as seen from
-//! the tile's mean surface point, turned by the rotation that takes the tile's view to +z. A
-//! pixel's samples are divided by its own irradiances (`1/r^2`, the LED's `cos^mu`), the pixel
-//! is estimated in the tile's frame, and its normal and tangent are turned back into the camera
-//! frame. Within a tile the directions are those of the tile's point, not the pixel's: the
-//! error this leaves shrinks with the tile (`tile = 1` is exact) and is measured in
-//! docs/method.md.
+//! view along +z, so each tile of pixels gets its own rig: the lights as seen from the tile's
+//! mean surface point, turned by the rotation that takes the tile's view to +z. A pixel's
+//! samples are divided by its own irradiances (`1/r^2`, the LED's `cos^mu`), the pixel is
+//! estimated in the tile's frame, and its normal and tangent are turned back into the camera
+//! frame. Within a tile the directions are those of the tile's point, not the pixel's: tiles
+//! are halved until the pixels' halfway vectors are within a bound of their rig's
+//! ([`NearParams::rig_bound_deg`]; `tiling`), so the error a tile leaves is bounded in angle
+//! whatever the image's resolution (docs/method.md, "Near lights and perspective cameras").
 //!
-//! The surface points need depths, which are unknown: [`estimate_near_stack`] starts from a
-//! plane at the object's distance, estimates, integrates the normals into a perspective depth
-//! map ([`depth_from_normals`]) whose median over each connected region stays that of the
-//! start, and repeats until the normals change by less than a tolerance.
+//! The surface points need depths, which are unknown: [`NearParams::rounds`] starts from a plane at
+//! the object's distance and goes in rounds. Each round but the last estimates one pixel per
+//! tile (the depth needs no more), spreads those normals over their neighbours and integrates
+//! them into a perspective depth map ([`depth_from_normals`]); once those normals settle, the
+//! last round estimates every pixel. A tile keeps the rig of the round before while its point
+//! has moved too little to matter ([`NearParams::rig_reuse_deg`]); the tiles whose point the
+//! last round's own depth map moves by more are estimated once more.
+
+use std::collections::HashMap;
+use std::sync::Arc;
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
@@ -26,6 +33,7 @@ use crate::frames::rig::{Rig, RigOptions};
 use crate::integrate::{integrate, DepthMap, IntegrateParams};
 use crate::maps::{EstimateMaps, PixelRecord, PixelStatus};
 use crate::method::{run_stack, PixelMethod};
+use crate::near::tiling::{halfway_change_deg, tile_image, Tile, Tiling, NO_TILE};
 use crate::near::{rotation_to_z, Pinhole, PointLight};
 use crate::regions::{label_regions, OUTSIDE};
 use crate::stack::Stack;
@@ -37,21 +45,35 @@ pub struct NearParams {
     pub rig: RigOptions,
     /// The estimator's parameters.
     pub estimator: EstimatorParams,
-    /// Side of a rig's tile, pixels (1: one rig per pixel, exact).
+    /// Side of the largest rig tile, pixels (1: one rig per pixel, exact).
     pub tile: usize,
-    /// Estimation rounds at most (each but the last followed by a depth update).
+    /// Tiles are halved while a pixel's halfway vectors may be further than this from its
+    /// rig's, degrees (`None`: every tile of side `tile`).
+    pub rig_bound_deg: Option<f64>,
+    /// A tile keeps its rig from the round before while the halfway vectors at its point have
+    /// moved by at most this, degrees (0: every round builds its rigs).
+    pub rig_reuse_deg: f64,
+    /// Whether the rounds before the last estimate one pixel per tile (else every pixel).
+    pub coarse: bool,
+    /// Estimation rounds at most, the last included (each but the last followed by a depth
+    /// update).
     pub max_iterations: usize,
     /// The rounds stop once the mean change of the normals is below this, degrees.
     pub tolerance_deg: f64,
 }
 
 impl Default for NearParams {
-    /// The default cone and estimator, 4-pixel tiles, at most 5 rounds, 0.05 degrees.
+    /// The default cone and estimator; tiles of up to 16 pixels halved to a halfway bound of
+    /// 0.5 degrees, rigs kept while their point moves by under 0.1 degrees; coarse rounds, at
+    /// most 5 rounds, 0.05 degrees.
     fn default() -> Self {
         Self {
             rig: RigOptions::default(),
             estimator: EstimatorParams::default(),
-            tile: 4,
+            tile: 8,
+            rig_bound_deg: Some(1.0),
+            rig_reuse_deg: 0.1,
+            coarse: true,
             max_iterations: 5,
             tolerance_deg: 0.05,
         }
@@ -63,6 +85,8 @@ impl Default for NearParams {
 #[derive(Debug, Clone)]
 struct TileRig {
     rig: Rig,
+    /// The surface point the rig was built for.
+    point: DVec3,
     /// Camera frame to the tile's frame.
     to_tile: DMat3,
     /// `1 / mean_i E_i` at the tile's point: the samples divided by a pixel's irradiances are
@@ -70,16 +94,20 @@ struct TileRig {
     scale: f64,
 }
 
-/// The per-pixel method of one round: per-tile rigs at the current depths.
+/// The per-pixel method of one round: per-tile rigs at the current depths, every pixel or a
+/// selection of them.
 #[derive(Debug, Clone)]
 pub struct NearMethod<'a> {
     camera: Pinhole,
     lights: &'a [PointLight],
     width: usize,
-    tile: usize,
-    tiles_x: usize,
     depth: &'a [f32],
-    rigs: Vec<Option<TileRig>>,
+    tile_of: Vec<u32>,
+    rigs: Vec<Option<Arc<TileRig>>>,
+    /// The pixels estimated (`None`: every pixel).
+    selected: Option<Vec<bool>>,
+    /// What the pixels not selected give (`None`: no data).
+    kept: Option<Vec<PixelRecord>>,
     params: EstimatorParams,
     /// The rig with the most lights (sizes the per-thread buffers).
     largest: Option<usize>,
@@ -92,10 +120,44 @@ pub struct NearScratch {
     samples: Vec<f32>,
 }
 
+/// The rigs of a tiling, those of `cache` kept where their point is within `reuse_deg` of the
+/// tile's (in halfway terms); the cache then holds this tiling's rigs. Returns the rigs and
+/// which were built.
+fn tile_rigs(
+    lights: &[PointLight],
+    tiling: &Tiling,
+    options: RigOptions,
+    reuse_deg: f64,
+    cache: &mut HashMap<[usize; 4], Option<Arc<TileRig>>>,
+) -> (Vec<Option<Arc<TileRig>>>, Vec<bool>) {
+    let key = |t: &Tile| [t.x0, t.y0, t.w, t.h];
+    let kept: Vec<Option<Option<Arc<TileRig>>>> = tiling
+        .tiles
+        .par_iter()
+        .map(|t| match cache.get(&key(t)) {
+            Some(Some(r)) if halfway_change_deg(lights, r.point, t.point) <= reuse_deg => {
+                Some(Some(r.clone()))
+            }
+            _ => None,
+        })
+        .collect();
+    let built: Vec<bool> = kept.iter().map(|k| k.is_none()).collect();
+    let rigs: Vec<Option<Arc<TileRig>>> = tiling
+        .tiles
+        .par_iter()
+        .zip(kept)
+        .map(|(t, k)| k.unwrap_or_else(|| tile_rig(lights, t.point, options).map(Arc::new)))
+        .collect();
+    cache.clear();
+    cache.extend(tiling.tiles.iter().map(key).zip(rigs.iter().cloned()));
+    (rigs, built)
+}
+
 impl<'a> NearMethod<'a> {
-    /// The rigs of every tile that holds a pixel inside `mask` with a finite depth (`depth`: per
-    /// pixel, along the optical axis). A tile whose rig cannot be built (fewer than three lights
-    /// in its cone) leaves its pixels without data.
+    /// The rigs of every tile (of `params.tile`, halved to `params.rig_bound_deg`) that holds a
+    /// pixel inside `mask` with a finite depth (`depth`: per pixel, along the optical axis). A
+    /// tile whose rig cannot be built (fewer than three lights in its cone) leaves its pixels
+    /// without data.
     pub fn new(
         camera: Pinhole,
         lights: &'a [PointLight],
@@ -105,60 +167,101 @@ impl<'a> NearMethod<'a> {
         mask: Option<&[bool]>,
         params: &NearParams,
     ) -> Result<Self> {
-        let n = width * height;
-        if depth.len() != n || mask.is_some_and(|m| m.len() != n) {
-            return Err(Error::BadParameter(format!(
-                "a {width}x{height} image needs {n} depths and mask values"
-            )));
-        }
-        if lights.is_empty() {
-            return Err(Error::NoLights);
-        }
-        if params.tile == 0 {
-            return Err(Error::BadParameter(
-                "the rig tile must be at least 1 pixel".into(),
-            ));
-        }
-        let tile = params.tile;
-        let (tiles_x, tiles_y) = (width.div_ceil(tile), height.div_ceil(tile));
-        let rigs: Vec<Option<TileRig>> = (0..tiles_x * tiles_y)
-            .into_par_iter()
-            .map(|t| {
-                let (tx, ty) = (t % tiles_x, t / tiles_x);
-                let (mut sum, mut count) = (DVec3::ZERO, 0usize);
-                for row in ty * tile..((ty + 1) * tile).min(height) {
-                    for col in tx * tile..((tx + 1) * tile).min(width) {
-                        let p = row * width + col;
-                        let d = depth[p] as f64;
-                        if mask.is_none_or(|m| m[p]) && d.is_finite() && d > 0.0 {
-                            sum += camera.point(col as f64, row as f64, d);
-                            count += 1;
-                        }
-                    }
-                }
-                (count > 0).then(|| tile_rig(lights, sum / count as f64, params.rig))?
-            })
-            .collect();
-        let largest = (0..rigs.len())
-            .filter(|&t| rigs[t].is_some())
-            .max_by_key(|&t| rigs[t].as_ref().map_or(0, |r| r.rig.n_used()));
-        Ok(Self {
+        check_method_inputs(lights, width, height, depth, mask, params)?;
+        let tiling = tile_image(
+            &camera,
+            lights,
+            width,
+            height,
+            depth,
+            mask,
+            params.tile,
+            params.rig_bound_deg,
+        );
+        let (rigs, _) = tile_rigs(lights, &tiling, params.rig, 0.0, &mut HashMap::new());
+        Ok(Self::with_rigs(
             camera,
             lights,
             width,
-            tile,
-            tiles_x,
             depth,
+            tiling.tile_of,
             rigs,
-            params: params.estimator,
+            params.estimator,
+        ))
+    }
+
+    fn with_rigs(
+        camera: Pinhole,
+        lights: &'a [PointLight],
+        width: usize,
+        depth: &'a [f32],
+        tile_of: Vec<u32>,
+        rigs: Vec<Option<Arc<TileRig>>>,
+        params: EstimatorParams,
+    ) -> Self {
+        let largest = (0..rigs.len())
+            .filter(|&t| rigs[t].is_some())
+            .max_by_key(|&t| rigs[t].as_ref().map_or(0, |r| r.rig.n_used()));
+        Self {
+            camera,
+            lights,
+            width,
+            depth,
+            tile_of,
+            rigs,
+            selected: None,
+            kept: None,
+            params,
             largest,
-        })
+        }
     }
 
     /// Tiles with a rig.
     pub fn n_rigs(&self) -> usize {
         self.rigs.iter().filter(|r| r.is_some()).count()
     }
+
+    /// The depths the round's rigs and irradiances are computed at.
+    pub fn depth(&self) -> &[f32] {
+        self.depth
+    }
+
+    /// Whether the round estimates pixel `p` (a round before the last estimates one pixel per
+    /// tile).
+    pub fn selects(&self, p: usize) -> bool {
+        self.selected.as_ref().is_none_or(|s| s[p])
+    }
+}
+
+fn check_method_inputs(
+    lights: &[PointLight],
+    width: usize,
+    height: usize,
+    depth: &[f32],
+    mask: Option<&[bool]>,
+    params: &NearParams,
+) -> Result<()> {
+    let n = width * height;
+    if depth.len() != n || mask.is_some_and(|m| m.len() != n) {
+        return Err(Error::BadParameter(format!(
+            "a {width}x{height} image needs {n} depths and mask values"
+        )));
+    }
+    if lights.is_empty() {
+        return Err(Error::NoLights);
+    }
+    if params.tile == 0 {
+        return Err(Error::BadParameter(
+            "the rig tile must be at least 1 pixel".into(),
+        ));
+    }
+    let angle_ok = |a: f64| a.is_finite() && a >= 0.0;
+    if params.rig_bound_deg.is_some_and(|b| !angle_ok(b)) || !angle_ok(params.rig_reuse_deg) {
+        return Err(Error::BadParameter(
+            "the rig's bound and reuse angles must be at least 0 degrees".into(),
+        ));
+    }
+    Ok(())
 }
 
 /// The rig of a tile whose surface point is `point`; `None` where it cannot be built.
@@ -175,6 +278,7 @@ fn tile_rig(lights: &[PointLight], point: DVec3, options: RigOptions) -> Option<
     let rig = Rig::new(&dirs, options).ok()?;
     (mean > 0.0).then_some(TileRig {
         rig,
+        point,
         to_tile,
         scale: 1.0 / mean,
     })
@@ -203,29 +307,50 @@ impl PixelMethod for NearMethod<'_> {
     }
 
     fn pixel(&self, p: usize, samples: &[f32], scratch: &mut NearScratch) -> PixelRecord {
-        let (col, row) = (p % self.width, p / self.width);
-        let t = (row / self.tile) * self.tiles_x + col / self.tile;
-        let (Some(tr), Some(pixel_scratch)) = (self.rigs[t].as_ref(), scratch.pixel.as_mut())
-        else {
+        if !self.selects(p) {
+            return self.kept.as_ref().map_or(NO_DATA, |k| k[p]);
+        }
+        let t = self.tile_of[p];
+        let tr = (t != NO_TILE)
+            .then(|| self.rigs[t as usize].as_deref())
+            .flatten();
+        let (Some(tr), Some(pixel_scratch)) = (tr, scratch.pixel.as_mut()) else {
             return NO_DATA;
         };
         let depth = self.depth[p] as f64;
         if !(depth.is_finite() && depth > 0.0) {
             return NO_DATA;
         }
+        let (col, row) = (p % self.width, p / self.width);
         let point = self.camera.point(col as f64, row as f64, depth);
+        let view = (-point).normalize_or_zero();
         let buf = &mut scratch.samples;
         buf.clear();
-        for &i in tr.rig.input_index() {
+        // The rotation that best takes the rig's halfway vectors to the pixel's own (both in
+        // the tile's frame), to first order: `R a_i ~ b_i` with `R = I + [w]x` gives
+        // `sum (I - a_i a_i^T) w = sum a_i x b_i`. The part of the tile's error that turns
+        // every halfway vector alike (the view's, mostly) so leaves the pixel's answer.
+        let (mut m, mut c) = (DMat3::ZERO, DVec3::ZERO);
+        for (&i, &a) in tr.rig.input_index().iter().zip(tr.rig.halfway_in_camera()) {
             let s = &samples[3 * i..3 * i + 3];
             let k = match self.lights[i].at(point) {
-                Some((_, e)) if e > 0.0 => (tr.scale / e) as f32,
+                Some((l, e)) if e > 0.0 => {
+                    if let Some(b) = (tr.to_tile * (l + view)).try_normalize() {
+                        m += DMat3::IDENTITY - DMat3::from_cols(a * a.x, a * a.y, a * a.z);
+                        c += a.cross(b);
+                    }
+                    (tr.scale / e) as f32
+                }
                 _ => f32::NAN,
             };
             buf.extend(s.iter().map(|&v| v * k));
         }
         let est = Estimator::new(&tr.rig, self.params).estimate_pixel_with(buf, pixel_scratch);
-        let back = tr.to_tile.transpose();
+        let turn = (m.determinant().abs() > 1e-12)
+            .then(|| m.inverse() * c)
+            .and_then(|w| Some(DMat3::from_axis_angle(w.try_normalize()?, w.length())))
+            .unwrap_or(DMat3::IDENTITY);
+        let back = tr.to_tile.transpose() * turn;
         let mut record = PixelRecord::from_estimate(&est);
         if let Some(n) = est.normal {
             record.normal = (back * n).as_vec3().to_array();
@@ -358,6 +483,23 @@ pub fn perspective_depth(
     })
 }
 
+/// A coarse tile's largest side, in tiles of the last round's.
+const COARSE_SIDE: usize = 2;
+
+/// A coarse tiling's halfway bound, in the last round's.
+const COARSE_BOUND: f64 = 2.0;
+
+/// A tile of the last round is estimated again where its bound on the last depth map exceeds
+/// this many times the tiling's bound and `rig_reuse_deg`.
+const REFINE_BOUND: f64 = 2.0;
+
+/// The conjugate gradients' tolerance of a coarse round's depth map.
+const COARSE_CG_TOLERANCE: f64 = 1e-4;
+
+/// The coarse rounds stop once no more than one sample in this many has moved (its rig's
+/// point by more than the coarse reuse angle).
+const SETTLED_SHARE: usize = 50;
+
 /// Smallest cosine between a pixel's normal and its view for its point to join the sphere fit
 /// of [`centre_scale`]: the integrated depth is least sure near the outline, where the normals
 /// turn away from the camera.
@@ -398,7 +540,7 @@ fn median(v: &mut [f64]) -> f64 {
     *v.select_nth_unstable_by(k, f64::total_cmp).1
 }
 
-/// What [`estimate_near_stack`] found.
+/// What [`NearParams::rounds`] found.
 #[derive(Debug, Clone)]
 pub struct NearOutcome {
     /// The last round's maps (normals and tangents in the camera frame).
@@ -406,11 +548,40 @@ pub struct NearOutcome {
     /// Depth along the optical axis integrated from the last round's normals (NaN outside the
     /// mask).
     pub depth: Vec<f32>,
-    /// Rounds run.
+    /// Rounds run, the last (every pixel) included.
     pub iterations: usize,
     /// Mean change of the normals from the round before, degrees, per round after the first.
     pub changes_deg: Vec<f64>,
+    /// Rounds that estimated one pixel per tile.
+    pub coarse_rounds: usize,
+    /// Tiles of the last round with a rig.
+    pub tiles: usize,
+    /// Rigs built over all rounds.
+    pub rigs_built: usize,
+    /// The largest halfway bound over the last round's tiles: the angle between the halfway
+    /// vectors of a tile's rig and those of its pixel farthest from the rig's point, on the
+    /// depth map written, degrees.
+    pub rig_bound_deg: f64,
+    /// Pixels estimated once more after the last round: those of the tiles whose bound the last
+    /// round's own depth map took past the tiling's bound and `rig_reuse_deg`.
+    pub refined_pixels: usize,
+    /// Whether the rounds settled before their limit: the normals changed by less than the
+    /// tolerance, or no coarse sample's rig moved by more than `rig_reuse_deg`.
+    pub settled: bool,
 }
+
+/// What a round of [`NearParams::rounds`] estimates: one pixel per tile, for the depth map.
+const STAGE_COARSE: &str = "coarse";
+/// What a round of [`NearParams::rounds`] estimates: every pixel.
+const STAGE_FULL: &str = "full";
+/// What a round of [`NearParams::rounds`] estimates: the pixels of the tiles the last depth map
+/// moved, the others kept.
+const STAGE_REFINE: &str = "refine";
+
+/// One round of [`NearParams::rounds`]: the method's result at every pixel, given the round's
+/// number and what it estimates (`coarse`, `full` or `refine`).
+pub(crate) type RoundFn<'r, E> = dyn FnMut(&NearMethod<'_>, usize, &'static str) -> std::result::Result<Vec<PixelRecord>, E>
+    + 'r;
 
 /// Mean angle (degrees) between two normal maps over the pixels where both have a normal.
 pub fn mean_change_deg(a: &[f32], b: &[f32]) -> f64 {
@@ -432,11 +603,381 @@ pub fn mean_change_deg(a: &[f32], b: &[f32]) -> f64 {
     }
 }
 
+/// The normals of every pixel with a tile from those of the tiles' centres (a coarse round's):
+/// a tent-weighted mean of the centres within the side of the pixel's tile, in the pixel's
+/// connected region; NaN where there is none.
+fn spread_normals(
+    width: usize,
+    height: usize,
+    records: &[PixelRecord],
+    tiling: &Tiling,
+    labels: &[u32],
+) -> Vec<f32> {
+    let mut sample = vec![None; width * height];
+    for t in &tiling.tiles {
+        let n = DVec3::from_array(records[t.centre].normal.map(|v| v as f64));
+        if n.is_finite() {
+            sample[t.centre] = Some(n);
+        }
+    }
+    let spread: Vec<[f32; 3]> = (0..width * height)
+        .into_par_iter()
+        .map(|p| {
+            let t = tiling.tile_of[p];
+            if t == NO_TILE || labels[p] == OUTSIDE {
+                return [f32::NAN; 3];
+            }
+            let tile = &tiling.tiles[t as usize];
+            let r = tile.w.max(tile.h);
+            let (col, row) = (p % width, p / width);
+            let mut sum = DVec3::ZERO;
+            for y in row.saturating_sub(r)..(row + r + 1).min(height) {
+                for x in col.saturating_sub(r)..(col + r + 1).min(width) {
+                    let q = y * width + x;
+                    if let (Some(n), true) = (sample[q], labels[q] == labels[p]) {
+                        let d = ((x as f64 - col as f64).powi(2) + (y as f64 - row as f64).powi(2))
+                            .sqrt();
+                        sum += n * (1.0 - d / (r as f64 + 1.0)).max(0.0);
+                    }
+                }
+            }
+            sum.try_normalize()
+                .map_or([f32::NAN; 3], |n| n.as_vec3().to_array())
+        })
+        .collect();
+    spread.into_iter().flatten().collect()
+}
+
+impl NearParams {
+    /// Estimates every pixel (inside `mask`) of a `width x height` image under `lights` seen by
+    /// `camera`, the object's surface started as the plane at `distance` along the optical axis.
+    /// `run` estimates one round: the method's result at every pixel of the image (as
+    /// [`run_stack`] gives them), told the round's number and what it estimates. Rounds of one
+    /// pixel per tile (`params.coarse`) and [`depth_from_normals`] go on until their normals
+    /// change by less than `params.tolerance_deg` on average; a round of every pixel follows
+    /// (`params.max_iterations` rounds at most, that one included), and the tiles its own depth
+    /// map moves are estimated once more.
+    #[allow(clippy::too_many_arguments)]
+    pub fn rounds<E: From<Error>>(
+        &self,
+        camera: &Pinhole,
+        lights: &[PointLight],
+        width: usize,
+        height: usize,
+        mask: Option<&[bool]>,
+        distance: f64,
+        run: &mut RoundFn<'_, E>,
+    ) -> std::result::Result<NearOutcome, E> {
+        let params = self;
+        if !(distance.is_finite() && distance > 0.0) {
+            return Err(Error::BadParameter(format!(
+                "the object's distance must be a positive number, got {distance}"
+            ))
+            .into());
+        }
+        let n = width * height;
+        let inside = |p: usize| mask.is_none_or(|m| m[p]);
+        let mut depth: Vec<f32> = (0..n)
+            .map(|p| if inside(p) { distance as f32 } else { f32::NAN })
+            .collect();
+        check_method_inputs(lights, width, height, &depth, mask, params)?;
+        let (labels, _) = label_regions(width, height, inside).ok_or_else(|| {
+            Error::BadParameter(format!("a {width}x{height} image is too large to estimate"))
+        })?;
+        let integrate_params = IntegrateParams::default();
+        // A coarse round's depth map needs less: its normals are a sample.
+        let coarse_integrate = IntegrateParams {
+            cg_tolerance: COARSE_CG_TOLERANCE,
+            ..integrate_params
+        };
+        let tiles_of = |depth: &[f32], coarse: bool| {
+            let (side, bound) = if coarse {
+                (
+                    COARSE_SIDE * params.tile,
+                    params.rig_bound_deg.map(|b| COARSE_BOUND * b),
+                )
+            } else {
+                (params.tile, params.rig_bound_deg)
+            };
+            let mut tiling = tile_image(camera, lights, width, height, depth, mask, side, bound);
+            if coarse {
+                // The one pixel a coarse tile estimates gets the rig of its own point.
+                for t in &mut tiling.tiles {
+                    let p = t.centre;
+                    t.point = camera.point((p % width) as f64, (p / width) as f64, depth[p] as f64);
+                }
+            }
+            tiling
+        };
+        let mut cache = HashMap::new();
+        let mut rigs_built = 0;
+        let mut changes = Vec::new();
+        let mut previous: Option<Vec<f32>> = None;
+        let mut coarse_records: Option<Vec<PixelRecord>> = None;
+        let rounds = params.max_iterations.max(1);
+        let mut coarse = params.coarse;
+        let mut converged = false;
+        let mut round = 0;
+        loop {
+            round += 1;
+            let mut stage = if coarse && round < rounds {
+                STAGE_COARSE
+            } else {
+                STAGE_FULL
+            };
+            let mut tiling = tiles_of(&depth, stage == STAGE_COARSE);
+            let reuse = if stage == STAGE_COARSE {
+                COARSE_BOUND * params.rig_reuse_deg
+            } else {
+                params.rig_reuse_deg
+            };
+            let (mut rigs, mut built) = tile_rigs(lights, &tiling, params.rig, reuse, &mut cache);
+            let mut n_coarse_built = usize::MAX;
+            let n_moved = built.iter().filter(|&&b| b).count();
+            if stage == STAGE_COARSE && round > 1 && n_moved * SETTLED_SHARE <= built.len() {
+                n_coarse_built = 0;
+                // (Almost) every sample's geometry is where it was: the depth has settled.
+                stage = STAGE_FULL;
+                tiling = tiles_of(&depth, false);
+                (rigs, built) = tile_rigs(
+                    lights,
+                    &tiling,
+                    params.rig,
+                    params.rig_reuse_deg,
+                    &mut cache,
+                );
+            }
+            let n_built = built.iter().filter(|&&b| b).count();
+            rigs_built += n_built;
+            let mut method = NearMethod::with_rigs(
+                *camera,
+                lights,
+                width,
+                &depth,
+                tiling.tile_of.clone(),
+                rigs.clone(),
+                params.estimator,
+            );
+            if stage == STAGE_COARSE {
+                // A sample whose rig is kept keeps its normal: only the others are estimated.
+                let mut selected = vec![false; n];
+                for (t, _) in tiling.tiles.iter().zip(&built).filter(|(_, &b)| b) {
+                    selected[t.centre] = true;
+                }
+                method.selected = Some(selected);
+                method.kept = coarse_records.take();
+            }
+            let records = run(&method, round, stage)?;
+            drop(method);
+            if records.len() != n {
+                return Err(Error::BadParameter(format!(
+                    "a round gave {} results for {n} pixels",
+                    records.len()
+                ))
+                .into());
+            }
+            let normals = match stage {
+                STAGE_COARSE => spread_normals(width, height, &records, &tiling, &labels),
+                _ => records.iter().flat_map(|r| r.normal).collect(),
+            };
+            // The last round after coarse ones is compared with nothing: a coarse round's
+            // normals are its samples', spread.
+            let change = previous
+                .as_ref()
+                .filter(|_| stage == STAGE_COARSE || !params.coarse)
+                .map(|prev| mean_change_deg(prev, &normals));
+            changes.extend(change);
+            let settled = change.is_some_and(|c| c < params.tolerance_deg);
+            if stage == STAGE_FULL && params.coarse {
+                converged = converged || n_coarse_built == 0;
+            } else {
+                converged = settled;
+            }
+            let confidence: Option<Vec<f32>> =
+                (stage == STAGE_FULL).then(|| records.iter().map(|r| r.confidence).collect());
+            let next = depth_from_normals(
+                camera,
+                width,
+                height,
+                &normals,
+                confidence.as_deref(),
+                &depth,
+                Some(distance),
+                if stage == STAGE_COARSE {
+                    &coarse_integrate
+                } else {
+                    &integrate_params
+                },
+            )?;
+            if stage == STAGE_COARSE {
+                coarse = !settled;
+                depth = next;
+                previous = Some(normals);
+                coarse_records = Some(records);
+                continue;
+            }
+            if !(settled || round == rounds || params.coarse) {
+                depth = next;
+                previous = Some(normals);
+                continue;
+            }
+            // The last round: its tiles' bounds on its own depth map, and the tiles it moved
+            // estimated again with rigs at their new points.
+            let (records, next, bound, refined) = refine(
+                camera,
+                lights,
+                width,
+                height,
+                params,
+                &tiling,
+                &rigs,
+                records,
+                next,
+                &mut |method| run(method, round + 1, STAGE_REFINE),
+                &mut |normals, confidence, previous| {
+                    depth_from_normals(
+                        camera,
+                        width,
+                        height,
+                        normals,
+                        Some(confidence),
+                        previous,
+                        Some(distance),
+                        &integrate_params,
+                    )
+                    .map_err(E::from)
+                },
+            )?;
+            rigs_built += refined.1;
+            let depth = next
+                .iter()
+                .enumerate()
+                .map(|(p, &d)| if inside(p) { d } else { f32::NAN })
+                .collect();
+            return Ok(NearOutcome {
+                maps: EstimateMaps::from_records(width, height, &records),
+                depth,
+                iterations: round,
+                changes_deg: changes,
+                coarse_rounds: if params.coarse { round - 1 } else { 0 },
+                tiles: rigs.iter().filter(|r| r.is_some()).count(),
+                rigs_built,
+                rig_bound_deg: bound,
+                refined_pixels: refined.0,
+                settled: converged,
+            });
+        }
+    }
+}
+
+/// The last round's tiles measured on the depth map its normals give (`next`): each tile's
+/// bound is the halfway change at its pixel farthest from its rig's point. A tile past its
+/// tiling bound plus `rig_reuse_deg` gets a rig at its new point and its pixels are estimated
+/// again (`run`, the others' records kept), and the depth map is integrated once more
+/// (`integrate`). Returns the records, the depth map, the largest bound and (pixels estimated
+/// again, rigs built).
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn refine<E: From<Error>>(
+    camera: &Pinhole,
+    lights: &[PointLight],
+    width: usize,
+    height: usize,
+    params: &NearParams,
+    tiling: &Tiling,
+    rigs: &[Option<Arc<TileRig>>],
+    records: Vec<PixelRecord>,
+    next: Vec<f32>,
+    run: &mut dyn FnMut(&NearMethod<'_>) -> std::result::Result<Vec<PixelRecord>, E>,
+    integrate: &mut dyn FnMut(&[f32], &[f32], &[f32]) -> std::result::Result<Vec<f32>, E>,
+) -> std::result::Result<(Vec<PixelRecord>, Vec<f32>, f64, (usize, usize)), E> {
+    // Each tile's pixels' points on the new depth map.
+    let n = width * height;
+    let mut members: Vec<Vec<DVec3>> = vec![Vec::new(); tiling.tiles.len()];
+    for (p, (&t, &d)) in tiling.tile_of.iter().zip(&next).enumerate() {
+        let d = d as f64;
+        if t != NO_TILE && d.is_finite() && d > 0.0 {
+            let q = camera.point((p % width) as f64, (p / width) as f64, d);
+            members[t as usize].push(q);
+        }
+    }
+    let far_bound = |points: &[DVec3], from: DVec3| {
+        points
+            .iter()
+            .copied()
+            .max_by(|a, b| {
+                a.distance_squared(from)
+                    .total_cmp(&b.distance_squared(from))
+            })
+            .map_or(0.0, |q| halfway_change_deg(lights, q, from))
+    };
+    let measured: Vec<(f64, Option<DVec3>)> = (0..tiling.tiles.len())
+        .into_par_iter()
+        .map(|t| {
+            let Some(rig) = rigs[t].as_ref() else {
+                return (0.0, None);
+            };
+            let points = &members[t];
+            let bound = far_bound(points, rig.point);
+            let allowed = REFINE_BOUND
+                * (params.rig_bound_deg.unwrap_or(tiling.tiles[t].bound_deg)
+                    + params.rig_reuse_deg);
+            if bound <= allowed || points.is_empty() {
+                return (bound, None);
+            }
+            let point = points.iter().copied().sum::<DVec3>() / points.len() as f64;
+            (far_bound(points, point), Some(point))
+        })
+        .collect();
+    let moved: Vec<usize> = (0..tiling.tiles.len())
+        .filter(|&t| measured[t].1.is_some())
+        .collect();
+    let largest = measured.iter().map(|m| m.0).fold(0.0, f64::max);
+    if moved.is_empty() {
+        return Ok((records, next, largest, (0, 0)));
+    }
+    let mut new_rigs = rigs.to_vec();
+    let built: Vec<(usize, Option<Arc<TileRig>>)> = moved
+        .par_iter()
+        .map(|&t| {
+            let point = measured[t].1.unwrap_or(DVec3::ZERO);
+            (t, tile_rig(lights, point, params.rig).map(Arc::new))
+        })
+        .collect();
+    for (t, r) in built {
+        new_rigs[t] = r;
+    }
+    let mut selected = vec![false; n];
+    let mut count = 0;
+    for (p, &t) in tiling.tile_of.iter().enumerate() {
+        if t != NO_TILE && measured[t as usize].1.is_some() {
+            selected[p] = true;
+            count += 1;
+        }
+    }
+    let mut method = NearMethod::with_rigs(
+        *camera,
+        lights,
+        width,
+        &next,
+        tiling.tile_of.clone(),
+        new_rigs,
+        params.estimator,
+    );
+    method.selected = Some(selected);
+    method.kept = Some(records);
+    let records = run(&method)?;
+    drop(method);
+    let normals: Vec<f32> = records.iter().flat_map(|r| r.normal).collect();
+    let confidence: Vec<f32> = records.iter().map(|r| r.confidence).collect();
+    let depth = integrate(&normals, &confidence, &next)?;
+    let _ = height;
+    Ok((records, depth, largest, (count, moved.len())))
+}
+
 /// Estimates every pixel of `stack` (inside `mask`) under `lights` (one per image) seen by
 /// `camera`, the object's surface started as the plane at `distance` along the optical axis:
-/// rounds of [`NearMethod`] and [`depth_from_normals`] until the normals change by less than
-/// `params.tolerance_deg` on average or `params.max_iterations` rounds have run. `progress` is
-/// told the pixels finished, round after round.
+/// the rounds of [`NearParams::rounds`] over the stack. `progress` is told the pixels finished, round
+/// after round.
 pub fn estimate_near_stack(
     stack: &Stack,
     mask: Option<&[bool]>,
@@ -453,57 +994,15 @@ pub fn estimate_near_stack(
         lights.len(),
         mask,
     )?;
-    if !(distance.is_finite() && distance > 0.0) {
-        return Err(Error::BadParameter(format!(
-            "the object's distance must be a positive number, got {distance}"
-        )));
-    }
-    let (w, h) = (stack.width, stack.height);
-    let inside = |p: usize| mask.is_none_or(|m| m[p]);
-    let mut depth: Vec<f32> = (0..w * h)
-        .map(|p| if inside(p) { distance as f32 } else { f32::NAN })
-        .collect();
-    let mut changes = Vec::new();
-    let mut previous: Option<EstimateMaps> = None;
-    let integrate_params = IntegrateParams::default();
-    let rounds = params.max_iterations.max(1);
-    let mut round = 0;
-    loop {
-        round += 1;
-        let method = NearMethod::new(*camera, lights, w, h, &depth, mask, params)?;
-        let records = run_stack(&method, stack, mask, progress);
-        let maps = EstimateMaps::from_records(w, h, &records);
-        let change = previous
-            .as_ref()
-            .map(|prev| mean_change_deg(&prev.normals, &maps.normals));
-        changes.extend(change);
-        let settled = change.is_some_and(|c| c < params.tolerance_deg);
-        let next = depth_from_normals(
-            camera,
-            w,
-            h,
-            &maps.normals,
-            Some(&maps.confidence),
-            &depth,
-            Some(distance),
-            &integrate_params,
-        )?;
-        if settled || round == rounds {
-            let depth = next
-                .iter()
-                .enumerate()
-                .map(|(p, &d)| if inside(p) { d } else { f32::NAN })
-                .collect();
-            return Ok(NearOutcome {
-                maps,
-                depth,
-                iterations: round,
-                changes_deg: changes,
-            });
-        }
-        depth = next;
-        previous = Some(maps);
-    }
+    params.rounds(
+        camera,
+        lights,
+        stack.width,
+        stack.height,
+        mask,
+        distance,
+        &mut |method, _, _| Ok::<_, Error>(run_stack(method, stack, mask, progress)),
+    )
 }
 
 #[cfg(test)]
@@ -647,7 +1146,12 @@ mod tests {
             e_near < 1.0 && e_near < e_far / 3.0,
             "near {e_near}, distant {e_far}"
         );
-        assert!(near.iterations >= 2 && near.changes_deg.len() == near.iterations - 1);
+        // Coarse rounds, then one of every pixel: each coarse round after the first has its
+        // change.
+        assert!(near.iterations >= 2 && near.coarse_rounds == near.iterations - 1);
+        assert_eq!(near.changes_deg.len(), near.coarse_rounds - 1);
+        assert!(near.tiles > 0 && near.rigs_built >= near.tiles);
+        assert!(near.rig_bound_deg.is_finite() && near.rig_bound_deg >= 0.0);
         // Bad input is an error, never a panic.
         assert!(estimate_near_stack(
             &stack,
