@@ -189,7 +189,12 @@ impl Plan {
     /// Gives the estimator the capture's noise model, unless the caller gave one: its clip
     /// level censors the clipped samples (docs/method.md, "Noise model"); report.json records
     /// it. The lights' uncertainty is the caller's (`--light-error`): the images cannot tell it.
-    fn take_capture_noise(&mut self, ds: &Dataset, decode: &DecodeOptions) -> Result<()> {
+    fn take_capture_noise(
+        &mut self,
+        ds: &Dataset,
+        decode: &DecodeOptions,
+        ctl: &Control,
+    ) -> Result<()> {
         if let Plan::Symmetry(_, params) = self {
             let light_error_deg = params.noise.light_error_deg;
             let told = symframe::NoiseModel {
@@ -201,6 +206,15 @@ impl Plan {
                     light_error_deg,
                     ..symframe_io::capture_noise(ds, decode)?
                 };
+                if let (symframe::Quantisation::Float, Some(c)) =
+                    (params.noise.quantisation, params.noise.clip_level)
+                {
+                    ctl.warn(&format!(
+                        "the float images clip: samples pile up at {c} (docs/method.md, \
+                         \"Noise model\"); samples at that level are taken as censored, known \
+                         only to be at least that bright"
+                    ));
+                }
             }
         }
         Ok(())
@@ -419,7 +433,7 @@ fn run(
         &|_| false,
     )?;
     let mut plan = Plan::new(&config.method, &ds)?;
-    plan.take_capture_noise(&ds, &config.decode)?;
+    plan.take_capture_noise(&ds, &config.decode, ctl)?;
     let rig_s = t0.elapsed().as_secs_f64();
 
     let t_load = Instant::now();

@@ -137,3 +137,63 @@ fn progress_is_reported_and_a_set_stop_flag_interrupts_before_any_work() {
     assert_eq!(tiles.into_inner(), 1);
     assert!(out.join("normals.npy").is_file());
 }
+
+#[test]
+fn a_float_capture_that_clipped_is_told_and_its_clip_level_recorded() {
+    // The sphere's float images clipped at the level 2% of its samples reach: the estimate
+    // warns that the float images clip and records the level in report.json; the same images
+    // unclipped give neither.
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = Scene::sphere(20, TangentField::Circular);
+    let lights = uniform_cone_lights(300, 65.0);
+    let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
+    let images: Vec<Vec<f32>> = lights.iter().map(|&l| scene.render(&brdf, l)).collect();
+    let mut all: Vec<f32> = images.iter().flatten().copied().filter(|&v| v > 0.0).collect();
+    all.sort_by(f32::total_cmp);
+    let level = all[all.len() * 98 / 100];
+    for (name, clip) in [("clipped", Some(level)), ("smooth", None)] {
+        let stored: Vec<Vec<f32>> = images
+            .iter()
+            .map(|img| img.iter().map(|&v| clip.map_or(v, |c| v.min(c))).collect())
+            .collect();
+        let lp = symframe_io::write_lp_dataset(
+            &tmp.path().join(name),
+            &lights,
+            &stored,
+            20,
+            20,
+            ImageFormat::Exr,
+            None,
+            None,
+            Some(&scene.mask),
+        )
+        .unwrap();
+        let warnings = std::sync::Mutex::new(Vec::new());
+        let warn = |line: &str| warnings.lock().unwrap().push(line.to_string());
+        let ctl = Control {
+            warning: &warn,
+            ..Control::default()
+        };
+        let out = tmp.path().join(format!("{name}-out"));
+        estimate(&EstimateConfig::new(&lp, &out), &ctl).unwrap();
+        let told = warnings
+            .into_inner()
+            .unwrap()
+            .iter()
+            .any(|w| w.contains("the float images clip"));
+        let report: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
+                .unwrap();
+        let recorded = &report["parameters"]["noise"]["clip_level"];
+        match clip {
+            Some(c) => {
+                assert!(told, "no warning for a clipped float capture");
+                assert_eq!(recorded.as_f64(), Some(c as f64), "{report}");
+            }
+            None => {
+                assert!(!told, "a warning for an unclipped float capture");
+                assert!(recorded.is_null(), "{report}");
+            }
+        }
+    }
+}
