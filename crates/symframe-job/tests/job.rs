@@ -148,7 +148,12 @@ fn a_float_capture_that_clipped_is_told_and_its_clip_level_recorded() {
     let lights = uniform_cone_lights(300, 65.0);
     let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
     let images: Vec<Vec<f32>> = lights.iter().map(|&l| scene.render(&brdf, l)).collect();
-    let mut all: Vec<f32> = images.iter().flatten().copied().filter(|&v| v > 0.0).collect();
+    let mut all: Vec<f32> = images
+        .iter()
+        .flatten()
+        .copied()
+        .filter(|&v| v > 0.0)
+        .collect();
     all.sort_by(f32::total_cmp);
     let level = all[all.len() * 98 / 100];
     for (name, clip) in [("clipped", Some(level)), ("smooth", None)] {
