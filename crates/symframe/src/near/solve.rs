@@ -827,7 +827,6 @@ impl NearParams {
                 camera,
                 lights,
                 width,
-                height,
                 params,
                 &tiling,
                 &rigs,
@@ -881,7 +880,6 @@ fn refine<E: From<Error>>(
     camera: &Pinhole,
     lights: &[PointLight],
     width: usize,
-    height: usize,
     params: &NearParams,
     tiling: &Tiling,
     rigs: &[Option<Arc<TileRig>>],
@@ -891,7 +889,7 @@ fn refine<E: From<Error>>(
     integrate: &mut dyn FnMut(&[f32], &[f32], &[f32]) -> std::result::Result<Vec<f32>, E>,
 ) -> std::result::Result<(Vec<PixelRecord>, Vec<f32>, f64, (usize, usize)), E> {
     // Each tile's pixels' points on the new depth map.
-    let n = width * height;
+    let n = next.len();
     let mut members: Vec<Vec<DVec3>> = vec![Vec::new(); tiling.tiles.len()];
     for (p, (&t, &d)) in tiling.tile_of.iter().zip(&next).enumerate() {
         let d = d as f64;
@@ -970,7 +968,6 @@ fn refine<E: From<Error>>(
     let normals: Vec<f32> = records.iter().flat_map(|r| r.normal).collect();
     let confidence: Vec<f32> = records.iter().map(|r| r.confidence).collect();
     let depth = integrate(&normals, &confidence, &next)?;
-    let _ = height;
     Ok((records, depth, largest, (count, moved.len())))
 }
 
