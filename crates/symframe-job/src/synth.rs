@@ -308,14 +308,27 @@ pub fn synth(config: &SynthConfig, ctl: &Control) -> Result<SynthOutcome> {
             config.intensity_spread
         );
     }
-    symframe_io::check_synth_target(&config.output, config.force)?;
-    // The output folder's lock, as estimate and fit take it: a second synth (or any job) into
-    // the folder is refused while this one writes. Checked again under the lock.
-    let out = OutputDir::lock(&config.output)?;
+    in_locked_target(&config.output, config.force, ctl, |out| {
+        render_and_write(config, out, ctl)
+    })
+}
+
+/// Runs `write` into the synthetic dataset's folder `output` under its lock, as estimate and
+/// fit take it: a second synth (or any job) into the folder is refused while this one writes.
+/// The folder is checked as a target ([`symframe_io::check_synth_target`]) before and again
+/// under the lock; on an error what this run left unfinished is discarded.
+pub(crate) fn in_locked_target(
+    output: &Path,
+    force: bool,
+    ctl: &Control,
+    write: impl FnOnce(&OutputDir) -> Result<SynthOutcome>,
+) -> Result<SynthOutcome> {
+    symframe_io::check_synth_target(output, force)?;
+    let out = OutputDir::lock(output)?;
     (ctl.checkpoint)(Checkpoint::OutputLocked);
-    let result = symframe_io::check_synth_target(&config.output, config.force)
+    let result = symframe_io::check_synth_target(output, force)
         .map_err(anyhow::Error::from)
-        .and_then(|()| render_and_write(config, &out, ctl));
+        .and_then(|()| write(&out));
     if result.is_err() {
         out.discard_unfinished();
     }

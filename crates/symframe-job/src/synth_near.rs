@@ -23,9 +23,9 @@ use symframe::render::{dome_lights, Ball, Degradation, NearMirrorBalls, NearScen
 use symframe::Pinhole;
 use symframe_io::{ImageFormat, NearFiles};
 
-use crate::outdir::{OutputDir, Staging};
-use crate::synth::SynthOutcome;
-use crate::{Checkpoint, Control, Interrupted, Progress, Stage};
+use crate::outdir::Staging;
+use crate::synth::{in_locked_target, SynthOutcome};
+use crate::{Control, Interrupted, Progress, Stage};
 
 /// The pair of spheres' width (two unit spheres, centres 2.2 apart).
 pub const PAIR_WIDTH: f64 = 4.2;
@@ -142,16 +142,9 @@ pub fn synth_near(config: &NearSynthConfig, ctl: &Control) -> Result<SynthOutcom
             config.exposure
         );
     }
-    symframe_io::check_synth_target(&config.output, config.force)?;
-    let out = OutputDir::lock(&config.output)?;
-    (ctl.checkpoint)(Checkpoint::OutputLocked);
-    let result = symframe_io::check_synth_target(&config.output, config.force)
-        .map_err(anyhow::Error::from)
-        .and_then(|()| render_and_write(config, ctl));
-    if result.is_err() {
-        out.discard_unfinished();
-    }
-    result
+    in_locked_target(&config.output, config.force, ctl, |_| {
+        render_and_write(config, ctl)
+    })
 }
 
 fn render_and_write(config: &NearSynthConfig, ctl: &Control) -> Result<SynthOutcome> {
