@@ -9,6 +9,7 @@
 
 use anyhow::Result;
 use glam::DVec3;
+use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use serde_json::Value;
@@ -251,6 +252,26 @@ pub fn lights_picture(plot: &LightsPlot) -> Result<Picture> {
     Ok(pic)
 }
 
+/// A white `w` x `h` legend: `title` at its top left, then what `draw` adds.
+fn legend(
+    w: usize,
+    h: usize,
+    title: &str,
+    draw: impl FnOnce(&DrawingArea<BitMapBackend<'_>, Shift>) -> Result<()>,
+) -> Result<Picture> {
+    font_ready()?;
+    let mut pic = Picture::white(w, h);
+    {
+        let root =
+            BitMapBackend::with_buffer(&mut pic.rgb, (w as u32, h as u32)).into_drawing_area();
+        root.draw_text(title, &text(16), (12, 10))
+            .map_err(draw_err)?;
+        draw(&root)?;
+        root.present().map_err(draw_err)?;
+    }
+    Ok(pic)
+}
+
 /// A legend with a colour bar from `lo` to `hi` at [`LEGEND_BAR`], a title and notes beside it.
 fn scalar_legend(
     title: &str,
@@ -259,16 +280,10 @@ fn scalar_legend(
     colour: &dyn Fn(f64) -> [u8; 3],
     ticks: &[(f64, String)],
 ) -> Result<Picture> {
-    font_ready()?;
     let (w, h) = (520usize, LEGEND_BAR.bottom + 30);
-    let mut pic = Picture::white(w, h);
-    {
-        let root =
-            BitMapBackend::with_buffer(&mut pic.rgb, (w as u32, h as u32)).into_drawing_area();
-        root.draw_text(title, &text(16), (12, 10))
-            .map_err(draw_err)?;
+    legend(w, h, title, |root| {
         draw_bar(
-            &root,
+            root,
             &Bar {
                 left: LEGEND_BAR.left as i32,
                 top: LEGEND_BAR.top as i32,
@@ -285,9 +300,8 @@ fn scalar_legend(
             root.draw_text(s, &text(13), (130, (LEGEND_BAR.top + 22 * k) as i32))
                 .map_err(draw_err)?;
         }
-        root.present().map_err(draw_err)?;
-    }
-    Ok(pic)
+        Ok(())
+    })
 }
 
 /// `confidence_legend.png`: the viridis bar from 0 to 1 of `confidence.png`.
@@ -352,47 +366,42 @@ pub fn residual_legend() -> Result<Picture> {
 /// `tangents_legend.png`: a wheel of the colours `tangents.png` gives each direction of the
 /// tangent's projection onto the image plane.
 pub fn tangents_legend() -> Result<Picture> {
-    font_ready()?;
     let (cx, cy, r) = TANGENT_WHEEL;
     let (w, h) = (560usize, cy + r + 40);
-    let mut pic = Picture::white(w, h);
-    {
-        let root =
-            BitMapBackend::with_buffer(&mut pic.rgb, (w as u32, h as u32)).into_drawing_area();
-        root.draw_text(
-            "tangents.png: the tangent's direction as a hue",
-            &text(16),
-            (12, 10),
-        )
-        .map_err(draw_err)?;
-        let (cxi, cyi, ri) = (cx as i32, cy as i32, r as i32);
-        let label = |s: &str, at: (i32, i32), hp: HPos, vp: VPos| {
-            root.draw(&Text::new(
-                s.to_string(),
-                at,
-                text(12).pos(Pos::new(hp, vp)),
-            ))
-            .map_err(draw_err)
-        };
-        label("+x", (cxi + ri + 6, cyi), HPos::Left, VPos::Center)?;
-        label("+y", (cxi, cyi - ri - 4), HPos::Center, VPos::Bottom)?;
-        let notes = [
-            "each direction in the wheel has the colour",
-            "of a tangent pointing that way in the image",
-            "(its projection onto the image plane)",
-            "",
-            "a tangent is an axis: t and -t are the same,",
-            "so the hues go round twice",
-            "",
-            "black: no tangent (an isotropic slice,",
-            "or no estimate)",
-        ];
-        for (k, s) in notes.iter().enumerate() {
-            root.draw_text(s, &text(13), (250, 60 + 22 * k as i32))
-                .map_err(draw_err)?;
-        }
-        root.present().map_err(draw_err)?;
-    }
+    let mut pic = legend(
+        w,
+        h,
+        "tangents.png: the tangent's direction as a hue",
+        |root| {
+            let (cxi, cyi, ri) = (cx as i32, cy as i32, r as i32);
+            let label = |s: &str, at: (i32, i32), hp: HPos, vp: VPos| {
+                root.draw(&Text::new(
+                    s.to_string(),
+                    at,
+                    text(12).pos(Pos::new(hp, vp)),
+                ))
+                .map_err(draw_err)
+            };
+            label("+x", (cxi + ri + 6, cyi), HPos::Left, VPos::Center)?;
+            label("+y", (cxi, cyi - ri - 4), HPos::Center, VPos::Bottom)?;
+            let notes = [
+                "each direction in the wheel has the colour",
+                "of a tangent pointing that way in the image",
+                "(its projection onto the image plane)",
+                "",
+                "a tangent is an axis: t and -t are the same,",
+                "so the hues go round twice",
+                "",
+                "black: no tangent (an isotropic slice,",
+                "or no estimate)",
+            ];
+            for (k, s) in notes.iter().enumerate() {
+                root.draw_text(s, &text(13), (250, 60 + 22 * k as i32))
+                    .map_err(draw_err)?;
+            }
+            Ok(())
+        },
+    )?;
     // The wheel, pixel by pixel, through the map's own colouring.
     for y in cy - r..=cy + r {
         for x in cx - r..=cx + r {
@@ -432,47 +441,41 @@ pub fn source_swatch(code: u8) -> (usize, usize) {
 /// `source_legend.png`: the colour of each code of `source.png`, its name, meaning and pixel
 /// count (`counts[code]`, from the report).
 pub fn source_legend(counts: &[usize]) -> Result<Picture> {
-    font_ready()?;
     let n = PixelSource::ALL.len();
     let (w, h) = (600usize, source_swatch(n as u8).1 + 4);
-    let mut pic = Picture::white(w, h);
-    {
-        let root =
-            BitMapBackend::with_buffer(&mut pic.rgb, (w as u32, h as u32)).into_drawing_area();
-        root.draw_text(
-            "source.png: which measure gave each pixel's normal",
-            &text(16),
-            (12, 10),
-        )
-        .map_err(draw_err)?;
-        for (code, name, what) in PixelSource::legend() {
-            let (x, y) = source_swatch(code);
-            let c = symframe_io::SOURCE_PALETTE[code as usize];
-            root.draw(&Rectangle::new(
-                [(x as i32, y as i32), (x as i32 + 27, y as i32 + 17)],
-                rgb(c).filled(),
-            ))
-            .map_err(draw_err)?;
-            root.draw(&Rectangle::new(
-                [(x as i32 - 1, y as i32 - 1), (x as i32 + 28, y as i32 + 18)],
-                RGBColor(120, 120, 120),
-            ))
-            .map_err(draw_err)?;
-            let count = counts.get(code as usize).copied().unwrap_or(0);
-            root.draw_text(
-                &format!("{code} {name}: {count} px"),
-                &text(14),
-                (x as i32 + 40, y as i32),
-            )
-            .map_err(draw_err)?;
-            for (k, l) in wrap(what, 72).iter().take(2).enumerate() {
-                root.draw_text(l, &text(12), (x as i32 + 40, y as i32 + 19 + 15 * k as i32))
-                    .map_err(draw_err)?;
+    legend(
+        w,
+        h,
+        "source.png: which measure gave each pixel's normal",
+        |root| {
+            for (code, name, what) in PixelSource::legend() {
+                let (x, y) = source_swatch(code);
+                let c = symframe_io::SOURCE_PALETTE[code as usize];
+                root.draw(&Rectangle::new(
+                    [(x as i32, y as i32), (x as i32 + 27, y as i32 + 17)],
+                    rgb(c).filled(),
+                ))
+                .map_err(draw_err)?;
+                root.draw(&Rectangle::new(
+                    [(x as i32 - 1, y as i32 - 1), (x as i32 + 28, y as i32 + 18)],
+                    RGBColor(120, 120, 120),
+                ))
+                .map_err(draw_err)?;
+                let count = counts.get(code as usize).copied().unwrap_or(0);
+                root.draw_text(
+                    &format!("{code} {name}: {count} px"),
+                    &text(14),
+                    (x as i32 + 40, y as i32),
+                )
+                .map_err(draw_err)?;
+                for (k, l) in wrap(what, 72).iter().take(2).enumerate() {
+                    root.draw_text(l, &text(12), (x as i32 + 40, y as i32 + 19 + 15 * k as i32))
+                        .map_err(draw_err)?;
+                }
             }
-        }
-        root.present().map_err(draw_err)?;
-    }
-    Ok(pic)
+            Ok(())
+        },
+    )
 }
 
 /// A picture of an estimate's output set, as `index.html` shows it.
