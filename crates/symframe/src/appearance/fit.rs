@@ -222,6 +222,19 @@ impl FitParams {
     }
 }
 
+/// The automatic choice keeps a two-lobe model at a pixel only where its squared error on the
+/// validation lights is below this share of the better single-lobe model's. The two-lobe
+/// models nearly contain a single GGX lobe, so on a one-lobe material they predict the
+/// validation lights about as well, and a choice by the smaller error alone swaps models from
+/// pixel to pixel on differences that do not carry to other lights (docs/validation.md,
+/// "Relighting"); on a two-lobe material the two-lobe model's error is several times smaller.
+pub(crate) const TWO_LOBE_GAIN: f64 = 0.75;
+
+/// Squared errors are compared with this share of the squared signal (the sum of the squared
+/// samples judged on) added to each: where both models predict the pixel to better than 40 dB
+/// their difference is not evidence for the model with more parameters.
+pub(crate) const TWO_LOBE_FLOOR: f64 = 1e-4;
+
 /// One training light in this many is a validation light ([`validation_lights`]).
 pub(crate) const VALIDATION_EVERY: usize = 5;
 
@@ -813,11 +826,12 @@ impl PixelFitter<'_> {
     }
 
     /// The automatic choice at one pixel: every candidate (Ward, glTF, the clear coat, the
-    /// woven lobes) fitted on the training samples that are not from validation lights, the
-    /// one with the smallest squared error on the validation samples refitted on every
-    /// training sample (ties go to the earlier of glTF, Ward, clear coat, woven: the fewer
-    /// parameters). Without a validation sample, or with too few others, the one with the
-    /// smallest training error.
+    /// woven lobes) fitted on the training samples that are not from validation lights; the
+    /// single-lobe model (Ward or glTF) with the smaller squared error on the validation
+    /// samples, unless the better two-lobe model's is below [`TWO_LOBE_GAIN`] times it (both
+    /// raised by [`TWO_LOBE_FLOOR`] of the signal); the
+    /// one kept is refitted on every training sample. Without a validation sample, or with too
+    /// few others, the same rule on the training errors.
     fn fit_auto(&mut self, n: DVec3, t: DVec3, b: DVec3, iso: bool, rgb: &[f32]) -> PixelOutcome {
         let v = self.gltf_samples(n, t, b, rgb);
         self.ward_samples(n, t, b, rgb);
@@ -858,12 +872,23 @@ impl PixelFitter<'_> {
         } else {
             [gltf.sse, ward.sse, lobes[0].sse, lobes[1].sse]
         };
-        let mut choice = 0;
-        for (k, &err) in errors.iter().enumerate() {
-            if err < errors[choice] {
-                choice = k;
-            }
-        }
+        // The better single-lobe model (glTF on a tie) and the better two-lobe one (the clear
+        // coat on a tie); the two-lobe one only where it predicts clearly better.
+        let single = if errors[1] < errors[0] { 1 } else { 0 };
+        let two = if errors[3] < errors[2] { 3 } else { 2 };
+        // Errors below TWO_LOBE_FLOOR of the signal are not told apart.
+        let judged = if by_validation {
+            &self.gval
+        } else {
+            &self.gtrain
+        };
+        let signal: f64 = judged.iter().flat_map(|s| s.rgb).map(|v| v * v).sum();
+        let floor = TWO_LOBE_FLOOR * signal;
+        let choice = if errors[two] + floor < TWO_LOBE_GAIN * (errors[single] + floor) {
+            two
+        } else {
+            single
+        };
         match choice {
             0 => {
                 let fit = if by_validation {
