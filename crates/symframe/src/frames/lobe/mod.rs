@@ -570,6 +570,13 @@ fn noise_variances(data: &Subset, noise: &NoiseModel, light_var: &[f64]) -> (f64
     (sum, sum2)
 }
 
+/// The noise-weighted polish runs only where the unweighted fit's normal scatters by at least
+/// this much (radians: a hundredth of a degree, the resolution the error figures are given
+/// at): the weights change the answer by less than its scatter, so below it they cannot change
+/// it by a figure anyone reads (a noise-free render whose noise estimate reads its curvature).
+/// Lower is slower on clean captures.
+const WEIGHTED_SD_FLOOR: f64 = 0.01 * std::f64::consts::PI / 180.0;
+
 /// The step (radians) of the forward differences that give each sample's slope with respect to
 /// the normal's two tilts, for the variance the lights' error gives it.
 const TILT_STEP: f64 = 1e-5;
@@ -1132,7 +1139,15 @@ pub(crate) fn fit_lobe(
     // How far the weighting moved the normal: a misfit the noise hides moves it, a lobe the
     // family describes moves it within the noise (the normal's uncertainty reads it below).
     let mut moved2 = 0.0;
-    if noise_weights(fine, &state, linear.coefficients, noise, buffers) {
+    let parameters = free.iter().filter(|f| **f).count() + linear.set.count_ones() as usize;
+    let scatter_sd = tilt_sd(
+        &buffers.jtj,
+        linear.cost,
+        fine.len() as f64 - parameters as f64,
+    );
+    if scatter_sd >= WEIGHTED_SD_FLOOR
+        && noise_weights(fine, &state, linear.coefficients, noise, buffers)
+    {
         let unweighted = state.normal;
         every.weighted(fine, &buffers.weight);
         buffers.fit(every);
