@@ -18,19 +18,31 @@ fn capture(dir: &Path) -> (Scene, PathBuf) {
     let lights = uniform_cone_lights(300, 65.0);
     let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
     let images: Vec<Vec<f32>> = lights.iter().map(|&l| scene.render(&brdf, l)).collect();
-    let lp = symframe_io::write_lp_dataset(
+    let lp = write_exr_capture(dir, &scene, &lights, &images);
+    (scene, lp)
+}
+
+/// `images` of `scene` under `lights` as float EXR images of an `.lp` dataset in `dir`, with
+/// the scene's mask.
+fn write_exr_capture(
+    dir: &Path,
+    scene: &Scene,
+    lights: &[glam::DVec3],
+    images: &[Vec<f32>],
+) -> PathBuf {
+    let (w, h) = (scene.width, scene.height);
+    symframe_io::write_lp_dataset(
         dir,
-        &lights,
-        &images,
-        20,
-        20,
+        lights,
+        images,
+        w,
+        h,
         ImageFormat::Exr,
         None,
         None,
         Some(&scene.mask),
     )
-    .unwrap();
-    (scene, lp)
+    .unwrap()
 }
 
 #[test]
@@ -161,18 +173,7 @@ fn a_float_capture_that_clipped_is_told_and_its_clip_level_recorded() {
             .iter()
             .map(|img| img.iter().map(|&v| clip.map_or(v, |c| v.min(c))).collect())
             .collect();
-        let lp = symframe_io::write_lp_dataset(
-            &tmp.path().join(name),
-            &lights,
-            &stored,
-            20,
-            20,
-            ImageFormat::Exr,
-            None,
-            None,
-            Some(&scene.mask),
-        )
-        .unwrap();
+        let lp = write_exr_capture(&tmp.path().join(name), &scene, &lights, &stored);
         let warnings = std::sync::Mutex::new(Vec::new());
         let warn = |line: &str| warnings.lock().unwrap().push(line.to_string());
         let ctl = Control {
