@@ -139,7 +139,8 @@ pub struct EstimateArgs {
     /// through the lights, a dome's centre).
     #[arg(long, value_name = "D")]
     pub distance: Option<f64>,
-    /// Near lights: side of the square of pixels that share one rig (1: a rig per pixel).
+    /// Near lights: side of the largest square of pixels that share one rig (tiles are halved
+    /// where a pixel's light geometry strays too far from its rig's; 1: a rig per pixel).
     #[arg(long, default_value_t = symframe_job::NearOptions::default().tile)]
     pub rig_tile: usize,
     /// Near lights: estimation rounds at most (each but the last followed by a new depth map).

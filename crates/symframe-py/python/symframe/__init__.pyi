@@ -107,7 +107,7 @@ def estimate_path(
     cache_format: str = "auto",
     light_model: str = "auto",
     distance: Optional[float] = None,
-    rig_tile: int = 4,
+    rig_tile: int = 8,
     rounds: int = 5,
 ) -> Maps:
     """The tiled, resumable `symframe estimate` job."""
