@@ -308,10 +308,11 @@ def test_fit_and_relight_equal_the_command_line(capture, cli, tmp_path):
                  "alpha_t", "alpha_b", "model", "normals", "tangents"]:
         want = np.load(tmp_path / "fit_cli" / f"{name}.npy")
         assert np.array_equal(bits(got[name]), bits(want)), name
-    # The default is the automatic choice: each fitted pixel Ward (1) or glTF (2).
+    # The default is the automatic choice: each fitted pixel Ward (1), glTF (2), clear coat (3)
+    # or woven (4).
     assert got["report"]["model"] == "auto" and got["report"]["exposure"] > 0
     codes = got["model"][np.isfinite(got["residual"])]
-    assert codes.size > 0 and np.isin(codes, [1, 2]).all()
+    assert codes.size > 0 and np.isin(codes, [1, 2, 3, 4]).all()
     cli("fit", capture, "--frames", frames, "-o", tmp_path / "ward_cli", "--model", "ward",
         "--exposure", "2")
     ward = symframe.fit(capture, frames, tmp_path / "ward_py", model="ward", exposure=2.0)
