@@ -556,14 +556,25 @@ fn noise_cost(data: &Subset, noise: &NoiseModel, z: f64) -> f64 {
     sum + z * (2.0 * sum2).sqrt()
 }
 
+/// The parameters a fit adjusted: its free nonlinear ones and its active linear coefficients.
+fn fitted_parameters(free: &[bool; P], linear: &Linear) -> usize {
+    free.iter().filter(|f| **f).count() + linear.set.count_ones() as usize
+}
+
+/// The noise model's variance of a grey value `v`: the sum of three channels of about a third
+/// of it, each with the model's variance.
+fn grey_variance(noise: &NoiseModel, v: f64) -> f64 {
+    3.0 * noise.variance(v / 3.0)
+}
+
 /// The sum of the samples' noise variances over `data` and the sum of their squares: each grey
-/// value is the sum of three channels of about a third of it, each with the noise model's
-/// variance, plus what the lights' error adds to sample `i` (`light_var[i]`, 0 beyond it).
+/// value's ([`grey_variance`]) plus what the lights' error adds to sample `i` (`light_var[i]`,
+/// 0 beyond it).
 fn noise_variances(data: &Subset, noise: &NoiseModel, light_var: &[f64]) -> (f64, f64) {
     let (mut sum, mut sum2) = (0.0, 0.0);
     for i in 0..data.len() {
         let y = data.value(i).max(0.0);
-        let v = 3.0 * noise.variance(y / 3.0) + light_var.get(i).copied().unwrap_or(0.0);
+        let v = grey_variance(noise, y) + light_var.get(i).copied().unwrap_or(0.0);
         sum += v;
         sum2 += v * v;
     }
@@ -583,11 +594,11 @@ const TILT_STEP: f64 = 1e-5;
 
 /// The weights of the noise-weighted polish into `buffers.weight`, one per sample of `data`:
 /// the inverse of each sample's variance at the fit `state` (coefficients `c`) under `noise`
-/// (docs/method.md, "Noise-weighted fit"): the noise model's variance of its prediction, plus
-/// what turning its light by the lights' RMS error moves the prediction by (the prediction's
-/// slope with respect to the normal's tilts: a light turned by `e` turns the halfway vector by
-/// about `e / (2 h.l)`). The weights' mean is 1. False where every sample weighs the same: a
-/// noise-free capture, or a fit the noise does not explain.
+/// (docs/method.md, "Lobe fit", "The noise-weighted fit"): the noise model's variance of its
+/// prediction, plus what turning its light by the lights' RMS error moves the prediction by
+/// (the prediction's slope with respect to the normal's tilts: a light turned by `e` turns the
+/// halfway vector by about `e / (2 h.l)`). The weights' mean is 1. False where every sample
+/// weighs the same: a noise-free capture, or a fit the noise does not explain.
 fn noise_weights(
     data: &Subset,
     state: &State,
@@ -616,13 +627,13 @@ fn noise_weights(
         out.clear();
         out.extend((0..n).map(|i| data.value(i) - r[i]));
     };
-    prediction(&Model::of(state), predicted);
+    let m = Model::of(state);
+    prediction(&m, predicted);
     // The prediction's slopes with respect to the frame's tilts about `t` (in `weight` for
     // now) and about `b`. A light turned by `e` about an axis moves the diffuse term as the
     // frame's tilt by `e` does, the lobe as a tilt by about `e / (2 h.l)` (the halfway
     // vector turns by that much): the diffuse slope is analytic (`d (n.l) = -l.b` and `l.t`),
     // the lobe's is the rest.
-    let m = Model::of(state);
     weight.clear();
     weight.resize(n, 0.0);
     let moved = |axis: usize| {
@@ -653,7 +664,7 @@ fn noise_weights(
             let turned = diffuse[a] + (total[a] - diffuse[a]) * half;
             from_lights += turned * turned * light_error * light_error / 2.0;
         }
-        weight[i] = 3.0 * noise.variance(p / 3.0) + from_lights;
+        weight[i] = grey_variance(noise, p) + from_lights;
     }
     let dof = n as f64 - (P + 3) as f64;
     if dof < 1.0 {
@@ -1132,14 +1143,14 @@ pub(crate) fn fit_lobe(
         evals += e;
         (state, linear) = (polished, polished_linear);
     }
-    // The noise-weighted polish (docs/method.md, "Noise-weighted fit"): where the capture is
-    // noisy and the fit explains the samples to the noise, it is repeated from its answer with
-    // each sample weighted by the inverse of its variance under the noise model, the lights'
-    // error included.
+    // The noise-weighted polish (docs/method.md, "Lobe fit", "The noise-weighted fit"): where
+    // the capture is noisy and the fit explains the samples to the noise, it is repeated from
+    // its answer with each sample weighted by the inverse of its variance under the noise
+    // model, the lights' error included.
     // How far the weighting moved the normal: a misfit the noise hides moves it, a lobe the
     // family describes moves it within the noise (the normal's uncertainty reads it below).
     let mut moved2 = 0.0;
-    let parameters = free.iter().filter(|f| **f).count() + linear.set.count_ones() as usize;
+    let parameters = fitted_parameters(&free, &linear);
     let scatter_sd = tilt_sd(
         &buffers.jtj,
         linear.cost,
@@ -1171,7 +1182,7 @@ pub(crate) fn fit_lobe(
     // The normal's uncertainty from the last Gauss-Newton system over the whole subset (at
     // the answer, or a step too small to take before it).
     let normal_sd = {
-        let parameters = free.iter().filter(|f| **f).count() + linear.set.count_ones() as usize;
+        let parameters = fitted_parameters(&free, &linear);
         let sd = tilt_sd(
             &buffers.jtj,
             linear.cost,
@@ -1249,7 +1260,7 @@ pub(crate) fn fit_lobe(
     // three channels, each about a third of it.
     let (noise_share, noise_share_sd) = {
         let (sum, sum2) = noise_variances(fine, noise, &buffers.light_var);
-        let parameters = free.iter().filter(|f| **f).count() + linear.set.count_ones() as usize;
+        let parameters = fitted_parameters(&free, &linear);
         let n = fine.len() as f64;
         let kept = ((n - parameters as f64) / n).max(0.0);
         if syy > 0.0 {
