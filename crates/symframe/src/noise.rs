@@ -177,10 +177,13 @@ pub struct NoiseSamples {
     top: f64,
     diffs: Vec<Vec<f32>>,
     levels: Vec<Vec<f32>>,
-    /// The largest sample seen, and the samples within [`Self::PLATEAU_BAND`] below it (it
-    /// included): where a float capture clipped, and how many samples say so.
+    /// The largest sample seen and how many samples had exactly that value: where a float
+    /// capture clipped, and how many samples say so.
     max: f32,
-    near_max: Vec<f32>,
+    at_max: usize,
+    /// Values below `max` within [`Self::PLATEAU_BAND`], each with how many samples had it (a
+    /// former largest value keeps its count).
+    below: Vec<(f32, usize)>,
 }
 
 impl NoiseSamples {
@@ -197,6 +200,11 @@ impl NoiseSamples {
     const PLATEAU_BAND: f32 = 1.0 / 64.0;
     /// Fewest samples at the largest value that make a plateau.
     const PLATEAU_MIN: usize = 8;
+    /// Most entries `below` keeps: beyond, they are merged into one at the largest of them
+    /// (a count that stays in the band longest, so a crowded band is never undercounted and no
+    /// plateau is found that the full list would refuse). Memory stays bounded on a large
+    /// bright region just below the top.
+    const BELOW_CAP: usize = 4096;
 
     /// Empty bins for a capture of `model`'s clip level.
     pub fn new(model: &NoiseModel) -> Self {
@@ -205,7 +213,8 @@ impl NoiseSamples {
             diffs: vec![Vec::new(); Self::BINS],
             levels: vec![Vec::new(); Self::BINS],
             max: 0.0,
-            near_max: Vec::new(),
+            at_max: 0,
+            below: Vec::new(),
         }
     }
 
@@ -213,28 +222,52 @@ impl NoiseSamples {
     /// [`Self::PLATEAU_MIN`] samples at exactly the largest value, and more there than in the
     /// whole band [`Self::PLATEAU_BAND`] below it. `None` where they do not.
     pub fn clip_plateau(&self) -> Option<f32> {
-        let at = self.near_max.iter().filter(|&&v| v == self.max).count();
-        let floor = self.max * (1.0 - Self::PLATEAU_BAND);
-        let below = self
-            .near_max
+        let floor = self.floor();
+        let below: usize = self
+            .below
             .iter()
-            .filter(|&&v| v < self.max && v >= floor)
-            .count();
+            .filter(|e| e.0 >= floor)
+            .map(|e| e.1)
+            .sum();
+        let at = self.at_max;
         (self.max > 0.0 && at >= Self::PLATEAU_MIN && at > below).then_some(self.max)
     }
 
-    /// Keeps `v` where it is within the band below the largest value so far.
+    /// The lower end of the band below the largest value.
+    fn floor(&self) -> f32 {
+        self.max * (1.0 - Self::PLATEAU_BAND)
+    }
+
+    /// Counts `v` where it is at or within the band below the largest value so far.
     fn add_top(&mut self, v: f32) {
-        if !(v.is_finite() && v >= self.max * (1.0 - Self::PLATEAU_BAND)) {
+        if !(v.is_finite() && v >= self.floor()) {
             return;
         }
-        self.near_max.push(v);
+        if v == self.max {
+            self.at_max += 1;
+            return;
+        }
         if v > self.max {
-            self.max = v;
+            if self.at_max > 0 {
+                self.below.push((self.max, self.at_max));
+            }
+            (self.max, self.at_max) = (v, 1);
             // The band moved up: drop what fell out of it, now and then (amortised).
-            if self.near_max.len() >= 64 {
-                let floor = v * (1.0 - Self::PLATEAU_BAND);
-                self.near_max.retain(|&x| x >= floor);
+            if self.below.len() >= 64 {
+                let floor = self.floor();
+                self.below.retain(|e| e.0 >= floor);
+            }
+        } else {
+            self.below.push((v, 1));
+        }
+        if self.below.len() > Self::BELOW_CAP {
+            let floor = self.floor();
+            self.below.retain(|e| e.0 >= floor);
+            if self.below.len() > Self::BELOW_CAP {
+                let top = self.below.iter().fold(0.0f32, |a, e| a.max(e.0));
+                let count = self.below.iter().map(|e| e.1).sum();
+                self.below.clear();
+                self.below.push((top, count));
             }
         }
     }
