@@ -395,10 +395,10 @@ mod tests {
         assert_eq!(s.figures.len(), 70);
         for r in &s.figures {
             // A two-lobe model forced onto a material of one lobe is a known weakness, not the
-            // product's answer (the automatic choice is): its figures are in the report, and
-            // here it is only held to a fit that ran (the Ward sphere's forced clear coat, quick
-            // run: 18 dB on held-out lights, relit values 11 times the brightest training
-            // sample where the truth reaches 1.7).
+            // product's answer (the automatic choice is): its figures are in the report
+            // (docs/validation.md, "Relighting from per-pixel Ward and glTF fits"), and here it
+            // is only held to a fit that ran (the forced clear coat of the Ward sphere falls
+            // below 20 dB and relights far above its training samples).
             if r.fit == "clearcoat" || r.fit == "woven" {
                 assert!(r.holdout_psnr > 10.0 && r.relit_psnr > 10.0, "{r:?}");
                 continue;
@@ -413,9 +413,9 @@ mod tests {
             // the default, automatic fit, twice), unless the truth itself rises as high (a
             // sharp highlight between the training lights), to within 5%.
             // The automatic fit's two-lobe picks are held to the single models' 4 times, not
-            // twice: a known defect (quick run, Ashikhmin-Shirley: 198 pixels given the clear
-            // coat, relit up to 3.6 times the brightest training sample where the truth
-            // reaches 1.1) until the choice bounds a candidate's unseen peak.
+            // twice: a known defect (the Ashikhmin-Shirley sphere's clear-coat picks relight
+            // above twice their brightest training sample) until the choice bounds a
+            // candidate's unseen peak.
             let two_lobe_picks = r.pixels[2] + r.pixels[3] > 0;
             let allowed = if r.fit == "auto" && !two_lobe_picks {
                 2.0
