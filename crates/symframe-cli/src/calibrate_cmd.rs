@@ -1,6 +1,6 @@
 //! `symframe calibrate`: flags to a [`CalibrateConfig`] (light directions from one mirror
 //! sphere) or, with `--K`, a [`NearCalibrateConfig`] (light positions from two or more), the
-//! library's calibration, a summary.
+//! library's calibration (with `--matte-sphere`, the lights' intensities too), a summary.
 
 use anyhow::{bail, Result};
 use symframe_job::calibrate::{CircleDoesNotFit, SphereNotFound};
@@ -90,9 +90,6 @@ fn run_near(
     k: &std::path::Path,
     decode: symframe_io::DecodeOptions,
 ) -> Result<()> {
-    if args.matte_sphere.is_some() {
-        bail!("--matte-sphere does not apply with --K (light positions)");
-    }
     let Some(radius) = args.sphere_radius else {
         bail!("--K needs the chrome spheres' radius: --sphere-radius R");
     };
@@ -104,6 +101,8 @@ fn run_near(
         output: args.output.clone(),
         threshold: args.threshold,
         strict: args.strict,
+        matte_sphere: args.matte_sphere,
+        matte_radius: args.matte_radius,
         decode,
     };
     let ctl = Control {
@@ -143,5 +142,12 @@ fn run_near(
         report.residual_rms_max,
         written.join(", ")
     );
+    if let Some(m) = &report.matte {
+        println!(
+            "symframe calibrate: light intensities from the matte sphere at ({:.4}, {:.4}, \
+             {:.4}), radius {}, with each light's 1/r^2 (mean {:.4} before normalising to 1)",
+            m.centre[0], m.centre[1], m.centre[2], m.radius, m.intensity_mean_raw
+        );
+    }
     Ok(())
 }

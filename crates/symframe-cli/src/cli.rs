@@ -218,9 +218,13 @@ pub struct CalibrateArgs {
     pub strict: bool,
     /// A matte (diffuse, grey) sphere's circle CX,CY,R (as --sphere): per light, its RGB
     /// intensity is measured there and written as light_intensities.txt beside the .lp,
-    /// normalised to a mean of 1 over all lights and channels.
+    /// normalised to a mean of 1 over all lights and channels. With --K, beside
+    /// light_positions.txt, each light's 1/r^2 from its triangulated position taken out.
     #[arg(long, value_parser = parse_circle, allow_hyphen_values = true, value_name = "CX,CY,R")]
     pub matte_sphere: Option<symframe::Circle>,
+    /// With --K: the matte sphere's radius (default: --sphere-radius).
+    #[arg(long, value_name = "R", requires_all = ["matte_sphere", "k"])]
+    pub matte_radius: Option<f64>,
     /// How the images are decoded.
     #[command(flatten)]
     pub decode: DecodeFlags,
