@@ -791,7 +791,7 @@ pub fn export_gltf(config: &ExportConfig) -> Result<ExportOutcome> {
                 regions: 0,
                 pixels: 0,
             };
-            let mesh = symframe::mesh(&dm, &maps.normals, config.max_jump);
+            let mesh = dm.mesh(&maps.normals, config.max_jump);
             if mesh.triangles.is_empty() {
                 bail!("{}: the mesh has no triangles", depth_path.display());
             }

@@ -14,8 +14,8 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 use symframe::{
-    integrate, mesh, perspective_depth, perspective_mesh, picture_heights, DepthMap,
-    IntegrateParams, Mesh, Pinhole, Solver,
+    integrate, perspective_depth, perspective_mesh, picture_heights, DepthMap, IntegrateParams,
+    Mesh, Pinhole, Solver,
 };
 
 use crate::outdir::{OutputDir, OutputSet};
@@ -330,7 +330,7 @@ fn integrate_into(
         None => {
             let depth = integrate(w, h, &normals, confidence.as_deref(), &config.params)
                 .with_context(|| format!("{}: cannot integrate", config.estimate.display()))?;
-            let m = mesh(&depth, &normals, config.max_jump);
+            let m = depth.mesh(&normals, config.max_jump);
             (depth, m, None)
         }
         Some((cam, from)) => {

@@ -11,8 +11,7 @@ use glam::DVec3;
 use symframe::brdf::Ward;
 use symframe::render::Scene;
 use symframe::{
-    gather_slice, uniform_cone_lights, Estimator, EstimatorParams, Interpolation, PixelScratch,
-    Rig, RigOptions,
+    uniform_cone_lights, Estimator, EstimatorParams, Interpolation, PixelScratch, Rig, RigOptions,
 };
 
 fn bench(c: &mut Criterion) {
@@ -25,8 +24,13 @@ fn bench(c: &mut Criterion) {
         let lights = uniform_cone_lights(n, 65.0);
         let rig = Rig::new(&lights, RigOptions::default()).unwrap();
         let stack = scene.render_stack(&ward, &lights);
-        let mut slice = vec![0.0; rig.n_used() * 3];
-        gather_slice(&rig, &stack, 0, &mut slice);
+        // The pixel's samples in rig order.
+        let all = stack.pixel(0);
+        let slice: Vec<f32> = rig
+            .input_index()
+            .iter()
+            .flat_map(|&i| all[3 * i..3 * i + 3].iter().copied())
+            .collect();
         for (name, interpolation) in [
             ("fast", Interpolation::Fast),
             ("exact", Interpolation::Exact),

@@ -17,7 +17,7 @@
 //!   against ground truth ([`evaluate`], [`Evaluation`]).
 //! - Fit and relight: per-pixel Ward or glTF metallic-roughness fits in the estimated frames
 //!   ([`fit_stack`], [`FitParams`], [`FitMaps`]), rendered and edited by a [`Relighter`].
-//! - Integrate: a depth map from the normals ([`integrate()`], [`DepthMap`]) and its [`mesh()`].
+//! - Integrate: a depth map from the normals ([`integrate()`], [`DepthMap`]) and its mesh ([`DepthMap::mesh`]).
 //! - Calibrate: light directions from chrome and matte spheres ([`find_highlight`],
 //!   [`detect_spheres`], [`matte_intensity`]); near lights and perspective cameras
 //!   ([`Pinhole`], [`PointLight`], [`NearMethod`], [`triangulate`]).
@@ -126,14 +126,13 @@ pub use stack::{check_inputs, Stack};
 
 // Estimating frames: the estimator, its parameters, the per-pixel interface and its drivers.
 pub use baselines::{
-    baseline_pixel, estimate_stack_baseline, estimate_stack_baseline_with, Baseline,
-    BaselineMethod, BaselineParams, BaselinePixel,
+    baseline_pixel, estimate_stack_baseline, Baseline, BaselineMethod, BaselineParams,
+    BaselinePixel,
 };
 pub use frames::estimator::{
     estimate_stack, Estimator, EstimatorParams, Fallback, Interpolation, PixelEstimate,
     PixelScratch,
 };
-pub use frames::slice::{gather_pixel, gather_slice};
 pub use frames::symmetry::CosineMode;
 pub use method::{run_stack, PixelMethod, Worker};
 
@@ -156,7 +155,7 @@ pub use appearance::lobe_fit::{LobeFit, LobeKind, LobeModel};
 pub use appearance::relight::{image_psnr, tone_map, Edits, Relighter};
 
 // Depth from normals, and a mesh of it.
-pub use integrate::{integrate, mesh, DepthMap, IntegrateParams, Mesh, Solver};
+pub use integrate::{integrate, DepthMap, IntegrateParams, Mesh, Solver};
 
 // Light calibration: chrome and matte spheres.
 pub use calibrate::{
@@ -167,9 +166,8 @@ pub use calibrate::{
 // Near lights and perspective cameras.
 pub use near::chrome::{circle_rim, reflected_ray, sphere_from_rim, triangulate, Triangulation};
 pub use near::{
-    depth_from_normals, estimate_near_stack, fit_sphere, mean_change_deg, perspective_depth,
-    perspective_mesh, picture_heights, NearMethod, NearOutcome, NearParams, NearScratch, Pinhole,
-    PointLight,
+    estimate_near_stack, fit_sphere, perspective_depth, perspective_mesh, picture_heights,
+    NearMethod, NearOutcome, NearParams, NearScratch, Pinhole, PointLight,
 };
 
 pub use error::{Error, Result};

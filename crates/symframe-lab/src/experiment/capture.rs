@@ -25,7 +25,8 @@ use symframe::brdf::{Beckmann, Brdf, Ggx, Layered, Sheen, Woven};
 use symframe::render::{diligent_lights, jitter_lights, Degradation, Noise, Scene, TangentField};
 use symframe::{
     estimate_stack, estimate_stack_baseline, evaluate, uniform_cone_lights, vec_at, Baseline,
-    EstimateMaps, EstimatorParams, Evaluation, NoiseModel, Quantisation, Rig, RigOptions, Stack,
+    BaselineParams, EstimateMaps, EstimatorParams, Evaluation, NoiseModel, Quantisation, Rig,
+    RigOptions, Stack,
 };
 use symframe_io::{decode_image, linear_to_srgb, DecodeOptions};
 
@@ -571,7 +572,14 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
             }
             let mut cells = vec![cell(&scene, &ours, &gt_t, mat.anisotropic)];
             for b in [Baseline::HighlightCentroid, Baseline::MaxReflectance] {
-                let maps = estimate_stack_baseline(&stack, &known, mask, b, &|_| {})?;
+                let maps = estimate_stack_baseline(
+                    &stack,
+                    &known,
+                    mask,
+                    b,
+                    BaselineParams::default(),
+                    &|_| {},
+                )?;
                 let mut c = cell(&scene, &maps, &gt_t, mat.anisotropic);
                 c.confident = 0;
                 c.confident_within_1 = f64::NAN;

@@ -10,7 +10,7 @@ use symframe::brdf::{AshikhminShirley, BlinnPhong, Brdf, CookTorrance, Ggx, Lamb
 use symframe::render::{diligent_lights, BumpParams, Scene, TangentField};
 use symframe::{
     estimate_stack, estimate_stack_baseline, evaluate, normal_error_map, uniform_cone_lights,
-    Baseline, EstimateMaps, EstimatorParams, Evaluation, Rig, RigOptions,
+    Baseline, BaselineParams, EstimateMaps, EstimatorParams, Evaluation, Rig, RigOptions,
 };
 
 use super::plot::{self, md_table};
@@ -238,7 +238,14 @@ pub fn compute(quick: bool, size: usize) -> Result<(Table, Vec<Shown>)> {
             let ours = estimate_stack(&stack, &rig, mask, EstimatorParams::default(), &|_| {})?;
             let mut cells = vec![cell(&mat.scene, &ours)];
             for b in Baseline::ALL {
-                let maps = estimate_stack_baseline(&stack, &lights, mask, b, &|_| {})?;
+                let maps = estimate_stack_baseline(
+                    &stack,
+                    &lights,
+                    mask,
+                    b,
+                    BaselineParams::default(),
+                    &|_| {},
+                )?;
                 cells.push(cell(&mat.scene, &maps));
             }
             Ok((

@@ -307,31 +307,12 @@ impl PixelMethod for BaselineMethod {
     }
 }
 
-/// Runs a baseline on every pixel of a stack (inside `mask` when given) with the default
-/// [`BaselineParams`], in parallel over row bands; see [`estimate_stack_baseline_with`].
-pub fn estimate_stack_baseline(
-    stack: &Stack,
-    lights: &[DVec3],
-    mask: Option<&[bool]>,
-    method: Baseline,
-    progress: &(dyn Fn(usize) + Sync),
-) -> Result<EstimateMaps> {
-    estimate_stack_baseline_with(
-        stack,
-        lights,
-        mask,
-        method,
-        BaselineParams::default(),
-        progress,
-    )
-}
-
-/// Runs a baseline on every pixel of a stack, in parallel over row bands, and returns the same
-/// maps as the symmetry estimator: tangents and anisotropy are NaN (the baselines recover
+/// Runs a baseline on every pixel of a stack (inside `mask` when given), in parallel over row
+/// bands, and returns the same maps as the symmetry estimator: tangents and anisotropy are NaN (the baselines recover
 /// normals only), confidence is the baseline's goodness of fit, `evals` is 0. Every light is
 /// used (no cone). `lights` are camera-frame directions, one per stack image (normalised here).
 /// `progress` is called with the number of pixels finished by each band.
-pub fn estimate_stack_baseline_with(
+pub fn estimate_stack_baseline(
     stack: &Stack,
     lights: &[DVec3],
     mask: Option<&[bool]>,
@@ -514,8 +495,15 @@ mod tests {
         stack.pixel_mut(1).copy_from_slice(&px);
         stack.pixel_mut(4).copy_from_slice(&px);
         let mask = [true, true, true, false, true, true];
-        let m = estimate_stack_baseline(&stack, &lights, Some(&mask), Baseline::Woodham, &|_| {})
-            .unwrap();
+        let m = estimate_stack_baseline(
+            &stack,
+            &lights,
+            Some(&mask),
+            Baseline::Woodham,
+            BaselineParams::default(),
+            &|_| {},
+        )
+        .unwrap();
         assert_eq!(m.counts.estimated, 2);
         assert_eq!(m.counts.masked, 1);
         assert_eq!(m.counts.no_data, 3);
@@ -533,7 +521,14 @@ mod tests {
 
         let e = |r: Result<EstimateMaps>| r.unwrap_err();
         let run = |l: &[DVec3], mask: Option<&[bool]>| {
-            estimate_stack_baseline(&stack, l, mask, Baseline::Woodham, &|_| {})
+            estimate_stack_baseline(
+                &stack,
+                l,
+                mask,
+                Baseline::Woodham,
+                BaselineParams::default(),
+                &|_| {},
+            )
         };
         assert_eq!(
             e(run(&lights[..29], None)),
@@ -555,7 +550,7 @@ mod tests {
             ..BaselineParams::default()
         };
         assert!(matches!(
-            estimate_stack_baseline_with(
+            estimate_stack_baseline(
                 &stack,
                 &lights,
                 None,

@@ -32,7 +32,9 @@
 use super::{Brdf, TangentAxis};
 use glam::DVec3;
 use std::f64::consts::{FRAC_PI_2, PI};
-use std::io::{BufWriter, Read, Write};
+use std::io::Read;
+#[cfg(test)]
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 /// Number of `θ_h` bins.
@@ -50,7 +52,7 @@ pub(crate) const FILE_LEN: u64 = 12 + 8 * 3 * CHANNEL_LEN as u64;
 
 /// Errors reading or writing a MERL `.binary` file; each names the file.
 #[derive(Debug, thiserror::Error)]
-pub enum MerlError {
+pub(crate) enum MerlError {
     /// The file could not be opened, read or written.
     #[error("MERL BRDF {}: {source}", .path.display())]
     Io {
@@ -89,14 +91,14 @@ pub enum MerlError {
 
 /// A MERL isotropic measured BRDF table.
 #[derive(Clone)]
-pub struct Merl {
+pub(crate) struct Merl {
     /// Stored values as in the file (before [`SCALE`]), channel-major, `3 · CHANNEL_LEN` long.
-    pub data: Vec<f64>,
+    pub(crate) data: Vec<f64>,
     /// The file the table was read from, if any (used by [`Brdf::name`]).
-    pub source: Option<PathBuf>,
+    pub(crate) source: Option<PathBuf>,
     /// Interpolate trilinearly between bin centres instead of the reference nearest-lower-bin
     /// lookup of `BRDFRead.cpp`.
-    pub trilinear: bool,
+    pub(crate) trilinear: bool,
 }
 
 impl std::fmt::Debug for Merl {
@@ -131,6 +133,7 @@ pub(crate) fn half_diff_angles(l: DVec3, v: DVec3) -> (f64, f64, f64, f64) {
 
 /// The light and view directions with the given half/difference angles (the inverse of
 /// [`half_diff_angles`]).
+#[cfg(test)]
 pub(crate) fn from_half_diff(theta_h: f64, phi_h: f64, theta_d: f64, phi_d: f64) -> (DVec3, DVec3) {
     let (sh, ch) = theta_h.sin_cos();
     let (sp, cp) = phi_h.sin_cos();
@@ -187,6 +190,7 @@ pub(crate) fn table_index(l: DVec3, v: DVec3) -> usize {
 }
 
 /// Bin-centre angles `(θ_h, θ_d, φ_d)` of a bin.
+#[cfg(test)]
 pub(crate) fn bin_centre(i_h: usize, i_d: usize, i_p: usize) -> (f64, f64, f64) {
     let s = (i_h as f64 + 0.5) / RES_THETA_H as f64;
     (
@@ -197,9 +201,10 @@ pub(crate) fn bin_centre(i_h: usize, i_d: usize, i_p: usize) -> (f64, f64, f64) 
 }
 
 impl Merl {
+    #[cfg(test)]
     /// A table from stored values (channel-major, as in the file). Panics unless
     /// `data.len() == 3 * CHANNEL_LEN`.
-    pub fn new(data: Vec<f64>) -> Self {
+    pub(crate) fn new(data: Vec<f64>) -> Self {
         assert_eq!(
             data.len(),
             3 * CHANNEL_LEN,
@@ -213,7 +218,7 @@ impl Merl {
     }
 
     /// Reads a MERL `.binary` file, checking the dimensions and the file size.
-    pub fn read(path: impl AsRef<Path>) -> Result<Merl, MerlError> {
+    pub(crate) fn read(path: impl AsRef<Path>) -> Result<Merl, MerlError> {
         let path = path.as_ref();
         let io = |source| MerlError::Io {
             path: path.to_path_buf(),
@@ -263,7 +268,7 @@ impl Merl {
     }
 
     /// The same table with trilinear interpolation switched on or off.
-    pub fn with_trilinear(mut self, trilinear: bool) -> Self {
+    pub(crate) fn with_trilinear(mut self, trilinear: bool) -> Self {
         self.trilinear = trilinear;
         self
     }
@@ -318,8 +323,9 @@ impl Merl {
         out
     }
 
+    #[cfg(test)]
     /// Writes the table as a MERL `.binary` file.
-    pub fn write(&self, path: impl AsRef<Path>) -> Result<(), MerlError> {
+    pub(crate) fn write(&self, path: impl AsRef<Path>) -> Result<(), MerlError> {
         let path = path.as_ref();
         let io = |source| MerlError::Io {
             path: path.to_path_buf(),
@@ -336,9 +342,10 @@ impl Merl {
         w.flush().map_err(io)
     }
 
+    #[cfg(test)]
     /// Tabulates a model at the bin centres (with `φ_h = 0`). Meant for isotropic models: an
     /// anisotropic model is sampled only along its local x-z plane of halfway vectors.
-    pub fn from_brdf(brdf: &dyn Brdf) -> Merl {
+    pub(crate) fn from_brdf(brdf: &dyn Brdf) -> Merl {
         let mut data = vec![0.0; 3 * CHANNEL_LEN];
         for i_h in 0..RES_THETA_H {
             for i_d in 0..RES_THETA_D {

@@ -69,7 +69,7 @@ pub use ggx::Ggx;
 pub use gltf::GltfPbr;
 pub use lambertian::Lambertian;
 pub use layered::Layered;
-pub use merl::{Merl, MerlError};
+pub(crate) use merl::Merl;
 pub use sheen::Sheen;
 pub use spec::parse_model;
 pub use torrance_sparrow::TorranceSparrow;

@@ -5,24 +5,6 @@
 use glam::DVec3;
 
 use crate::frames::rig::Rig;
-use crate::stack::Stack;
-
-/// Gathers one pixel's samples into rig order (`rig.n_used() * 3` values) in the caller's buffer.
-///
-/// The stack holds every input light; the rig uses those inside the cone.
-#[inline]
-pub fn gather_slice(rig: &Rig, stack: &Stack, pixel: usize, out: &mut [f32]) {
-    gather_pixel(rig, stack.pixel(pixel), out);
-}
-
-/// Gathers one pixel's samples, given as every input light's RGB in input order
-/// (`rig.n_input() * 3` values, e.g. a pixel of a [`Stack`] or of an on-disk tile), into rig order.
-#[inline]
-pub fn gather_pixel(rig: &Rig, samples: &[f32], out: &mut [f32]) {
-    for (dst, &i) in out.chunks_exact_mut(3).zip(rig.input_index()) {
-        dst.copy_from_slice(&samples[i * 3..i * 3 + 3]);
-    }
-}
 
 /// The slice's RGB value at a unit halfway vector; `None` where there is no data (outside the
 /// sampled region, or a corner sample is invalid).
@@ -124,25 +106,5 @@ mod tests {
             .0;
         slice[top * 3..top * 3 + 3].fill(f32::NAN);
         assert!(interpolate(&rig, &slice, rig.halfway_in_camera()[top]).is_none());
-    }
-
-    #[test]
-    fn gather_follows_the_rig_order() {
-        let mut lights = uniform_cone_lights(10, 65.0);
-        lights.insert(3, DVec3::new(0.0, 0.0, -1.0)); // dropped by the rig
-        let rig = Rig::new(&lights, RigOptions::default()).unwrap();
-        let mut stack = Stack::zeros(2, 1, lights.len());
-        for i in 0..lights.len() {
-            stack.set_image(i, &[i as f32; 6]);
-        }
-        let mut out = vec![0.0; rig.n_used() * 3];
-        gather_slice(&rig, &stack, 1, &mut out);
-        let want: Vec<f32> = rig
-            .input_index()
-            .iter()
-            .flat_map(|&i| [i as f32; 3])
-            .collect();
-        assert_eq!(out, want);
-        assert!(!out.contains(&3.0));
     }
 }

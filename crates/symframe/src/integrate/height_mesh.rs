@@ -20,47 +20,49 @@ pub struct Mesh {
     pub dropped: usize,
 }
 
-/// Builds a mesh with a vertex at the centre of every pixel with a height and a normal, two
-/// triangles per 2 x 2 block (one where only three of its pixels are valid), leaving out any
-/// triangle with an edge whose height difference departs from what the normals predict by more
-/// than `max_jump * (1 + |predicted|)` pixels (a depth discontinuity).
-pub fn mesh(depth: &DepthMap, normals: &[f32], max_jump: f64) -> Mesh {
-    let (w, h) = (depth.width, depth.height);
-    let mut index = vec![u32::MAX; w * h];
-    let mut m = Mesh::default();
-    let slope = |i: usize| -> Option<(f64, f64)> {
-        let v = &normals[3 * i..3 * i + 3];
-        if !v.iter().all(|x| x.is_finite()) {
-            return None;
-        }
-        let nz = (v[2] as f64).max(0.05);
-        Some((-(v[0] as f64) / nz, v[1] as f64 / nz))
-    };
-    for i in 0..w * h {
-        let v = &normals[3 * i..3 * i + 3];
-        if depth.depth[i].is_finite() && v.iter().all(|x| x.is_finite()) {
-            index[i] = m.positions.len() as u32;
-            let (r, q) = (i / w, i % w);
-            m.positions
-                .push([q as f32 + 0.5, (h - r) as f32 - 0.5, depth.depth[i]]);
-            let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(1e-30);
-            m.normals.push([v[0] / len, v[1] / len, v[2] / len]);
-            m.pixels.push([q as u32, r as u32]);
-        }
-    }
-    // An edge a -> b is continuous when its height step agrees with the mean slope.
-    let continuous = |a: usize, b: usize| -> bool {
-        let (Some((pa, qa)), Some((pb, qb))) = (slope(a), slope(b)) else {
-            return false;
+impl DepthMap {
+    /// Builds a mesh with a vertex at the centre of every pixel with a height and a normal, two
+    /// triangles per 2 x 2 block (one where only three of its pixels are valid), leaving out any
+    /// triangle with an edge whose height difference departs from what the normals predict by more
+    /// than `max_jump * (1 + |predicted|)` pixels (a depth discontinuity).
+    pub fn mesh(&self, normals: &[f32], max_jump: f64) -> Mesh {
+        let (w, h) = (self.width, self.height);
+        let mut index = vec![u32::MAX; w * h];
+        let mut m = Mesh::default();
+        let slope = |i: usize| -> Option<(f64, f64)> {
+            let v = &normals[3 * i..3 * i + 3];
+            if !v.iter().all(|x| x.is_finite()) {
+                return None;
+            }
+            let nz = (v[2] as f64).max(0.05);
+            Some((-(v[0] as f64) / nz, v[1] as f64 / nz))
         };
-        let dq = (b % w) as f64 - (a % w) as f64;
-        let dr = (b / w) as f64 - (a / w) as f64;
-        let predicted = 0.5 * (pa + pb) * dq + 0.5 * (qa + qb) * dr;
-        let step = depth.depth[b] as f64 - depth.depth[a] as f64;
-        (step - predicted).abs() <= max_jump * (1.0 + predicted.abs())
-    };
-    triangulate_grid(w, h, &index, continuous, &mut m);
-    m
+        for i in 0..w * h {
+            let v = &normals[3 * i..3 * i + 3];
+            if self.depth[i].is_finite() && v.iter().all(|x| x.is_finite()) {
+                index[i] = m.positions.len() as u32;
+                let (r, q) = (i / w, i % w);
+                m.positions
+                    .push([q as f32 + 0.5, (h - r) as f32 - 0.5, self.depth[i]]);
+                let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(1e-30);
+                m.normals.push([v[0] / len, v[1] / len, v[2] / len]);
+                m.pixels.push([q as u32, r as u32]);
+            }
+        }
+        // An edge a -> b is continuous when its height step agrees with the mean slope.
+        let continuous = |a: usize, b: usize| -> bool {
+            let (Some((pa, qa)), Some((pb, qb))) = (slope(a), slope(b)) else {
+                return false;
+            };
+            let dq = (b % w) as f64 - (a % w) as f64;
+            let dr = (b / w) as f64 - (a / w) as f64;
+            let predicted = 0.5 * (pa + pb) * dq + 0.5 * (qa + qb) * dr;
+            let step = self.depth[b] as f64 - self.depth[a] as f64;
+            (step - predicted).abs() <= max_jump * (1.0 + predicted.abs())
+        };
+        triangulate_grid(w, h, &index, continuous, &mut m);
+        m
+    }
 }
 
 /// The triangles of a mesh on a `w` x `h` pixel grid whose vertices `index` numbers (`u32::MAX`

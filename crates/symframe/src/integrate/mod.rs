@@ -40,7 +40,7 @@ mod height_mesh;
 mod multigrid;
 
 pub(crate) use height_mesh::triangulate_grid;
-pub use height_mesh::{mesh, Mesh};
+pub use height_mesh::Mesh;
 
 use crate::error::{Error, Result};
 use crate::regions::{label_regions, OUTSIDE};
@@ -423,7 +423,7 @@ mod tests {
         // The mesh of the bilateral surface breaks at the step, and keeps
         // no triangle across a jump of more than 3 pixels (the jump of the solution: its sides'
         // relative offset is its own).
-        let m = mesh(&bini, &n, 2.0);
+        let m = bini.mesh(&n, 2.0);
         assert!(m.dropped >= size / 2, "{} dropped", m.dropped);
         let mut kept = 0;
         for r in 0..size - 1 {
@@ -455,7 +455,7 @@ mod tests {
         let full = 2 * (size - 1) * (size - 1);
         assert_eq!(m.triangles.len() + m.dropped, full);
         // The smooth Poisson surface keeps every triangle of a full grid.
-        let mp = mesh(&poisson, &n, 2.0);
+        let mp = poisson.mesh(&n, 2.0);
         assert_eq!(mp.triangles.len() + mp.dropped, 2 * (size - 1) * (size - 1));
     }
 
@@ -510,7 +510,7 @@ mod tests {
     fn mesh_triangles_face_the_camera() {
         let (n, _, _) = sphere(32);
         let d = integrate(32, 32, &n, None, &IntegrateParams::default()).unwrap();
-        let m = mesh(&d, &n, 2.0);
+        let m = d.mesh(&n, 2.0);
         assert_eq!(m.positions.len(), d.pixels);
         assert!(!m.triangles.is_empty());
         for t in &m.triangles {

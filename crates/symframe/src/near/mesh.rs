@@ -19,7 +19,7 @@ const MIN_FACING: f64 = 0.05;
 /// A triangle is left out where an edge's log-depth step departs from the normals' prediction
 /// (`d ln z / du = -(n . r_u) / (n . r)`) by more than `max_jump * (1 + |predicted|)` once both
 /// are scaled to pixels by the focal length (a depth discontinuity, judged as
-/// [`crate::integrate::mesh`] judges it for a height map).
+/// [`crate::DepthMap::mesh`] judges it for a height map).
 pub fn perspective_mesh(
     camera: &Pinhole,
     width: usize,

@@ -21,6 +21,5 @@ pub(crate) use light::rotation_to_z;
 pub use light::{fit_sphere, PointLight};
 pub use mesh::{perspective_mesh, picture_heights};
 pub use solve::{
-    depth_from_normals, estimate_near_stack, mean_change_deg, perspective_depth, NearMethod,
-    NearOutcome, NearParams, NearScratch,
+    estimate_near_stack, perspective_depth, NearMethod, NearOutcome, NearParams, NearScratch,
 };

@@ -376,7 +376,7 @@ impl PixelMethod for NearMethod<'_> {
 /// fits (a flat region), the region's median depth is that of `previous` over the same pixels.
 /// Pixels without a normal (or facing away from the camera) keep their `previous` depth.
 #[allow(clippy::too_many_arguments)]
-pub fn depth_from_normals(
+pub(crate) fn depth_from_normals(
     camera: &Pinhole,
     width: usize,
     height: usize,
@@ -584,7 +584,7 @@ pub(crate) type RoundFn<'r, E> = dyn FnMut(&NearMethod<'_>, usize, &'static str)
     + 'r;
 
 /// Mean angle (degrees) between two normal maps over the pixels where both have a normal.
-pub fn mean_change_deg(a: &[f32], b: &[f32]) -> f64 {
+pub(crate) fn mean_change_deg(a: &[f32], b: &[f32]) -> f64 {
     let (mut sum, mut count) = (0.0, 0usize);
     for (x, y) in a.chunks_exact(3).zip(b.chunks_exact(3)) {
         let (x, y) = (

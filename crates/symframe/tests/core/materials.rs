@@ -8,7 +8,7 @@ use glam::DVec3;
 use symframe::brdf::{Brdf, Ggx, Lambertian};
 use symframe::render::{diligent_lights, BumpParams, Scene, TangentField};
 use symframe::{
-    estimate_stack, estimate_stack_baseline, gather_pixel, uniform_cone_lights, Baseline,
+    estimate_stack, estimate_stack_baseline, uniform_cone_lights, Baseline, BaselineParams,
     EstimateMaps, Estimator, EstimatorParams, Fallback, PixelSource, Rig, RigOptions,
 };
 
@@ -70,7 +70,15 @@ fn estimate(scene: &Scene, brdf: &dyn Brdf, lights: &[DVec3], params: EstimatorP
 
 fn baseline(scene: &Scene, brdf: &dyn Brdf, lights: &[DVec3], method: Baseline) -> Figures {
     let stack = scene.render_stack(brdf, lights);
-    let maps = estimate_stack_baseline(&stack, lights, Some(&scene.mask), method, &|_| {}).unwrap();
+    let maps = estimate_stack_baseline(
+        &stack,
+        lights,
+        Some(&scene.mask),
+        method,
+        BaselineParams::default(),
+        &|_| {},
+    )
+    .unwrap();
     let f = figures(scene, &maps);
     eprintln!("{} {method}: {f:?}", brdf.name());
     f
@@ -198,14 +206,19 @@ fn narrow_rigs_fill_every_pixel_and_say_where_from() {
     let stack = scene.render_stack(&plastic, &lights);
     let rig = Rig::new(&lights, RigOptions::default()).unwrap();
     let estimator = Estimator::new(&rig, EstimatorParams::default());
-    let mut slice = vec![0.0; rig.n_used() * 3];
     let (mut centre, mut rim) = (None, None);
     for p in 0..scene.n_pixels() {
         if !scene.mask[p] {
             continue;
         }
         let angle = scene.normals_in_camera[p].z.acos().to_degrees();
-        gather_pixel(&rig, stack.pixel(p), &mut slice);
+        // The pixel's samples in rig order.
+        let all = stack.pixel(p);
+        let slice: Vec<f32> = rig
+            .input_index()
+            .iter()
+            .flat_map(|&i| all[3 * i..3 * i + 3].iter().copied())
+            .collect();
         if angle < 5.0 && centre.is_none() {
             centre = Some(estimator.estimate_pixel(&slice));
         } else if (40.0..50.0).contains(&angle) && rim.is_none() {
