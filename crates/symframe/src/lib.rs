@@ -126,8 +126,7 @@ pub use stack::{check_inputs, Stack};
 
 // Estimating frames: the estimator, its parameters, the per-pixel interface and its drivers.
 pub use baselines::{
-    baseline_pixel, estimate_stack_baseline, Baseline, BaselineMethod, BaselineParams,
-    BaselinePixel,
+    estimate_stack_baseline, Baseline, BaselineMethod, BaselineParams, BaselinePixel,
 };
 pub use frames::estimator::{
     estimate_stack, Estimator, EstimatorParams, Fallback, Interpolation, PixelEstimate,

@@ -6,8 +6,8 @@ use rayon::prelude::*;
 use symframe::brdf::{Brdf, CookTorrance, TorranceSparrow, Ward};
 use symframe::render::{plane_frame, Scene};
 use symframe::{
-    baseline_pixel, uniform_cone_lights, Baseline, BaselineParams, CosineMode, Estimator,
-    EstimatorParams, Rig, RigOptions,
+    uniform_cone_lights, Baseline, BaselineParams, CosineMode, Estimator, EstimatorParams, Rig,
+    RigOptions,
 };
 
 use super::plot::{self, fmt_opt, md_table};
@@ -151,7 +151,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Cell>>> {
                 .into_iter()
                 .enumerate()
             {
-                let px = baseline_pixel(b, &all, &lights, &BaselineParams::default(), &mut scratch);
+                let px = b.pixel(&all, &lights, &BaselineParams::default(), &mut scratch);
                 out[2 + i] = px.normal.map(|n| angle_deg(n, n_gt));
             }
             out

@@ -230,20 +230,22 @@ fn brightest(samples: &[f32]) -> Option<(usize, f64)> {
     best
 }
 
-/// Runs one baseline at one pixel (`samples` as [`Stack::pixel`], `lights` unit, same order;
-/// `scratch` a buffer reused between pixels).
-pub fn baseline_pixel(
-    method: Baseline,
-    samples: &[f32],
-    lights: &[DVec3],
-    params: &BaselineParams,
-    scratch: &mut Vec<f64>,
-) -> BaselinePixel {
-    match method {
-        Baseline::Woodham => woodham_pixel(samples, lights, params, scratch),
-        Baseline::WoodhamRobust => woodham_robust_pixel(samples, lights, params, scratch),
-        Baseline::MaxReflectance => max_reflectance_pixel(samples, lights),
-        Baseline::HighlightCentroid => highlight_centroid_pixel(samples, lights),
+impl Baseline {
+    /// Runs this baseline at one pixel (`samples` as [`Stack::pixel`], `lights` unit, same
+    /// order; `scratch` a buffer reused between pixels).
+    pub fn pixel(
+        self,
+        samples: &[f32],
+        lights: &[DVec3],
+        params: &BaselineParams,
+        scratch: &mut Vec<f64>,
+    ) -> BaselinePixel {
+        match self {
+            Baseline::Woodham => woodham_pixel(samples, lights, params, scratch),
+            Baseline::WoodhamRobust => woodham_robust_pixel(samples, lights, params, scratch),
+            Baseline::MaxReflectance => max_reflectance_pixel(samples, lights),
+            Baseline::HighlightCentroid => highlight_centroid_pixel(samples, lights),
+        }
     }
 }
 
@@ -298,7 +300,8 @@ impl PixelMethod for BaselineMethod {
     }
 
     fn pixel(&self, _p: usize, samples: &[f32], scratch: &mut Vec<f64>) -> PixelRecord {
-        baseline_pixel(self.method, samples, &self.lights, &self.params, scratch)
+        self.method
+            .pixel(samples, &self.lights, &self.params, scratch)
             .record(self.method.source())
     }
 
@@ -435,11 +438,11 @@ mod tests {
         let nan = vec![f32::NAN; 150];
         for m in Baseline::ALL {
             assert_eq!(
-                baseline_pixel(m, &dark, &lights, &p, &mut Vec::new()).status,
+                m.pixel(&dark, &lights, &p, &mut Vec::new()).status,
                 PixelStatus::NoData
             );
             assert_eq!(
-                baseline_pixel(m, &nan, &lights, &p, &mut Vec::new()).status,
+                m.pixel(&nan, &lights, &p, &mut Vec::new()).status,
                 PixelStatus::NoData
             );
         }
