@@ -1,6 +1,8 @@
 //! Regular grids over the stereographic projection of the cone: [`StereoGrid`] and the
 //! symmetry domains' edge, [`Coverage`].
 
+use std::sync::{Arc, Mutex};
+
 use glam::{DVec2, DVec3};
 
 use crate::geometry::from_stereographic;
@@ -88,17 +90,47 @@ pub(crate) struct Coverage {
 /// Cells per side of the [`Coverage`] grid.
 const COVERAGE_SIZE: usize = 159;
 
+/// Grid nodes: index (row-major) and unit vector.
+type ConeNodes = Vec<(u32, DVec3)>;
+
+/// The [`Coverage`] grid's nodes strictly inside the cone of `theta_d_max_deg` (index, unit
+/// vector), row by row: the same for every rig of that cone, so computed once per cone (a
+/// near-light estimate builds hundreds of rigs of one cone).
+fn cone_nodes(theta_d_max_deg: f64) -> Arc<ConeNodes> {
+    /// The cones seen (their angle's bits), at most [`CONES_KEPT`], the oldest dropped.
+    static CONES: Mutex<Vec<(u64, Arc<ConeNodes>)>> = Mutex::new(Vec::new());
+    const CONES_KEPT: usize = 4;
+    let key = theta_d_max_deg.to_bits();
+    let mut cones = CONES.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, v)) = cones.iter().find(|(k, _)| *k == key) {
+        return v.clone();
+    }
+    let grid = StereoGrid::new(theta_d_max_deg, COVERAGE_SIZE);
+    let nodes = COVERAGE_SIZE + 1;
+    let cos_max = theta_d_max_deg.to_radians().cos();
+    let inside: Arc<ConeNodes> = Arc::new(
+        (0..nodes * nodes)
+            .map(|k| (k as u32, grid.point((k % nodes) as f64, (k / nodes) as f64)))
+            .filter(|(_, h)| h.z > cos_max)
+            .collect(),
+    );
+    if cones.len() >= CONES_KEPT {
+        cones.remove(0);
+    }
+    cones.push((key, inside.clone()));
+    inside
+}
+
 impl Coverage {
-    pub(super) fn new(inside: impl Fn(DVec3) -> bool, theta_d_max_deg: f64) -> Self {
+    /// The coverage of the region where `inside` holds (within the cone), its nodes visited
+    /// row by row.
+    pub(super) fn new(mut inside: impl FnMut(DVec3) -> bool, theta_d_max_deg: f64) -> Self {
         let grid = StereoGrid::new(theta_d_max_deg, COVERAGE_SIZE);
         let nodes = COVERAGE_SIZE + 1;
-        let cos_max = theta_d_max_deg.to_radians().cos();
-        let node: Vec<bool> = (0..nodes * nodes)
-            .map(|k| {
-                let h = grid.point((k % nodes) as f64, (k / nodes) as f64);
-                h.z > cos_max && inside(h)
-            })
-            .collect();
+        let mut node = vec![false; nodes * nodes];
+        for &(k, h) in cone_nodes(theta_d_max_deg).iter() {
+            node[k as usize] = inside(h);
+        }
         let covered = (0..COVERAGE_SIZE * COVERAGE_SIZE)
             .map(|c| {
                 let (i, j) = (c % COVERAGE_SIZE, c / COVERAGE_SIZE);

@@ -157,11 +157,22 @@ impl Rig {
         let triangles = triangulate(&halfway_in_camera)?;
         let grid = LocateGrid::new(&triangles, &halfway_in_camera);
         let fast = FastLocator::new(&triangles, &grid, theta);
+        // A node is inside where a candidate triangle holds it. The grid's nodes are visited
+        // row by row, so the triangle that held the node before is tried first.
+        let mut last = None;
         let coverage = Coverage::new(
             |h| {
-                grid.candidates(DVec2::new(h.x, h.y))
+                let candidates = grid.candidates(DVec2::new(h.x, h.y));
+                let holds = |t: u32| triangles[t as usize].weights(h).is_some();
+                if last.is_some_and(|t| candidates.contains(&t) && holds(t)) {
+                    return true;
+                }
+                let found = candidates
                     .iter()
-                    .any(|&t| triangles[t as usize].weights(h).is_some())
+                    .copied()
+                    .find(|&t| Some(t) != last && holds(t));
+                last = found.or(last);
+                found.is_some()
             },
             theta,
         );
@@ -369,6 +380,41 @@ mod tests {
         }
         assert_eq!(rig.n_dropped(), 2);
         assert!(rig.halfway_in_camera.iter().all(|h| rig.in_cone(*h)));
+    }
+
+    /// The coverage (nodes visited from the cone's cached list, the triangle that held the
+    /// node before tried first) is that of every node of the grid tested against all its
+    /// candidates, on rigs of several sizes and cones.
+    #[test]
+    fn coverage_is_every_node_tested_against_its_candidates() {
+        for (n, theta) in [(20, 65.0), (150, 65.0), (400, 40.0), (1512, 65.0)] {
+            let options = RigOptions {
+                theta_d_max_deg: theta,
+            };
+            let rig = Rig::new(&uniform_cone_lights(n, 70.0), options).unwrap();
+            let grid = grid::StereoGrid::new(theta, rig.coverage.grid.size);
+            let nodes = grid.size + 1;
+            let cos_max = theta.to_radians().cos();
+            let node: Vec<bool> = (0..nodes * nodes)
+                .map(|k| {
+                    let h = grid.point((k % nodes) as f64, (k / nodes) as f64);
+                    h.z > cos_max
+                        && rig
+                            .grid
+                            .candidates(DVec2::new(h.x, h.y))
+                            .iter()
+                            .any(|&t| rig.triangles[t as usize].weights(h).is_some())
+                })
+                .collect();
+            let covered: Vec<bool> = (0..grid.size * grid.size)
+                .map(|c| {
+                    let k = (c / grid.size) * nodes + c % grid.size;
+                    node[k] && node[k + 1] && node[k + nodes] && node[k + nodes + 1]
+                })
+                .collect();
+            assert!(covered.iter().filter(|&&c| c).count() > 1000);
+            assert_eq!(rig.coverage.covered, covered, "{n} lights, {theta} degrees");
+        }
     }
 
     #[test]

@@ -56,18 +56,16 @@ const CELLS_PER_TRIANGLE_SIDE: f64 = 4.0;
 impl FastLocator {
     pub(super) fn new(rig_triangles: &[Triangle], grid: &LocateGrid, theta_d_max_deg: f64) -> Self {
         let n = rig_triangles.len();
-        // Neighbours through shared edges.
-        let mut edges: std::collections::HashMap<(u32, u32), Vec<(u32, usize)>> =
-            std::collections::HashMap::with_capacity(3 * n);
+        // Neighbours through shared edges: each edge's sides, sorted by the edge (an edge with
+        // two sides joins their triangles).
+        let mut edges: Vec<((u32, u32), u32, usize)> = Vec::with_capacity(3 * n);
         for (t, tri) in rig_triangles.iter().enumerate() {
             for k in 0..3 {
                 let (a, b) = (tri.vertices[(k + 1) % 3], tri.vertices[(k + 2) % 3]);
-                edges
-                    .entry((a.min(b), a.max(b)))
-                    .or_default()
-                    .push((t as u32, k));
+                edges.push(((a.min(b), a.max(b)), t as u32, k));
             }
         }
+        edges.sort_unstable();
         let sentinel = n as u32;
         let mut triangles: Vec<WalkTriangle> = rig_triangles
             .iter()
@@ -80,8 +78,8 @@ impl FastLocator {
                 }
             })
             .collect();
-        for sharing in edges.values() {
-            if let [(t0, k0), (t1, k1)] = sharing[..] {
+        for sharing in edges.chunk_by(|a, b| a.0 == b.0) {
+            if let [(_, t0, k0), (_, t1, k1)] = *sharing {
                 triangles[t0 as usize].neighbours[k0] = t1;
                 triangles[t1 as usize].neighbours[k1] = t0;
             }
