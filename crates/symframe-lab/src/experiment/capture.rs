@@ -440,11 +440,20 @@ fn cell(scene: &Scene, maps: &EstimateMaps, gt_t: &[f32], anisotropic: bool) -> 
     }
 }
 
+/// How many times the sets' size the images the noise is estimated from are: four, as a
+/// 48-pixel sphere becomes a 192-pixel one, its shading's curvature per pixel sixteen times
+/// smaller.
+const NOISE_SCALE: usize = 4;
+
 /// Renders, degrades and estimates every set; the rows in job order.
 pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
     let mats = materials(quick);
     let conds = conditions(quick);
     let scene = Scene::sphere(size, TangentField::Circular);
+    // The noise is estimated on the same capture at NOISE_SCALE times the size: the
+    // estimator reads a small sphere's shading curvature as noise, where a real capture's
+    // object spans hundreds of pixels (docs/validation.md, "Real-capture conditions").
+    let noise_scene = Scene::sphere(NOISE_SCALE * size, TangentField::Circular);
     let gt_t = scene.gt_tangents();
     let mut jobs: Vec<(usize, usize, &'static str)> = Vec::new();
     for m in 0..mats.len() {
@@ -487,29 +496,32 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
             drop(clean);
             let seed = 17 + 1000 * m as u64 + c as u64;
             let d = cond.degradation(at, seed);
-            let stack = match cond.jpeg_quality {
-                None => scene.render_stack_degraded(mat.brdf.as_ref(), &lights, &d),
-                Some(q) => {
-                    ensure!(
-                        (cond.bits, cond.srgb) == (Some(8), true),
-                        "a JPEG capture is 8-bit sRGB: {}",
-                        cond.label()
-                    );
-                    // Quantisation and the saturation rule are the round trip's.
-                    let camera = Degradation {
-                        quantise_bits: None,
-                        saturation: None,
-                        ..d
-                    };
-                    // The reader's defaults (its saturation rule is the one `degradation`
-                    // copies); above 1 where that rule is off: no sample counts as saturated.
-                    let mut opts = DecodeOptions::default();
-                    if d.saturation.is_none() {
-                        opts.saturation = 2.0;
+            let capture = |scene: &Scene, lights: &[DVec3]| -> Result<_> {
+                Ok(match cond.jpeg_quality {
+                    None => scene.render_stack_degraded(mat.brdf.as_ref(), lights, &d),
+                    Some(q) => {
+                        ensure!(
+                            (cond.bits, cond.srgb) == (Some(8), true),
+                            "a JPEG capture is 8-bit sRGB: {}",
+                            cond.label()
+                        );
+                        // Quantisation and the saturation rule are the round trip's.
+                        let camera = Degradation {
+                            quantise_bits: None,
+                            saturation: None,
+                            ..d
+                        };
+                        // The reader's defaults (its saturation rule is the one `degradation`
+                        // copies); above 1 where that rule is off: no sample counts as saturated.
+                        let mut opts = DecodeOptions::default();
+                        if d.saturation.is_none() {
+                            opts.saturation = 2.0;
+                        }
+                        render_stack_jpeg(scene, mat.brdf.as_ref(), lights, &camera, q, &opts)?
                     }
-                    render_stack_jpeg(&scene, mat.brdf.as_ref(), &lights, &camera, q, &opts)?
-                }
+                })
             };
+            let stack = capture(&scene, &lights)?;
             // The methods get the lights as a calibration knows them.
             let known = if cond.light_error_deg > 0.0 {
                 jitter_lights(&lights, cond.light_error_deg, seed)
@@ -534,8 +546,10 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
                 ..NoiseModel::default()
             };
             let n = lights.len();
-            let picks: Vec<Vec<f32>> = (0..4).map(|k| stack.image(k * (n - 1) / 3)).collect();
-            let estimated = told.estimate(picks.iter().map(|v| &v[..]), stack.width, None);
+            let probe_lights: Vec<DVec3> = (0..4).map(|k| lights[k * (n - 1) / 3]).collect();
+            let probe = capture(&noise_scene, &probe_lights)?;
+            let picks: Vec<Vec<f32>> = (0..4).map(|k| probe.image(k)).collect();
+            let estimated = told.estimate(picks.iter().map(|v| &v[..]), probe.width, None);
             let params = EstimatorParams {
                 noise: NoiseModel {
                     light_error_deg: cond.light_error_deg,
@@ -723,7 +737,12 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
          maximum is unknown under that light; a float capture's clip level is found from the \
          plateau of its samples at one value, docs/method.md \"Noise model\"), and light \
          directions given to every method \
-         each off by the stated angle in a random direction. The reference capture is {}, \
+         each off by the stated angle in a random direction. The estimator's noise model (shot \
+         and read noise; a float capture's clip level) is estimated as `estimate` estimates \
+         it, from four of the capture's images, rendered for that at {noise} x {noise} pixels \
+         with the same degradation: on the {size}-pixel sphere itself the estimate reads the \
+         shading's curvature per pixel as noise, where a real capture's object spans hundreds \
+         of pixels. The reference capture is {}, \
          stored losslessly (as a PNG). Rigs: dense = {} lights uniform over the 65-degree cone (a 130-degree cap), sparse = \
          200, narrow = the DiLiGenT-like 96-light grid within 45 degrees. The estimator runs \
          with its defaults. Cells: mean normal error in degrees over pixels within 60 degrees \
@@ -732,7 +751,8 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
          swap (the frame's error, without the rule that picks which axis is the tangent). Materials marked held out were not looked at while \
          the estimator's rules were chosen.\n\n",
         REFERENCE.label(),
-        if ctx.quick { 300 } else { 1000 }
+        if ctx.quick { 300 } else { 1000 },
+        noise = NOISE_SCALE * size,
     );
     let header = |first: &str| -> Vec<String> {
         let mut h = vec!["material".to_string(), first.to_string()];
