@@ -461,6 +461,9 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
             let rigs: &[&'static str] = match (*sweep, quick) {
                 ("reference", false) => &["dense", "sparse", "narrow"],
                 ("reference", true) | ("clean", _) => &["dense", "sparse"],
+                // A development aid: `SYMFRAME_CAPTURE_SPARSE=1` runs the sweeps on the sparse
+                // rig too.
+                _ if std::env::var_os("SYMFRAME_CAPTURE_SPARSE").is_some() => &["dense", "sparse"],
                 _ => &["dense"],
             };
             jobs.extend(rigs.iter().map(|&r| (m, c, r)));
