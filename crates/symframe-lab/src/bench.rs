@@ -14,7 +14,8 @@
 //! written to `bench.json` in `--dir` (`total_s`, `decode_s`, `estimate_s`, `peak_rss_bytes`,
 //! `cache_bytes`, `woodham_s`, ...). `symframe-lab bench scaling` ([`scaling`]) sweeps size,
 //! lights and threads with the same dataset and run code. `--near` ([`run_near`]) times the
-//! near-light estimate of a dome capture against the distant-light one on the same images.
+//! near-light estimate of a dome capture against a distant-light capture of as many pixels (in
+//! wall and CPU time) and, unless `--no-baseline`, the distant-light model on the same images.
 
 pub mod scaling;
 
@@ -410,10 +411,32 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
+/// One run of the near capture in `data` with the light `model`, output into `out-{tag}-{name}`
+/// (its tile cache deleted first when `--cold` and `model` is near, the first run on it).
+fn near_run(
+    args: &BenchArgs,
+    data: &Path,
+    tag: &str,
+    name: &str,
+    model: LightModel,
+) -> Result<Figures> {
+    let mut config = symmetry_config(
+        data,
+        args.dir.join(format!("out-{tag}-{name}")),
+        args.dir.join(format!("cache-{tag}")),
+        args.cold && model == LightModel::Near,
+        args.decode_memory,
+        args.cache_format,
+    )?;
+    config.near.model = model;
+    run_estimate(&config)
+}
+
 /// The near-light benchmark: renders the dome capture of `symframe synth --near` once (`--size`
 /// wide, `--lights` lights), then times its estimate with near lights (rounds of per-tile rigs
-/// and depth) and with distant ones (`--light-model distant`) on the same tile cache, and the
-/// paper's distant-light sphere of about as many pixels under as many lights.
+/// and depth), the paper's distant-light sphere of about as many pixels under as many lights,
+/// and (unless `--no-baseline`) the near images with distant lights (`--light-model distant`)
+/// on the same tile cache.
 pub fn run_near(args: &BenchArgs) -> Result<()> {
     let (width, n) = (args.size, args.lights);
     if !(16..=2048).contains(&width) || !(16..=10_000).contains(&n) {
@@ -438,22 +461,12 @@ pub fn run_near(args: &BenchArgs) -> Result<()> {
         let show = |p| bars.update(p);
         symframe_job::synth_near(&capture, &symframe_console::control(&show, None))?;
     }
-    let mut runs = Vec::new();
-    for (name, model) in [("near", LightModel::Near), ("distant", LightModel::Distant)] {
-        let mut config = symmetry_config(
-            &data,
-            args.dir.join(format!("out-{tag}-{name}")),
-            args.dir.join(format!("cache-{tag}")),
-            args.cold && name == "near",
-            args.decode_memory,
-            args.cache_format,
-        )?;
-        config.near.model = model;
-        runs.push(run_estimate(&config)?);
-    }
+    // The near run, then the distant capture right after it (the machine's load changes less
+    // between them than over the long distant-model run), then the distant model.
+    let near = near_run(args, &data, &tag, "near", LightModel::Near)?;
     // A distant-light capture of about as many pixels: the paper's brushed sphere, its side
     // chosen so that its disc holds the near capture's mask, under as many lights.
-    let side = ((runs[0].mask_pixels * 4.0 / std::f64::consts::PI)
+    let side = ((near.mask_pixels * 4.0 / std::f64::consts::PI)
         .sqrt()
         .round() as usize)
         .max(8);
@@ -468,21 +481,39 @@ pub fn run_near(args: &BenchArgs) -> Result<()> {
         args.cache_format,
     )?;
     let sphere = run_estimate(&config)?;
-    let (near, far) = (&runs[0], &runs[1]);
+    // The distant model on the near images (--no-baseline skips it: it costs several times the
+    // near run, the lights not fitting these images).
+    let far = if args.no_baseline {
+        None
+    } else {
+        Some(near_run(args, &data, &tag, "distant", LightModel::Distant)?)
+    };
+    let near = &near;
     println!(
         "bench --near: {width}x{} pixels, {n} lights on a dome, {} threads",
         width / 2,
         rayon::current_num_threads()
     );
     print_figures("near", near);
-    print_figures("distant", far);
+    if let Some(far) = &far {
+        print_figures("distant", far);
+    }
     print_figures("sphere", &sphere);
-    let ratio = near.estimate_s / far.estimate_s;
-    println!("    ratio: near / distant estimation time on the same images {ratio:.2}x");
+    let ratio = far.as_ref().map(|f| near.estimate_s / f.estimate_s);
+    if let Some(ratio) = ratio {
+        println!("    ratio: near / distant estimation time on the same images {ratio:.2}x");
+    }
     let capture_ratio = near.pixels_per_s().recip() / sphere.pixels_per_s().recip();
     println!(
         "    ratio: near / a distant-light capture ({side}x{side} sphere, {n} lights) time per \
          pixel {capture_ratio:.2}x"
+    );
+    // CPU seconds (all threads) per pixel: steadier than the wall time where other programs
+    // share the cores.
+    let cpu_ratio = (near.cpu_s / near.mask_pixels) / (sphere.cpu_s / sphere.mask_pixels);
+    println!(
+        "    ratio: the same in CPU time per pixel {cpu_ratio:.2}x (near {:.1} s, sphere {:.1} s)",
+        near.cpu_s, sphere.cpu_s
     );
     // What each run's time is made of: the near rounds, and the estimator's work per pixel
     // (the distant model's lights do not fit these images, which costs it more per pixel).
@@ -492,18 +523,21 @@ pub fn run_near(args: &BenchArgs) -> Result<()> {
             fs::read_to_string(&p).with_context(|| format!("{}: cannot read", p.display()))?;
         Ok(serde_json::from_str(&text)?)
     };
-    let (rn, rf) = (
-        report_at(&format!("out-{tag}-near"))?,
-        report_at(&format!("out-{tag}-distant"))?,
-    );
+    let rn = report_at(&format!("out-{tag}-near"))?;
+    let rf = match far {
+        Some(_) => Some(report_at(&format!("out-{tag}-distant"))?),
+        None => None,
+    };
     let rounds = rn.pointer("/near/iterations").and_then(|v| v.as_u64());
     let evals = |r: &serde_json::Value| r["evals_per_pixel"].as_f64().unwrap_or(f64::NAN);
     println!(
-        "    near: {} rounds, {:.0} objective evaluations per pixel in the last; distant: {:.0} \
-         per pixel",
+        "    near: {} rounds, {:.0} objective evaluations per pixel in the last{}",
         rounds.unwrap_or(0),
         evals(&rn),
-        evals(&rf)
+        rf.as_ref().map_or(String::new(), |r| format!(
+            "; distant: {:.0} per pixel",
+            evals(r)
+        ))
     );
     let json = serde_json::json!({
         "near": true,
@@ -512,19 +546,22 @@ pub fn run_near(args: &BenchArgs) -> Result<()> {
         "lights": n,
         "threads": rayon::current_num_threads(),
         "near_estimate_s": near.estimate_s,
-        "distant_estimate_s": far.estimate_s,
+        "distant_estimate_s": far.as_ref().map(|f| f.estimate_s),
         "near_total_s": near.wall_s,
-        "distant_total_s": far.wall_s,
+        "distant_total_s": far.as_ref().map(|f| f.wall_s),
         "near_peak_rss_bytes": near.peak_rss_bytes,
-        "distant_peak_rss_bytes": far.peak_rss_bytes,
+        "distant_peak_rss_bytes": far.as_ref().map(|f| f.peak_rss_bytes),
         "near_over_distant": ratio,
         "near_rounds": rounds,
         "near_evals_per_pixel_last_round": evals(&rn),
-        "distant_evals_per_pixel": evals(&rf),
+        "distant_evals_per_pixel": rf.as_ref().map(evals),
         "sphere_side": side,
         "sphere_estimate_s": sphere.estimate_s,
         "sphere_evals_per_pixel": evals(&report_at(&format!("out-{sphere_tag}-symmetry"))?),
         "near_over_distant_capture_per_pixel": capture_ratio,
+        "near_cpu_s": near.cpu_s,
+        "sphere_cpu_s": sphere.cpu_s,
+        "near_over_distant_capture_cpu_per_pixel": cpu_ratio,
     });
     let out = args.dir.join("bench.json");
     fs::write(&out, serde_json::to_string_pretty(&json)? + "\n")

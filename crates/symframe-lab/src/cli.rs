@@ -128,7 +128,8 @@ pub struct BenchArgs {
     /// Number of lights (the paper's captures: 1512).
     #[arg(long, default_value_t = 1512)]
     pub lights: usize,
-    /// Skip the baseline run (`woodham` on the same cache).
+    /// Skip the baseline run (`woodham` on the same cache; with --near, the distant-light model
+    /// on the near images).
     #[arg(long)]
     pub no_baseline: bool,
     /// Delete the tile cache first, so the run decodes every image (default: reuse it).
