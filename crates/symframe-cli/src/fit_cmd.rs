@@ -4,7 +4,7 @@
 
 use anyhow::{bail, Result};
 use glam::DVec3;
-use symframe::{holdout_lights, FitParams};
+use symframe::FitParams;
 use symframe_io::CacheOptions;
 use symframe_job::{FitConfig, FitOutcome, RelightConfig, RelightOutcome, ViewConfig, ViewOutcome};
 
@@ -32,7 +32,7 @@ pub fn config(args: &FitArgs) -> Result<FitConfig> {
     if args.holdout > 0 {
         // Checked here to name the flag (reading the light file is cheap).
         let n = symframe_io::open_dataset(&args.input)?.lights.len();
-        holdout_lights(n, args.holdout)
+        FitParams::holdout_lights(n, args.holdout)
             .map_err(|e| anyhow::anyhow!("--holdout {}: {e}", args.holdout))?;
     }
     Ok(FitConfig {

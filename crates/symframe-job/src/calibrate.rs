@@ -10,8 +10,8 @@ use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
 use symframe::{
-    detect_sphere, find_highlight, matte_intensity, Circle, Highlight, HighlightError,
-    HighlightParams, MatteError, MatteParams,
+    detect_sphere, find_highlight, Circle, Highlight, HighlightError, HighlightParams, MatteError,
+    MatteParams,
 };
 use symframe_io::DecodeOptions;
 
@@ -33,7 +33,7 @@ pub struct CalibrateConfig {
     /// Fail on the first image without a single clear highlight (else drop it with a warning).
     pub strict: bool,
     /// A diffuse (matte, grey) sphere's circle: per light, its RGB intensity is measured there
-    /// ([`symframe::matte_intensity`]) and written as `light_intensities.txt` beside
+    /// ([`symframe::MatteParams::intensity`]) and written as `light_intensities.txt` beside
     /// the `.lp`, normalised to a mean of 1 over every light and channel.
     pub matte_sphere: Option<Circle>,
     /// How images are decoded.
@@ -281,7 +281,7 @@ pub(crate) fn read_grey(
 }
 
 /// The rows a circle's pixels lie in, clipped to an image of `height` rows (as
-/// [`matte_intensity`] and [`find_highlight`] bound their pixels).
+/// [`MatteParams::intensity`] and [`find_highlight`] bound their pixels).
 pub(crate) fn circle_rows(c: &Circle, height: usize) -> std::ops::Range<usize> {
     let y0 = (c.cy - c.r).floor().max(0.0) as usize;
     let y1 = ((c.cy + c.r).ceil().max(0.0) as usize).min(height);
@@ -615,7 +615,7 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
                 // The matte sphere from its rows alone: its circle moved up by their first
                 // (a whole number of rows: every pixel's offset from the centre is the same).
                 let matte = match (&res, &config.matte_sphere) {
-                    (Ok(hl), Some(c)) => Some(matte_intensity(
+                    (Ok(hl), Some(c)) => Some(MatteParams::default().intensity(
                         w,
                         matte_rows.len(),
                         &rgb,
@@ -624,7 +624,6 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
                             ..*c
                         },
                         hl.light,
-                        &MatteParams::default(),
                     )),
                     _ => None,
                 };

@@ -15,9 +15,8 @@ use glam::DVec3;
 use rayon::prelude::*;
 use serde::Serialize;
 use symframe::{
-    circle_rim, detect_spheres, find_highlight, fit_sphere, outline_points, reflected_ray,
-    sphere_from_rim, triangulate, Circle, HighlightParams, MatteParams, Pinhole, PointLight,
-    Triangulation,
+    circle_rim, detect_spheres, find_highlight, fit_sphere, reflected_ray, sphere_from_rim,
+    triangulate, Circle, HighlightParams, MatteParams, Pinhole, PointLight, Triangulation,
 };
 use symframe_io::DecodeOptions;
 
@@ -359,7 +358,7 @@ pub fn calibrate_near(
 
     let mut spheres = Vec::with_capacity(circles.len());
     for c in &circles {
-        let (outline, rim) = match outline_points(w, h, &mean, *c) {
+        let (outline, rim) = match c.outline(w, h, &mean) {
             Some((_, rim)) if rim.len() >= 16 => ("image", rim),
             _ => {
                 ctl.warn(&format!(
@@ -631,7 +630,7 @@ fn matte_intensities(
     ctl: &Control,
 ) -> Result<(MatteRecord, Vec<[f64; 3]>)> {
     let radius = config.matte_radius.unwrap_or(config.radius);
-    let (outline, rim) = match outline_points(w, h, mean, circle) {
+    let (outline, rim) = match circle.outline(w, h, mean) {
         Some((_, rim)) if rim.len() >= 16 => ("image", rim),
         _ => {
             ctl.warn(&format!(

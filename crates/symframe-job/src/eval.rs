@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Result};
 use glam::DVec3;
 use serde::Serialize;
-use symframe::{evaluate_in_views, normal_error_map, tangent_error_map, Evaluation};
+use symframe::{evaluate, Evaluation};
 
 use crate::colorbar::{error_picture, Cell, Scale};
 
@@ -131,7 +131,7 @@ fn inside(mask: Option<&[bool]>, p: usize) -> bool {
 }
 
 /// The evaluated pixels: inside the mask, with a true normal within `max_angle_deg` of the
-/// pixel's view (as [`evaluate_in_views`] counts them).
+/// pixel's view (as [`evaluate`] counts them).
 fn evaluated(
     gt_normals: &[f32],
     mask: Option<&[bool]>,
@@ -254,14 +254,14 @@ pub fn evaluate_job(config: &EvalConfig, ctl: &crate::Control) -> Result<EvalRep
         Some(c) => c.view((p % w) as f64, (p / w) as f64),
         None => DVec3::Z,
     };
-    let evaluation = evaluate_in_views(
+    let evaluation = evaluate(
         &normals,
         &tangents,
         &gt_normals,
         gt_tangents.as_deref(),
         mask.as_deref(),
         config.max_angle,
-        &view,
+        Some(&view),
     );
     // Colour scales: the user's top, or a round number near the 95th percentile of the
     // evaluated pixels' errors (those outside still show, clipped to the top colour).
@@ -272,7 +272,7 @@ pub fn evaluate_job(config: &EvalConfig, ctl: &crate::Control) -> Result<EvalRep
     };
 
     // Everything is computed before anything is written.
-    let n_err = normal_error_map(&normals, &gt_normals);
+    let n_err = Evaluation::normal_error_map(&normals, &gt_normals);
     let n_scale = scale_for(&n_err, 180.0);
     let n_pic = error_picture(
         "normal error (degrees)",
@@ -283,7 +283,7 @@ pub fn evaluate_job(config: &EvalConfig, ctl: &crate::Control) -> Result<EvalRep
     )?;
     let t_pic = match &gt_tangents {
         Some(gt_t) => {
-            let t_err = tangent_error_map(&tangents, gt_t);
+            let t_err = Evaluation::tangent_error_map(&tangents, gt_t);
             let t_scale = scale_for(&t_err, 90.0);
             let pic = error_picture(
                 "tangent axis error (degrees)",

@@ -10,9 +10,8 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 use symframe::{
-    holdout_lights, ExposureChoice, FitMaps, FitMethod, FitModel, FitParams, FitSummary, GltfFit,
-    HoldoutError, LobeFit, LobeKind, LobeModel, PixelOutcome, WardFit, MODEL_CLEARCOAT, MODEL_GLTF,
-    MODEL_WARD, MODEL_WOVEN,
+    ExposureChoice, FitMaps, FitMethod, FitModel, FitParams, FitSummary, GltfFit, HoldoutError,
+    LobeFit, LobeKind, LobeModel, PixelOutcome, WardFit,
 };
 use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{
@@ -41,11 +40,11 @@ pub struct FitConfig {
     /// `params.holdout`.
     pub holdout: usize,
     /// The fit's parameters (`params.model` chooses the model; the default is the automatic
-    /// choice per pixel, [`symframe::DEFAULT_MODEL`]).
+    /// choice per pixel, [`symframe::FitModel::DEFAULT`]).
     pub params: FitParams,
     /// glTF or automatic fit: the light intensity ([`FitParams::exposure`]); `None` chooses
     /// it by validation lights on up to [`EXPOSURE_PIXELS`] pixels spread over the image
-    /// ([`symframe::select_exposure`]). Replaces `params.exposure`.
+    /// ([`symframe::ExposureChoice::select`]). Replaces `params.exposure`.
     pub exposure: Option<f64>,
     /// Mask image (`None`: the dataset's `mask.png`, if any).
     pub mask: Option<PathBuf>,
@@ -139,7 +138,7 @@ pub struct FitReport {
     /// Whether that exposure was chosen from the data (`true`) or given (`false`).
     pub exposure_chosen: Option<bool>,
     /// How a chosen exposure was chosen: the intensities tried and the validation error of
-    /// each ([`symframe::select_exposure`]).
+    /// each ([`symframe::ExposureChoice::select`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub exposure_choice: Option<ExposureChoice>,
     /// Fit parameters, including the held-out light indices.
@@ -333,7 +332,7 @@ fn run(
         &|n| n == "viewer.html",
     )?;
     let params = FitParams {
-        holdout: holdout_lights(ds.lights.len(), config.holdout)
+        holdout: FitParams::holdout_lights(ds.lights.len(), config.holdout)
             .with_context(|| format!("holding out {} lights", config.holdout))?,
         ..config.params.clone()
     };
@@ -460,7 +459,7 @@ pub const EXPOSURE_PIXELS: usize = 2048;
 
 /// The light intensity of a glTF fit chosen from up to [`EXPOSURE_PIXELS`] pixels (inside the
 /// mask, with a frame) spread evenly over the image, read tile by tile from the cache
-/// ([`symframe::select_exposure`]).
+/// ([`symframe::ExposureChoice::select`]).
 fn choose_exposure(
     cache: &symframe_io::TileCache,
     lights: &[glam::DVec3],
@@ -470,10 +469,9 @@ fn choose_exposure(
     mask: Option<&[bool]>,
 ) -> Result<ExposureChoice> {
     use rayon::prelude::*;
-    use symframe::vec_at;
-    use symframe::{PixelData, PixelFitter};
+    use symframe::{EstimateMaps, PixelData, PixelFitter};
     let grid = *cache.grid();
-    let usable = |p: usize| mask.is_none_or(|m| m[p]) && vec_at(normals, p).is_some();
+    let usable = |p: usize| mask.is_none_or(|m| m[p]) && EstimateMaps::vec_at(normals, p).is_some();
     let count = (0..grid.width * grid.height).filter(|&p| usable(p)).count();
     let stride = count.div_ceil(EXPOSURE_PIXELS).max(1);
     // The k-th usable pixel (row-major) is chosen when k is a multiple of the stride.
@@ -493,7 +491,10 @@ fn choose_exposure(
                 if !chosen[p] {
                     continue;
                 }
-                let (Some(normal), tangent) = (vec_at(normals, p), vec_at(tangents, p)) else {
+                let (Some(normal), tangent) = (
+                    EstimateMaps::vec_at(normals, p),
+                    EstimateMaps::vec_at(tangents, p),
+                ) else {
                     continue;
                 };
                 let mut rgb = vec![0.0f32; lights.len() * 3];
@@ -508,7 +509,7 @@ fn choose_exposure(
             out
         })
         .collect();
-    symframe::select_exposure(lights, params, &pixels).with_context(|| {
+    ExposureChoice::select(lights, params, &pixels).with_context(|| {
         "no pixel to choose the exposure of the glTF fit from; give it with --exposure"
     })
 }
@@ -616,10 +617,10 @@ fn write_outputs(
             .model
             .iter()
             .flat_map(|&c| match c {
-                MODEL_WARD => [0.2, 0.45, 1.0],
-                MODEL_GLTF => [1.0, 0.55, 0.1],
-                MODEL_CLEARCOAT => [0.2, 0.8, 0.3],
-                MODEL_WOVEN => [0.85, 0.25, 0.8],
+                FitMaps::MODEL_WARD => [0.2, 0.45, 1.0],
+                FitMaps::MODEL_GLTF => [1.0, 0.55, 0.1],
+                FitMaps::MODEL_CLEARCOAT => [0.2, 0.8, 0.3],
+                FitMaps::MODEL_WOVEN => [0.85, 0.25, 0.8],
                 _ => [0.0; 3],
             })
             .collect();

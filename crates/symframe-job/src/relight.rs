@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use serde::Serialize;
-use symframe::{tone_map, Edits, GltfMaps, LobeMaps, Relighter, WardMaps};
+use symframe::{Edits, GltfMaps, LobeMaps, Relighter, WardMaps};
 
 use crate::outdir::{OutputDir, OutputSet};
 
@@ -166,7 +166,7 @@ pub fn read_fit_maps(dir: &Path) -> Result<FittedMaps> {
 /// The two-lobe maps of a fit folder (without extension; `.npy` and `.exr` are written):
 /// diffuse albedo, the two lobes' reflectances (`H x W x 3`), then the roughnesses along the
 /// tangent and the binormal and the coat's (`H x W`). Which model each pixel has is in
-/// `model.npy` ([`symframe::MODEL_CLEARCOAT`], [`symframe::MODEL_WOVEN`]).
+/// `model.npy` ([`symframe::FitMaps::MODEL_CLEARCOAT`], [`symframe::FitMaps::MODEL_WOVEN`]).
 pub const LOBE_MAPS: [&str; 6] = [
     "lobes_kd",
     "lobes_ka",
@@ -421,7 +421,7 @@ fn write_relit(
         let name = format!("relit_{i:03}");
         let mut img = relighter.render(l);
         if let Some(hf) = heights {
-            let shadowed = symframe::render::cast_shadows(hf, w, h, l);
+            let shadowed = symframe::render::Scene::cast_shadows(hf, w, h, l);
             for (px, _) in img.chunks_exact_mut(3).zip(&shadowed).filter(|(_, &s)| s) {
                 px.fill(0.0);
             }
@@ -431,7 +431,7 @@ fn write_relit(
             &staging.path(&format!("{name}.png")),
             w,
             h,
-            &tone_map(&img, config.exposure),
+            &Relighter::tone_map(&img, config.exposure),
             true,
         )?;
         names.push(name);

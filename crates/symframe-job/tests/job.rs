@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use symframe::brdf::Ward;
 use symframe::render::{Scene, TangentField};
-use symframe::{fit_stack, holdout_lights, uniform_cone_lights, FitParams};
+use symframe::{fit_stack, uniform_cone_lights, FitParams};
 use symframe_io::{DecodeOptions, ImageFormat};
 use symframe_job::{
     estimate, fit, Control, EstimateConfig, EstimateOutcome, FitConfig, Interrupted, Stage,
@@ -82,7 +82,7 @@ fn the_tiled_fit_equals_the_in_memory_fit_and_resumes_after_a_stop() {
         .expect("the automatic fit has an exposure");
     assert!(resumed.report.exposure_choice.is_some());
     let params = FitParams {
-        holdout: holdout_lights(300, 6).unwrap(),
+        holdout: FitParams::holdout_lights(300, 6).unwrap(),
         exposure,
         ..FitParams::default()
     };

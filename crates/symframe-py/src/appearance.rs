@@ -29,7 +29,7 @@ pub(crate) fn fit<'py>(
     let mut o = Options::new("fit", options);
     let d = symframe::FitParams::default();
     let holdout: usize = o.or("holdout", 0)?;
-    let model: String = o.or("model", symframe::DEFAULT_MODEL.name().to_string())?;
+    let model: String = o.or("model", symframe::FitModel::DEFAULT.name().to_string())?;
     let exposure: Option<f64> = o.get("exposure")?;
     let roughness_min: f64 = o.or("roughness_min", d.roughness_min)?;
     let max_iterations: u32 = o.or("max_iterations", d.max_iterations)?;

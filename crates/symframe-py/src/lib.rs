@@ -124,7 +124,8 @@ fn evaluate<'py>(
                 .map_err(|e| PyValueError::new_err(e.to_string()))
         })
         .transpose()?;
-    let e = py.detach(|| symframe::evaluate(&n, &t, &g, gt.as_deref(), m.as_deref(), max_angle));
+    let e =
+        py.detach(|| symframe::evaluate(&n, &t, &g, gt.as_deref(), m.as_deref(), max_angle, None));
     to_python(py, &e)
 }
 

@@ -640,11 +640,26 @@ pub fn detect_spheres(
     Ok(found)
 }
 
+impl Circle {
+    /// This sphere's outline in the image `image` (`width x height` grey values, `NaN`
+    /// counting as the brightest), this circle the start: the points where its rim falls off
+    /// most steeply (outliers left out) and the circle fitted to them; `None` where too few
+    /// rays find the rim.
+    pub fn outline(
+        &self,
+        width: usize,
+        height: usize,
+        image: &[f32],
+    ) -> Option<(Circle, Vec<(f64, f64)>)> {
+        outline_points(width, height, image, *self)
+    }
+}
+
 /// A sphere's outline in the image `image` (`width x height` grey values, `NaN` counting as
 /// the brightest) near `start`: the points where its rim falls off most steeply, as
 /// [`detect_sphere`] refines a circle (outliers left out), and the circle fitted to them;
 /// `None` where too few rays find the rim.
-pub fn outline_points(
+pub(crate) fn outline_points(
     width: usize,
     height: usize,
     image: &[f32],
@@ -978,7 +993,7 @@ fn fit_circle(points: &[(f64, f64)], start: Circle) -> Option<Circle> {
     (c.r > 0.0 && c.cx.is_finite() && c.cy.is_finite()).then_some(c)
 }
 
-/// What [`matte_intensity`] needs besides the image.
+/// What [`MatteParams::intensity`] needs besides the image.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MatteParams {
     /// Pixels where the light is this close to grazing (`n.l` below it) are left out: their
@@ -1023,7 +1038,7 @@ pub enum MatteError {
 /// the median one (a shadow, a highlight, a bad rim pixel), and the intensity is `|b|`. The
 /// fit takes the direction from the sphere itself, so an error of the chrome sphere's light,
 /// which near grazing would change `n.l` by many percent, does not enter.
-pub fn matte_intensity(
+pub(crate) fn matte_intensity(
     width: usize,
     height: usize,
     rgb: &[f32],
@@ -1093,6 +1108,21 @@ pub fn matte_intensity(
 }
 
 impl MatteParams {
+    /// The RGB intensity (times the sphere's albedo) of the distant light `light` from a
+    /// diffuse sphere of circle `circle` in an RGB image (`width x height x 3`, `NaN` where
+    /// saturated): `I = b . n` fitted per channel over the lit pixels, refitted without the
+    /// outliers, the intensity `|b|` (the module documentation says how).
+    pub fn intensity(
+        &self,
+        width: usize,
+        height: usize,
+        rgb: &[f32],
+        circle: &Circle,
+        light: DVec3,
+    ) -> Result<[f64; 3], MatteError> {
+        matte_intensity(width, height, rgb, circle, light, self)
+    }
+
     /// The radiant intensity (RGB, times the sphere's albedo) of the near light `light` from a
     /// diffuse sphere of centre `centre` and radius `radius` (the camera frame of `camera`, in
     /// the light's length unit) in an RGB image (`width x height x 3`, `NaN` where saturated):

@@ -65,8 +65,9 @@ pub struct Evaluation {
     pub swapped_share: f64,
 }
 
-/// Reads the unit vector at pixel `p` of an `H x W x 3` map; `None` for NaN or zero.
-pub fn vec_at(v: &[f32], p: usize) -> Option<DVec3> {
+/// Reads the unit vector at pixel `p` of an `H x W x 3` map; `None` for NaN or zero
+/// ([`EstimateMaps::vec_at`](crate::EstimateMaps::vec_at) outside the crate).
+pub(crate) fn vec_at(v: &[f32], p: usize) -> Option<DVec3> {
     let s = &v[p * 3..p * 3 + 3];
     s.iter()
         .all(|x| x.is_finite())
@@ -77,6 +78,9 @@ pub fn vec_at(v: &[f32], p: usize) -> Option<DVec3> {
 /// Compares estimated normal/tangent maps (`H x W x 3`, NaN = none) with ground truth over the
 /// pixels inside `mask` (when given) whose true normal is within `max_normal_angle_deg` of the
 /// view. `gt_tangents` may be absent (isotropic scenes): tangent figures are then empty.
+/// `view(p)`, when given, is the unit vector from pixel `p`'s surface toward the camera (a
+/// pinhole camera's `view(col, row)`); without it every pixel's view is `(0, 0, 1)`
+/// (orthographic).
 pub fn evaluate(
     normals: &[f32],
     tangents: &[f32],
@@ -84,29 +88,7 @@ pub fn evaluate(
     gt_tangents: Option<&[f32]>,
     mask: Option<&[bool]>,
     max_normal_angle_deg: f64,
-) -> Evaluation {
-    evaluate_in_views(
-        normals,
-        tangents,
-        gt_normals,
-        gt_tangents,
-        mask,
-        max_normal_angle_deg,
-        &|_| DVec3::Z,
-    )
-}
-
-/// [`evaluate`] with each pixel's own view: `view(p)` is the unit vector from pixel `p`'s
-/// surface toward the camera (a pinhole camera's `view(col, row)`), and only pixels whose true
-/// normal is within `max_normal_angle_deg` of it are evaluated.
-pub fn evaluate_in_views(
-    normals: &[f32],
-    tangents: &[f32],
-    gt_normals: &[f32],
-    gt_tangents: Option<&[f32]>,
-    mask: Option<&[bool]>,
-    max_normal_angle_deg: f64,
-    view: &dyn Fn(usize) -> DVec3,
+    view: Option<&dyn Fn(usize) -> DVec3>,
 ) -> Evaluation {
     let cos_max = max_normal_angle_deg.to_radians().cos();
     let (mut ne, mut te, mut tse) = (Vec::new(), Vec::new(), Vec::new());
@@ -118,7 +100,7 @@ pub fn evaluate_in_views(
         let Some(gn) = vec_at(gt_normals, p) else {
             continue;
         };
-        if gn.dot(view(p)) < cos_max {
+        if gn.dot(view.map_or(DVec3::Z, |v| v(p))) < cos_max {
             continue;
         }
         pixels += 1;
@@ -153,24 +135,26 @@ pub fn evaluate_in_views(
     }
 }
 
-/// Per-pixel normal angular error map (degrees, NaN where either side has no normal).
-pub fn normal_error_map(normals: &[f32], gt_normals: &[f32]) -> Vec<f32> {
-    (0..gt_normals.len() / 3)
-        .map(|p| match (vec_at(normals, p), vec_at(gt_normals, p)) {
-            (Some(n), Some(g)) => n.dot(g).clamp(-1.0, 1.0).acos().to_degrees() as f32,
-            _ => f32::NAN,
-        })
-        .collect()
-}
+impl Evaluation {
+    /// Per-pixel normal angular error map (degrees, NaN where either side has no normal).
+    pub fn normal_error_map(normals: &[f32], gt_normals: &[f32]) -> Vec<f32> {
+        (0..gt_normals.len() / 3)
+            .map(|p| match (vec_at(normals, p), vec_at(gt_normals, p)) {
+                (Some(n), Some(g)) => n.dot(g).clamp(-1.0, 1.0).acos().to_degrees() as f32,
+                _ => f32::NAN,
+            })
+            .collect()
+    }
 
-/// Per-pixel tangent axis error map (degrees, NaN where either side has no tangent).
-pub fn tangent_error_map(tangents: &[f32], gt_tangents: &[f32]) -> Vec<f32> {
-    (0..gt_tangents.len() / 3)
-        .map(|p| match (vec_at(tangents, p), vec_at(gt_tangents, p)) {
-            (Some(t), Some(g)) => t.dot(g).abs().min(1.0).acos().to_degrees() as f32,
-            _ => f32::NAN,
-        })
-        .collect()
+    /// Per-pixel tangent axis error map (degrees, NaN where either side has no tangent).
+    pub fn tangent_error_map(tangents: &[f32], gt_tangents: &[f32]) -> Vec<f32> {
+        (0..gt_tangents.len() / 3)
+            .map(|p| match (vec_at(tangents, p), vec_at(gt_tangents, p)) {
+                (Some(t), Some(g)) => t.dot(g).abs().min(1.0).acos().to_degrees() as f32,
+                _ => f32::NAN,
+            })
+            .collect()
+    }
 }
 
 #[cfg(test)]
@@ -215,7 +199,7 @@ mod tests {
             0.0,
             0.0,
         ];
-        let e = evaluate(&n, &t, &gt_n, Some(&gt_t), None, 60.0);
+        let e = evaluate(&n, &t, &gt_n, Some(&gt_t), None, 60.0, None);
         assert_eq!(e.pixels, 3);
         assert!((e.coverage - 2.0 / 3.0).abs() < 1e-12);
         assert_eq!(e.normal_error.count, 2);
@@ -232,7 +216,7 @@ mod tests {
         );
         assert!(e.tangent_error_swap_free.max < 1e-3);
         assert!((e.swapped_share - 0.5).abs() < 1e-12);
-        let m = normal_error_map(&n, &gt_n);
+        let m = Evaluation::normal_error_map(&n, &gt_n);
         assert!((m[0] - 10.0).abs() < 1e-3 && m[1].abs() < 1e-3 && m[2].is_nan());
     }
 

@@ -31,7 +31,7 @@
 //!
 //! ```
 //! use symframe::brdf::Ward;
-//! use symframe::render::{plane_frame, Scene};
+//! use symframe::render::Scene;
 //! use symframe::{
 //!     uniform_cone_lights, CosineMode, Estimator, EstimatorParams, PixelStatus, Rig, RigOptions,
 //! };
@@ -40,7 +40,7 @@
 //! // degrees from the view, rendered as a one-pixel image per light.
 //! let lights = uniform_cone_lights(600, 65.0);
 //! let rig = Rig::new(&lights, RigOptions::default())?;
-//! let (n, t) = plane_frame(30.0, 0.0, 25.0);
+//! let (n, t) = Scene::plane_frame(30.0, 0.0, 25.0);
 //! let patch = Scene::plane(1, 1, n, t);
 //! let brdf = Ward::new([0.5; 3], [0.5; 3], 0.1, 0.5);
 //! let samples: Vec<f32> = rig
@@ -83,7 +83,8 @@
 //!
 //! // Median normal error over the pixels whose true normal is within 60 degrees of the view.
 //! let truth = scene.gt_normals();
-//! let e = evaluate(&maps.normals, &maps.tangents, &truth, None, Some(&scene.mask), 60.0);
+//! let mask = Some(&scene.mask[..]);
+//! let e = evaluate(&maps.normals, &maps.tangents, &truth, None, mask, 60.0, None);
 //! assert!(e.normal_error.median < 1.0, "{e:?}");
 //!
 //! // Heights from the normals (a sphere: highest in the middle).
@@ -136,30 +137,25 @@ pub use frames::symmetry::CosineMode;
 pub use method::{run_stack, PixelMethod, Worker};
 
 // The maps an estimate writes, and their error against ground truth.
-pub use eval::{
-    evaluate, evaluate_in_views, normal_error_map, tangent_error_map, vec_at, ErrorStats,
-    Evaluation,
-};
+pub use eval::{evaluate, ErrorStats, Evaluation};
 pub use maps::{EstimateMaps, PixelCounts, PixelRecord, PixelSource, PixelStatus};
 
 // Fitting a BRDF per pixel in the estimated frames, and relighting the fit.
 pub use appearance::fit::{
-    fit_stack, holdout_lights, select_exposure, ExposureChoice, FitMaps, FitMethod, FitModel,
-    FitParams, FitStatus, FitSummary, GltfMaps, HoldoutError, LobeMaps, PixelData, PixelFitter,
-    PixelOutcome, WardFit, WardMaps, DEFAULT_MODEL, MODEL_CLEARCOAT, MODEL_GLTF, MODEL_WARD,
-    MODEL_WOVEN,
+    fit_stack, ExposureChoice, FitMaps, FitMethod, FitModel, FitParams, FitStatus, FitSummary,
+    GltfMaps, HoldoutError, LobeMaps, PixelData, PixelFitter, PixelOutcome, WardFit, WardMaps,
 };
 pub use appearance::gltf_fit::GltfFit;
 pub use appearance::lobe_fit::{LobeFit, LobeKind, LobeModel};
-pub use appearance::relight::{image_psnr, tone_map, Edits, Relighter};
+pub use appearance::relight::{Edits, Relighter};
 
 // Depth from normals, and a mesh of it.
 pub use integrate::{integrate, DepthMap, IntegrateParams, Mesh, Solver};
 
 // Light calibration: chrome and matte spheres.
 pub use calibrate::{
-    detect_sphere, detect_spheres, find_highlight, matte_intensity, outline_points, Circle,
-    Detection, Highlight, HighlightError, HighlightParams, MatteError, MatteParams,
+    detect_sphere, detect_spheres, find_highlight, Circle, Detection, Highlight, HighlightError,
+    HighlightParams, MatteError, MatteParams,
 };
 
 // Near lights and perspective cameras.

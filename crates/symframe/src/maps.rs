@@ -205,6 +205,12 @@ impl PixelRecord {
 }
 
 impl EstimateMaps {
+    /// The unit vector at pixel `p` of an `H x W x 3` map such as [`EstimateMaps::normals`]
+    /// or a true normal map; `None` for NaN or zero.
+    pub fn vec_at(map: &[f32], p: usize) -> Option<glam::DVec3> {
+        crate::eval::vec_at(map, p)
+    }
+
     /// Maps of `width x height` pixels with nothing estimated yet (every value `NaN`, no
     /// status, counts zero): fill them with [`EstimateMaps::put`] for every pixel.
     pub fn empty(width: usize, height: usize) -> Self {

@@ -40,8 +40,8 @@ impl ModelArg {
     }
 
     /// The default of `--model`: the library's default model
-    /// ([`symframe::DEFAULT_MODEL`], the automatic choice per pixel).
-    pub const DEFAULT: ModelArg = match symframe::DEFAULT_MODEL {
+    /// ([`symframe::FitModel::DEFAULT`], the automatic choice per pixel).
+    pub const DEFAULT: ModelArg = match symframe::FitModel::DEFAULT {
         symframe::FitModel::Ward => ModelArg::Ward,
         symframe::FitModel::Gltf => ModelArg::Gltf,
         symframe::FitModel::Auto => ModelArg::Auto,

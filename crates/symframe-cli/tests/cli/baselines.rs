@@ -100,6 +100,7 @@ fn estimate(lp: &Path, out: &Path, method: &str, scene: &Scene, n_lights: u64) -
         None,
         Some(&scene.mask),
         60.0,
+        None,
     );
     eprintln!(
         "{method}: mean {:.4} median {:.4} max {:.4} deg, coverage {:.3}",

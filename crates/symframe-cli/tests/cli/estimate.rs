@@ -151,7 +151,15 @@ fn estimate_on_an_lp_dataset_writes_every_output_and_is_accurate() {
         serde_json::from_str(&fs::read_to_string(reference.join("report.json")).unwrap()).unwrap();
     assert_eq!(report["parameters"]["interpolation"], "exact");
     let (_, exact) = read_npy_f32(&reference.join("normals.npy")).unwrap();
-    let e = evaluate(&normals, &tangents, &exact, None, Some(&scene.mask), 60.0);
+    let e = evaluate(
+        &normals,
+        &tangents,
+        &exact,
+        None,
+        Some(&scene.mask),
+        60.0,
+        None,
+    );
     assert!(e.normal_error.median < 0.1, "fast vs reference {e:?}");
 }
 

@@ -13,7 +13,7 @@ use crate::common::{
 use glam::DVec3;
 use symframe::brdf::Ward;
 use symframe::render::Scene;
-use symframe::{image_psnr, uniform_cone_lights};
+use symframe::uniform_cone_lights;
 use symframe_io::{read_npy_f32, write_npy_f32, DecodeOptions, ImageFormat};
 
 fn material() -> Ward {
@@ -153,7 +153,7 @@ fn estimate_fit_relight_end_to_end() {
     for (i, l) in [l0, l1].into_iter().enumerate() {
         assert!(relit.join(format!("relit_{i:03}.png")).is_file());
         let img = read_exr(&relit.join(format!("relit_{i:03}.exr")));
-        let psnr = image_psnr(&img, &scene.render(&w, l), Some(&inside));
+        let psnr = symframe::Relighter::image_psnr(&img, &scene.render(&w, l), Some(&inside));
         assert!(psnr > 35.0, "light {i}: {psnr} dB");
     }
     assert!(relit.join("relight.json").is_file());
@@ -447,7 +447,7 @@ fn relit_psnr(dir: &Path, data: &Path, lights: &[usize]) -> f64 {
         .zip(truth.chunks_exact(3))
         .map(|(a, b)| a.iter().chain(b).all(|v| v.is_finite()))
         .collect();
-    image_psnr(&relit, &truth, Some(&both))
+    symframe::Relighter::image_psnr(&relit, &truth, Some(&both))
 }
 
 #[test]
@@ -496,7 +496,7 @@ fn cast_shadows_from_the_integrated_relief_raise_held_out_psnr_on_bumps() {
         "--solver",
         "poisson",
     ]);
-    let held = symframe::holdout_lights(n_lights, k).unwrap();
+    let held = symframe::FitParams::holdout_lights(n_lights, k).unwrap();
     let all = symframe_io::open_dataset(&p("d")).unwrap().lights;
     let rows: Vec<String> = held
         .iter()

@@ -249,7 +249,7 @@ fn the_demo_writes_error_pictures_whose_mean_it_prints() {
 
     let (_, normals) = read_npy_f32(&est.join("normals.npy")).unwrap();
     let (_, gt) = read_npy_f32(&out.join("dataset/gt_normals.npy")).unwrap();
-    let errors = symframe::normal_error_map(&normals, &gt);
+    let errors = symframe::Evaluation::normal_error_map(&normals, &gt);
     let eval: serde_json::Value =
         serde_json::from_str(&fs::read_to_string(est.join("eval.json")).unwrap()).unwrap();
     let max = eval["normal_scale_max_deg"].as_f64().unwrap() as f32;

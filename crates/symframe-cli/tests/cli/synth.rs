@@ -9,7 +9,6 @@ use crate::common::{s, symframe};
 
 use glam::DVec3;
 use symframe::evaluate;
-use symframe::render::plane_frame;
 use symframe_io::read_npy_f32;
 
 fn run_ok(args: &[&str]) {
@@ -71,7 +70,7 @@ fn a_synthetic_lambertian_sphere_round_trips_through_estimate_within_1_degree() 
     assert_eq!(shape, vec![24, 24, 3]);
     let (_, tangents) = read_npy_f32(&out.join("tangents.npy")).unwrap();
     let (_, gt) = read_npy_f32(&data.join("gt_normals.npy")).unwrap();
-    let e = evaluate(&normals, &tangents, &gt, None, None, 60.0);
+    let e = evaluate(&normals, &tangents, &gt, None, None, 60.0, None);
     assert!(e.pixels > 200 && e.coverage > 0.95, "{e:?}");
     assert!(e.normal_error.mean < 1.0, "{e:?}");
 }
@@ -169,7 +168,7 @@ fn plane_and_cylinder_ground_truth_is_what_was_asked() {
         "--exposure",
         "0.5",
     ]);
-    let (n_exp, t_exp) = plane_frame(30.0, 0.0, 25.0);
+    let (n_exp, t_exp) = symframe::render::Scene::plane_frame(30.0, 0.0, 25.0);
     let (_, n) = read_npy_f32(&plane.join("gt_normals.npy")).unwrap();
     let (_, t) = read_npy_f32(&plane.join("gt_tangents.npy")).unwrap();
     for p in 0..64 {

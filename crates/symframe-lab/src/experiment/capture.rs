@@ -22,9 +22,9 @@ use image::ExtendedColorType;
 use rayon::prelude::*;
 use serde::Serialize;
 use symframe::brdf::{Beckmann, Brdf, Ggx, Layered, Sheen, Woven};
-use symframe::render::{diligent_lights, jitter_lights, Degradation, Noise, Scene, TangentField};
+use symframe::render::{diligent_lights, Degradation, Noise, Rng, Scene, TangentField};
 use symframe::{
-    estimate_stack, estimate_stack_baseline, evaluate, uniform_cone_lights, vec_at, Baseline,
+    estimate_stack, estimate_stack_baseline, evaluate, uniform_cone_lights, Baseline,
     BaselineParams, EstimateMaps, EstimatorParams, Evaluation, NoiseModel, Quantisation, Rig,
     RigOptions, Stack,
 };
@@ -387,6 +387,7 @@ fn cell(scene: &Scene, maps: &EstimateMaps, gt_t: &[f32], anisotropic: bool) -> 
         anisotropic.then_some(gt_t),
         Some(&scene.mask),
         60.0,
+        None,
     );
     let gt = scene.gt_normals();
     let (mut confident, mut within) = (0usize, 0usize);
@@ -395,9 +396,9 @@ fn cell(scene: &Scene, maps: &EstimateMaps, gt_t: &[f32], anisotropic: bool) -> 
     for p in 0..scene.n_pixels() {
         if let (true, Some(t), Some(g), Some(gn)) = (
             anisotropic && scene.mask[p] && maps.tangent_confidence[p] >= 0.9,
-            vec_at(&maps.tangents, p),
-            vec_at(gt_t, p),
-            vec_at(&gt, p),
+            EstimateMaps::vec_at(&maps.tangents, p),
+            EstimateMaps::vec_at(gt_t, p),
+            EstimateMaps::vec_at(&gt, p),
         ) {
             if gn.z >= 0.5 {
                 // The axes' error: the tangent against the true tangent or binormal.
@@ -408,12 +409,15 @@ fn cell(scene: &Scene, maps: &EstimateMaps, gt_t: &[f32], anisotropic: bool) -> 
             }
         }
         if scene.mask[p]
-            && vec_at(&maps.normals, p).is_some()
+            && EstimateMaps::vec_at(&maps.normals, p).is_some()
             && gt.get(3 * p + 2).is_some_and(|z| *z >= 0.5)
         {
             sources[(maps.source[p] as usize).min(4)] += 1;
         }
-        let (Some(n), Some(g)) = (vec_at(&maps.normals, p), vec_at(&gt, p)) else {
+        let (Some(n), Some(g)) = (
+            EstimateMaps::vec_at(&maps.normals, p),
+            EstimateMaps::vec_at(&gt, p),
+        ) else {
             continue;
         };
         let sure = maps.confidence[p] >= 0.9; // false for NaN
@@ -495,7 +499,7 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
             let (sweep, cond) = conds[c];
             let lights = rig_lights(rig_name, quick);
             let clean = scene.render_stack(mat.brdf.as_ref(), &lights);
-            let at = symframe::render::clip_point(&clean, &scene.mask, cond.clipped);
+            let at = symframe::render::Degradation::clip_point(&clean, &scene.mask, cond.clipped);
             drop(clean);
             let seed = 17 + 1000 * m as u64 + c as u64;
             let d = cond.degradation(at, seed);
@@ -569,9 +573,11 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
                 let gt = scene.gt_normals();
                 let mut out = String::new();
                 for p in 0..scene.n_pixels() {
-                    if let (true, Some(n), Some(g)) =
-                        (scene.mask[p], vec_at(&ours.normals, p), vec_at(&gt, p))
-                    {
+                    if let (true, Some(n), Some(g)) = (
+                        scene.mask[p],
+                        EstimateMaps::vec_at(&ours.normals, p),
+                        EstimateMaps::vec_at(&gt, p),
+                    ) {
                         if g.z >= 0.5 {
                             out +=
                                 &format!(
@@ -943,8 +949,37 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
     })
 }
 
+/// Light directions as a calibration knows them: each of `lights` turned by `error_deg`
+/// degrees about a random axis perpendicular to it (deterministic in `seed`), so every
+/// direction is off by exactly that angle, each its own way.
+fn jitter_lights(lights: &[glam::DVec3], error_deg: f64, seed: u64) -> Vec<glam::DVec3> {
+    let mut rng = Rng::new(seed ^ 0x6c69_6768_7473);
+    let a = error_deg.to_radians();
+    lights
+        .iter()
+        .map(|&l| {
+            let l = l.normalize();
+            let (u, w) = l.any_orthonormal_pair();
+            let phi = rng.range(0.0, std::f64::consts::TAU);
+            let axis = u * phi.cos() + w * phi.sin();
+            (l * a.cos() + axis * a.sin()).normalize()
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn jitter_turns_every_light_by_the_asked_angle() {
+        let lights = symframe::uniform_cone_lights(50, 65.0);
+        let moved = super::jitter_lights(&lights, 1.0, 3);
+        for (a, b) in lights.iter().zip(&moved) {
+            let deg = a.normalize().angle_between(*b).to_degrees();
+            assert!((deg - 1.0).abs() < 1e-9, "{deg}");
+        }
+        assert_ne!(super::jitter_lights(&lights, 1.0, 4), moved);
+    }
+
     use super::*;
 
     /// Side of the test image.

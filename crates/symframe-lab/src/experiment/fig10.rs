@@ -5,7 +5,7 @@ use anyhow::Result;
 use glam::DVec3;
 use symframe::brdf::{Brdf, Ward};
 use symframe::render::{BumpParams, Scene, TangentField};
-use symframe::{normal_error_map, uniform_cone_lights, Rig, RigOptions};
+use symframe::{uniform_cone_lights, Rig, RigOptions};
 
 use super::plot::{self, md_table};
 use super::{Ctx, Section};
@@ -148,7 +148,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
                 evaluation: e,
                 facet,
             });
-            let err = normal_error_map(&maps.normals, &gt_n);
+            let err = symframe::Evaluation::normal_error_map(&maps.normals, &gt_n);
             tiles.push(plot::normal_tile(&maps.normals, &scene.mask));
             tiles.push(plot::error_tile(&err, &scene.mask, ERROR_MAX));
         }

@@ -4,7 +4,7 @@
 use anyhow::Result;
 use rayon::prelude::*;
 use symframe::brdf::{AshikhminShirley, Brdf, Ward};
-use symframe::render::{plane_frame, Scene};
+use symframe::render::Scene;
 use symframe::{uniform_cone_lights, CosineMode, Estimator, EstimatorParams, Rig, RigOptions};
 
 use super::plot::{self, fmt_opt, md_table};
@@ -101,7 +101,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Cell>>> {
         .into_par_iter()
         .map(|k| {
             let (m, r, c) = (k / (nr * nc), (k / nc) % nr, k % nc);
-            let (n_gt, t_gt) = plane_frame(rows[r], 0.0, TANGENT_ANGLE);
+            let (n_gt, t_gt) = Scene::plane_frame(rows[r], 0.0, TANGENT_ANGLE);
             let scene = Scene::tilted_plane(1, 1, rows[r], 0.0, TANGENT_ANGLE);
             let rig = &rigs[c];
             let slice: Vec<f32> = rig

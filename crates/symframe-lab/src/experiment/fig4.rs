@@ -4,7 +4,7 @@
 use anyhow::Result;
 use rayon::prelude::*;
 use symframe::brdf::{Brdf, CookTorrance, TorranceSparrow, Ward};
-use symframe::render::{plane_frame, Scene};
+use symframe::render::Scene;
 use symframe::{
     uniform_cone_lights, Baseline, BaselineParams, CosineMode, Estimator, EstimatorParams, Rig,
     RigOptions,
@@ -122,7 +122,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Cell>>> {
             let (f, m, o) = (k / (mats.len() * no), (k / no) % mats.len(), k % no);
             let brdf = (fams[f].2)(mats[m]);
             let (tn, pn) = orients[o];
-            let (n_gt, _) = plane_frame(tn, pn, 0.0);
+            let (n_gt, _) = Scene::plane_frame(tn, pn, 0.0);
             let scene = Scene::tilted_plane(1, 1, tn, pn, 0.0);
             let all: Vec<f32> = lights
                 .iter()

@@ -9,8 +9,8 @@ use serde::Serialize;
 use symframe::brdf::{AshikhminShirley, BlinnPhong, Brdf, CookTorrance, Ggx, Lambertian, Ward};
 use symframe::render::{diligent_lights, BumpParams, Scene, TangentField};
 use symframe::{
-    estimate_stack, estimate_stack_baseline, evaluate, normal_error_map, uniform_cone_lights,
-    Baseline, BaselineParams, EstimateMaps, EstimatorParams, Evaluation, Rig, RigOptions,
+    estimate_stack, estimate_stack_baseline, evaluate, uniform_cone_lights, Baseline,
+    BaselineParams, EstimateMaps, EstimatorParams, Evaluation, Rig, RigOptions,
 };
 
 use super::plot::{self, md_table};
@@ -193,8 +193,9 @@ fn cell(scene: &Scene, maps: &EstimateMaps) -> Cell {
         Some(&scene.gt_tangents()),
         Some(&scene.mask),
         60.0,
+        None,
     );
-    let errors = normal_error_map(&maps.normals, &gt);
+    let errors = Evaluation::normal_error_map(&maps.normals, &gt);
     let (mut over, mut n) = (0usize, 0usize);
     for (p, e) in errors.iter().enumerate() {
         if scene.mask[p] && scene.normals_in_camera[p].z >= 0.5 && e.is_finite() {
@@ -387,7 +388,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
     let mut tiles = Vec::new();
     let mut labels = Vec::new();
     for (i, s) in pick.iter().enumerate() {
-        let err = normal_error_map(&s.maps.normals, &s.scene.gt_normals());
+        let err = Evaluation::normal_error_map(&s.maps.normals, &s.scene.gt_normals());
         tiles.push(plot::error_tile(&err, &s.scene.mask, 5.0));
         if i % 2 == 0 {
             labels.push(

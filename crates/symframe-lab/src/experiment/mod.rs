@@ -82,6 +82,7 @@ pub fn estimate_and_evaluate(
         Some(gt_tangents),
         Some(&scene.mask),
         60.0,
+        None,
     );
     Ok((maps, e))
 }

@@ -10,8 +10,8 @@ use serde::Serialize;
 use symframe::brdf::{parse_model, Brdf, Ggx, Layered};
 use symframe::render::{dome_lights, NearScene};
 use symframe::{
-    estimate_near_stack, estimate_stack, evaluate_in_views, fit_sphere, perspective_depth,
-    EstimatorParams, Evaluation, IntegrateParams, NearParams, Rig, RigOptions, Stack,
+    estimate_near_stack, estimate_stack, evaluate, fit_sphere, perspective_depth, EstimatorParams,
+    Evaluation, IntegrateParams, NearParams, Rig, RigOptions, Stack,
 };
 use symframe_job::synth_near::PAIR_WIDTH;
 use symframe_job::NearSynthConfig;
@@ -152,14 +152,14 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
                 ("distant", &far, &far_depth, None),
                 ("near", &near.maps, &near.depth, Some(near.iterations)),
             ] {
-                let e = evaluate_in_views(
+                let e = evaluate(
                     &maps.normals,
                     &maps.tangents,
                     &gt_n,
                     Some(&gt_t),
                     Some(&mask),
                     60.0,
-                    &view,
+                    Some(&view),
                 );
                 rows.push(row(
                     m, ratio, model, &e, depth, &gt_depth, &gt_n, &view, rounds,

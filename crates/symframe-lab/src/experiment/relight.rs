@@ -14,11 +14,10 @@ use super::{Ctx, Section};
 use anyhow::Result;
 use glam::DVec3;
 use symframe::brdf::{parse_model, Brdf, Ggx, Layered, Woven};
-use symframe::render::{cast_shadows, BumpParams, Scene, TangentField};
+use symframe::render::{BumpParams, Scene, TangentField};
 use symframe::{
-    estimate_stack, fit_stack, holdout_lights, image_psnr, integrate, select_exposure, tone_map,
-    uniform_cone_lights, vec_at, Edits, EstimatorParams, FitMaps, FitModel, FitParams,
-    IntegrateParams, PixelData, Relighter, Rig, RigOptions, Stack,
+    estimate_stack, fit_stack, integrate, uniform_cone_lights, Edits, EstimatorParams, FitMaps,
+    FitModel, FitParams, IntegrateParams, PixelData, Relighter, Rig, RigOptions, Stack,
 };
 
 /// Models rendered on the sphere: a brushed Ward material (the Ward fit's own family), two GGX
@@ -155,7 +154,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
     let (out, quick) = (ctx.out.as_path(), ctx.quick);
     let (size, n_lights, k) = if quick { (20, 300, 10) } else { (48, 800, 20) };
     let lights = uniform_cone_lights(n_lights, 65.0);
-    let holdout = holdout_lights(n_lights, k)?;
+    let holdout = FitParams::holdout_lights(n_lights, k)?;
     let train: Vec<usize> = (0..n_lights).filter(|i| !holdout.contains(i)).collect();
     let train_lights: Vec<DVec3> = train.iter().map(|&i| lights[i]).collect();
     let sphere = Scene::sphere(size, TangentField::Circular);
@@ -204,7 +203,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
         if let (true, Some(hf)) = (mat.drop_shadowed, &heights) {
             for (i, &l) in lights.iter().enumerate() {
                 let mut img = samples.image(i);
-                let shadowed = cast_shadows(hf, size, size, l);
+                let shadowed = Scene::cast_shadows(hf, size, size, l);
                 for (px, _) in img.chunks_exact_mut(3).zip(&shadowed).filter(|p| *p.1) {
                     px.fill(f32::NAN);
                 }
@@ -234,13 +233,14 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
                     .filter(|&p| scene.mask[p])
                     .filter_map(|p| {
                         Some(PixelData {
-                            normal: vec_at(&frames.normals, p)?,
-                            tangent: vec_at(&frames.tangents, p),
+                            normal: symframe::EstimateMaps::vec_at(&frames.normals, p)?,
+                            tangent: symframe::EstimateMaps::vec_at(&frames.tangents, p),
                             rgb: samples.pixel(p).to_vec(),
                         })
                     })
                     .collect();
-                params.exposure = select_exposure(&lights, &params, &pixels)?.exposure;
+                params.exposure =
+                    symframe::ExposureChoice::select(&lights, &params, &pixels)?.exposure;
             }
             let fit = fit_stack(
                 &samples,
@@ -277,7 +277,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
                 .map(|&i| {
                     let mut relit = relighter.render(lights[i]);
                     if let Some(hf) = &heights {
-                        let shadowed = cast_shadows(hf, size, size, lights[i]);
+                        let shadowed = Scene::cast_shadows(hf, size, size, lights[i]);
                         for (px, _) in relit.chunks_exact_mut(3).zip(&shadowed).filter(|p| *p.1) {
                             px.fill(0.0);
                         }
@@ -294,7 +294,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
                             }
                         }
                     }
-                    image_psnr(&relit, &truth, Some(&within))
+                    Relighter::image_psnr(&relit, &truth, Some(&within))
                 })
                 .collect();
             rows.push(Row {
@@ -490,7 +490,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
         .chunks_exact(FITS.len())
         .filter(|m| m[auto].relit_psnr - m[auto].relit_worst <= 6.0)
         .count();
-    let default = symframe::DEFAULT_MODEL.name();
+    let default = symframe::FitModel::DEFAULT.name();
     writeln!(
         md,
         "\nMean relit PSNR over the materials: Ward {:.1} dB, glTF {:.1} dB, clear coat {:.1} dB, \
@@ -543,7 +543,7 @@ fn write_side_by_side(path: &Path, size: usize, images: &[Vec<f32>]) -> Result<(
         .max(1e-6);
     let exposure = -(peak as f64).log2();
     for (k, img) in images.iter().enumerate() {
-        let mapped = tone_map(img, exposure);
+        let mapped = Relighter::tone_map(img, exposure);
         for y in 0..s {
             for x in 0..s {
                 let src = ((y / scale) * size + x / scale) * 3;

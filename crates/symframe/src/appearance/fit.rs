@@ -7,7 +7,7 @@
 //!
 //! # Held-out lights
 //!
-//! [`holdout_lights`] picks `K` evenly spaced light indices; with them in
+//! [`FitParams::holdout_lights`] picks `K` evenly spaced light indices; with them in
 //! [`FitParams::holdout`], the fit never sees those images and [`FitSummary`] reports the RMS
 //! error and PSNR of the prediction on them (same sample rules: valid, `n.l > 0`). PSNR is
 //! `20 log10(peak / RMS)` with `peak` the largest held-out measurement used.
@@ -113,23 +113,25 @@ impl std::str::FromStr for FitModel {
     }
 }
 
-/// The model fitted unless one is asked for (`symframe fit`, the fit job, the Python package,
-/// [`FitParams::default`], [`FitModel::default`]): the automatic choice per pixel, which
-/// predicts held-out lights as well as the better single model on nearly every material of
-/// the validation scenes (docs/validation.md, "Relighting").
-pub const DEFAULT_MODEL: FitModel = FitModel::Auto;
+impl FitModel {
+    /// The model fitted unless one is asked for (`symframe fit`, the fit job, the Python
+    /// package, [`FitParams::default`], [`FitModel::default`]): the automatic choice per pixel,
+    /// which predicts held-out lights as well as the better single model on nearly every
+    /// material of the validation scenes (docs/validation.md, "Relighting").
+    pub const DEFAULT: FitModel = FitModel::Auto;
+}
 
 impl Default for FitModel {
-    /// [`DEFAULT_MODEL`].
+    /// [`FitModel::DEFAULT`].
     fn default() -> Self {
-        DEFAULT_MODEL
+        FitModel::DEFAULT
     }
 }
 
 /// Parameters of the per-pixel fit.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FitParams {
-    /// The model fitted ([`DEFAULT_MODEL`] by default).
+    /// The model fitted ([`FitModel::DEFAULT`] by default).
     #[serde(default)]
     pub model: FitModel,
     /// glTF model: the intensity of every light, in the units of the measurements (a white
@@ -167,7 +169,7 @@ fn default_roughness_min() -> f64 {
 impl Default for FitParams {
     fn default() -> Self {
         Self {
-            model: DEFAULT_MODEL,
+            model: FitModel::DEFAULT,
             exposure: 1.0,
             roughness_min: default_roughness_min(),
             holdout: Vec::new(),
@@ -261,18 +263,20 @@ pub(crate) fn validation_lights(n_lights: usize, holdout: &[usize]) -> Vec<bool>
     out
 }
 
-/// `k` light indices spread evenly over `0..n_lights` (the centres of `k` equal blocks), for
-/// [`FitParams::holdout`]. Deterministic; empty when `k == 0`.
-///
-/// # Errors
-/// When more than half of the lights would be held out.
-pub fn holdout_lights(n_lights: usize, k: usize) -> Result<Vec<usize>> {
-    if 2 * k > n_lights {
-        return Err(Error::BadParameter(format!(
-            "cannot hold out {k} of {n_lights} lights: at most half may be held out"
-        )));
+impl FitParams {
+    /// `k` light indices spread evenly over `0..n_lights` (the centres of `k` equal blocks),
+    /// for [`FitParams::holdout`]. Deterministic; empty when `k == 0`.
+    ///
+    /// # Errors
+    /// When more than half of the lights would be held out.
+    pub fn holdout_lights(n_lights: usize, k: usize) -> Result<Vec<usize>> {
+        if 2 * k > n_lights {
+            return Err(Error::BadParameter(format!(
+                "cannot hold out {k} of {n_lights} lights: at most half may be held out"
+            )));
+        }
+        Ok((0..k).map(|j| (2 * j + 1) * n_lights / (2 * k)).collect())
     }
-    Ok((0..k).map(|j| (2 * j + 1) * n_lights / (2 * k)).collect())
 }
 
 /// Per-pixel anisotropic Ward parameters and the frames they live in: what relighting needs.
@@ -436,15 +440,15 @@ pub struct FitSummary {
 }
 
 /// [`FitMaps::model`] where a pixel was not fitted.
-pub(crate) const MODEL_NONE: u8 = 0;
+pub(crate) const MODEL_NONE: u8 = FitMaps::MODEL_NONE;
 /// [`FitMaps::model`] where a pixel's model is Ward.
-pub const MODEL_WARD: u8 = 1;
+pub(crate) const MODEL_WARD: u8 = FitMaps::MODEL_WARD;
 /// [`FitMaps::model`] where a pixel's model is glTF.
-pub const MODEL_GLTF: u8 = 2;
+pub(crate) const MODEL_GLTF: u8 = FitMaps::MODEL_GLTF;
 /// [`FitMaps::model`] where a pixel's model is the clear coat.
-pub const MODEL_CLEARCOAT: u8 = 3;
+pub(crate) const MODEL_CLEARCOAT: u8 = FitMaps::MODEL_CLEARCOAT;
 /// [`FitMaps::model`] where a pixel's model is the woven one.
-pub const MODEL_WOVEN: u8 = 4;
+pub(crate) const MODEL_WOVEN: u8 = FitMaps::MODEL_WOVEN;
 
 /// Per-pixel parameters of the two-lobe models ([`LobeModel`]) and the frames they live in:
 /// what relighting and export need. Row-major, row 0 at the top; NaN where a pixel has no
@@ -459,7 +463,8 @@ pub struct LobeMaps {
     pub normals: Vec<f32>,
     /// Unit tangents (axis of `alpha_t`), `H x W x 3`; NaN where isotropic.
     pub tangents: Vec<f32>,
-    /// Per pixel, [`MODEL_CLEARCOAT`], [`MODEL_WOVEN`] or 0 (no two-lobe model), `H x W`.
+    /// Per pixel, [`FitMaps::MODEL_CLEARCOAT`], [`FitMaps::MODEL_WOVEN`] or 0 (no two-lobe
+    /// model), `H x W`.
     pub kind: Vec<u8>,
     /// Diffuse albedo, `H x W x 3`.
     pub kd: Vec<f32>,
@@ -566,8 +571,9 @@ pub struct FitMaps {
     pub gltf: Option<GltfMaps>,
     /// The fitted parameters of a two-lobe or automatic fit (`None` otherwise).
     pub lobes: Option<LobeMaps>,
-    /// Per pixel, the model fitted there: [`MODEL_NONE`], [`MODEL_WARD`], [`MODEL_GLTF`],
-    /// [`MODEL_CLEARCOAT`] or [`MODEL_WOVEN`] (an automatic fit's choice), `H x W`.
+    /// Per pixel, the model fitted there: [`FitMaps::MODEL_NONE`], [`FitMaps::MODEL_WARD`],
+    /// [`FitMaps::MODEL_GLTF`], [`FitMaps::MODEL_CLEARCOAT`] or [`FitMaps::MODEL_WOVEN`] (an
+    /// automatic fit's choice), `H x W`.
     pub model: Vec<u8>,
     /// RMS error of the fit on each pixel's training samples, `H x W`.
     pub residual: Vec<f32>,
@@ -952,7 +958,7 @@ impl PixelFitter<'_> {
     /// The squared error on the validation samples ([`validation_lights`]) of a glTF fit at
     /// `exposure` made on the pixel's other training samples, and the number of validation
     /// values (3 per sample); `None` where the pixel would not be fitted or has no validation
-    /// sample. What [`select_exposure`] sums over pixels.
+    /// sample. What [`ExposureChoice::select`] sums over pixels.
     pub fn gltf_validation_error(
         &mut self,
         normal: DVec3,
@@ -1028,7 +1034,7 @@ impl PixelFitter<'_> {
 }
 
 /// One pixel's frame (camera frame; `tangent = None`: isotropic) and samples (`3 * lights`
-/// values, NaN = invalid), for [`select_exposure`].
+/// values, NaN = invalid), for [`ExposureChoice::select`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct PixelData {
     /// Unit normal.
@@ -1039,7 +1045,7 @@ pub struct PixelData {
     pub rgb: Vec<f32>,
 }
 
-/// The light intensity a glTF fit was given by [`select_exposure`], and the evidence.
+/// The light intensity a glTF fit was given by [`ExposureChoice::select`], and the evidence.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ExposureChoice {
     /// The intensity chosen.
@@ -1051,107 +1057,109 @@ pub struct ExposureChoice {
     pub pixels: usize,
 }
 
-/// [`select_exposure`] keeps the lowest intensity whose validation RMS is within this share of
+/// [`ExposureChoice::select`] keeps the lowest intensity whose validation RMS is within this share of
 /// the best one's.
 pub(crate) const EXPOSURE_TOLERANCE: f64 = 0.05;
 
-/// Pixels [`select_exposure`] judges each candidate intensity on, at most.
+/// Pixels [`ExposureChoice::select`] judges each candidate intensity on, at most.
 pub(crate) const EXPOSURE_JUDGED_PIXELS: usize = 512;
 
-/// The light intensity of a glTF fit (or of an automatic fit's glTF part) from sampled
-/// pixels: the candidates are the lowest intensity that keeps 99% of the pixels' base colours
-/// within 1 (from free-scale fits, [`gltf_fit::exposure_bounds`]) times `2^k`, `k = -8..=4`,
-/// and the intensity the mostly dielectric pixels imply where there are enough of them, then
-/// half steps (`2^(±1/2)`) either side of the best; each is judged by the squared error of fits at it on the validation lights
-/// ([`validation_lights`]) of up to [`EXPOSURE_JUDGED_PIXELS`] of the pixels (spread over the
-/// list), and the lowest intensity whose RMS error is within [`EXPOSURE_TOLERANCE`] of the
-/// smallest wins.
-///
-/// Why judged, not read off: the scale of a pixel's free fit rests on the strength of the
-/// specular layer's Fresnel term, which a metal does not fix (a bare metal is also a black
-/// dielectric under brighter lights); a lobe that is not GGX's (Beckmann brushed gold) was
-/// fitted as such a dielectric under 60 times the true intensity, its shape bent by the
-/// Fresnel term's growth toward grazing halfway angles, and predicted held-out lights with
-/// errors 66 times the brightest sample. Whatever the intensity, that growth is then scaled by
-/// it. Why the lowest of the near-best: under 800 lights the same gold predicted its
-/// validation lights within 3% alike from 1.1 to 12.6 times the true intensity (the Fresnel
-/// term's extra freedom fits a Beckmann lobe a little better), and the higher ones put that
-/// freedom, times the intensity, into every light that is not like the rig's.
-///
-/// # Errors
-/// When no pixel can be fitted.
-pub fn select_exposure(
-    lights: &[DVec3],
-    params: &FitParams,
-    pixels: &[PixelData],
-) -> Result<ExposureChoice> {
-    use rayon::prelude::*;
-    PixelFitter::new(lights, params)?;
-    let scales: Vec<gltf_fit::PixelScale> = pixels
-        .par_iter()
-        .map_init(
-            || PixelFitter::checked(lights, params),
-            |f, p| f.scale(p.normal, p.tangent, &p.rgb),
-        )
-        .flatten()
-        .collect();
-    let (dielectric, brightest) = gltf_fit::exposure_bounds(&scales);
-    let Some(base) = brightest.or(dielectric) else {
-        return Err(Error::BadParameter(
-            "no pixel to choose the exposure of the glTF fit from".into(),
-        ));
-    };
-    let stride = pixels.len().div_ceil(EXPOSURE_JUDGED_PIXELS).max(1);
-    let judged: Vec<&PixelData> = pixels.iter().step_by(stride).collect();
-    let mut tried: Vec<(f64, f64)> = Vec::new();
-    let judge = |e: f64, tried: &mut Vec<(f64, f64)>| {
-        let (sum, count) = judged
+impl ExposureChoice {
+    /// The light intensity of a glTF fit (or of an automatic fit's glTF part) from sampled
+    /// pixels: the candidates are the lowest intensity that keeps 99% of the pixels' base colours
+    /// within 1 (from free-scale fits, [`gltf_fit::exposure_bounds`]) times `2^k`, `k = -8..=4`,
+    /// and the intensity the mostly dielectric pixels imply where there are enough of them, then
+    /// half steps (`2^(±1/2)`) either side of the best; each is judged by the squared error of fits at it on the validation lights
+    /// ([`validation_lights`]) of up to [`EXPOSURE_JUDGED_PIXELS`] of the pixels (spread over the
+    /// list), and the lowest intensity whose RMS error is within [`EXPOSURE_TOLERANCE`] of the
+    /// smallest wins.
+    ///
+    /// Why judged, not read off: the scale of a pixel's free fit rests on the strength of the
+    /// specular layer's Fresnel term, which a metal does not fix (a bare metal is also a black
+    /// dielectric under brighter lights); a lobe that is not GGX's (Beckmann brushed gold) was
+    /// fitted as such a dielectric under 60 times the true intensity, its shape bent by the
+    /// Fresnel term's growth toward grazing halfway angles, and predicted held-out lights with
+    /// errors 66 times the brightest sample. Whatever the intensity, that growth is then scaled by
+    /// it. Why the lowest of the near-best: under 800 lights the same gold predicted its
+    /// validation lights within 3% alike from 1.1 to 12.6 times the true intensity (the Fresnel
+    /// term's extra freedom fits a Beckmann lobe a little better), and the higher ones put that
+    /// freedom, times the intensity, into every light that is not like the rig's.
+    ///
+    /// # Errors
+    /// When no pixel can be fitted.
+    pub fn select(
+        lights: &[DVec3],
+        params: &FitParams,
+        pixels: &[PixelData],
+    ) -> Result<ExposureChoice> {
+        use rayon::prelude::*;
+        PixelFitter::new(lights, params)?;
+        let scales: Vec<gltf_fit::PixelScale> = pixels
             .par_iter()
             .map_init(
                 || PixelFitter::checked(lights, params),
-                |f, p| f.gltf_validation_error(p.normal, p.tangent, &p.rgb, e),
+                |f, p| f.scale(p.normal, p.tangent, &p.rgb),
             )
             .flatten()
-            .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-        if count > 0 {
-            tried.push((e, (sum / count as f64).sqrt()));
+            .collect();
+        let (dielectric, brightest) = gltf_fit::exposure_bounds(&scales);
+        let Some(base) = brightest.or(dielectric) else {
+            return Err(Error::BadParameter(
+                "no pixel to choose the exposure of the glTF fit from".into(),
+            ));
+        };
+        let stride = pixels.len().div_ceil(EXPOSURE_JUDGED_PIXELS).max(1);
+        let judged: Vec<&PixelData> = pixels.iter().step_by(stride).collect();
+        let mut tried: Vec<(f64, f64)> = Vec::new();
+        let judge = |e: f64, tried: &mut Vec<(f64, f64)>| {
+            let (sum, count) = judged
+                .par_iter()
+                .map_init(
+                    || PixelFitter::checked(lights, params),
+                    |f, p| f.gltf_validation_error(p.normal, p.tangent, &p.rgb, e),
+                )
+                .flatten()
+                .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+            if count > 0 {
+                tried.push((e, (sum / count as f64).sqrt()));
+            }
+        };
+        let best = |tried: &[(f64, f64)]| {
+            tried
+                .iter()
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|&(e, _)| e)
+        };
+        // Coarse: factors of 2 from 1/256 to 16 times the reading, and the dielectric reading;
+        // then half steps either side of the best.
+        for k in -8..=4 {
+            judge(base * 2f64.powi(k), &mut tried);
         }
-    };
-    let best = |tried: &[(f64, f64)]| {
-        tried
-            .iter()
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .map(|&(e, _)| e)
-    };
-    // Coarse: factors of 2 from 1/256 to 16 times the reading, and the dielectric reading;
-    // then half steps either side of the best.
-    for k in -8..=4 {
-        judge(base * 2f64.powi(k), &mut tried);
-    }
-    if let Some(d) = dielectric.filter(|&d| d != base) {
-        judge(d, &mut tried);
-    }
-    if let Some(e) = best(&tried) {
-        for f in [std::f64::consts::FRAC_1_SQRT_2, std::f64::consts::SQRT_2] {
-            judge(e * f, &mut tried);
+        if let Some(d) = dielectric.filter(|&d| d != base) {
+            judge(d, &mut tried);
         }
+        if let Some(e) = best(&tried) {
+            for f in [std::f64::consts::FRAC_1_SQRT_2, std::f64::consts::SQRT_2] {
+                judge(e * f, &mut tried);
+            }
+        }
+        // The lowest intensity that predicts the validation lights as well as the best to within
+        // EXPOSURE_TOLERANCE.
+        let exposure = match tried.iter().map(|t| t.1).min_by(f64::total_cmp) {
+            Some(least) => tried
+                .iter()
+                .filter(|t| t.1 <= (1.0 + EXPOSURE_TOLERANCE) * least)
+                .map(|t| t.0)
+                .min_by(f64::total_cmp)
+                .unwrap_or(base),
+            None => gltf_fit::choose_exposure(&scales).unwrap_or(base),
+        };
+        Ok(ExposureChoice {
+            exposure,
+            candidates: tried,
+            pixels: judged.len(),
+        })
     }
-    // The lowest intensity that predicts the validation lights as well as the best to within
-    // EXPOSURE_TOLERANCE.
-    let exposure = match tried.iter().map(|t| t.1).min_by(f64::total_cmp) {
-        Some(least) => tried
-            .iter()
-            .filter(|t| t.1 <= (1.0 + EXPOSURE_TOLERANCE) * least)
-            .map(|t| t.0)
-            .min_by(f64::total_cmp)
-            .unwrap_or(base),
-        None => gltf_fit::choose_exposure(&scales).unwrap_or(base),
-    };
-    Ok(ExposureChoice {
-        exposure,
-        candidates: tried,
-        pixels: judged.len(),
-    })
 }
 
 /// The Ward fit as a [`PixelMethod`]: every pixel fitted in its frame of the `normals` and
@@ -1240,6 +1248,17 @@ pub fn fit_stack(
 }
 
 impl FitMaps {
+    /// [`FitMaps::model`] where a pixel was not fitted.
+    pub const MODEL_NONE: u8 = 0;
+    /// [`FitMaps::model`] where a pixel's model is Ward.
+    pub const MODEL_WARD: u8 = 1;
+    /// [`FitMaps::model`] where a pixel's model is glTF.
+    pub const MODEL_GLTF: u8 = 2;
+    /// [`FitMaps::model`] where a pixel's model is the clear coat.
+    pub const MODEL_CLEARCOAT: u8 = 3;
+    /// [`FitMaps::model`] where a pixel's model is the woven one.
+    pub const MODEL_WOVEN: u8 = 4;
+
     /// The maps and summary of `width x height` pixels fitted in the frames `normals` and
     /// `tangents` with `params`, from their outcomes in row-major order (`None`: outside the
     /// mask).
@@ -1527,7 +1546,7 @@ mod tests {
             rgb[i * 3..i * 3 + 3].fill(f32::NAN);
         }
         let params = FitParams {
-            holdout: holdout_lights(300, 10).unwrap(),
+            holdout: FitParams::holdout_lights(300, 10).unwrap(),
             ..ward_params()
         };
         let PixelOutcome::Fitted(fit, hold) =
@@ -1556,7 +1575,7 @@ mod tests {
         use crate::brdf::Beckmann;
         use crate::render::{Scene, TangentField};
         let lights = uniform_cone_lights(800, 65.0);
-        let holdout = holdout_lights(800, 12).unwrap();
+        let holdout = FitParams::holdout_lights(800, 12).unwrap();
         let scene = Scene::sphere(24, TangentField::Circular);
         let gold = Beckmann::new([0.0; 3], [1.0, 0.71, 0.29], 0.25, 0.06);
         let stack = scene.render_stack(&gold, &lights);
@@ -1586,7 +1605,7 @@ mod tests {
                     rgb: stack.pixel(p).to_vec(),
                 })
                 .collect();
-            let choice = select_exposure(&lights, &params, &pixels).unwrap();
+            let choice = ExposureChoice::select(&lights, &params, &pixels).unwrap();
             assert!((0.7..1.42).contains(&choice.exposure), "{choice:?}");
             params.exposure = choice.exposure;
             let fit = fit_stack(
@@ -1623,9 +1642,9 @@ mod tests {
 
     #[test]
     fn one_default_model() {
-        assert_eq!(FitModel::default(), DEFAULT_MODEL);
-        assert_eq!(FitParams::default().model, DEFAULT_MODEL);
-        assert_eq!(DEFAULT_MODEL, FitModel::Auto);
+        assert_eq!(FitModel::default(), FitModel::DEFAULT);
+        assert_eq!(FitParams::default().model, FitModel::DEFAULT);
+        assert_eq!(FitModel::DEFAULT, FitModel::Auto);
     }
 
     #[test]
@@ -1638,12 +1657,15 @@ mod tests {
 
     #[test]
     fn holdout_indices_are_spread_and_bounded() {
-        assert_eq!(holdout_lights(10, 2).unwrap(), vec![2, 7]);
-        assert_eq!(holdout_lights(100, 0).unwrap(), Vec::<usize>::new());
-        let h = holdout_lights(1000, 25).unwrap();
+        assert_eq!(FitParams::holdout_lights(10, 2).unwrap(), vec![2, 7]);
+        assert_eq!(
+            FitParams::holdout_lights(100, 0).unwrap(),
+            Vec::<usize>::new()
+        );
+        let h = FitParams::holdout_lights(1000, 25).unwrap();
         assert_eq!(h.len(), 25);
         assert!(h.windows(2).all(|w| w[1] - w[0] == 40));
-        assert!(holdout_lights(10, 6).is_err());
+        assert!(FitParams::holdout_lights(10, 6).is_err());
     }
 
     #[test]

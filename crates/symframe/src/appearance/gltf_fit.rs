@@ -485,7 +485,7 @@ mod tests {
         let truth = GltfPbr::new([0.5, 0.4, 0.3], 0.0, 0.35, 0.0);
         let rgb = render_pixel(&truth, n, t, &lights, 1.0);
         let params = FitParams {
-            holdout: crate::appearance::fit::holdout_lights(400, 10).unwrap(),
+            holdout: crate::appearance::fit::FitParams::holdout_lights(400, 10).unwrap(),
             ..params(1.0)
         };
         let PixelOutcome::FittedGltf(fit, hold) = PixelFitter::new(&lights, &params)

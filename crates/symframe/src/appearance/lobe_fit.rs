@@ -613,12 +613,12 @@ mod tests {
     /// truth (PSNR over the sphere).
     #[test]
     fn two_lobe_fits_relight_within_the_training_samples() {
-        use crate::appearance::fit::{fit_stack, holdout_lights, select_exposure, PixelData};
-        use crate::appearance::relight::{image_psnr, Edits, Relighter};
+        use crate::appearance::fit::{fit_stack, ExposureChoice, PixelData};
+        use crate::appearance::relight::{Edits, Relighter};
         use crate::eval::vec_at;
         use crate::render::{Scene, TangentField};
         let lights = uniform_cone_lights(400, 65.0);
-        let holdout = holdout_lights(400, 12).unwrap();
+        let holdout = FitParams::holdout_lights(400, 12).unwrap();
         let scene = Scene::sphere(16, TangentField::Circular);
         let (normals, tangents) = (scene.gt_normals(), scene.gt_tangents());
         let np = scene.n_pixels();
@@ -659,7 +659,9 @@ mod tests {
                         rgb: stack.pixel(p).to_vec(),
                     })
                     .collect();
-                params.exposure = select_exposure(&lights, &params, &pixels).unwrap().exposure;
+                params.exposure = ExposureChoice::select(&lights, &params, &pixels)
+                    .unwrap()
+                    .exposure;
             }
             let fit = fit_stack(
                 &stack,
@@ -678,7 +680,8 @@ mod tests {
             let (mut relit_ratio, mut truth_ratio, mut psnr) = (0.0f32, 0.0f32, 0.0);
             for &i in &holdout {
                 let (relit, truth) = (relighter.render(lights[i]), stack.image(i));
-                psnr += image_psnr(&relit, &truth, Some(&scene.mask)) / holdout.len() as f64;
+                psnr +=
+                    Relighter::image_psnr(&relit, &truth, Some(&scene.mask)) / holdout.len() as f64;
                 for p in (0..np).filter(|&p| scene.mask[p]) {
                     let bound = brightest[p].max(1e-3 * peak);
                     for c in 0..3 {

@@ -366,44 +366,46 @@ fn edited_frame(
     (t, anisotropic)
 }
 
-/// Scales linear RGB by `2^exposure_stops` and clamps to `[0, 1]` (NaN becomes 0), ready for an
-/// sRGB-encoded 8-bit picture.
-pub fn tone_map(rgb: &[f32], exposure_stops: f64) -> Vec<f32> {
-    let k = 2f64.powf(exposure_stops) as f32;
-    rgb.iter()
-        .map(|&v| {
-            if v.is_nan() {
-                0.0
-            } else {
-                (v * k).clamp(0.0, 1.0)
-            }
-        })
-        .collect()
-}
+impl Relighter {
+    /// Scales linear RGB by `2^exposure_stops` and clamps to `[0, 1]` (NaN becomes 0), ready
+    /// for an sRGB-encoded 8-bit picture.
+    pub fn tone_map(rgb: &[f32], exposure_stops: f64) -> Vec<f32> {
+        let k = 2f64.powf(exposure_stops) as f32;
+        rgb.iter()
+            .map(|&v| {
+                if v.is_nan() {
+                    0.0
+                } else {
+                    (v * k).clamp(0.0, 1.0)
+                }
+            })
+            .collect()
+    }
 
-/// PSNR (dB) of an image against a reference, both `H x W x 3`, over the pixels inside `mask`
-/// (all when `None`): `20 log10(peak / RMS)`, `peak` the reference's largest value there.
-/// Infinite when the images are equal; NaN when no pixel is compared.
-pub fn image_psnr(image: &[f32], reference: &[f32], mask: Option<&[bool]>) -> f64 {
-    let (mut sse, mut count, mut peak) = (0.0f64, 0usize, 0.0f64);
-    for (p, (a, b)) in image
-        .chunks_exact(3)
-        .zip(reference.chunks_exact(3))
-        .enumerate()
-    {
-        if mask.is_some_and(|m| !m[p]) {
-            continue;
+    /// PSNR (dB) of an image against a reference, both `H x W x 3`, over the pixels inside `mask`
+    /// (all when `None`): `20 log10(peak / RMS)`, `peak` the reference's largest value there.
+    /// Infinite when the images are equal; NaN when no pixel is compared.
+    pub fn image_psnr(image: &[f32], reference: &[f32], mask: Option<&[bool]>) -> f64 {
+        let (mut sse, mut count, mut peak) = (0.0f64, 0usize, 0.0f64);
+        for (p, (a, b)) in image
+            .chunks_exact(3)
+            .zip(reference.chunks_exact(3))
+            .enumerate()
+        {
+            if mask.is_some_and(|m| !m[p]) {
+                continue;
+            }
+            for c in 0..3 {
+                sse += (a[c] as f64 - b[c] as f64).powi(2);
+                peak = peak.max(b[c] as f64);
+            }
+            count += 3;
         }
-        for c in 0..3 {
-            sse += (a[c] as f64 - b[c] as f64).powi(2);
-            peak = peak.max(b[c] as f64);
+        if count == 0 {
+            return f64::NAN;
         }
-        count += 3;
+        crate::appearance::fit::psnr_db(peak, (sse / count as f64).sqrt())
     }
-    if count == 0 {
-        return f64::NAN;
-    }
-    crate::appearance::fit::psnr_db(peak, (sse / count as f64).sqrt())
 }
 
 #[cfg(test)]
@@ -637,12 +639,15 @@ mod tests {
     #[test]
     fn psnr_and_tone_map() {
         let a = vec![1.0f32, 0.5, 0.0, 0.2, 0.2, 0.2];
-        assert!(image_psnr(&a, &a, None).is_infinite());
+        assert!(Relighter::image_psnr(&a, &a, None).is_infinite());
         let mut b = a.clone();
         b[0] = 0.9;
         // RMS = sqrt(0.01 / 6), peak 1.
         let want = 20.0 * (1.0 / (0.01f64 / 6.0).sqrt()).log10();
-        assert!((image_psnr(&b, &a, None) - want).abs() < 1e-4);
-        assert_eq!(tone_map(&[0.25, f32::NAN, 2.0], 1.0), vec![0.5, 0.0, 1.0]);
+        assert!((Relighter::image_psnr(&b, &a, None) - want).abs() < 1e-4);
+        assert_eq!(
+            Relighter::tone_map(&[0.25, f32::NAN, 2.0], 1.0),
+            vec![0.5, 0.0, 1.0]
+        );
     }
 }

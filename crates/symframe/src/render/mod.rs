@@ -3,8 +3,9 @@
 //! and for `symframe synth`.
 //!
 //! - Scenes ([`Scene`]): [`Scene::sphere`], [`Scene::cylinder`], [`Scene::plane`] /
-//!   [`Scene::tilted_plane`] (see [`plane_frame`]), and height fields ([`Scene::height_field`],
-//!   [`Scene::bumps`], [`Scene::from_bumps`]) which cast shadows ([`shadow`]).
+//!   [`Scene::tilted_plane`] (see [`Scene::plane_frame`]), and height fields
+//!   ([`Scene::height_field`], [`Scene::bumps`], [`Scene::from_bumps`]) which cast shadows
+//!   ([`shadow`], [`Scene::cast_shadows`]).
 //! - Tangent fields ([`TangentField`]): circular, axial, radial, swirl, or any function.
 //! - Light rigs ([`rigs`]): the uniform cone, a DiLiGenT-like 96-light grid.
 //! - A mirror ball for light calibration ([`MirrorBall`]): lamps of finite size, anti-aliased;
@@ -29,11 +30,10 @@ mod tangent;
 
 pub use mirror_ball::MirrorBall;
 pub use near_mirror::NearMirrorBalls;
-pub use noise::{clip_point, jitter_lights, Degradation, Noise, Rng};
+pub use noise::{Degradation, Noise, Rng};
 pub use perspective::{dome_lights, Ball, NearScene};
 pub use rigs::diligent_lights;
-pub use shadow::cast_shadows;
-pub use shapes::{plane_frame, Bump, BumpParams};
+pub use shapes::{Bump, BumpParams};
 pub use tangent::TangentField;
 
 /// A surface seen by the camera: per pixel, a normal and a tangent (camera frame), inside a
@@ -68,6 +68,7 @@ impl Scene {
             Some(&self.gt_tangents()),
             Some(&self.mask),
             60.0,
+            None,
         )
     }
 

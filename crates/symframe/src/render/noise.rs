@@ -250,47 +250,6 @@ fn srgb_to_linear(v: f64) -> f64 {
     }
 }
 
-/// Light directions as a calibration knows them: each of `lights` turned by `error_deg`
-/// degrees about a random axis perpendicular to it (deterministic in `seed`), so every
-/// direction is off by exactly that angle, each its own way.
-pub fn jitter_lights(lights: &[glam::DVec3], error_deg: f64, seed: u64) -> Vec<glam::DVec3> {
-    let mut rng = Rng::new(seed ^ 0x6c69_6768_7473);
-    let a = error_deg.to_radians();
-    lights
-        .iter()
-        .map(|&l| {
-            let l = l.normalize();
-            let (u, w) = l.any_orthonormal_pair();
-            let phi = rng.range(0.0, std::f64::consts::TAU);
-            let axis = u * phi.cos() + w * phi.sin();
-            (l * a.cos() + axis * a.sin()).normalize()
-        })
-        .collect()
-}
-
-/// The clip point of a clean `stack` for a share `clipped` of its samples to clip: the sample
-/// value (the brightest channel of a pixel under one light, pixels inside `mask`) that share
-/// exceeds; the brightest when 0, 1 when there is none. An exposure of its inverse clips them.
-pub fn clip_point(stack: &crate::Stack, mask: &[bool], clipped: f64) -> f32 {
-    let mut v: Vec<f32> = (0..stack.n_pixels())
-        .filter(|&p| mask[p])
-        .flat_map(|p| {
-            stack
-                .pixel(p)
-                .chunks_exact(3)
-                .map(|s| s[0].max(s[1]).max(s[2]))
-                .collect::<Vec<_>>()
-        })
-        .filter(|x| x.is_finite())
-        .collect();
-    if v.is_empty() {
-        return 1.0;
-    }
-    let k = ((1.0 - clipped.clamp(0.0, 1.0)) * (v.len() - 1) as f64).round() as usize;
-    let (_, at, _) = v.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
-    *at
-}
-
 /// A full degradation pipeline, applied in this order: multiply by `exposure`, add `noise`,
 /// clip to `[0, clip]` when set, quantise to `quantise_bits` when set (in the sRGB domain when
 /// `srgb`), then mark saturated pixels as the dataset reader does when `saturation` is set.
@@ -329,6 +288,29 @@ impl Default for Degradation {
 }
 
 impl Degradation {
+    /// The clip point of a clean `stack` for a share `clipped` of its samples to clip: the sample
+    /// value (the brightest channel of a pixel under one light, pixels inside `mask`) that share
+    /// exceeds; the brightest when 0, 1 when there is none. An exposure of its inverse clips them.
+    pub fn clip_point(stack: &crate::Stack, mask: &[bool], clipped: f64) -> f32 {
+        let mut v: Vec<f32> = (0..stack.n_pixels())
+            .filter(|&p| mask[p])
+            .flat_map(|p| {
+                stack
+                    .pixel(p)
+                    .chunks_exact(3)
+                    .map(|s| s[0].max(s[1]).max(s[2]))
+                    .collect::<Vec<_>>()
+            })
+            .filter(|x| x.is_finite())
+            .collect();
+        if v.is_empty() {
+            return 1.0;
+        }
+        let k = ((1.0 - clipped.clamp(0.0, 1.0)) * (v.len() - 1) as f64).round() as usize;
+        let (_, at, _) = v.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
+        *at
+    }
+
     /// Degrades image number `index` of a stack in place (deterministic in `seed` and `index`).
     pub fn apply(&self, img: &mut [f32], index: usize) {
         if self.exposure != 1.0 {
@@ -362,7 +344,7 @@ mod tests {
     }
 
     #[test]
-    fn srgb_quantisation_has_fine_steps_in_the_darks_and_jitter_the_asked_angle() {
+    fn srgb_quantisation_has_fine_steps_in_the_darks() {
         let mut v = vec![0.001f32, 0.0011, 0.5, 0.5015, 1.2, f32::NAN];
         quantise_srgb(&mut v, 8);
         // Two darks 10% apart stay apart (sRGB's step there is ~0.0003 linear); near 0.5 the
@@ -371,13 +353,6 @@ mod tests {
         assert_eq!(v[2], v[3]);
         assert_eq!(v[4], 1.0);
         assert!(v[5].is_nan());
-        let lights = crate::frames::rig::uniform_cone_lights(50, 65.0);
-        let moved = jitter_lights(&lights, 1.0, 3);
-        for (a, b) in lights.iter().zip(&moved) {
-            let deg = a.normalize().angle_between(*b).to_degrees();
-            assert!((deg - 1.0).abs() < 1e-9, "{deg}");
-        }
-        assert_ne!(jitter_lights(&lights, 1.0, 4), moved);
     }
 
     #[test]

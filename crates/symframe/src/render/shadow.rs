@@ -85,22 +85,22 @@ impl<'a> ShadowTracer<'a> {
     }
 }
 
-/// The cast-shadow mask of a height field (`width * height` heights in pixel units, row 0 at
-/// the top, `NaN` where there is no surface) under the distant light `light`, by the same
-/// march as the renderer's: how a relit image hides what an integrated relief occludes.
-/// Pixels without a height are never shadowed (and never block: `NaN` compares false).
-pub fn cast_shadows(heights: &[f64], width: usize, height: usize, light: DVec3) -> Vec<bool> {
-    if width == 0 || height == 0 || heights.len() != width * height {
-        return vec![false; heights.len()];
-    }
-    let l = light.normalize();
-    let tracer = ShadowTracer::new(heights, width, height);
-    (0..heights.len())
-        .map(|p| heights[p].is_finite() && tracer.shadowed(p, l))
-        .collect()
-}
-
 impl Scene {
+    /// The cast-shadow mask of a height field (`width * height` heights in pixel units, row 0 at
+    /// the top, `NaN` where there is no surface) under the distant light `light`, by the same
+    /// march as the renderer's: how a relit image hides what an integrated relief occludes.
+    /// Pixels without a height are never shadowed (and never block: `NaN` compares false).
+    pub fn cast_shadows(heights: &[f64], width: usize, height: usize, light: DVec3) -> Vec<bool> {
+        if width == 0 || height == 0 || heights.len() != width * height {
+            return vec![false; heights.len()];
+        }
+        let l = light.normalize();
+        let tracer = ShadowTracer::new(heights, width, height);
+        (0..heights.len())
+            .map(|p| heights[p].is_finite() && tracer.shadowed(p, l))
+            .collect()
+    }
+
     /// Whether pixel `pixel` is in cast shadow from the light direction `light` (module
     /// documentation); always `false` for scenes without heights. Builds a tracer per call:
     /// use [`Scene::cast_shadow_mask`] for whole images.

@@ -6,25 +6,6 @@ use super::noise::Rng;
 use super::tangent::{image_position, project_to_tangent_plane};
 use super::{Scene, TangentField};
 
-/// The frame of a tilted planar patch: the normal at `theta_n_deg` from the view, tilted
-/// toward the image-plane azimuth `phi_n_deg` (counter-clockwise from x, so 0 tilts toward +x
-/// and the normal lies in the x-z plane), and the tangent rotated by `tangent_angle_deg` about
-/// the normal from the projection of camera x onto the tangent plane (positive angles turn from
-/// x toward `n x x_proj`, i.e. counter-clockwise as seen from the camera). This is the paper's
-/// Figure 3 set-up: `phi_n = 0`, tangent 25 degrees off the x-z plane. Returns `(n, t)`.
-///
-/// The projection of x degenerates only for a normal along x (`theta_n = 90`, `phi_n = 0`);
-/// the projection of y is used there.
-pub fn plane_frame(theta_n_deg: f64, phi_n_deg: f64, tangent_angle_deg: f64) -> (DVec3, DVec3) {
-    let (st, ct) = theta_n_deg.to_radians().sin_cos();
-    let (sp, cp) = phi_n_deg.to_radians().sin_cos();
-    let n = DVec3::new(st * cp, st * sp, ct);
-    let r = project_to_tangent_plane(DVec3::X, n);
-    let (sa, ca) = tangent_angle_deg.to_radians().sin_cos();
-    let t = (ca * r + sa * n.cross(r)).normalize();
-    (n, t)
-}
-
 /// One Gaussian bump of a height field, in pixel units: `amplitude * exp(-d^2 / (2 sigma^2))`
 /// where `d` is the distance from `(col, row)` (pixel centres at integer coordinates).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -94,6 +75,25 @@ impl BumpParams {
 }
 
 impl Scene {
+    /// The frame of a tilted planar patch: the normal at `theta_n_deg` from the view, tilted
+    /// toward the image-plane azimuth `phi_n_deg` (counter-clockwise from x, so 0 tilts toward +x
+    /// and the normal lies in the x-z plane), and the tangent rotated by `tangent_angle_deg` about
+    /// the normal from the projection of camera x onto the tangent plane (positive angles turn from
+    /// x toward `n x x_proj`, i.e. counter-clockwise as seen from the camera). This is the paper's
+    /// Figure 3 set-up: `phi_n = 0`, tangent 25 degrees off the x-z plane. Returns `(n, t)`.
+    ///
+    /// The projection of x degenerates only for a normal along x (`theta_n = 90`, `phi_n = 0`);
+    /// the projection of y is used there.
+    pub fn plane_frame(theta_n_deg: f64, phi_n_deg: f64, tangent_angle_deg: f64) -> (DVec3, DVec3) {
+        let (st, ct) = theta_n_deg.to_radians().sin_cos();
+        let (sp, cp) = phi_n_deg.to_radians().sin_cos();
+        let n = DVec3::new(st * cp, st * sp, ct);
+        let r = project_to_tangent_plane(DVec3::X, n);
+        let (sa, ca) = tangent_angle_deg.to_radians().sin_cos();
+        let t = (ca * r + sa * n.cross(r)).normalize();
+        (n, t)
+    }
+
     /// A scene from per-pixel normals inside a mask; tangents from `field`.
     fn from_normals(
         width: usize,
@@ -177,7 +177,7 @@ impl Scene {
         }
     }
 
-    /// A flat patch in the orientation of [`plane_frame`] (angles in degrees).
+    /// A flat patch in the orientation of [`Scene::plane_frame`] (angles in degrees).
     pub fn tilted_plane(
         width: usize,
         height: usize,
@@ -185,7 +185,7 @@ impl Scene {
         phi_n_deg: f64,
         tangent_angle_deg: f64,
     ) -> Self {
-        let (n, t) = plane_frame(theta_n_deg, phi_n_deg, tangent_angle_deg);
+        let (n, t) = Scene::plane_frame(theta_n_deg, phi_n_deg, tangent_angle_deg);
         Self::plane(width, height, n, t)
     }
 
@@ -311,12 +311,12 @@ mod tests {
         // The tangent is 25 degrees from the x-z plane (whose normal is y).
         assert!((t.y.asin().to_degrees() - 25.0).abs() < 1e-9, "{t}");
         // Angle 0: the projection of x; azimuth 90 tilts toward +y.
-        let (n0, t0) = plane_frame(30.0, 0.0, 0.0);
+        let (n0, t0) = Scene::plane_frame(30.0, 0.0, 0.0);
         assert!((t0 - (DVec3::X - n0.x * n0).normalize()).length() < 1e-12);
-        let (n9, t9) = plane_frame(30.0, 90.0, 0.0);
+        let (n9, t9) = Scene::plane_frame(30.0, 90.0, 0.0);
         assert!(n9.y > 0.49 && n9.x.abs() < 1e-12 && (t9 - DVec3::X).length() < 1e-12);
         // Degenerate reference: a normal along x uses y.
-        let (nx, tx) = plane_frame(90.0, 0.0, 0.0);
+        let (nx, tx) = Scene::plane_frame(90.0, 0.0, 0.0);
         assert!(nx.dot(tx).abs() < 1e-12 && (tx.length() - 1.0).abs() < 1e-12);
     }
 

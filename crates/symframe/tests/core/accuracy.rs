@@ -175,8 +175,8 @@ fn assert_paths_agree_with(
     let with_tangent = |m: &symframe::EstimateMaps| m.counts.with_tangent;
     assert!(estimated(&fast).abs_diff(estimated(&exact)) * 200 <= estimated(&exact));
     assert!(with_tangent(&fast).abs_diff(with_tangent(&exact)) * 200 <= estimated(&exact));
-    let normals = symframe::normal_error_map(&fast.normals, &exact.normals);
-    let tangents = symframe::tangent_error_map(&fast.tangents, &exact.tangents);
+    let normals = symframe::Evaluation::normal_error_map(&fast.normals, &exact.normals);
+    let tangents = symframe::Evaluation::tangent_error_map(&fast.tangents, &exact.tangents);
     let (n_median, n_p99, n) = median_and_p99(normals.into_iter());
     let (t_median, t_p99, t) = median_and_p99(tangents.into_iter());
     eprintln!(

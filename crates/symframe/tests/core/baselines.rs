@@ -33,6 +33,7 @@ fn run_with(
         None,
         Some(&scene.mask),
         60.0,
+        None,
     );
     eprintln!(
         "{method} on {} ({} lights, shadow fraction {}): mean {:.4} median {:.4} p90 {:.4} max {:.4} deg, coverage {:.3}",

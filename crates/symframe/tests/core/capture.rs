@@ -5,7 +5,7 @@
 
 use glam::DVec3;
 use symframe::brdf::{Brdf, Ggx};
-use symframe::render::{clip_point, Degradation, Noise, Scene, TangentField};
+use symframe::render::{Degradation, Noise, Scene, TangentField};
 use symframe::{
     estimate_stack, evaluate, uniform_cone_lights, EstimateMaps, EstimatorParams, NoiseModel,
     PixelSource, Quantisation, Rig, RigOptions,
@@ -24,7 +24,7 @@ fn clipped_capture() -> (Scene, Vec<DVec3>, symframe::Stack) {
     let lights = uniform_cone_lights(400, 65.0);
     let brdf = Ggx::new([0.02; 3], [0.91, 0.92, 0.92], 0.3, 0.08);
     let clean = scene.render_stack(&brdf as &dyn Brdf, &lights);
-    let at = clip_point(&clean, &scene.mask, 0.005);
+    let at = Degradation::clip_point(&clean, &scene.mask, 0.005);
     let d = Degradation {
         exposure: 1.0 / at,
         noise: Noise::Shot { photons: 4000.0 },
@@ -119,6 +119,7 @@ fn float_sphere_error(brdf: &dyn Brdf) -> f64 {
         None,
         Some(&scene.mask),
         60.0,
+        None,
     )
     .normal_error
     .mean

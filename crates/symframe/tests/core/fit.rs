@@ -6,8 +6,8 @@ use glam::DVec3;
 use symframe::brdf::{Brdf, Ward};
 use symframe::render::{Scene, TangentField};
 use symframe::{
-    estimate_stack, fit_stack, holdout_lights, image_psnr, uniform_cone_lights, Edits,
-    EstimatorParams, FitMaps, FitModel, FitParams, Relighter, Rig, RigOptions,
+    estimate_stack, fit_stack, uniform_cone_lights, Edits, EstimatorParams, FitMaps, FitModel,
+    FitParams, Relighter, Rig, RigOptions,
 };
 
 /// Pixels inside the sphere whose normal is within 60 degrees of the view.
@@ -95,7 +95,7 @@ fn relit_psnr(
     let v: Vec<f64> = holdout
         .iter()
         .map(|&i| {
-            image_psnr(
+            Relighter::image_psnr(
                 &r.render(lights[i]),
                 &scene.render(brdf, lights[i]),
                 Some(&mask),
@@ -116,7 +116,7 @@ fn true_frames_recover_ward_parameters_and_relight_held_out_lights() {
     let w = paper_like();
     let lights = uniform_cone_lights(600, 65.0);
     let stack = scene.render_stack(&w, &lights);
-    let holdout = holdout_lights(lights.len(), 20).unwrap();
+    let holdout = FitParams::holdout_lights(lights.len(), 20).unwrap();
     let params = FitParams {
         holdout: holdout.clone(),
         model: FitModel::Ward,
@@ -155,7 +155,7 @@ fn estimated_frames_give_close_parameters_and_relighting() {
     let scene = Scene::sphere(32, TangentField::Circular);
     let w = paper_like();
     let lights = uniform_cone_lights(800, 65.0);
-    let holdout = holdout_lights(lights.len(), 20).unwrap();
+    let holdout = FitParams::holdout_lights(lights.len(), 20).unwrap();
     // Frames are estimated without the held-out lights, as the fit is.
     let train: Vec<DVec3> = (0..lights.len())
         .filter(|i| !holdout.contains(i))
@@ -211,7 +211,7 @@ fn estimated_frames_give_close_parameters_and_relighting() {
 fn other_models_held_out_psnr() {
     let scene = Scene::sphere(32, TangentField::Circular);
     let lights = uniform_cone_lights(800, 65.0);
-    let holdout = holdout_lights(lights.len(), 20).unwrap();
+    let holdout = FitParams::holdout_lights(lights.len(), 20).unwrap();
     let train: Vec<DVec3> = (0..lights.len())
         .filter(|i| !holdout.contains(i))
         .map(|i| lights[i])
@@ -267,7 +267,7 @@ fn true_frames_recover_gltf_parameters_and_relight_held_out_lights() {
     let g = GltfPbr::new([0.85, 0.6, 0.35], 1.0, 0.3, 0.55);
     let lights = uniform_cone_lights(400, 65.0);
     let stack = scene.render_stack(&g, &lights);
-    let holdout = holdout_lights(lights.len(), 20).unwrap();
+    let holdout = FitParams::holdout_lights(lights.len(), 20).unwrap();
     let params = FitParams {
         holdout: holdout.clone(),
         model: FitModel::Gltf,
@@ -316,7 +316,7 @@ fn true_frames_recover_gltf_parameters_and_relight_held_out_lights() {
     assert!(s.holdout_psnr_db.unwrap() > 70.0, "{s:?}");
     let r = Relighter::gltf(m, &Edits::default()).unwrap();
     for &i in &holdout {
-        let psnr = image_psnr(
+        let psnr = Relighter::image_psnr(
             &r.render(lights[i]),
             &scene.render(&g, lights[i]),
             Some(&scene.mask),
