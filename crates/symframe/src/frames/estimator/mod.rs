@@ -26,10 +26,12 @@ use crate::stack::Stack;
 
 use crate::maps::{EstimateMaps, PixelRecord, PixelSource, PixelStatus};
 
+mod censored;
 mod confidence;
 mod diffuse;
 mod search;
 
+use censored::Censoring;
 use confidence::{unconfirmed, within_confident, JUDGE_LIGHTS};
 use diffuse::{diffuse_noise_share, unexplained_share};
 use search::{brightest_sample, centre_observed, highlight_wider_along, TangentSearch};
@@ -217,9 +219,11 @@ impl<'a> Estimator<'a> {
             greys,
             lambert,
             censored,
+            censoring,
             lobe_input,
             base_input,
         } = scratch;
+        let raw = slice;
         // Clipped samples read through the censoring map: the clipped top of a highlight stays
         // in the slice, at the clip level, symmetric wherever the unclipped slice is.
         let clipped = self.params.noise.censor(slice, censored);
@@ -266,28 +270,29 @@ impl<'a> Estimator<'a> {
                 )
             });
         let pure_diffuse = policy::pure_diffuse(&self.policy.diffuse, &fit, share, diffuse_noise);
-        // The lobe's model has no clip: a censored sample tells it nothing it can fit (copied
-        // only where a lobe is fitted).
-        let lobe_slice = match self
+        // A clipped sample is a lower bound the lobe's model cannot take as a value: the fit
+        // leaves the clipped samples out, and where it breaks their bounds the normal is only
+        // as certain as the bounds let it be (docs/method.md, "Clipped samples in the lobe
+        // fit").
+        let clip = self
             .params
             .noise
             .clip_level
-            .filter(|_| clipped && auto && !pure_diffuse)
-        {
-            Some(c) => {
-                lobe_input.clear();
-                lobe_input.extend_from_slice(slice);
-                for s in lobe_input.chunks_exact_mut(3).filter(|s| s[0] >= c) {
-                    s.fill(f32::NAN);
-                }
-                &lobe_input[..]
-            }
-            None => slice,
+            .filter(|_| clipped && auto && !pure_diffuse);
+        if let Some(c) = clip {
+            censoring.leave_out(raw, slice, c, lobe_input);
+        }
+        let fitted = match moments.filter(|_| auto && !pure_diffuse) {
+            Some(m) if clip.is_some() => self
+                .lobe_fit(lobe_input, m.normal, m.tangent, m.radius, lobe)
+                .map(|first| self.bounds_checked(first, lobe_input, raw, censoring)),
+            Some(m) => self.lobe_fit(slice, m.normal, m.tangent, m.radius, lobe),
+            None => None,
         };
-        let fitted = if auto && !pure_diffuse {
-            moments.and_then(|m| self.lobe_fit(lobe_slice, m.normal, m.tangent, m.radius, lobe))
+        let lobe_slice = if clip.is_some() {
+            &lobe_input[..]
         } else {
-            None
+            slice
         };
         // Where one lobe leaves the samples unexplained, two sharing its frame may explain them
         // (a coat over a base, a woven cross): the pair then stands for the lobe, with the axis
@@ -784,7 +789,9 @@ pub struct PixelScratch {
     lambert: Vec<f64>,
     /// The slice through the censoring map (pixels with clipped samples).
     censored: Vec<f32>,
-    /// The lobe fit's samples, the censored ones left out.
+    /// The clipped samples' bounds, and the fit under them.
+    censoring: Censoring,
+    /// The lobe fit's samples, the clipped ones left out.
     lobe_input: Vec<f32>,
     /// The base lobe's samples under a sharp coat, the coat's left out.
     base_input: Vec<f32>,
@@ -801,6 +808,7 @@ impl PixelScratch {
             greys: Vec::with_capacity(rig.n_used()),
             lambert: vec![0.0; 2 * rig.n_used()],
             censored: Vec::with_capacity(rig.n_used() * 3),
+            censoring: Censoring::default(),
             lobe_input: Vec::with_capacity(rig.n_used() * 3),
             base_input: Vec::with_capacity(rig.n_used() * 3),
         }

@@ -379,6 +379,21 @@ pub(crate) struct LobeScratch {
     /// Every other sample of `fine` (the split-half fit's), or all of them with the lights
     /// turned (the light error's).
     every: Subset,
+    /// [`predicted_greys`]'s samples and buffers.
+    probe: Probe,
+}
+
+/// The buffers [`predicted_greys`] evaluates a fitted lobe in (its own, so the fit's kept
+/// terms stay those of its samples).
+#[derive(Debug, Clone, Default)]
+struct Probe {
+    samples: Subset,
+    /// A zero per light: the probed samples' values (their residuals are then minus the
+    /// prediction).
+    zeros: Vec<f64>,
+    lobe: Vec<f64>,
+    r: Vec<f64>,
+    kept: kernel::Kept,
 }
 
 /// Per-sample work buffers: the lobe's values, the residuals, and which samples stay.
@@ -1299,6 +1314,46 @@ pub(crate) fn fit_lobe(
         noise_share_sd,
         evals,
     })
+}
+
+/// The grey value (the sum of the channels) the fitted lobe `fit` predicts under each light
+/// of `js` (rig indices), diffuse term included, into `out` (in `js`'s order): what a clipped
+/// sample's lower bound is held against (docs/method.md, "Clipped samples in the lobe fit").
+pub(crate) fn predicted_greys(
+    fit: &LobeFit,
+    js: &[u32],
+    rig: &Rig,
+    scratch: &mut LobeScratch,
+    out: &mut Vec<f64>,
+) {
+    let a = |v: f64| v.clamp(ALPHA_RANGE.0, ALPHA_RANGE.1);
+    let (at, ab) = (a(fit.alpha[0]), a(fit.alpha[1]));
+    let m = Model {
+        normal: fit.normal,
+        t: fit.tangent,
+        b: fit.normal.cross(fit.tangent),
+        inv_a2: [at.powi(-2), ab.powi(-2)],
+        alpha2: at * ab,
+        shape: fit.shape,
+        foreshortening: fit.foreshortening,
+    };
+    let Probe {
+        samples,
+        zeros,
+        lobe,
+        r,
+        kept,
+    } = &mut scratch.probe;
+    zeros.resize(rig.lights_in_camera().len(), 0.0);
+    samples.gather(js, rig.lights_in_camera(), rig.halfway_in_camera(), zeros);
+    for buffer in [&mut *lobe, &mut *r] {
+        buffer.resize(samples.padded_len(), 0.0);
+    }
+    kernel::sums(&m, samples, lobe, kept);
+    let coefficients = [fit.diffuse, fit.specular, fit.fresnel];
+    kernel::residuals(&m, samples, coefficients, lobe, r);
+    out.clear();
+    out.extend(r[..js.len()].iter().map(|v| -v));
 }
 
 #[cfg(test)]
