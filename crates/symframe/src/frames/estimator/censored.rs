@@ -97,13 +97,20 @@ impl Estimator<'_> {
         if lights.is_empty() {
             return None;
         }
+        // Most fits keep every bound: the samples are copied only once one is broken.
+        predicted_greys(first, lights, self.rig, scratch, predicted);
+        if !predicted.iter().zip(bounds.iter()).any(|(p, b)| p < b) {
+            return None;
+        }
         held.clear();
         held.resize(lights.len(), false);
         samples.clear();
         samples.extend_from_slice(input);
-        let (mut fit, mut evals, mut refitted) = (*first, 0, false);
-        for _ in 0..CENSORED_ROUNDS {
-            predicted_greys(&fit, lights, self.rig, scratch, predicted);
+        let (mut fit, mut evals) = (*first, 0);
+        for round in 0..CENSORED_ROUNDS {
+            if round > 0 {
+                predicted_greys(&fit, lights, self.rig, scratch, predicted);
+            }
             let mut changed = false;
             for (k, &j) in lights.iter().enumerate() {
                 let hold = predicted[k] < bounds[k];
@@ -128,9 +135,8 @@ impl Estimator<'_> {
             let radius = fit.alpha[0].atan();
             fit = self.lobe_fit(samples, fit.normal, fit.tangent, radius, scratch)?;
             evals += fit.evals;
-            refitted = true;
         }
-        refitted.then_some((fit, evals))
+        Some((fit, evals))
     }
 }
 

@@ -1326,17 +1326,18 @@ pub(crate) fn predicted_greys(
     scratch: &mut LobeScratch,
     out: &mut Vec<f64>,
 ) {
-    let a = |v: f64| v.clamp(ALPHA_RANGE.0, ALPHA_RANGE.1);
-    let (at, ab) = (a(fit.alpha[0]), a(fit.alpha[1]));
-    let m = Model {
+    // The fit's state (its widths and shape in the search's coordinates), so the model is the
+    // one the fit evaluated.
+    let m = Model::of(&State {
         normal: fit.normal,
-        t: fit.tangent,
-        b: fit.normal.cross(fit.tangent),
-        inv_a2: [at.powi(-2), ab.powi(-2)],
-        alpha2: at * ab,
-        shape: fit.shape,
-        foreshortening: fit.foreshortening,
-    };
+        tangent: fit.tangent,
+        shape: [
+            fit.alpha[0].ln(),
+            fit.alpha[1].ln(),
+            fit.shape.ln(),
+            fit.foreshortening,
+        ],
+    });
     let Probe {
         samples,
         zeros,
