@@ -842,7 +842,8 @@ mod tests {
         assert!(e.contains("nope.lp: cannot read"), "{e}");
     }
 
-    /// A byte-order mark gave "expected the number of lights, found '2'".
+    /// A byte-order mark is skipped, not read into the count ("expected the number of lights,
+    /// found '2'").
     #[test]
     fn a_bom_before_the_light_count_is_ignored() {
         let d = tempfile::tempdir().unwrap();
@@ -858,7 +859,8 @@ mod tests {
         assert_eq!(ds.intensities.unwrap().len(), 2);
     }
 
-    /// `#` in a file name was blamed on spaces (or the cut name reported missing).
+    /// `#` in a file name is explained, not blamed on spaces (nor the cut name reported
+    /// missing).
     #[test]
     fn a_hash_in_a_file_name_is_explained() {
         let d = tempfile::tempdir().unwrap();
@@ -883,8 +885,8 @@ mod tests {
         );
     }
 
-    /// A folder, FIFO or broken link among the images was "does not exist"; a mask.png that is
-    /// a folder was silently ignored.
+    /// A folder, FIFO or broken link among the images is named as such, not "does not exist";
+    /// a mask.png that is a folder is an error, not silently ignored.
     #[cfg(unix)]
     #[test]
     fn folders_fifos_and_broken_links_are_named_as_such() {
@@ -927,7 +929,8 @@ mod tests {
         assert!(e.contains("broken.lp: is a broken symbolic link"), "{e}");
     }
 
-    /// `light_intensities.txt` was silently ignored once a second `.lp` sat beside the first.
+    /// `light_intensities.txt` is applied by its row count, never silently ignored, also where
+    /// a second `.lp` sits beside the first.
     #[test]
     fn intensities_beside_an_lp_are_applied_by_row_count_and_never_silently() {
         let d = tempfile::tempdir().unwrap();

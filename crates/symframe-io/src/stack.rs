@@ -711,8 +711,8 @@ mod tests {
         assert!(e.contains("test.lp: the dataset has no images"), "{e}");
     }
 
-    /// A pure blue mask was empty, a red and green one lost its green half, and alpha was
-    /// ignored (a mask transparent outside was all inside).
+    /// Any colour channel and the alpha count: a pure blue mask is not empty, a red and green
+    /// one keeps its green half, and a mask transparent outside is not all inside.
     #[test]
     fn a_mask_pixel_is_inside_by_any_colour_channel_and_its_alpha() {
         let d = tempfile::tempdir().unwrap();

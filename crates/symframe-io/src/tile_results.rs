@@ -249,8 +249,8 @@ pub fn parse_tile_result_bytes(b: &[u8]) -> std::result::Result<Vec<PixelRecord>
 /// Reads and verifies tile `t`'s `n` records of job `job` from `path`: `None` if there is no
 /// such file. Anything but a regular file (a link, FIFO, device) is an error and never opened
 /// ([`crate::open_own_file`]); a file whose length is not that of the tile is judged by its
-/// header alone, and no more than the tile's length is ever read (a sparse 1 GB file there was
-/// read whole).
+/// header alone, and no more than the tile's length is ever read (a sparse file of gigabytes
+/// there is never read whole).
 fn load(
     path: &Path,
     job: u64,
@@ -392,7 +392,7 @@ mod tests {
         assert!(e.contains("tile-000003.bin: corrupt tile result"), "{e}");
     }
 
-    /// Overwriting the normals of a finished tile, length and header kept, was trusted.
+    /// Overwritten normals of a finished tile, length and header kept, fail the checksum.
     #[test]
     fn overwritten_normals_fail_the_checksum() {
         let d = tempfile::tempdir().unwrap();

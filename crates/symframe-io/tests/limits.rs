@@ -1,6 +1,6 @@
 //! Forged headers: every decoder refuses a declared size beyond the limits, or beyond what the
-//! file can hold, with a one-line error naming the file, before allocating it (these used to
-//! abort with "memory allocation of 40000000000 bytes failed").
+//! file can hold, with a one-line error naming the file, before allocating it (never an abort
+//! such as "memory allocation of 40000000000 bytes failed").
 
 use std::fs::{self, File};
 use std::path::{Path, PathBuf};

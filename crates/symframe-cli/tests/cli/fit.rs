@@ -269,9 +269,9 @@ fn copy_dataset(from: &Path, to: &Path) {
     }
 }
 
-/// `fit --frames` from another capture of the same size was accepted (wrong Ward maps, exit
-/// 0): the estimate's report.json now records the capture's fingerprint and fit checks it
-/// before decoding anything. A copy of the capture elsewhere is the same capture.
+/// `fit --frames` from another capture of the same size is refused (it would give wrong Ward
+/// maps, exit 0): the estimate's report.json records the capture's fingerprint and fit checks
+/// it before decoding anything. A copy of the capture elsewhere is the same capture.
 #[test]
 fn fit_refuses_frames_of_another_capture() {
     let tmp = tempfile::tempdir().unwrap();

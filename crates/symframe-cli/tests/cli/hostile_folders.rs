@@ -163,7 +163,7 @@ fn links_at_output_names_are_replaced_not_written_through() {
 }
 
 /// A file at an output's name that no report of the tool's names (a user's `report.json`, a
-/// link planted in a fresh folder) was replaced without a word.
+/// link planted in a fresh folder) is never replaced without a word.
 #[test]
 fn files_the_tool_did_not_write_are_never_replaced() {
     let tmp = tempfile::tempdir().unwrap();
@@ -329,10 +329,10 @@ fn npy_maps(out: &Path) -> Vec<(String, Vec<u8>)> {
 }
 
 /// A tile result that is a link to `/dev/zero`, a FIFO or a sparse 1 GB file (where a
-/// 688-byte tile belongs) was read without bound (2 GB peak) or waited forever on resume, and
-/// a merge read it too: now such a file is never opened, nor read beyond a tile's length. The
-/// resumed run recomputes those tiles with a warning naming each, its maps equal to a clean
-/// run's, peaking under 600 MB; a merge of such a shard fails naming the file.
+/// 688-byte tile belongs) is never opened, nor read beyond a tile's length, by a resumed run
+/// or a merge (read, it would cost gigabytes or wait forever: docs/performance.md, "Memory model").
+/// The resumed run recomputes those tiles with a warning naming each, its maps equal to a
+/// clean run's, peaking under 600 MB; a merge of such a shard fails naming the file.
 #[test]
 #[cfg(target_os = "linux")]
 fn tile_results_that_are_devices_fifos_or_huge_are_never_read() {
@@ -413,8 +413,8 @@ fn report_warnings_of(out: &Path) -> Vec<String> {
     }
 }
 
-/// `fit` resumes from its own tile folder: a tile file there that is a FIFO waited forever, a
-/// link to `/dev/zero` was opened. Now neither is opened: the tiles are recomputed, the fit
+/// `fit` resumes from its own tile folder: a tile file there that is a FIFO (opening it would
+/// wait forever) or a link to `/dev/zero` is never opened: the tiles are recomputed, the fit
 /// equal to a clean one's.
 #[test]
 #[cfg(target_os = "linux")]
@@ -441,8 +441,8 @@ fn fit_tile_results_that_are_fifos_or_devices_are_never_opened() {
     assert_eq!(npy_maps(&out), npy_maps(&clean));
 }
 
-/// A tile cache file (`OUT/.symframe-cache/*.stack`, or in `--cache DIR`) that is a FIFO: the
-/// run waited forever opening it. Now it is never opened, and rebuilt like a stale cache.
+/// A tile cache file (`OUT/.symframe-cache/*.stack`, or in `--cache DIR`) that is a FIFO is
+/// never opened (the run would wait forever), and rebuilt like a stale cache.
 #[test]
 #[cfg(target_os = "linux")]
 fn a_cache_file_that_is_a_fifo_is_rebuilt_not_waited_on() {
@@ -475,8 +475,8 @@ fn a_cache_file_that_is_a_fifo_is_rebuilt_not_waited_on() {
     assert!(fs::symlink_metadata(&stack).unwrap().is_file());
 }
 
-/// A finished job removed its whole tile folder, a user's file in it too: now only the tile
-/// results go, and the folder stays while anything else is in it.
+/// A finished job removes only its tile results from its tile folder, never a user's file in
+/// it: the folder stays while anything else is in it.
 #[test]
 fn a_finished_job_removes_only_its_own_tile_files() {
     let tmp = tempfile::tempdir().unwrap();
@@ -499,7 +499,8 @@ fn a_finished_job_removes_only_its_own_tile_files() {
     assert!(!tiles.exists());
 }
 
-/// A MERL file that was /dev/zero was read until memory ran out (2 GB peak).
+/// A MERL file that is /dev/zero is refused, not read until memory runs out
+/// (docs/performance.md, "Memory model").
 #[cfg(target_os = "linux")]
 #[test]
 fn a_merl_file_that_is_a_device_is_refused_unread() {
@@ -535,7 +536,7 @@ fn calibrate_never_replaces_the_lp_it_reads() {
     assert_eq!(fs::read(&lp).unwrap(), before);
 }
 
-/// A FIFO planted at the tile cache's lock file made the next run wait forever.
+/// A FIFO planted at the tile cache's lock file does not make the next run wait forever.
 #[cfg(target_os = "linux")]
 #[test]
 fn a_fifo_at_the_cache_lock_is_an_error_not_a_wait() {
@@ -583,9 +584,9 @@ fn a_folder_beside_the_output_is_never_removed() {
     assert!(par.join("shape").join("depth.npy").is_file());
 }
 
-/// A corrupt cache block was repaired in place, through every hard link of the cache file (a
-/// backup made with `cp -al`, outside the output folder, changed with it); then such a cache
-/// failed the run. Now it is rebuilt as a new file, with a warning, and the other link keeps
+/// A corrupt block of a cache file with other hard links (a backup made with `cp -al`, outside
+/// the output folder) is not repaired in place, which would change the backup too, nor does it
+/// fail the run: the cache is rebuilt as a new file, with a warning, and the other link keeps
 /// its bytes.
 #[test]
 fn a_hard_linked_cache_file_is_not_repaired_in_place() {
@@ -728,8 +729,8 @@ fn synth_never_replaces_its_rig_file() {
     ]));
 }
 
-/// A real (sparse) 11000 x 11000 normal map aborted `integrate` on a failed allocation
-/// (exit 134) under an address-space limit, instead of a one-line error with the figures.
+/// A real (sparse) 11000 x 11000 normal map under an address-space limit gets a one-line
+/// error with the figures from `integrate`, not an abort on a failed allocation (exit 134).
 #[cfg(target_os = "linux")]
 #[test]
 fn integrate_refuses_a_map_too_large_for_the_memory_it_may_use() {
@@ -761,8 +762,8 @@ fn integrate_refuses_a_map_too_large_for_the_memory_it_may_use() {
 }
 
 /// What taking the output folder's lock left alone (a user's folder named like a staging
-/// folder) was printed by `fit` and `relight` but not recorded: `fit.json` and `relight.json`
-/// carry it in `warnings`, as `report.json` of an estimate does.
+/// folder) is recorded as well as printed by `fit` and `relight`: `fit.json` and
+/// `relight.json` carry it in `warnings`, as `report.json` of an estimate does.
 #[test]
 fn fit_and_relight_record_what_the_lock_left_alone() {
     let tmp = tempfile::tempdir().unwrap();

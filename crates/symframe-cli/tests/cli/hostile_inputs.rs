@@ -1,6 +1,7 @@
-//! End-to-end regression tests of hostile inputs: files beside the light file that were read
-//! (or ignored) without a word, EXR layers and masks read the wrong way, images whose size
-//! defeated `--decode-memory`, and paths that are not regular files read without bound.
+//! End-to-end regression tests of hostile inputs: files beside the light file, never read (or
+//! ignored) without a word; EXR layers and masks, read the right way; images whose declared
+//! size could defeat `--decode-memory`; paths that are not regular files, never read without
+//! bound.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -19,8 +20,8 @@ fn lambert(dir: &Path, size: usize, lights: usize) -> PathBuf {
     crate::common::sphere_dataset(dir, size, lights, &brdf, ImageFormat::Exr, 1.0, truth).1
 }
 
-/// `light_intensities.txt` was silently ignored once a second `.lp` sat beside the first (a
-/// Lambertian test went from 0.000 to 1.34 degrees with nothing in report.json).
+/// `light_intensities.txt` is not silently ignored where a second `.lp` sits beside the first
+/// (the normals would be off with nothing in report.json).
 #[test]
 fn light_intensities_beside_several_lp_files_are_never_silent() {
     let tmp = tempfile::tempdir().unwrap();
@@ -64,8 +65,9 @@ fn light_intensities_beside_several_lp_files_are_never_silent() {
     assert_one_line_error(&o, "light_intensities.txt: 7 light intensities but");
 }
 
-/// A layered EXR (`albedo.R/G/B`, `beauty.R/G/B`) was read from the wrong layer without a word
-/// (36 degrees off); an EXR holding only a depth channel `Z` was taken as radiance.
+/// A layered EXR (`albedo.R/G/B`, `beauty.R/G/B`) is not read from the wrong layer without a
+/// word (its normals would be far off); an EXR holding only a depth channel `Z` is not taken as
+/// radiance.
 #[test]
 fn layered_exr_needs_exr_layer_and_depth_alone_is_refused() {
     let tmp = tempfile::tempdir().unwrap();
@@ -123,7 +125,7 @@ fn layered_exr_needs_exr_layer_and_depth_alone_is_refused() {
     );
 }
 
-/// Only a mask's first channel counted: a pure blue mask was "empty".
+/// Every channel of a mask counts, not only its first: a pure blue mask is not "empty".
 #[test]
 fn a_blue_mask_is_not_empty() {
     let tmp = tempfile::tempdir().unwrap();
@@ -249,9 +251,9 @@ fn black_png_of(path: &Path, w: u32, h: u32, layout: Layout) {
     fs::write(path, png).unwrap();
 }
 
-/// `--decode-memory` was ignored when an image's size disagreed with the first image's: that
-/// image was decoded whole before the comparison (four small PNGs of 8000 x 8000 pixels after
-/// a 16 x 16 one: 3.7 GB peak with `--decode-memory 16`).
+/// `--decode-memory` holds when an image's size disagrees with the first image's: that image is
+/// refused from its header, not decoded whole before the comparison (four small PNGs of 8000 x 8000
+/// pixels after a 16 x 16 one would cost gigabytes: docs/performance.md, "Memory model").
 #[cfg(target_os = "linux")]
 #[test]
 fn an_image_of_another_size_is_refused_before_it_is_decoded() {
@@ -286,8 +288,9 @@ fn an_image_of_another_size_is_refused_before_it_is_decoded() {
     assert!(peak_kib < 600 << 10, "peak {peak_kib} KiB");
 }
 
-/// A sparse 3 GB file holding a valid 16 x 16 PNG was read whole (3.1 GB peak): a file far
-/// longer than any encoding of the image its header declares is refused from its header.
+/// A sparse 3 GB file holding a valid 16 x 16 PNG is not read whole (docs/performance.md, "Memory
+/// model"): a file far longer than any encoding of the image its header declares is refused from
+/// its header.
 #[cfg(target_os = "linux")]
 #[test]
 fn a_padded_image_file_is_refused_before_it_is_read_whole() {
@@ -361,8 +364,8 @@ fn paths_that_are_not_regular_files_are_refused_unread() {
     assert_one_line_error(&o, "/dev/zero: not a regular file (a character device)");
 }
 
-/// A light `1e200 0 1e200` was "zero or not finite"; an `.lp` with CR-only line ends was one
-/// line (its error quoted the whole file).
+/// A light `1e200 0 1e200` is not "zero or not finite"; an `.lp` with CR-only line ends has
+/// one line per light, not one in all (whose error would quote the whole file).
 #[test]
 fn huge_finite_lights_and_cr_only_line_ends_are_read() {
     let tmp = tempfile::tempdir().unwrap();
@@ -402,11 +405,11 @@ fn make_fifo(path: &Path) {
     assert_eq!(r, 0, "mkfifo {path:?}");
 }
 
-/// A capture of a few kilobytes (four 4096 x 4096 black PNGs of 16 KB) made `estimate` hold
-/// whole maps and four whole pictures (773 MB at its peak), and `merge` of a forged shard
-/// with one sparse 670 MB tile assemble maps first (1,173 MB): the outputs are written from
-/// the tile results a band of tiles at a time, and a tile file's header is checked before
-/// its records are read.
+/// A capture of a few kilobytes (four 4096 x 4096 black PNGs of 16 KB) is estimated without holding
+/// whole maps and four whole pictures, and a forged shard with one sparse 670 MB tile merged
+/// without assembling maps first (either would cost hundreds of MB: docs/performance.md, "Memory
+/// model"): the outputs are written from the tile results a band of tiles at a time, and a tile
+/// file's header is checked before its records are read.
 #[cfg(target_os = "linux")]
 #[test]
 fn a_forged_4096_square_capture_is_estimated_and_merged_in_bounded_memory() {
@@ -483,8 +486,8 @@ fn a_forged_4096_square_capture_is_estimated_and_merged_in_bounded_memory() {
     assert!(peak < limit_kib, "forged merge: peak {peak} KiB");
 }
 
-/// `calibrate` left an image of its folder that is a FIFO out without a word: an error
-/// naming it, before anything is opened.
+/// `calibrate` does not leave out an image of its folder that is a FIFO without a word: an
+/// error names it, before anything is opened.
 #[cfg(unix)]
 #[test]
 fn calibrate_refuses_an_image_that_is_a_fifo() {
@@ -556,10 +559,11 @@ fn relight_and_view_refuse_a_fit_json_that_is_not_a_regular_file() {
     }
 }
 
-/// A DiLiGenT `light_directions.txt` of ten million rows (60 MB) was read whole and parsed
-/// (690 MB peak, 3.8 s), and an `.lp` declaring seven million lights, each naming an existing
-/// image, had every name checked: light files are read a line at a time and refused at the
-/// line that passes the cap of 100,000 lights. The files are written a line at a time, so this
+/// A DiLiGenT `light_directions.txt` of ten million rows (60 MB) is not read whole and parsed
+/// (which would cost hundreds of MB and seconds: docs/performance.md, "Memory model"), nor an `.lp`
+/// declaring seven million lights, each naming an existing image, every name checked: light
+/// files are read a line at a time and refused at the line that passes the cap of 100,000
+/// lights. The files are written a line at a time, so this
 /// process's own peak (which the child's measure includes, see `own_peak_kib`) stays low.
 #[cfg(target_os = "linux")]
 #[test]
@@ -611,10 +615,10 @@ fn ten_million_light_directions_are_refused_in_bounded_memory() {
     assert!(t.elapsed().as_secs() < 10, "{:?}", t.elapsed());
 }
 
-/// Four PNGs of a few KB declaring 8000 x 8000 pixels each were decoded whole into the cache
-/// builder's batch, `f32` RGB (768 MB an image) beside their raw samples: 1.01 GB peak with
-/// `--decode-memory 16`. Images are now read a band of tile rows at a time (a PNG row by row),
-/// so what is held is a band of each image of the batch, whatever the size they declare.
+/// Four PNGs of a few KB declaring 8000 x 8000 pixels each are not decoded whole into the cache
+/// builder's batch (`f32` RGB, 768 MB an image, beside their raw samples: docs/performance.md,
+/// "Memory model"). Images are read a band of tile rows at a time (a PNG row by row), so what is
+/// held is a band of each image of the batch, whatever the size they declare.
 #[cfg(target_os = "linux")]
 #[test]
 fn large_declared_images_are_decoded_a_band_at_a_time() {
@@ -660,8 +664,8 @@ fn large_declared_images_are_decoded_a_band_at_a_time() {
     assert!(len > 8000 * 8000 * 3 * 6, "{len}");
 }
 
-/// EXR, TIFF and Radiance HDR images were decoded whole: 415 KB of EXR, 6 KB of TIFF
-/// and 96 KB of HDR declaring 8000 x 8000 float RGB pixels cost 768 MB each as `f32`. They are
+/// EXR, TIFF and Radiance HDR images are not decoded whole (415 KB of EXR, 6 KB of TIFF and 96
+/// KB of HDR declaring 8000 x 8000 float RGB pixels would be 768 MB each as `f32`). They are
 /// read from the file a row of blocks (a scan line) at a time; with `--decode-memory 16` the
 /// run's peak memory stays under 600 MB.
 #[cfg(target_os = "linux")]
@@ -761,9 +765,9 @@ fn a_decoding_batch_holds_no_more_files_open_than_the_process_may() {
     );
 }
 
-/// A mask was decoded whole before its size was compared with the images': a 415 KB EXR
-/// declaring 8000 x 8000 float pixels as the mask of 16 x 16 images took 800 MB. The sizes
-/// their headers declare are compared first.
+/// A mask is not decoded before its size is compared with the images' (a 415 KB EXR declaring
+/// 8000 x 8000 float pixels as the mask of 16 x 16 images would cost hundreds of MB:
+/// docs/performance.md, "Memory model"): the sizes their headers declare are compared first.
 #[cfg(target_os = "linux")]
 #[test]
 fn a_mask_of_another_size_is_refused_before_it_is_decoded() {
@@ -795,8 +799,7 @@ fn a_mask_of_another_size_is_refused_before_it_is_decoded() {
 /// fitter's samples), CR LF line ends (RTIBuilder on Windows) and vectors of 300 (light
 /// positions in mm, as ramamoorthyluxman/illumi-net reads `.lp` rows) give the same normals
 /// as the plain file, the lengths warned about; a fourth number after the image (read by
-/// relight as part of the name, and by symframe as a wrong image before) is refused naming the
-/// line.
+/// relight as part of the name) is refused naming the line.
 #[test]
 fn lp_row_variants_of_other_tools_are_read_or_refused_naming_the_line() {
     let tmp = tempfile::tempdir().unwrap();

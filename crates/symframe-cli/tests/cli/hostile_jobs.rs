@@ -104,7 +104,7 @@ fn merge_refuses_a_forged_manifest_before_allocating_its_size() {
 }
 
 /// `--sphere` and `--matte-sphere` circles are checked against the image before anything is
-/// computed with them: a radius beyond the image's diagonal (before, 1e12 ran without end), a
+/// computed with them: a radius beyond the image's diagonal (1e12 would run without end), a
 /// centre outside the image, a sphere mostly outside the frame are one-line errors naming the
 /// circle and the image size.
 #[test]
@@ -157,9 +157,8 @@ fn snapshot(dir: &Path) -> BTreeMap<String, Option<u64>> {
         .collect()
 }
 
-/// A failed `export gltf` leaves the earlier asset as it was (before, the new textures were
-/// written beside the old `.gltf` before the failure) and no `.symframe-export-*` folder; a
-/// successful one replaces the whole asset.
+/// A failed `export gltf` leaves the earlier asset as it was (no new textures beside the old
+/// `.gltf`) and no `.symframe-export-*` folder; a successful one replaces the whole asset.
 #[test]
 fn failed_export_keeps_the_old_asset_and_leaves_no_staging_folder() {
     let tmp = tempfile::tempdir().unwrap();
@@ -370,8 +369,9 @@ fn quiet_silences_every_subcommand() {
     }
 }
 
-/// A forged `shard.json` claiming 2^64 - 1 shards was merged without a word when its tiles
-/// covered the grid; `estimate --tiles K/N` with more shards than tiles made empty shards.
+/// A forged `shard.json` claiming 2^64 - 1 shards is not merged without a word, even where its
+/// tiles cover the grid; `estimate --tiles K/N` with more shards than tiles makes no empty
+/// shards.
 #[test]
 fn shard_counts_beyond_the_tile_count_are_refused() {
     let tmp = tempfile::tempdir().unwrap();
@@ -386,7 +386,7 @@ fn shard_counts_beyond_the_tile_count_are_refused() {
 }
 
 /// A texture name of the asset that is a hard link to a map the export reads (the same file
-/// under another name) was replaced, through the switch's backup link: refused with a
+/// under another name) is not replaced through the switch's backup link: refused with a
 /// one-line error naming the map, the map untouched.
 #[cfg(unix)]
 #[test]
@@ -415,9 +415,10 @@ fn export_refuses_a_texture_name_hard_linked_to_a_map() {
         .starts_with(".symframe")));
 }
 
-/// `export gltf -o FILE` replaced a user's `scene.gltf`, and a user's `scene.bin` beside a new
-/// asset, without a word. It replaces only an asset symframe wrote (its `asset.generator`)
-/// and the files that asset names; anything else is refused before a file is written.
+/// `export gltf -o FILE` never replaces a user's `scene.gltf`, nor a user's `scene.bin` beside
+/// a new asset, without a word. It replaces only an asset symframe wrote (its
+/// `asset.generator`) and the files that asset names; anything else is refused before a file
+/// is written.
 #[test]
 fn export_never_replaces_files_it_did_not_write() {
     let tmp = tempfile::tempdir().unwrap();
@@ -471,9 +472,9 @@ fn export_never_replaces_files_it_did_not_write() {
     }
 }
 
-/// `calibrate` decoded each image whole, two at a time: three HDR files of 96 KB declaring
-/// 8000 x 8000 pixels took 2.2 GB (2.2 GB also to look for the sphere). It reads them a band
-/// at a time as grey values, keeping the sum or the brightest of all images and each image's
+/// `calibrate` does not decode each image whole (three HDR files of 96 KB declaring 8000 x 8000
+/// pixels would cost gigabytes: docs/performance.md, "Memory model"). It reads them a band at a
+/// time as grey values, keeping the sum or the brightest of all images and each image's
 /// spheres' rows, and refuses images of more than 8192 x 8192 pixels from their header.
 #[cfg(target_os = "linux")]
 #[test]

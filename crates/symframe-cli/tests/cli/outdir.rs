@@ -127,9 +127,9 @@ pub fn wait_for_lock(dir: &Path, child: &std::process::Child) {
     }
 }
 
-/// `synth -o DIR` and `eval` wrote into their folders without the output lock, so they could
-/// interleave with each other and with estimate or fit: now they hold it like those do, and
-/// a second job into the folder is refused while they run.
+/// `synth -o DIR` and `eval` hold the output lock like estimate and fit do, so they cannot
+/// interleave with each other or with those: a second job into the folder is refused while
+/// they run.
 #[test]
 fn synth_and_eval_hold_the_output_folder_lock() {
     let tmp = tempfile::tempdir().unwrap();

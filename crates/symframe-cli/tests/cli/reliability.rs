@@ -245,8 +245,8 @@ fn synth_never_replaces_a_folder_it_did_not_write() {
     ok(&synth(&[]));
 }
 
-/// An EXR whose header claims 100000 x 100000 pixels (a 1 KB file) aborted `estimate` with
-/// "memory allocation of 40000000000 bytes failed".
+/// An EXR whose header claims 100000 x 100000 pixels (a 1 KB file) is a one-line error, not an
+/// abort of `estimate` with "memory allocation of 40000000000 bytes failed".
 #[test]
 fn a_forged_image_header_is_a_one_line_error() {
     let tmp = tempfile::tempdir().unwrap();
@@ -315,8 +315,8 @@ fn absurd_thread_counts_are_refused() {
     }
 }
 
-/// `--decode-memory` was shifted into bytes unchecked: a huge value wrapped around (2^44 MiB
-/// became a zero-byte batch). Out of range now is a one-line error naming the flag.
+/// `--decode-memory` is checked before it is shifted into bytes (a huge value would wrap
+/// around: 2^44 MiB, a zero-byte batch): out of range is a one-line error naming the flag.
 #[test]
 fn huge_decode_memory_is_refused() {
     let tmp = tempfile::tempdir().unwrap();
@@ -338,8 +338,8 @@ fn huge_decode_memory_is_refused() {
     }
 }
 
-/// The mask was read only after every image was decoded into the cache: a wrong-size or empty
-/// `mask.png` now fails after the first image, before the cache file is created.
+/// The mask is not read only after every image is decoded into the cache: a wrong-size or empty
+/// `mask.png` fails after the first image, before the cache file is created.
 #[test]
 fn a_bad_mask_fails_before_the_cache_is_written() {
     let tmp = tempfile::tempdir().unwrap();

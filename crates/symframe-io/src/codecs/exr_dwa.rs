@@ -4,12 +4,12 @@
 //! A DWA block holds four sections (unknown channels, AC and DC coefficients, RLE channels)
 //! after a header of eleven 64-bit counters and the channel rules. OpenEXR codes the AC
 //! coefficients with PIZ's Huffman code in scan-line files and tiled DWAB files, and with zlib
-//! in tiled DWAA files. The `exr` crate rebuilt its Huffman tables over the whole 65,537-symbol
-//! alphabet for each block (70% of its time on 128 x 128 scan-line DWAA files, 8.5-12x
-//! OpenEXR 3.1's time), and its DCT path converted samples one by one (62% of a 1024 x 1024
-//! decode once the Huffman part was ours). [`decode`] does what it does, in the same
-//! arithmetic order, so its values are OpenEXR's to the bit (`tests/openexr.rs`), at 0.7-1.25x
-//! OpenEXR's time (docs/performance.md, "Decoding, every compression").
+//! in tiled DWAA files. The `exr` crate rebuilds its Huffman tables over the whole
+//! 65,537-symbol alphabet for each block (most of its time on small scan-line DWAA files), and
+//! its DCT path converts samples one by one (most of what is left once the Huffman part is
+//! ours). [`decode`] does what it does, in the same arithmetic order, so its values are
+//! OpenEXR's to the bit (`tests/openexr.rs`), in about OpenEXR's time (docs/performance.md,
+//! "Decoding, every compression").
 //!
 //! Blocks with other channels (alpha, depth: the unknown and RLE sections) go to the `exr`
 //! crate, [`recode_ac`] having replaced their Huffman-coded AC section by the same values
@@ -166,7 +166,7 @@ pub(super) fn plan(
 /// `exr` crate's decoder step for step (the AC run lengths, the zig-zag, [`idct_8x8`], the
 /// Y'CbCr inverse, the transfer curve), whose values equal OpenEXR 3.1's, but without its
 /// per-block buffers and sample-by-sample conversions, and straight into the caller's image:
-/// 1.6-1.8x faster than it (docs/performance.md, "Decoding, every compression").
+/// faster than it (docs/performance.md, "Decoding, every compression").
 pub(super) fn decode(
     block: &[u8],
     plan: &Plan,
@@ -230,7 +230,8 @@ pub(super) fn decode(
                         data.fill(v);
                     } else {
                         // Converted 64 at a time (F16C): converting each coefficient on its
-                        // own was 12% of the decoding time.
+                        // own is a noticeable share of the decoding time
+                        // (docs/performance.md, "Decoding, every compression").
                         use half::slice::HalfBitsSliceExt;
                         raster
                             .reinterpret_cast::<half::f16>()
@@ -552,8 +553,9 @@ fn half_table() -> &'static [f32; 65536] {
 }
 
 /// `data` as a zlib stream of stored (uncompressed) deflate blocks. Written out here because
-/// `flate2`'s level 0 (`miniz_oxide`) goes through its compressor byte by byte: 13.5% of the
-/// decoding time of 128 x 128 scan-line DWAA files, where this is a copy and a checksum.
+/// `flate2`'s level 0 (`miniz_oxide`) goes through its compressor byte by byte, a noticeable
+/// share of decoding small scan-line DWAA files, where this is a copy and a checksum
+/// (docs/performance.md, "Decoding, every compression").
 fn zlib_stored(data: &[u8]) -> Vec<u8> {
     const MAX_BLOCK: usize = 65_535;
     let mut out = Vec::with_capacity(data.len() + data.len() / MAX_BLOCK * 5 + 11);

@@ -3,11 +3,10 @@
 //!
 //! Written here rather than taken from the `exr` crate because that crate's decoder rebuilds
 //! tables over the whole 65,537-symbol alphabet for every block and keeps a heap vector per
-//! table entry: on OpenEXR-written float RGB files one thread decoded 128 x 128 images at 2.0x
-//! OpenEXR 3.1's time and half images at 5.9x (docs/performance.md, "Decoding, every
-//! compression"). This one touches only the symbols a block uses, reads the bit stream a word
-//! at a time and keeps the decoded samples as 16-bit planes, which the caller converts straight
-//! into its output (no interleaved copy of the block): 0.7-1.2x OpenEXR's time.
+//! table entry, several times OpenEXR's time on small images. This one touches only the
+//! symbols a block uses, reads the bit stream a word at a time and keeps the decoded samples as
+//! 16-bit planes, which the caller converts straight into its output (no interleaved copy of
+//! the block): about OpenEXR's time (docs/performance.md, "Decoding, every compression").
 //!
 //! Every length, code and count read from the file is checked: a forged block gives an error,
 //! never a panic, and allocations are bounded by the block's pixel count.
@@ -16,7 +15,7 @@
 const MAX_CODE_LEN: usize = 58;
 /// Bits of the direct decoding table: codes up to this long are looked up at once, longer
 /// ones by length. OpenEXR's `hufDecode` uses 14 bits; 11 keep the table (8 KB) in the L1
-/// cache, which made 1024 x 1024 half-float PIZ decoding 1.2x faster here.
+/// cache, which decodes faster (docs/performance.md, "Decoding, every compression").
 const DEC_BITS: u32 = 11;
 const DEC_SIZE: usize = 1 << DEC_BITS;
 /// Code lengths 59 to 62 stand for 2 to 5 unused symbols, 63 for 6 to 261 (8 bits follow).

@@ -1,8 +1,8 @@
 //! JPEG decoding with zune-jpeg, the decoder the `image` crate uses, called directly with the
 //! options `image` gives it (so the samples are the same to the bit) but without `image`'s
 //! copy of the file, and with the output's memory taken in 2 MiB pages where the system allows:
-//! a fresh 72 MB output of a 24-megapixel image cost as much again as decoding it, in 4 KiB
-//! page faults (docs/performance.md, "JPEG decoding").
+//! paging in a large fresh output 4 KiB at a time costs about as much as decoding the image
+//! (docs/performance.md, "JPEG decoding").
 
 use std::path::Path;
 

@@ -551,8 +551,9 @@ fn finish(path: &Path, img: RawImage, opts: &DecodeOptions, integer: bool) -> Re
         // Float samples with no channel to drop are marked in place: no second buffer.
         Raw::F32(mut v) if take == channels => {
             // Tested 64 pixels at a time without branching (the compiler vectorises the
-            // fold), pixel by pixel only where one is not finite: the per-pixel loop alone
-            // took 13% of decoding a half-float PIZ EXR of 1024 x 1024.
+            // fold), pixel by pixel only where one is not finite: a per-pixel loop alone is a
+            // noticeable share of a half-float decode (docs/performance.md, "Decoding, every
+            // compression").
             for block in v.chunks_mut(64 * take) {
                 if !block.iter().fold(true, |all, s| all & s.is_finite()) {
                     for px in block.chunks_exact_mut(take) {
@@ -847,8 +848,8 @@ mod tests {
         assert!(e.contains("y.exr: no radiance channel"), "{e}");
     }
 
-    /// A layered EXR (`albedo.R/G/B`, `beauty.R/G/B`) was read from its first layer without a
-    /// word, and a depth-only EXR taken as radiance.
+    /// A layered EXR (`albedo.R/G/B`, `beauty.R/G/B`) is not read from its first layer without
+    /// a word, nor a depth-only EXR taken as radiance.
     #[test]
     fn exr_layers_are_chosen_by_name_never_guessed() {
         let d = tempfile::tempdir().unwrap();
@@ -896,7 +897,8 @@ mod tests {
         );
     }
 
-    /// An image whose size disagrees with the stack's was decoded whole before the comparison.
+    /// Every format's size is read from its header, so an image whose size disagrees with the
+    /// stack's is refused without being decoded.
     #[test]
     fn declared_sizes_come_from_the_headers_of_every_format() {
         let d = tempfile::tempdir().unwrap();

@@ -128,8 +128,8 @@ pub(crate) fn unit_light(v: [f64; 3]) -> std::result::Result<DVec3, String> {
         return Err("is zero".into());
     }
     let d = DVec3::from_array(v);
-    // Directly when the squares neither overflow nor lose precision (the unit vectors of all
-    // earlier versions, bit for bit), else after scaling by the largest component.
+    // Directly when the squares neither overflow nor lose precision (so ordinary lights keep
+    // `normalize`'s unit vectors, bit for bit), else after scaling by the largest component.
     let n = if (1e-150..=1e150).contains(&largest) {
         d.normalize()
     } else {
@@ -410,7 +410,8 @@ mod tests {
         assert!(read_light_directions(&lp).is_err());
     }
 
-    /// A byte-order mark gave "expected the number of lights, found '2'".
+    /// A byte-order mark is skipped, not read into the count ("expected the number of lights,
+    /// found '2'").
     #[test]
     fn a_utf8_bom_is_ignored() {
         let d = tempfile::tempdir().unwrap();
@@ -461,7 +462,8 @@ mod tests {
         assert!(!is_windows_path("a/b.png"));
     }
 
-    /// `1e200 0 1e200` was "zero or not finite": its length overflowed.
+    /// `1e200 0 1e200` is a light, not "zero or not finite" (its length overflows as computed
+    /// directly).
     #[test]
     fn huge_and_tiny_finite_lights_are_normalised() {
         let s = 0.5f64.sqrt();
@@ -484,7 +486,8 @@ mod tests {
         assert!(read_light_directions(&lp).unwrap()[0].is_finite());
     }
 
-    /// A file with CR-only line ends was one line: errors quoted the whole file as "line 1".
+    /// A file with CR-only line ends has as many lines as a file with LF ones, not one (whose
+    /// errors would quote the whole file as "line 1").
     #[test]
     fn cr_only_line_ends_are_line_ends() {
         let lines = |text: &str| {
@@ -528,9 +531,10 @@ mod tests {
         assert!(e.len() < 200 && e.contains("yyy..."), "{e}");
     }
 
-    /// A `light_directions.txt` of ten million rows was read whole (690 MB, 3.8 s): a table
-    /// of exactly [`MAX_LIGHTS`] rows is read, one more is refused at the row that passes the
-    /// cap; so are the other tables, and an `.lp` that declares more lights.
+    /// Light files are read a row at a time up to the cap, never whole (a huge one would cost
+    /// memory and seconds first: docs/performance.md, "Memory model"): a table of exactly
+    /// [`MAX_LIGHTS`] rows is read, one more is refused at the row that passes the cap; so are the
+    /// other tables, and an `.lp` that declares more lights.
     #[test]
     fn light_files_hold_at_most_max_lights() {
         let d = tempfile::tempdir().unwrap();
@@ -751,9 +755,9 @@ mod tests {
         );
     }
 
-    /// A fourth number after the image was read silently: relight's reader (src/lp.cpp) joins
-    /// all but the last three fields into the file name, and so did symframe, so
-    /// `a.jpg 0.1 0.2 0.9 1.0` was the light (0.2, 0.9, 1.0) to `read_light_directions`. No
+    /// A fourth number after the image is not read silently: relight's reader (src/lp.cpp)
+    /// joins all but the last three fields into the file name, so `a.jpg 0.1 0.2 0.9 1.0`
+    /// would be the light (0.2, 0.9, 1.0) of an image `a.jpg 0.1`. No
     /// tool surveyed (RTIBuilder, relight, the PTM and HSH fitters, SpectralRTI_Toolkit,
     /// NeuralRTI) writes a 4th or an r g b column: refused naming the line, unless the image's
     /// name ends in that number.
@@ -817,9 +821,9 @@ mod tests {
         }
     }
 
-    /// relight crashed on an `.lp` without its count line (cnr-isti-vclab/relight issue #19);
-    /// symframe said "expected the number of lights": the light row is named, the count asked
-    /// for.
+    /// An `.lp` without its count line (relight crashes on one, cnr-isti-vclab/relight issue
+    /// #19) gets an error naming the light row and asking for the count, not "expected the
+    /// number of lights".
     #[test]
     fn a_missing_count_line_is_named() {
         let d = tempfile::tempdir().unwrap();

@@ -629,9 +629,9 @@ mod tests {
     use crate::codecs::Gamma;
     use crate::stack::fixture;
 
-    /// The cache of a stack of every kind of image, light blocks of 3, tiles of 8, as the
-    /// decoders and the scatter of version 0.1 (whole images decoded, then scattered) wrote it
-    /// (now read a band at a time, PNG and PFM row by row):
+    /// The cache of a stack of every kind of image, light blocks of 3, tiles of 8, as decoding
+    /// whole images and then scattering them writes it, which reading a band at a time (PNG and
+    /// PFM row by row) must reproduce:
     /// the bytes after the header (samples, checksums, half-float exponents) are pinned by
     /// their XXH3-64, and the warnings about the inputs by their text.
     #[test]

@@ -340,7 +340,8 @@ pub fn dataset_fingerprints(
         .u64(opts.gamma.code())
         .f64(opts.saturation as f64)
         .u64(trust_mtime as u64);
-    // Only a layer named: caches of the default layer keep the fingerprint they had.
+    // Only a layer named: the default layer's fingerprint is that of caches built without the
+    // option, which stay valid.
     if let Some(layer) = &opts.exr_layer {
         f.str("exr layer").str(layer);
     }
@@ -455,7 +456,7 @@ pub(super) fn cache_stem(ds: &Dataset) -> String {
 
 /// Reads a file's header, `None` if the file is missing, too short or not a regular file (a
 /// link, FIFO, device or folder there is not a cache this tool wrote: it is never opened, as
-/// opening a FIFO waited forever, and it is replaced like a stale cache).
+/// opening a FIFO would wait forever, and it is replaced like a stale cache).
 pub(super) fn read_header(path: &Path) -> Result<Option<(Header, u64)>> {
     use std::io::Read;
     let (mut f, len) = match crate::open_own_file(path) {

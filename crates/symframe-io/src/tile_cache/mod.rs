@@ -14,12 +14,10 @@
 //! Why blocks: a batch then fills one contiguous range per tile, written with one positioned
 //! write, so every page of the file is written once. With each pixel's samples under all lights
 //! contiguous instead, a batch of 85 paper-size images writes 1 KB per pixel every 18 KB, and
-//! each 4 KB page is rewritten by four batches. Measured at paper scale (1,512 RGB images of
-//! 1024x1024, 85 per batch, 18 GB cache, 2 cores, virtual disk of 260-580 MB/s): scattering
-//! took 161-202 s with pixel-contiguous tiles written through a memory map, 41-178 s with
-//! blocked tiles through a memory map, 32-41 s with blocked tiles and positioned writes (this
-//! module; decoding took another 25 s). Readers see no difference: [`TileView`] gathers a
-//! pixel's samples in any light order.
+//! each 4 KB page is rewritten by four batches. Blocked tiles written with positioned writes
+//! also scatter faster than either layout written through a memory map (docs/performance.md,
+//! "Tile cache layout"). Readers see no difference: [`TileView`] gathers a pixel's samples in
+//! any light order.
 //!
 //! File: a 4,096-byte header (magic, format version, an endianness mark, width, height, lights,
 //! tile size, the inputs' fingerprint, the number of images already scattered, a completion flag,
@@ -339,7 +337,7 @@ fn open_complete(path: &Path, fingerprint: u64, tile: usize, n: usize) -> Result
     };
     let t = Instant::now();
     // Each block's pages are unmapped once summed, so verifying does not hold the whole cache
-    // resident (it did: a reused 18 GB cache showed a peak RSS of 17 GiB).
+    // resident, however large (docs/performance.md, "Paper scale").
     let bad = verify(&map, &header, |o, len| {
         #[cfg(unix)]
         {
@@ -399,7 +397,8 @@ impl TileCache {
         }
         // The mask is one image: a bad one fails here, not after decoding the stack. Its size
         // and the first image's are compared from their headers first, so a mask of another
-        // size is never decoded (one declaring 8000 x 8000 float pixels cost 800 MB).
+        // size is never decoded (a small file may declare a huge image: docs/performance.md,
+        // "Memory model").
         let mask = match &ds.mask {
             Some(p) => {
                 let header = |q: &Path, o: &DecodeOptions| crate::stack::read_image_size(q, o);
@@ -933,7 +932,8 @@ mod tests {
         batches_of(2, ds, CacheFormat::F32, 4)
     }
 
-    /// A changed light-block field in the header was trusted (wrong samples, `hit: true`).
+    /// A changed light-block field in the header is not trusted (its samples would be wrong,
+    /// with `hit: true`): the cache is rebuilt.
     #[test]
     fn a_changed_header_field_rebuilds_the_cache() {
         let d = tempfile::tempdir().unwrap();
@@ -958,7 +958,7 @@ mod tests {
         same_as_stack(&cache, &ds);
     }
 
-    /// 3,000 changed floats of pixel data were trusted; now the failing blocks are decoded
+    /// 3,000 changed floats of pixel data fail their blocks' checksums: those blocks are decoded
     /// again and rewritten, the rest kept.
     #[test]
     fn changed_pixel_data_is_repaired() {
@@ -1009,8 +1009,8 @@ mod tests {
         same_as_stack(&cache, &ds);
     }
 
-    /// An image replaced with the same size and modification time (`cp -p`) reused the stale
-    /// cache; the content fingerprint notices it (`trust_mtime` does not, by design).
+    /// An image replaced with the same size and modification time (`cp -p`) does not reuse the
+    /// stale cache: the content fingerprint notices it (`trust_mtime` does not, by design).
     #[test]
     fn same_size_and_mtime_but_new_content_rebuilds() {
         let d = tempfile::tempdir().unwrap();
@@ -1337,7 +1337,7 @@ mod tests {
         }
     }
 
-    /// A tile size as large as the image made one band the whole decoded image, whatever
+    /// A tile size as large as the image would make one band the whole decoded image, whatever
     /// the decoding memory: a band larger than it is refused beyond the default tile size.
     #[test]
     fn a_tile_band_larger_than_the_decoding_memory_is_refused() {

@@ -98,10 +98,9 @@ impl<'a> TileView<'a> {
     }
 
     /// [`Self::pixel`] from half floats: each block's run of the pixel's samples converted at
-    /// once (F16C where the CPU has it) and rescaled, without a float copy of the whole tile.
-    /// Measured with `--method woodham` on 1,512 images of 256 x 256 (cache in memory, 2 cores):
-    /// 1.17-1.27 s with each tile converted into a float copy first, 0.82-0.90 s with this
-    /// (0.88-0.90 s from a float32 cache); docs/performance.md.
+    /// once (F16C where the CPU has it) and rescaled, without a float copy of the whole tile:
+    /// read so, a half-float cache is as fast as a float32 one, where the copy made it slower
+    /// (docs/performance.md, "Half-float cache").
     fn pixel_f16(&self, halves: &[u16], factors: &[f32], k: usize, out: &mut [f32]) {
         let lb = self.light_block;
         for (b, &f) in factors.iter().enumerate() {

@@ -125,7 +125,7 @@ impl BlockLayout {
         }
         // Each picked channel's line converted into a row of `rows`, then the rows
         // interleaved into the output: contiguous loops the compiler vectorises (F16C for
-        // half floats), where converting straight into every k-th output sample did not.
+        // half floats), which converting straight into every k-th output sample is not.
         let mut rows = vec![0.0f32; k * bw];
         for dy in 0..bh {
             for (&ci, row) in self.picked.iter().zip(rows.chunks_exact_mut(bw)) {
@@ -220,7 +220,8 @@ fn words_to_f32(ty: exr::meta::attribute::SampleType, src: &[u16], out: &mut [f3
 }
 
 /// Half floats given as bits into floats, with `half`'s slice conversion (F16C where the CPU
-/// has it: 3x faster than converting sample by sample, docs/performance.md).
+/// has it: faster than converting sample by sample; docs/performance.md, "Decoding, every
+/// compression").
 fn half_to_f32(src: &[u16], out: &mut [f32]) {
     use half::slice::{HalfBitsSliceExt, HalfFloatSliceExt};
     let n = src.len().min(out.len());
