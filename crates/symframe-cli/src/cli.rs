@@ -140,8 +140,8 @@ pub enum IntegrateSolverArg {
     /// Least squares on the mask (Poisson), conjugate gradients coarse to fine: fast, smooth
     /// everywhere (a depth jump becomes a slope).
     Poisson,
-    /// Bilateral normal integration (Cao et al. 2022): keeps depth discontinuities; about 10 to
-    /// 50 times the time of Poisson.
+    /// Bilateral normal integration (Cao et al. 2022): keeps depth discontinuities; slower than
+    /// Poisson (docs/capture.md, "Normal integration").
     Bilateral,
 }
 

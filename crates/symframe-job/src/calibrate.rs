@@ -408,7 +408,7 @@ fn picture(
 }
 
 /// Refuses a run whose `.lp`, highlights picture or JSON would replace one of its inputs (the
-/// `.lp` or list it reads, an image): `calibrate lights.lp -o lights.lp` replaced its input.
+/// `.lp` or list it reads, an image), as `calibrate lights.lp -o lights.lp` would.
 fn refuse_inputs_as_outputs(config: &CalibrateConfig, images: &[PathBuf]) -> Result<()> {
     let canon = |p: &Path| p.canonicalize().ok();
     let inputs: Vec<PathBuf> = std::iter::once(config.images.as_path())
@@ -473,7 +473,7 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
     let opts = config.decode.clone();
     let stopped = || ctl.stop.load(std::sync::atomic::Ordering::SeqCst);
     // The size from the first image's header: nothing is decoded before it is checked (a few
-    // KB declaring 8000 x 8000 pixels were decoded whole, two images at a time: 2.2 GB).
+    // KB may declare gigabytes of pixels: docs/performance.md, "Memory model").
     let (w, h) = symframe_io::read_image_size(&images[0], &opts)?;
     if w == 0 || h == 0 {
         bail!("{}: the image is empty", images[0].display());
@@ -486,7 +486,7 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
         );
     }
     // Given circles, checked before anything is computed with them (a radius far beyond the
-    // image made the highlight search run without end).
+    // image would make the highlight search run without end).
     for (sphere, circle) in [("mirror", config.sphere), ("matte", config.matte_sphere)] {
         if let Some(c) = circle {
             c.check_fits(w, h).map_err(|reason| CircleDoesNotFit {
@@ -780,7 +780,7 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
 mod tests {
     use super::*;
 
-    /// An image list was read whole; it is read a line at a time (any line end, comments),
+    /// An image list is read a line at a time, never whole (any line end, comments),
     /// its errors naming the line, and holds at most `MAX_LIGHTS` images.
     #[test]
     fn an_image_list_is_read_a_line_at_a_time() {

@@ -1002,7 +1002,7 @@ fn asset_json(path: &Path) -> Option<Value> {
 /// Refuses, before anything is written, to replace a file that this tool did not write: the
 /// asset at `output` must be absent or a glTF asset symframe wrote (its `asset.generator`), and
 /// each of its companion files there (the `.bin` and textures) absent or named by that asset.
-/// A user's `scene.gltf`, or a `scene.bin` beside a new asset, was replaced without a word.
+/// A user's `scene.gltf`, or a `scene.bin` beside a new asset, is never replaced without a word.
 fn check_own_files(targets: &[PathBuf], output: &Path) -> Result<()> {
     let exists = |p: &Path| std::fs::symlink_metadata(p).is_ok();
     let ours = asset_json(output).filter(|doc| {

@@ -825,7 +825,7 @@ impl TileRecord for Option<PixelOutcome> {
 
     fn check(path: &Path, job: u64, t: usize, n: usize) -> TileFile {
         // A link, FIFO, device or folder there is not a file this tool wrote: never opened
-        // (a FIFO hung the resumed fit), recomputed with a warning.
+        // (a FIFO would hang the resumed fit), recomputed with a warning.
         let (f, len) = match symframe_io::open_own_file(path) {
             Ok(Some(f)) => f,
             Ok(None) => return TileFile::Missing,

@@ -288,7 +288,7 @@ fn integrate_owned(name: &str) -> bool {
 
 /// Memory integration takes per pixel of the map, bytes: the solver's multigrid levels, the
 /// weights, the mesh and the pictures (peak resident memory over pixels at 2048 x 2048:
-/// docs/performance.md, "Integration").
+/// docs/performance.md, "Memory model", Integration).
 const INTEGRATE_BYTES_PER_PIXEL: u64 = 200;
 
 /// Refuses, before reading it, a normal map whose integration cannot fit in the memory this

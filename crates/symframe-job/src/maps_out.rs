@@ -459,7 +459,7 @@ mod tests {
         (tiles_dir, whole)
     }
 
-    /// The output set as written from whole maps before the maps were streamed.
+    /// The output set written from whole maps: what the streamed writer must equal.
     fn write_whole(dir: &std::path::Path, m: &EstimateMaps, normal_png: NormalPng) {
         use symframe_io::*;
         let (w, h) = (m.width, m.height);

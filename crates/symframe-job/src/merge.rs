@@ -288,7 +288,7 @@ fn run(
     // Nothing the size of the declared image is allocated before the tiles listed cover the
     // grid and every tile's file is there with the length of its records: what the manifests
     // declare is then backed by files of 48 bytes per pixel (a forged `shard.json` of a few
-    // bytes declaring 65536 x 2048 one-pixel tiles made merge allocate gigabytes first).
+    // bytes may declare gigabytes of maps: docs/performance.md, "Memory model").
     // Which shard folder holds each tile: the first that lists it (memory in proportion to the
     // manifests' lists, already read).
     let mut listed: Vec<(usize, usize)> = manifests

@@ -6,11 +6,12 @@
 //! The baseline `woodham` then runs on the same cache and the time ratio is printed. The
 //! process's peak-memory mark is reset before each run, so each run's peak is its own.
 //!
-//! The paper's captures are 1,512 lights at 1024x1024 (the defaults): about 10 GB of images,
-//! an 18 GB cache, and hours of estimation on two cores. `--size 256 --lights 380` is a quick
-//! try. `--width W --height H --format jpeg|png16` benchmarks another layout (the sphere as
-//! large as the shorter side, the rest background; 8-bit sRGB JPEG as cameras write them, or
-//! 16-bit linear PNG), whose tile cache is then `u8` or `u16` by default. The figures are also
+//! The paper's captures are 1,512 lights at 1024x1024 (the defaults): gigabytes of images, an
+//! 18 GB cache, and minutes of estimation on two cores (docs/performance.md, "Paper scale").
+//! `--size 256 --lights 380` is a quick try. `--width W --height H --format jpeg|png16`
+//! benchmarks another layout (the sphere as large as the shorter side, the rest background;
+//! 8-bit sRGB JPEG as cameras write them, or 16-bit linear PNG), whose tile cache is then `u8`
+//! or `u16` by default. The figures are also
 //! written to `bench.json` in `--dir` (`total_s`, `decode_s`, `estimate_s`, `peak_rss_bytes`,
 //! `cache_bytes`, `woodham_s`, ...). `symframe-lab bench scaling` ([`scaling`]) sweeps size,
 //! lights and threads with the same dataset and run code. `--near` ([`run_near`]) times the

@@ -189,8 +189,9 @@ pub struct EstimateArgs {
     #[arg(long)]
     pub no_tangents: bool,
     /// Use the reference path: triangle lookups with spherical barycentric weights in double
-    /// precision at every query, every light visited (about 5x slower; for checking the
-    /// default fast path, which does the same in single precision, on your own data).
+    /// precision at every query, every light visited (slower where the symmetry search answers,
+    /// see docs/performance.md, "Per pixel"; for checking the default fast path, which does the
+    /// same in single precision, on your own data).
     #[arg(long)]
     pub reference: bool,
     /// Where the tile cache goes and whether it stays.

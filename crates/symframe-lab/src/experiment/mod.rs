@@ -284,8 +284,9 @@ mod tests {
         // No tangent on the isotropic plastic.
         let plastic = row("glossy plastic", "reference", "dense");
         assert!(plastic.cells[0].tangent_share < 0.02, "{plastic:?}");
-        // The quick run's JPEG capture (q90) went through the round trip; measured 0.81° and
-        // a tangent on 97% of the pixels.
+        // The quick run's JPEG capture (q90) went through the round trip: its normals and
+        // tangents stay near the float capture's (the full run's: docs/validation.md, "JPEG
+        // quality").
         let jpeg = row("brushed aluminium", "jpeg", "dense");
         assert_eq!(jpeg.condition.jpeg_quality, Some(90));
         assert!(

@@ -1076,14 +1076,14 @@ impl ExposureChoice {
     ///
     /// Why judged, not read off: the scale of a pixel's free fit rests on the strength of the
     /// specular layer's Fresnel term, which a metal does not fix (a bare metal is also a black
-    /// dielectric under brighter lights); a lobe that is not GGX's (Beckmann brushed gold) was
-    /// fitted as such a dielectric under 60 times the true intensity, its shape bent by the
-    /// Fresnel term's growth toward grazing halfway angles, and predicted held-out lights with
-    /// errors 66 times the brightest sample. Whatever the intensity, that growth is then scaled by
-    /// it. Why the lowest of the near-best: under 800 lights the same gold predicted its
-    /// validation lights within 3% alike from 1.1 to 12.6 times the true intensity (the Fresnel
-    /// term's extra freedom fits a Beckmann lobe a little better), and the higher ones put that
-    /// freedom, times the intensity, into every light that is not like the rig's.
+    /// dielectric under brighter lights); a lobe that is not GGX's (Beckmann brushed gold) is
+    /// fitted as such a dielectric under many times the true intensity, its shape bent by the
+    /// Fresnel term's growth toward grazing halfway angles, and predicts held-out lights with
+    /// errors many times the brightest sample. Whatever the intensity, that growth is then scaled
+    /// by it. Why the lowest of the near-best: a range of intensities predicts the validation
+    /// lights almost equally well (the Fresnel term's extra freedom fits a Beckmann lobe a little
+    /// better), and the higher ones put that freedom, times the intensity, into every light that
+    /// is not like the rig's (docs/method.md, "Choosing the exposure").
     ///
     /// # Errors
     /// When no pixel can be fitted.
@@ -1567,8 +1567,8 @@ mod tests {
     /// lights, 12 of them held out: the exposure chosen by validation lights is the true one
     /// to within the search's half steps, and no relit pixel of the glTF or automatic fit
     /// under the held-out lights exceeds twice the brightest training sample of its pixel (the
-    /// true renders stay within 1.5 times it here). The free-scale reading alone gave 60
-    /// times the true intensity and relit values 66 times the brightest sample.
+    /// true renders stay below that); the free-scale reading alone is far off on both counts
+    /// (docs/method.md, "Choosing the exposure").
     #[test]
     fn beckmann_gold_relit_without_fireflies() {
         use crate::appearance::relight::{Edits, Relighter};

@@ -11,8 +11,8 @@
 //!
 //! The fast kernel is written by hand rather than through [`symmetry_term`]'s generic lookup:
 //! it is the whole cost of an estimate (the profile of the generic path: half in the lookups,
-//! half in the per-light geometry in f64), and this layout measured about 2x faster per
-//! evaluation (`cargo bench -p symframe --bench pixel`).
+//! half in the per-light geometry in f64), and this layout's geometry loops vectorise
+//! (docs/performance.md, "Where the time went"; `cargo bench -p symframe --bench pixel`).
 
 use std::cell::RefCell;
 
@@ -446,7 +446,8 @@ impl FastObjective<'_> {
     }
 
     /// The kernel compiled for AVX2 where the processor has it (the geometry loops run 8
-    /// lights wide instead of 4: ~1.4x per evaluation, measured), else for the baseline.
+    /// lights wide instead of 4; docs/performance.md, "Where the time went"), else for the
+    /// baseline.
     /// Both compute the same operations in the same order: identical results.
     #[inline(always)]
     fn dispatch<const TANGENTS: bool, W: Weights>(

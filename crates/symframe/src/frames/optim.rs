@@ -1,8 +1,8 @@
 //! Nelder-Mead simplex minimisation in `N` dimensions, allocation-free.
 //!
 //! Written by hand (not `argmin`): the per-pixel optimisation runs millions of times, and
-//! argmin's Nelder-Mead allocates on every iteration (crates.md measured it ~10x slower per
-//! iteration on a cheap objective).
+//! argmin's Nelder-Mead allocates on every iteration, which costs more than a cheap objective
+//! (docs/performance.md, "Where the time went").
 
 /// Stopping rules for [`nelder_mead`].
 #[derive(Debug, Clone, Copy, PartialEq)]

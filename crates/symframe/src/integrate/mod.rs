@@ -20,10 +20,11 @@
 //!   sparse linear solve: the normal equations are a weighted 5-point Laplacian, solved by
 //!   conjugate gradients preconditioned with a multigrid V-cycle (red-black Gauss-Seidel
 //!   smoothing, 2 x 2 aggregation with Galerkin coarse operators), warm-started coarse to fine
-//!   (the map halved until it is small, each level's solution the next one's start). About 40
-//!   iterations at 1024 x 1024, seconds in all; written here rather than taken from a sparse
-//!   crate because the grid structure makes the operator five arrays and the multigrid
-//!   preconditioner (which a general sparse solver would not give) is what makes it fast.
+//!   (the map halved until it is small, each level's solution the next one's start): few
+//!   iterations at full size (docs/capture.md, "Normal integration"); written here rather than
+//!   taken from a sparse crate because the grid structure makes the operator five arrays and
+//!   the multigrid preconditioner (which a general sparse solver would not give) is what makes
+//!   it fast.
 //!   Smooth everywhere: a depth jump is smeared into a slope.
 //! - [`Solver::Bilateral`]: the weights of the two sides follow the current surface,
 //!   `w^+ = sigmoid(k ((nz D_- z)^2 - (nz D_+ z)^2))`, `w^- = 1 - w^+`, re-solved

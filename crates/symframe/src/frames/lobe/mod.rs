@@ -344,8 +344,9 @@ pub(crate) const LOBE_EXPLAINS: f64 = 0.002;
 const RETRY_RESIDUAL: f64 = LOBE_EXPLAINS;
 
 /// Lights of the coarse subset the search runs on: the first of the spread subset's and of the
-/// highlight's (so evenly spread too); the fit is then polished on the whole subset. Measured
-/// on the materials scenes at 1,000 and 1,512 lights: the same maps (to 0.01 degrees).
+/// highlight's (so evenly spread too); the fit is then polished on the whole subset, which
+/// gives the same maps as searching on all of it (docs/performance.md, "The default estimator
+/// with the lobe fit", Coarse-to-fine).
 const COARSE_SPREAD: usize = 128;
 
 /// Highlight lights of the coarse subset (see [`COARSE_SPREAD`]).
@@ -513,8 +514,8 @@ fn residuals(
 /// coefficients and `P` the projection off the active basis functions. Returns `J^T J` and
 /// `-J^T r = v^T r` (the residuals are orthogonal to the active functions).
 ///
-/// Analytic derivatives (one pass) instead of forward differences (seven passes): measured
-/// 3-4x fewer model passes per fit.
+/// Analytic derivatives (one pass) instead of forward differences (seven passes): fewer model
+/// passes per fit (docs/performance.md, "The default estimator with the lobe fit").
 fn normal_equations(
     m: &Model,
     linear: &Linear,

@@ -57,7 +57,7 @@ impl Triangle {
     ///
     /// The triangle is found on the sphere, not on the disc: a great-circle edge bulges past the
     /// planar edge, and a point inside a thin planar triangle at the hull can lie well outside
-    /// the spherical one (weights down to -0.12 were seen on a 400-light rig).
+    /// the spherical one (some of its weights clearly negative).
     #[inline]
     pub(super) fn weights(&self, h: DVec3) -> Option<Location> {
         const EPS: f64 = -1e-10;
