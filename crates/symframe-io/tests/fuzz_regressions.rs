@@ -15,7 +15,8 @@ fn inputs(target: &str) -> Vec<PathBuf> {
     v
 }
 
-/// `'shape': (` followed by a `)` only before the `(`: the header check sliced backwards.
+/// `'shape': (` followed by a `)` only before the `(`: the header check must not slice
+/// backwards.
 #[test]
 fn npy() {
     let files = inputs("npy");

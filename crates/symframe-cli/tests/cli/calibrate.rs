@@ -339,7 +339,7 @@ fn matte_sphere_intensities_match_the_truth_and_estimates_agree() {
     let b = normals(&truth_dir.join("lights.lp"), &tmp.path().join("est_true"));
     // Over the pixels within 60 degrees of the view (the evaluations' convention): on this
     // 80-light rig a few pixels have two nearly equal lobe fits, and a rounding-level change of
-    // the intensities can pick the other one (measured: 17 of 1356 pixels over 1 degree).
+    // the intensities can pick the other one (measured: docs/method.md, "What the tests measured").
     let (_, gt) = read_npy_f32(&data.join("gt_normals.npy")).unwrap();
     let mut diffs: Vec<f64> = a
         .chunks_exact(3)

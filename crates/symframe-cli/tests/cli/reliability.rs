@@ -55,7 +55,7 @@ fn corrupt_tile_results_are_recomputed_with_a_warning_and_named_by_merge() {
     }
     assert_eq!(b.len(), len);
     fs::write(&t0, &b).unwrap();
-    // Tile 1: one bad status byte (blocked every rerun before).
+    // Tile 1: one bad status byte (it must not block every rerun).
     let t1 = tiles.join("tile-000001.bin");
     let mut b = fs::read(&t1).unwrap();
     b[HEADER + 3 * RECORD] = 200;

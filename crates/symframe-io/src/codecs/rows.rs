@@ -248,7 +248,8 @@ impl Rows {
     }
 
     /// A PFM read from its file a band at a time; `None` when its header is not in its first
-    /// [`PFM_HEADER_BYTES`] as expected (then it is read whole, as before: the same errors).
+    /// [`PFM_HEADER_BYTES`] as expected (then it is read whole, so a malformed header gets the
+    /// whole-file reader's errors).
     fn open_pfm(
         path: &Path,
         opts: &DecodeOptions,

@@ -150,9 +150,9 @@ fn fast_and_exact(
 ///
 /// The target is 0.1 degrees median and 0.5 at the 99th percentile, normals and tangents.
 /// Both paths interpolate with the same spherical barycentric weights, so they differ by
-/// rounding only: measured ~1e-6 median and 0.003-0.013 degrees p99 on these scenes. The
-/// bound asserted is 0.05 (4 to 15 times the measured, a tenth of the target's): a fast path that
-/// approximates the slice (the grid resampling this replaced: 0.44-1.5 degrees p99) fails it.
+/// rounding only (measured: docs/method.md, "What the tests measured"). The bound
+/// asserted is 0.05, a few times what rounding gives and a tenth of the target's: a fast path
+/// that approximates the slice (a grid resampling of it) fails it.
 ///
 /// In the paper's form, where the lookups are what is compared (see
 /// [`assert_paths_agree_with`] for the default measure).
@@ -229,9 +229,8 @@ fn fast_path_agrees_with_the_reference_path_on_shadowed_bumps() {
 }
 
 /// The default measure: the lobe fit does not read the interpolated slice, so the pixels it
-/// answers agree exactly; the rest (diffuse fits, the search) as in the paper's form. Measured
-/// here: p99 1.5e-6 degrees on both scenes (through the command line on a brushed GGX sphere and
-/// Ward bumps: 0.028 and 0.020).
+/// answers agree exactly; the rest (diffuse fits, the search) as in the paper's form
+/// (measured: docs/method.md, "What the tests measured").
 #[test]
 fn fast_path_agrees_with_the_reference_path_under_the_default_measure() {
     let sphere = Scene::sphere(32, TangentField::Circular);
@@ -244,8 +243,8 @@ fn fast_path_agrees_with_the_reference_path_under_the_default_measure() {
 /// degrees: normals beyond that cannot be recovered and, with fallbacks off, must be discarded,
 /// not returned as clamped guesses (docs/method.md, "Beyond-reach discard"); those within reach
 /// are estimated. (With the default fallbacks they are filled and flagged: tests/materials.rs.)
-/// Without the check that the centre `h = n` is observed, every pixel beyond reach came back as
-/// a guess (up to 43 degrees off).
+/// Without the check that the centre `h = n` is observed, every pixel beyond reach would come
+/// back as a guess, far off (docs/method.md, "What the tests measured").
 #[test]
 fn normals_beyond_the_rigs_reach_are_discarded() {
     beyond_reach(EstimatorParams {
@@ -302,12 +301,13 @@ fn beyond_reach(params: EstimatorParams) {
         }
     }
     eprintln!("near {near_ok}/{near} ok, far {far_returned}/{far} returned");
-    // Measured: 14 of 16 within 2 degrees, 2 discarded (sparse rig, small domains).
+    // Most within 2 degrees, some discarded (sparse rig, small domains; measured:
+    // docs/method.md, "What the tests measured").
     assert!(
         near_ok as f64 >= 0.85 * near as f64,
         "near {near_ok}/{near}"
     );
-    // Discarded, or (3 of 604 pixels measured) returned with a confidence that says so.
+    // Discarded, or (a few pixels) returned with a confidence that says so.
     assert!(
         far_returned * 100 <= far,
         "{far_returned} of {far} beyond reach returned"

@@ -93,14 +93,13 @@ fn clipped_highlights_keep_their_normals_and_tangents() {
         dropped.tangent_error.mean,
         100.0 * within_reach(&dropped_maps),
     );
-    // Measured: censored 0.055 degrees, tangents on 100% at 0.08.
+    // Measured figures: docs/method.md, "What the tests measured".
     assert!(censored.normal_error.mean < 0.3, "{censored:?}");
     assert!(censored.tangent_coverage > 0.95, "{censored:?}");
     assert!(censored.tangent_error.mean < 1.0, "{censored:?}");
     // Dropped, the clipped peak leaves the highlight's centre unobserved: its pixels are
     // beyond the symmetry's reach and only the fallback (the lobe fitted to the flanks, at half
     // confidence) answers them; censored, the symmetry reaches them.
-    // Measured: 64% of the object's pixels (the rim beyond the reach included) against 0.4%.
     assert!(within_reach(&censored_maps) > 0.5);
     assert!(within_reach(&dropped_maps) < 0.1 * within_reach(&censored_maps));
 }
@@ -136,7 +135,7 @@ fn a_beckmann_lobe_is_inside_the_family() {
     let plastic = Ggx::isotropic([0.3, 0.4, 0.5], [0.04; 3], 0.12);
     let ggx = float_sphere_error(&plastic);
     println!("Beckmann copper {beckmann:.3} degrees, GGX plastic {ggx:.3}");
-    // Measured: copper 0.78 (2.79 with the exponent stopped at 40), plastic 0.003.
+    // Measured figures: docs/method.md, "What the tests measured".
     assert!(beckmann < 1.0, "{beckmann}");
     assert!(ggx < 0.05, "{ggx}");
 }
@@ -174,8 +173,8 @@ fn two_lobes_sharing_a_frame_give_their_normals_and_tangents() {
         100.0 * wc,
         100.0 * cc
     );
-    // Measured: woven 0.02 degrees, tangents on 98% at 0.03 (one lobe and the search: 0.81,
-    // 1%); coated 0.24, tangents on 98% at 0.48 (0.32, 95% at 0.72).
+    // Measured figures, and those of one lobe and the search: docs/method.md, "What the tests
+    // measured".
     assert!(wn < 0.3 && wc > 0.9 && wt < 0.5, "{wn} {wc} {wt}");
     assert!(cn < 0.3 && cc > 0.9 && ct < 0.5, "{cn} {cc} {ct}");
 }
@@ -189,6 +188,7 @@ fn a_second_lobe_does_not_absorb_an_asymmetric_material() {
     let brdf = AshikhminShirley::new([0.4; 3], [0.1; 3], 100.0, 10.0);
     let (n, _, _) = float_sphere(&brdf, 1000);
     println!("Ashikhmin-Shirley: normal {n:.3}");
-    // Measured: 0.40 degrees (0.77 where the pair answered without the test of its residuals).
+    // Measured figures, and those without the test of the pair's residuals:
+    // docs/method.md, "What the tests measured".
     assert!(n < 0.6, "{n}");
 }

@@ -103,10 +103,9 @@ fn ggx(kd: f64, f0: f64, ax: f64, ay: f64) -> Ggx {
 
 #[test]
 fn near_mirror_highlights_do_not_derail_the_search() {
-    // Lights ~3.6 degrees apart in halfway space; the lobes are 1-3 degrees wide. Measured:
-    // alpha 0.02: mean 0.04, p99 0.52; 0.03: 0.002, 0.04; 0.05: 0.0001, 0.0004 (the lobe fit;
-    // the search alone with the full-level judge: 0.5-0.8 mean, p99 to 1.9; before it: 3.1
-    // mean, 18% of pixels over 5 degrees).
+    // Lights ~3.6 degrees apart in halfway space; the lobes are 1-3 degrees wide. The lobe fit
+    // answers; the search alone does worse, without the full-level judge far worse (measured:
+    // docs/method.md, "What the tests measured").
     let scene = Scene::sphere(40, TangentField::Circular);
     for alpha in [0.02, 0.03, 0.05] {
         let f = estimate(
@@ -129,11 +128,11 @@ fn the_default_measure_is_right_from_diffuse_to_metal() {
         &dense(),
         EstimatorParams::default(),
     );
-    // Measured 1e-6 (the robust Lambertian fit is the centre of a diffuse slice).
+    // The robust Lambertian fit is the centre of a diffuse slice.
     assert!(lambert.mean <= 0.1, "{lambert:?}");
-    // Diffuse fraction from mostly diffuse to metal, roughness 0.05-0.2. Measured mean
-    // 0.00005-0.01, p99 up to 0.16 (the lobe fit; the search before it: mean 0.17-0.55, p99 to
-    // 3.75 on the rough plastic, whose weak wide lobe the paper's form tilts by 1.7 degrees).
+    // Diffuse fraction from mostly diffuse to metal, roughness 0.05-0.2: the lobe fit answers;
+    // the search would tilt the rough plastic's weak wide lobe in the paper's form (measured:
+    // docs/method.md, "What the tests measured").
     for (kd, f0, alpha) in [
         (0.5, 0.04, 0.1),
         (0.7, 0.04, 0.2),
@@ -156,8 +155,8 @@ fn the_default_measure_is_right_from_diffuse_to_metal() {
 #[test]
 fn brushed_metal_along_the_tilt_plane_is_not_biased() {
     // The paper's form tilts these normals by 2 degrees on average (the wide axis lies in the
-    // plane of tilt); the default measure removes the bias. Measured: 0.17 mean (0.47 with the
-    // search and the compensated measure alone).
+    // plane of tilt); the default measure removes the bias (measured, and with the search and
+    // the compensated measure alone: docs/method.md, "What the tests measured").
     let scene = Scene::sphere(40, TangentField::Axial(DVec3::X));
     let f = estimate(
         &scene,
@@ -186,7 +185,7 @@ fn narrow_rigs_fill_every_pixel_and_say_where_from() {
     let lights = diligent_lights();
     let brdf = Lambertian::new([0.8; 3]);
     let filled = estimate(&scene, &brdf, &lights, EstimatorParams::default());
-    // Measured: coverage 100%, mean 0.08 degrees (the Lambertian fallback is exact here).
+    // The Lambertian fallback is exact here (measured: docs/method.md, "What the tests measured").
     assert!(filled.coverage >= 0.99 && filled.mean <= 0.1, "{filled:?}");
     let bare = estimate(
         &scene,
@@ -239,8 +238,8 @@ fn narrow_rigs_fill_every_pixel_and_say_where_from() {
 
 #[test]
 fn isotropic_materials_get_no_tangents() {
-    // Measured tangent shares: at most 0.7% on every rig (before the lobe fit: up to 6.5% on
-    // plastic under 200 lights, where a highlight of three or four samples can look elongated).
+    // Under 200 lights a highlight of three or four samples can look elongated; the lobe fit
+    // does not read it so (measured tangent shares: docs/method.md, "What the tests measured").
     let scene = Scene::sphere(40, TangentField::Circular);
     let rigs: [(&str, Vec<DVec3>, f64); 3] = [
         ("dense", dense(), 0.02),
@@ -285,8 +284,7 @@ fn sparse_rigs_keep_brushed_frames() {
             "{field:?}: {f:?}, tangent mean {:.2} swapped {:.3} coverage {:.3}",
             e.tangent_error.mean, e.swapped_share, e.tangent_coverage
         );
-        // Measured: normals 0.06 / 0.27 mean; tangents 0.03 / 0.28, none swapped, on 95.5-95.7%
-        // of the pixels (before: normals 3.2 / 2.9, tangents on 10-17%, 15% swapped).
+        // Measured figures: docs/method.md, "What the tests measured".
         assert!(f.mean <= 0.5 && f.coverage >= 0.99, "{field:?}: {f:?}");
         assert!(e.tangent_error.mean <= 1.0, "{field:?}: {e:?}");
         assert!(e.swapped_share < 0.02, "{field:?}: {e:?}");
@@ -303,8 +301,7 @@ fn lobes_outside_the_microfacet_family_and_broad_lobes() {
     let rough_metal = ggx(0.0, 0.9, 0.5, 0.5);
     for (brdf, limit) in [(&ward as &dyn Brdf, 0.5), (&rough_metal, 0.5)] {
         for lights in [dense(), uniform_cone_lights(200, 65.0)] {
-            // Measured: Ward 0.09 / 0.10, metal alpha 0.5 0.30 / 0.26 (before: 1.67 /
-            // 1.99 and 2.39 / 2.22; max-reflectance 1.40 on the metal).
+            // Measured figures: docs/method.md, "What the tests measured".
             let f = estimate(&scene, brdf, &lights, EstimatorParams::default());
             assert!(
                 f.mean <= limit && f.coverage >= 0.99,
@@ -320,9 +317,9 @@ fn beyond_reach_a_lobe_outside_the_family_beats_the_biased_lambertian_fit() {
     // Ashikhmin-Shirley (not a member of the lobe fit's family) under 200 lights: normals 45-60
     // degrees from the view have their highlight beyond the rig. The lobe fit leaves 0.6-0.7%
     // unexplained there (more than the 0.2% that makes it the answer) but much less than a
-    // diffuse term, and is 1.6-3.1 degrees off where the Lambertian fallback, biased by the
-    // highlight's tails, was 7.5-11. Measured: 0.7% of the pixels over 5 degrees (2.2% with
-    // the Lambertian fallback), mean 0.79.
+    // diffuse term, and is a few degrees off where the Lambertian fallback, biased by the
+    // highlight's tails, is several times further (measured: docs/method.md, "What the tests
+    // measured").
     let scene = Scene::sphere(48, TangentField::Circular);
     let brdf = symframe::brdf::AshikhminShirley::new([0.4; 3], [0.1; 3], 100.0, 10.0);
     let f = estimate(
@@ -340,10 +337,9 @@ fn beyond_reach_a_lobe_outside_the_family_beats_the_biased_lambertian_fit() {
 #[test]
 fn a_lobe_that_barely_improves_on_the_diffuse_term_does_not_answer() {
     // Satin bumps with cast shadows and interreflections under the dense rig: on the steep
-    // sides of the bumps a broad lobe with no diffuse part stood in for the diffuse light,
-    // centred 30-35 degrees from the normal, at confidence 0.9, where the robust Lambertian
-    // fit (R^2 0.999) was 2 degrees off. Measured: mean 0.285, no pixel over 5 degrees (before:
-    // 0.326, 0.2%).
+    // sides of the bumps a broad lobe with no diffuse part can stand in for the diffuse light,
+    // centred far from the normal at high confidence, where the robust Lambertian fit (R^2 0.999)
+    // is close; such a lobe does not answer (measured: docs/method.md, "What the tests measured").
     let scene = shadowed_bumps(5);
     let f = estimate(
         &scene,
@@ -360,11 +356,8 @@ fn a_lobe_that_barely_improves_on_the_diffuse_term_does_not_answer() {
 #[test]
 fn a_doubtful_search_gives_way_to_a_plausible_lobe() {
     // Ward on shadowed bumps under 500 lights: cast shadows break the slices' symmetry, and
-    // where the search's own confidence is under 0.1 a lobe fit leaving under 0.5% answers.
-    // Measured: mean 0.82, 4.4% of the pixels over 5 degrees (the search alone: 0.91, 6.9%;
-    // 0.64 and 3.5% while the lobe's shape exponent stopped at 40, before Beckmann's
-    // distribution, Ward's too, was inside the family: docs/method.md, "Beckmann inside the
-    // family").
+    // where the search's own confidence is under 0.1 a lobe fit leaving under 0.5% answers
+    // (measured, and the search alone: docs/method.md, "What the tests measured").
     let scene = shadowed_bumps(7);
     let ward = symframe::brdf::Ward::new([0.3; 3], [0.5; 3], 0.1, 0.4);
     let f = estimate(
@@ -383,8 +376,8 @@ fn a_doubtful_search_gives_way_to_a_plausible_lobe() {
 fn a_spike_the_rig_undersamples_does_not_mislead_the_search() {
     // Sharp GGX plastic (alpha 0.02) on shadowed bumps under 200 lights: the spike falls on a
     // few lights or none; the robust Lambertian fit explains every other sample (R^2 > 0.999)
-    // and its normal answers, where the search went 14-20 degrees off on the spike's few
-    // samples. Measured: mean 0.31, no pixel over 5 degrees (before: 0.93, 1.6%).
+    // and its normal answers, where the search would go far off on the spike's few samples
+    // (measured: docs/method.md, "What the tests measured").
     let scene = shadowed_bumps(7);
     let f = estimate(
         &scene,
