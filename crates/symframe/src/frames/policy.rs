@@ -47,10 +47,10 @@ pub(crate) struct LobeSettings {
     /// A lobe leaving less than this share of the pixel's energy unexplained is the answer
     /// (source `lobe`), as is one that leaves no more than the capture's noise does (see
     /// [`LobeSettings::noise_z`]); one leaving more is no evidence, and the symmetry search
-    /// decides. Fits of lobes in the family leave below 1e-4 noise-free; a lobe outside the
-    /// family (Ashikhmin-Shirley) leaves 0.2-1% with normals 3-15 degrees off where the search
-    /// is within 1. Higher: more pixels answered by the lobe's centre, biased where the family
-    /// misdescribes the material.
+    /// decides. Fits of lobes in the family leave almost nothing noise-free; a lobe outside the
+    /// family (Ashikhmin-Shirley) leaves more, with normals further off than the search's
+    /// (docs/method.md, "Lobe fit"). Higher: more pixels answered by the lobe's centre, biased
+    /// where the family misdescribes the material.
     pub explains: f64,
     /// A lobe explains the pixel too where what it leaves is what the noise model expects the
     /// capture's noise to leave ([`LobeFit::noise_share`]) plus the family's floor
