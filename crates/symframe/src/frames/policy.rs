@@ -525,7 +525,7 @@ pub(crate) fn pure_diffuse(
 pub(crate) fn pair_explains(s: &LobeSettings, p: &LobePair, single: &LobeFit) -> bool {
     (p.residual < s.explains
         || (p.residual < lobe_limit(s, single)
-            && p.normal_sd.hypot(single.light_sd) <= s.noise_determined))
+            && p.normal_sd.hypot(p.light_sd) <= s.noise_determined))
         && p.significant()
         && (p.residual_everywhere < s.model_floor || p.structure < s.noise_like_z)
 }

@@ -304,12 +304,11 @@ impl<'a> Estimator<'a> {
                 if !policy::lobe_explains(&self.policy.lobe, &f)
                     && policy::spiked_diffuse(&self.policy.diffuse, &fit, None).is_none() =>
             {
-                match fit_lobe_pair(&f, self.rig, lobe) {
+                match fit_lobe_pair(&f, self.rig, self.params.noise.light_error_deg, lobe) {
                     Some(p) if policy::pair_explains(&self.policy.lobe, &p, &f) => {
                         let l = p.as_lobe(|l| self.lobe_has_tangent(l));
                         Some(LobeFit {
                             evals: f.evals + p.evals,
-                            light_sd: f.light_sd,
                             noise_share: f.noise_share,
                             noise_share_sd: f.noise_share_sd,
                             ..l

@@ -21,8 +21,8 @@ use crate::frames::rig::Rig;
 
 use super::kernel::Subset;
 use super::{
-    cholesky_solve, damping_floor, negligible, solve_spd, tilt_sd, LobeFit, LobeScratch,
-    ALPHA_RANGE, MAX_ITERATIONS, RELATIVE_GAIN, SHAPE_RANGE,
+    cholesky_solve, damping_floor, floored, negligible, solve_spd, tilt_sd, LobeFit, LobeScratch,
+    ALPHA_RANGE, LIGHT_DRAWS, MAX_ITERATIONS, RELATIVE_GAIN, SHAPE_RANGE,
 };
 
 /// Number of linear coefficients: the diffuse term and each lobe's two Fresnel terms.
@@ -65,6 +65,9 @@ pub(crate) struct LobePair {
     /// Standard deviation of the shared normal (radians) the samples' scatter about the pair
     /// leaves, as [`LobeFit::normal_sd`].
     pub normal_sd: f64,
+    /// Standard deviation of the shared normal (radians) from the lights' uncertainty, as
+    /// [`LobeFit::light_sd`].
+    pub light_sd: f64,
     /// Model evaluations used.
     pub evals: u32,
 }
@@ -118,9 +121,7 @@ impl LobePair {
                 residual: self.residual,
                 trimmed: 0,
                 normal_sd: self.normal_sd,
-                // The pair's lights are the one lobe's: the estimator keeps its light error and
-                // noise.
-                light_sd: 0.0,
+                light_sd: self.light_sd,
                 noise_share: 0.0,
                 noise_share_sd: 0.0,
                 evals: self.evals,
@@ -559,12 +560,14 @@ const BROAD_START: f64 = 0.3;
 pub(crate) fn fit_lobe_pair(
     single: &LobeFit,
     rig: &Rig,
+    light_error_deg: f64,
     scratch: &mut LobeScratch,
 ) -> Option<LobePair> {
     let (lights, halfways) = (rig.lights_in_camera(), rig.halfway_in_camera());
     let LobeScratch {
         fine,
         coarse,
+        every,
         pair,
         greys,
         residuals,
@@ -643,6 +646,29 @@ pub(crate) fn fit_lobe_pair(
         let parameters = P + members(at.set).1;
         tilt_sd(&jtj, at.cost, s.len() as f64 - parameters as f64)
     };
+    // The lights' uncertainty, as for one lobe ([`LobeFit::light_sd`]): the Gauss-Newton step
+    // from the answer with every light turned at random by the light error, the mean of the
+    // squared tilts over the draws. The pair's own: its normal is read where its sharper lobe
+    // is, between fewer lights than the one lobe's (a coat's highlight under a sparse rig).
+    let light_error = light_error_deg.to_radians();
+    let light_sd = if light_error > 0.0 {
+        let seed = fine_lights.iter().fold(s.len() as u64, |h, &j| {
+            (h ^ greys[j as usize].to_bits()).wrapping_mul(0x0100_0000_01b3)
+        });
+        let mut sum = 0.0;
+        for draw in 0..LIGHT_DRAWS {
+            every.clone_from(s);
+            every.jitter_lights(light_error, seed.wrapping_add(draw));
+            let at = project(&model, every, syy, &mut pair[1]);
+            let (jtj, rhs) = normal_equations(&at, every, &pair[1]);
+            sum +=
+                solve_spd(floored(&jtj), rhs).map_or(f64::INFINITY, |d| d[0] * d[0] + d[1] * d[1]);
+            evals += 2;
+        }
+        (sum / LIGHT_DRAWS as f64).sqrt()
+    } else {
+        0.0
+    };
     let c = linear.coefficients;
     let mut energy = [0.0f64; 2];
     for i in 0..s.len() {
@@ -674,6 +700,7 @@ pub(crate) fn fit_lobe_pair(
         structure,
         residual_everywhere,
         normal_sd,
+        light_sd,
         evals,
     })
 }
@@ -761,7 +788,7 @@ mod tests {
             &mut scratch,
         )
         .unwrap();
-        let pair = fit_lobe_pair(&single, rig, &mut scratch).unwrap();
+        let pair = fit_lobe_pair(&single, rig, 0.0, &mut scratch).unwrap();
         (single, pair)
     }
 
