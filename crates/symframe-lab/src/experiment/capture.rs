@@ -501,7 +501,14 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
             let clean = scene.render_stack(mat.brdf.as_ref(), &lights);
             let at = symframe::render::Degradation::clip_point(&clean, &scene.mask, cond.clipped);
             drop(clean);
-            let seed = 17 + 1000 * m as u64 + c as u64;
+            // A development aid: `SYMFRAME_CAPTURE_SEED=N` draws another realisation of every
+            // set's noise and light errors (a set's confidence figures come from one draw of
+            // its lights' errors, shared by neighbouring pixels).
+            let realisation = std::env::var("SYMFRAME_CAPTURE_SEED")
+                .ok()
+                .and_then(|v| v.parse::<u64>().ok())
+                .unwrap_or(0);
+            let seed = 17 + 1000 * m as u64 + c as u64 + 1_000_003 * realisation;
             let d = cond.degradation(at, seed);
             let capture = |scene: &Scene, lights: &[DVec3]| -> Result<_> {
                 Ok(match cond.jpeg_quality {
