@@ -1,7 +1,7 @@
 //! The calibration job (`symframe calibrate`): light directions from a mirror sphere in the
 //! images, written as an `.lp` file, with a picture of the detected highlights and a JSON
 //! record beside it. The per-image highlight and the sphere detection are the core crate's
-//! ([`symframe::find_highlight`], [`symframe::detect_spheres`]); this module reads the images
+//! ([`symframe::Highlight::find`], [`symframe::Detection::find_all`]); this module reads the images
 //! and writes the files.
 
 use std::path::{Component, Path, PathBuf};
@@ -10,8 +10,7 @@ use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
 use symframe::{
-    detect_sphere, find_highlight, Circle, Highlight, HighlightError, HighlightParams, MatteError,
-    MatteParams,
+    Circle, Detection, Highlight, HighlightError, HighlightParams, MatteError, MatteParams,
 };
 use symframe_io::DecodeOptions;
 
@@ -281,7 +280,7 @@ pub(crate) fn read_grey(
 }
 
 /// The rows a circle's pixels lie in, clipped to an image of `height` rows (as
-/// [`MatteParams::intensity`] and [`find_highlight`] bound their pixels).
+/// [`MatteParams::intensity`] and [`Highlight::find`] bound their pixels).
 pub(crate) fn circle_rows(c: &Circle, height: usize) -> std::ops::Range<usize> {
     let y0 = (c.cy - c.r).floor().max(0.0) as usize;
     let y1 = ((c.cy + c.r).ceil().max(0.0) as usize).min(height);
@@ -560,7 +559,7 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
             let n = images.len() as f32;
             let mut mean = sum;
             mean.iter_mut().for_each(|v| *v /= n);
-            let d = detect_sphere(w, h, &mean, &brightest).map_err(|e| SphereNotFound {
+            let d = Detection::find(w, h, &mean, &brightest).map_err(|e| SphereNotFound {
                 images: config.images.clone(),
                 reason: e.to_string(),
             })?;
@@ -611,7 +610,7 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
                         }
                     }
                 })?;
-                let res = find_highlight(w, h, &g, &circle, &params);
+                let res = Highlight::find(w, h, &g, &circle, &params);
                 // The matte sphere from its rows alone: its circle moved up by their first
                 // (a whole number of rows: every pixel's offset from the centre is the same).
                 let matte = match (&res, &config.matte_sphere) {

@@ -1,10 +1,10 @@
 //! The near-light calibration job (`symframe calibrate --K K.txt --sphere-radius R`): the
 //! lights' positions from two or more chrome spheres seen by a pinhole camera, written as
 //! `light_positions.txt` with a JSON record beside it. The geometry (each sphere placed by its
-//! outline and radius, each light triangulated from its reflections) is
-//! the core crate's ([`symframe::sphere_from_rim`], [`symframe::triangulate`]); the highlights
-//! and the spheres' outlines too. With a matte sphere in the images, each light's radiant
-//! intensity is measured on it with the light's falloff from its position
+//! outline and radius, each light triangulated from its reflections) is the core crate's
+//! ([`symframe::Pinhole::sphere_from_rim`], [`symframe::Triangulation::from_rays`]); the
+//! highlights and the spheres' outlines too. With a matte sphere in the images, each light's
+//! radiant intensity is measured on it with the light's falloff from its position
 //! ([`symframe::MatteParams::near_sphere_intensity`]) and written as `light_intensities.txt`.
 //! This module reads the images and writes the files.
 
@@ -15,8 +15,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use serde::Serialize;
 use symframe::{
-    circle_rim, detect_spheres, find_highlight, fit_sphere, reflected_ray, sphere_from_rim,
-    triangulate, Circle, HighlightParams, MatteParams, Pinhole, PointLight, Triangulation,
+    Circle, Detection, Highlight, HighlightParams, MatteParams, Pinhole, PointLight, Triangulation,
 };
 use symframe_io::DecodeOptions;
 
@@ -314,7 +313,7 @@ pub fn calibrate_near(
     }
 
     let (circles, source): (Vec<Circle>, &'static str) = if config.spheres.is_empty() {
-        let found = detect_spheres(w, h, &mean, &brightest, 0.05).map_err(|why| {
+        let found = Detection::find_all(w, h, &mean, &brightest, 0.05).map_err(|why| {
             anyhow::anyhow!(
                 "{}: cannot find the chrome spheres: {why}; give each circle with --sphere \
                  CX,CY,R",
@@ -366,10 +365,10 @@ pub fn calibrate_near(
                      circle's rim is taken",
                     c.cx, c.cy
                 ));
-                ("circle", circle_rim(c, 360))
+                ("circle", c.rim(360))
             }
         };
-        let centre = sphere_from_rim(&camera, &rim, config.radius).map_err(|why| {
+        let centre = camera.sphere_from_rim(&rim, config.radius).map_err(|why| {
             anyhow::anyhow!(
                 "the sphere at ({:.1}, {:.1}), radius {:.1} px: cannot place it: {why}",
                 c.cx,
@@ -411,7 +410,7 @@ pub fn calibrate_near(
                 Ok(circles
                     .iter()
                     .map(|c| {
-                        find_highlight(w, h, &g, c, &params)
+                        Highlight::find(w, h, &g, c, &params)
                             .map(|hl| [hl.x, hl.y])
                             .map_err(|e| e.to_string())
                     })
@@ -434,7 +433,7 @@ pub fn calibrate_near(
             .filter_map(|(hl, c)| {
                 hl.as_ref()
                     .ok()
-                    .map(|[x, y]| reflected_ray(&camera, *c, config.radius, *x, *y))
+                    .map(|[x, y]| camera.reflected_ray(*c, config.radius, *x, *y))
             })
             .collect();
         let why = |e: &str| {
@@ -452,7 +451,7 @@ pub fn calibrate_near(
             0 => bail!("{}", why("the light is seen on no sphere")),
             1 if config.strict => bail!("{}", why("the light is seen on one sphere only")),
             1 => placed.push(None),
-            _ => match triangulate(&rays) {
+            _ => match Triangulation::from_rays(&rays) {
                 Ok(t) => placed.push(Some((t.position, Some(t), "triangulated"))),
                 Err(e) if config.strict => bail!("{}", why(&e)),
                 Err(_) => placed.push(None),
@@ -481,7 +480,7 @@ pub fn calibrate_near(
     let kept: Vec<DVec3> = placed.iter().flatten().map(|(p, _, _)| *p).collect();
     let pending: Vec<usize> = (0..placed.len()).filter(|&k| placed[k].is_none()).collect();
     if let Some(&first) = pending.first() {
-        let Some((centre, radius)) = fit_sphere(&kept) else {
+        let Some((centre, radius)) = PointLight::fit_sphere(&kept) else {
             bail!(
                 "{} lights are seen on one sphere only or fixed poorly by their rays, and the {} \
                  others do not lie on a sphere to place them on (e.g. {}); place the spheres so \
@@ -521,7 +520,7 @@ pub fn calibrate_near(
                     .to_degrees()
                     .round()
             ));
-            let t = triangulate(&all_rays[k]).ok();
+            let t = Triangulation::from_rays(&all_rays[k]).ok();
             placed[k] = Some((p, t, "dome"));
         }
     }
@@ -572,7 +571,7 @@ pub fn calibrate_near(
         triangulated: residuals.len(),
         residual_rms_median: residuals.get(residuals.len() / 2).copied().unwrap_or(0.0),
         residual_rms_max: residuals.last().copied().unwrap_or(0.0),
-        dome: fit_sphere(&positions).map(|(c, r)| (c.to_array(), r)),
+        dome: PointLight::fit_sphere(&positions).map(|(c, r)| (c.to_array(), r)),
         matte: matte.as_ref().map(|m| m.0.clone()),
         records,
         conventions: "pixels: x right, y down, centre of the top-left pixel (0.5, 0.5); \
@@ -638,10 +637,10 @@ fn matte_intensities(
                  circle's rim is taken",
                 circle.cx, circle.cy
             ));
-            ("circle", circle_rim(&circle, 360))
+            ("circle", circle.rim(360))
         }
     };
-    let centre = sphere_from_rim(camera, &rim, radius).map_err(|why| {
+    let centre = camera.sphere_from_rim(&rim, radius).map_err(|why| {
         anyhow::anyhow!(
             "the matte sphere at ({:.1}, {:.1}), radius {:.1} px: cannot place it: {why}",
             circle.cx,

@@ -11,8 +11,8 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use glam::DVec3;
 use symframe::{
-    check_inputs, Baseline, BaselineMethod, BaselineParams, Estimator, EstimatorParams,
-    PixelCounts, Rig, RigOptions,
+    Baseline, BaselineMethod, BaselineParams, Estimator, EstimatorParams, PixelCounts, Rig,
+    RigOptions, Stack,
 };
 use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{Dataset, DecodeOptions, NormalPng, TileCache, TileGrid};
@@ -453,7 +453,7 @@ fn run(
         Some(p) => p.display().to_string(),
         None => ds.source.display().to_string(),
     };
-    check_inputs(
+    Stack::check_inputs(
         grid.width,
         grid.height,
         cache.n_lights(),

@@ -500,7 +500,7 @@ pub fn from_mesh(m: &symframe::Mesh, w: usize, h: usize) -> Geometry {
     g
 }
 
-/// A perspective mesh ([`symframe::perspective_mesh`]) as it is: camera-frame points in
+/// A perspective mesh ([`symframe::Pinhole::mesh`]) as it is: camera-frame points in
 /// the depths' unit (glTF's y up and -z forward are the camera frame's), uv at pixel centres.
 pub fn from_camera_mesh(m: &symframe::Mesh, w: usize, h: usize) -> Geometry {
     let mut g = Geometry {
@@ -774,8 +774,7 @@ pub fn export_gltf(config: &ExportConfig) -> Result<ExportOutcome> {
             );
         }
         if let Some((cam, _)) = camera {
-            let mesh =
-                symframe::perspective_mesh(&cam, w, h, &depth, &maps.normals, config.max_jump);
+            let mesh = cam.mesh(w, h, &depth, &maps.normals, config.max_jump);
             if mesh.triangles.is_empty() {
                 bail!("{}: the mesh has no triangles", depth_path.display());
             }

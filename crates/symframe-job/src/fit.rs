@@ -348,7 +348,7 @@ fn run(
     let normals = read_frame_map(&config.frames.join("normals.npy"), w, h)?;
     let tangents = read_frame_map(&config.frames.join("tangents.npy"), w, h)?;
     let (mask_path, mask) = read_mask(&config.mask, &ds, &grid)?;
-    symframe::check_inputs(w, h, cache.n_lights(), ds.lights.len(), mask.as_deref())
+    symframe::Stack::check_inputs(w, h, cache.n_lights(), ds.lights.len(), mask.as_deref())
         .with_context(|| ds.source.display().to_string())?;
     let mut exposure_chosen = false;
     let mut exposure_choice = None;

@@ -2,7 +2,7 @@
 //! mesh (`depth.npy`, `depth.exr`, `depth.png`, `mesh.ply`, `integrate.json`).
 //!
 //! With a pinhole camera (`K.txt`, or the one a near-light estimate recorded in its report)
-//! the normals are integrated as a perspective depth map ([`perspective_depth`]): metric
+//! the normals are integrated as a perspective depth map ([`Pinhole::integrate`]): metric
 //! depths along the optical axis, scaled as the estimate's `depth.npy` (its median over each
 //! connected region kept) or, without one, so that the object's centre is at the given distance;
 //! the mesh is the surface points the pixels see, in the camera frame.
@@ -13,10 +13,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
-use symframe::{
-    integrate, perspective_depth, perspective_mesh, picture_heights, DepthMap, IntegrateParams,
-    Mesh, Pinhole, Solver,
-};
+use symframe::{DepthMap, IntegrateParams, Mesh, Pinhole, Solver};
 
 use crate::outdir::{OutputDir, OutputSet};
 
@@ -328,7 +325,7 @@ fn integrate_into(
     let t_int = Instant::now();
     let (depth, m, camera_report) = match &camera {
         None => {
-            let depth = integrate(w, h, &normals, confidence.as_deref(), &config.params)
+            let depth = DepthMap::integrate(w, h, &normals, confidence.as_deref(), &config.params)
                 .with_context(|| format!("{}: cannot integrate", config.estimate.display()))?;
             let m = depth.mesh(&normals, config.max_jump);
             (depth, m, None)
@@ -336,7 +333,7 @@ fn integrate_into(
         Some((cam, from)) => {
             let (depth, scale) =
                 integrate_perspective(config, cam, scale_by, w, h, &normals, &confidence)?;
-            let m = perspective_mesh(cam, w, h, &depth.depth, &normals, config.max_jump);
+            let m = cam.mesh(w, h, &depth.depth, &normals, config.max_jump);
             let report = CameraReport {
                 k: cam.k(),
                 from: from.display().to_string(),
@@ -352,7 +349,7 @@ fn integrate_into(
     symframe_io::write_exr_map(&staging.path("depth.exr"), w, h, 1, &depth.depth)?;
     let picture = match &camera {
         None => shade(w, h, &depth.depth),
-        Some((cam, _)) => shade(w, h, &picture_heights(cam, &depth.depth)),
+        Some((cam, _)) => shade(w, h, &cam.picture_heights(&depth.depth)),
     };
     let shaded: Vec<f32> = picture.iter().flat_map(|&v| [v; 3]).collect();
     symframe_io::write_png8_rgb(&staging.path("depth.png"), w, h, &shaded, true)?;
@@ -509,17 +506,17 @@ fn integrate_perspective(
         let scale = format!("the object's centre at depth {distance}");
         (previous, Some(distance), scale)
     };
-    let depth = perspective_depth(
-        camera,
-        w,
-        h,
-        normals,
-        confidence.as_deref(),
-        &previous,
-        centre,
-        &config.params,
-    )
-    .with_context(|| format!("{}: cannot integrate", config.estimate.display()))?;
+    let depth = camera
+        .integrate(
+            w,
+            h,
+            normals,
+            confidence.as_deref(),
+            &previous,
+            centre,
+            &config.params,
+        )
+        .with_context(|| format!("{}: cannot integrate", config.estimate.display()))?;
     Ok((depth, scale))
 }
 
@@ -619,7 +616,7 @@ mod tests {
         for (a, b) in ours.iter().zip(&theirs).filter(|(a, _)| a.is_finite()) {
             assert!((a / b - 1.0).abs() < 0.01, "integrate {a}, estimate {b}");
         }
-        let m = perspective_mesh(&camera, 96, 48, &ours, &normals_of(&est), 2.0);
+        let m = camera.mesh(96, 48, &ours, &normals_of(&est), 2.0);
         check(&m);
         let ply = std::fs::read(d.path().join("int/mesh.ply")).unwrap();
         assert!(String::from_utf8_lossy(&ply[..200]).contains("camera frame"));
@@ -642,14 +639,7 @@ mod tests {
         let (_, report) = integrate_job(&config).unwrap();
         assert!(report.camera.unwrap().scale.contains("centre"));
         let (_, depth) = symframe_io::read_npy_f32(&d.path().join("int2/depth.npy")).unwrap();
-        check(&perspective_mesh(
-            &camera,
-            96,
-            48,
-            &depth,
-            &normals_of(&est),
-            2.0,
-        ));
+        check(&camera.mesh(96, 48, &depth, &normals_of(&est), 2.0));
 
         // export gltf --mesh: the perspective mesh in the camera frame, its bounds those of the
         // integrated mesh.

@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use symframe::{PixelMethod, PixelRecord, Worker};
+use symframe::{PixelMethod, PixelRecord};
 use symframe_io::{TileCache, TileGrid};
 
 use symframe_io::TileFile;
@@ -142,8 +142,8 @@ where
         .par_iter()
         .enumerate()
         .map_init(
-            || (Worker::new(method, cache.n_lights()), Vec::new()),
-            |(worker, scratch), (i, &t)| -> Result<bool> {
+            || (method.scratch(), vec![0.0; lights.len() * 3], Vec::new()),
+            |(pixel_scratch, samples, scratch), (i, &t)| -> Result<bool> {
                 if ctl.stop.load(Ordering::SeqCst) || stopped.load(Ordering::SeqCst) {
                     return Ok(false);
                 }
@@ -161,7 +161,8 @@ where
                         if mask.is_some_and(|m| !m[p]) {
                             return method.masked();
                         }
-                        worker.run(method, p, |out| gather.pixel(k, out))
+                        gather.pixel(k, samples);
+                        method.pixel(p, samples, pixel_scratch)
                     })
                     .collect();
                 cache.release(t);

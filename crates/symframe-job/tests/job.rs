@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use symframe::brdf::Ward;
 use symframe::render::{Scene, TangentField};
-use symframe::{fit_stack, uniform_cone_lights, FitParams};
+use symframe::{uniform_cone_lights, FitParams};
 use symframe_io::{DecodeOptions, ImageFormat};
 use symframe_job::{
     estimate, fit, Control, EstimateConfig, EstimateOutcome, FitConfig, Interrupted, Stage,
@@ -87,16 +87,16 @@ fn the_tiled_fit_equals_the_in_memory_fit_and_resumes_after_a_stop() {
         ..FitParams::default()
     };
     let maps = done.maps.as_ref().expect("kept by default");
-    let memory = fit_stack(
-        &stack,
-        &ds.lights,
-        &maps.normals,
-        &maps.tangents,
-        Some(&scene.mask),
-        &params,
-        &|_| {},
-    )
-    .unwrap();
+    let memory = params
+        .fit_stack(
+            &stack,
+            &ds.lights,
+            &maps.normals,
+            &maps.tangents,
+            Some(&scene.mask),
+            &|_| {},
+        )
+        .unwrap();
     let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&resumed.maps.ward.kd), bits(&memory.ward.kd));
     assert_eq!(bits(&resumed.maps.ward.alpha_t), bits(&memory.ward.alpha_t));

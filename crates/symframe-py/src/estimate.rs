@@ -7,9 +7,7 @@ use numpy::{PyReadonlyArray2, PyReadonlyArray4, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use symframe::{
-    check_inputs, BaselineMethod, EstimateMaps, Estimator, PixelMethod, PixelRecord, Rig, Stack,
-};
+use symframe::{BaselineMethod, EstimateMaps, Estimator, PixelMethod, PixelRecord, Rig, Stack};
 use symframe_job::{EstimateConfig, EstimateOutcome, MethodConfig, Progress, Sources, Stage};
 
 use crate::arrays::{kept, lights_of, map_array, put_maps};
@@ -43,7 +41,7 @@ fn run_bands<M: PixelMethod<Output = PixelRecord> + Sync>(
             }
         }
         let band_mask = mask.map(|m| &m[y0 * w..y1 * w]);
-        records.extend(symframe::run_stack(method, &stack, band_mask, &|_| {}));
+        records.extend(stack.run(method, band_mask, &|_| {}));
         (ctl.progress)(Progress {
             stage: Stage::Tiles,
             done: band as u64 + 1,
@@ -110,7 +108,7 @@ pub(crate) fn estimate_arrays<'py>(
         match method {
             MethodConfig::Symmetry { rig, params } => {
                 let rig = Rig::new(&lights, rig)?;
-                check_inputs(w, h, n, rig.n_input(), mask)?;
+                Stack::check_inputs(w, h, n, rig.n_input(), mask)?;
                 let est = Estimator::new(&rig, params);
                 let maps = run_bands(&est, images, (n, h, w), mask, ctl)?;
                 let report = serde_json::json!({
@@ -130,7 +128,7 @@ pub(crate) fn estimate_arrays<'py>(
             }
             MethodConfig::Baseline { method, params } => {
                 let b = BaselineMethod::new(method, &lights, params)?;
-                check_inputs(w, h, n, b.unit_lights().len(), mask)?;
+                Stack::check_inputs(w, h, n, b.unit_lights().len(), mask)?;
                 let maps = run_bands(&b, images, (n, h, w), mask, ctl)?;
                 let report = serde_json::json!({
                     "method": method.name(),

@@ -5,7 +5,7 @@
 //! pixel off moves a highlight's normal by `0.5 / r` radians and the light by twice that: about
 //! 2 degrees on a sphere 30 pixels across.)
 //!
-//! Per image ([`find_highlight`]): the brightest connected spot on the sphere (saturated pixels,
+//! Per image ([`Highlight::find`]): the brightest connected spot on the sphere (saturated pixels,
 //! `NaN` in a decoded image, count as the brightest), thresholded at a fraction of its peak
 //! above the sphere's median. A spot small against the ball (at most 16 pixels, or a square a
 //! seventh of the radius across: a lamp's reflection smaller than a pixel, spread by the lens)
@@ -17,7 +17,7 @@
 //! the normal there. No spot bright enough, or a second spot carrying a large share of the
 //! first one's weight, is an error for that image (the command drops it with a warning).
 //!
-//! [`detect_sphere`] finds the sphere when its circle is not given: the connected region
+//! [`Detection::find`] finds the sphere when its circle is not given: the connected region
 //! brighter than the image border (its median), in the mean over all images, that holds the
 //! brightest spot of most images; its circle first has the region's centroid and the radius of
 //! a disc of the same area, then is fitted to the rim (`refine_circle`: the edge of a blurred
@@ -142,7 +142,7 @@ pub(crate) fn light_from_normal(n: DVec3) -> DVec3 {
     (2.0 * n.z * n - DVec3::Z).normalize()
 }
 
-/// Thresholds of [`find_highlight`].
+/// Thresholds of [`Highlight::find`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HighlightParams {
     /// The spot is the pixels above `median + fraction * (peak - median)`.
@@ -232,219 +232,221 @@ const HALO: usize = 3;
 /// chrome sphere", says why not a fixed size). A larger spot is located in normal space.
 const SMALL_SPOT: usize = 16;
 
-/// Locates the highlight of a mirror sphere in one image of `width x height` grey values
-/// (linear; `NaN` = saturated). See the module documentation.
-pub fn find_highlight(
-    width: usize,
-    height: usize,
-    grey: &[f32],
-    circle: &Circle,
-    params: &HighlightParams,
-) -> Result<Highlight, HighlightError> {
-    let (c0, c1, r0, r1) = circle.bounds(width, height);
-    let mut inside = Vec::new();
-    for row in r0..r1 {
-        for col in c0..c1 {
-            if circle.covers(col, row) {
-                inside.push(row * width + col);
+impl Highlight {
+    /// Locates the highlight of a mirror sphere in one image of `width x height` grey values
+    /// (linear; `NaN` = saturated). See the module documentation.
+    pub fn find(
+        width: usize,
+        height: usize,
+        grey: &[f32],
+        circle: &Circle,
+        params: &HighlightParams,
+    ) -> Result<Highlight, HighlightError> {
+        let (c0, c1, r0, r1) = circle.bounds(width, height);
+        let mut inside = Vec::new();
+        for row in r0..r1 {
+            for col in c0..c1 {
+                if circle.covers(col, row) {
+                    inside.push(row * width + col);
+                }
             }
         }
-    }
-    if inside.is_empty() {
-        return Err(HighlightError::OffImage);
-    }
-    let mut finite: Vec<f32> = inside
-        .iter()
-        .map(|&i| grey[i])
-        .filter(|v| v.is_finite())
-        .collect();
-    let saturated_any = finite.len() < inside.len();
-    finite.sort_by(f32::total_cmp);
-    let median = finite
-        .get(finite.len() / 2)
-        .copied()
-        .unwrap_or(0.0)
-        .max(0.0) as f64;
-    let peak = finite.last().copied().unwrap_or(0.0) as f64;
-    // Saturated pixels are at least as bright as anything measured, and stand out.
-    let top = if saturated_any {
-        peak.max(median * params.min_contrast).max(1e-6)
-    } else {
-        peak.max(median)
-    };
-    let floor = 1e-6 * top.max(1e-12);
-    let contrast = top / (median + floor);
-    let stands_out = contrast >= params.min_contrast && top > 0.0;
-    if !(saturated_any || stands_out) {
-        return Err(HighlightError::None {
-            contrast,
-            min: params.min_contrast,
-        });
-    }
-    let threshold = median + params.fraction * (top - median);
-    let value = |i: usize| -> f64 {
-        let v = grey[i];
-        if v.is_finite() {
-            v as f64
+        if inside.is_empty() {
+            return Err(HighlightError::OffImage);
+        }
+        let mut finite: Vec<f32> = inside
+            .iter()
+            .map(|&i| grey[i])
+            .filter(|v| v.is_finite())
+            .collect();
+        let saturated_any = finite.len() < inside.len();
+        finite.sort_by(f32::total_cmp);
+        let median = finite
+            .get(finite.len() / 2)
+            .copied()
+            .unwrap_or(0.0)
+            .max(0.0) as f64;
+        let peak = finite.last().copied().unwrap_or(0.0) as f64;
+        // Saturated pixels are at least as bright as anything measured, and stand out.
+        let top = if saturated_any {
+            peak.max(median * params.min_contrast).max(1e-6)
         } else {
-            top
+            peak.max(median)
+        };
+        let floor = 1e-6 * top.max(1e-12);
+        let contrast = top / (median + floor);
+        let stands_out = contrast >= params.min_contrast && top > 0.0;
+        if !(saturated_any || stands_out) {
+            return Err(HighlightError::None {
+                contrast,
+                min: params.min_contrast,
+            });
         }
-    };
-    let bright = |i: usize| !grey[i].is_finite() || grey[i] as f64 > threshold;
-    // Connected spots (8-neighbours) among the bright sphere pixels.
-    let mut seen = std::collections::HashSet::new();
-    let mut spots: Vec<(f64, Vec<usize>)> = Vec::new();
-    for &start in &inside {
-        if !bright(start) || !seen.insert(start) {
-            continue;
-        }
-        let mut members = vec![start];
-        let mut k = 0;
-        while k < members.len() {
-            let i = members[k];
-            k += 1;
-            let (row, col) = ((i / width) as isize, (i % width) as isize);
-            for dr in -1..=1 {
-                for dc in -1..=1 {
-                    let (rr, cc) = (row + dr, col + dc);
-                    if rr < 0 || cc < 0 || rr as usize >= height || cc as usize >= width {
-                        continue;
-                    }
-                    let j = rr as usize * width + cc as usize;
-                    if circle.covers(cc as usize, rr as usize) && bright(j) && seen.insert(j) {
-                        members.push(j);
-                    }
-                }
+        let threshold = median + params.fraction * (top - median);
+        let value = |i: usize| -> f64 {
+            let v = grey[i];
+            if v.is_finite() {
+                v as f64
+            } else {
+                top
             }
-        }
-        let weight: f64 = members.iter().map(|&i| value(i) - threshold).sum();
-        spots.push((weight, members));
-    }
-    spots.sort_by(|a, b| b.0.total_cmp(&a.0));
-    // The spot's centre: the centroid in the image of everything above the local background
-    // over the spot and a halo around it (no threshold: a thresholded centroid is pulled
-    // toward the brightest pixel's centre, a tenth of a pixel and degrees of light on a small
-    // ball). A lens's blur makes the spot band-limited, so its sampled centroid is its centre
-    // to a few hundredths of a pixel; the mirror maps that point to the normal.
-    let in_spot: std::collections::HashMap<usize, usize> = spots
-        .iter()
-        .enumerate()
-        .flat_map(|(k, (_, m))| m.iter().map(move |&i| (i, k)))
-        .collect();
-    let centre = |k: usize| -> (DVec3, usize) {
-        let members = &spots[k].1;
-        let sat = members.iter().filter(|&&i| !grey[i].is_finite()).count();
-        // A broad spot (a rough ball's lobe, a large saturated core) is squeezed toward the
-        // rim in the image: its centre is the mean of the sphere normals under the spot above
-        // the threshold (in normal space, as the squeeze does not pull it). A spot small against
-        // the ball ([`SMALL_SPOT`]) is the blur of a lamp smaller than a pixel, clipped or not:
-        // its centroid in the image.
-        if members.len() as f64 > (circle.r / 7.0).powi(2).max(SMALL_SPOT as f64) {
-            let mut sum = DVec3::ZERO;
-            for &i in members {
-                let (x, y) = ((i % width) as f64 + 0.5, (i / width) as f64 + 0.5);
-                if let Some(n) = circle.normal_at(x, y) {
-                    sum += (value(i) - threshold).max(0.0) * n;
-                }
+        };
+        let bright = |i: usize| !grey[i].is_finite() || grey[i] as f64 > threshold;
+        // Connected spots (8-neighbours) among the bright sphere pixels.
+        let mut seen = std::collections::HashSet::new();
+        let mut spots: Vec<(f64, Vec<usize>)> = Vec::new();
+        for &start in &inside {
+            if !bright(start) || !seen.insert(start) {
+                continue;
             }
-            return (sum.normalize_or(DVec3::Z), sat);
-        }
-        let (mut x0, mut x1, mut y0, mut y1) = (usize::MAX, 0, usize::MAX, 0);
-        for &i in members {
-            let (col, row) = (i % width, i / width);
-            (x0, x1, y0, y1) = (x0.min(col), x1.max(col), y0.min(row), y1.max(row));
-        }
-        // The halo: pixels within HALO of the spot's box, on the sphere, in no other spot.
-        // A wider spot (a clipped core) has tails as wide.
-        let halo = HALO.max((x1 - x0).max(y1 - y0) / 2 + 1);
-        let (x0, y0) = (x0.saturating_sub(halo), y0.saturating_sub(halo));
-        let (x1, y1) = ((x1 + halo).min(width - 1), (y1 + halo).min(height - 1));
-        let (mx, my) = ((x0 + x1) as f64 / 2.0, (y0 + y1) as f64 / 2.0);
-        let mut window = Vec::new();
-        // The local background: a plane `a + b x + c y` fitted to the window's edge (the room's
-        // reflection changes across the window; a constant would pull the centroid along it).
-        let mut normal_eq = [[0.0f64; 3]; 3];
-        let mut rhs = [0.0f64; 3];
-        for row in y0..=y1 {
-            for col in x0..=x1 {
-                let i = row * width + col;
-                if !circle.covers(col, row) || in_spot.get(&i).is_some_and(|&o| o != k) {
-                    continue;
-                }
-                window.push(i);
-                let edge = row == y0 || row == y1 || col == x0 || col == x1;
-                if edge && !in_spot.contains_key(&i) && grey[i].is_finite() {
-                    let f = [1.0, col as f64 - mx, row as f64 - my];
-                    for a in 0..3 {
-                        rhs[a] += f[a] * grey[i] as f64;
-                        for b in 0..3 {
-                            normal_eq[a][b] += f[a] * f[b];
+            let mut members = vec![start];
+            let mut k = 0;
+            while k < members.len() {
+                let i = members[k];
+                k += 1;
+                let (row, col) = ((i / width) as isize, (i % width) as isize);
+                for dr in -1..=1 {
+                    for dc in -1..=1 {
+                        let (rr, cc) = (row + dr, col + dc);
+                        if rr < 0 || cc < 0 || rr as usize >= height || cc as usize >= width {
+                            continue;
+                        }
+                        let j = rr as usize * width + cc as usize;
+                        if circle.covers(cc as usize, rr as usize) && bright(j) && seen.insert(j) {
+                            members.push(j);
                         }
                     }
                 }
             }
+            let weight: f64 = members.iter().map(|&i| value(i) - threshold).sum();
+            spots.push((weight, members));
         }
-        // Too few edge pixels for a plane (a spot filling its window): the sphere's median.
-        let m = glam::DMat3::from_cols_array_2d(&normal_eq);
-        let plane = Some(m)
-            .filter(|m| m.determinant().abs() > 1e-12 * (1.0 + normal_eq[0][0]).powi(3))
-            .map(|m| (m.inverse() * DVec3::from(rhs)).to_array())
-            .filter(|p| p.iter().all(|v| v.is_finite()))
-            .unwrap_or([median, 0.0, 0.0]);
-        let background = |i: usize| {
-            let v = plane[0]
-                + plane[1] * ((i % width) as f64 - mx)
-                + plane[2] * ((i / width) as f64 - my);
-            v.min(threshold)
+        spots.sort_by(|a, b| b.0.total_cmp(&a.0));
+        // The spot's centre: the centroid in the image of everything above the local background
+        // over the spot and a halo around it (no threshold: a thresholded centroid is pulled
+        // toward the brightest pixel's centre, a tenth of a pixel and degrees of light on a small
+        // ball). A lens's blur makes the spot band-limited, so its sampled centroid is its centre
+        // to a few hundredths of a pixel; the mirror maps that point to the normal.
+        let in_spot: std::collections::HashMap<usize, usize> = spots
+            .iter()
+            .enumerate()
+            .flat_map(|(k, (_, m))| m.iter().map(move |&i| (i, k)))
+            .collect();
+        let centre = |k: usize| -> (DVec3, usize) {
+            let members = &spots[k].1;
+            let sat = members.iter().filter(|&&i| !grey[i].is_finite()).count();
+            // A broad spot (a rough ball's lobe, a large saturated core) is squeezed toward the
+            // rim in the image: its centre is the mean of the sphere normals under the spot
+            // above the threshold (in normal space, as the squeeze does not pull it). A spot
+            // small against the ball ([`SMALL_SPOT`]) is the blur of a lamp smaller than a
+            // pixel, clipped or not: its centroid in the image.
+            if members.len() as f64 > (circle.r / 7.0).powi(2).max(SMALL_SPOT as f64) {
+                let mut sum = DVec3::ZERO;
+                for &i in members {
+                    let (x, y) = ((i % width) as f64 + 0.5, (i / width) as f64 + 0.5);
+                    if let Some(n) = circle.normal_at(x, y) {
+                        sum += (value(i) - threshold).max(0.0) * n;
+                    }
+                }
+                return (sum.normalize_or(DVec3::Z), sat);
+            }
+            let (mut x0, mut x1, mut y0, mut y1) = (usize::MAX, 0, usize::MAX, 0);
+            for &i in members {
+                let (col, row) = (i % width, i / width);
+                (x0, x1, y0, y1) = (x0.min(col), x1.max(col), y0.min(row), y1.max(row));
+            }
+            // The halo: pixels within HALO of the spot's box, on the sphere, in no other spot.
+            // A wider spot (a clipped core) has tails as wide.
+            let halo = HALO.max((x1 - x0).max(y1 - y0) / 2 + 1);
+            let (x0, y0) = (x0.saturating_sub(halo), y0.saturating_sub(halo));
+            let (x1, y1) = ((x1 + halo).min(width - 1), (y1 + halo).min(height - 1));
+            let (mx, my) = ((x0 + x1) as f64 / 2.0, (y0 + y1) as f64 / 2.0);
+            let mut window = Vec::new();
+            // The local background: a plane `a + b x + c y` fitted to the window's edge (the room's
+            // reflection changes across the window; a constant would pull the centroid along it).
+            let mut normal_eq = [[0.0f64; 3]; 3];
+            let mut rhs = [0.0f64; 3];
+            for row in y0..=y1 {
+                for col in x0..=x1 {
+                    let i = row * width + col;
+                    if !circle.covers(col, row) || in_spot.get(&i).is_some_and(|&o| o != k) {
+                        continue;
+                    }
+                    window.push(i);
+                    let edge = row == y0 || row == y1 || col == x0 || col == x1;
+                    if edge && !in_spot.contains_key(&i) && grey[i].is_finite() {
+                        let f = [1.0, col as f64 - mx, row as f64 - my];
+                        for a in 0..3 {
+                            rhs[a] += f[a] * grey[i] as f64;
+                            for b in 0..3 {
+                                normal_eq[a][b] += f[a] * f[b];
+                            }
+                        }
+                    }
+                }
+            }
+            // Too few edge pixels for a plane (a spot filling its window): the sphere's median.
+            let m = glam::DMat3::from_cols_array_2d(&normal_eq);
+            let plane = Some(m)
+                .filter(|m| m.determinant().abs() > 1e-12 * (1.0 + normal_eq[0][0]).powi(3))
+                .map(|m| (m.inverse() * DVec3::from(rhs)).to_array())
+                .filter(|p| p.iter().all(|v| v.is_finite()))
+                .unwrap_or([median, 0.0, 0.0]);
+            let background = |i: usize| {
+                let v = plane[0]
+                    + plane[1] * ((i % width) as f64 - mx)
+                    + plane[2] * ((i / width) as f64 - my);
+                v.min(threshold)
+            };
+            let (mut sx, mut sy, mut sw) = (0.0, 0.0, 0.0);
+            for &i in &window {
+                let w = value(i) - background(i);
+                sx += w * ((i % width) as f64 + 0.5);
+                sy += w * ((i / width) as f64 + 0.5);
+                sw += w;
+            }
+            let normal = if sw > 0.0 {
+                let (x, y) = (sx / sw, sy / sw);
+                // A centre on the rim (a light behind the ball) is held just inside it.
+                circle.normal_at(x, y).unwrap_or_else(|| {
+                    let (nx, ny) = ((x - circle.cx) / circle.r, -(y - circle.cy) / circle.r);
+                    DVec3::new(nx, ny, 1e-6).normalize()
+                })
+            } else {
+                DVec3::Z
+            };
+            (normal, sat)
         };
-        let (mut sx, mut sy, mut sw) = (0.0, 0.0, 0.0);
-        for &i in &window {
-            let w = value(i) - background(i);
-            sx += w * ((i % width) as f64 + 0.5);
-            sy += w * ((i / width) as f64 + 0.5);
-            sw += w;
+        let (main_w, main) = &spots[0];
+        let (normal, saturated) = centre(0);
+        if let Some((second_w, _)) = spots.get(1) {
+            if *second_w > params.several_ratio * main_w {
+                let (n2, _) = centre(1);
+                let ((x1, y1), (x2, y2)) = (circle.point_of(normal), circle.point_of(n2));
+                return Err(HighlightError::Several {
+                    count: spots.len(),
+                    share: 100.0 * second_w / main_w,
+                    x1,
+                    y1,
+                    x2,
+                    y2,
+                });
+            }
         }
-        let normal = if sw > 0.0 {
-            let (x, y) = (sx / sw, sy / sw);
-            // A centre on the rim (a light behind the ball) is held just inside it.
-            circle.normal_at(x, y).unwrap_or_else(|| {
-                let (nx, ny) = ((x - circle.cx) / circle.r, -(y - circle.cy) / circle.r);
-                DVec3::new(nx, ny, 1e-6).normalize()
-            })
-        } else {
-            DVec3::Z
-        };
-        (normal, sat)
-    };
-    let (main_w, main) = &spots[0];
-    let (normal, saturated) = centre(0);
-    if let Some((second_w, _)) = spots.get(1) {
-        if *second_w > params.several_ratio * main_w {
-            let (n2, _) = centre(1);
-            let ((x1, y1), (x2, y2)) = (circle.point_of(normal), circle.point_of(n2));
-            return Err(HighlightError::Several {
-                count: spots.len(),
-                share: 100.0 * second_w / main_w,
-                x1,
-                y1,
-                x2,
-                y2,
-            });
-        }
+        let (x, y) = circle.point_of(normal);
+        Ok(Highlight {
+            x,
+            y,
+            normal,
+            light: light_from_normal(normal),
+            pixels: main.len(),
+            saturated,
+            contrast,
+        })
     }
-    let (x, y) = circle.point_of(normal);
-    Ok(Highlight {
-        x,
-        y,
-        normal,
-        light: light_from_normal(normal),
-        pixels: main.len(),
-        saturated,
-        contrast,
-    })
 }
 
-/// What [`detect_sphere`] found.
+/// What [`Detection::find`] found.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Detection {
     /// The circle.
@@ -499,50 +501,52 @@ fn finite_or(mean: &[f32], top: f64, i: usize) -> f64 {
     }
 }
 
-/// Finds a mirror sphere from the mean of all images (`width x height` grey values, `NaN` =
-/// saturated somewhere) and the brightest point of each image (pixel indices). See the module
-/// documentation. `Err` says why none was found.
-pub fn detect_sphere(
-    width: usize,
-    height: usize,
-    mean: &[f32],
-    brightest: &[usize],
-) -> Result<Detection, String> {
-    let (label, sizes, top) = bright_regions(width, height, mean)?;
-    let value = |i: usize| finite_or(mean, top, i);
-    if sizes.is_empty() {
-        return Err("nothing in the images is brighter than their border".into());
-    }
-    let mut votes = vec![0usize; sizes.len()];
-    for &b in brightest {
-        if let Some(&l) = label.get(b) {
-            if l != OUTSIDE {
-                votes[l as usize] += 1;
+impl Detection {
+    /// Finds a mirror sphere from the mean of all images (`width x height` grey values, `NaN` =
+    /// saturated somewhere) and the brightest point of each image (pixel indices). See the module
+    /// documentation. `Err` says why none was found.
+    pub fn find(
+        width: usize,
+        height: usize,
+        mean: &[f32],
+        brightest: &[usize],
+    ) -> Result<Detection, String> {
+        let (label, sizes, top) = bright_regions(width, height, mean)?;
+        let value = |i: usize| finite_or(mean, top, i);
+        if sizes.is_empty() {
+            return Err("nothing in the images is brighter than their border".into());
+        }
+        let mut votes = vec![0usize; sizes.len()];
+        for &b in brightest {
+            if let Some(&l) = label.get(b) {
+                if l != OUTSIDE {
+                    votes[l as usize] += 1;
+                }
             }
         }
-    }
-    let (best, &count) = votes
-        .iter()
-        .enumerate()
-        .max_by_key(|(_, v)| **v)
-        .ok_or("no region")?;
-    let share = count as f64 / brightest.len().max(1) as f64;
-    if count == 0 {
-        return Err("no bright region holds the images' brightest spots".into());
-    }
-    let (circle, n, roundness) = region_circle(width, height, &label, best as u32, &value);
-    if roundness < 0.9 {
-        return Err(format!(
-            "the region holding the brightest spots (centre {:.1}, {:.1}, {} pixels) is not \
+        let (best, &count) = votes
+            .iter()
+            .enumerate()
+            .max_by_key(|(_, v)| **v)
+            .ok_or("no region")?;
+        let share = count as f64 / brightest.len().max(1) as f64;
+        if count == 0 {
+            return Err("no bright region holds the images' brightest spots".into());
+        }
+        let (circle, n, roundness) = region_circle(width, height, &label, best as u32, &value);
+        if roundness < 0.9 {
+            return Err(format!(
+                "the region holding the brightest spots (centre {:.1}, {:.1}, {} pixels) is not \
              round (overlap with its circle {:.2})",
-            circle.cx, circle.cy, n, roundness
-        ));
+                circle.cx, circle.cy, n, roundness
+            ));
+        }
+        Ok(Detection {
+            circle,
+            highlight_share: share,
+            roundness,
+        })
     }
-    Ok(Detection {
-        circle,
-        highlight_share: share,
-        roundness,
-    })
 }
 
 /// The circle of region `best` of `label` (its centroid and the radius of a disc of its area,
@@ -588,56 +592,59 @@ fn region_circle(
     (circle, n, roundness)
 }
 
-/// The fewest pixels a region must have for [`detect_spheres`] to take it for a sphere.
+/// The fewest pixels a region must have for [`Detection::find_all`] to take it for a sphere.
 const MIN_SPHERE_PIXELS: usize = 50;
 
-/// Finds every mirror sphere in the images for a calibration with two or more spheres: as
-/// [`detect_sphere`] finds one (the connected regions brighter than the image border in the
-/// mean image `mean`), every region at least [`MIN_SPHERE_PIXELS`] large, round (roundness
-/// 0.9) and holding at least `min_share` of the images' brightest spots (`brightest`), largest
-/// share first. `Err` says why none was found.
-pub fn detect_spheres(
-    width: usize,
-    height: usize,
-    mean: &[f32],
-    brightest: &[usize],
-    min_share: f64,
-) -> Result<Vec<Detection>, String> {
-    let (label, sizes, top) = bright_regions(width, height, mean)?;
-    let value = |i: usize| finite_or(mean, top, i);
-    let mut votes = vec![0usize; sizes.len()];
-    for &b in brightest {
-        if let Some(&l) = label.get(b) {
-            if l != OUTSIDE {
-                votes[l as usize] += 1;
+impl Detection {
+    /// Finds every mirror sphere in the images for a calibration with two or more spheres: as
+    /// [`Detection::find`] finds one (the connected regions brighter than the image border in the
+    /// mean image `mean`), every region at least [`MIN_SPHERE_PIXELS`] large, round (roundness
+    /// 0.9) and holding at least `min_share` of the images' brightest spots (`brightest`), largest
+    /// share first. `Err` says why none was found.
+    pub fn find_all(
+        width: usize,
+        height: usize,
+        mean: &[f32],
+        brightest: &[usize],
+        min_share: f64,
+    ) -> Result<Vec<Detection>, String> {
+        let (label, sizes, top) = bright_regions(width, height, mean)?;
+        let value = |i: usize| finite_or(mean, top, i);
+        let mut votes = vec![0usize; sizes.len()];
+        for &b in brightest {
+            if let Some(&l) = label.get(b) {
+                if l != OUTSIDE {
+                    votes[l as usize] += 1;
+                }
             }
         }
-    }
-    let total = brightest.len().max(1) as f64;
-    let mut found = Vec::new();
-    for (region, &count) in votes.iter().enumerate() {
-        let share = count as f64 / total;
-        if share < min_share || sizes[region] < MIN_SPHERE_PIXELS {
-            continue;
+        let total = brightest.len().max(1) as f64;
+        let mut found = Vec::new();
+        for (region, &count) in votes.iter().enumerate() {
+            let share = count as f64 / total;
+            if share < min_share || sizes[region] < MIN_SPHERE_PIXELS {
+                continue;
+            }
+            let (circle, _, roundness) =
+                region_circle(width, height, &label, region as u32, &value);
+            if roundness >= 0.9 {
+                found.push(Detection {
+                    circle,
+                    highlight_share: share,
+                    roundness,
+                });
+            }
         }
-        let (circle, _, roundness) = region_circle(width, height, &label, region as u32, &value);
-        if roundness >= 0.9 {
-            found.push(Detection {
-                circle,
-                highlight_share: share,
-                roundness,
-            });
-        }
-    }
-    if found.is_empty() {
-        return Err(format!(
-            "no round region of at least {MIN_SPHERE_PIXELS} pixels brighter than the images' \
+        if found.is_empty() {
+            return Err(format!(
+                "no round region of at least {MIN_SPHERE_PIXELS} pixels brighter than the images' \
              border holds {:.0}% of their brightest spots",
-            100.0 * min_share
-        ));
+                100.0 * min_share
+            ));
+        }
+        found.sort_by(|a, b| b.highlight_share.total_cmp(&a.highlight_share));
+        Ok(found)
     }
-    found.sort_by(|a, b| b.highlight_share.total_cmp(&a.highlight_share));
-    Ok(found)
 }
 
 impl Circle {
@@ -657,7 +664,7 @@ impl Circle {
 
 /// A sphere's outline in the image `image` (`width x height` grey values, `NaN` counting as
 /// the brightest) near `start`: the points where its rim falls off most steeply, as
-/// [`detect_sphere`] refines a circle (outliers left out), and the circle fitted to them;
+/// [`Detection::find`] refines a circle (outliers left out), and the circle fitted to them;
 /// `None` where too few rays find the rim.
 pub(crate) fn outline_points(
     width: usize,
@@ -1370,14 +1377,14 @@ mod tests {
             );
             let l = light_from_normal(n);
             let img = grey(&scene.render(&chrome as &dyn Brdf, l));
-            let h = find_highlight(size, size, &img, &circle, &HighlightParams::default())
+            let h = Highlight::find(size, size, &img, &circle, &HighlightParams::default())
                 .unwrap_or_else(|e| panic!("theta {theta}: {e}"));
             worst = worst.max(angle_deg(h.light, l));
         }
         assert!(worst < 1.0, "worst light error {worst} degrees");
     }
 
-    /// Light errors (mean, max, degrees) of [`find_highlight`] on a mirror ball of radius
+    /// Light errors (mean, max, degrees) of [`Highlight::find`] on a mirror ball of radius
     /// `r` at a sub-pixel position under 120 lamps up to 130 degrees from the view, with the
     /// circle given (exact) and detected; 8-bit images (the lamp clipped) where `eight_bit`.
     fn mirror_ball_errors(r: f64, eight_bit: bool) -> [(f64, f64); 2] {
@@ -1415,7 +1422,9 @@ mod tests {
                 .unwrap();
             brightest.push(b);
         }
-        let detected = detect_sphere(size, size, &mean, &brightest).unwrap().circle;
+        let detected = Detection::find(size, size, &mean, &brightest)
+            .unwrap()
+            .circle;
         let given = Circle {
             cx: ball.cx,
             cy: ball.cy,
@@ -1426,7 +1435,7 @@ mod tests {
                 .iter()
                 .zip(&lights)
                 .map(|(img, &l)| {
-                    match find_highlight(size, size, img, &circle, &HighlightParams::default()) {
+                    match Highlight::find(size, size, img, &circle, &HighlightParams::default()) {
                         Ok(h) => angle_deg(h.light, l),
                         Err(e) => panic!("light {l}: {e}"),
                     }
@@ -1477,7 +1486,7 @@ mod tests {
             }
         }
         assert!(matches!(
-            find_highlight(size, size, &img, &circle, &p),
+            Highlight::find(size, size, &img, &circle, &p),
             Err(HighlightError::None { .. })
         ));
         // A saturated 3 x 3 core (NaN) at pixel (40, 20): its centre.
@@ -1487,7 +1496,7 @@ mod tests {
                 sat[r * size + c] = f32::NAN;
             }
         }
-        let h = find_highlight(size, size, &sat, &circle, &p).unwrap();
+        let h = Highlight::find(size, size, &sat, &circle, &p).unwrap();
         assert!(
             (h.x - 40.5).abs() < 0.2 && (h.y - 20.5).abs() < 0.2,
             "{h:?}"
@@ -1500,13 +1509,13 @@ mod tests {
                 two[r * size + c] = f32::NAN;
             }
         }
-        let e = find_highlight(size, size, &two, &circle, &p).unwrap_err();
+        let e = Highlight::find(size, size, &two, &circle, &p).unwrap_err();
         assert!(matches!(e, HighlightError::Several { count: 2, .. }), "{e}");
         assert!(e.to_string().contains("2 highlights"));
         // A faint second spot (a tenth of the weight) does not matter.
         let mut faint = sat;
         faint[45 * size + 20] = 1.0;
-        assert!(find_highlight(size, size, &faint, &circle, &p).is_ok());
+        assert!(Highlight::find(size, size, &faint, &circle, &p).is_ok());
         // Off the image.
         let off = Circle {
             cx: -100.0,
@@ -1514,7 +1523,7 @@ mod tests {
             r: 10.0,
         };
         assert_eq!(
-            find_highlight(size, size, &img, &off, &p),
+            Highlight::find(size, size, &img, &off, &p),
             Err(HighlightError::OffImage)
         );
     }
@@ -1539,15 +1548,15 @@ mod tests {
             }
         }
         let brightest = vec![38 * w + 80, 30 * w + 75, 45 * w + 90, 30 * w + 30];
-        let d = detect_sphere(w, h, &mean, &brightest).unwrap();
+        let d = Detection::find(w, h, &mean, &brightest).unwrap();
         assert!((d.circle.cx - truth.cx).abs() < 0.1, "{d:?}");
         assert!((d.circle.cy - truth.cy).abs() < 0.1, "{d:?}");
         assert!((d.circle.r - truth.r).abs() < 0.15, "{d:?}");
         assert!((d.highlight_share - 0.75).abs() < 1e-9);
         // Only the square holds bright spots: not round.
-        let e = detect_sphere(w, h, &mean, &[30 * w + 30]).unwrap_err();
+        let e = Detection::find(w, h, &mean, &[30 * w + 30]).unwrap_err();
         assert!(e.contains("not round"), "{e}");
-        assert!(detect_sphere(w, h, &vec![0.0; w * h], &brightest).is_err());
+        assert!(Detection::find(w, h, &vec![0.0; w * h], &brightest).is_err());
     }
 
     #[test]

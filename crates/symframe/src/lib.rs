@@ -6,21 +6,22 @@
 //!
 //! What the crate offers, named at its root:
 //!
-//! - Datasets and rigs: a measurement [`Stack`] ([`check_inputs`]), its lights as a [`Rig`]
+//! - Datasets and rigs: a measurement [`Stack`] ([`Stack::check_inputs`]), its lights as a [`Rig`]
 //!   ([`RigOptions`], [`uniform_cone_lights`]), the capture's [`NoiseModel`], and a check of the
 //!   lights' axes ([`AxesCheck`]).
 //! - Estimating frames: the [`Estimator`] and its [`EstimatorParams`], run over a stack by
-//!   [`estimate_stack`]; the paper's baselines ([`Baseline`], [`estimate_stack_baseline`]); the
+//!   [`estimate_stack`]; the paper's baselines ([`Baseline`], [`Baseline::estimate_stack`]); the
 //!   [`PixelMethod`] interface every per-pixel method implements, and its in-memory driver
-//!   [`run_stack`].
+//!   [`Stack::run`].
 //! - Maps: what an estimate holds per pixel ([`EstimateMaps`], [`PixelRecord`]) and its error
 //!   against ground truth ([`evaluate`], [`Evaluation`]).
 //! - Fit and relight: per-pixel Ward or glTF metallic-roughness fits in the estimated frames
-//!   ([`fit_stack`], [`FitParams`], [`FitMaps`]), rendered and edited by a [`Relighter`].
-//! - Integrate: a depth map from the normals ([`integrate()`], [`DepthMap`]) and its mesh ([`DepthMap::mesh`]).
-//! - Calibrate: light directions from chrome and matte spheres ([`find_highlight`],
-//!   [`detect_spheres`], [`matte_intensity`]); near lights and perspective cameras
-//!   ([`Pinhole`], [`PointLight`], [`NearMethod`], [`triangulate`]).
+//!   ([`FitParams::fit_stack`], [`FitMaps`]), rendered and edited by a [`Relighter`].
+//! - Integrate: a depth map from the normals ([`DepthMap::integrate`]; seen through a pinhole,
+//!   [`Pinhole::integrate`]) and its mesh ([`DepthMap::mesh`]).
+//! - Calibrate: light directions from chrome and matte spheres ([`Highlight::find`],
+//!   [`Detection::find`], [`MatteParams::intensity`]); near lights and perspective cameras
+//!   ([`Pinhole`], [`PointLight`], [`NearParams`], [`Triangulation`]).
 //! - [`brdf`] (reflectance models) and [`render`] (the synthetic renderer that tests and
 //!   experiments measure against).
 //!
@@ -70,7 +71,7 @@
 //! use symframe::brdf::Ward;
 //! use symframe::render::{Scene, TangentField};
 //! use symframe::{
-//!     estimate_stack, evaluate, integrate, uniform_cone_lights, EstimatorParams, IntegrateParams,
+//!     estimate_stack, evaluate, uniform_cone_lights, DepthMap, EstimatorParams, IntegrateParams,
 //!     Rig, RigOptions,
 //! };
 //!
@@ -88,7 +89,7 @@
 //! assert!(e.normal_error.median < 1.0, "{e:?}");
 //!
 //! // Heights from the normals (a sphere: highest in the middle).
-//! let depth = integrate(24, 24, &maps.normals, None, &IntegrateParams::default())?;
+//! let depth = DepthMap::integrate(24, 24, &maps.normals, None, &IntegrateParams::default())?;
 //! assert!(depth.depth[12 * 24 + 12] > depth.depth[12 * 24 + 3]);
 //! # Ok::<(), symframe::Error>(())
 //! ```
@@ -123,18 +124,16 @@ mod stack;
 pub use frames::rig::{uniform_cone_lights, Rig, RigOptions};
 pub use noise::{NoiseModel, NoiseSamples, Quantisation};
 pub use orientation::{AxesCheck, LightAxes};
-pub use stack::{check_inputs, Stack};
+pub use stack::Stack;
 
 // Estimating frames: the estimator, its parameters, the per-pixel interface and its drivers.
-pub use baselines::{
-    estimate_stack_baseline, Baseline, BaselineMethod, BaselineParams, BaselinePixel,
-};
+pub use baselines::{Baseline, BaselineMethod, BaselineParams};
 pub use frames::estimator::{
     estimate_stack, Estimator, EstimatorParams, Fallback, Interpolation, PixelEstimate,
     PixelScratch,
 };
 pub use frames::symmetry::CosineMode;
-pub use method::{run_stack, PixelMethod, Worker};
+pub use method::PixelMethod;
 
 // The maps an estimate writes, and their error against ground truth.
 pub use eval::{evaluate, ErrorStats, Evaluation};
@@ -142,27 +141,23 @@ pub use maps::{EstimateMaps, PixelCounts, PixelRecord, PixelSource, PixelStatus}
 
 // Fitting a BRDF per pixel in the estimated frames, and relighting the fit.
 pub use appearance::fit::{
-    fit_stack, ExposureChoice, FitMaps, FitMethod, FitModel, FitParams, FitStatus, FitSummary,
-    GltfMaps, HoldoutError, LobeMaps, PixelData, PixelFitter, PixelOutcome, WardFit, WardMaps,
+    ExposureChoice, FitMaps, FitMethod, FitModel, FitParams, FitStatus, FitSummary, GltfMaps,
+    HoldoutError, LobeMaps, PixelData, PixelFitter, PixelOutcome, WardFit, WardMaps,
 };
 pub use appearance::gltf_fit::GltfFit;
 pub use appearance::lobe_fit::{LobeFit, LobeKind, LobeModel};
 pub use appearance::relight::{Edits, Relighter};
 
 // Depth from normals, and a mesh of it.
-pub use integrate::{integrate, DepthMap, IntegrateParams, Mesh, Solver};
+pub use integrate::{DepthMap, IntegrateParams, Mesh, Solver};
 
 // Light calibration: chrome and matte spheres.
 pub use calibrate::{
-    detect_sphere, detect_spheres, find_highlight, Circle, Detection, Highlight, HighlightError,
-    HighlightParams, MatteError, MatteParams,
+    Circle, Detection, Highlight, HighlightError, HighlightParams, MatteError, MatteParams,
 };
 
 // Near lights and perspective cameras.
-pub use near::chrome::{circle_rim, reflected_ray, sphere_from_rim, triangulate, Triangulation};
-pub use near::{
-    estimate_near_stack, fit_sphere, perspective_depth, perspective_mesh, picture_heights,
-    NearMethod, NearOutcome, NearParams, NearScratch, Pinhole, PointLight,
-};
+pub use near::chrome::Triangulation;
+pub use near::{NearMethod, NearOutcome, NearParams, Pinhole, PointLight};
 
 pub use error::{Error, Result};

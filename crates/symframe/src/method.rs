@@ -15,7 +15,7 @@ pub trait PixelMethod: Sync {
     type Scratch: Send;
     /// What one pixel yields.
     type Output: Send;
-    /// Rows of the image per parallel task of [`run_stack`]: enough work per task to amortise
+    /// Rows of the image per parallel task of [`Stack::run`]: enough work per task to amortise
     /// scheduling, small enough to balance (cheap methods take wider bands).
     const BAND_ROWS: usize = 2;
 
@@ -33,14 +33,14 @@ pub trait PixelMethod: Sync {
 
 /// Per-thread state of a driver: the method's buffers and one pixel's samples in the method's
 /// light order.
-pub struct Worker<M: PixelMethod> {
+struct Worker<M: PixelMethod> {
     scratch: M::Scratch,
     samples: Vec<f32>,
 }
 
 impl<M: PixelMethod> Worker<M> {
     /// A worker for `method` on a stack of `n_input` lights.
-    pub fn new(method: &M, n_input: usize) -> Self {
+    fn new(method: &M, n_input: usize) -> Self {
         let n = method.lights().map_or(n_input, |l| l.len());
         Self {
             scratch: method.scratch(),
@@ -48,15 +48,9 @@ impl<M: PixelMethod> Worker<M> {
         }
     }
 
-    /// Runs `method` at pixel `p`, whose samples `fill(out)` writes in the method's light order.
-    pub fn run(&mut self, method: &M, p: usize, fill: impl FnOnce(&mut [f32])) -> M::Output {
-        fill(&mut self.samples);
-        method.pixel(p, &self.samples, &mut self.scratch)
-    }
-
     /// Runs `method` at pixel `p` given its samples over every input light (a pixel of a
     /// [`Stack`]): read in place when the method reads every light, else gathered.
-    pub fn run_all(&mut self, method: &M, p: usize, all: &[f32]) -> M::Output {
+    fn run_all(&mut self, method: &M, p: usize, all: &[f32]) -> M::Output {
         match method.lights() {
             None => method.pixel(p, all, &mut self.scratch),
             Some(lights) => {
@@ -67,11 +61,24 @@ impl<M: PixelMethod> Worker<M> {
     }
 }
 
-/// Runs `method` on every pixel of `stack` (inside `mask` when given; the others get
-/// [`PixelMethod::masked`]) in parallel over bands of [`PixelMethod::BAND_ROWS`] rows, and
-/// returns the results in row-major order. `progress` is called with the number of pixels
-/// finished by each band. The caller checks that the mask has the stack's size.
-pub fn run_stack<M: PixelMethod>(
+impl Stack {
+    /// Runs `method` on every pixel of this stack (inside `mask` when given; the others get
+    /// [`PixelMethod::masked`]) in parallel over bands of [`PixelMethod::BAND_ROWS`] rows, and
+    /// returns the results in row-major order. `progress` is called with the number of pixels
+    /// finished by each band. The caller checks that the mask has the stack's size
+    /// ([`Stack::check_inputs`]).
+    pub fn run<M: PixelMethod>(
+        &self,
+        method: &M,
+        mask: Option<&[bool]>,
+        progress: &(dyn Fn(usize) + Sync),
+    ) -> Vec<M::Output> {
+        run_stack(method, self, mask, progress)
+    }
+}
+
+/// [`Stack::run`], for the crate's drivers.
+pub(crate) fn run_stack<M: PixelMethod>(
     method: &M,
     stack: &Stack,
     mask: Option<&[bool]>,

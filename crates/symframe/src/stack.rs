@@ -95,29 +95,31 @@ impl Stack {
     }
 }
 
-/// Checks that a stack of `width x height` pixels and `n_lights` lights fits an estimator
-/// expecting `expected_lights` lights (a rig's `n_input`) and `mask` (the checks of
-/// [`estimate_stack`](crate::estimate_stack), for pipelines that read the stack piecewise).
-pub fn check_inputs(
-    width: usize,
-    height: usize,
-    n_lights: usize,
-    expected_lights: usize,
-    mask: Option<&[bool]>,
-) -> Result<()> {
-    if n_lights != expected_lights {
-        return Err(Error::LightCountMismatch {
-            stack: n_lights,
-            rig: expected_lights,
-        });
-    }
-    if let Some(m) = mask {
-        check_mask_size(m, width, height, "mask")?;
-        if !m.iter().any(|&v| v) {
-            return Err(Error::BadMask("mask is empty: no pixel inside".into()));
+impl Stack {
+    /// Checks that a stack of `width x height` pixels and `n_lights` lights fits an estimator
+    /// expecting `expected_lights` lights (a rig's `n_input`) and `mask` (the checks of
+    /// [`estimate_stack`](crate::estimate_stack), for pipelines that read the stack piecewise).
+    pub fn check_inputs(
+        width: usize,
+        height: usize,
+        n_lights: usize,
+        expected_lights: usize,
+        mask: Option<&[bool]>,
+    ) -> Result<()> {
+        if n_lights != expected_lights {
+            return Err(Error::LightCountMismatch {
+                stack: n_lights,
+                rig: expected_lights,
+            });
         }
+        if let Some(m) = mask {
+            check_mask_size(m, width, height, "mask")?;
+            if !m.iter().any(|&v| v) {
+                return Err(Error::BadMask("mask is empty: no pixel inside".into()));
+            }
+        }
+        Ok(())
     }
-    Ok(())
 }
 
 #[cfg(test)]

@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 use crate::common::{estimate_tiled as estimate, ok, report, s, stderr, symframe, ward_sphere};
 
 use symframe::{
-    estimate_stack, estimate_stack_baseline, Baseline, BaselineParams, CosineMode, EstimatorParams,
-    NoiseModel, Rig, RigOptions,
+    estimate_stack, Baseline, BaselineParams, CosineMode, EstimatorParams, NoiseModel, Rig,
+    RigOptions,
 };
 use symframe_io::{read_npy_f32, DecodeOptions};
 
@@ -150,15 +150,15 @@ fn tiled_baselines_equal_the_in_memory_baselines_exactly() {
                 "1",
             ],
         ));
-        let maps = estimate_stack_baseline(
-            &stack,
-            &ds.lights,
-            Some(&mask),
-            b,
-            BaselineParams::default(),
-            &|_| {},
-        )
-        .unwrap();
+        let maps = b
+            .estimate_stack(
+                &stack,
+                &ds.lights,
+                Some(&mask),
+                BaselineParams::default(),
+                &|_| {},
+            )
+            .unwrap();
         for (name, want) in MAPS.iter().zip([
             &maps.normals,
             &maps.tangents,

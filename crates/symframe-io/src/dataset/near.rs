@@ -12,7 +12,7 @@
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
-use symframe::{fit_sphere, Pinhole, PointLight};
+use symframe::{Pinhole, PointLight};
 
 use super::Dataset;
 use crate::error::{Error, Result, Warning};
@@ -187,7 +187,7 @@ pub fn open_near_geometry(ds: &Dataset) -> Result<Option<NearGeometry>> {
             ..PointLight::isotropic(position)
         })
         .collect();
-    let dome = fit_sphere(&positions);
+    let dome = PointLight::fit_sphere(&positions);
     let warnings = disagreement(ds, &pos, &positions, dome)
         .into_iter()
         .collect();
@@ -205,7 +205,7 @@ pub fn open_near_geometry(ds: &Dataset) -> Result<Option<NearGeometry>> {
 /// positions lie on no sphere (on a plane, or fewer than four), since where the object is cannot
 /// then be told from them.
 pub(crate) fn directions_from_positions(path: &Path, positions: &[DVec3]) -> Result<Vec<DVec3>> {
-    let Some((centre, _)) = fit_sphere(positions) else {
+    let Some((centre, _)) = PointLight::fit_sphere(positions) else {
         return Err(Error::invalid(
             path,
             "the light positions lie on no sphere (fewer than 4, or on a plane), so where the \

@@ -24,9 +24,8 @@ use serde::Serialize;
 use symframe::brdf::{Beckmann, Brdf, Ggx, Layered, Sheen, Woven};
 use symframe::render::{diligent_lights, Degradation, Noise, Rng, Scene, TangentField};
 use symframe::{
-    estimate_stack, estimate_stack_baseline, evaluate, uniform_cone_lights, Baseline,
-    BaselineParams, EstimateMaps, EstimatorParams, Evaluation, NoiseModel, Quantisation, Rig,
-    RigOptions, Stack,
+    estimate_stack, evaluate, uniform_cone_lights, Baseline, BaselineParams, EstimateMaps,
+    EstimatorParams, Evaluation, NoiseModel, Quantisation, Rig, RigOptions, Stack,
 };
 use symframe_io::{decode_image, linear_to_srgb, DecodeOptions};
 
@@ -602,14 +601,8 @@ pub fn compute(quick: bool, size: usize) -> Result<Vec<Row>> {
             }
             let mut cells = vec![cell(&scene, &ours, &gt_t, mat.anisotropic)];
             for b in [Baseline::HighlightCentroid, Baseline::MaxReflectance] {
-                let maps = estimate_stack_baseline(
-                    &stack,
-                    &known,
-                    mask,
-                    b,
-                    BaselineParams::default(),
-                    &|_| {},
-                )?;
+                let maps =
+                    b.estimate_stack(&stack, &known, mask, BaselineParams::default(), &|_| {})?;
                 let mut c = cell(&scene, &maps, &gt_t, mat.anisotropic);
                 c.confident = 0;
                 c.confident_within_1 = f64::NAN;

@@ -151,8 +151,8 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Cell>>> {
                 .into_iter()
                 .enumerate()
             {
-                let px = b.pixel(&all, &lights, &BaselineParams::default(), &mut scratch);
-                out[2 + i] = px.normal.map(|n| angle_deg(n, n_gt));
+                let normal = b.normal(&all, &lights, &BaselineParams::default(), &mut scratch);
+                out[2 + i] = normal.map(|n| angle_deg(n, n_gt));
             }
             out
         })

@@ -9,8 +9,8 @@ use serde::Serialize;
 use symframe::brdf::{AshikhminShirley, BlinnPhong, Brdf, CookTorrance, Ggx, Lambertian, Ward};
 use symframe::render::{diligent_lights, BumpParams, Scene, TangentField};
 use symframe::{
-    estimate_stack, estimate_stack_baseline, evaluate, uniform_cone_lights, Baseline,
-    BaselineParams, EstimateMaps, EstimatorParams, Evaluation, Rig, RigOptions,
+    estimate_stack, evaluate, uniform_cone_lights, Baseline, BaselineParams, EstimateMaps,
+    EstimatorParams, Evaluation, Rig, RigOptions,
 };
 
 use super::plot::{self, md_table};
@@ -239,14 +239,8 @@ pub fn compute(quick: bool, size: usize) -> Result<(Table, Vec<Shown>)> {
             let ours = estimate_stack(&stack, &rig, mask, EstimatorParams::default(), &|_| {})?;
             let mut cells = vec![cell(&mat.scene, &ours)];
             for b in Baseline::ALL {
-                let maps = estimate_stack_baseline(
-                    &stack,
-                    &lights,
-                    mask,
-                    b,
-                    BaselineParams::default(),
-                    &|_| {},
-                )?;
+                let maps =
+                    b.estimate_stack(&stack, &lights, mask, BaselineParams::default(), &|_| {})?;
                 cells.push(cell(&mat.scene, &maps));
             }
             Ok((

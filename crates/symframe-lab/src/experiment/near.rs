@@ -10,8 +10,8 @@ use serde::Serialize;
 use symframe::brdf::{parse_model, Brdf, Ggx, Layered};
 use symframe::render::{dome_lights, NearScene};
 use symframe::{
-    estimate_near_stack, estimate_stack, evaluate, fit_sphere, perspective_depth, EstimatorParams,
-    Evaluation, IntegrateParams, NearParams, Rig, RigOptions, Stack,
+    estimate_stack, evaluate, EstimatorParams, Evaluation, IntegrateParams, NearParams, PointLight,
+    Rig, RigOptions, Stack,
 };
 use symframe_job::synth_near::PAIR_WIDTH;
 use symframe_job::NearSynthConfig;
@@ -113,15 +113,15 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
             // No distance given: the object is taken to be at the centre of the sphere through
             // the lights, as `symframe estimate` takes it.
             let positions: Vec<DVec3> = lights.iter().map(|l| l.position).collect();
-            let (dome, _) = fit_sphere(&positions).context("the lights lie on no sphere")?;
+            let (dome, _) =
+                PointLight::fit_sphere(&positions).context("the lights lie on no sphere")?;
             let distance = -dome.z;
-            let near = estimate_near_stack(
+            let near = NearParams::default().estimate_stack(
                 &stack,
                 Some(&mask),
                 &scene.camera,
                 &lights,
                 distance,
-                &NearParams::default(),
                 &|_| {},
             )?;
             let directions: Vec<DVec3> = positions.iter().map(|p| *p - dome).collect();
@@ -137,17 +137,18 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
                 .iter()
                 .map(|&inside| if inside { distance as f32 } else { f32::NAN })
                 .collect();
-            let far_depth = perspective_depth(
-                &scene.camera,
-                w,
-                h,
-                &far.normals,
-                Some(&far.confidence),
-                &start,
-                Some(distance),
-                &IntegrateParams::default(),
-            )?
-            .depth;
+            let far_depth = scene
+                .camera
+                .integrate(
+                    w,
+                    h,
+                    &far.normals,
+                    Some(&far.confidence),
+                    &start,
+                    Some(distance),
+                    &IntegrateParams::default(),
+                )?
+                .depth;
             for (model, maps, depth, rounds) in [
                 ("distant", &far, &far_depth, None),
                 ("near", &near.maps, &near.depth, Some(near.iterations)),

@@ -16,8 +16,8 @@ use glam::DVec3;
 use symframe::brdf::{parse_model, Brdf, Ggx, Layered, Woven};
 use symframe::render::{BumpParams, Scene, TangentField};
 use symframe::{
-    estimate_stack, fit_stack, integrate, uniform_cone_lights, Edits, EstimatorParams, FitMaps,
-    FitModel, FitParams, IntegrateParams, PixelData, Relighter, Rig, RigOptions, Stack,
+    estimate_stack, uniform_cone_lights, DepthMap, Edits, EstimatorParams, FitMaps, FitModel,
+    FitParams, IntegrateParams, PixelData, Relighter, Rig, RigOptions, Stack,
 };
 
 /// Models rendered on the sphere: a brushed Ward material (the Ward fit's own family), two GGX
@@ -186,7 +186,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
         // The bumpy surface's cast shadows, as `symframe relight --shadows` casts them: from
         // the relief integrated from the estimated normals.
         let heights: Option<Vec<f64>> = if mat.bumpy {
-            let depth = integrate(
+            let depth = DepthMap::integrate(
                 size,
                 size,
                 &frames.normals,
@@ -242,22 +242,20 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
                 params.exposure =
                     symframe::ExposureChoice::select(&lights, &params, &pixels)?.exposure;
             }
-            let fit = fit_stack(
+            let fit = params.fit_stack(
                 &samples,
                 &lights,
                 &frames.normals,
                 &frames.tangents,
                 Some(&scene.mask),
-                &params,
                 &|_| {},
             )?;
-            let true_frames = fit_stack(
+            let true_frames = params.fit_stack(
                 &samples,
                 &lights,
                 &scene.gt_normals(),
                 &scene.gt_tangents(),
                 Some(&scene.mask),
-                &params,
                 &|_| {},
             )?;
             let mut relighter = Relighter::of_fit(&fit.ward, fit.gltf.as_ref(), &Edits::default())?;

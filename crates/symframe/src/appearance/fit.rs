@@ -382,7 +382,7 @@ impl GltfMaps {
     }
 }
 
-/// What happened at a pixel of [`fit_stack`].
+/// What happened at a pixel of [`FitParams::fit_stack`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum FitStatus {
@@ -562,7 +562,7 @@ impl LobeMaps {
     }
 }
 
-/// The result of [`fit_stack`].
+/// The result of [`FitParams::fit_stack`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct FitMaps {
     /// The frames used and, for a Ward fit, the fitted parameters (NaN for a glTF fit).
@@ -1225,26 +1225,28 @@ impl<'a> PixelMethod for FitMethod<'a> {
     }
 }
 
-/// Fits every pixel of a stack (inside `mask` when given) in its frame: `normals` and `tangents`
-/// are `H x W x 3` maps as [`crate::estimate_stack`] returns them (NaN tangent = isotropic),
-/// `lights` the stack's light directions. Parallel over row bands; `progress` is called with the
-/// number of pixels finished by each band.
-pub fn fit_stack(
-    stack: &Stack,
-    lights: &[DVec3],
-    normals: &[f32],
-    tangents: &[f32],
-    mask: Option<&[bool]>,
-    params: &FitParams,
-    progress: &(dyn Fn(usize) + Sync),
-) -> Result<FitMaps> {
-    let (w, h) = (stack.width, stack.height);
-    crate::stack::check_inputs(w, h, stack.n_lights, lights.len(), mask)?;
-    let method = FitMethod::new(lights, params, normals, tangents, w * h)?;
-    let outcomes = run_stack(&method, stack, mask, progress);
-    Ok(FitMaps::from_outcomes(
-        w, h, normals, tangents, params, outcomes,
-    ))
+impl FitParams {
+    /// Fits every pixel of a stack (inside `mask` when given) in its frame with these
+    /// parameters: `normals` and `tangents` are `H x W x 3` maps as [`crate::estimate_stack`]
+    /// returns them (NaN tangent = isotropic), `lights` the stack's light directions. Parallel
+    /// over row bands; `progress` is called with the number of pixels finished by each band.
+    pub fn fit_stack(
+        &self,
+        stack: &Stack,
+        lights: &[DVec3],
+        normals: &[f32],
+        tangents: &[f32],
+        mask: Option<&[bool]>,
+        progress: &(dyn Fn(usize) + Sync),
+    ) -> Result<FitMaps> {
+        let (w, h) = (stack.width, stack.height);
+        Stack::check_inputs(w, h, stack.n_lights, lights.len(), mask)?;
+        let method = FitMethod::new(lights, self, normals, tangents, w * h)?;
+        let outcomes = run_stack(&method, stack, mask, progress);
+        Ok(FitMaps::from_outcomes(
+            w, h, normals, tangents, self, outcomes,
+        ))
+    }
 }
 
 impl FitMaps {
@@ -1608,16 +1610,16 @@ mod tests {
             let choice = ExposureChoice::select(&lights, &params, &pixels).unwrap();
             assert!((0.7..1.42).contains(&choice.exposure), "{choice:?}");
             params.exposure = choice.exposure;
-            let fit = fit_stack(
-                &stack,
-                &lights,
-                &normals,
-                &tangents,
-                Some(&scene.mask),
-                &params,
-                &|_| {},
-            )
-            .unwrap();
+            let fit = params
+                .fit_stack(
+                    &stack,
+                    &lights,
+                    &normals,
+                    &tangents,
+                    Some(&scene.mask),
+                    &|_| {},
+                )
+                .unwrap();
             let relighter =
                 Relighter::of_fit(&fit.ward, fit.gltf.as_ref(), &Edits::default()).unwrap();
             // The largest relit and true values over the brightest training sample.

@@ -613,7 +613,7 @@ mod tests {
     /// truth (PSNR over the sphere).
     #[test]
     fn two_lobe_fits_relight_within_the_training_samples() {
-        use crate::appearance::fit::{fit_stack, ExposureChoice, PixelData};
+        use crate::appearance::fit::{ExposureChoice, PixelData};
         use crate::appearance::relight::{Edits, Relighter};
         use crate::eval::vec_at;
         use crate::render::{Scene, TangentField};
@@ -663,16 +663,16 @@ mod tests {
                     .unwrap()
                     .exposure;
             }
-            let fit = fit_stack(
-                &stack,
-                &lights,
-                &normals,
-                &tangents,
-                Some(&scene.mask),
-                &params,
-                &|_| {},
-            )
-            .unwrap();
+            let fit = params
+                .fit_stack(
+                    &stack,
+                    &lights,
+                    &normals,
+                    &tangents,
+                    Some(&scene.mask),
+                    &|_| {},
+                )
+                .unwrap();
             let relighter = Relighter::of_fit(&fit.ward, fit.gltf.as_ref(), &Edits::default())
                 .unwrap()
                 .with_lobes(fit.lobes.as_ref().unwrap(), &Edits::default())

@@ -142,7 +142,7 @@ impl BaselineParams {
 
 /// The result of a baseline at one pixel.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct BaselinePixel {
+pub(crate) struct BaselinePixel {
     /// What happened: [`PixelStatus::Estimated`], [`PixelStatus::NoData`] (no valid sample
     /// brighter than zero) or [`PixelStatus::Discarded`] (too few unshadowed samples, a
     /// degenerate fit, or a normal facing away from the camera); `Masked` from the stack driver.
@@ -175,7 +175,7 @@ impl BaselinePixel {
     /// What the maps hold at this pixel, whose normal comes from `source`: the normal and,
     /// where there is one, the confidence; no anisotropy, tangent confidence or residual (`NaN`), no
     /// objective evaluations.
-    pub fn record(&self, source: PixelSource) -> PixelRecord {
+    pub(crate) fn record(&self, source: PixelSource) -> PixelRecord {
         PixelRecord {
             status: self.status,
             source: if self.normal.is_some() {
@@ -231,9 +231,21 @@ fn brightest(samples: &[f32]) -> Option<(usize, f64)> {
 }
 
 impl Baseline {
-    /// Runs this baseline at one pixel (`samples` as [`Stack::pixel`], `lights` unit, same
-    /// order; `scratch` a buffer reused between pixels).
-    pub fn pixel(
+    /// The normal this baseline gives at one pixel (`samples` as [`Stack::pixel`], `lights`
+    /// unit, same order; `scratch` a buffer reused between pixels), `None` where it gives none;
+    /// [`BaselineMethod`] gives the pixel's whole record.
+    pub fn normal(
+        self,
+        samples: &[f32],
+        lights: &[DVec3],
+        params: &BaselineParams,
+        scratch: &mut Vec<f64>,
+    ) -> Option<DVec3> {
+        self.pixel(samples, lights, params, scratch).normal
+    }
+
+    /// Runs this baseline at one pixel (as [`Baseline::normal`]).
+    pub(crate) fn pixel(
         self,
         samples: &[f32],
         lights: &[DVec3],
@@ -310,33 +322,36 @@ impl PixelMethod for BaselineMethod {
     }
 }
 
-/// Runs a baseline on every pixel of a stack (inside `mask` when given), in parallel over row
-/// bands, and returns the same maps as the symmetry estimator: tangents and anisotropy are NaN (the baselines recover
-/// normals only), confidence is the baseline's goodness of fit, `evals` is 0. Every light is
-/// used (no cone). `lights` are camera-frame directions, one per stack image (normalised here).
-/// `progress` is called with the number of pixels finished by each band.
-pub fn estimate_stack_baseline(
-    stack: &Stack,
-    lights: &[DVec3],
-    mask: Option<&[bool]>,
-    method: Baseline,
-    params: BaselineParams,
-    progress: &(dyn Fn(usize) + Sync),
-) -> Result<EstimateMaps> {
-    let method = BaselineMethod::new(method, lights, params)?;
-    crate::stack::check_inputs(
-        stack.width,
-        stack.height,
-        stack.n_lights,
-        method.lights.len(),
-        mask,
-    )?;
-    let records = run_stack(&method, stack, mask, progress);
-    Ok(EstimateMaps::from_records(
-        stack.width,
-        stack.height,
-        &records,
-    ))
+impl Baseline {
+    /// Runs this baseline on every pixel of a stack (inside `mask` when given), in parallel over
+    /// row bands, and returns the same maps as the symmetry estimator: tangents and anisotropy
+    /// are NaN (the baselines recover normals only), confidence is the baseline's goodness of
+    /// fit, `evals` is 0. Every light is used (no cone). `lights` are camera-frame directions,
+    /// one per stack image (normalised here). `progress` is called with the number of pixels
+    /// finished by each band.
+    pub fn estimate_stack(
+        self,
+        stack: &Stack,
+        lights: &[DVec3],
+        mask: Option<&[bool]>,
+        params: BaselineParams,
+        progress: &(dyn Fn(usize) + Sync),
+    ) -> Result<EstimateMaps> {
+        let method = BaselineMethod::new(self, lights, params)?;
+        Stack::check_inputs(
+            stack.width,
+            stack.height,
+            stack.n_lights,
+            method.lights.len(),
+            mask,
+        )?;
+        let records = run_stack(&method, stack, mask, progress);
+        Ok(EstimateMaps::from_records(
+            stack.width,
+            stack.height,
+            &records,
+        ))
+    }
 }
 
 /// The unit light directions a baseline runs with: `lights` normalised; an error if there are
@@ -498,15 +513,15 @@ mod tests {
         stack.pixel_mut(1).copy_from_slice(&px);
         stack.pixel_mut(4).copy_from_slice(&px);
         let mask = [true, true, true, false, true, true];
-        let m = estimate_stack_baseline(
-            &stack,
-            &lights,
-            Some(&mask),
-            Baseline::Woodham,
-            BaselineParams::default(),
-            &|_| {},
-        )
-        .unwrap();
+        let m = Baseline::Woodham
+            .estimate_stack(
+                &stack,
+                &lights,
+                Some(&mask),
+                BaselineParams::default(),
+                &|_| {},
+            )
+            .unwrap();
         assert_eq!(m.counts.estimated, 2);
         assert_eq!(m.counts.masked, 1);
         assert_eq!(m.counts.no_data, 3);
@@ -524,14 +539,7 @@ mod tests {
 
         let e = |r: Result<EstimateMaps>| r.unwrap_err();
         let run = |l: &[DVec3], mask: Option<&[bool]>| {
-            estimate_stack_baseline(
-                &stack,
-                l,
-                mask,
-                Baseline::Woodham,
-                BaselineParams::default(),
-                &|_| {},
-            )
+            Baseline::Woodham.estimate_stack(&stack, l, mask, BaselineParams::default(), &|_| {})
         };
         assert_eq!(
             e(run(&lights[..29], None)),
@@ -553,14 +561,7 @@ mod tests {
             ..BaselineParams::default()
         };
         assert!(matches!(
-            estimate_stack_baseline(
-                &stack,
-                &lights,
-                None,
-                Baseline::Woodham,
-                bad_params,
-                &|_| {}
-            ),
+            Baseline::Woodham.estimate_stack(&stack, &lights, None, bad_params, &|_| {}),
             Err(Error::BadParameter(_))
         ));
     }

@@ -7,7 +7,7 @@ use super::DepthMap;
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Mesh {
     /// Vertex positions `(x, y, z)`: x = column + 0.5, y = height - row - 0.5 (up), z = the
-    /// height; pixel units (a perspective mesh, [`crate::near::perspective_mesh`]: the
+    /// height; pixel units (a perspective mesh, [`crate::Pinhole::mesh`]: the
     /// camera-frame points the pixels see, in the depths' unit).
     pub positions: Vec<[f32; 3]>,
     /// Unit vertex normals (the normal map's).
@@ -50,19 +50,34 @@ impl DepthMap {
             }
         }
         // An edge a -> b is continuous when its height step agrees with the mean slope.
-        let continuous = |a: usize, b: usize| -> bool {
-            let (Some((pa, qa)), Some((pb, qb))) = (slope(a), slope(b)) else {
-                return false;
-            };
-            let dq = (b % w) as f64 - (a % w) as f64;
-            let dr = (b / w) as f64 - (a / w) as f64;
-            let predicted = 0.5 * (pa + pb) * dq + 0.5 * (qa + qb) * dr;
-            let step = self.depth[b] as f64 - self.depth[a] as f64;
-            (step - predicted).abs() <= max_jump * (1.0 + predicted.abs())
-        };
+        let height = |i: usize| self.depth[i] as f64;
+        let continuous = |a, b| continuous_edge(w, a, b, &slope, &height, 1.0, max_jump);
         triangulate_grid(w, h, &index, continuous, &mut m);
         m
     }
+}
+
+/// Whether the edge from pixel `a` to pixel `b` of a `w`-wide grid is continuous: the step
+/// `scale * (value(b) - value(a))` departs from the one the ends' mean slopes predict (`slope`:
+/// per column, per row; times `scale`) by at most `max_jump * (1 + |predicted|)`. Not where an
+/// end has no slope.
+pub(crate) fn continuous_edge(
+    w: usize,
+    a: usize,
+    b: usize,
+    slope: &impl Fn(usize) -> Option<(f64, f64)>,
+    value: &impl Fn(usize) -> f64,
+    scale: f64,
+    max_jump: f64,
+) -> bool {
+    let (Some((pa, qa)), Some((pb, qb))) = (slope(a), slope(b)) else {
+        return false;
+    };
+    let dq = (b % w) as f64 - (a % w) as f64;
+    let dr = (b / w) as f64 - (a / w) as f64;
+    let predicted = scale * (0.5 * (pa + pb) * dq + 0.5 * (qa + qb) * dr);
+    let step = scale * (value(b) - value(a));
+    (step - predicted).abs() <= max_jump * (1.0 + predicted.abs())
 }
 
 /// The triangles of a mesh on a `w` x `h` pixel grid whose vertices `index` numbers (`u32::MAX`

@@ -40,15 +40,15 @@ mod energy;
 mod height_mesh;
 mod multigrid;
 
-pub(crate) use height_mesh::triangulate_grid;
 pub use height_mesh::Mesh;
+pub(crate) use height_mesh::{continuous_edge, triangulate_grid};
 
 use crate::error::{Error, Result};
 use crate::regions::{label_regions, OUTSIDE};
 use energy::{Level, SideWeights};
 use multigrid::Hierarchy;
 
-/// Which solver [`integrate`] runs.
+/// Which solver [`DepthMap::integrate`] runs.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Solver {
     /// Least squares with fixed weights (a screened-free Poisson problem on the mask).
@@ -78,7 +78,7 @@ impl Solver {
     }
 }
 
-/// Parameters of [`integrate`].
+/// Parameters of [`DepthMap::integrate`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct IntegrateParams {
     /// The solver.
@@ -147,121 +147,124 @@ fn poisson_pyramid(level: &Level, params: &IntegrateParams) -> (Vec<f64>, usize)
     (z, iterations)
 }
 
-/// Integrates a normal map (`H x W x 3`, camera frame, unit vectors, NaN where there is no
-/// normal) into heights, weighted by `confidence` (`H x W`, values in [0, 1]) when given.
-pub fn integrate(
-    width: usize,
-    height: usize,
-    normals: &[f32],
-    confidence: Option<&[f32]>,
-    params: &IntegrateParams,
-) -> Result<DepthMap> {
-    let n = width
-        .checked_mul(height)
-        .filter(|&n| n > 0)
-        .ok_or_else(|| Error::BadParameter(format!("empty {width}x{height} normal map")))?;
-    if normals.len() != 3 * n {
-        return Err(Error::BadParameter(format!(
-            "a {width}x{height} normal map needs {} values, got {}",
-            3 * n,
-            normals.len()
-        )));
-    }
-    if let Some(c) = confidence {
-        if c.len() != n {
+impl DepthMap {
+    /// Integrates a normal map (`H x W x 3`, camera frame, unit vectors, NaN where there is no
+    /// normal) into heights, weighted by `confidence` (`H x W`, values in [0, 1]) when given.
+    pub fn integrate(
+        width: usize,
+        height: usize,
+        normals: &[f32],
+        confidence: Option<&[f32]>,
+        params: &IntegrateParams,
+    ) -> Result<DepthMap> {
+        let n = width
+            .checked_mul(height)
+            .filter(|&n| n > 0)
+            .ok_or_else(|| Error::BadParameter(format!("empty {width}x{height} normal map")))?;
+        if normals.len() != 3 * n {
             return Err(Error::BadParameter(format!(
-                "a {width}x{height} confidence map needs {n} values, got {}",
-                c.len()
+                "a {width}x{height} normal map needs {} values, got {}",
+                3 * n,
+                normals.len()
             )));
         }
-    }
-    if !(params.cg_tolerance > 0.0 && params.cg_tolerance < 1.0) {
-        return Err(Error::BadParameter(format!(
-            "the solver tolerance must be in (0, 1), got {}",
-            params.cg_tolerance
-        )));
-    }
-    if !(params.min_weight > 0.0 && params.min_weight <= 1.0) {
-        return Err(Error::BadParameter(format!(
-            "the smallest confidence weight must be in (0, 1], got {}",
-            params.min_weight
-        )));
-    }
-    let level = Level::from_maps(width, height, normals, confidence, params.min_weight);
-    let pixels = level.mask.iter().filter(|&&m| m).count();
-    if pixels == 0 {
-        return Err(Error::BadMask("the normal map has no valid normal".into()));
-    }
-    let (mut z, mut cg_iterations) = poisson_pyramid(&level, params);
-    let mut weights = SideWeights::half(n);
-    let mut reweight_iterations = 0;
-    if let Solver::Bilateral {
-        k,
-        max_iterations,
-        tolerance,
-    } = params.solver
-    {
-        if !(k.is_finite() && k > 0.0) {
+        if let Some(c) = confidence {
+            if c.len() != n {
+                return Err(Error::BadParameter(format!(
+                    "a {width}x{height} confidence map needs {n} values, got {}",
+                    c.len()
+                )));
+            }
+        }
+        if !(params.cg_tolerance > 0.0 && params.cg_tolerance < 1.0) {
             return Err(Error::BadParameter(format!(
-                "the bilateral sharpness k must be positive, got {k}"
+                "the solver tolerance must be in (0, 1), got {}",
+                params.cg_tolerance
             )));
         }
-        // The reweighting steps solve loosely (each is only a step toward the fixed point);
-        // the last system is solved to the full tolerance.
-        let inner = params.cg_tolerance.max(1e-4);
-        let mut energy = level.energy(&weights, &z);
-        let mut sys = None;
-        for _ in 0..max_iterations {
-            weights = level.bilateral_weights(&z, k);
-            let h = Hierarchy::new(level.system(&weights));
-            cg_iterations += h.solve(&mut z, inner, params.cg_max_iterations);
-            sys = Some(h);
-            reweight_iterations += 1;
-            let e = level.energy(&weights, &z);
-            let change = (e - energy).abs() / energy.max(1e-300);
-            energy = e;
-            if change < tolerance {
-                break;
+        if !(params.min_weight > 0.0 && params.min_weight <= 1.0) {
+            return Err(Error::BadParameter(format!(
+                "the smallest confidence weight must be in (0, 1], got {}",
+                params.min_weight
+            )));
+        }
+        let level = Level::from_maps(width, height, normals, confidence, params.min_weight);
+        let pixels = level.mask.iter().filter(|&&m| m).count();
+        if pixels == 0 {
+            return Err(Error::BadMask("the normal map has no valid normal".into()));
+        }
+        let (mut z, mut cg_iterations) = poisson_pyramid(&level, params);
+        let mut weights = SideWeights::half(n);
+        let mut reweight_iterations = 0;
+        if let Solver::Bilateral {
+            k,
+            max_iterations,
+            tolerance,
+        } = params.solver
+        {
+            if !(k.is_finite() && k > 0.0) {
+                return Err(Error::BadParameter(format!(
+                    "the bilateral sharpness k must be positive, got {k}"
+                )));
+            }
+            // The reweighting steps solve loosely (each is only a step toward the fixed point);
+            // the last system is solved to the full tolerance.
+            let inner = params.cg_tolerance.max(1e-4);
+            let mut energy = level.energy(&weights, &z);
+            let mut sys = None;
+            for _ in 0..max_iterations {
+                weights = level.bilateral_weights(&z, k);
+                let h = Hierarchy::new(level.system(&weights));
+                cg_iterations += h.solve(&mut z, inner, params.cg_max_iterations);
+                sys = Some(h);
+                reweight_iterations += 1;
+                let e = level.energy(&weights, &z);
+                let change = (e - energy).abs() / energy.max(1e-300);
+                energy = e;
+                if change < tolerance {
+                    break;
+                }
+            }
+            if let Some(h) = sys {
+                cg_iterations += h.solve(&mut z, params.cg_tolerance, params.cg_max_iterations);
             }
         }
-        if let Some(h) = sys {
-            cg_iterations += h.solve(&mut z, params.cg_tolerance, params.cg_max_iterations);
-        }
-    }
-    let energy = level.energy(&weights, &z);
-    // One offset per region: its lowest point at 0.
-    let (label, sizes) = label_regions(level.w, level.h, |i| level.mask[i]).ok_or_else(|| {
-        Error::BadParameter(format!(
-            "a {width}x{height} normal map is too large to integrate"
-        ))
-    })?;
-    let mut lowest = vec![f64::INFINITY; sizes.len()];
-    for i in 0..n {
-        if label[i] != OUTSIDE {
-            let l = label[i] as usize;
-            lowest[l] = lowest[l].min(z[i]);
-        }
-    }
-    let depth = (0..n)
-        .map(|i| {
-            if label[i] == OUTSIDE {
-                f32::NAN
-            } else {
-                (z[i] - lowest[label[i] as usize]) as f32
+        let energy = level.energy(&weights, &z);
+        // One offset per region: its lowest point at 0.
+        let (label, sizes) =
+            label_regions(level.w, level.h, |i| level.mask[i]).ok_or_else(|| {
+                Error::BadParameter(format!(
+                    "a {width}x{height} normal map is too large to integrate"
+                ))
+            })?;
+        let mut lowest = vec![f64::INFINITY; sizes.len()];
+        for i in 0..n {
+            if label[i] != OUTSIDE {
+                let l = label[i] as usize;
+                lowest[l] = lowest[l].min(z[i]);
             }
+        }
+        let depth = (0..n)
+            .map(|i| {
+                if label[i] == OUTSIDE {
+                    f32::NAN
+                } else {
+                    (z[i] - lowest[label[i] as usize]) as f32
+                }
+            })
+            .collect();
+        z.clear();
+        Ok(DepthMap {
+            width,
+            height,
+            depth,
+            cg_iterations,
+            reweight_iterations,
+            energy,
+            regions: sizes.len(),
+            pixels,
         })
-        .collect();
-    z.clear();
-    Ok(DepthMap {
-        width,
-        height,
-        depth,
-        cg_iterations,
-        reweight_iterations,
-        energy,
-        regions: sizes.len(),
-        pixels,
-    })
+    }
 }
 
 #[cfg(test)]
@@ -325,7 +328,7 @@ mod tests {
                 solver,
                 ..IntegrateParams::default()
             };
-            let d = integrate(size, size, &n, None, &params).unwrap();
+            let d = DepthMap::integrate(size, size, &n, None, &params).unwrap();
             assert_eq!(d.regions, 1);
             let rms = rms_after_offset(&d.depth, &truth, within_60);
             // Radius 64 px: 1% is 0.64.
@@ -342,7 +345,7 @@ mod tests {
         for r in 0..h {
             n[3 * (r * w + 20)..3 * (r * w + 20) + 3].fill(f32::NAN);
         }
-        let d = integrate(w, h, &n, None, &IntegrateParams::default()).unwrap();
+        let d = DepthMap::integrate(w, h, &n, None, &IntegrateParams::default()).unwrap();
         assert_eq!(d.regions, 2);
         assert_eq!(d.pixels, w * h - h);
         for r in 0..h {
@@ -398,8 +401,9 @@ mod tests {
     fn bilateral_keeps_a_discontinuity_that_poisson_smears() {
         let size = 96;
         let (n, truth) = step_scene(size);
-        let poisson = integrate(size, size, &n, None, &IntegrateParams::default()).unwrap();
-        let bini = integrate(
+        let poisson =
+            DepthMap::integrate(size, size, &n, None, &IntegrateParams::default()).unwrap();
+        let bini = DepthMap::integrate(
             size,
             size,
             &n,
@@ -485,8 +489,8 @@ mod tests {
             min_weight: 1e-4,
             ..IntegrateParams::default()
         };
-        let weighted = integrate(size, size, &n, Some(&conf), &p).unwrap();
-        let plain = integrate(size, size, &n, None, &p).unwrap();
+        let weighted = DepthMap::integrate(size, size, &n, Some(&conf), &p).unwrap();
+        let plain = DepthMap::integrate(size, size, &n, None, &p).unwrap();
         let ew = rms_after_offset(&weighted.depth, &truth, outside);
         let ep = rms_after_offset(&plain.depth, &truth, outside);
         assert!(ew < 0.2 * ep && ew < 0.05, "weighted {ew}, plain {ep}");
@@ -495,22 +499,22 @@ mod tests {
     #[test]
     fn bad_input_is_an_error() {
         let p = IntegrateParams::default();
-        assert!(integrate(2, 2, &[0.0; 11], None, &p).is_err());
-        assert!(integrate(2, 2, &[f32::NAN; 12], None, &p).is_err());
-        assert!(integrate(0, 2, &[], None, &p).is_err());
+        assert!(DepthMap::integrate(2, 2, &[0.0; 11], None, &p).is_err());
+        assert!(DepthMap::integrate(2, 2, &[f32::NAN; 12], None, &p).is_err());
+        assert!(DepthMap::integrate(0, 2, &[], None, &p).is_err());
         let n = [0.0, 0.0, 1.0].repeat(4);
-        assert!(integrate(2, 2, &n, Some(&[1.0; 3]), &p).is_err());
+        assert!(DepthMap::integrate(2, 2, &n, Some(&[1.0; 3]), &p).is_err());
         let bad = IntegrateParams {
             cg_tolerance: 0.0,
             ..p
         };
-        assert!(integrate(2, 2, &n, None, &bad).is_err());
+        assert!(DepthMap::integrate(2, 2, &n, None, &bad).is_err());
     }
 
     #[test]
     fn mesh_triangles_face_the_camera() {
         let (n, _, _) = sphere(32);
-        let d = integrate(32, 32, &n, None, &IntegrateParams::default()).unwrap();
+        let d = DepthMap::integrate(32, 32, &n, None, &IntegrateParams::default()).unwrap();
         let m = d.mesh(&n, 2.0);
         assert_eq!(m.positions.len(), d.pixels);
         assert!(!m.triangles.is_empty());

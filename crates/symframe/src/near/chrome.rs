@@ -2,15 +2,17 @@
 //!
 //! Each sphere's centre comes from its outline and its known radius: the camera sees a sphere
 //! as the cone of rays tangent to it, so the rays through its rim in the image make one angle
-//! `a` with the ray to its centre ([`sphere_from_rim`]: the cone fitted to the rim's rays), and
-//! the centre lies along the cone's axis at `radius / sin(a)`. Under perspective the outline is
-//! an ellipse slightly longer away from the principal point; the cone takes it as it is.
+//! `a` with the ray to its centre ([`Pinhole::sphere_from_rim`]: the cone fitted to the rim's
+//! rays), and the centre lies along the cone's axis at `radius / sin(a)`. Under perspective the
+//! outline is an ellipse slightly longer away from the principal point; the cone takes it as it
+//! is.
 //!
-//! Each light's highlight on a sphere ([`crate::calibrate::find_highlight`]'s image point) is
-//! where the ray from the camera meets the sphere at the point whose normal mirrors the view
-//! into the direction of the light: the light lies on the reflected ray from that point
-//! ([`reflected_ray`]). With two or more spheres the light is the point closest to all its rays
-//! in least squares ([`triangulate`]); the distances from it to the rays are its residual.
+//! Each light's highlight on a sphere ([`crate::Highlight::find`]'s image point) is where the
+//! ray from the camera meets the sphere at the point whose normal mirrors the view into the
+//! direction of the light: the light lies on the reflected ray from that point
+//! ([`Pinhole::reflected_ray`]). With two or more spheres the light is the point closest to all
+//! its rays in least squares ([`Triangulation::from_rays`]); the distances from it to the rays
+//! are its residual.
 //!
 //! Pixel points here are in [`Circle`]'s convention (x right, y down, the centre of the
 //! top-left pixel at `(0.5, 0.5)`); the camera's `K` is OpenCV's (that centre at `(0, 0)`).
@@ -25,128 +27,123 @@ pub(crate) fn pixel_ray(camera: &Pinhole, x: f64, y: f64) -> DVec3 {
     camera.ray(x - 0.5, y - 0.5).normalize()
 }
 
-/// `count` points evenly spaced on a circle's rim, for [`sphere_from_rim`] where only the
-/// circle is known.
-pub fn circle_rim(circle: &Circle, count: usize) -> Vec<(f64, f64)> {
-    (0..count)
-        .map(|k| {
-            let a = k as f64 / count as f64 * std::f64::consts::TAU;
-            (
-                circle.cx + circle.r * a.cos(),
-                circle.cy + circle.r * a.sin(),
-            )
-        })
-        .collect()
+impl Circle {
+    /// `count` points evenly spaced on the circle's rim, for [`Pinhole::sphere_from_rim`] where
+    /// only the circle is known.
+    pub fn rim(&self, count: usize) -> Vec<(f64, f64)> {
+        (0..count)
+            .map(|k| {
+                let a = k as f64 / count as f64 * std::f64::consts::TAU;
+                (self.cx + self.r * a.cos(), self.cy + self.r * a.sin())
+            })
+            .collect()
+    }
 }
 
-/// The centre (camera frame) of a sphere of `radius` whose outline passes through the image
-/// points `rim` ([`Circle`]'s pixel convention): the cone of rays tangent to the sphere fitted
-/// to the rays through them (its axis `w / |w|` and `cos(a) = 1 / |w|` from `w . r = 1` by
-/// least squares, then Gauss-Newton on the angles between the rays and the axis), the centre
-/// `radius / sin(a)` along its axis. Why not where fewer than 8 points are given, a value is
-/// not finite, the radius is not positive, or the points do not lie on a cone opening away
-/// from the camera (a line of points, a cone wider than a half turn).
-pub fn sphere_from_rim(camera: &Pinhole, rim: &[(f64, f64)], radius: f64) -> Result<DVec3, String> {
-    if !(radius.is_finite() && radius > 0.0) {
-        return Err(format!(
-            "the sphere's radius must be a positive number, got {radius}"
-        ));
-    }
-    if rim.len() < 8 {
-        return Err(format!(
-            "{} points on the sphere's outline, at least 8 needed",
-            rim.len()
-        ));
-    }
-    if rim.iter().any(|(x, y)| !(x.is_finite() && y.is_finite())) {
-        return Err("a point of the sphere's outline is not a finite number".into());
-    }
-    let rays: Vec<DVec3> = rim.iter().map(|&(x, y)| pixel_ray(camera, x, y)).collect();
-    // w . r_i = 1 by least squares.
-    let mut ata = DMat3::ZERO;
-    let mut atb = DVec3::ZERO;
-    for r in &rays {
-        ata += DMat3::from_cols(*r * r.x, *r * r.y, *r * r.z);
-        atb += *r;
-    }
-    let scale = (ata.x_axis.x + ata.y_axis.y + ata.z_axis.z) / 3.0;
-    if ata.determinant().abs() <= 1e-18 * scale.powi(3) {
-        return Err("the points of the sphere's outline do not span a cone".into());
-    }
-    let w = ata.inverse() * atb;
-    let mut axis = w.normalize();
-    let mut cos_a = 1.0 / w.length();
-    if !(axis.is_finite() && cos_a > 0.0 && cos_a < 1.0 && axis.z < 0.0) {
-        return Err(
-            "the points of the sphere's outline do not lie on a cone before the camera".into(),
-        );
-    }
-    // Gauss-Newton on the angles: r_i . axis = cos(a), the axis moved in its tangent plane.
-    let mut angle = cos_a.acos();
-    for _ in 0..10 {
-        let (e1, e2) = {
-            let t = if axis.x.abs() < 0.9 {
-                DVec3::X
-            } else {
-                DVec3::Y
-            };
-            let e1 = axis.cross(t).normalize();
-            (e1, axis.cross(e1))
-        };
-        let mut jtj = DMat3::ZERO;
-        let mut jtr = DVec3::ZERO;
+impl Pinhole {
+    /// The centre (camera frame) of a sphere of `radius` whose outline passes through the image
+    /// points `rim` ([`Circle`]'s pixel convention): the cone of rays tangent to the sphere fitted
+    /// to the rays through them (its axis `w / |w|` and `cos(a) = 1 / |w|` from `w . r = 1` by
+    /// least squares, then Gauss-Newton on the angles between the rays and the axis), the centre
+    /// `radius / sin(a)` along its axis. Why not where fewer than 8 points are given, a value is
+    /// not finite, the radius is not positive, or the points do not lie on a cone opening away
+    /// from the camera (a line of points, a cone wider than a half turn).
+    pub fn sphere_from_rim(&self, rim: &[(f64, f64)], radius: f64) -> Result<DVec3, String> {
+        if !(radius.is_finite() && radius > 0.0) {
+            return Err(format!(
+                "the sphere's radius must be a positive number, got {radius}"
+            ));
+        }
+        if rim.len() < 8 {
+            return Err(format!(
+                "{} points on the sphere's outline, at least 8 needed",
+                rim.len()
+            ));
+        }
+        if rim.iter().any(|(x, y)| !(x.is_finite() && y.is_finite())) {
+            return Err("a point of the sphere's outline is not a finite number".into());
+        }
+        let rays: Vec<DVec3> = rim.iter().map(|&(x, y)| pixel_ray(self, x, y)).collect();
+        // w . r_i = 1 by least squares.
+        let mut ata = DMat3::ZERO;
+        let mut atb = DVec3::ZERO;
         for r in &rays {
-            let c = r.dot(axis).clamp(-1.0, 1.0);
-            let s = (1.0 - c * c).sqrt().max(1e-12);
-            // The angle between r and the axis moved by (p, q) in (e1, e2): d/dp = -r.e1 / s.
-            let j = DVec3::new(-r.dot(e1) / s, -r.dot(e2) / s, -1.0);
-            let res = c.acos() - angle;
-            jtj += DMat3::from_cols(j * j.x, j * j.y, j * j.z);
-            jtr += j * res;
+            ata += DMat3::from_cols(*r * r.x, *r * r.y, *r * r.z);
+            atb += *r;
         }
-        if jtj.determinant().abs() <= 1e-300 {
-            break;
+        let scale = (ata.x_axis.x + ata.y_axis.y + ata.z_axis.z) / 3.0;
+        if ata.determinant().abs() <= 1e-18 * scale.powi(3) {
+            return Err("the points of the sphere's outline do not span a cone".into());
         }
-        let step = -(jtj.inverse() * jtr);
-        axis = (axis + step.x * e1 + step.y * e2).normalize();
-        angle += step.z;
-        if step.length() < 1e-14 {
-            break;
+        let w = ata.inverse() * atb;
+        let mut axis = w.normalize();
+        let mut cos_a = 1.0 / w.length();
+        if !(axis.is_finite() && cos_a > 0.0 && cos_a < 1.0 && axis.z < 0.0) {
+            return Err(
+                "the points of the sphere's outline do not lie on a cone before the camera".into(),
+            );
         }
+        // Gauss-Newton on the angles: r_i . axis = cos(a), the axis moved in its tangent plane.
+        let mut angle = cos_a.acos();
+        for _ in 0..10 {
+            let (e1, e2) = {
+                let t = if axis.x.abs() < 0.9 {
+                    DVec3::X
+                } else {
+                    DVec3::Y
+                };
+                let e1 = axis.cross(t).normalize();
+                (e1, axis.cross(e1))
+            };
+            let mut jtj = DMat3::ZERO;
+            let mut jtr = DVec3::ZERO;
+            for r in &rays {
+                let c = r.dot(axis).clamp(-1.0, 1.0);
+                let s = (1.0 - c * c).sqrt().max(1e-12);
+                // The angle between r and the axis moved by (p, q) in (e1, e2): d/dp = -r.e1 / s.
+                let j = DVec3::new(-r.dot(e1) / s, -r.dot(e2) / s, -1.0);
+                let res = c.acos() - angle;
+                jtj += DMat3::from_cols(j * j.x, j * j.y, j * j.z);
+                jtr += j * res;
+            }
+            if jtj.determinant().abs() <= 1e-300 {
+                break;
+            }
+            let step = -(jtj.inverse() * jtr);
+            axis = (axis + step.x * e1 + step.y * e2).normalize();
+            angle += step.z;
+            if step.length() < 1e-14 {
+                break;
+            }
+        }
+        cos_a = angle.cos();
+        let sin_a = angle.sin();
+        if !(axis.is_finite() && sin_a > 0.0 && cos_a > 0.0 && axis.z < 0.0) {
+            return Err(
+                "the points of the sphere's outline do not lie on a cone before the camera".into(),
+            );
+        }
+        Ok(axis * (radius / sin_a))
     }
-    cos_a = angle.cos();
-    let sin_a = angle.sin();
-    if !(axis.is_finite() && sin_a > 0.0 && cos_a > 0.0 && axis.z < 0.0) {
-        return Err(
-            "the points of the sphere's outline do not lie on a cone before the camera".into(),
-        );
-    }
-    Ok(axis * (radius / sin_a))
-}
 
-/// The ray that the mirror sphere of `centre` and `radius` reflects toward the camera at image
-/// point `(x, y)` ([`Circle`]'s pixel convention): the surface point where the camera's ray
-/// meets the sphere (where it passes beside it, the point of the sphere nearest to it) and the
-/// unit direction in which a light must lie to be seen there, `2 (n.v) n - v`.
-pub fn reflected_ray(
-    camera: &Pinhole,
-    centre: DVec3,
-    radius: f64,
-    x: f64,
-    y: f64,
-) -> (DVec3, DVec3) {
-    let d = pixel_ray(camera, x, y);
-    let b = d.dot(centre);
-    let closest = d * b;
-    let off = (centre - closest).length_squared();
-    let point = if off <= radius * radius {
-        d * (b - (radius * radius - off).sqrt())
-    } else {
-        centre + (closest - centre).normalize_or(DVec3::Z) * radius
-    };
-    let n = ((point - centre) / radius).normalize_or(DVec3::Z);
-    let v = -d;
-    (point, (2.0 * n.dot(v) * n - v).normalize_or(DVec3::Z))
+    /// The ray that the mirror sphere of `centre` and `radius` reflects toward the camera at image
+    /// point `(x, y)` ([`Circle`]'s pixel convention): the surface point where the camera's ray
+    /// meets the sphere (where it passes beside it, the point of the sphere nearest to it) and the
+    /// unit direction in which a light must lie to be seen there, `2 (n.v) n - v`.
+    pub fn reflected_ray(&self, centre: DVec3, radius: f64, x: f64, y: f64) -> (DVec3, DVec3) {
+        let d = pixel_ray(self, x, y);
+        let b = d.dot(centre);
+        let closest = d * b;
+        let off = (centre - closest).length_squared();
+        let point = if off <= radius * radius {
+            d * (b - (radius * radius - off).sqrt())
+        } else {
+            centre + (closest - centre).normalize_or(DVec3::Z) * radius
+        };
+        let n = ((point - centre) / radius).normalize_or(DVec3::Z);
+        let v = -d;
+        (point, (2.0 * n.dot(v) * n - v).normalize_or(DVec3::Z))
+    }
 }
 
 /// A light's position from the rays toward it.
@@ -163,65 +160,67 @@ pub struct Triangulation {
     pub spread_deg: f64,
 }
 
-/// The narrowest angle (degrees) that two rays toward a light may make for [`triangulate`] to
-/// place it: below it, an error of a tenth of a degree in a ray moves the light along the rays
-/// by more than a twentieth of its distance.
+/// The narrowest angle (degrees) that two rays toward a light may make for
+/// [`Triangulation::from_rays`] to place it: below it, an error of a tenth of a degree in a ray
+/// moves the light along the rays by more than a twentieth of its distance.
 pub(crate) const MIN_SPREAD_DEG: f64 = 2.0;
 
-/// The point closest to the rays `(origin, unit direction)` in least squares, which must lie
-/// ahead of every origin. Why not where fewer than two rays are given, no two are at least
-/// [`MIN_SPREAD_DEG`] apart, or the point lies behind one of them.
-pub fn triangulate(rays: &[(DVec3, DVec3)]) -> Result<Triangulation, String> {
-    if rays.len() < 2 {
-        return Err(format!(
-            "{} ray{} toward the light, at least 2 needed",
-            rays.len(),
-            if rays.len() == 1 { "" } else { "s" }
-        ));
-    }
-    if rays.iter().any(|(o, d)| !(o.is_finite() && d.is_finite())) {
-        return Err("a ray toward the light is not finite".into());
-    }
-    let mut spread: f64 = 0.0;
-    for (i, (_, a)) in rays.iter().enumerate() {
-        for (_, b) in &rays[i + 1..] {
-            spread = spread.max(a.angle_between(*b).to_degrees());
+impl Triangulation {
+    /// The point closest to the rays `(origin, unit direction)` in least squares, which must lie
+    /// ahead of every origin. Why not where fewer than two rays are given, no two are at least
+    /// [`MIN_SPREAD_DEG`] apart, or the point lies behind one of them.
+    pub fn from_rays(rays: &[(DVec3, DVec3)]) -> Result<Triangulation, String> {
+        if rays.len() < 2 {
+            return Err(format!(
+                "{} ray{} toward the light, at least 2 needed",
+                rays.len(),
+                if rays.len() == 1 { "" } else { "s" }
+            ));
         }
-    }
-    if spread < MIN_SPREAD_DEG {
-        return Err(format!(
-            "the rays toward the light are {spread:.2} degrees apart at most ({MIN_SPREAD_DEG} \
-             needed): spheres further apart fix it"
-        ));
-    }
-    let mut a = DMat3::ZERO;
-    let mut rhs = DVec3::ZERO;
-    for (o, d) in rays {
-        let p = DMat3::IDENTITY - DMat3::from_cols(*d * d.x, *d * d.y, *d * d.z);
-        a += p;
-        rhs += p * *o;
-    }
-    let x = a.inverse() * rhs;
-    if !x.is_finite() {
-        return Err("the rays toward the light do not fix a point".into());
-    }
-    let distances: Vec<f64> = rays
-        .iter()
-        .map(|(o, d)| {
-            let q = x - *o;
-            (q - d * q.dot(*d)).length()
+        if rays.iter().any(|(o, d)| !(o.is_finite() && d.is_finite())) {
+            return Err("a ray toward the light is not finite".into());
+        }
+        let mut spread: f64 = 0.0;
+        for (i, (_, a)) in rays.iter().enumerate() {
+            for (_, b) in &rays[i + 1..] {
+                spread = spread.max(a.angle_between(*b).to_degrees());
+            }
+        }
+        if spread < MIN_SPREAD_DEG {
+            return Err(format!(
+                "the rays toward the light are {spread:.2} degrees apart at most ({MIN_SPREAD_DEG} \
+                 needed): spheres further apart fix it"
+            ));
+        }
+        let mut a = DMat3::ZERO;
+        let mut rhs = DVec3::ZERO;
+        for (o, d) in rays {
+            let p = DMat3::IDENTITY - DMat3::from_cols(*d * d.x, *d * d.y, *d * d.z);
+            a += p;
+            rhs += p * *o;
+        }
+        let x = a.inverse() * rhs;
+        if !x.is_finite() {
+            return Err("the rays toward the light do not fix a point".into());
+        }
+        let distances: Vec<f64> = rays
+            .iter()
+            .map(|(o, d)| {
+                let q = x - *o;
+                (q - d * q.dot(*d)).length()
+            })
+            .collect();
+        if rays.iter().any(|(o, d)| (x - *o).dot(*d) <= 0.0) {
+            return Err("the rays toward the light meet behind a sphere".into());
+        }
+        let n = distances.len() as f64;
+        Ok(Triangulation {
+            position: x,
+            residual_rms: (distances.iter().map(|d| d * d).sum::<f64>() / n).sqrt(),
+            residual_max: distances.iter().copied().fold(0.0, f64::max),
+            spread_deg: spread,
         })
-        .collect();
-    if rays.iter().any(|(o, d)| (x - *o).dot(*d) <= 0.0) {
-        return Err("the rays toward the light meet behind a sphere".into());
     }
-    let n = distances.len() as f64;
-    Ok(Triangulation {
-        position: x,
-        residual_rms: (distances.iter().map(|d| d * d).sum::<f64>() / n).sqrt(),
-        residual_max: distances.iter().copied().fold(0.0, f64::max),
-        spread_deg: spread,
-    })
 }
 
 #[cfg(test)]
@@ -254,24 +253,27 @@ mod tests {
             DVec3::new(2.0, -1.0, -9.0),
         ] {
             let rim = outline(&camera, centre, 1.0, 64);
-            let c = sphere_from_rim(&camera, &rim, 1.0).unwrap();
+            let c = camera.sphere_from_rim(&rim, 1.0).unwrap();
             assert!((c - centre).length() < 1e-9, "{c} {centre}");
             // Twice the radius: twice the distance, the same direction.
-            let c2 = sphere_from_rim(&camera, &rim, 2.0).unwrap();
+            let c2 = camera.sphere_from_rim(&rim, 2.0).unwrap();
             assert!((c2 - 2.0 * centre).length() < 1e-8);
         }
         let rim = outline(&camera, DVec3::new(0.0, 0.0, -12.0), 1.0, 64);
-        assert!(sphere_from_rim(&camera, &rim[..5], 1.0)
+        assert!(camera
+            .sphere_from_rim(&rim[..5], 1.0)
             .unwrap_err()
             .contains("at least 8"));
-        assert!(sphere_from_rim(&camera, &rim, -1.0)
+        assert!(camera
+            .sphere_from_rim(&rim, -1.0)
             .unwrap_err()
             .contains("positive"));
         let line: Vec<(f64, f64)> = (0..20).map(|i| (i as f64, 5.0)).collect();
-        assert!(sphere_from_rim(&camera, &line, 1.0).is_err());
+        assert!(camera.sphere_from_rim(&line, 1.0).is_err());
         let mut nan = rim.clone();
         nan[3].0 = f64::NAN;
-        assert!(sphere_from_rim(&camera, &nan, 1.0)
+        assert!(camera
+            .sphere_from_rim(&nan, 1.0)
             .unwrap_err()
             .contains("finite"));
     }
@@ -284,7 +286,7 @@ mod tests {
         let mut rays = Vec::new();
         for c in balls {
             // The mirror point: the normal halfway between the view and the light, found by
-            // bisection along the sphere (independent of reflected_ray's formula).
+            // bisection along the sphere (independent of Pinhole::reflected_ray's formula).
             let mut n = (light - c).normalize();
             for _ in 0..200 {
                 let p = c + n;
@@ -292,19 +294,23 @@ mod tests {
                 n = (n + 0.5 * (h - n)).normalize();
             }
             let (u, v) = camera.project(c + n).unwrap();
-            let (o, d) = reflected_ray(&camera, c, 1.0, u + 0.5, v + 0.5);
+            let (o, d) = camera.reflected_ray(c, 1.0, u + 0.5, v + 0.5);
             assert!((o - (c + n)).length() < 1e-9);
             assert!(d.angle_between(light - o) < 1e-9);
             rays.push((o, d));
         }
-        let t = triangulate(&rays).unwrap();
+        let t = Triangulation::from_rays(&rays).unwrap();
         assert!((t.position - light).length() < 1e-8, "{}", t.position);
         assert!(t.residual_max < 1e-8 && t.spread_deg > 10.0);
-        assert!(triangulate(&rays[..1]).unwrap_err().contains("at least 2"));
+        assert!(Triangulation::from_rays(&rays[..1])
+            .unwrap_err()
+            .contains("at least 2"));
         let parallel = [rays[0], (rays[0].0 + DVec3::X * 0.01, rays[0].1)];
-        assert!(triangulate(&parallel).unwrap_err().contains("apart"));
+        assert!(Triangulation::from_rays(&parallel)
+            .unwrap_err()
+            .contains("apart"));
         let behind = [rays[0], (rays[1].0, -rays[1].1)];
-        assert!(triangulate(&behind).is_err());
+        assert!(Triangulation::from_rays(&behind).is_err());
     }
 
     /// Two chrome balls under a dome of lamps, rendered by [`crate::render::NearMirrorBalls`]
@@ -313,7 +319,7 @@ mod tests {
     /// radius.
     #[test]
     fn chrome_balls_under_a_dome_give_the_lamps_within_a_percent_of_its_radius() {
-        use crate::calibrate::{detect_spheres, find_highlight, outline_points, HighlightParams};
+        use crate::calibrate::{outline_points, Detection, Highlight, HighlightParams};
         use crate::render::perspective::dome_lights;
         use crate::render::NearMirrorBalls;
         let (w, h) = (640, 320);
@@ -342,14 +348,14 @@ mod tests {
                     .unwrap()
             })
             .collect();
-        let mut found = detect_spheres(w, h, &mean, &brightest, 0.05).unwrap();
+        let mut found = Detection::find_all(w, h, &mean, &brightest, 0.05).unwrap();
         assert_eq!(found.len(), 2);
         found.sort_by(|a, b| a.circle.cx.total_cmp(&b.circle.cx));
         let mut spheres = Vec::new();
         for (d, (truth, r)) in found.iter().zip(balls) {
             let (_, rim) = outline_points(w, h, &mean, d.circle).unwrap();
-            let c = sphere_from_rim(&camera, &rim, r).unwrap();
-            let from_circle = sphere_from_rim(&camera, &circle_rim(&d.circle, 256), r).unwrap();
+            let c = camera.sphere_from_rim(&rim, r).unwrap();
+            let from_circle = camera.sphere_from_rim(&d.circle.rim(256), r).unwrap();
             println!(
                 "sphere centre error: {:.4} from the rim's points, {:.4} from its circle",
                 (c - truth).length(),
@@ -362,11 +368,12 @@ mod tests {
             let rays: Vec<(DVec3, DVec3)> = spheres
                 .iter()
                 .filter_map(|(circle, c)| {
-                    let hl = find_highlight(w, h, img, circle, &HighlightParams::default()).ok()?;
-                    Some(reflected_ray(&camera, *c, 1.0, hl.x, hl.y))
+                    let hl =
+                        Highlight::find(w, h, img, circle, &HighlightParams::default()).ok()?;
+                    Some(camera.reflected_ray(*c, 1.0, hl.x, hl.y))
                 })
                 .collect();
-            if let Ok(t) = triangulate(&rays) {
+            if let Ok(t) = Triangulation::from_rays(&rays) {
                 errors.push((t.position - light.position).length() / dome);
             }
         }

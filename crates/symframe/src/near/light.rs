@@ -59,51 +59,51 @@ impl PointLight {
         };
         Some((l, falloff / r2))
     }
-}
 
-/// The sphere that best fits `points` (algebraic least squares: `|p|^2 = 2 c.p + k`), as
-/// (centre, radius); `None` for fewer than four points, points on one plane or circle (the
-/// fit is ill-conditioned), or a non-finite answer.
-pub fn fit_sphere(points: &[DVec3]) -> Option<(DVec3, f64)> {
-    if points.len() < 4 {
-        return None;
-    }
-    // Centred on the mean for conditioning; unknowns (c', k') of |q|^2 = 2 c'.q + k'.
-    let mean = points.iter().copied().sum::<DVec3>() / points.len() as f64;
-    let scale = points
-        .iter()
-        .map(|p| (*p - mean).length())
-        .fold(0.0, f64::max);
-    if !(scale > 0.0 && scale.is_finite()) {
-        return None;
-    }
-    // Normal equations of the 4 unknowns.
-    let mut a = [[0.0f64; 4]; 4];
-    let mut b = [0.0f64; 4];
-    for p in points {
-        let q = (*p - mean) / scale;
-        let row = [2.0 * q.x, 2.0 * q.y, 2.0 * q.z, 1.0];
-        let rhs = q.length_squared();
-        for i in 0..4 {
-            for j in 0..4 {
-                a[i][j] += row[i] * row[j];
-            }
-            b[i] += row[i] * rhs;
+    /// The sphere that best fits `points` (algebraic least squares: `|p|^2 = 2 c.p + k`), as
+    /// (centre, radius); `None` for fewer than four points, points on one plane or circle (the
+    /// fit is ill-conditioned), or a non-finite answer.
+    pub fn fit_sphere(points: &[DVec3]) -> Option<(DVec3, f64)> {
+        if points.len() < 4 {
+            return None;
         }
+        // Centred on the mean for conditioning; unknowns (c', k') of |q|^2 = 2 c'.q + k'.
+        let mean = points.iter().copied().sum::<DVec3>() / points.len() as f64;
+        let scale = points
+            .iter()
+            .map(|p| (*p - mean).length())
+            .fold(0.0, f64::max);
+        if !(scale > 0.0 && scale.is_finite()) {
+            return None;
+        }
+        // Normal equations of the 4 unknowns.
+        let mut a = [[0.0f64; 4]; 4];
+        let mut b = [0.0f64; 4];
+        for p in points {
+            let q = (*p - mean) / scale;
+            let row = [2.0 * q.x, 2.0 * q.y, 2.0 * q.z, 1.0];
+            let rhs = q.length_squared();
+            for i in 0..4 {
+                for j in 0..4 {
+                    a[i][j] += row[i] * row[j];
+                }
+                b[i] += row[i] * rhs;
+            }
+        }
+        let x = solve4(a, b)?;
+        let c = DVec3::new(x[0], x[1], x[2]);
+        let r2 = x[3] + c.length_squared();
+        if r2.is_nan() || r2 <= 0.0 {
+            return None;
+        }
+        // Ill-conditioned (points on a plane): the centre runs off far beyond the points.
+        if c.length() > 1e3 {
+            return None;
+        }
+        let centre = mean + c * scale;
+        let radius = r2.sqrt() * scale;
+        (centre.is_finite() && radius.is_finite()).then_some((centre, radius))
     }
-    let x = solve4(a, b)?;
-    let c = DVec3::new(x[0], x[1], x[2]);
-    let r2 = x[3] + c.length_squared();
-    if r2.is_nan() || r2 <= 0.0 {
-        return None;
-    }
-    // Ill-conditioned (points on a plane): the centre runs off far beyond the points.
-    if c.length() > 1e3 {
-        return None;
-    }
-    let centre = mean + c * scale;
-    let radius = r2.sqrt() * scale;
-    (centre.is_finite() && radius.is_finite()).then_some((centre, radius))
 }
 
 /// Solves a symmetric 4 x 4 system by Gaussian elimination with partial pivoting; `None` when
@@ -192,7 +192,7 @@ mod tests {
                 centre + 8.0 * DVec3::new(r * a.cos(), r * a.sin(), z)
             })
             .collect();
-        let (c, r) = fit_sphere(&dome).unwrap();
+        let (c, r) = PointLight::fit_sphere(&dome).unwrap();
         assert!(
             (c - centre).length() < 1e-9 && (r - 8.0).abs() < 1e-9,
             "{c} {r}"
@@ -200,8 +200,8 @@ mod tests {
         let plane: Vec<DVec3> = (0..20)
             .map(|i| DVec3::new((i % 5) as f64, (i / 5) as f64, -3.0))
             .collect();
-        assert_eq!(fit_sphere(&plane), None);
-        assert_eq!(fit_sphere(&dome[..3]), None);
+        assert_eq!(PointLight::fit_sphere(&plane), None);
+        assert_eq!(PointLight::fit_sphere(&dome[..3]), None);
     }
 
     #[test]

@@ -4,7 +4,7 @@
 
 use glam::DVec3;
 
-use crate::integrate::{triangulate_grid, Mesh};
+use crate::integrate::{continuous_edge, triangulate_grid, Mesh};
 use crate::near::Pinhole;
 
 /// Smallest cosine between a normal and the ray to its pixel used to predict the depth's slope:
@@ -12,86 +12,79 @@ use crate::near::Pinhole;
 /// orthographic mesh.
 const MIN_FACING: f64 = 0.05;
 
-/// Builds the mesh of `depth` (`H x W`, metric depths along the optical axis through `camera`,
-/// NaN where none) with the camera-frame `normals` (`H x W x 3`): a vertex at
-/// `camera.point(col, row, depth)` for every pixel with a depth and a normal, two triangles per
-/// 2 x 2 block (one where only three pixels are valid), counter-clockwise seen from the camera.
-/// A triangle is left out where an edge's log-depth step departs from the normals' prediction
-/// (`d ln z / du = -(n . r_u) / (n . r)`) by more than `max_jump * (1 + |predicted|)` once both
-/// are scaled to pixels by the focal length (a depth discontinuity, judged as
-/// [`crate::DepthMap::mesh`] judges it for a height map).
-pub fn perspective_mesh(
-    camera: &Pinhole,
-    width: usize,
-    height: usize,
-    depth: &[f32],
-    normals: &[f32],
-    max_jump: f64,
-) -> Mesh {
-    let (w, h) = (width, height);
-    let mut index = vec![u32::MAX; w * h];
-    let mut m = Mesh::default();
-    let r_u = camera.ray(1.0, 0.0) - camera.ray(0.0, 0.0);
-    let r_v = camera.ray(0.0, 1.0) - camera.ray(0.0, 0.0);
-    let focal = 0.5 * (camera.fx + camera.fy);
-    let normal = |i: usize| -> Option<DVec3> {
-        let v = DVec3::from_array([0, 1, 2].map(|c| normals[3 * i + c] as f64));
-        (v.is_finite() && v.length() > 0.0).then(|| v.normalize())
-    };
-    // The normal's log-depth slopes (along u, along v) at pixel i.
-    let slope = |i: usize| -> Option<(f64, f64)> {
-        let n = normal(i)?;
-        let r = camera.ray((i % w) as f64, (i / w) as f64);
-        let nr = n.dot(r).min(-MIN_FACING * r.length());
-        Some((-n.dot(r_u) / nr, -n.dot(r_v) / nr))
-    };
-    for i in 0..w * h {
-        let d = depth[i];
-        if let (true, Some(n)) = (d.is_finite() && d > 0.0, normal(i)) {
-            index[i] = m.positions.len() as u32;
-            let (r, q) = (i / w, i % w);
-            let p = camera.point(q as f64, r as f64, d as f64);
-            m.positions.push(p.as_vec3().to_array());
-            m.normals.push(n.as_vec3().to_array());
-            m.pixels.push([q as u32, r as u32]);
-        }
-    }
-    let continuous = |a: usize, b: usize| -> bool {
-        let (Some((ua, va)), Some((ub, vb))) = (slope(a), slope(b)) else {
-            return false;
+impl Pinhole {
+    /// Builds the mesh of `depth` (`H x W`, metric depths along the optical axis through this
+    /// camera, NaN where none) with the camera-frame `normals` (`H x W x 3`): a vertex at
+    /// `self.point(col, row, depth)` for every pixel with a depth and a normal, two triangles per
+    /// 2 x 2 block (one where only three pixels are valid), counter-clockwise seen from the camera.
+    /// A triangle is left out where an edge's log-depth step departs from the normals' prediction
+    /// (`d ln z / du = -(n . r_u) / (n . r)`) by more than `max_jump * (1 + |predicted|)` once both
+    /// are scaled to pixels by the focal length (a depth discontinuity, judged as
+    /// [`crate::DepthMap::mesh`] judges it for a height map).
+    pub fn mesh(
+        &self,
+        width: usize,
+        height: usize,
+        depth: &[f32],
+        normals: &[f32],
+        max_jump: f64,
+    ) -> Mesh {
+        let (w, h) = (width, height);
+        let mut index = vec![u32::MAX; w * h];
+        let mut m = Mesh::default();
+        let r_u = self.ray(1.0, 0.0) - self.ray(0.0, 0.0);
+        let r_v = self.ray(0.0, 1.0) - self.ray(0.0, 0.0);
+        let focal = 0.5 * (self.fx + self.fy);
+        let normal = |i: usize| -> Option<DVec3> {
+            let v = DVec3::from_array([0, 1, 2].map(|c| normals[3 * i + c] as f64));
+            (v.is_finite() && v.length() > 0.0).then(|| v.normalize())
         };
-        let dq = (b % w) as f64 - (a % w) as f64;
-        let dr = (b / w) as f64 - (a / w) as f64;
-        let predicted = focal * (0.5 * (ua + ub) * dq + 0.5 * (va + vb) * dr);
-        let step = focal * ((depth[b] as f64).ln() - (depth[a] as f64).ln());
-        (step - predicted).abs() <= max_jump * (1.0 + predicted.abs())
-    };
-    triangulate_grid(w, h, &index, continuous, &mut m);
-    m
-}
-
-/// Heights in pixel spacings for a picture of a perspective depth map: `-f ln z` (f the mean
-/// focal length), whose slopes are the surface's in pixel units where the rays are near the
-/// axis, so the integrate job's picture shades it as it shades a height map.
-pub fn picture_heights(camera: &Pinhole, depth: &[f32]) -> Vec<f32> {
-    let focal = 0.5 * (camera.fx + camera.fy);
-    depth
-        .iter()
-        .map(|&d| {
-            if d.is_finite() && d > 0.0 {
-                (-focal * (d as f64).ln()) as f32
-            } else {
-                f32::NAN
+        // The normal's log-depth slopes (along u, along v) at pixel i.
+        let slope = |i: usize| -> Option<(f64, f64)> {
+            let n = normal(i)?;
+            let r = self.ray((i % w) as f64, (i / w) as f64);
+            let nr = n.dot(r).min(-MIN_FACING * r.length());
+            Some((-n.dot(r_u) / nr, -n.dot(r_v) / nr))
+        };
+        for i in 0..w * h {
+            let d = depth[i];
+            if let (true, Some(n)) = (d.is_finite() && d > 0.0, normal(i)) {
+                index[i] = m.positions.len() as u32;
+                let (r, q) = (i / w, i % w);
+                let p = self.point(q as f64, r as f64, d as f64);
+                m.positions.push(p.as_vec3().to_array());
+                m.normals.push(n.as_vec3().to_array());
+                m.pixels.push([q as u32, r as u32]);
             }
-        })
-        .collect()
+        }
+        let log_depth = |i: usize| (depth[i] as f64).ln();
+        let continuous = |a, b| continuous_edge(w, a, b, &slope, &log_depth, focal, max_jump);
+        triangulate_grid(w, h, &index, continuous, &mut m);
+        m
+    }
+
+    /// Heights in pixel spacings for a picture of a perspective depth map: `-f ln z` (f the mean
+    /// focal length), whose slopes are the surface's in pixel units where the rays are near the
+    /// axis, so the integrate job's picture shades it as it shades a height map.
+    pub fn picture_heights(&self, depth: &[f32]) -> Vec<f32> {
+        let focal = 0.5 * (self.fx + self.fy);
+        depth
+            .iter()
+            .map(|&d| {
+                if d.is_finite() && d > 0.0 {
+                    (-focal * (d as f64).ln()) as f32
+                } else {
+                    f32::NAN
+                }
+            })
+            .collect()
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::integrate::IntegrateParams;
-    use crate::near::perspective_depth;
 
     /// A sphere of radius 1 at depth 6 seen by a 64 x 48 camera: its depth map, normals and the
     /// true surface point of each pixel (NaN where the ray misses it).
@@ -123,7 +116,7 @@ mod tests {
     #[test]
     fn the_mesh_of_a_sphere_lies_on_it() {
         let (cam, w, h, depth, normals) = sphere();
-        let m = perspective_mesh(&cam, w, h, &depth, &normals, 2.0);
+        let m = cam.mesh(w, h, &depth, &normals, 2.0);
         assert_eq!(
             m.positions.len(),
             depth.iter().filter(|d| d.is_finite()).count()
@@ -153,7 +146,8 @@ mod tests {
             .map(|d| if d.is_finite() { 6.0 } else { f32::NAN })
             .collect();
         let params = IntegrateParams::default();
-        let got = perspective_depth(&cam, w, h, &normals, None, &start, Some(6.0), &params)
+        let got = cam
+            .integrate(w, h, &normals, None, &start, Some(6.0), &params)
             .unwrap()
             .depth;
         let errs: Vec<(f32, f32)> = got
@@ -182,7 +176,7 @@ mod tests {
             .enumerate()
             .map(|(i, &d)| if i % w >= w / 2 { d + 0.1 } else { d })
             .collect();
-        let m = perspective_mesh(&cam, w, h, &stepped, &normals, 2.0);
+        let m = cam.mesh(w, h, &stepped, &normals, 2.0);
         assert!(m.dropped > 0);
         let rows = depth
             .chunks_exact(w)

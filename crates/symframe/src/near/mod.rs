@@ -1,9 +1,9 @@
 //! Near lights and perspective cameras: a pinhole camera ([`Pinhole`]: each pixel's ray and
 //! view direction from OpenCV's intrinsics), point lights ([`PointLight`]: each light's
 //! direction and irradiance at a surface point, LEDs with a cos^mu falloff) and the sphere
-//! through the lights ([`fit_sphere`]: a dome's centre, where the object is taken to be when its
-//! distance is not given); the lights' positions from chrome spheres ([`chrome`]: each sphere
-//! placed by its outline, each light triangulated from its reflections).
+//! through the lights ([`PointLight::fit_sphere`]: a dome's centre, where the object is taken to
+//! be when its distance is not given); the lights' positions from chrome spheres ([`chrome`]:
+//! each sphere placed by its outline, each light triangulated from its reflections).
 //!
 //! The estimator itself assumes distant lights and the view along +z; with near lights each
 //! pixel has its own light directions, irradiances and view. docs/method.md ("Near lights and
@@ -18,8 +18,5 @@ mod tiling;
 
 pub use camera::Pinhole;
 pub(crate) use light::rotation_to_z;
-pub use light::{fit_sphere, PointLight};
-pub use mesh::{perspective_mesh, picture_heights};
-pub use solve::{
-    estimate_near_stack, perspective_depth, NearMethod, NearOutcome, NearParams, NearScratch,
-};
+pub use light::PointLight;
+pub use solve::{NearMethod, NearOutcome, NearParams};

@@ -16,7 +16,7 @@
 //! The surface points need depths, which are unknown: [`NearParams::rounds`] starts from a plane at
 //! the object's distance and goes in rounds. Each round but the last estimates one pixel per
 //! tile (the depth needs no more), spreads those normals over their neighbours and integrates
-//! them into a perspective depth map ([`depth_from_normals`]); once those normals settle, the
+//! them into a perspective depth map ([`Pinhole::integrate`]); once those normals settle, the
 //! last round estimates every pixel. A tile keeps the rig of the round before while its point
 //! has moved too little to matter ([`NearParams::rig_reuse_deg`]); the tiles whose point the
 //! last round's own depth map moves by more are estimated once more.
@@ -30,7 +30,7 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::frames::estimator::{Estimator, EstimatorParams, PixelScratch};
 use crate::frames::rig::{Rig, RigOptions};
-use crate::integrate::{integrate, DepthMap, IntegrateParams};
+use crate::integrate::{DepthMap, IntegrateParams};
 use crate::maps::{EstimateMaps, PixelRecord, PixelStatus};
 use crate::method::{run_stack, PixelMethod};
 use crate::near::tiling::{halfway_change_deg, tile_image, Tile, Tiling, NO_TILE};
@@ -113,12 +113,9 @@ pub struct NearMethod<'a> {
     largest: Option<usize>,
 }
 
-/// Per-thread buffers of [`NearMethod`].
-#[derive(Debug, Clone)]
-pub struct NearScratch {
-    pixel: Option<PixelScratch>,
-    samples: Vec<f32>,
-}
+/// Per-thread buffers of [`NearMethod`]: the estimator's, sized for the largest rig (none where
+/// no tile has a rig), and one pixel's samples divided by its irradiances.
+pub(crate) type NearScratch = (Option<PixelScratch>, Vec<f32>);
 
 /// The rigs of a tiling, those of `cache` kept where their point is within `reuse_deg` of the
 /// tile's (in halfway terms); the cache then holds this tiling's rigs. Returns the rigs and
@@ -300,10 +297,10 @@ impl PixelMethod for NearMethod<'_> {
 
     fn scratch(&self) -> NearScratch {
         let largest = self.largest.and_then(|t| self.rigs[t].as_ref());
-        NearScratch {
-            pixel: largest.map(|r| PixelScratch::new(&r.rig)),
-            samples: Vec::with_capacity(largest.map_or(0, |r| r.rig.n_used() * 3)),
-        }
+        (
+            largest.map(|r| PixelScratch::new(&r.rig)),
+            Vec::with_capacity(largest.map_or(0, |r| r.rig.n_used() * 3)),
+        )
     }
 
     fn pixel(&self, p: usize, samples: &[f32], scratch: &mut NearScratch) -> PixelRecord {
@@ -314,7 +311,7 @@ impl PixelMethod for NearMethod<'_> {
         let tr = (t != NO_TILE)
             .then(|| self.rigs[t as usize].as_deref())
             .flatten();
-        let (Some(tr), Some(pixel_scratch)) = (tr, scratch.pixel.as_mut()) else {
+        let (Some(tr), Some(pixel_scratch)) = (tr, scratch.0.as_mut()) else {
             return NO_DATA;
         };
         let depth = self.depth[p] as f64;
@@ -324,7 +321,7 @@ impl PixelMethod for NearMethod<'_> {
         let (col, row) = (p % self.width, p / self.width);
         let point = self.camera.point(col as f64, row as f64, depth);
         let view = (-point).normalize_or_zero();
-        let buf = &mut scratch.samples;
+        let buf = &mut scratch.1;
         buf.clear();
         // The rotation that best takes the rig's halfway vectors to the pixel's own (both in
         // the tile's frame), to first order: `R a_i ~ b_i` with `R = I + [w]x` gives
@@ -366,121 +363,105 @@ impl PixelMethod for NearMethod<'_> {
     }
 }
 
-/// Integrates camera-frame normals (`H x W x 3`, NaN where none) into depths along the optical
-/// axis through the pinhole `camera`: the log-depth's gradient is `d ln z / du = -(n.r_u) /
-/// (n.r)` (and likewise in v) with `r` the pixel's ray at depth 1, integrated as the orthographic
-/// solver integrates heights ([`integrate`]). Each connected region's shape is so known up to a
-/// scale about the camera's centre: with `centre` (the object's distance along the optical
-/// axis) the scale puts the centre of the sphere that best fits the region's surface at that
-/// depth (the object is taken to be centred there: exact for a sphere), else, or where no sphere
-/// fits (a flat region), the region's median depth is that of `previous` over the same pixels.
-/// Pixels without a normal (or facing away from the camera) keep their `previous` depth.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn depth_from_normals(
-    camera: &Pinhole,
-    width: usize,
-    height: usize,
-    normals: &[f32],
-    confidence: Option<&[f32]>,
-    previous: &[f32],
-    centre: Option<f64>,
-    params: &IntegrateParams,
-) -> Result<Vec<f32>> {
-    perspective_depth(
-        camera, width, height, normals, confidence, previous, centre, params,
-    )
-    .map(|d| d.depth)
-}
-
-/// [`depth_from_normals`] with the integration's figures: the map's `depth` holds the metric
-/// depths along the optical axis (NaN where `previous` is), its counts those of the log-depth's
-/// solve.
-#[allow(clippy::too_many_arguments)]
-pub fn perspective_depth(
-    camera: &Pinhole,
-    width: usize,
-    height: usize,
-    normals: &[f32],
-    confidence: Option<&[f32]>,
-    previous: &[f32],
-    centre: Option<f64>,
-    params: &IntegrateParams,
-) -> Result<DepthMap> {
-    let n = width * height;
-    if normals.len() != 3 * n || previous.len() != n {
-        return Err(Error::BadParameter(format!(
-            "a {width}x{height} image needs {} normal values and {n} depths",
-            3 * n
-        )));
-    }
-    // Pseudo-normals whose orthographic slopes are the log-depth's (heights are -ln z).
-    let r_u = camera.ray(1.0, 0.0) - camera.ray(0.0, 0.0);
-    let r_v = camera.ray(0.0, 1.0) - camera.ray(0.0, 0.0);
-    let mut pseudo = vec![f32::NAN; 3 * n];
-    // Pixels facing the camera well enough to place the region's sphere.
-    let mut facing = vec![false; n];
-    for p in 0..n {
-        let m = DVec3::from_array([0, 1, 2].map(|c| normals[3 * p + c] as f64));
-        if !m.is_finite() || !previous[p].is_finite() {
-            continue;
+impl Pinhole {
+    /// Integrates camera-frame normals (`H x W x 3`, NaN where none) into depths along the optical
+    /// axis through this pinhole: the log-depth's gradient is `d ln z / du = -(n.r_u) / (n.r)` (and
+    /// likewise in v) with `r` the pixel's ray at depth 1, integrated as the orthographic solver
+    /// integrates heights ([`DepthMap::integrate`]). Each connected region's shape is so known up
+    /// to a scale about the camera's centre: with `centre` (the object's distance along the optical
+    /// axis) the scale puts the centre of the sphere that best fits the region's surface at that
+    /// depth (the object is taken to be centred there: exact for a sphere), else, or where no
+    /// sphere fits (a flat region), the region's median depth is that of `previous` over the same
+    /// pixels. Pixels without a normal (or facing away from the camera) keep their `previous`
+    /// depth. The map's `depth` holds the metric depths along the optical axis (NaN where
+    /// `previous` is), its counts those of the log-depth's solve.
+    #[allow(clippy::too_many_arguments)]
+    pub fn integrate(
+        &self,
+        width: usize,
+        height: usize,
+        normals: &[f32],
+        confidence: Option<&[f32]>,
+        previous: &[f32],
+        centre: Option<f64>,
+        params: &IntegrateParams,
+    ) -> Result<DepthMap> {
+        let n = width * height;
+        if normals.len() != 3 * n || previous.len() != n {
+            return Err(Error::BadParameter(format!(
+                "a {width}x{height} image needs {} normal values and {n} depths",
+                3 * n
+            )));
         }
-        let r = camera.ray((p % width) as f64, (p / width) as f64);
-        let nr = m.dot(r);
-        if nr >= -1e-6 {
-            continue;
-        }
-        // h = -ln z: dh/du = (n.r_u)/(n.r), dh/dv = (n.r_v)/(n.r); the solver reads
-        // dh/dcol = -mx/mz and dh/drow = +my/mz.
-        facing[p] = -nr / r.length() > MIN_FIT_COSINE;
-        let (hu, hv) = (m.dot(r_u) / nr, m.dot(r_v) / nr);
-        let q = DVec3::new(-hu, hv, 1.0).normalize();
-        pseudo[3 * p..3 * p + 3].copy_from_slice(&q.as_vec3().to_array());
-    }
-    let heights = integrate(width, height, &pseudo, confidence, params)?;
-    // One scale per connected region: the median of ln z kept.
-    let (label, sizes) = label_regions(width, height, |p| heights.depth[p].is_finite())
-        .ok_or_else(|| {
-            Error::BadParameter(format!(
-                "a {width}x{height} image is too large to integrate"
-            ))
-        })?;
-    // Each region's pixels, in label order (a counting sort of the labels).
-    let mut starts = vec![0usize; sizes.len() + 1];
-    for (l, &size) in sizes.iter().enumerate() {
-        starts[l + 1] = starts[l] + size;
-    }
-    let mut order = vec![0usize; starts[sizes.len()]];
-    let mut next = starts.clone();
-    for (p, &l) in label.iter().enumerate().filter(|(_, &l)| l != OUTSIDE) {
-        order[next[l as usize]] = p;
-        next[l as usize] += 1;
-    }
-    let mut out = previous.to_vec();
-    let (mut logs, mut hs, mut fitted) = (Vec::new(), Vec::new(), Vec::new());
-    for region in starts.windows(2).map(|w| &order[w[0]..w[1]]) {
-        hs.clear();
-        hs.extend(region.iter().map(|&p| heights.depth[p] as f64));
-        let h_mid = median(&mut hs);
-        // The region's shape at the scale where its median depth is 1 (ln z = h_mid - h).
-        let relative = |p: usize| (h_mid - heights.depth[p] as f64).exp();
-        fitted.clear();
-        fitted.extend(region.iter().copied().filter(|&p| facing[p]));
-        let c = match centre.and_then(|d| centre_scale(camera, width, &fitted, &relative, d)) {
-            Some(scale) => scale.ln(),
-            None => {
-                logs.clear();
-                logs.extend(region.iter().map(|&p| (previous[p] as f64).ln()));
-                median(&mut logs)
+        // Pseudo-normals whose orthographic slopes are the log-depth's (heights are -ln z).
+        let r_u = self.ray(1.0, 0.0) - self.ray(0.0, 0.0);
+        let r_v = self.ray(0.0, 1.0) - self.ray(0.0, 0.0);
+        let mut pseudo = vec![f32::NAN; 3 * n];
+        // Pixels facing the camera well enough to place the region's sphere.
+        let mut facing = vec![false; n];
+        for p in 0..n {
+            let m = DVec3::from_array([0, 1, 2].map(|c| normals[3 * p + c] as f64));
+            if !m.is_finite() || !previous[p].is_finite() {
+                continue;
             }
-        };
-        for &p in region {
-            out[p] = (c + h_mid - heights.depth[p] as f64).exp() as f32;
+            let r = self.ray((p % width) as f64, (p / width) as f64);
+            let nr = m.dot(r);
+            if nr >= -1e-6 {
+                continue;
+            }
+            // h = -ln z: dh/du = (n.r_u)/(n.r), dh/dv = (n.r_v)/(n.r); the solver reads
+            // dh/dcol = -mx/mz and dh/drow = +my/mz.
+            facing[p] = -nr / r.length() > MIN_FIT_COSINE;
+            let (hu, hv) = (m.dot(r_u) / nr, m.dot(r_v) / nr);
+            let q = DVec3::new(-hu, hv, 1.0).normalize();
+            pseudo[3 * p..3 * p + 3].copy_from_slice(&q.as_vec3().to_array());
         }
+        let heights = DepthMap::integrate(width, height, &pseudo, confidence, params)?;
+        // One scale per connected region: the median of ln z kept.
+        let (label, sizes) = label_regions(width, height, |p| heights.depth[p].is_finite())
+            .ok_or_else(|| {
+                Error::BadParameter(format!(
+                    "a {width}x{height} image is too large to integrate"
+                ))
+            })?;
+        // Each region's pixels, in label order (a counting sort of the labels).
+        let mut starts = vec![0usize; sizes.len() + 1];
+        for (l, &size) in sizes.iter().enumerate() {
+            starts[l + 1] = starts[l] + size;
+        }
+        let mut order = vec![0usize; starts[sizes.len()]];
+        let mut next = starts.clone();
+        for (p, &l) in label.iter().enumerate().filter(|(_, &l)| l != OUTSIDE) {
+            order[next[l as usize]] = p;
+            next[l as usize] += 1;
+        }
+        let mut out = previous.to_vec();
+        let (mut logs, mut hs, mut fitted) = (Vec::new(), Vec::new(), Vec::new());
+        for region in starts.windows(2).map(|w| &order[w[0]..w[1]]) {
+            hs.clear();
+            hs.extend(region.iter().map(|&p| heights.depth[p] as f64));
+            let h_mid = median(&mut hs);
+            // The region's shape at the scale where its median depth is 1 (ln z = h_mid - h).
+            let relative = |p: usize| (h_mid - heights.depth[p] as f64).exp();
+            fitted.clear();
+            fitted.extend(region.iter().copied().filter(|&p| facing[p]));
+            let c = match centre.and_then(|d| centre_scale(self, width, &fitted, &relative, d)) {
+                Some(scale) => scale.ln(),
+                None => {
+                    logs.clear();
+                    logs.extend(region.iter().map(|&p| (previous[p] as f64).ln()));
+                    median(&mut logs)
+                }
+            };
+            for &p in region {
+                out[p] = (c + h_mid - heights.depth[p] as f64).exp() as f32;
+            }
+        }
+        Ok(DepthMap {
+            depth: out,
+            ..heights
+        })
     }
-    Ok(DepthMap {
-        depth: out,
-        ..heights
-    })
 }
 
 /// A coarse tile's largest side, in tiles of the last round's.
@@ -526,7 +507,7 @@ fn centre_scale(
         .iter()
         .map(|&p| camera.point((p % width) as f64, (p / width) as f64, relative(p)))
         .collect();
-    let (c, r) = crate::near::fit_sphere(&points)?;
+    let (c, r) = PointLight::fit_sphere(&points)?;
     let mean = points.iter().copied().sum::<DVec3>() / points.len() as f64;
     let spread = points
         .iter()
@@ -652,8 +633,8 @@ impl NearParams {
     /// Estimates every pixel (inside `mask`) of a `width x height` image under `lights` seen by
     /// `camera`, the object's surface started as the plane at `distance` along the optical axis.
     /// `run` estimates one round: the method's result at every pixel of the image (as
-    /// [`run_stack`] gives them), told the round's number and what it estimates. Rounds of one
-    /// pixel per tile (`params.coarse`) and [`depth_from_normals`] go on until their normals
+    /// [`Stack::run`] gives them), told the round's number and what it estimates. Rounds of one
+    /// pixel per tile (`params.coarse`) and [`Pinhole::integrate`] go on until their normals
     /// change by less than `params.tolerance_deg` on average; a round of every pixel follows
     /// (`params.max_iterations` rounds at most, that one included), and the tiles its own depth
     /// map moves are estimated once more.
@@ -795,20 +776,21 @@ impl NearParams {
             }
             let confidence: Option<Vec<f32>> =
                 (stage == STAGE_FULL).then(|| records.iter().map(|r| r.confidence).collect());
-            let next = depth_from_normals(
-                camera,
-                width,
-                height,
-                &normals,
-                confidence.as_deref(),
-                &depth,
-                Some(distance),
-                if stage == STAGE_COARSE {
-                    &coarse_integrate
-                } else {
-                    &integrate_params
-                },
-            )?;
+            let next = camera
+                .integrate(
+                    width,
+                    height,
+                    &normals,
+                    confidence.as_deref(),
+                    &depth,
+                    Some(distance),
+                    if stage == STAGE_COARSE {
+                        &coarse_integrate
+                    } else {
+                        &integrate_params
+                    },
+                )
+                .map(|d| d.depth)?;
             if stage == STAGE_COARSE {
                 coarse = !settled;
                 depth = next;
@@ -834,17 +816,18 @@ impl NearParams {
                 next,
                 &mut |method| run(method, round + 1, STAGE_REFINE),
                 &mut |normals, confidence, previous| {
-                    depth_from_normals(
-                        camera,
-                        width,
-                        height,
-                        normals,
-                        Some(confidence),
-                        previous,
-                        Some(distance),
-                        &integrate_params,
-                    )
-                    .map_err(E::from)
+                    camera
+                        .integrate(
+                            width,
+                            height,
+                            normals,
+                            Some(confidence),
+                            previous,
+                            Some(distance),
+                            &integrate_params,
+                        )
+                        .map(|d| d.depth)
+                        .map_err(E::from)
                 },
             )?;
             rigs_built += refined.1;
@@ -971,35 +954,37 @@ fn refine<E: From<Error>>(
     Ok((records, depth, largest, (count, moved.len())))
 }
 
-/// Estimates every pixel of `stack` (inside `mask`) under `lights` (one per image) seen by
-/// `camera`, the object's surface started as the plane at `distance` along the optical axis:
-/// the rounds of [`NearParams::rounds`] over the stack. `progress` is told the pixels finished, round
-/// after round.
-pub fn estimate_near_stack(
-    stack: &Stack,
-    mask: Option<&[bool]>,
-    camera: &Pinhole,
-    lights: &[PointLight],
-    distance: f64,
-    params: &NearParams,
-    progress: &(dyn Fn(usize) + Sync),
-) -> Result<NearOutcome> {
-    crate::stack::check_inputs(
-        stack.width,
-        stack.height,
-        stack.n_lights,
-        lights.len(),
-        mask,
-    )?;
-    params.rounds(
-        camera,
-        lights,
-        stack.width,
-        stack.height,
-        mask,
-        distance,
-        &mut |method, _, _| Ok::<_, Error>(run_stack(method, stack, mask, progress)),
-    )
+impl NearParams {
+    /// Estimates every pixel of `stack` (inside `mask`) under `lights` (one per image) seen by
+    /// `camera`, the object's surface started as the plane at `distance` along the optical axis:
+    /// the rounds of [`NearParams::rounds`] over the stack. `progress` is told the pixels
+    /// finished, round after round.
+    pub fn estimate_stack(
+        &self,
+        stack: &Stack,
+        mask: Option<&[bool]>,
+        camera: &Pinhole,
+        lights: &[PointLight],
+        distance: f64,
+        progress: &(dyn Fn(usize) + Sync),
+    ) -> Result<NearOutcome> {
+        Stack::check_inputs(
+            stack.width,
+            stack.height,
+            stack.n_lights,
+            lights.len(),
+            mask,
+        )?;
+        self.rounds(
+            camera,
+            lights,
+            stack.width,
+            stack.height,
+            mask,
+            distance,
+            &mut |method, _, _| Ok::<_, Error>(run_stack(method, stack, mask, progress)),
+        )
+    }
 }
 
 #[cfg(test)]
@@ -1044,17 +1029,11 @@ mod tests {
         // The sphere's centre at depth 6: the surface found to about a hundredth of its radius
         // on average at this resolution (a radius of 19 pixels; the one-sided differences of
         // the integration leave that much), the rim pixels aside.
-        let d = depth_from_normals(
-            &s.camera,
-            48,
-            48,
-            &s.gt_normals(),
-            None,
-            &start,
-            Some(6.0),
-            &params,
-        )
-        .unwrap();
+        let d = s
+            .camera
+            .integrate(48, 48, &s.gt_normals(), None, &start, Some(6.0), &params)
+            .map(|d| d.depth)
+            .unwrap();
         let inner: Vec<f32> = d
             .iter()
             .enumerate()
@@ -1068,17 +1047,11 @@ mod tests {
             .collect();
         assert!(mean(&inner) < 0.012, "{}", mean(&inner));
         // Without the centre, the median depth stays the start's.
-        let d = depth_from_normals(
-            &s.camera,
-            48,
-            48,
-            &s.gt_normals(),
-            None,
-            &start,
-            None,
-            &params,
-        )
-        .unwrap();
+        let d = s
+            .camera
+            .integrate(48, 48, &s.gt_normals(), None, &start, None, &params)
+            .map(|d| d.depth)
+            .unwrap();
         let mut v: Vec<f64> = d
             .iter()
             .filter(|x| x.is_finite())
@@ -1128,16 +1101,9 @@ mod tests {
             max_iterations: 3,
             ..NearParams::default()
         };
-        let near = estimate_near_stack(
-            &stack,
-            Some(&mask),
-            &s.camera,
-            &lights,
-            6.0,
-            &params,
-            &|_| {},
-        )
-        .unwrap();
+        let near = params
+            .estimate_stack(&stack, Some(&mask), &s.camera, &lights, 6.0, &|_| {})
+            .unwrap();
         let (e_far, e_near) = (error(&far.normals), error(&near.maps.normals));
         assert!(
             e_near < 1.0 && e_near < e_far / 3.0,
@@ -1150,25 +1116,11 @@ mod tests {
         assert!(near.tiles > 0 && near.rigs_built >= near.tiles);
         assert!(near.rig_bound_deg.is_finite() && near.rig_bound_deg >= 0.0);
         // Bad input is an error, never a panic.
-        assert!(estimate_near_stack(
-            &stack,
-            Some(&mask),
-            &s.camera,
-            &lights[1..],
-            6.0,
-            &params,
-            &|_| {}
-        )
-        .is_err());
-        assert!(estimate_near_stack(
-            &stack,
-            Some(&mask),
-            &s.camera,
-            &lights,
-            -1.0,
-            &params,
-            &|_| {}
-        )
-        .is_err());
+        assert!(params
+            .estimate_stack(&stack, Some(&mask), &s.camera, &lights[1..], 6.0, &|_| {})
+            .is_err());
+        assert!(params
+            .estimate_stack(&stack, Some(&mask), &s.camera, &lights, -1.0, &|_| {})
+            .is_err());
     }
 }

@@ -6,10 +6,7 @@
 use glam::DVec3;
 use symframe::brdf::{parse_model, Brdf, Lambertian};
 use symframe::render::{Scene, TangentField};
-use symframe::{
-    estimate_stack_baseline, evaluate, uniform_cone_lights, Baseline, BaselineParams, Evaluation,
-    PixelStatus,
-};
+use symframe::{evaluate, uniform_cone_lights, Baseline, BaselineParams, Evaluation, PixelStatus};
 
 /// Lights spread uniformly over the paper's cone: up to 130 degrees from the view.
 fn rig(n: usize) -> Vec<DVec3> {
@@ -24,7 +21,8 @@ fn run_with(
     params: BaselineParams,
 ) -> Evaluation {
     let stack = scene.render_stack(brdf, lights);
-    let maps = estimate_stack_baseline(&stack, lights, Some(&scene.mask), method, params, &|_| {})
+    let maps = method
+        .estimate_stack(&stack, lights, Some(&scene.mask), params, &|_| {})
         .unwrap();
     let e = evaluate(
         &maps.normals,
@@ -181,17 +179,11 @@ fn stack_driver_matches_the_per_pixel_results_and_counts() {
     let lights = rig(120);
     let stack = scene.render_stack(&Lambertian::new([0.5; 3]), &lights);
     let done = std::sync::atomic::AtomicUsize::new(0);
-    let maps = estimate_stack_baseline(
-        &stack,
-        &lights,
-        None,
-        Baseline::WoodhamRobust,
-        BaselineParams::default(),
-        &|k| {
+    let maps = Baseline::WoodhamRobust
+        .estimate_stack(&stack, &lights, None, BaselineParams::default(), &|k| {
             done.fetch_add(k, std::sync::atomic::Ordering::Relaxed);
-        },
-    )
-    .unwrap();
+        })
+        .unwrap();
     assert_eq!(done.into_inner(), 16 * 16);
     let inside = scene.mask.iter().filter(|&&m| m).count();
     // Outside the sphere the renders are black: no data.

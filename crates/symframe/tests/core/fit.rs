@@ -6,8 +6,8 @@ use glam::DVec3;
 use symframe::brdf::{Brdf, Ward};
 use symframe::render::{Scene, TangentField};
 use symframe::{
-    estimate_stack, fit_stack, uniform_cone_lights, Edits, EstimatorParams, FitMaps, FitModel,
-    FitParams, Relighter, Rig, RigOptions,
+    estimate_stack, uniform_cone_lights, Edits, EstimatorParams, FitMaps, FitModel, FitParams,
+    Relighter, Rig, RigOptions,
 };
 
 /// Pixels inside the sphere whose normal is within 60 degrees of the view.
@@ -122,16 +122,16 @@ fn true_frames_recover_ward_parameters_and_relight_held_out_lights() {
         model: FitModel::Ward,
         ..FitParams::default()
     };
-    let fit = fit_stack(
-        &stack,
-        &lights,
-        &scene.gt_normals(),
-        &scene.gt_tangents(),
-        Some(&scene.mask),
-        &params,
-        &|_| {},
-    )
-    .unwrap();
+    let fit = params
+        .fit_stack(
+            &stack,
+            &lights,
+            &scene.gt_normals(),
+            &scene.gt_tangents(),
+            Some(&scene.mask),
+            &|_| {},
+        )
+        .unwrap();
     let e = errors(&scene, &fit, &w);
     report("true frames", &e);
     // Noise-free data of the fitted model in its own frame: within 2% (albedo), 5% (roughness)
@@ -176,16 +176,16 @@ fn estimated_frames_give_close_parameters_and_relighting() {
         model: FitModel::Ward,
         ..FitParams::default()
     };
-    let fit = fit_stack(
-        &stack,
-        &lights,
-        &est.normals,
-        &est.tangents,
-        Some(&scene.mask),
-        &params,
-        &|_| {},
-    )
-    .unwrap();
+    let fit = params
+        .fit_stack(
+            &stack,
+            &lights,
+            &est.normals,
+            &est.tangents,
+            Some(&scene.mask),
+            &|_| {},
+        )
+        .unwrap();
     let e = errors(&scene, &fit, &w);
     report("estimated frames", &e);
     eprintln!("estimated frames: {:?}", fit.summary);
@@ -243,16 +243,16 @@ fn other_models_held_out_psnr() {
             ("true", &gt.0, &gt.1),
             ("estimated", &est.normals, &est.tangents),
         ] {
-            let fit = fit_stack(
-                &stack,
-                &lights,
-                normals,
-                tangents,
-                Some(&scene.mask),
-                &params,
-                &|_| {},
-            )
-            .unwrap();
+            let fit = params
+                .fit_stack(
+                    &stack,
+                    &lights,
+                    normals,
+                    tangents,
+                    Some(&scene.mask),
+                    &|_| {},
+                )
+                .unwrap();
             let all = fit.summary.holdout_psnr_db.unwrap();
             let relit = relit_psnr(&scene, &fit, brdf.as_ref(), &lights, &holdout);
             assert!(all > 20.0 && relit > 25.0, "{spec} {name}: {all} {relit}");
@@ -273,16 +273,16 @@ fn true_frames_recover_gltf_parameters_and_relight_held_out_lights() {
         model: FitModel::Gltf,
         ..FitParams::default()
     };
-    let fit = fit_stack(
-        &stack,
-        &lights,
-        &scene.gt_normals(),
-        &scene.gt_tangents(),
-        Some(&scene.mask),
-        &params,
-        &|_| {},
-    )
-    .unwrap();
+    let fit = params
+        .fit_stack(
+            &stack,
+            &lights,
+            &scene.gt_normals(),
+            &scene.gt_tangents(),
+            Some(&scene.mask),
+            &|_| {},
+        )
+        .unwrap();
     let m = fit.gltf.as_ref().expect("glTF maps");
     // Noise-free data of the fitted model in its own frame, pixels within 60 degrees of the
     // view: every parameter within 1%.

@@ -8,8 +8,8 @@ use glam::DVec3;
 use symframe::brdf::{Brdf, Ggx, Lambertian};
 use symframe::render::{diligent_lights, BumpParams, Scene, TangentField};
 use symframe::{
-    estimate_stack, estimate_stack_baseline, uniform_cone_lights, Baseline, BaselineParams,
-    EstimateMaps, Estimator, EstimatorParams, Fallback, PixelSource, Rig, RigOptions,
+    estimate_stack, uniform_cone_lights, Baseline, BaselineParams, EstimateMaps, Estimator,
+    EstimatorParams, Fallback, PixelSource, Rig, RigOptions,
 };
 
 /// Normal error figures over the pixels within 60 degrees of the view.
@@ -70,15 +70,15 @@ fn estimate(scene: &Scene, brdf: &dyn Brdf, lights: &[DVec3], params: EstimatorP
 
 fn baseline(scene: &Scene, brdf: &dyn Brdf, lights: &[DVec3], method: Baseline) -> Figures {
     let stack = scene.render_stack(brdf, lights);
-    let maps = estimate_stack_baseline(
-        &stack,
-        lights,
-        Some(&scene.mask),
-        method,
-        BaselineParams::default(),
-        &|_| {},
-    )
-    .unwrap();
+    let maps = method
+        .estimate_stack(
+            &stack,
+            lights,
+            Some(&scene.mask),
+            BaselineParams::default(),
+            &|_| {},
+        )
+        .unwrap();
     let f = figures(scene, &maps);
     eprintln!("{} {method}: {f:?}", brdf.name());
     f

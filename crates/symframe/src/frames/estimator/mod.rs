@@ -870,7 +870,7 @@ pub fn estimate_stack(
     params: EstimatorParams,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<EstimateMaps> {
-    crate::stack::check_inputs(
+    Stack::check_inputs(
         stack.width,
         stack.height,
         stack.n_lights,
