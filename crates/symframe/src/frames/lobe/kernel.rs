@@ -236,6 +236,12 @@ impl Subset {
 }
 
 impl Subset {
+    /// Makes the samples `from`'s with their lights turned ([`Subset::jitter_lights`]).
+    pub(super) fn turned_from(&mut self, from: &Subset, sd: f64, seed: u64) {
+        self.clone_from(from);
+        self.jitter_lights(sd, seed);
+    }
+
     /// Turns every sample's light by a random angle (each of its two components normal with
     /// standard deviation `sd / sqrt(2)` radians: `sd` the RMS angle) from the stream `seed`,
     /// and recomputes its halfway vector and Fresnel weight: the samples as a calibration off

@@ -362,6 +362,14 @@ const SPLIT_SAMPLES: usize = 128;
 /// is slower (three passes over the samples each), only where a light error is given.
 const LIGHT_DRAWS: u64 = 8;
 
+/// The seed of a pixel's light-error draws ([`LIGHT_DRAWS`]): a hash of its `len` fitted
+/// samples' grey values (`greys` at `lights`), so that a pixel draws the same turns every run.
+fn light_draws_seed(lights: &[u32], greys: &[f64], len: usize) -> u64 {
+    lights.iter().fold(len as u64, |h, &j| {
+        (h ^ greys[j as usize].to_bits()).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
 /// Per-thread buffers of [`fit_lobe`], reused from pixel to pixel.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct LobeScratch {
@@ -1244,13 +1252,10 @@ pub(crate) fn fit_lobe(
             predicted.extend((0..fine.len()).map(|i| fine.value(i) - r[i]));
             light_var.resize(fine.len(), 0.0);
         }
-        let seed = fine_lights.iter().fold(fine.len() as u64, |h, &j| {
-            (h ^ greys[j as usize].to_bits()).wrapping_mul(0x0100_0000_01b3)
-        });
+        let seed = light_draws_seed(fine_lights, greys, fine.len());
         let mut sum = 0.0;
         for draw in 0..LIGHT_DRAWS {
-            every.clone_from(fine);
-            every.jitter_lights(light_error, seed.wrapping_add(draw));
+            every.turned_from(fine, light_error, seed.wrapping_add(draw));
             sum += tilt_step2(&m, every, free, buffers);
             let Buffers {
                 lobe,

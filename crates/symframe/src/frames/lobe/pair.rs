@@ -21,8 +21,8 @@ use crate::frames::rig::Rig;
 
 use super::kernel::Subset;
 use super::{
-    cholesky_solve, damping_floor, floored, negligible, solve_spd, tilt_sd, LobeFit, LobeScratch,
-    ALPHA_RANGE, LIGHT_DRAWS, MAX_ITERATIONS, RELATIVE_GAIN, SHAPE_RANGE,
+    cholesky_solve, damping_floor, floored, light_draws_seed, negligible, solve_spd, tilt_sd,
+    LobeFit, LobeScratch, ALPHA_RANGE, LIGHT_DRAWS, MAX_ITERATIONS, RELATIVE_GAIN, SHAPE_RANGE,
 };
 
 /// Number of linear coefficients: the diffuse term and each lobe's two Fresnel terms.
@@ -652,13 +652,10 @@ pub(crate) fn fit_lobe_pair(
     // is, between fewer lights than the one lobe's (a coat's highlight under a sparse rig).
     let light_error = light_error_deg.to_radians();
     let light_sd = if light_error > 0.0 {
-        let seed = fine_lights.iter().fold(s.len() as u64, |h, &j| {
-            (h ^ greys[j as usize].to_bits()).wrapping_mul(0x0100_0000_01b3)
-        });
+        let seed = light_draws_seed(fine_lights, greys, s.len());
         let mut sum = 0.0;
         for draw in 0..LIGHT_DRAWS {
-            every.clone_from(s);
-            every.jitter_lights(light_error, seed.wrapping_add(draw));
+            every.turned_from(s, light_error, seed.wrapping_add(draw));
             let at = project(&model, every, syy, &mut pair[1]);
             let (jtj, rhs) = normal_equations(&at, every, &pair[1]);
             sum +=
