@@ -25,6 +25,8 @@
 //! # }
 //! ```
 
+#![deny(unreachable_pub)]
+
 mod atomic;
 mod bounded;
 pub mod codecs;

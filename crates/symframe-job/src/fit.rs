@@ -455,7 +455,7 @@ const GLTF_MAPS: [&str; 4] = ["base_color", "metallic", "roughness", "anisotropy
 use crate::relight::LOBE_MAPS;
 
 /// Pixels the exposure of a glTF fit is chosen from, at most.
-pub const EXPOSURE_PIXELS: usize = 2048;
+pub(crate) const EXPOSURE_PIXELS: usize = 2048;
 
 /// The light intensity of a glTF fit chosen from up to [`EXPOSURE_PIXELS`] pixels (inside the
 /// mask, with a frame) spread evenly over the image, read tile by tile from the cache

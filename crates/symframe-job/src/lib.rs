@@ -57,6 +57,8 @@
 //! # }
 //! ```
 
+#![deny(unreachable_pub)]
+
 pub mod calibrate;
 pub mod calibrate_near;
 pub mod colorbar;
@@ -97,7 +99,7 @@ pub use view::{
     write_viewer, PyramidOutcome, ViewConfig, ViewOutcome, DEFAULT_PYRAMID_ABOVE, DEFAULT_TILE_SIZE,
 };
 /// The parsers of files a hostile user can plant, for the fuzz targets (`fuzz/`).
-#[cfg(feature = "fuzzing")]
+#[cfg(any(test, feature = "fuzzing"))]
 pub use {merge::check_shard_manifest, outdir::check_switch_plan};
 
 pub use calibrate::{calibrate, CalibrateConfig, CalibrationReport};

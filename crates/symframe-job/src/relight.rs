@@ -167,7 +167,7 @@ pub fn read_fit_maps(dir: &Path) -> Result<FittedMaps> {
 /// diffuse albedo, the two lobes' reflectances (`H x W x 3`), then the roughnesses along the
 /// tangent and the binormal and the coat's (`H x W`). Which model each pixel has is in
 /// `model.npy` ([`symframe::FitMaps::MODEL_CLEARCOAT`], [`symframe::FitMaps::MODEL_WOVEN`]).
-pub const LOBE_MAPS: [&str; 6] = [
+pub(crate) const LOBE_MAPS: [&str; 6] = [
     "lobes_kd",
     "lobes_ka",
     "lobes_kb",
@@ -178,7 +178,7 @@ pub const LOBE_MAPS: [&str; 6] = [
 
 /// Reads the two-lobe maps of a fit folder (a clear-coat, woven or automatic fit), `None`
 /// where it has none.
-pub fn read_lobe_maps(dir: &Path) -> Result<Option<LobeMaps>> {
+pub(crate) fn read_lobe_maps(dir: &Path) -> Result<Option<LobeMaps>> {
     let first = dir.join(format!("{}.npy", LOBE_MAPS[0]));
     if !first.is_file() {
         return Ok(None);
@@ -219,7 +219,7 @@ pub fn read_lobe_maps(dir: &Path) -> Result<Option<LobeMaps>> {
 
 /// The relighter of a fit folder: [`FittedMaps::relighter`] with the two-lobe pixels of
 /// [`read_lobe_maps`] rendered with their models.
-pub fn fit_relighter(maps: &FittedMaps, dir: &Path, edits: &Edits) -> Result<Relighter> {
+pub(crate) fn fit_relighter(maps: &FittedMaps, dir: &Path, edits: &Edits) -> Result<Relighter> {
     let r = maps
         .relighter(edits)
         .with_context(|| dir.display().to_string())?;

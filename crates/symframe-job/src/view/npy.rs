@@ -39,7 +39,13 @@ pub(super) struct NpyBands {
 impl NpyBands {
     /// Opens `path`, which must hold `dtype` values of shape `[h, w]` (`channels` = 1) or
     /// `[h, w, channels]`; errors name the file.
-    pub fn open(path: &Path, dtype: Dtype, h: usize, w: usize, channels: usize) -> Result<Self> {
+    pub(super) fn open(
+        path: &Path,
+        dtype: Dtype,
+        h: usize,
+        w: usize,
+        channels: usize,
+    ) -> Result<Self> {
         let r = Self::open_any(path, dtype)?;
         let want: Vec<usize> = if channels == 1 {
             vec![h, w]
@@ -61,7 +67,7 @@ impl NpyBands {
     }
 
     /// Opens `path` as an array of `dtype` of any two- or three-dimensional shape.
-    pub fn open_any(path: &Path, dtype: Dtype) -> Result<Self> {
+    pub(super) fn open_any(path: &Path, dtype: Dtype) -> Result<Self> {
         let file = File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
         let len = file
             .metadata()
@@ -161,7 +167,7 @@ impl NpyBands {
     }
 
     /// `[H, W, C]`.
-    pub fn shape(&self) -> [usize; 3] {
+    pub(super) fn shape(&self) -> [usize; 3] {
         self.shape
     }
 
@@ -178,7 +184,7 @@ impl NpyBands {
     }
 
     /// Rows `y0..y1` of a `float32` map, values in C order.
-    pub fn rows_f32(&mut self, y0: usize, y1: usize, out: &mut Vec<f32>) -> Result<()> {
+    pub(super) fn rows_f32(&mut self, y0: usize, y1: usize, out: &mut Vec<f32>) -> Result<()> {
         debug_assert_eq!(self.dtype, Dtype::F32);
         let bytes = self.read_bytes(y0, y1)?;
         out.clear();
@@ -191,7 +197,7 @@ impl NpyBands {
     }
 
     /// Rows `y0..y1` of a `uint8` map.
-    pub fn rows_u8(&mut self, y0: usize, y1: usize, out: &mut Vec<u8>) -> Result<()> {
+    pub(super) fn rows_u8(&mut self, y0: usize, y1: usize, out: &mut Vec<u8>) -> Result<()> {
         debug_assert_eq!(self.dtype, Dtype::U8);
         let bytes = self.read_bytes(y0, y1)?;
         out.clear();

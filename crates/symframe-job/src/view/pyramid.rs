@@ -32,7 +32,7 @@ pub(super) struct Layout {
 
 impl Layout {
     /// Levels halve until both sides fit in one tile.
-    pub fn new(width: usize, height: usize, tile: usize) -> Self {
+    pub(super) fn new(width: usize, height: usize, tile: usize) -> Self {
         let mut top = 0;
         while width.div_ceil(1 << top) > tile || height.div_ceil(1 << top) > tile {
             top += 1;
@@ -46,12 +46,12 @@ impl Layout {
     }
 
     /// Width and height of level `k`.
-    pub fn level_size(&self, k: usize) -> (usize, usize) {
+    pub(super) fn level_size(&self, k: usize) -> (usize, usize) {
         (self.width.div_ceil(1 << k), self.height.div_ceil(1 << k))
     }
 
     /// Tiles across and down of level `k`.
-    pub fn tiles(&self, k: usize) -> (usize, usize) {
+    pub(super) fn tiles(&self, k: usize) -> (usize, usize) {
         let (w, h) = self.level_size(k);
         (w.div_ceil(self.tile), h.div_ceil(self.tile))
     }
@@ -78,7 +78,7 @@ pub(super) struct Builder {
 }
 
 impl Builder {
-    pub fn new(layout: Layout, dir: Option<&Path>, present: [bool; 5]) -> Result<Self> {
+    pub(super) fn new(layout: Layout, dir: Option<&Path>, present: [bool; 5]) -> Result<Self> {
         if let Some(dir) = dir {
             for k in 0..layout.top {
                 let d = dir.join(k.to_string());
@@ -104,7 +104,7 @@ impl Builder {
 
     /// Takes full-resolution rows `y0..` (the next ones, a whole number of tiles high unless
     /// they are the last).
-    pub fn push(&mut self, y0: usize, band: &Band) -> Result<()> {
+    pub(super) fn push(&mut self, y0: usize, band: &Band) -> Result<()> {
         let rows = band.rows();
         for k in 0..=self.layout.top {
             let (wk, hk) = self.layout.level_size(k);
@@ -160,7 +160,7 @@ impl Builder {
     }
 
     /// The top level's picture, once every row is in.
-    pub fn finish(mut self) -> Result<(Band, usize, u64)> {
+    pub(super) fn finish(mut self) -> Result<(Band, usize, u64)> {
         let top = self.layout.top;
         let band = std::mem::replace(&mut self.levels[top].band, Band::new(0, self.present));
         let (wt, ht) = self.layout.level_size(top);
