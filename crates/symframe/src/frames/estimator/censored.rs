@@ -140,6 +140,42 @@ impl Estimator<'_> {
     }
 }
 
+/// `slice` (RGB per light, through the censoring map: a clipped sample is the clip level `clip`
+/// in every channel) into `out` with each clipped sample given the colour of the highlight
+/// where it clipped, at the clip level in its brightest channel; NaN stays NaN. A clipped
+/// sample is known only to have a channel at or above the clip level; filled grey, it differs
+/// from an unclipped neighbour on the other side of a symmetric highlight by the darker
+/// channels' gap (large on a coloured material), a step the true slice does not have and the
+/// reconstruction between lights places differently on the two sides. The colour is that of
+/// the brightest unclipped sample (the nearest to the clip in level; a coat's highlight whitens
+/// towards its top), grey where no sample reaches half the clip level.
+pub(super) fn clipped_in_colour(slice: &[f32], clip: f32, out: &mut Vec<f32>) {
+    let brightest = |s: &[f32]| s[0].max(s[1]).max(s[2]);
+    let top = slice
+        .chunks_exact(3)
+        .filter(|s| {
+            let m = brightest(s);
+            m.is_finite() && m < clip && m >= 0.5 * clip
+        })
+        .max_by(|a, b| brightest(a).total_cmp(&brightest(b)));
+    let colour = match top {
+        Some(s) => {
+            let m = brightest(s);
+            [s[0] / m, s[1] / m, s[2] / m]
+        }
+        None => [1.0; 3],
+    };
+    out.clear();
+    out.extend_from_slice(slice);
+    for s in out.chunks_exact_mut(3) {
+        if s[0] >= clip {
+            for (v, c) in s.iter_mut().zip(colour) {
+                *v = clip * c;
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -225,5 +261,47 @@ mod tests {
         // its error's evidence.
         assert!(held_error < first_error, "{first_error} -> {held_error}");
         assert!(covered >= covered_before, "{covered_before} -> {covered}");
+    }
+}
+
+#[cfg(test)]
+mod colour_tests {
+    use super::clipped_in_colour;
+
+    #[test]
+    fn clipped_samples_take_the_highlight_s_colour() {
+        let clip = 0.9f32;
+        let colour = [1.0f32, 0.6, 0.3];
+        let at = |m: f32| colour.map(|c| c * m);
+        // A coloured highlight whose top clipped (the censoring map's grey fill), its flanks
+        // below the clip, a dark diffuse sample and an invalid one.
+        let mut slice = Vec::new();
+        for s in [
+            [clip; 3],
+            at(0.85),
+            at(0.6),
+            [clip; 3],
+            [0.05, 0.04, 0.03],
+            [f32::NAN; 3],
+        ] {
+            slice.extend_from_slice(&s);
+        }
+        let mut out = Vec::new();
+        clipped_in_colour(&slice, clip, &mut out);
+        // The clipped samples continue their flanks: the highlight's colour at the clip level
+        // in the brightest channel, where the grey fill jumped by the darker channels' gap.
+        for j in [0, 3] {
+            for k in 0..3 {
+                assert!((out[j * 3 + k] - clip * colour[k]).abs() < 1e-6, "{out:?}");
+            }
+        }
+        // Every other sample as it was (NaN stays NaN).
+        assert_eq!(out[3..9], slice[3..9]);
+        assert_eq!(out[12..15], slice[12..15]);
+        assert!(out[15..].iter().all(|v| v.is_nan()));
+        // Nothing bright enough to tell the colour: the grey fill stays.
+        let dark = [clip, clip, clip, 0.1, 0.2, 0.05];
+        clipped_in_colour(&dark, clip, &mut out);
+        assert_eq!(out, dark);
     }
 }

@@ -12,14 +12,14 @@ use crate::baselines::{
     grey_values, highlight_peak, woodham_robust_greys, BaselineParams, BaselinePixel,
 };
 use crate::error::Result;
-use crate::frames::lobe::{fit_lobe, fit_lobe_pair, LobeFit, LobeScratch, LobeStart};
+use crate::frames::lobe::{fit_lobe_pair, LobeFit, LobeScratch};
 use crate::frames::objective::{ExactObjective, FastScratch, Level, Objective};
 use crate::frames::policy::{
-    self, has_tangent, tangent_confidence, LobeAxis, NoiseShare, NormalChoice, NormalEvidence,
+    self, has_tangent, tangent_confidence, NoiseShare, NormalChoice, NormalEvidence,
     PolicySettings, TangentEvidence, TangentSettings, DEFAULT_MIN_ANISOTROPY,
 };
 use crate::frames::rig::Rig;
-use crate::frames::symmetry::{default_min_domain, CosineMode, SymmetryTerm};
+use crate::frames::symmetry::{default_min_domain, CosineMode};
 use crate::highlight::{highlight_moments_of_greys, HighlightMoments, HIGHLIGHT_LEVEL};
 use crate::method::{run_stack, PixelMethod};
 use crate::stack::Stack;
@@ -29,10 +29,11 @@ use crate::maps::{EstimateMaps, PixelRecord, PixelSource, PixelStatus};
 mod censored;
 mod confidence;
 mod diffuse;
+mod lobe_answer;
 mod search;
 
-use censored::Censoring;
-use confidence::{unconfirmed, within_confident, JUDGE_LIGHTS};
+use censored::{clipped_in_colour, Censoring};
+use confidence::within_confident;
 use diffuse::{diffuse_noise_share, unexplained_share};
 use search::{brightest_sample, centre_observed, highlight_wider_along, TangentSearch};
 
@@ -654,114 +655,6 @@ impl<'a> Estimator<'a> {
         (Some(if swap { b } else { t }), evidence)
     }
 
-    /// The symmetric lobe fitted to a pixel, from the highlight's centre `normal`, widest axis
-    /// `tangent` and RMS angular `radius`.
-    fn lobe_fit(
-        &self,
-        slice: &[f32],
-        normal: DVec3,
-        tangent: DVec3,
-        radius: f64,
-        scratch: &mut LobeScratch,
-    ) -> Option<LobeFit> {
-        let rig = self.rig;
-        let r = radius.tan().max(LOBE_START_WIDTH);
-        let start = LobeStart {
-            normal,
-            tangent,
-            alpha: [1.2 * r, 0.8 * r],
-        };
-        fit_lobe(slice, rig, start, &self.params.noise, scratch)
-    }
-
-    /// The estimate of a pixel the lobe `f` explains (its normal within the rig's reach): the
-    /// lobe's frame, its elongation as the anisotropy, a tangent where the lobe is elongated.
-    fn lobe_estimate<O: Objective>(
-        &self,
-        slice: &[f32],
-        objective: &O,
-        cosine: CosineMode,
-        f: &LobeFit,
-        term_n: &SymmetryTerm,
-        sd_n: f64,
-    ) -> PixelEstimate {
-        let anisotropy = f.elongation();
-        let tangent = (self.params.tangents && self.lobe_has_tangent(f)).then_some(f.tangent);
-        // The data's symmetry judges the lobe's centre, which is only as certain as the
-        // symmetry can confirm it: its own variance (up to the stencil's resolution) is added,
-        // and where the slice is more symmetric about a normal nearby than the two readings'
-        // uncertainties allow, the lobe does not describe the material and its centre may be
-        // biased by as much (docs/method.md, "Confidence").
-        // On the first JUDGE_LIGHTS of the query order (evenly spread; all of them on small
-        // rigs), as the tangent's confidence below, and without the split halves.
-        let judged_on = Level::Coarse(JUDGE_LIGHTS);
-        let centre = objective.normal_term(f.normal, cosine, judged_on);
-        let (judged, evals) =
-            self.symmetry_sd(objective, f.normal, cosine, judged_on, false, &centre);
-        let own = f.normal_sd.powi(2);
-        let sd = (own + f.light_sd.powi(2) + unconfirmed(&judged, own)).sqrt();
-        let confidence = (self.coverage(slice, f.normal, term_n) * within_confident(sd)) as f32;
-        let status = self.status_of(confidence);
-        let keep = status == PixelStatus::Estimated;
-        // The tangent's confidence is the data's, as for the search: how much more symmetric
-        // the slice is about the lobe's axes than about the pair 45 degrees away.
-        let (tangent_confidence, evals) = match tangent {
-            Some(t) if keep => {
-                let b = f.normal.cross(t);
-                let at = |a: DVec3| {
-                    self.tangent_distance(objective, f.normal, a, cosine, judged_on)
-                        .0
-                };
-                let evidence = TangentEvidence {
-                    anisotropy,
-                    moments_elongated: false,
-                    axes: [t, b],
-                    lobes: [Some(self.lobe_axis(f)), None],
-                };
-                let c = tangent_confidence(
-                    &self.policy.tangent,
-                    &evidence,
-                    at(t),
-                    at((t + b).normalize()),
-                );
-                (c, evals + 3)
-            }
-            _ => (0.0, evals + 1),
-        };
-        PixelEstimate {
-            status,
-            source: PixelSource::Lobe,
-            normal: keep.then_some(f.normal),
-            tangent: if keep { tangent } else { None },
-            confidence,
-            anisotropy: anisotropy as f32,
-            tangent_confidence,
-            residual: [sd_n, f.residual, 0.0],
-            evals,
-        }
-    }
-
-    /// Whether a fitted lobe is elongated enough for a tangent, and wide enough for the rig to
-    /// tell: `--min-anisotropy` scales the elongation threshold (its default asks for widths in
-    /// a ratio of 2); the rig tells a lobe's shape only where its long axis spans several
-    /// lights (narrower, it reads as elongated or round by where the lights happen to be).
-    fn lobe_has_tangent(&self, f: &LobeFit) -> bool {
-        let threshold = self.policy.lobe.min_elongation * self.params.min_anisotropy as f64
-            / DEFAULT_MIN_ANISOTROPY as f64;
-        let resolved = f.full_width().atan()
-            >= self.policy.lobe.resolved_spacings * self.rig.halfway_spacing();
-        f.elongation() >= threshold && resolved
-    }
-
-    /// A fitted lobe's reading of the highlight's axes, for the tangent decision.
-    fn lobe_axis(&self, f: &LobeFit) -> LobeAxis {
-        LobeAxis {
-            tangent: f.tangent,
-            plausible: policy::lobe_plausible(&self.policy.lobe, f),
-            elongated: self.lobe_has_tangent(f),
-        }
-    }
-
     /// A pixel's status for its `confidence`: culled under the user's threshold.
     fn status_of(&self, confidence: f32) -> PixelStatus {
         if confidence < self.params.min_confidence {
@@ -779,10 +672,6 @@ struct Lobes {
     fitted: Option<LobeFit>,
     base: Option<LobeFit>,
 }
-
-/// Smallest width the lobe fit starts from (slope units): a highlight of one sample has no
-/// moment to measure it by.
-const LOBE_START_WIDTH: f64 = 0.02;
 
 /// Per-thread buffers of the per-pixel estimator (the fast path's samples and light
 /// layout), reused from pixel to pixel.
@@ -823,42 +712,6 @@ impl PixelScratch {
             lobe_input: Vec::with_capacity(rig.n_used() * 3),
             base_input: Vec::with_capacity(rig.n_used() * 3),
             coloured: Vec::with_capacity(rig.n_used() * 3),
-        }
-    }
-}
-
-/// `slice` (RGB per light, through the censoring map: a clipped sample is the clip level `clip`
-/// in every channel) into `out` with each clipped sample given the colour of the highlight
-/// where it clipped, at the clip level in its brightest channel; NaN stays NaN. A clipped
-/// sample is known only to have a channel at or above the clip level; filled grey, it differs
-/// from an unclipped neighbour on the other side of a symmetric highlight by the darker
-/// channels' gap (large on a coloured material), a step the true slice does not have and the
-/// reconstruction between lights places differently on the two sides. The colour is that of
-/// the brightest unclipped sample (the nearest to the clip in level; a coat's highlight whitens
-/// towards its top), grey where no sample reaches half the clip level.
-fn clipped_in_colour(slice: &[f32], clip: f32, out: &mut Vec<f32>) {
-    let brightest = |s: &[f32]| s[0].max(s[1]).max(s[2]);
-    let top = slice
-        .chunks_exact(3)
-        .filter(|s| {
-            let m = brightest(s);
-            m.is_finite() && m < clip && m >= 0.5 * clip
-        })
-        .max_by(|a, b| brightest(a).total_cmp(&brightest(b)));
-    let colour = match top {
-        Some(s) => {
-            let m = brightest(s);
-            [s[0] / m, s[1] / m, s[2] / m]
-        }
-        None => [1.0; 3],
-    };
-    out.clear();
-    out.extend_from_slice(slice);
-    for s in out.chunks_exact_mut(3) {
-        if s[0] >= clip {
-            for (v, c) in s.iter_mut().zip(colour) {
-                *v = clip * c;
-            }
         }
     }
 }
@@ -932,46 +785,4 @@ pub fn estimate_stack(
         stack.height,
         &records,
     ))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::clipped_in_colour;
-
-    #[test]
-    fn clipped_samples_take_the_highlight_s_colour() {
-        let clip = 0.9f32;
-        let colour = [1.0f32, 0.6, 0.3];
-        let at = |m: f32| colour.map(|c| c * m);
-        // A coloured highlight whose top clipped (the censoring map's grey fill), its flanks
-        // below the clip, a dark diffuse sample and an invalid one.
-        let mut slice = Vec::new();
-        for s in [
-            [clip; 3],
-            at(0.85),
-            at(0.6),
-            [clip; 3],
-            [0.05, 0.04, 0.03],
-            [f32::NAN; 3],
-        ] {
-            slice.extend_from_slice(&s);
-        }
-        let mut out = Vec::new();
-        clipped_in_colour(&slice, clip, &mut out);
-        // The clipped samples continue their flanks: the highlight's colour at the clip level
-        // in the brightest channel, where the grey fill jumped by the darker channels' gap.
-        for j in [0, 3] {
-            for k in 0..3 {
-                assert!((out[j * 3 + k] - clip * colour[k]).abs() < 1e-6, "{out:?}");
-            }
-        }
-        // Every other sample as it was (NaN stays NaN).
-        assert_eq!(out[3..9], slice[3..9]);
-        assert_eq!(out[12..15], slice[12..15]);
-        assert!(out[15..].iter().all(|v| v.is_nan()));
-        // Nothing bright enough to tell the colour: the grey fill stays.
-        let dark = [clip, clip, clip, 0.1, 0.2, 0.05];
-        clipped_in_colour(&dark, clip, &mut out);
-        assert_eq!(out, dark);
-    }
 }
