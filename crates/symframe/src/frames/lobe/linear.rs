@@ -1,0 +1,121 @@
+//! The lobe fit's linear part: the coefficients of its three basis functions by non-negative
+//! least squares, for a given frame and shape.
+
+/// Non-negative least squares of `y ~ c . x` over three basis functions from their Gram
+/// matrix `g`, the products `p` with `y` and `syy = y . y`: the coefficients, the residual
+/// sum of squares and the active set. Every active set is tried (seven small solves): exact and branch-free in
+/// the number of iterations.
+pub(super) fn nnls3(g: [[f64; 3]; 3], p: [f64; 3], syy: f64) -> Linear {
+    let residual = |x: [f64; 3]| {
+        let mut r = syy;
+        for a in 0..3 {
+            r -= 2.0 * x[a] * p[a];
+            for b in 0..3 {
+                r += x[a] * g[a][b] * x[b];
+            }
+        }
+        r
+    };
+    let mut best = Linear {
+        coefficients: [0.0; 3],
+        cost: syy,
+        set: 0,
+        gram: g,
+    };
+    for set in 1u8..8 {
+        let Some(x) = ActiveSet::of(set).solve(&g, &p) else {
+            continue;
+        };
+        if x.iter().all(|&v| v >= 0.0) {
+            let r = residual(x);
+            if r < best.cost {
+                best = Linear {
+                    coefficients: x,
+                    cost: r,
+                    set,
+                    gram: g,
+                };
+            }
+        }
+    }
+    best
+}
+
+/// The linear part of a fit: the coefficients `[d, s1, s2]`, the residual sum of squares, the
+/// active set (bit `k`: coefficient `k` free, the others held at 0) and the Gram matrix.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Linear {
+    pub(super) coefficients: [f64; 3],
+    pub(super) cost: f64,
+    pub(super) set: u8,
+    pub(super) gram: [[f64; 3]; 3],
+}
+
+/// A subset of the three basis functions (bit `k` of the mask: function `k`).
+pub(super) struct ActiveSet {
+    pub(super) members: [usize; 3],
+    pub(super) len: usize,
+}
+
+impl ActiveSet {
+    pub(super) fn of(mask: u8) -> Self {
+        let mut members = [0; 3];
+        let mut len = 0;
+        for k in 0..3 {
+            if mask & (1 << k) != 0 {
+                members[len] = k;
+                len += 1;
+            }
+        }
+        Self { members, len }
+    }
+
+    /// The least-squares coefficients with only the members free (others zero), by Cramer's
+    /// rule on the members' Gram block; `None` where the block is singular.
+    pub(super) fn solve(&self, g: &[[f64; 3]; 3], p: &[f64; 3]) -> Option<[f64; 3]> {
+        let m = &self.members[..self.len];
+        let mut x = [0.0; 3];
+        match *m {
+            [a] => {
+                if g[a][a] <= 0.0 {
+                    return None;
+                }
+                x[a] = p[a] / g[a][a];
+            }
+            [a, b] => {
+                let det = g[a][a] * g[b][b] - g[a][b] * g[a][b];
+                if det <= 1e-12 * g[a][a] * g[b][b] {
+                    return None;
+                }
+                x[a] = (p[a] * g[b][b] - p[b] * g[a][b]) / det;
+                x[b] = (p[b] * g[a][a] - p[a] * g[a][b]) / det;
+            }
+            [a, b, c] => {
+                let det3 = |m: [[f64; 3]; 3]| {
+                    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+                        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+                        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+                };
+                let gm = [
+                    [g[a][a], g[a][b], g[a][c]],
+                    [g[b][a], g[b][b], g[b][c]],
+                    [g[c][a], g[c][b], g[c][c]],
+                ];
+                let det = det3(gm);
+                if det <= 1e-12 * g[a][a] * g[b][b] * g[c][c] {
+                    return None;
+                }
+                let rhs = [p[a], p[b], p[c]];
+                for (k, &slot) in [a, b, c].iter().enumerate() {
+                    let mut mk = gm;
+                    for row in 0..3 {
+                        mk[row][k] = rhs[row];
+                    }
+                    x[slot] = det3(mk) / det;
+                }
+            }
+            _ => return None,
+        }
+        x.iter().all(|v| v.is_finite()).then_some(x)
+    }
+}
