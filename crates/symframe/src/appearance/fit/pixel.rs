@@ -1,0 +1,804 @@
+//! One pixel's fit ([`PixelFitter`]): its samples split into fitting and validation lights,
+//! each model fitted and the automatic choice between them; the glTF light intensity chosen
+//! from sampled pixels ([`ExposureChoice`]); and the fit of a whole stack as a
+//! [`PixelMethod`] ([`FitMethod`]).
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+use std::f64::consts::PI;
+
+use super::{validation_lights, FitModel, FitParams, TWO_LOBE_FLOOR, TWO_LOBE_GAIN};
+use crate::appearance::gltf_fit::{self, GltfFit, GltfSample};
+use crate::appearance::lobe_fit::{self, LobeFit, LobeKind};
+use crate::appearance::ward_fit::{fit_samples, sse, Sample};
+use crate::error::{Error, Result};
+use crate::eval::vec_at;
+use crate::geometry::tangent_basis;
+use crate::method::PixelMethod;
+
+/// The fitted Ward parameters of one pixel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WardFit {
+    /// Diffuse albedo per channel.
+    pub kd: [f64; 3],
+    /// Specular albedo per channel.
+    pub ks: [f64; 3],
+    /// Roughness along the tangent.
+    pub alpha_t: f64,
+    /// Roughness along the binormal.
+    pub alpha_b: f64,
+    /// Whether one roughness was fitted (no tangent given).
+    pub isotropic: bool,
+    /// Training samples used.
+    pub samples: usize,
+    /// Sum of squared errors over the training samples and channels.
+    pub sse: f64,
+    /// Levenberg-Marquardt iterations.
+    pub iterations: u32,
+}
+
+impl WardFit {
+    /// RMS error over the training samples and channels.
+    pub fn rms(&self) -> f64 {
+        (self.sse / (3 * self.samples.max(1)) as f64).sqrt()
+    }
+}
+
+/// Held-out error sums of one pixel.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct HoldoutError {
+    /// Sum of squared errors over the held-out samples and channels.
+    pub sse: f64,
+    /// Held-out samples evaluated.
+    pub samples: usize,
+    /// Largest held-out measurement.
+    pub peak: f64,
+}
+
+/// The outcome of fitting one pixel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PixelOutcome {
+    /// Fitted: the parameters and the held-out error.
+    Fitted(WardFit, HoldoutError),
+    /// Fitted with the glTF model: the parameters and the held-out error.
+    FittedGltf(GltfFit, HoldoutError),
+    /// Fitted with a two-lobe model: the parameters and the held-out error.
+    FittedLobes(LobeFit, HoldoutError),
+    /// No normal, or it faces away from the view.
+    NoFrame,
+    /// Too few usable samples.
+    TooFewSamples,
+}
+
+/// Sum of squared errors of the predicted against the measured RGB radiance over `samples`
+/// (`pair(s)` gives both), and the largest measurement: the figures of either model's fit.
+pub(crate) fn squared_errors<S>(
+    samples: &[S],
+    pair: impl Fn(&S) -> ([f64; 3], [f64; 3]),
+) -> (f64, f64) {
+    let mut sum = 0.0;
+    let mut peak = 0.0f64;
+    for s in samples {
+        let (predicted, measured) = pair(s);
+        for (f, i) in predicted.into_iter().zip(measured) {
+            sum += (f - i).powi(2);
+            peak = peak.max(i);
+        }
+    }
+    (sum, peak)
+}
+
+/// Fits pixels one at a time, reusing its sample buffers (one per thread).
+#[derive(Debug, Clone)]
+pub struct PixelFitter<'a> {
+    lights: &'a [DVec3],
+    params: &'a FitParams,
+    held_out: Vec<bool>,
+    /// Per light: a validation light ([`validation_lights`]).
+    validation: Vec<bool>,
+    train: Vec<Sample>,
+    /// Per training sample of `train`: from a validation light.
+    train_val: Vec<bool>,
+    test: Vec<Sample>,
+    gtrain: Vec<GltfSample>,
+    /// Per training sample of `gtrain`: from a validation light.
+    gtrain_val: Vec<bool>,
+    gtest: Vec<GltfSample>,
+    gscratch: gltf_fit::Scratch,
+    lscratch: lobe_fit::Scratch,
+    /// The split of the training samples for a choice: fitted on, judged on.
+    wfit: Vec<Sample>,
+    wval: Vec<Sample>,
+    gfit: Vec<GltfSample>,
+    gval: Vec<GltfSample>,
+}
+
+impl<'a> PixelFitter<'a> {
+    /// A fitter for a stack lit by `lights` (unit, camera frame, surface toward light).
+    pub fn new(lights: &'a [DVec3], params: &'a FitParams) -> Result<Self> {
+        params.validate(lights.len())?;
+        Ok(Self::checked(lights, params))
+    }
+
+    /// [`PixelFitter::new`] for parameters already validated against `lights`.
+    fn checked(lights: &'a [DVec3], params: &'a FitParams) -> Self {
+        let mut held_out = vec![false; lights.len()];
+        for &i in &params.holdout {
+            held_out[i] = true;
+        }
+        Self {
+            lights,
+            params,
+            validation: validation_lights(lights.len(), &params.holdout),
+            held_out,
+            train: Vec::new(),
+            train_val: Vec::new(),
+            test: Vec::new(),
+            gtrain: Vec::new(),
+            gtrain_val: Vec::new(),
+            gtest: Vec::new(),
+            gscratch: gltf_fit::Scratch::default(),
+            lscratch: lobe_fit::Scratch::default(),
+            wfit: Vec::new(),
+            wval: Vec::new(),
+            gfit: Vec::new(),
+            gval: Vec::new(),
+        }
+    }
+
+    /// Fits one pixel: `normal` and `tangent` (camera frame; `tangent = None` fits one
+    /// roughness), `rgb` the pixel's samples (`3 * lights.len()` values, NaN = invalid).
+    pub fn fit(&mut self, normal: DVec3, tangent: Option<DVec3>, rgb: &[f32]) -> PixelOutcome {
+        let Some(n) = normal.try_normalize().filter(|n| n.z > 0.0) else {
+            return PixelOutcome::NoFrame;
+        };
+        let t = tangent
+            .map(|t| t - t.dot(n) * n)
+            .and_then(|t| t.try_normalize());
+        let iso = t.is_none();
+        let t = t.unwrap_or_else(|| tangent_basis(n).0);
+        let b = n.cross(t);
+        match self.params.model {
+            FitModel::Gltf => self.fit_gltf(n, t, b, iso, rgb),
+            FitModel::Ward => self.fit_ward(n, t, b, iso, rgb),
+            FitModel::Auto => self.fit_auto(n, t, b, iso, rgb),
+            FitModel::Clearcoat => self.fit_lobes(LobeKind::Clearcoat, n, t, b, iso, rgb),
+            FitModel::Woven => self.fit_lobes(LobeKind::Woven, n, t, b, iso, rgb),
+        }
+    }
+}
+
+/// Splits `all` by `flag` into `(fit, val)`: the samples without the flag and those with it.
+fn split_by<S: Copy>(all: &[S], flag: &[bool], fit: &mut Vec<S>, val: &mut Vec<S>) {
+    fit.clear();
+    val.clear();
+    for (s, &f) in all.iter().zip(flag) {
+        if f {
+            val.push(*s);
+        } else {
+            fit.push(*s);
+        }
+    }
+}
+
+impl PixelFitter<'_> {
+    /// Collects the usable samples of one pixel for the Ward fit in the frame `(t, b, n)`.
+    fn ward_samples(&mut self, n: DVec3, t: DVec3, b: DVec3, rgb: &[f32]) {
+        let nv = n.z;
+        self.train.clear();
+        self.train_val.clear();
+        self.test.clear();
+        for (i, (l, px)) in self.lights.iter().zip(rgb.chunks_exact(3)).enumerate() {
+            if !px.iter().all(|v| v.is_finite()) {
+                continue;
+            }
+            let nl = n.dot(*l);
+            if nl <= 0.0 {
+                continue;
+            }
+            let h = (*l + DVec3::Z).normalize();
+            let hn = h.dot(n);
+            if hn <= 0.0 {
+                continue;
+            }
+            let s = Sample {
+                diffuse: nl / PI,
+                spec: (nl / nv).sqrt(),
+                xt: (h.dot(t) / hn).powi(2),
+                xb: (h.dot(b) / hn).powi(2),
+                rgb: [px[0] as f64, px[1] as f64, px[2] as f64],
+            };
+            if self.held_out[i] {
+                self.test.push(s);
+            } else {
+                self.train.push(s);
+                self.train_val.push(self.validation[i]);
+            }
+        }
+    }
+
+    /// The Ward fit of one pixel in the frame `(t, b, n)`.
+    fn fit_ward(&mut self, n: DVec3, t: DVec3, b: DVec3, iso: bool, rgb: &[f32]) -> PixelOutcome {
+        self.ward_samples(n, t, b, rgb);
+        if self.train.len() < self.params.min_samples {
+            return PixelOutcome::TooFewSamples;
+        }
+        let fit = fit_samples(&self.train, iso, self.params);
+        let (hsse, peak) = sse(&fit, &self.test);
+        PixelOutcome::Fitted(
+            fit,
+            HoldoutError {
+                sse: hsse,
+                samples: self.test.len(),
+                peak,
+            },
+        )
+    }
+}
+
+impl PixelFitter<'_> {
+    /// Collects the usable samples of one pixel for the glTF fit in the frame `(t, b, n)`;
+    /// returns the view in that frame.
+    fn gltf_samples(&mut self, n: DVec3, t: DVec3, b: DVec3, rgb: &[f32]) -> DVec3 {
+        let local = |d: DVec3| DVec3::new(d.dot(t), d.dot(b), d.dot(n));
+        self.gtrain.clear();
+        self.gtrain_val.clear();
+        self.gtest.clear();
+        for (i, (l, px)) in self.lights.iter().zip(rgb.chunks_exact(3)).enumerate() {
+            if !px.iter().all(|v| v.is_finite()) || n.dot(*l) <= 0.0 {
+                continue;
+            }
+            let s = GltfSample {
+                l: local(*l),
+                rgb: [px[0] as f64, px[1] as f64, px[2] as f64],
+            };
+            if self.held_out[i] {
+                self.gtest.push(s);
+            } else {
+                self.gtrain.push(s);
+                self.gtrain_val.push(self.validation[i]);
+            }
+        }
+        local(DVec3::Z)
+    }
+
+    /// The automatic choice at one pixel: every candidate (Ward, glTF, the clear coat, the
+    /// woven lobes) fitted on the training samples that are not from validation lights; the
+    /// single-lobe model (Ward or glTF) with the smaller squared error on the validation
+    /// samples, unless the better two-lobe model's is below [`TWO_LOBE_GAIN`] times it (both
+    /// raised by [`TWO_LOBE_FLOOR`] of the signal); the
+    /// one kept is refitted on every training sample. Without a validation sample, or with too
+    /// few others, the same rule on the training errors.
+    fn fit_auto(&mut self, n: DVec3, t: DVec3, b: DVec3, iso: bool, rgb: &[f32]) -> PixelOutcome {
+        let v = self.gltf_samples(n, t, b, rgb);
+        self.ward_samples(n, t, b, rgb);
+        let min = self.params.min_samples;
+        if self.train.len() < min || self.gtrain.len() < min {
+            return PixelOutcome::TooFewSamples;
+        }
+        let e = self.params.exposure;
+        split_by(&self.train, &self.train_val, &mut self.wfit, &mut self.wval);
+        split_by(
+            &self.gtrain,
+            &self.gtrain_val,
+            &mut self.gfit,
+            &mut self.gval,
+        );
+        let by_validation = !self.wval.is_empty()
+            && !self.gval.is_empty()
+            && self.wfit.len() >= min
+            && self.gfit.len() >= min;
+        let (wtrain, gtrain) = if by_validation {
+            (&self.wfit, &self.gfit)
+        } else {
+            (&self.train, &self.gtrain)
+        };
+        let params = self.params;
+        let ward = fit_samples(wtrain, iso, params);
+        let gltf = gltf_fit::fit_samples(gtrain, v, iso, params, &mut self.gscratch);
+        let lobes = [LobeKind::Clearcoat, LobeKind::Woven]
+            .map(|k| lobe_fit::fit_samples(k, gtrain, v, iso, params, &mut self.lscratch));
+        // Errors in the order glTF, Ward, clear coat, woven.
+        let errors = if by_validation {
+            [
+                gltf_fit::sse(&gltf, &self.gval, v, e).0,
+                sse(&ward, &self.wval).0,
+                lobe_fit::sse(&lobes[0], &self.gval, v).0,
+                lobe_fit::sse(&lobes[1], &self.gval, v).0,
+            ]
+        } else {
+            [gltf.sse, ward.sse, lobes[0].sse, lobes[1].sse]
+        };
+        // The better single-lobe model (glTF on a tie) and the better two-lobe one (the clear
+        // coat on a tie); the two-lobe one only where it predicts clearly better.
+        let single = if errors[1] < errors[0] { 1 } else { 0 };
+        let two = if errors[3] < errors[2] { 3 } else { 2 };
+        // Errors below TWO_LOBE_FLOOR of the signal are not told apart.
+        let judged = if by_validation {
+            &self.gval
+        } else {
+            &self.gtrain
+        };
+        let signal: f64 = judged.iter().flat_map(|s| s.rgb).map(|v| v * v).sum();
+        let floor = TWO_LOBE_FLOOR * signal;
+        let choice = if errors[two] + floor < TWO_LOBE_GAIN * (errors[single] + floor) {
+            two
+        } else {
+            single
+        };
+        match choice {
+            0 => {
+                let fit = if by_validation {
+                    gltf_fit::fit_samples(&self.gtrain, v, iso, params, &mut self.gscratch)
+                } else {
+                    gltf
+                };
+                let hold = gltf_fit::holdout(&fit, &self.gtest, v, e);
+                PixelOutcome::FittedGltf(fit, hold)
+            }
+            1 => {
+                let fit = if by_validation {
+                    fit_samples(&self.train, iso, params)
+                } else {
+                    ward
+                };
+                let (hsse, peak) = sse(&fit, &self.test);
+                PixelOutcome::Fitted(
+                    fit,
+                    HoldoutError {
+                        sse: hsse,
+                        samples: self.test.len(),
+                        peak,
+                    },
+                )
+            }
+            k => {
+                let lobe = lobes[k - 2];
+                let fit = if by_validation {
+                    let kind = lobe.model.kind;
+                    lobe_fit::fit_samples(kind, &self.gtrain, v, iso, params, &mut self.lscratch)
+                } else {
+                    lobe
+                };
+                let hold = lobe_fit::holdout(&fit, &self.gtest, v);
+                PixelOutcome::FittedLobes(fit, hold)
+            }
+        }
+    }
+
+    /// A two-lobe fit of one pixel in the frame `(t, b, n)`.
+    fn fit_lobes(
+        &mut self,
+        kind: LobeKind,
+        n: DVec3,
+        t: DVec3,
+        b: DVec3,
+        iso: bool,
+        rgb: &[f32],
+    ) -> PixelOutcome {
+        let v = self.gltf_samples(n, t, b, rgb);
+        if self.gtrain.len() < self.params.min_samples {
+            return PixelOutcome::TooFewSamples;
+        }
+        let fit =
+            lobe_fit::fit_samples(kind, &self.gtrain, v, iso, self.params, &mut self.lscratch);
+        let hold = lobe_fit::holdout(&fit, &self.gtest, v);
+        PixelOutcome::FittedLobes(fit, hold)
+    }
+
+    /// The squared error on the validation samples ([`validation_lights`]) of a glTF fit at
+    /// `exposure` made on the pixel's other training samples, and the number of validation
+    /// values (3 per sample); `None` where the pixel would not be fitted or has no validation
+    /// sample. What [`ExposureChoice::select`] sums over pixels.
+    pub fn gltf_validation_error(
+        &mut self,
+        normal: DVec3,
+        tangent: Option<DVec3>,
+        rgb: &[f32],
+        exposure: f64,
+    ) -> Option<(f64, usize)> {
+        let n = normal.try_normalize().filter(|n| n.z > 0.0)?;
+        let t = tangent
+            .map(|t| t - t.dot(n) * n)
+            .and_then(|t| t.try_normalize());
+        let iso = t.is_none();
+        let t = t.unwrap_or_else(|| tangent_basis(n).0);
+        let v = self.gltf_samples(n, t, n.cross(t), rgb);
+        split_by(
+            &self.gtrain,
+            &self.gtrain_val,
+            &mut self.gfit,
+            &mut self.gval,
+        );
+        if self.gfit.len() < self.params.min_samples || self.gval.is_empty() {
+            return None;
+        }
+        let params = FitParams {
+            exposure,
+            ..self.params.clone()
+        };
+        let fit = gltf_fit::fit_samples(&self.gfit, v, iso, &params, &mut self.gscratch);
+        Some((
+            gltf_fit::sse(&fit, &self.gval, v, exposure).0,
+            3 * self.gval.len(),
+        ))
+    }
+
+    /// The glTF fit of one pixel in the frame `(t, b, n)`.
+    fn fit_gltf(&mut self, n: DVec3, t: DVec3, b: DVec3, iso: bool, rgb: &[f32]) -> PixelOutcome {
+        let v = self.gltf_samples(n, t, b, rgb);
+        if self.gtrain.len() < self.params.min_samples {
+            return PixelOutcome::TooFewSamples;
+        }
+        let fit = gltf_fit::fit_samples(&self.gtrain, v, iso, self.params, &mut self.gscratch);
+        let hold = gltf_fit::holdout(&fit, &self.gtest, v, self.params.exposure);
+        PixelOutcome::FittedGltf(fit, hold)
+    }
+
+    /// A free-scale glTF fit of one pixel (its own light intensity), on the training samples,
+    /// for choosing the exposure ([`gltf_fit::choose_exposure`]); `None` where the pixel would
+    /// not be fitted.
+    pub(crate) fn scale(
+        &mut self,
+        normal: DVec3,
+        tangent: Option<DVec3>,
+        rgb: &[f32],
+    ) -> Option<gltf_fit::PixelScale> {
+        let n = normal.try_normalize().filter(|n| n.z > 0.0)?;
+        let t = tangent
+            .map(|t| t - t.dot(n) * n)
+            .and_then(|t| t.try_normalize());
+        let iso = t.is_none();
+        let t = t.unwrap_or_else(|| tangent_basis(n).0);
+        let v = self.gltf_samples(n, t, n.cross(t), rgb);
+        if self.gtrain.len() < self.params.min_samples {
+            return None;
+        }
+        Some(gltf_fit::fit_exposure(
+            &self.gtrain,
+            v,
+            iso,
+            self.params,
+            &mut self.gscratch,
+        ))
+    }
+}
+
+/// One pixel's frame (camera frame; `tangent = None`: isotropic) and samples (`3 * lights`
+/// values, NaN = invalid), for [`ExposureChoice::select`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct PixelData {
+    /// Unit normal.
+    pub normal: DVec3,
+    /// Unit tangent, if any.
+    pub tangent: Option<DVec3>,
+    /// The pixel's samples, RGB per light.
+    pub rgb: Vec<f32>,
+}
+
+/// The light intensity a glTF fit was given by [`ExposureChoice::select`], and the evidence.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ExposureChoice {
+    /// The intensity chosen.
+    pub exposure: f64,
+    /// Each intensity tried and the RMS error of the fits at it on the validation samples
+    /// of the pixels judged, in the order tried.
+    pub candidates: Vec<(f64, f64)>,
+    /// Pixels judged.
+    pub pixels: usize,
+}
+
+/// [`ExposureChoice::select`] keeps the lowest intensity whose validation RMS is within this share of
+/// the best one's.
+pub(crate) const EXPOSURE_TOLERANCE: f64 = 0.05;
+
+/// Pixels [`ExposureChoice::select`] judges each candidate intensity on, at most.
+pub(crate) const EXPOSURE_JUDGED_PIXELS: usize = 512;
+
+impl ExposureChoice {
+    /// The light intensity of a glTF fit (or of an automatic fit's glTF part) from sampled
+    /// pixels: the candidates are the lowest intensity that keeps 99% of the pixels' base colours
+    /// within 1 (from free-scale fits, [`gltf_fit::exposure_bounds`]) times `2^k`, `k = -8..=4`,
+    /// and the intensity the mostly dielectric pixels imply where there are enough of them, then
+    /// half steps (`2^(±1/2)`) either side of the best; each is judged by the squared error of fits at it on the validation lights
+    /// ([`validation_lights`]) of up to [`EXPOSURE_JUDGED_PIXELS`] of the pixels (spread over the
+    /// list), and the lowest intensity whose RMS error is within [`EXPOSURE_TOLERANCE`] of the
+    /// smallest wins.
+    ///
+    /// Why judged, not read off: the scale of a pixel's free fit rests on the strength of the
+    /// specular layer's Fresnel term, which a metal does not fix (a bare metal is also a black
+    /// dielectric under brighter lights); a lobe that is not GGX's (Beckmann brushed gold) is
+    /// fitted as such a dielectric under many times the true intensity, its shape bent by the
+    /// Fresnel term's growth toward grazing halfway angles, and predicts held-out lights with
+    /// errors many times the brightest sample. Whatever the intensity, that growth is then scaled
+    /// by it. Why the lowest of the near-best: a range of intensities predicts the validation
+    /// lights almost equally well (the Fresnel term's extra freedom fits a Beckmann lobe a little
+    /// better), and the higher ones put that freedom, times the intensity, into every light that
+    /// is not like the rig's (docs/method.md, "Choosing the exposure").
+    ///
+    /// # Errors
+    /// When no pixel can be fitted.
+    pub fn select(
+        lights: &[DVec3],
+        params: &FitParams,
+        pixels: &[PixelData],
+    ) -> Result<ExposureChoice> {
+        use rayon::prelude::*;
+        PixelFitter::new(lights, params)?;
+        let scales: Vec<gltf_fit::PixelScale> = pixels
+            .par_iter()
+            .map_init(
+                || PixelFitter::checked(lights, params),
+                |f, p| f.scale(p.normal, p.tangent, &p.rgb),
+            )
+            .flatten()
+            .collect();
+        let (dielectric, brightest) = gltf_fit::exposure_bounds(&scales);
+        let Some(base) = brightest.or(dielectric) else {
+            return Err(Error::BadParameter(
+                "no pixel to choose the exposure of the glTF fit from".into(),
+            ));
+        };
+        let stride = pixels.len().div_ceil(EXPOSURE_JUDGED_PIXELS).max(1);
+        let judged: Vec<&PixelData> = pixels.iter().step_by(stride).collect();
+        let mut tried: Vec<(f64, f64)> = Vec::new();
+        let judge = |e: f64, tried: &mut Vec<(f64, f64)>| {
+            let (sum, count) = judged
+                .par_iter()
+                .map_init(
+                    || PixelFitter::checked(lights, params),
+                    |f, p| f.gltf_validation_error(p.normal, p.tangent, &p.rgb, e),
+                )
+                .flatten()
+                .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+            if count > 0 {
+                tried.push((e, (sum / count as f64).sqrt()));
+            }
+        };
+        let best = |tried: &[(f64, f64)]| {
+            tried
+                .iter()
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|&(e, _)| e)
+        };
+        // Coarse: factors of 2 from 1/256 to 16 times the reading, and the dielectric reading;
+        // then half steps either side of the best.
+        for k in -8..=4 {
+            judge(base * 2f64.powi(k), &mut tried);
+        }
+        if let Some(d) = dielectric.filter(|&d| d != base) {
+            judge(d, &mut tried);
+        }
+        if let Some(e) = best(&tried) {
+            for f in [std::f64::consts::FRAC_1_SQRT_2, std::f64::consts::SQRT_2] {
+                judge(e * f, &mut tried);
+            }
+        }
+        // The lowest intensity that predicts the validation lights as well as the best to within
+        // EXPOSURE_TOLERANCE.
+        let exposure = match tried.iter().map(|t| t.1).min_by(f64::total_cmp) {
+            Some(least) => tried
+                .iter()
+                .filter(|t| t.1 <= (1.0 + EXPOSURE_TOLERANCE) * least)
+                .map(|t| t.0)
+                .min_by(f64::total_cmp)
+                .unwrap_or(base),
+            None => gltf_fit::choose_exposure(&scales).unwrap_or(base),
+        };
+        Ok(ExposureChoice {
+            exposure,
+            candidates: tried,
+            pixels: judged.len(),
+        })
+    }
+}
+
+/// The Ward fit as a [`PixelMethod`]: every pixel fitted in its frame of the `normals` and
+/// `tangents` maps (`H x W x 3`, NaN tangent = isotropic); `None` outside the mask.
+#[derive(Debug, Clone, Copy)]
+pub struct FitMethod<'a> {
+    lights: &'a [DVec3],
+    params: &'a FitParams,
+    normals: &'a [f32],
+    tangents: &'a [f32],
+}
+
+impl<'a> FitMethod<'a> {
+    /// Checks `params` against the `lights` (unit, camera frame, one per input light) and the
+    /// frame maps against the image size `n_pixels`.
+    pub fn new(
+        lights: &'a [DVec3],
+        params: &'a FitParams,
+        normals: &'a [f32],
+        tangents: &'a [f32],
+        n_pixels: usize,
+    ) -> Result<Self> {
+        for (name, len) in [("normal", normals.len()), ("tangent", tangents.len())] {
+            if len != n_pixels * 3 {
+                return Err(Error::BadParameter(format!(
+                    "the {name} map has {len} values but the images have {n_pixels} pixels \
+                     ({} values expected)",
+                    n_pixels * 3
+                )));
+            }
+        }
+        params.validate(lights.len())?;
+        Ok(Self {
+            lights,
+            params,
+            normals,
+            tangents,
+        })
+    }
+}
+
+impl<'a> PixelMethod for FitMethod<'a> {
+    type Scratch = PixelFitter<'a>;
+    type Output = Option<PixelOutcome>;
+
+    fn lights(&self) -> Option<&[usize]> {
+        None
+    }
+
+    fn scratch(&self) -> PixelFitter<'a> {
+        PixelFitter::checked(self.lights, self.params)
+    }
+
+    fn pixel(&self, p: usize, samples: &[f32], fitter: &mut PixelFitter<'a>) -> Self::Output {
+        let Some(normal) = vec_at(self.normals, p) else {
+            return Some(PixelOutcome::NoFrame);
+        };
+        Some(fitter.fit(normal, vec_at(self.tangents, p), samples))
+    }
+
+    fn masked(&self) -> Self::Output {
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::brdf::ward::Ward;
+    use crate::frames::rig::uniform_cone_lights;
+
+    /// One pixel's samples of a Ward BRDF in the frame (n, t, b = n x t), x = t.
+    fn render_pixel(w: &Ward, n: DVec3, t: DVec3, lights: &[DVec3]) -> Vec<f32> {
+        crate::brdf::testutil::render_pixel(w, n, t, lights, 1.0)
+    }
+
+    /// The default parameters with the Ward model forced (what `--model ward` asks for).
+    fn ward_params() -> FitParams {
+        FitParams {
+            model: FitModel::Ward,
+            ..FitParams::default()
+        }
+    }
+
+    fn frame() -> (DVec3, DVec3) {
+        let n = DVec3::new(0.3, -0.2, 0.9).normalize();
+        let t = tangent_basis(n).0 * 0.6 + tangent_basis(n).1 * 0.8;
+        (n, t)
+    }
+
+    #[test]
+    fn prediction_matches_the_ward_model() {
+        let (n, t) = frame();
+        let lights = uniform_cone_lights(200, 65.0);
+        let w = Ward::new([0.3, 0.2, 0.1], [0.4, 0.5, 0.6], 0.3, 0.08);
+        let rgb = render_pixel(&w, n, t, &lights);
+        let params = ward_params();
+        let mut f = PixelFitter::new(&lights, &params).unwrap();
+        f.fit(n, Some(t), &rgb);
+        let fit = WardFit {
+            kd: w.kd,
+            ks: w.ks,
+            alpha_t: w.alpha_x,
+            alpha_b: w.alpha_y,
+            isotropic: false,
+            samples: 0,
+            sse: 0.0,
+            iterations: 0,
+        };
+        let (err, peak) = sse(&fit, &f.train);
+        assert!(f.train.len() > 100);
+        assert!(err < 1e-10 * peak * peak, "{err} {peak}");
+    }
+
+    #[test]
+    fn recovers_anisotropic_ward_exactly() {
+        let (n, t) = frame();
+        let lights = uniform_cone_lights(500, 65.0);
+        for (kd, ks, at, ab) in [
+            ([0.3, 0.2, 0.1], [0.4, 0.5, 0.6], 0.3, 0.08),
+            ([0.5; 3], [0.5; 3], 0.5, 0.1),
+            ([0.05, 0.1, 0.2], [0.9, 0.8, 0.7], 0.15, 0.12),
+            ([0.6, 0.6, 0.6], [0.0, 0.05, 0.1], 0.25, 0.1),
+        ] {
+            let w = Ward::new(kd, ks, at, ab);
+            let rgb = render_pixel(&w, n, t, &lights);
+            let params = ward_params();
+            let PixelOutcome::Fitted(fit, _) =
+                PixelFitter::new(&lights, &params)
+                    .unwrap()
+                    .fit(n, Some(t), &rgb)
+            else {
+                panic!("not fitted")
+            };
+            for c in 0..3 {
+                assert!((fit.kd[c] - kd[c]).abs() < 1e-4, "{fit:?} {kd:?}");
+                assert!((fit.ks[c] - ks[c]).abs() < 1e-4, "{fit:?} {ks:?}");
+            }
+            if ks.iter().any(|&v| v > 0.01) {
+                assert!((fit.alpha_t / at - 1.0).abs() < 1e-3, "{fit:?}");
+                assert!((fit.alpha_b / ab - 1.0).abs() < 1e-3, "{fit:?}");
+            }
+            assert!(fit.rms() < 1e-5, "{fit:?}");
+        }
+    }
+
+    #[test]
+    fn isotropic_pixels_get_one_roughness() {
+        let (n, t) = frame();
+        let lights = uniform_cone_lights(400, 65.0);
+        let w = Ward::isotropic([0.2, 0.3, 0.4], [0.5, 0.4, 0.3], 0.12);
+        let rgb = render_pixel(&w, n, t, &lights);
+        let params = ward_params();
+        let PixelOutcome::Fitted(fit, _) = PixelFitter::new(&lights, &params)
+            .unwrap()
+            .fit(n, None, &rgb)
+        else {
+            panic!("not fitted")
+        };
+        assert!(fit.isotropic);
+        assert_eq!(fit.alpha_t, fit.alpha_b);
+        assert!((fit.alpha_t / 0.12 - 1.0).abs() < 1e-3, "{fit:?}");
+        assert!((fit.ks[0] - 0.5).abs() < 1e-4 && (fit.kd[2] - 0.4).abs() < 1e-4);
+    }
+
+    #[test]
+    fn invalid_and_back_facing_samples_are_excluded_and_holdout_is_judged() {
+        let (n, t) = frame();
+        let lights = uniform_cone_lights(300, 65.0);
+        let w = Ward::new([0.3; 3], [0.4; 3], 0.2, 0.1);
+        let mut rgb = render_pixel(&w, n, t, &lights);
+        // Corrupt samples that are marked invalid: must not matter.
+        for i in (0..300).step_by(7) {
+            rgb[i * 3..i * 3 + 3].fill(f32::NAN);
+        }
+        let params = FitParams {
+            holdout: FitParams::holdout_lights(300, 10).unwrap(),
+            ..ward_params()
+        };
+        let PixelOutcome::Fitted(fit, hold) =
+            PixelFitter::new(&lights, &params)
+                .unwrap()
+                .fit(n, Some(t), &rgb)
+        else {
+            panic!("not fitted")
+        };
+        assert!((fit.alpha_t / 0.2 - 1.0).abs() < 1e-3, "{fit:?}");
+        let lit = (0..300).filter(|&i| n.dot(lights[i]) > 0.0).count();
+        assert!(fit.samples < lit, "{} {lit}", fit.samples);
+        assert!(hold.samples > 0 && hold.samples <= 10);
+        assert!((hold.sse / hold.samples as f64).sqrt() < 1e-5, "{hold:?}");
+    }
+
+    #[test]
+    fn pixels_without_frames_or_samples_are_reported() {
+        let lights = uniform_cone_lights(50, 65.0);
+        let params = FitParams::default();
+        let mut f = PixelFitter::new(&lights, &params).unwrap();
+        let rgb = vec![f32::NAN; 150];
+        assert_eq!(
+            f.fit(DVec3::new(0.0, 0.0, -1.0), None, &rgb),
+            PixelOutcome::NoFrame
+        );
+        assert_eq!(f.fit(DVec3::Z, None, &rgb), PixelOutcome::TooFewSamples);
+        let bad = FitParams {
+            holdout: vec![50],
+            ..FitParams::default()
+        };
+        assert!(PixelFitter::new(&lights, &bad).is_err());
+    }
+}
