@@ -131,7 +131,15 @@ pub fn run_job<T: Send>(
             });
             rx = back;
             match got {
-                Ok(result) => break (result, interrupt),
+                // A signal that came in since the last poll is the caller's too, though the job
+                // finished first: raised here, inside the call, not at whatever bytecode runs
+                // next (which may be outside the caller's `try`).
+                Ok(result) => {
+                    if interrupt.is_none() {
+                        interrupt = py.check_signals().err();
+                    }
+                    break (result, interrupt);
+                }
                 Err(RecvTimeoutError::Timeout) => {
                     if interrupt.is_none() {
                         if let Err(e) = py.check_signals() {
