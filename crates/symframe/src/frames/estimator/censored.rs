@@ -262,11 +262,6 @@ mod tests {
         assert!(held_error < first_error, "{first_error} -> {held_error}");
         assert!(covered >= covered_before, "{covered_before} -> {covered}");
     }
-}
-
-#[cfg(test)]
-mod colour_tests {
-    use super::clipped_in_colour;
 
     #[test]
     fn clipped_samples_take_the_highlight_s_colour() {

@@ -1,6 +1,7 @@
 //! Small dense solves and the normal's uncertainty from a Gauss-Newton system.
 
-use super::*;
+use super::kernel::Subset;
+use super::{normal_equations, project, Buffers, Model, P};
 
 /// Solves `a x = b` for a symmetric positive definite `a` (Cholesky); `None` if it is not.
 pub(super) fn solve_spd<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {

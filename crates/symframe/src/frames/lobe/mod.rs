@@ -40,10 +40,12 @@ mod noise_fit;
 mod pair;
 mod search;
 
-use linalg::*;
-use linear::*;
-use noise_fit::*;
-use search::*;
+use linalg::{tilt_sd, tilt_step2};
+use linear::{nnls3, ActiveSet, Linear};
+use noise_fit::{
+    fitted_parameters, noise_cost, noise_variances, noise_weights, SETTLED_Z, WEIGHTED_SD_FLOOR,
+};
+use search::{levenberg_marquardt, search_subset, COARSE_RELATIVE_GAIN, RELATIVE_GAIN};
 
 pub(crate) use pair::{fit_lobe_pair, LobePair};
 

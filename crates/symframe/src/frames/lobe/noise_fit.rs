@@ -1,6 +1,10 @@
 //! What the capture's noise leaves of a lobe fit, and the noise-weighted polish's weights.
 
-use super::*;
+use crate::noise::NoiseModel;
+
+use super::kernel::{self, Subset};
+use super::linear::Linear;
+use super::{Buffers, Model, State, P};
 
 /// A fit leaving no more than what the capture's noise leaves, at this many standard
 /// deviations above its expectation (the one-sided 0.1% point of the normal distribution, as

@@ -20,9 +20,11 @@ use glam::{DQuat, DVec3};
 use crate::frames::rig::Rig;
 
 use super::kernel::Subset;
+use super::linalg::{cholesky_solve, damping_floor, floored, solve_spd, tilt_sd};
+use super::search::{negligible, COARSE_RELATIVE_GAIN, RELATIVE_GAIN};
 use super::{
-    cholesky_solve, damping_floor, floored, light_draws_seed, negligible, solve_spd, tilt_sd,
-    LobeFit, LobeScratch, ALPHA_RANGE, LIGHT_DRAWS, MAX_ITERATIONS, RELATIVE_GAIN, SHAPE_RANGE,
+    light_draws_seed, LobeFit, LobeScratch, ALPHA_RANGE, LIGHT_DRAWS, MAX_ITERATIONS,
+    RETRY_RESIDUAL, SHAPE_RANGE,
 };
 
 /// Number of linear coefficients: the diffuse term and each lobe's two Fresnel terms.
@@ -587,7 +589,7 @@ pub(crate) fn fit_lobe_pair(
     // polished on the whole.
     let polish = fine.len() >= 2 * coarse.len();
     let (searched, relative): (&Subset, f64) = if polish {
-        (coarse, super::COARSE_RELATIVE_GAIN)
+        (coarse, COARSE_RELATIVE_GAIN)
     } else {
         (fine, RELATIVE_GAIN)
     };
@@ -623,7 +625,7 @@ pub(crate) fn fit_lobe_pair(
             best = Some((state, linear));
         }
         // As for one lobe, the starts are tried until one explains the samples.
-        if best.is_some_and(|b| b.1.cost <= super::RETRY_RESIDUAL * searched_syy) {
+        if best.is_some_and(|b| b.1.cost <= RETRY_RESIDUAL * searched_syy) {
             break;
         }
     }

@@ -1,6 +1,12 @@
 //! The lobe fit's search: Levenberg-Marquardt from each start, and the starts tried on a subset.
 
-use super::*;
+use super::kernel::Subset;
+use super::linalg::{damping_floor, solve_spd};
+use super::linear::Linear;
+use super::{
+    normal_equations, project, shape_bounds, trim_shadows, Buffers, LobeStart, Model, State,
+    FORESHORTENING_FLOOR, MAX_ITERATIONS, MICROFACET, P, RETRY_RESIDUAL,
+};
 
 /// Whether a gain in the sum of squares is too small to go on for: below [`RELATIVE_GAIN`] of
 /// the cost, or [`ABSOLUTE_GAIN`] of the samples' energy `syy`.
