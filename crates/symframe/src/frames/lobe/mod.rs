@@ -94,8 +94,8 @@ pub(crate) struct LobeFit {
     /// about the fit leaves ([`tilt_sd`]); infinite where they do not determine it.
     pub normal_sd: f64,
     /// Standard deviation of the normal (radians) the lights' own uncertainty gives (0 where
-    /// the lights are taken as exact): how far the fit moves when every light is off by the
-    /// capture's light error at random.
+    /// the lights are taken as exact): how far the fit moves, refitted, when every light is
+    /// off by the capture's light error at random.
     pub light_sd: f64,
     /// The share of the samples' energy the capture's noise alone would leave unexplained
     /// (its expectation, the fitted parameters' degrees of freedom taken off): each sample's
@@ -251,7 +251,7 @@ const SPLIT_SAMPLES: usize = 128;
 /// Draws of the lights' error the lobe fit's [`LobeFit::light_sd`] averages: two degrees of
 /// freedom each, so that the estimate rarely falls far below the variance it stands for (a
 /// quarter of it at about one pixel in a thousand with eight; one in eleven with two). Higher
-/// is slower (three passes over the samples each), only where a light error is given.
+/// is slower (a refit each, two passes per iteration), only where a light error is given.
 const LIGHT_DRAWS: u64 = 8;
 
 /// The seed of a pixel's light-error draws ([`LIGHT_DRAWS`]): a hash of its `len` fitted
@@ -664,11 +664,15 @@ pub(crate) fn fit_lobe(
         evals += 2;
         (sd * sd + split2 + moved2).sqrt()
     };
-    // The lights' uncertainty: the Gauss-Newton step from the answer with every light of the
-    // whole subset turned at random by the light error, LIGHT_DRAWS times (the mean of the
-    // squared tilts), from a stream the pixel's samples seed. The same draws
-    // give what the turned lights change in each sample's prediction (its variance from the
-    // lights, for the noise share below).
+    // The lights' uncertainty: the fit repeated from the answer (Levenberg-Marquardt to
+    // convergence) with every light of the whole subset turned at random by the light error,
+    // LIGHT_DRAWS times (the mean of the squared angles the normal moved), from a stream the
+    // pixel's samples seed. A refit, not one Gauss-Newton step: a lobe read between few lights
+    // can answer a turn of its lights nonlinearly, sliding along a valley of its shape and
+    // tilt several times further than the step from the answer predicts (or less far), and a
+    // calibration's error moves the answer as the refit does (docs/method.md, "Confidence").
+    // The same draws give what the turned lights change in each sample's prediction (its
+    // variance from the lights, for the noise share below).
     buffers.light_var.clear();
     let light_sd = if light_error > 0.0 {
         buffers.fit(fine);
@@ -690,7 +694,11 @@ pub(crate) fn fit_lobe(
         let mut sum = 0.0;
         for draw in 0..LIGHT_DRAWS {
             every.turned_from(fine, light_error, seed.wrapping_add(draw));
-            sum += tilt_step2(&m, every, free, buffers);
+            buffers.fit(every);
+            let (refit, _, e) =
+                levenberg_marquardt(every, state, None, free, RELATIVE_GAIN, buffers);
+            sum += refit.normal.angle_between(state.normal).powi(2);
+            evals += e;
             let Buffers {
                 lobe,
                 r,
@@ -704,7 +712,7 @@ pub(crate) fn fit_lobe(
                 let d = every.value(i) - r[i] - predicted[i];
                 *v += d * d / LIGHT_DRAWS as f64;
             }
-            evals += 3;
+            evals += 1;
         }
         evals += 1;
         (sum / LIGHT_DRAWS as f64).sqrt()
@@ -800,7 +808,7 @@ pub(crate) fn predicted_greys(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::brdf::{Brdf, Ggx, Ward};
+    use crate::brdf::{Brdf, Ggx, Layered, Ward};
     use crate::frames::rig::{uniform_cone_lights, Rig, RigOptions};
 
     /// The slice of `brdf` at a pixel of frame `(n, t)` under `rig` (view `+z`), RGB (the red
@@ -1000,6 +1008,51 @@ pub(crate) mod tests {
         assert!(
             f.residual < f.noise_share + 1e-4 + 3.09 * f.noise_share_sd,
             "{f:?}"
+        );
+    }
+
+    #[test]
+    fn the_light_share_is_what_the_lights_error_moves_the_normal_by() {
+        // A clear coat over a glossy base under 200 lights, fitted as one lobe (the family
+        // cannot hold both, so the fit slides along its shape when the lights turn), lights
+        // each off by 1 degree at random (24 draws): the normal moves from where the exact
+        // lights put it by what the light share says, as a root mean square over the draws.
+        let lights = uniform_cone_lights(200, 65.0);
+        let brdf = Layered::new(
+            0.03,
+            1.5,
+            Box::new(Ggx::isotropic([0.3, 0.12, 0.05], [0.3; 3], 0.2)),
+        );
+        let (n, t) = frame();
+        let start = LobeStart {
+            normal: n,
+            tangent: t,
+            alpha: [0.1, 0.1],
+        };
+        let told = NoiseModel {
+            light_error_deg: 1.0,
+            ..NoiseModel::default()
+        };
+        let mut scratch = LobeScratch::default();
+        let exact_rig = Rig::new(&lights, RigOptions::default()).unwrap();
+        let exact = slice(&exact_rig, &brdf, n, t);
+        let at_exact = fit_lobe(&exact, &exact_rig, start, &told, &mut scratch)
+            .unwrap()
+            .normal;
+        let (mut moved2, mut predicted2) = (0.0, 0.0);
+        let draws = 24;
+        for seed in 0..draws {
+            let (rig, samples) = under_turned_lights(&lights, 1.0, seed, &brdf, (n, t));
+            let f = fit_lobe(&samples, &rig, start, &told, &mut scratch).unwrap();
+            moved2 += f.normal.angle_between(at_exact).powi(2) / draws as f64;
+            predicted2 += f.light_sd.powi(2) / draws as f64;
+        }
+        let ratio = (moved2 / predicted2).sqrt();
+        assert!(
+            (0.7..1.4).contains(&ratio),
+            "moved {:.3} deg rms, light share {:.3} deg rms",
+            moved2.sqrt().to_degrees(),
+            predicted2.sqrt().to_degrees()
         );
     }
 

@@ -20,7 +20,7 @@ use glam::{DQuat, DVec3};
 use crate::frames::rig::Rig;
 
 use super::kernel::Subset;
-use super::linalg::{cholesky_solve, damping_floor, floored, solve_spd, tilt_sd};
+use super::linalg::{cholesky_solve, damping_floor, solve_spd, tilt_sd};
 use super::search::{negligible, COARSE_RELATIVE_GAIN, RELATIVE_GAIN};
 use super::{
     light_draws_seed, LobeFit, LobeScratch, ALPHA_RANGE, LIGHT_DRAWS, MAX_ITERATIONS,
@@ -648,9 +648,9 @@ pub(crate) fn fit_lobe_pair(
         let parameters = P + members(at.set).1;
         tilt_sd(&jtj, at.cost, s.len() as f64 - parameters as f64)
     };
-    // The lights' uncertainty, as for one lobe ([`LobeFit::light_sd`]): the Gauss-Newton step
-    // from the answer with every light turned at random by the light error, the mean of the
-    // squared tilts over the draws. The pair's own: its normal is read where its sharper lobe
+    // The lights' uncertainty, as for one lobe ([`LobeFit::light_sd`]): the pair refitted from
+    // the answer with every light turned at random by the light error, the mean of the
+    // squared angles its normal moved over the draws. The pair's own: its normal is read where its sharper lobe
     // is, between fewer lights than the one lobe's (a coat's highlight under a sparse rig).
     let light_error = light_error_deg.to_radians();
     let light_sd = if light_error > 0.0 {
@@ -658,11 +658,9 @@ pub(crate) fn fit_lobe_pair(
         let mut sum = 0.0;
         for draw in 0..LIGHT_DRAWS {
             every.turned_from(s, light_error, seed.wrapping_add(draw));
-            let at = project(&model, every, syy, &mut pair[1]);
-            let (jtj, rhs) = normal_equations(&at, every, &pair[1]);
-            sum +=
-                solve_spd(floored(&jtj), rhs).map_or(f64::INFINITY, |d| d[0] * d[0] + d[1] * d[1]);
-            evals += 2;
+            let (refit, _, e) = levenberg_marquardt(every, state, syy, RELATIVE_GAIN, pair);
+            sum += refit.normal.angle_between(state.normal).powi(2);
+            evals += e;
         }
         (sum / LIGHT_DRAWS as f64).sqrt()
     } else {
