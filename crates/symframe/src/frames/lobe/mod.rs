@@ -34,12 +34,14 @@ use crate::geometry::tangent_basis;
 
 mod kernel;
 mod lanes;
+mod light_share;
 mod linalg;
 mod linear;
 mod noise_fit;
 mod pair;
 mod search;
 
+use light_share::{light_draws_seed, light_share};
 use linalg::{tilt_sd, tilt_step2};
 use linear::{nnls3, ActiveSet, Linear};
 use noise_fit::{
@@ -247,20 +249,6 @@ const COARSE_HIGHLIGHT: usize = 128;
 /// Fewest samples in the part of a lobe fit's split ([`fit_lobe`]'s `normal_sd`): its fit
 /// must still read the lobe, not only its neighbourhood (lower is faster on dense rigs).
 const SPLIT_SAMPLES: usize = 128;
-
-/// Draws of the lights' error the lobe fit's [`LobeFit::light_sd`] averages: two degrees of
-/// freedom each, so that the estimate rarely falls far below the variance it stands for (a
-/// quarter of it at about one pixel in a thousand with eight; one in eleven with two). Higher
-/// is slower (a refit each, two passes per iteration), only where a light error is given.
-const LIGHT_DRAWS: u64 = 8;
-
-/// The seed of a pixel's light-error draws ([`LIGHT_DRAWS`]): a hash of its `len` fitted
-/// samples' grey values (`greys` at `lights`), so that a pixel draws the same turns every run.
-fn light_draws_seed(lights: &[u32], greys: &[f64], len: usize) -> u64 {
-    lights.iter().fold(len as u64, |h, &j| {
-        (h ^ greys[j as usize].to_bits()).wrapping_mul(0x0100_0000_01b3)
-    })
-}
 
 /// Per-thread buffers of [`fit_lobe`], reused from pixel to pixel.
 #[derive(Debug, Clone, Default)]
@@ -664,58 +652,14 @@ pub(crate) fn fit_lobe(
         evals += 2;
         (sd * sd + split2 + moved2).sqrt()
     };
-    // The lights' uncertainty: the fit repeated from the answer (Levenberg-Marquardt to
-    // convergence) with every light of the whole subset turned at random by the light error,
-    // LIGHT_DRAWS times (the mean of the squared angles the normal moved), from a stream the
-    // pixel's samples seed. A refit, not one Gauss-Newton step: a lobe read between few lights
-    // can answer a turn of its lights nonlinearly, sliding along a valley of its shape and
-    // tilt several times further than the step from the answer predicts (or less far), and a
-    // calibration's error moves the answer as the refit does (docs/method.md, "Confidence").
-    // The same draws give what the turned lights change in each sample's prediction (its
-    // variance from the lights, for the noise share below).
+    // The lights' uncertainty, and what they add to each sample's variance (for the noise
+    // share below).
     buffers.light_var.clear();
     let light_sd = if light_error > 0.0 {
-        buffers.fit(fine);
-        {
-            let Buffers {
-                lobe,
-                r,
-                kept,
-                predicted,
-                light_var,
-                ..
-            } = &mut *buffers;
-            residuals(&m, fine, lobe, r, kept);
-            predicted.clear();
-            predicted.extend((0..fine.len()).map(|i| fine.value(i) - r[i]));
-            light_var.resize(fine.len(), 0.0);
-        }
         let seed = light_draws_seed(fine_lights, greys, fine.len());
-        let mut sum = 0.0;
-        for draw in 0..LIGHT_DRAWS {
-            every.turned_from(fine, light_error, seed.wrapping_add(draw));
-            buffers.fit(every);
-            let (refit, _, e) =
-                levenberg_marquardt(every, state, None, free, RELATIVE_GAIN, buffers);
-            sum += refit.normal.angle_between(state.normal).powi(2);
-            evals += e;
-            let Buffers {
-                lobe,
-                r,
-                kept,
-                predicted,
-                light_var,
-                ..
-            } = &mut *buffers;
-            residuals(&m, every, lobe, r, kept);
-            for (i, v) in light_var.iter_mut().enumerate() {
-                let d = every.value(i) - r[i] - predicted[i];
-                *v += d * d / LIGHT_DRAWS as f64;
-            }
-            evals += 1;
-        }
-        evals += 1;
-        (sum / LIGHT_DRAWS as f64).sqrt()
+        let (sd, e) = light_share(&state, fine, every, free, light_error, seed, buffers);
+        evals += e;
+        sd
     } else {
         0.0
     };

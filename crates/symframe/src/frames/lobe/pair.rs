@@ -20,12 +20,10 @@ use glam::{DQuat, DVec3};
 use crate::frames::rig::Rig;
 
 use super::kernel::Subset;
+use super::light_share::{light_draws_seed, LIGHT_DRAWS};
 use super::linalg::{cholesky_solve, damping_floor, solve_spd, tilt_sd};
 use super::search::{negligible, COARSE_RELATIVE_GAIN, RELATIVE_GAIN};
-use super::{
-    light_draws_seed, LobeFit, LobeScratch, ALPHA_RANGE, LIGHT_DRAWS, MAX_ITERATIONS,
-    RETRY_RESIDUAL, SHAPE_RANGE,
-};
+use super::{LobeFit, LobeScratch, ALPHA_RANGE, MAX_ITERATIONS, RETRY_RESIDUAL, SHAPE_RANGE};
 
 /// Number of linear coefficients: the diffuse term and each lobe's two Fresnel terms.
 const C: usize = 5;

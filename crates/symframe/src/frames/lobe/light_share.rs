@@ -1,0 +1,83 @@
+//! The lights' uncertainty in a lobe fit ([`super::LobeFit::light_sd`]): how far the normal
+//! moves when the fit is repeated with every light turned at random by the calibration's
+//! error, and what the turns add to each sample's variance (docs/method.md, "Confidence").
+
+use super::kernel::Subset;
+use super::search::{levenberg_marquardt, RELATIVE_GAIN};
+use super::{residuals, Buffers, Model, State, P};
+
+/// Draws of the lights' error the lobe fit's [`super::LobeFit::light_sd`] averages: two
+/// degrees of freedom each, so that the estimate rarely falls far below the variance it stands
+/// for (a quarter of it at about one pixel in a thousand with eight; one in eleven with two).
+/// Higher is slower (a refit each, two passes per iteration), only where a light error is
+/// given.
+pub(super) const LIGHT_DRAWS: u64 = 8;
+
+/// The seed of a pixel's light-error draws ([`LIGHT_DRAWS`]): a hash of its `len` fitted
+/// samples' grey values (`greys` at `lights`), so that a pixel draws the same turns every run.
+pub(super) fn light_draws_seed(lights: &[u32], greys: &[f64], len: usize) -> u64 {
+    lights.iter().fold(len as u64, |h, &j| {
+        (h ^ greys[j as usize].to_bits()).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+/// The standard deviation (radians) of the normal of the fit `state` of `fine` (its free
+/// parameters `free`) under lights off by `light_error` (radians, RMS) at random, and the
+/// passes over the samples it took: the fit repeated from the answer (Levenberg-Marquardt to
+/// convergence) with every light of `fine` turned ([`Subset::turned_from`], into `turned`),
+/// [`LIGHT_DRAWS`] times from the stream `seed`, the root of the mean squared angle the normal
+/// moved. A refit, not one Gauss-Newton step: a lobe read between few lights can answer a turn
+/// of its lights nonlinearly, sliding along a valley of its shape and tilt several times
+/// further than the step from the answer predicts (or less far), and a calibration's error
+/// moves the answer as the refit does. The same draws leave in `buffers.light_var` what the
+/// turned lights change in each sample's prediction, its variance from the lights.
+pub(super) fn light_share(
+    state: &State,
+    fine: &Subset,
+    turned: &mut Subset,
+    free: [bool; P],
+    light_error: f64,
+    seed: u64,
+    buffers: &mut Buffers,
+) -> (f64, u32) {
+    let m = Model::of(state);
+    let mut evals = 1;
+    buffers.fit(fine);
+    {
+        let Buffers {
+            lobe,
+            r,
+            kept,
+            predicted,
+            light_var,
+            ..
+        } = &mut *buffers;
+        residuals(&m, fine, lobe, r, kept);
+        predicted.clear();
+        predicted.extend((0..fine.len()).map(|i| fine.value(i) - r[i]));
+        light_var.clear();
+        light_var.resize(fine.len(), 0.0);
+    }
+    let mut sum = 0.0;
+    for draw in 0..LIGHT_DRAWS {
+        turned.turned_from(fine, light_error, seed.wrapping_add(draw));
+        buffers.fit(turned);
+        let (refit, _, e) = levenberg_marquardt(turned, *state, None, free, RELATIVE_GAIN, buffers);
+        sum += refit.normal.angle_between(state.normal).powi(2);
+        evals += e + 1;
+        let Buffers {
+            lobe,
+            r,
+            kept,
+            predicted,
+            light_var,
+            ..
+        } = &mut *buffers;
+        residuals(&m, turned, lobe, r, kept);
+        for (i, v) in light_var.iter_mut().enumerate() {
+            let d = turned.value(i) - r[i] - predicted[i];
+            *v += d * d / LIGHT_DRAWS as f64;
+        }
+    }
+    ((sum / LIGHT_DRAWS as f64).sqrt(), evals)
+}
