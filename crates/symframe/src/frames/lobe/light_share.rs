@@ -43,21 +43,17 @@ pub(super) fn light_share(
     let m = Model::of(state);
     let mut evals = 1;
     buffers.fit(fine);
-    {
-        let Buffers {
-            lobe,
-            r,
-            kept,
-            predicted,
-            light_var,
-            ..
-        } = &mut *buffers;
-        residuals(&m, fine, lobe, r, kept);
-        predicted.clear();
-        predicted.extend((0..fine.len()).map(|i| fine.value(i) - r[i]));
-        light_var.clear();
-        light_var.resize(fine.len(), 0.0);
-    }
+    predict(&m, fine, buffers);
+    let Buffers {
+        r,
+        predicted,
+        light_var,
+        ..
+    } = &mut *buffers;
+    predicted.clear();
+    predicted.extend_from_slice(&r[..fine.len()]);
+    light_var.clear();
+    light_var.resize(fine.len(), 0.0);
     let mut sum = 0.0;
     for draw in 0..LIGHT_DRAWS {
         turned.turned_from(fine, light_error, seed.wrapping_add(draw));
@@ -65,19 +61,26 @@ pub(super) fn light_share(
         let (refit, _, e) = levenberg_marquardt(turned, *state, None, free, RELATIVE_GAIN, buffers);
         sum += refit.normal.angle_between(state.normal).powi(2);
         evals += e + 1;
+        predict(&m, turned, buffers);
         let Buffers {
-            lobe,
             r,
-            kept,
             predicted,
             light_var,
             ..
         } = &mut *buffers;
-        residuals(&m, turned, lobe, r, kept);
-        for (i, v) in light_var.iter_mut().enumerate() {
-            let d = turned.value(i) - r[i] - predicted[i];
-            *v += d * d / LIGHT_DRAWS as f64;
+        for (v, (now, before)) in light_var.iter_mut().zip(r.iter().zip(predicted.iter())) {
+            *v += (now - before).powi(2) / LIGHT_DRAWS as f64;
         }
     }
     ((sum / LIGHT_DRAWS as f64).sqrt(), evals)
+}
+
+/// What `m` predicts for each sample of `data`, into `buffers.r` (each value less its
+/// residual).
+fn predict(m: &Model, data: &Subset, buffers: &mut Buffers) {
+    let Buffers { lobe, r, kept, .. } = buffers;
+    residuals(m, data, lobe, r, kept);
+    for (i, v) in r.iter_mut().enumerate().take(data.len()) {
+        *v = data.value(i) - *v;
+    }
 }
