@@ -2,6 +2,8 @@
 //! moves when the fit is repeated with every light turned at random by the calibration's
 //! error, and what the turns add to each sample's variance (docs/method.md, "Confidence").
 
+use glam::DVec3;
+
 use super::kernel::Subset;
 use super::search::{levenberg_marquardt, RELATIVE_GAIN};
 use super::{residuals, Buffers, Model, State, P};
@@ -21,16 +23,38 @@ pub(super) fn light_draws_seed(lights: &[u32], greys: &[f64], len: usize) -> u64
     })
 }
 
-/// The standard deviation (radians) of the normal of the fit `state` of `fine` (its free
-/// parameters `free`) under lights off by `light_error` (radians, RMS) at random, and the
-/// passes over the samples it took: the fit repeated from the answer (Levenberg-Marquardt to
-/// convergence) with every light of `fine` turned ([`Subset::turned_from`], into `turned`),
-/// [`LIGHT_DRAWS`] times from the stream `seed`, the root of the mean squared angle the normal
-/// moved. A refit, not one Gauss-Newton step: a lobe read between few lights can answer a turn
-/// of its lights nonlinearly, sliding along a valley of its shape and tilt several times
-/// further than the step from the answer predicts (or less far), and a calibration's error
-/// moves the answer as the refit does. The same draws leave in `buffers.light_var` what the
-/// turned lights change in each sample's prediction, its variance from the lights.
+/// The root mean squared angle (radians) the normal `normal` of a fit of `fine` moves by
+/// when `refit` repeats the fit from its answer on the samples with every light turned
+/// ([`Subset::turned_from`], into `turned`) by `light_error` (radians, RMS) at random,
+/// [`LIGHT_DRAWS`] times from the stream `seed`; `refit` returns the refitted normal and the
+/// passes it took, summed here. One lobe and two share it.
+pub(super) fn moved_by_turned_lights(
+    fine: &Subset,
+    turned: &mut Subset,
+    normal: DVec3,
+    light_error: f64,
+    seed: u64,
+    mut refit: impl FnMut(&Subset) -> (DVec3, u32),
+) -> (f64, u32) {
+    let (mut sum, mut evals) = (0.0, 0);
+    for draw in 0..LIGHT_DRAWS {
+        turned.turned_from(fine, light_error, seed.wrapping_add(draw));
+        let (moved, e) = refit(turned);
+        sum += moved.angle_between(normal).powi(2);
+        evals += e;
+    }
+    ((sum / LIGHT_DRAWS as f64).sqrt(), evals)
+}
+
+/// The standard deviation (radians) of the normal of the one-lobe fit `state` of `fine` (its
+/// free parameters `free`) under lights off by `light_error` (radians, RMS) at random, and the
+/// passes over the samples it took ([`moved_by_turned_lights`], each draw refitted by
+/// Levenberg-Marquardt to convergence). A refit, not one Gauss-Newton step: a lobe read between
+/// few lights can answer a turn of its lights nonlinearly, sliding along a valley of its shape
+/// and tilt several times further than the step from the answer predicts (or less far), and a
+/// calibration's error moves the answer as the refit does. The same draws leave in
+/// `buffers.light_var` what the turned lights change in each sample's prediction, its variance
+/// from the lights.
 pub(super) fn light_share(
     state: &State,
     fine: &Subset,
@@ -41,7 +65,6 @@ pub(super) fn light_share(
     buffers: &mut Buffers,
 ) -> (f64, u32) {
     let m = Model::of(state);
-    let mut evals = 1;
     buffers.fit(fine);
     predict(&m, fine, buffers);
     let Buffers {
@@ -54,13 +77,9 @@ pub(super) fn light_share(
     predicted.extend_from_slice(&r[..fine.len()]);
     light_var.clear();
     light_var.resize(fine.len(), 0.0);
-    let mut sum = 0.0;
-    for draw in 0..LIGHT_DRAWS {
-        turned.turned_from(fine, light_error, seed.wrapping_add(draw));
+    let (sd, e) = moved_by_turned_lights(fine, turned, state.normal, light_error, seed, |turned| {
         buffers.fit(turned);
         let (refit, _, e) = levenberg_marquardt(turned, *state, None, free, RELATIVE_GAIN, buffers);
-        sum += refit.normal.angle_between(state.normal).powi(2);
-        evals += e + 1;
         predict(&m, turned, buffers);
         let Buffers {
             r,
@@ -71,8 +90,10 @@ pub(super) fn light_share(
         for (v, (now, before)) in light_var.iter_mut().zip(r.iter().zip(predicted.iter())) {
             *v += (now - before).powi(2) / LIGHT_DRAWS as f64;
         }
-    }
-    ((sum / LIGHT_DRAWS as f64).sqrt(), evals)
+        (refit.normal, e + 1)
+    });
+    // One pass more: the prediction at the answer.
+    (sd, e + 1)
 }
 
 /// What `m` predicts for each sample of `data`, into `buffers.r` (each value less its

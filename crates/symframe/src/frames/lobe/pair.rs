@@ -20,7 +20,7 @@ use glam::{DQuat, DVec3};
 use crate::frames::rig::Rig;
 
 use super::kernel::Subset;
-use super::light_share::{light_draws_seed, LIGHT_DRAWS};
+use super::light_share::{light_draws_seed, moved_by_turned_lights};
 use super::linalg::{cholesky_solve, damping_floor, solve_spd, tilt_sd};
 use super::search::{negligible, COARSE_RELATIVE_GAIN, RELATIVE_GAIN};
 use super::{LobeFit, LobeScratch, ALPHA_RANGE, MAX_ITERATIONS, RETRY_RESIDUAL, SHAPE_RANGE};
@@ -647,20 +647,19 @@ pub(crate) fn fit_lobe_pair(
         tilt_sd(&jtj, at.cost, s.len() as f64 - parameters as f64)
     };
     // The lights' uncertainty, as for one lobe ([`LobeFit::light_sd`]): the pair refitted from
-    // the answer with every light turned at random by the light error, the mean of the
-    // squared angles its normal moved over the draws. The pair's own: its normal is read where its sharper lobe
-    // is, between fewer lights than the one lobe's (a coat's highlight under a sparse rig).
+    // the answer with every light turned at random by the light error, the root mean squared
+    // angle its normal moved over the draws. The pair's own: its normal is read where its
+    // sharper lobe is, between fewer lights than the one lobe's (a coat's highlight under a
+    // sparse rig).
     let light_error = light_error_deg.to_radians();
     let light_sd = if light_error > 0.0 {
         let seed = light_draws_seed(fine_lights, greys, s.len());
-        let mut sum = 0.0;
-        for draw in 0..LIGHT_DRAWS {
-            every.turned_from(s, light_error, seed.wrapping_add(draw));
-            let (refit, _, e) = levenberg_marquardt(every, state, syy, RELATIVE_GAIN, pair);
-            sum += refit.normal.angle_between(state.normal).powi(2);
-            evals += e;
-        }
-        (sum / LIGHT_DRAWS as f64).sqrt()
+        let (sd, e) = moved_by_turned_lights(s, every, state.normal, light_error, seed, |turned| {
+            let (refit, _, e) = levenberg_marquardt(turned, state, syy, RELATIVE_GAIN, pair);
+            (refit.normal, e)
+        });
+        evals += e;
+        sd
     } else {
         0.0
     };
