@@ -15,8 +15,9 @@
 //! written to `bench.json` in `--dir` (`total_s`, `decode_s`, `estimate_s`, `peak_rss_bytes`,
 //! `cache_bytes`, `woodham_s`, ...). `symframe-lab bench scaling` ([`scaling`]) sweeps size,
 //! lights and threads with the same dataset and run code. `--near` ([`run_near`]) times the
-//! near-light estimate of a dome capture against a distant-light capture of as many pixels (in
-//! wall and CPU time) and, unless `--no-baseline`, the distant-light model on the same images.
+//! near-light estimate of a dome capture against the same scene under distant lights, a
+//! distant-light capture of as many pixels (in wall and CPU time) and, unless
+//! `--no-baseline`, the distant-light model on the same images.
 
 pub mod scaling;
 
@@ -412,20 +413,20 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// One run of the near capture in `data` with the light `model`, output into `out-{tag}-{name}`
-/// (its tile cache deleted first when `--cold` and `model` is near, the first run on it).
+/// One run of the dome capture in `data` with the light `model`, output into
+/// `out-{tag}-{name}` (its tile cache `cache-{tag}` deleted first when `cold`).
 fn near_run(
     args: &BenchArgs,
-    data: &Path,
-    tag: &str,
+    (data, tag): (&Path, &str),
     name: &str,
     model: LightModel,
+    cold: bool,
 ) -> Result<Figures> {
     let mut config = symmetry_config(
         data,
         args.dir.join(format!("out-{tag}-{name}")),
         args.dir.join(format!("cache-{tag}")),
-        args.cold && model == LightModel::Near,
+        cold,
         args.decode_memory,
         args.cache_format,
     )?;
@@ -433,9 +434,41 @@ fn near_run(
     run_estimate(&config)
 }
 
+/// The dome and camera distances of the near benchmark's capture, in the pair's widths: the
+/// near one of `symframe synth --near`, and one where the lights are distant and the camera
+/// orthographic (the largest `synth_near` takes).
+const NEAR_DOME: [f64; 2] = [2.0, 3.0];
+const FAR_DOME: [f64; 2] = [1000.0, 1000.0];
+
+/// Renders the dome capture of `symframe synth --near` (`width` pixels wide, `n` lights, the
+/// dome's radius and the camera's distance `[dome, camera]` in the pair's widths) into `data`,
+/// unless it is there already.
+fn dome_capture(data: &Path, width: usize, n: usize, [dome, camera]: [f64; 2]) -> Result<()> {
+    if data.join("light_positions.txt").is_file() {
+        eprintln!("bench: reusing the dataset in {}", data.display());
+        return Ok(());
+    }
+    eprintln!(
+        "bench: rendering {n} dome images into {} (once)",
+        data.display()
+    );
+    let capture = NearSynthConfig {
+        size: width,
+        lights: n,
+        force: true,
+        dome_ratio: dome,
+        camera_ratio: camera,
+        ..NearSynthConfig::new(data)
+    };
+    let bars = progress::Bars::default();
+    let show = |p| bars.update(p);
+    symframe_job::synth_near(&capture, &symframe_console::control(&show, None))?;
+    Ok(())
+}
+
 /// The near-light benchmark: renders the dome capture of `symframe synth --near` once (`--size`
 /// wide, `--lights` lights), then times its estimate with near lights (rounds of per-tile rigs
-/// and depth), the paper's distant-light sphere of about as many pixels under as many lights,
+/// and depth), the same scene under distant lights, the paper's distant-light sphere of about as many pixels under as many lights,
 /// and (unless `--no-baseline`) the near images with distant lights (`--light-model distant`)
 /// on the same tile cache.
 pub fn run_near(args: &BenchArgs) -> Result<()> {
@@ -445,26 +478,23 @@ pub fn run_near(args: &BenchArgs) -> Result<()> {
     }
     let tag = format!("near-{width}px-{n}lights");
     let data = args.dir.join(format!("data-{tag}"));
-    if data.join("light_positions.txt").is_file() {
-        eprintln!("bench: reusing the dataset in {}", data.display());
-    } else {
-        eprintln!(
-            "bench: rendering {n} near-light images into {} (once)",
-            data.display()
-        );
-        let capture = NearSynthConfig {
-            size: width,
-            lights: n,
-            force: true,
-            ..NearSynthConfig::new(&data)
-        };
-        let bars = progress::Bars::default();
-        let show = |p| bars.update(p);
-        symframe_job::synth_near(&capture, &symframe_console::control(&show, None))?;
-    }
-    // The near run, then the distant capture right after it (the machine's load changes less
+    dome_capture(&data, width, n, NEAR_DOME)?;
+    // The same scene with the dome and the camera so far away that its lights are distant
+    // and its camera orthographic (to 0.03 degrees across the pair): the same materials,
+    // pixels and light directions, estimated with distant lights.
+    let far_tag = format!("far-{width}px-{n}lights");
+    let far_data = args.dir.join(format!("data-{far_tag}"));
+    dome_capture(&far_data, width, n, FAR_DOME)?;
+    // The near run, then the distant captures right after it (the machine's load changes less
     // between them than over the long distant-model run), then the distant model.
-    let near = near_run(args, &data, &tag, "near", LightModel::Near)?;
+    let near = near_run(args, (&data, &tag), "near", LightModel::Near, args.cold)?;
+    let same = near_run(
+        args,
+        (&far_data, &far_tag),
+        "distant",
+        LightModel::Distant,
+        args.cold,
+    )?;
     // A distant-light capture of about as many pixels: the paper's brushed sphere, its side
     // chosen so that its disc holds the near capture's mask, under as many lights.
     let side = ((near.mask_pixels * 4.0 / std::f64::consts::PI)
@@ -487,7 +517,13 @@ pub fn run_near(args: &BenchArgs) -> Result<()> {
     let far = if args.no_baseline {
         None
     } else {
-        Some(near_run(args, &data, &tag, "distant", LightModel::Distant)?)
+        Some(near_run(
+            args,
+            (&data, &tag),
+            "distant",
+            LightModel::Distant,
+            false,
+        )?)
     };
     let near = &near;
     println!(
@@ -499,7 +535,15 @@ pub fn run_near(args: &BenchArgs) -> Result<()> {
     if let Some(far) = &far {
         print_figures("distant", far);
     }
+    print_figures("same scene distant", &same);
     print_figures("sphere", &sphere);
+    let same_ratio = (near.cpu_s / near.mask_pixels) / (same.cpu_s / same.mask_pixels);
+    let same_wall_ratio = near.pixels_per_s().recip() / same.pixels_per_s().recip();
+    println!(
+        "    ratio: near / the same scene under distant lights (dome and camera at {} widths) \
+         time per pixel {same_wall_ratio:.2}x, in CPU time {same_ratio:.2}x",
+        FAR_DOME[0]
+    );
     let ratio = far.as_ref().map(|f| near.estimate_s / f.estimate_s);
     if let Some(ratio) = ratio {
         println!("    ratio: near / distant estimation time on the same images {ratio:.2}x");
@@ -563,6 +607,11 @@ pub fn run_near(args: &BenchArgs) -> Result<()> {
         "near_cpu_s": near.cpu_s,
         "sphere_cpu_s": sphere.cpu_s,
         "near_over_distant_capture_cpu_per_pixel": cpu_ratio,
+        "same_scene_distant_estimate_s": same.estimate_s,
+        "same_scene_distant_cpu_s": same.cpu_s,
+        "same_scene_distant_evals_per_pixel": evals(&report_at(&format!("out-{far_tag}-distant"))?),
+        "near_over_same_scene_distant_per_pixel": same_wall_ratio,
+        "near_over_same_scene_distant_cpu_per_pixel": same_ratio,
     });
     let out = args.dir.join("bench.json");
     fs::write(&out, serde_json::to_string_pretty(&json)? + "\n")
