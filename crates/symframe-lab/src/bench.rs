@@ -468,9 +468,9 @@ fn dome_capture(data: &Path, width: usize, n: usize, [dome, camera]: [f64; 2]) -
 
 /// The near-light benchmark: renders the dome capture of `symframe synth --near` once (`--size`
 /// wide, `--lights` lights), then times its estimate with near lights (rounds of per-tile rigs
-/// and depth), the same scene under distant lights, the paper's distant-light sphere of about as many pixels under as many lights,
-/// and (unless `--no-baseline`) the near images with distant lights (`--light-model distant`)
-/// on the same tile cache.
+/// and depth), the same scene under distant lights, the paper's distant-light sphere of about
+/// as many pixels under as many lights, and (unless `--no-baseline`) the near images with
+/// distant lights (`--light-model distant`) on the same tile cache.
 pub fn run_near(args: &BenchArgs) -> Result<()> {
     let (width, n) = (args.size, args.lights);
     if !(16..=2048).contains(&width) || !(16..=10_000).contains(&n) {
