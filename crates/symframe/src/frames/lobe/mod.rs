@@ -32,6 +32,7 @@ use glam::{DQuat, DVec3};
 
 use crate::geometry::tangent_basis;
 
+mod descent;
 mod kernel;
 mod lanes;
 mod light_share;
@@ -190,6 +191,7 @@ fn shape_bounds(k: usize) -> (f64, f64) {
 }
 
 /// The model at a state: the frame, and the shape's values.
+#[derive(Clone, Copy)]
 struct Model {
     normal: DVec3,
     t: DVec3,

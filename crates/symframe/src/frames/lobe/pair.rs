@@ -19,11 +19,12 @@ use glam::{DQuat, DVec3};
 
 use crate::frames::rig::Rig;
 
+use super::descent::{descend, hold_at_bound, Descent};
 use super::kernel::Subset;
 use super::light_share::{light_draws_seed, moved_by_turned_lights};
-use super::linalg::{cholesky_solve, damping_floor, solve_spd, tilt_sd};
-use super::search::{negligible, COARSE_RELATIVE_GAIN, RELATIVE_GAIN};
-use super::{LobeFit, LobeScratch, ALPHA_RANGE, MAX_ITERATIONS, RETRY_RESIDUAL, SHAPE_RANGE};
+use super::linalg::{cholesky_solve, tilt_sd};
+use super::search::{COARSE_RELATIVE_GAIN, RELATIVE_GAIN};
+use super::{LobeFit, LobeScratch, ALPHA_RANGE, RETRY_RESIDUAL, SHAPE_RANGE};
 
 /// Number of linear coefficients: the diffuse term and each lobe's two Fresnel terms.
 const C: usize = 5;
@@ -482,70 +483,73 @@ fn normal_equations(lin: &Linear, s: &Subset, terms: &[Terms]) -> ([[f64; P]; P]
 /// state, its linear part and the passes used.
 fn levenberg_marquardt(
     s: &Subset,
-    mut state: State,
+    state: State,
     syy: f64,
     relative: f64,
     buffers: &mut [Vec<Terms>; 2],
 ) -> (State, Linear, u32) {
-    let [terms, trial_terms] = buffers;
-    let mut linear = project(&Model::of(&state), s, syy, terms);
-    let mut evals = 1;
-    let mut lambda = 1e-3;
-    let (lo, hi) = (ALPHA_RANGE.0.ln(), ALPHA_RANGE.1.ln());
-    for _ in 0..MAX_ITERATIONS {
-        let (mut jtj, mut rhs) = normal_equations(&linear, s, terms);
-        evals += 1;
+    let linear = project(&Model::of(&state), s, syy, &mut buffers[0]);
+    let mut fit = Pair {
+        samples: s,
+        syy,
+        terms: buffers,
+    };
+    descend(&mut fit, state, linear, syy, relative, 1)
+}
+
+/// The pair's fit as [`descend`] reads it: the samples, their energy, and the samples' terms at
+/// the search's point and at its last trial.
+struct Pair<'a> {
+    samples: &'a Subset,
+    syy: f64,
+    terms: &'a mut [Vec<Terms>; 2],
+}
+
+impl Descent<P> for Pair<'_> {
+    type Point = State;
+    type Linear = Linear;
+    const STOPS_UNDAMPED: bool = false;
+
+    fn cost(linear: &Linear) -> f64 {
+        linear.cost
+    }
+
+    fn normal_equations(&mut self, state: &State, linear: &Linear) -> ([[f64; P]; P], [f64; P]) {
+        let (mut jtj, mut rhs) = normal_equations(linear, self.samples, &self.terms[0]);
         // A width or the shape at its bound that the descent pushes further out is held this
         // iteration.
-        for k in 0..5 {
-            let i = 3 + k;
-            let (v, lo, hi) = if k < 4 {
-                (state.ln_alpha[k], lo, hi)
-            } else {
-                (state.ln_shape, SHAPE_RANGE.0.ln(), SHAPE_RANGE.1.ln())
-            };
-            if (v <= lo && rhs[i] < 0.0) || (v >= hi && rhs[i] > 0.0) {
-                rhs[i] = 0.0;
-                jtj[i] = [0.0; P];
-                for row in jtj.iter_mut() {
-                    row[i] = 0.0;
-                }
-            }
+        let alpha = (ALPHA_RANGE.0.ln(), ALPHA_RANGE.1.ln());
+        for k in 0..4 {
+            hold_at_bound(&mut jtj, &mut rhs, 3 + k, state.ln_alpha[k], alpha);
         }
-        let floor = damping_floor(&jtj);
-        let mut improved = false;
-        for _ in 0..10 {
-            let mut a = jtj;
-            for (k, row) in a.iter_mut().enumerate() {
-                row[k] += lambda * jtj[k][k] + floor;
-            }
-            let Some(step) = solve_spd(a, rhs) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let trial = state.moved(&step);
-            if trial.normal.z <= 0.0 {
-                lambda *= 4.0;
-                continue;
-            }
-            let trial_model = Model::of(&trial);
-            let trial_linear = project(&trial_model, s, syy, trial_terms);
-            evals += 1;
-            if trial_linear.cost < linear.cost {
-                let gain = linear.cost - trial_linear.cost;
-                (state, linear) = (trial, trial_linear);
-                std::mem::swap(terms, trial_terms);
-                lambda = (lambda / 3.0).max(1e-9);
-                improved = !negligible(gain, linear.cost, syy, relative);
-                break;
-            }
-            lambda *= 4.0;
-        }
-        if !improved {
-            break;
-        }
+        let shape = (SHAPE_RANGE.0.ln(), SHAPE_RANGE.1.ln());
+        hold_at_bound(&mut jtj, &mut rhs, 7, state.ln_shape, shape);
+        (jtj, rhs)
     }
-    (state, linear, evals)
+
+    fn try_step(
+        &mut self,
+        state: &State,
+        step: &[f64; P],
+        passes: &mut u32,
+    ) -> Option<(State, Linear)> {
+        let trial = state.moved(step);
+        if trial.normal.z <= 0.0 {
+            return None;
+        }
+        *passes += 1;
+        let linear = project(
+            &Model::of(&trial),
+            self.samples,
+            self.syy,
+            &mut self.terms[1],
+        );
+        Some((trial, linear))
+    }
+
+    fn keep(&mut self) {
+        self.terms.swap(0, 1);
+    }
 }
 
 /// Widths of the second lobe's starts besides the crossed one: a sharp coat at this share of

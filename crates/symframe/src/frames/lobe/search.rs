@@ -1,20 +1,15 @@
 //! The lobe fit's search: Levenberg-Marquardt from each start, and the starts tried on a subset.
 
+use super::descent::{descend, hold_at_bound, Descent};
 use super::kernel::Subset;
-use super::linalg::{damping_floor, solve_spd};
 use super::linear::Linear;
 use super::{
     normal_equations, project, shape_bounds, trim_shadows, Buffers, LobeStart, Model, State,
-    FORESHORTENING_FLOOR, MAX_ITERATIONS, MICROFACET, P, RETRY_RESIDUAL,
+    FORESHORTENING_FLOOR, MICROFACET, P, RETRY_RESIDUAL,
 };
 
-/// Whether a gain in the sum of squares is too small to go on for: below [`RELATIVE_GAIN`] of
-/// the cost, or [`ABSOLUTE_GAIN`] of the samples' energy `syy`.
-pub(super) fn negligible(gain: f64, cost: f64, syy: f64, relative: f64) -> bool {
-    gain <= relative * cost || gain <= ABSOLUTE_GAIN * syy
-}
-
-/// The search stops once a step gains less than this share of the cost...
+/// The search stops once a step gains less than this share of the cost (or
+/// [`super::descent::ABSOLUTE_GAIN`] of the samples' energy).
 pub(super) const RELATIVE_GAIN: f64 = 1e-4;
 
 /// The search on a coarse subset stops at this share instead: the polish on the whole subset
@@ -22,103 +17,86 @@ pub(super) const RELATIVE_GAIN: f64 = 1e-4;
 /// default estimator with the lobe fit", "Fewer passes").
 pub(super) const COARSE_RELATIVE_GAIN: f64 = 1e-2;
 
-/// ...or of the samples' energy: a floor much above this stops near-mirror lobes early
-/// (docs/performance.md, "Fewer passes").
-pub(super) const ABSOLUTE_GAIN: f64 = 1e-12;
-
-/// The gain in the sum of squares the Gauss-Newton model predicts for its undamped step
-/// (`(J^T J + floor I) s = rhs`, gain `s . rhs`); `None` where the system is singular.
-pub(super) fn undamped_gain(jtj: &[[f64; P]; P], rhs: &[f64; P], floor: f64) -> Option<f64> {
-    let mut m = *jtj;
-    for (a, row) in m.iter_mut().enumerate() {
-        row[a] += floor;
-    }
-    let step = solve_spd(m, *rhs)?;
-    Some(step.iter().zip(rhs).map(|(s, r)| s * r).sum())
-}
-
 /// Levenberg-Marquardt from `state` (whose linear part over `samples` is `known`, where the
 /// caller has it: one pass fewer) over the parameters marked `free`; returns the state, its
 /// linear part (the sum of squares and the coefficients) and the passes over the samples.
 /// `buffers` are work buffers (fitted to `samples`).
 pub(super) fn levenberg_marquardt(
     samples: &Subset,
-    mut state: State,
+    state: State,
     known: Option<Linear>,
     free: [bool; P],
     relative: f64,
     buffers: &mut Buffers,
 ) -> (State, Linear, u32) {
-    let Buffers {
-        lobe,
-        kept,
-        jtj: last,
-        ..
-    } = buffers;
-    let syy = samples.energy();
-    let mut model = Model::of(&state);
-    let mut evals = known.is_none() as u32;
-    let mut linear = known.unwrap_or_else(|| project(&model, samples, lobe, kept));
-    let mut lambda = 1e-3;
-    for _ in 0..MAX_ITERATIONS {
-        let (mut jtj, mut rhs) = normal_equations(&model, &linear, free, samples, kept);
-        evals += 1;
-        // A shape coordinate at a bound that the descent pushes further out is held there this
-        // iteration (a projected step), so the others' step does not count on it moving.
-        for k in 0..4 {
-            let (lo, hi) = shape_bounds(k);
-            let i = 3 + k;
-            if (state.shape[k] <= lo && rhs[i] < 0.0) || (state.shape[k] >= hi && rhs[i] > 0.0) {
-                rhs[i] = 0.0;
-                jtj[i] = [0.0; P];
-                for row in jtj.iter_mut() {
-                    row[i] = 0.0;
-                }
-            }
-        }
-        *last = jtj;
-        // A floor on the damping: a parameter the data does not constrain (the tangent angle of
-        // a round lobe, a width at its bound) must not make the system singular.
-        let floor = damping_floor(&jtj);
-        // Converged where even the undamped Gauss-Newton step would gain too little: no trial
-        // pass is spent finding that out (docs/performance.md, "Fewer passes").
-        if undamped_gain(&jtj, &rhs, floor)
-            .is_some_and(|g| negligible(g, linear.cost, syy, relative))
-        {
-            break;
-        }
-        let mut improved = false;
-        for _ in 0..10 {
-            let mut m = jtj;
-            for (a, row) in m.iter_mut().enumerate() {
-                row[a] += lambda * jtj[a][a] + floor;
-            }
-            let Some(step) = solve_spd(m, rhs) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let trial = state.moved(&step);
-            let trial_model = Model::of(&trial);
-            evals += 1;
-            if trial_model.normal.z <= 0.0 {
-                lambda *= 4.0;
-                continue;
-            }
-            let trial_linear = project(&trial_model, samples, lobe, kept);
-            if trial_linear.cost < linear.cost {
-                let gain = linear.cost - trial_linear.cost;
-                (state, model, linear) = (trial, trial_model, trial_linear);
-                lambda = (lambda / 3.0).max(1e-9);
-                improved = !negligible(gain, linear.cost, syy, relative);
-                break;
-            }
-            lambda *= 4.0;
-        }
-        if !improved {
-            break;
-        }
+    let model = Model::of(&state);
+    let evals = known.is_none() as u32;
+    let linear =
+        known.unwrap_or_else(|| project(&model, samples, &mut buffers.lobe, &mut buffers.kept));
+    let mut fit = OneLobe {
+        samples,
+        free,
+        model,
+        trial: model,
+        buffers,
+    };
+    descend(&mut fit, state, linear, samples.energy(), relative, evals)
+}
+
+/// The one-lobe fit as [`descend`] reads it: the samples and the parameters free in it, the
+/// model at the search's point and at its last trial, and the work buffers (the last `J^T J`
+/// left in `buffers.jtj`).
+struct OneLobe<'a> {
+    samples: &'a Subset,
+    free: [bool; P],
+    model: Model,
+    trial: Model,
+    buffers: &'a mut Buffers,
+}
+
+impl Descent<P> for OneLobe<'_> {
+    type Point = State;
+    type Linear = Linear;
+    const STOPS_UNDAMPED: bool = true;
+
+    fn cost(linear: &Linear) -> f64 {
+        linear.cost
     }
-    (state, linear, evals)
+
+    fn normal_equations(&mut self, state: &State, linear: &Linear) -> ([[f64; P]; P], [f64; P]) {
+        let (mut jtj, mut rhs) = normal_equations(
+            &self.model,
+            linear,
+            self.free,
+            self.samples,
+            &self.buffers.kept,
+        );
+        for k in 0..4 {
+            hold_at_bound(&mut jtj, &mut rhs, 3 + k, state.shape[k], shape_bounds(k));
+        }
+        self.buffers.jtj = jtj;
+        (jtj, rhs)
+    }
+
+    fn try_step(
+        &mut self,
+        state: &State,
+        step: &[f64; P],
+        passes: &mut u32,
+    ) -> Option<(State, Linear)> {
+        let trial = state.moved(step);
+        self.trial = Model::of(&trial);
+        *passes += 1;
+        if self.trial.normal.z <= 0.0 {
+            return None;
+        }
+        let Buffers { lobe, kept, .. } = &mut *self.buffers;
+        Some((trial, project(&self.trial, self.samples, lobe, kept)))
+    }
+
+    fn keep(&mut self) {
+        self.model = self.trial;
+    }
 }
 
 /// The search on one subset: Levenberg-Marquardt from each start in turn until one explains
