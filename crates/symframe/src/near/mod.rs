@@ -11,12 +11,15 @@
 
 mod camera;
 pub(crate) mod chrome;
+mod depth;
 mod light;
 mod mesh;
+mod rounds;
 mod solve;
 mod tiling;
 
 pub use camera::Pinhole;
 pub(crate) use light::rotation_to_z;
 pub use light::PointLight;
-pub use solve::{NearMethod, NearOutcome, NearParams};
+pub use rounds::NearOutcome;
+pub use solve::{NearMethod, NearParams};
