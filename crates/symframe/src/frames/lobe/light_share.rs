@@ -4,8 +4,8 @@
 
 use glam::DVec3;
 
-use super::kernel::Subset;
 use super::search::{levenberg_marquardt, RELATIVE_GAIN};
+use super::subset::Subset;
 use super::{residuals, Buffers, Model, State, P};
 
 /// Draws of the lights' error the lobe fit's [`super::LobeFit::light_sd`] averages: two

@@ -1,6 +1,6 @@
 //! Small dense solves and the normal's uncertainty from a Gauss-Newton system.
 
-use super::kernel::Subset;
+use super::subset::Subset;
 use super::{normal_equations, project, Buffers, Model, P};
 
 /// Solves `a x = b` for a symmetric positive definite `a` (Cholesky); `None` if it is not.

@@ -41,6 +41,7 @@ mod linear;
 mod noise_fit;
 mod pair;
 mod search;
+mod subset;
 
 use light_share::{light_draws_seed, light_share};
 use linalg::{tilt_sd, tilt_step2};
@@ -52,7 +53,7 @@ use search::{levenberg_marquardt, search_subset, COARSE_RELATIVE_GAIN, RELATIVE_
 
 pub(crate) use pair::{fit_lobe_pair, LobePair};
 
-use kernel::Subset;
+use subset::Subset;
 
 /// Range of the lobe widths `a_t`, `a_b` (slope units): below, a lobe is a single sample's
 /// spike; above, no highlight is left to locate.

@@ -2,8 +2,9 @@
 
 use crate::noise::NoiseModel;
 
-use super::kernel::{self, Subset};
+use super::kernel;
 use super::linear::Linear;
+use super::subset::Subset;
 use super::{Buffers, Model, State, P};
 
 /// A fit leaving no more than what the capture's noise leaves, at this many standard

@@ -20,10 +20,10 @@ use glam::{DQuat, DVec3};
 use crate::frames::rig::Rig;
 
 use super::descent::{descend, hold_at_bound, Descent};
-use super::kernel::Subset;
 use super::light_share::{light_draws_seed, moved_by_turned_lights};
 use super::linalg::{cholesky_solve, tilt_sd};
 use super::search::{COARSE_RELATIVE_GAIN, RELATIVE_GAIN};
+use super::subset::Subset;
 use super::{LobeFit, LobeScratch, ALPHA_RANGE, RETRY_RESIDUAL, SHAPE_RANGE};
 
 /// Number of linear coefficients: the diffuse term and each lobe's two Fresnel terms.
@@ -731,7 +731,7 @@ fn residual_structure(
                     return f64::NAN;
                 }
                 let g = Geometry::of(model, nl, l, h);
-                let fr = super::kernel::schlick(h);
+                let fr = super::subset::schlick(h);
                 let la = lobe(&g, &model.lobes[0], model.shape).0;
                 let lb = lobe(&g, &model.lobes[1], model.shape).0;
                 y - (c[0] * nl + (c[1] + c[2] * fr) * la + (c[3] + c[4] * fr) * lb)

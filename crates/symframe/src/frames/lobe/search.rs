@@ -1,8 +1,8 @@
 //! The lobe fit's search: Levenberg-Marquardt from each start, and the starts tried on a subset.
 
 use super::descent::{descend, hold_at_bound, Descent};
-use super::kernel::Subset;
 use super::linear::Linear;
+use super::subset::Subset;
 use super::{
     normal_equations, project, shape_bounds, trim_shadows, Buffers, LobeStart, Model, State,
     FORESHORTENING_FLOOR, MICROFACET, P, RETRY_RESIDUAL,
