@@ -22,7 +22,7 @@ pub(crate) use cache::{
 };
 pub use cache::{CacheConfig, CACHE_DIR};
 pub use report::{
-    BaselineParameters, CacheReport, Done, EstimateOutcome, InputsRecord, LightCounts,
+    BaselineParameters, CacheReport, EstimateOutcome, FinishedEstimate, InputsRecord, LightCounts,
     MethodParameters, Report, SymmetryParameters, TileReport, Timings,
 };
 
@@ -126,9 +126,9 @@ pub struct EstimateConfig {
     pub shard: Option<Shard>,
     /// The y convention of `normals.png` (16-bit, `(n + 1) / 2` per channel).
     pub normal_png: NormalPng,
-    /// Return the whole maps in memory ([`Done::maps`]) as well as writing them (42 bytes per
-    /// pixel); off, the outputs are written a band of tiles at a time and memory stays bounded
-    /// whatever the image size (the CLI).
+    /// Return the whole maps in memory ([`FinishedEstimate::maps`]) as well as writing them
+    /// (42 bytes per pixel); off, the outputs are written a band of tiles at a time and memory
+    /// stays bounded whatever the image size (the CLI).
     pub keep_maps: bool,
     /// The light model, and how near lights are estimated.
     pub near: NearOptions,
@@ -620,7 +620,10 @@ fn run(
     if config.cache.remove_after {
         remove_cache(&cache_path, &cache_dir)?;
     }
-    Ok(EstimateOutcome::Maps(Box::new(Done { maps, report })))
+    Ok(EstimateOutcome::Maps(Box::new(FinishedEstimate {
+        maps,
+        report,
+    })))
 }
 
 /// The tiles this run estimates: a shard's share (an error where there are fewer tiles than

@@ -81,9 +81,9 @@ mod view;
 use std::sync::atomic::AtomicBool;
 
 pub use estimate::{
-    estimate, BaselineParameters, CacheConfig, CacheReport, Done, EstimateConfig, EstimateOutcome,
-    InputsRecord, LightCounts, MethodConfig, MethodParameters, Report, Shard, SymmetryParameters,
-    TileReport, Timings, CACHE_DIR,
+    estimate, BaselineParameters, CacheConfig, CacheReport, EstimateConfig, EstimateOutcome,
+    FinishedEstimate, InputsRecord, LightCounts, MethodConfig, MethodParameters, Report, Shard,
+    SymmetryParameters, TileReport, Timings, CACHE_DIR,
 };
 pub use fit::{fit, FitConfig, FitLights, FitOutcome, FitReport, FitTimings};
 pub use maps_out::{SourceCount, Sources};

@@ -286,7 +286,7 @@ fn verify(map: &[u8], h: &Header, done: impl Fn(usize, usize) + Sync) -> Vec<(us
 }
 
 /// A complete cache of the wanted inputs, mapped and verified.
-struct Found {
+struct VerifiedCache {
     map: Mmap,
     header: Header,
     /// How an integer cache's codes become samples.
@@ -323,7 +323,12 @@ fn code_tables(h: &Header, file: &[u8]) -> Option<Option<CodeTables>> {
 
 /// The complete cache of these inputs at `path`, mapped and verified; `None` if there is none
 /// (missing, incomplete, stale or with a bad header).
-fn open_complete(path: &Path, fingerprint: u64, tile: usize, n: usize) -> Result<Option<Found>> {
+fn open_complete(
+    path: &Path,
+    fingerprint: u64,
+    tile: usize,
+    n: usize,
+) -> Result<Option<VerifiedCache>> {
     let Some((header, len)) = read_header(path)? else {
         return Ok(None);
     };
@@ -349,7 +354,7 @@ fn open_complete(path: &Path, fingerprint: u64, tile: usize, n: usize) -> Result
         #[cfg(not(unix))]
         let _ = (o, len);
     });
-    Ok(Some(Found {
+    Ok(Some(VerifiedCache {
         map,
         header,
         codes,
@@ -501,7 +506,7 @@ impl TileCache {
                 info.warnings = read_warnings(&found.map);
                 return Ok(Self::from_found(found, path, lock, fingerprint, info));
             }
-            let Found {
+            let VerifiedCache {
                 map, header, bad, ..
             } = found;
             info.warnings = read_warnings(&map);
@@ -553,7 +558,7 @@ impl TileCache {
             if built.resumed > 0 {
                 if let Some(found) = open_complete(&path, fingerprint, copts.tile, n)? {
                     info.verify_s += found.verify_s;
-                    let Found {
+                    let VerifiedCache {
                         map, header, bad, ..
                     } = found;
                     drop(map);
@@ -567,7 +572,7 @@ impl TileCache {
         let map = map_file(&path, len)?;
         let codes = code_tables(&header, &map)
             .ok_or_else(|| Error::invalid(&path, "cache's light records are not valid"))?;
-        let found = Found {
+        let found = VerifiedCache {
             map,
             header,
             codes,
@@ -578,7 +583,7 @@ impl TileCache {
     }
 
     fn from_found(
-        found: Found,
+        found: VerifiedCache,
         path: PathBuf,
         lock: CacheLock,
         fingerprint: u64,

@@ -175,7 +175,7 @@ pub struct Timings {
 
 /// A finished job's maps and report.
 #[derive(Debug, Clone)]
-pub struct Done {
+pub struct FinishedEstimate {
     /// The maps written, when [`crate::EstimateConfig::keep_maps`] asked for them (the report
     /// has the counts either way).
     pub maps: Option<EstimateMaps>,
@@ -187,7 +187,7 @@ pub struct Done {
 #[derive(Debug, Clone)]
 pub enum EstimateOutcome {
     /// A full run: the maps and the report, written.
-    Maps(Box<Done>),
+    Maps(Box<FinishedEstimate>),
     /// A shard: its tile results and manifest written, no maps; the shard's own report.
     Shard(Box<Report>),
 }
