@@ -33,25 +33,18 @@ pub struct WardMaps {
 impl WardMaps {
     /// Checks that every map has the size `width x height` implies.
     pub fn check(&self) -> Result<()> {
-        let n = self.width * self.height;
-        for (name, len, per) in [
-            ("normals", self.normals.len(), 3),
-            ("tangents", self.tangents.len(), 3),
-            ("kd", self.kd.len(), 3),
-            ("ks", self.ks.len(), 3),
-            ("alpha_t", self.alpha_t.len(), 1),
-            ("alpha_b", self.alpha_b.len(), 1),
-        ] {
-            if len != n * per {
-                return Err(Error::BadParameter(format!(
-                    "{name} map has {len} values, expected {} for {}x{}",
-                    n * per,
-                    self.width,
-                    self.height
-                )));
-            }
-        }
-        Ok(())
+        check_sizes(
+            self.width,
+            self.height,
+            &[
+                ("normals", self.normals.len(), 3),
+                ("tangents", self.tangents.len(), 3),
+                ("kd", self.kd.len(), 3),
+                ("ks", self.ks.len(), 3),
+                ("alpha_t", self.alpha_t.len(), 1),
+                ("alpha_b", self.alpha_b.len(), 1),
+            ],
+        )
     }
 }
 
@@ -83,24 +76,18 @@ pub struct GltfMaps {
 impl GltfMaps {
     /// Checks that every map has the size `width x height` implies and the exposure is usable.
     pub fn check(&self) -> Result<()> {
-        let n = self.width * self.height;
-        for (name, len, per) in [
-            ("normals", self.normals.len(), 3),
-            ("tangents", self.tangents.len(), 3),
-            ("base_color", self.base_color.len(), 3),
-            ("metallic", self.metallic.len(), 1),
-            ("roughness", self.roughness.len(), 1),
-            ("anisotropy_strength", self.anisotropy.len(), 1),
-        ] {
-            if len != n * per {
-                return Err(Error::BadParameter(format!(
-                    "{name} map has {len} values, expected {} for {}x{}",
-                    n * per,
-                    self.width,
-                    self.height
-                )));
-            }
-        }
+        check_sizes(
+            self.width,
+            self.height,
+            &[
+                ("normals", self.normals.len(), 3),
+                ("tangents", self.tangents.len(), 3),
+                ("base_color", self.base_color.len(), 3),
+                ("metallic", self.metallic.len(), 1),
+                ("roughness", self.roughness.len(), 1),
+                ("anisotropy_strength", self.anisotropy.len(), 1),
+            ],
+        )?;
         if !(self.exposure > 0.0 && self.exposure.is_finite()) {
             return Err(Error::BadParameter(format!(
                 "exposure must be positive and finite, got {}",
@@ -162,28 +149,21 @@ impl LobeMaps {
 
     /// Checks that every map has the size `width x height` implies.
     pub fn check(&self) -> Result<()> {
-        let n = self.width * self.height;
-        for (name, len, per) in [
-            ("normals", self.normals.len(), 3),
-            ("tangents", self.tangents.len(), 3),
-            ("kind", self.kind.len(), 1),
-            ("kd", self.kd.len(), 3),
-            ("ka", self.ka.len(), 3),
-            ("kb", self.kb.len(), 3),
-            ("alpha_t", self.alpha_t.len(), 1),
-            ("alpha_b", self.alpha_b.len(), 1),
-            ("alpha_c", self.alpha_c.len(), 1),
-        ] {
-            if len != n * per {
-                return Err(Error::BadParameter(format!(
-                    "{name} map has {len} values, expected {} for {}x{}",
-                    n * per,
-                    self.width,
-                    self.height
-                )));
-            }
-        }
-        Ok(())
+        check_sizes(
+            self.width,
+            self.height,
+            &[
+                ("normals", self.normals.len(), 3),
+                ("tangents", self.tangents.len(), 3),
+                ("kind", self.kind.len(), 1),
+                ("kd", self.kd.len(), 3),
+                ("ka", self.ka.len(), 3),
+                ("kb", self.kb.len(), 3),
+                ("alpha_t", self.alpha_t.len(), 1),
+                ("alpha_b", self.alpha_b.len(), 1),
+                ("alpha_c", self.alpha_c.len(), 1),
+            ],
+        )
     }
 
     /// The model of pixel `p`, if it has a valid one.
@@ -427,4 +407,19 @@ impl FitMaps {
         }
         maps
     }
+}
+
+/// Checks that each map `(name, len, per)` holds `per` values for each of `width x height`
+/// pixels.
+fn check_sizes(width: usize, height: usize, maps: &[(&str, usize, usize)]) -> Result<()> {
+    let n = width * height;
+    for &(name, len, per) in maps {
+        if len != n * per {
+            return Err(Error::BadParameter(format!(
+                "{name} map has {len} values, expected {} for {width}x{height}",
+                n * per
+            )));
+        }
+    }
+    Ok(())
 }
