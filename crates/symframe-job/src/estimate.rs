@@ -340,7 +340,21 @@ fn job_fingerprint(cache: &TileCache, plan: &Plan, mask: Option<&[bool]>) -> Res
 /// is refused). On an error the finished tiles and the cache are kept, so the same call
 /// resumes; only what this job created and holds nothing to resume from is removed again.
 pub fn estimate(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcome> {
-    let out = OutputDir::lock(&config.output)?;
+    in_locked_output(&config.output, ctl, |ctl, out, warnings| {
+        run(config, ctl, out, warnings)
+    })
+}
+
+/// Runs a job's `run` into the output folder `output`, locked for the whole job: the warnings
+/// (the folder's recovery's first) collected for the job's report and told through `ctl`; on
+/// an error other than an interruption, what this job created and holds nothing to resume from
+/// is removed again.
+pub(crate) fn in_locked_output<T>(
+    output: &Path,
+    ctl: &Control,
+    run: impl FnOnce(&Control, &OutputDir, &Mutex<Vec<String>>) -> Result<T>,
+) -> Result<T> {
+    let out = OutputDir::lock(output)?;
     (ctl.checkpoint)(Checkpoint::OutputLocked);
     let warnings = Mutex::new(Vec::new());
     let warn = |line: &str| {
@@ -348,16 +362,13 @@ pub fn estimate(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcom
         ctl.warn(line);
     };
     let counted = Control {
-        stop: ctl.stop,
-        progress: ctl.progress,
-        stop_after_tiles: ctl.stop_after_tiles,
         warning: &warn,
-        checkpoint: ctl.checkpoint,
+        ..*ctl
     };
     for w in out.warnings() {
         warn(w);
     }
-    let result = run(config, &counted, &out, &warnings);
+    let result = run(&counted, &out, &warnings);
     if let Err(e) = &result {
         if !e.is::<Interrupted>() {
             out.discard_unfinished();

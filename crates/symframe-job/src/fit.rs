@@ -14,13 +14,13 @@ use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{CacheFormat, CacheOptions, Dataset, DecodeOptions, Fingerprints, StampKind};
 
 use crate::estimate::{
-    cache_dir, fingerprint_lights, fingerprint_mask, lock_warnings, open_cache, read_mask,
-    remove_cache, CacheConfig, CacheReport, InputsRecord, CACHE_DIR,
+    cache_dir, fingerprint_lights, fingerprint_mask, in_locked_output, lock_warnings, open_cache,
+    read_mask, remove_cache, CacheConfig, CacheReport, InputsRecord, CACHE_DIR,
 };
 use crate::outdir::{OutputDir, OutputSet};
 use crate::tiles::TILES_DIR;
 use crate::tiles::{read_tiles, run_tiles, tile_path, TileCounts};
-use crate::{Checkpoint, Control, Interrupted};
+use crate::{Checkpoint, Control};
 
 mod records;
 
@@ -286,27 +286,9 @@ pub fn fit(config: &FitConfig, ctl: &Control) -> Result<FitOutcome> {
             );
         }
     }
-    let out = OutputDir::lock(&config.output)?;
-    (ctl.checkpoint)(Checkpoint::OutputLocked);
-    let warnings = Mutex::new(Vec::new());
-    let warn = |line: &str| {
-        lock_warnings(&warnings).push(line.to_string());
-        ctl.warn(line);
-    };
-    let counted = Control {
-        warning: &warn,
-        ..*ctl
-    };
-    for w in out.warnings() {
-        warn(w);
-    }
-    let result = run(config, &counted, &out, &warnings);
-    if let Err(e) = &result {
-        if !e.is::<Interrupted>() {
-            out.discard_unfinished();
-        }
-    }
-    result
+    in_locked_output(&config.output, ctl, |ctl, out, warnings| {
+        run(config, ctl, out, warnings)
+    })
 }
 
 fn run(
