@@ -8,8 +8,8 @@ use super::{
     FORESHORTENING_FLOOR, MICROFACET, P, RETRY_RESIDUAL,
 };
 
-/// The search stops once a step gains less than this share of the cost (or
-/// [`super::descent::ABSOLUTE_GAIN`] of the samples' energy).
+/// The search stops once a step gains less than this share of the cost (or a tiny share of the
+/// samples' energy, `ABSOLUTE_GAIN` in `lobe/descent.rs`).
 pub(super) const RELATIVE_GAIN: f64 = 1e-4;
 
 /// The search on a coarse subset stops at this share instead: the polish on the whole subset
