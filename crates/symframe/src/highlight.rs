@@ -57,7 +57,7 @@ pub(crate) fn highlight_moments(samples: &[f32], halfways: &[DVec3]) -> Option<H
     highlight_moments_by(samples, |i| Some(halfways[i]))
 }
 
-/// [`highlight_moments`] with the halfway vector of sample `i` given by `halfway(i)` (`None`:
+/// The highlight's moments ([`HighlightMoments`]) with the halfway vector of sample `i` given by `halfway(i)` (`None`:
 /// the sample has none, e.g. a light behind the view, and is left out).
 pub(crate) fn highlight_moments_by(
     samples: &[f32],
@@ -80,7 +80,7 @@ pub(crate) fn highlight_moments_by(
     moments(samples.len() / 3, grey, reaches, halfway)
 }
 
-/// [`highlight_moments`] from the pixel's grey values (`(r + g + b) / 3`, NaN where invalid):
+/// The highlight's moments ([`HighlightMoments`]) from the pixel's grey values (`(r + g + b) / 3`, NaN where invalid):
 /// for a caller that has them.
 pub(crate) fn highlight_moments_of_greys(
     greys: &[f64],

@@ -14,9 +14,9 @@ const CENTROID_MIN_ELONGATION: f64 = crate::highlight::MIN_ELONGATION;
 /// The highlight-centroid baseline at one pixel: the normal is the intensity-weighted mean of
 /// the halfway vectors of the samples at or above half the brightest grey value, the tangent
 /// the widest axis of their weighted second moment where the highlight is elongated
-/// ([`highlight_moments`](crate::highlight::highlight_moments)). Strong on glossy materials under dense rigs; on diffuse surfaces it
-/// shares max-reflectance's bias (half the normal's angle from the view). Confidence: the
-/// highlight's contrast. Allocation-free.
+/// (the highlight's moments, `highlight_moments_of_greys` in `highlight.rs`). Strong on glossy
+/// materials under dense rigs; on diffuse surfaces it shares max-reflectance's bias (half the
+/// normal's angle from the view). Confidence: the highlight's contrast. Allocation-free.
 pub(crate) fn highlight_centroid_pixel(samples: &[f32], lights: &[DVec3]) -> BaselinePixel {
     let Some(m) = highlight_moments_by(samples, |i| halfway_from_light(lights[i])) else {
         return BaselinePixel::empty(PixelStatus::NoData);

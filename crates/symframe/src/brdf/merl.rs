@@ -25,7 +25,7 @@
 //! reference behaviour is kept) blends the 8 surrounding bin centres in index space
 //! (`sqrt`-spaced θ_h, linear θ_d, φ_d periodic with period π by reciprocity), clamping at the
 //! θ ends and ignoring "no data" corners (renormalising the weights). The table is isotropic (independent of `φ_h`): its tangent axis is `None`.
-//! [`Merl::from_brdf`] tabulates an analytic model at bin centres (`θ_h = (π/2)((i_h+½)/90)²`,
+//! `Merl::from_brdf` (within the crate) tabulates an analytic model at bin centres (`θ_h = (π/2)((i_h+½)/90)²`,
 //! `θ_d = (i_d+½)·(π/2)/90`, `φ_d = (i_p+½)·π/180`, `φ_h = 0`), storing `-1` where the light
 //! or view would be below the horizon.
 

@@ -9,7 +9,7 @@ use crate::frames::rig::Rig;
 use crate::noise::NoiseModel;
 
 /// The share of a pixel's signal energy (over lights with `n.l` at least
-/// [`ShadowSettings::min_cosine`]: near grazing, shadows the fitted normal cannot tell from light
+/// [`ShadowSettings::min_cosine`](crate::frames::policy::ShadowSettings::min_cosine): near grazing, shadows the fitted normal cannot tell from light
 /// decide nothing) that the best Lambertian
 /// term `d (n.l)` with normal `n` (RGB `d >= 0`, least squares) leaves unexplained: 0 for a
 /// diffuse surface, the specular part's share otherwise.

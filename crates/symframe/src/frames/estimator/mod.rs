@@ -115,8 +115,8 @@ pub struct PixelEstimate {
     pub normal: Option<DVec3>,
     /// Unit tangent (an axis: sign arbitrary) in the camera frame, when the slice is anisotropic.
     pub tangent: Option<DVec3>,
-    /// Confidence in [0, 1]: the probability that the normal is within
-    /// [`CONFIDENT_WITHIN_DEG`] of the truth (0 where nothing was estimated).
+    /// Confidence in [0, 1]: the probability that the normal is within 1 degree of the truth
+    /// (0 where nothing was estimated; docs/method.md, "Confidence").
     pub confidence: f32,
     /// Anisotropy in [0, 1]: how much the tangent objective varies with the tangent's angle
     /// (for the lobe fit: its elongation).

@@ -158,7 +158,7 @@ impl Estimator<'_> {
     }
 
     /// The search's answer `found`, unless one of `starts` has a clearly lower `SD_n` on the full
-    /// level (below [`SearchSettings::judge_margin`] times it):
+    /// level (below [`SearchSettings::judge_margin`](crate::frames::policy::SearchSettings::judge_margin) times it):
     /// then the coarse levels misled the search (a lobe narrower than their spacing is aliased
     /// there), and a full-level search from the best start decides. The result never has a
     /// higher full-level distance than the best start.
