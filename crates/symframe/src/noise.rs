@@ -219,8 +219,8 @@ impl NoiseSamples {
     }
 
     /// The level at which the samples show a clipped plateau: at least
-    /// [`Self::PLATEAU_MIN`] samples at exactly the largest value, and more there than in the
-    /// whole band [`Self::PLATEAU_BAND`] below it. `None` where they do not.
+    /// `Self::PLATEAU_MIN` samples at exactly the largest value, and more there than in the
+    /// whole band `Self::PLATEAU_BAND` below it. `None` where they do not.
     pub fn clip_plateau(&self) -> Option<f32> {
         let floor = self.floor();
         let below: usize = self

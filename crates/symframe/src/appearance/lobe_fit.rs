@@ -32,9 +32,9 @@ use crate::brdf::{Brdf, TangentAxis};
 /// Which two-lobe model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LobeKind {
-    /// A sharp isotropic coat over an anisotropic base ([`super::clearcoat`]).
+    /// A sharp isotropic coat over an anisotropic base (`appearance/clearcoat.rs`).
     Clearcoat,
-    /// Two perpendicular anisotropic lobes ([`super::woven`]).
+    /// Two perpendicular anisotropic lobes (`appearance/woven.rs`).
     Woven,
 }
 

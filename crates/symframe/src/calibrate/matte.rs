@@ -138,7 +138,7 @@ impl MatteParams {
     /// The radiant intensity (RGB, times the sphere's albedo) of the near light `light` from a
     /// diffuse sphere of centre `centre` and radius `radius` (the camera frame of `camera`, in
     /// the light's length unit) in an RGB image (`width x height x 3`, `NaN` where saturated):
-    /// [`MatteParams::near_intensity`] with the sphere's surface.
+    /// `MatteParams::near_intensity` with the sphere's surface.
     #[allow(clippy::too_many_arguments)]
     pub fn near_sphere_intensity(
         &self,
@@ -176,7 +176,7 @@ impl MatteParams {
     /// The radiant intensity (RGB, times the plane's albedo) of the near light `light` from a
     /// diffuse plane through `point` with unit normal `normal` (toward the camera), seen by
     /// `camera` in an RGB image (`width x height x 3`, `NaN` where saturated):
-    /// [`MatteParams::near_intensity`] with the plane's surface.
+    /// `MatteParams::near_intensity` with the plane's surface.
     #[allow(clippy::too_many_arguments)]
     pub fn near_plane_intensity(
         &self,

@@ -159,7 +159,7 @@ const MIN_SPHERE_PIXELS: usize = 50;
 impl Detection {
     /// Finds every mirror sphere in the images for a calibration with two or more spheres: as
     /// [`Detection::find`] finds one (the connected regions brighter than the image border in the
-    /// mean image `mean`), every region at least [`MIN_SPHERE_PIXELS`] large, round (roundness
+    /// mean image `mean`), every region at least `MIN_SPHERE_PIXELS` large, round (roundness
     /// 0.9) and holding at least `min_share` of the images' brightest spots (`brightest`), largest
     /// share first. `Err` says why none was found.
     pub fn find_all(

@@ -168,7 +168,7 @@ pub(crate) const MIN_SPREAD_DEG: f64 = 2.0;
 impl Triangulation {
     /// The point closest to the rays `(origin, unit direction)` in least squares, which must lie
     /// ahead of every origin. Why not where fewer than two rays are given, no two are at least
-    /// [`MIN_SPREAD_DEG`] apart, or the point lies behind one of them.
+    /// `MIN_SPREAD_DEG` apart, or the point lies behind one of them.
     pub fn from_rays(rays: &[(DVec3, DVec3)]) -> Result<Triangulation, String> {
         if rays.len() < 2 {
             return Err(format!(

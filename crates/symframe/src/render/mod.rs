@@ -5,12 +5,12 @@
 //! - Scenes ([`Scene`]): [`Scene::sphere`], [`Scene::cylinder`], [`Scene::plane`] /
 //!   [`Scene::tilted_plane`] (see [`Scene::plane_frame`]), and height fields
 //!   ([`Scene::height_field`], [`Scene::bumps`], [`Scene::from_bumps`]) which cast shadows
-//!   ([`shadow`], [`Scene::cast_shadows`]).
+//!   (`shadow`, [`Scene::cast_shadows`]).
 //! - Tangent fields ([`TangentField`]): circular, axial, radial, swirl, or any function.
-//! - Light rigs ([`rigs`]): the uniform cone, a DiLiGenT-like 96-light grid.
+//! - Light rigs (`rigs`): the uniform cone, a DiLiGenT-like 96-light grid.
 //! - A mirror ball for light calibration ([`MirrorBall`]): lamps of finite size, anti-aliased;
 //!   mirror balls before a pinhole camera under a near lamp ([`NearMirrorBalls`]).
-//! - Degradations ([`noise`]): exposure, Gaussian and shot noise, clipping, quantisation.
+//! - Degradations (`noise`): exposure, Gaussian and shot noise, clipping, quantisation.
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -51,7 +51,7 @@ pub struct Scene {
     /// Unit tangents, perpendicular to the normals (meaningful inside the mask).
     pub tangents_in_camera: Vec<DVec3>,
     /// Surface heights at pixel centres in pixel units, row-major, for height fields. When
-    /// present, [`Scene::render`] tests cast shadows ([`shadow`]); set to `None` to render
+    /// present, [`Scene::render`] tests cast shadows (`shadow`); set to `None` to render
     /// without them.
     pub heights: Option<Vec<f64>>,
 }
@@ -114,7 +114,7 @@ impl Scene {
 
     /// Renders the image under one distant light of unit intensity: interleaved linear RGB,
     /// `radiance = f(l, v) (n.l)`, zero outside the mask, in attached shadow (`n.l <= 0`) and,
-    /// for scenes with [`Scene::heights`], in cast shadow ([`shadow`]).
+    /// for scenes with [`Scene::heights`], in cast shadow (`shadow`).
     pub fn render(&self, brdf: &dyn Brdf, light_in_camera: DVec3) -> Vec<f32> {
         let l = light_in_camera.normalize();
         let axis = brdf.tangent_axis();
@@ -163,7 +163,7 @@ impl Scene {
 
     /// Renders the whole stack with a degradation (image `i` uses index `i`; see
     /// [`Scene::render_degraded`]), in parallel over lights. To drop clipped samples as a
-    /// dataset reader would, apply [`noise::mark_saturated`] to the images instead.
+    /// dataset reader would, apply `noise::mark_saturated` to the images instead.
     pub fn render_stack_degraded(
         &self,
         brdf: &dyn Brdf,

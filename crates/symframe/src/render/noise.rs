@@ -100,7 +100,7 @@ pub enum Noise {
     #[default]
     None,
     /// Additive Gaussian noise of standard deviation `sigma` in full-scale units (1.0 = the
-    /// white level). Results are not clipped (they may go negative): see [`clip`].
+    /// white level). Results are not clipped (they may go negative): see `clip`.
     Gaussian {
         /// Standard deviation, full-scale units.
         sigma: f64,

@@ -13,7 +13,7 @@ pub(crate) const DILIGENT_MAX_ANGLE_DEG: f64 = 45.0;
 /// A DiLiGenT-like rig: 96 lights on a regular 12 x 8 grid (12 across, 8 down) of LED
 /// positions on a plane facing the object, like the LED board of the DiLiGenT benchmark (Shi
 /// et al. 2016), with the grid's corners a hair inside 45 degrees of the view. See
-/// [`grid_lights`].
+/// `grid_lights`.
 pub fn diligent_lights() -> Vec<DVec3> {
     grid_lights(DILIGENT_COLS, DILIGENT_ROWS, DILIGENT_MAX_ANGLE_DEG)
 }

@@ -115,7 +115,7 @@ impl Scene {
     }
 
     /// Recomputes every tangent (inside the mask) from `field`, evaluated at each pixel's
-    /// normalised image position (see [`image_position`]).
+    /// normalised image position (see `image_position`).
     pub fn set_tangent_field(&mut self, field: TangentField) {
         for p in 0..self.n_pixels() {
             if self.mask[p] {
@@ -190,7 +190,7 @@ impl Scene {
     }
 
     /// A height field covering the whole `width x height` frame. `heights` (row-major, pixel
-    /// units, samples at pixel centres; see [`super::shadow`]) give the normals by finite
+    /// units, samples at pixel centres; see `render/shadow.rs`) give the normals by finite
     /// differences (central inside, one-sided on the border):
     /// `n = normalize(-dh/dx, -dh/dy, 1)` with x = column and y = up = -row. The heights stay
     /// in the scene, so rendering casts shadows.

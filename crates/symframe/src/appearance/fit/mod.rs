@@ -35,18 +35,18 @@ pub enum FitModel {
     /// Anisotropic Ward (the paper's model): `kd`, `ks`, `alpha_t`, `alpha_b`.
     Ward,
     /// glTF 2.0 metallic-roughness GGX with `KHR_materials_anisotropy`: base colour,
-    /// metallic, roughness, anisotropy strength ([`super::gltf_fit`]).
+    /// metallic, roughness, anisotropy strength (`appearance/gltf_fit.rs`).
     Gltf,
     /// Per pixel, whichever of the candidates (Ward, glTF, clear coat, woven) predicts the
     /// pixel's validation lights best (a share of the training lights set aside,
-    /// [`validation_lights`]); the chosen model is then refitted on every training light.
+    /// `validation_lights`); the chosen model is then refitted on every training light.
     Auto,
     /// A sharp isotropic clear coat over an anisotropic GGX base, sharing the frame
-    /// ([`super::clearcoat`]): `kd`, `ks`, coat reflectance `kc`, `alpha_t`, `alpha_b`,
+    /// (`appearance/clearcoat.rs`): `kd`, `ks`, coat reflectance `kc`, `alpha_t`, `alpha_b`,
     /// coat roughness.
     Clearcoat,
     /// Two perpendicular anisotropic GGX lobes over a diffuse base, sharing the frame
-    /// ([`super::woven`]): `kd`, warp and weft reflectances, `alpha_t`, `alpha_b`.
+    /// (`appearance/woven.rs`): `kd`, warp and weft reflectances, `alpha_t`, `alpha_b`.
     Woven,
 }
 

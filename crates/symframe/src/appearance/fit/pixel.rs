@@ -386,7 +386,7 @@ impl PixelFitter<'_> {
         PixelOutcome::FittedLobes(fit, hold)
     }
 
-    /// The squared error on the validation samples ([`validation_lights`]) of a glTF fit at
+    /// The squared error on the validation samples (`validation_lights`) of a glTF fit at
     /// `exposure` made on the pixel's other training samples, and the number of validation
     /// values (3 per sample); `None` where the pixel would not be fitted or has no validation
     /// sample. What [`ExposureChoice::select`] sums over pixels.
@@ -498,11 +498,11 @@ pub(crate) const EXPOSURE_JUDGED_PIXELS: usize = 512;
 impl ExposureChoice {
     /// The light intensity of a glTF fit (or of an automatic fit's glTF part) from sampled
     /// pixels: the candidates are the lowest intensity that keeps 99% of the pixels' base colours
-    /// within 1 (from free-scale fits, [`gltf_fit::exposure_bounds`]) times `2^k`, `k = -8..=4`,
+    /// within 1 (from free-scale fits, `gltf_fit::exposure_bounds`) times `2^k`, `k = -8..=4`,
     /// and the intensity the mostly dielectric pixels imply where there are enough of them, then
     /// half steps (`2^(±1/2)`) either side of the best; each is judged by the squared error of fits at it on the validation lights
-    /// ([`validation_lights`]) of up to [`EXPOSURE_JUDGED_PIXELS`] of the pixels (spread over the
-    /// list), and the lowest intensity whose RMS error is within [`EXPOSURE_TOLERANCE`] of the
+    /// (`validation_lights`) of up to `EXPOSURE_JUDGED_PIXELS` of the pixels (spread over the
+    /// list), and the lowest intensity whose RMS error is within `EXPOSURE_TOLERANCE` of the
     /// smallest wins.
     ///
     /// Why judged, not read off: the scale of a pixel's free fit rests on the strength of the

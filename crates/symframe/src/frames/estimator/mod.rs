@@ -42,7 +42,7 @@ use search::{brightest_sample, centre_observed, highlight_wider_along, TangentSe
 pub struct EstimatorParams {
     /// Cosine handling in the symmetry distance.
     pub cosine: CosineMode,
-    /// Smallest domain (lights) that counts as non-empty; `None` = [`default_min_domain`].
+    /// Smallest domain (lights) that counts as non-empty; `None` = `default_min_domain`.
     pub min_domain: Option<u32>,
     /// Pixels whose confidence is below this are culled (no estimate).
     pub min_confidence: f32,
@@ -122,7 +122,7 @@ pub struct PixelEstimate {
     /// (for the lobe fit: its elongation).
     pub anisotropy: f32,
     /// How clearly the data single out the tangent's axes, in [0, 1] (0 where there is no
-    /// tangent; [`crate::frames::policy::tangent_confidence`]).
+    /// tangent; `crate::frames::policy::tangent_confidence`).
     pub tangent_confidence: f32,
     /// Symmetry distances at the solution: `[SD_n, SD_nt, SD_nb]` (for the lobe fit: `[SD_n,
     /// unexplained share, 0]`).

@@ -294,7 +294,7 @@ impl Rig {
         self.triangles.len()
     }
 
-    /// Whether a halfway vector's [`Coverage`] cell lies wholly inside the sampled region. Both
+    /// Whether a halfway vector's `Coverage` cell lies wholly inside the sampled region. Both
     /// paths' symmetry domains require it of every reflected halfway vector.
     #[inline]
     pub fn covered(&self, halfway: DVec3) -> bool {
