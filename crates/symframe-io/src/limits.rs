@@ -1,7 +1,7 @@
 //! What the decoders accept: every image and array reader checks the sizes a file declares
 //! against these limits, and against the file's own length, before it allocates anything of
 //! that size. A header that claims more (a forged or corrupt file, e.g. an EXR of 100000 x
-//! 100000 pixels in 1 KB) gives an [`Error::Limits`](crate::Error::Limits) naming the file.
+//! 100000 pixels in 1 KB) gives an [`Error::Limits`] naming the file.
 //!
 //! - At most [`MAX_SIDE`] pixels per side and [`MAX_PIXELS`] pixels per image (134 million:
 //!   a 16,384 x 8,192 image). Larger images are not supported; crop or downsample them.

@@ -244,7 +244,7 @@ fn byte(v: f64) -> u8 {
 
 /// Colours unit normals (`H x W x 3`, `NaN` = no result) the way normal maps are stored:
 /// `(r, g, b) = ((nx+1)/2, (ny+1)/2, (nz+1)/2)` (OpenGL convention, y up), written as bytes
-/// directly (a data map, not sRGB-encoded); `NaN` pixels black. See [`normal_map_rgb16`] for
+/// directly (a data map, not sRGB-encoded); `NaN` pixels black. See [`normal_map_values`] for
 /// the 16-bit map and the DirectX (y down) convention.
 pub fn normal_map_rgb8(normals: &[f32]) -> Vec<u8> {
     normal_map_values(normals, NormalPng::OpenGl)

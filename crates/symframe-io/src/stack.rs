@@ -26,7 +26,7 @@ pub fn load_stack(
     load_stack_with_warnings(ds, opts, on_image).map(|(s, _)| s)
 }
 
-/// [`load_stack`], and the warnings about mixed inputs (see [`Notes::warnings`]) for the caller
+/// [`load_stack`], and the warnings about mixed inputs (see `Notes::warnings`) for the caller
 /// to print.
 pub fn load_stack_with_warnings(
     ds: &Dataset,

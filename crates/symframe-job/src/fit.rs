@@ -42,7 +42,7 @@ pub struct FitConfig {
     /// choice per pixel, [`symframe::FitModel::DEFAULT`]).
     pub params: FitParams,
     /// glTF or automatic fit: the light intensity ([`FitParams::exposure`]); `None` chooses
-    /// it by validation lights on up to [`EXPOSURE_PIXELS`] pixels spread over the image
+    /// it by validation lights on up to `EXPOSURE_PIXELS` pixels spread over the image
     /// ([`symframe::ExposureChoice::select`]). Replaces `params.exposure`.
     pub exposure: Option<f64>,
     /// Mask image (`None`: the dataset's `mask.png`, if any).

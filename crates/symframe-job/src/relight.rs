@@ -122,7 +122,7 @@ impl FittedMaps {
 /// `kd.npy` are there (an automatic fit that chose each somewhere), a glTF fit where only
 /// `base_color.npy` is, a Ward fit where only `kd.npy` is; a two-lobe fit's folder, which has
 /// neither, reads as a Ward fit without parameters in its frames (its models are
-/// [`read_lobe_maps`]'s).
+/// `read_lobe_maps`'s).
 pub fn read_fit_maps(dir: &Path) -> Result<FittedMaps> {
     if !dir.join("base_color.npy").is_file()
         && !dir.join("kd.npy").is_file()

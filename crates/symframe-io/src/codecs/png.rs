@@ -129,7 +129,7 @@ impl Drop for Sink {
 
 /// A PNG written a row at a time, top to bottom, and renamed into place by
 /// [`PngRows::finish`] (dropped unfinished, nothing is left behind): a picture of a map that
-/// is never whole in memory. Encoded as [`write_png_rows`] does, to the same bytes.
+/// is never whole in memory. Encoded as `write_png_rows` does, to the same bytes.
 pub struct PngRows {
     path: PathBuf,
     guard: Option<TempFile>,

@@ -536,7 +536,7 @@ pub type GreyBand<'a> = dyn FnMut(usize, &[f32], &[f32]) + 'a;
 /// giving each band to `band(y, grey, rgb)`: its first row `y`, one grey value a pixel (the
 /// mean of the image's channels, as a whole decode's samples give it: `NaN` or `+inf` where a
 /// channel is) and its interleaved RGB samples (grey replicated). Nothing the size of the
-/// image is held but what its format's reader holds (see [`Rows`]): what calibration needs of
+/// image is held but what its format's reader holds (see `Rows`): what calibration needs of
 /// a possibly large picture. Returns the image's width and height.
 pub fn read_image_grey(
     path: &Path,

@@ -145,7 +145,7 @@ pub(crate) fn unit_light(v: [f64; 3]) -> std::result::Result<DVec3, String> {
 /// file (the count `N` on the first line, then `N` lines `<name> <lx> <ly> <lz>` or `<lx> <ly>
 /// <lz>`; the names are ignored and need not exist) or a table of `x y z` rows (DiLiGenT
 /// `light_directions.txt`). The form is told by the first meaningful line: one integer means
-/// `.lp`. Directions are normalised; rows as [`parse_lp`] reads them; errors name the file and
+/// `.lp`. Directions are normalised; rows as `parse_lp` reads them; errors name the file and
 /// line.
 pub fn read_light_directions(path: &Path) -> Result<Vec<DVec3>> {
     let mut lines = TextLines::open(path)?;
