@@ -444,29 +444,7 @@ fn refuse_inputs_as_outputs(config: &CalibrateConfig, images: &[PathBuf]) -> Res
 /// the picture and the JSON report; returns the report. Dropped images are told through
 /// `ctl`'s warnings; its stop flag is polled between images.
 pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationReport> {
-    let ext_ok = config
-        .output
-        .extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("lp"));
-    if !ext_ok {
-        bail!(
-            "{}: the output must be an .lp file",
-            config.output.display()
-        );
-    }
-    if !(config.decode.saturation > 0.0 && config.decode.saturation <= 1.0) {
-        bail!(
-            "the saturation level must be in (0, 1], got {}",
-            config.decode.saturation
-        );
-    }
-    if !(config.threshold > 0.0 && config.threshold < 1.0) {
-        bail!(
-            "the highlight threshold must be in (0, 1), got {}",
-            config.threshold
-        );
-    }
+    check_config(config)?;
     let images = image_list(&config.images)?;
     refuse_inputs_as_outputs(config, &images)?;
     let opts = config.decode.clone();
@@ -502,76 +480,10 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
     // alone, keeping only what it needs.
     let matte_rows = config.matte_sphere.map_or(0..0, |c| circle_rows(&c, h));
     let at_once = (DECODE_MEMORY / (4 * w * h + 12 * w * matte_rows.len())).max(1);
-    let key = |v: f32| if v.is_finite() { v } else { f32::INFINITY };
-    // The index of the brightest of `g`'s values (starting at pixel `at`) if brighter than or
-    // as bright as `best` (the last of equals, as `max_by` picks it).
-    let brighter = |best: &mut Option<(usize, f32)>, at: usize, g: &[f32]| {
-        for (k, &v) in g.iter().enumerate() {
-            if best.is_none_or(|(_, b)| key(v).total_cmp(&key(b)) != std::cmp::Ordering::Less) {
-                *best = Some((at + k, v));
-            }
-        }
-    };
-
     // The sphere: given, or found in the mean image.
     let (circle, source, detection) = match config.sphere {
         Some(c) => (c, "given", None),
-        None => {
-            // The images summed in order, each band as it is read when one is read at a
-            // time, else each image's grey values once its batch is read.
-            let mut sum = vec![0.0f32; w * h];
-            let mut brightest = Vec::with_capacity(images.len());
-            for batch in images.chunks(at_once) {
-                if stopped() {
-                    return Err(Interrupted.into());
-                }
-                if let [p] = batch {
-                    let mut best = None;
-                    read_grey(p, &opts, (w, h), &mut |y, g, _| {
-                        brighter(&mut best, y * w, g);
-                        for (s, v) in sum[y * w..].iter_mut().zip(g) {
-                            *s += v;
-                        }
-                    })?;
-                    brightest.push(best.map_or(0, |b| b.0));
-                    continue;
-                }
-                let greys = batch
-                    .par_iter()
-                    .map(|p| -> Result<(Vec<f32>, usize)> {
-                        if stopped() {
-                            return Err(Interrupted.into());
-                        }
-                        let mut best = None;
-                        let mut own = Vec::with_capacity(w * h);
-                        read_grey(p, &opts, (w, h), &mut |y, g, _| {
-                            brighter(&mut best, y * w, g);
-                            own.extend_from_slice(g);
-                        })?;
-                        Ok((own, best.map_or(0, |b| b.0)))
-                    })
-                    .collect::<Result<Vec<_>>>()?;
-                for (g, best) in greys {
-                    sum.iter_mut().zip(&g).for_each(|(x, y)| *x += y);
-                    brightest.push(best);
-                }
-            }
-            let n = images.len() as f32;
-            let mut mean = sum;
-            mean.iter_mut().for_each(|v| *v /= n);
-            let d = Detection::find(w, h, &mean, &brightest).map_err(|e| SphereNotFound {
-                images: config.images.clone(),
-                reason: e.to_string(),
-            })?;
-            (
-                d.circle,
-                "detected",
-                Some(SphereDetection {
-                    highlight_share: d.highlight_share,
-                    roundness: d.roundness,
-                }),
-            )
-        }
+        None => detect_sphere(config, &images, (w, h), at_once, &stopped)?,
     };
     let params = HighlightParams {
         fraction: config.threshold,
@@ -773,6 +685,113 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
     )?;
     symframe_io::write_bytes(&config.output, lp_text.as_bytes())?;
     Ok(report)
+}
+
+/// Refuses a configuration calibrate cannot run: an output that is not an `.lp` file, a
+/// saturation level outside (0, 1], a highlight threshold outside (0, 1).
+fn check_config(config: &CalibrateConfig) -> Result<()> {
+    let ext_ok = config
+        .output
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("lp"));
+    if !ext_ok {
+        bail!(
+            "{}: the output must be an .lp file",
+            config.output.display()
+        );
+    }
+    if !(config.decode.saturation > 0.0 && config.decode.saturation <= 1.0) {
+        bail!(
+            "the saturation level must be in (0, 1], got {}",
+            config.decode.saturation
+        );
+    }
+    if !(config.threshold > 0.0 && config.threshold < 1.0) {
+        bail!(
+            "the highlight threshold must be in (0, 1), got {}",
+            config.threshold
+        );
+    }
+    Ok(())
+}
+
+/// Finds the mirror sphere in the mean of the `images` (`w x h`, read `at_once` at a time, or
+/// a band of rows at a time where one is read alone), helped by where each image is brightest:
+/// its circle, how it was found (`detected`) and the detection's figures.
+fn detect_sphere(
+    config: &CalibrateConfig,
+    images: &[PathBuf],
+    (w, h): (usize, usize),
+    at_once: usize,
+    stopped: &(dyn Fn() -> bool + Sync),
+) -> Result<(Circle, &'static str, Option<SphereDetection>)> {
+    let opts = &config.decode;
+    let key = |v: f32| if v.is_finite() { v } else { f32::INFINITY };
+    // The index of the brightest of `g`'s values (starting at pixel `at`) if brighter than or
+    // as bright as `best` (the last of equals, as `max_by` picks it).
+    let brighter = |best: &mut Option<(usize, f32)>, at: usize, g: &[f32]| {
+        for (k, &v) in g.iter().enumerate() {
+            if best.is_none_or(|(_, b)| key(v).total_cmp(&key(b)) != std::cmp::Ordering::Less) {
+                *best = Some((at + k, v));
+            }
+        }
+    };
+
+    // The images summed in order, each band as it is read when one is read at a
+    // time, else each image's grey values once its batch is read.
+    let mut sum = vec![0.0f32; w * h];
+    let mut brightest = Vec::with_capacity(images.len());
+    for batch in images.chunks(at_once) {
+        if stopped() {
+            return Err(Interrupted.into());
+        }
+        if let [p] = batch {
+            let mut best = None;
+            read_grey(p, opts, (w, h), &mut |y, g, _| {
+                brighter(&mut best, y * w, g);
+                for (s, v) in sum[y * w..].iter_mut().zip(g) {
+                    *s += v;
+                }
+            })?;
+            brightest.push(best.map_or(0, |b| b.0));
+            continue;
+        }
+        let greys = batch
+            .par_iter()
+            .map(|p| -> Result<(Vec<f32>, usize)> {
+                if stopped() {
+                    return Err(Interrupted.into());
+                }
+                let mut best = None;
+                let mut own = Vec::with_capacity(w * h);
+                read_grey(p, opts, (w, h), &mut |y, g, _| {
+                    brighter(&mut best, y * w, g);
+                    own.extend_from_slice(g);
+                })?;
+                Ok((own, best.map_or(0, |b| b.0)))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        for (g, best) in greys {
+            sum.iter_mut().zip(&g).for_each(|(x, y)| *x += y);
+            brightest.push(best);
+        }
+    }
+    let n = images.len() as f32;
+    let mut mean = sum;
+    mean.iter_mut().for_each(|v| *v /= n);
+    let d = Detection::find(w, h, &mean, &brightest).map_err(|e| SphereNotFound {
+        images: config.images.clone(),
+        reason: e.to_string(),
+    })?;
+    Ok((
+        d.circle,
+        "detected",
+        Some(SphereDetection {
+            highlight_share: d.highlight_share,
+            roundness: d.roundness,
+        }),
+    ))
 }
 
 #[cfg(test)]
