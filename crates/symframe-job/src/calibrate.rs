@@ -449,19 +449,7 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
     refuse_inputs_as_outputs(config, &images)?;
     let opts = config.decode.clone();
     let stopped = || ctl.stop.load(std::sync::atomic::Ordering::SeqCst);
-    // The size from the first image's header: nothing is decoded before it is checked (a few
-    // KB may declare gigabytes of pixels: docs/performance.md, "Memory model").
-    let (w, h) = symframe_io::read_image_size(&images[0], &opts)?;
-    if w == 0 || h == 0 {
-        bail!("{}: the image is empty", images[0].display());
-    }
-    if w.saturating_mul(h) > MAX_CALIBRATE_PIXELS {
-        bail!(
-            "{}: {w}x{h} pixels, more than the {MAX_CALIBRATE_PIXELS} (8192 x 8192) calibrate \
-             reads; crop the images to the spheres",
-            images[0].display()
-        );
-    }
+    let (w, h) = image_size(&images[0], &opts)?;
     // Given circles, checked before anything is computed with them (a radius far beyond the
     // image would make the highlight search run without end).
     for (sphere, circle) in [("mirror", config.sphere), ("matte", config.matte_sphere)] {
@@ -685,6 +673,24 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
     )?;
     symframe_io::write_bytes(&config.output, lp_text.as_bytes())?;
     Ok(report)
+}
+
+/// The size of the images from the first one's header, `path`: nothing is decoded before it is
+/// checked (a few KB may declare gigabytes of pixels: docs/performance.md, "Memory model").
+/// Refused where empty or larger than [`MAX_CALIBRATE_PIXELS`].
+pub(crate) fn image_size(path: &Path, opts: &DecodeOptions) -> Result<(usize, usize)> {
+    let (w, h) = symframe_io::read_image_size(path, opts)?;
+    if w == 0 || h == 0 {
+        bail!("{}: the image is empty", path.display());
+    }
+    if w.saturating_mul(h) > MAX_CALIBRATE_PIXELS {
+        bail!(
+            "{}: {w}x{h} pixels, more than the {MAX_CALIBRATE_PIXELS} (8192 x 8192) calibrate \
+             reads; crop the images to the spheres",
+            path.display()
+        );
+    }
+    Ok((w, h))
 }
 
 /// Refuses a configuration calibrate cannot run: an output that is not an `.lp` file, a

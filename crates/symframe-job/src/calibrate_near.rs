@@ -19,7 +19,7 @@ use symframe::{
 };
 use symframe_io::DecodeOptions;
 
-use crate::calibrate::{image_list, keep_rows, read_grey, DECODE_MEMORY, MAX_CALIBRATE_PIXELS};
+use crate::calibrate::{image_list, image_size, keep_rows, read_grey, DECODE_MEMORY};
 use crate::{Control, Interrupted};
 
 /// Rays toward a light less than this many degrees apart fix it poorly along them (a tenth of a
@@ -255,17 +255,7 @@ pub fn calibrate_near(
     }
     let opts = config.decode.clone();
     let stopped = || ctl.stop.load(std::sync::atomic::Ordering::SeqCst);
-    let (w, h) = symframe_io::read_image_size(&images[0], &opts)?;
-    if w == 0 || h == 0 {
-        bail!("{}: the image is empty", images[0].display());
-    }
-    if w.saturating_mul(h) > MAX_CALIBRATE_PIXELS {
-        bail!(
-            "{}: {w}x{h} pixels, more than the {MAX_CALIBRATE_PIXELS} (8192 x 8192) calibrate \
-             reads; crop the images to the spheres",
-            images[0].display()
-        );
-    }
+    let (w, h) = image_size(&images[0], &opts)?;
     for (what, c) in config
         .spheres
         .iter()
