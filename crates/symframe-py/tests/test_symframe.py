@@ -224,11 +224,11 @@ def test_ctrl_c_raises_keyboard_interrupt(tmp_path):
     script = f"""
 import os, signal, sys
 import symframe
-lp = symframe.synth({str(tmp_path / 'ds')!r}, size=48, lights=120)
+lp = symframe.synth({str(tmp_path / 'ds')!r}, size=128, lights=120)
 sent = []
 def ctrl_c(stage, done, total):
-    # Progress may be told in steps of several tiles: the first tile done, whichever report
-    # says so, sends the signal.
+    # Progress is told at most every 100 ms (the first and last reports always), so the job
+    # must outlast that: 256 tiles. The first report with a tile done sends the signal.
     if stage == "tiles" and 1 <= done < total and not sent:
         sent.append(done)
         os.kill(os.getpid(), signal.SIGINT)
