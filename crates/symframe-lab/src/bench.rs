@@ -238,6 +238,15 @@ impl Figures {
     pub fn pixels_per_s(&self) -> f64 {
         self.mask_pixels / self.estimate_s
     }
+
+    /// This run's time per pixel of the mask over `other`'s: in estimation (wall) time, and in
+    /// CPU time of the whole run (all threads: steadier where other programs share the cores).
+    fn per_pixel_over(&self, other: &Figures) -> (f64, f64) {
+        (
+            self.pixels_per_s().recip() / other.pixels_per_s().recip(),
+            (self.cpu_s / self.mask_pixels) / (other.cpu_s / other.mask_pixels),
+        )
+    }
 }
 
 /// Resets the process's peak resident memory mark (`VmHWM`) to the current use (Linux: writing
@@ -537,8 +546,7 @@ pub fn run_near(args: &BenchArgs) -> Result<()> {
     }
     print_figures("same scene distant", &same);
     print_figures("sphere", &sphere);
-    let same_ratio = (near.cpu_s / near.mask_pixels) / (same.cpu_s / same.mask_pixels);
-    let same_wall_ratio = near.pixels_per_s().recip() / same.pixels_per_s().recip();
+    let (same_wall_ratio, same_ratio) = near.per_pixel_over(&same);
     println!(
         "    ratio: near / the same scene under distant lights (dome and camera at {} widths) \
          time per pixel {same_wall_ratio:.2}x, in CPU time {same_ratio:.2}x",
@@ -548,14 +556,11 @@ pub fn run_near(args: &BenchArgs) -> Result<()> {
     if let Some(ratio) = ratio {
         println!("    ratio: near / distant estimation time on the same images {ratio:.2}x");
     }
-    let capture_ratio = near.pixels_per_s().recip() / sphere.pixels_per_s().recip();
+    let (capture_ratio, cpu_ratio) = near.per_pixel_over(&sphere);
     println!(
         "    ratio: near / a distant-light capture ({side}x{side} sphere, {n} lights) time per \
          pixel {capture_ratio:.2}x"
     );
-    // CPU seconds (all threads) per pixel: steadier than the wall time where other programs
-    // share the cores.
-    let cpu_ratio = (near.cpu_s / near.mask_pixels) / (sphere.cpu_s / sphere.mask_pixels);
     println!(
         "    ratio: the same in CPU time per pixel {cpu_ratio:.2}x (near {:.1} s, sphere {:.1} s)",
         near.cpu_s, sphere.cpu_s
