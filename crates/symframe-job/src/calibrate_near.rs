@@ -228,6 +228,42 @@ pub fn calibrate_near(
     let camera = symframe_io::near::read_camera(&config.k_file)?;
     check(config, &camera)?;
     let images = image_list(&config.images)?;
+    let out = outputs(config, &images)?;
+    let cap = capture(config, &images)?;
+    let (mean, brightest) = mean_and_brightest(&cap, ctl)?;
+    let (circles, source) = chrome_circles(config, cap.size, &mean, &brightest)?;
+    let spheres = place_spheres(config, &camera, (&mean, cap.size), (&circles, source), ctl)?;
+    let found = find_highlights(config, &cap, &circles, ctl)?;
+    let placed = place_lights(config, &camera, &images, (&spheres, &found), ctl)?;
+    let positions: Vec<DVec3> = placed.iter().flatten().map(|(p, _, _)| *p).collect();
+    let matte = match config.matte_sphere {
+        Some(c) => Some(matte_intensities(
+            config, &camera, &cap, &mean, c, &positions, ctl,
+        )?),
+        None => None,
+    };
+    let findings = Findings {
+        spheres,
+        found,
+        placed,
+        positions,
+    };
+    let (report, rows_out) = assemble(config, &camera, &images, findings, matte.as_ref())?;
+    write_files(config, &camera, out, report, &rows_out, matte.as_ref())
+}
+
+/// The files a run writes beside the positions: their folder, the JSON report, `K.txt` and the
+/// intensities.
+struct Outputs {
+    dir: PathBuf,
+    json_path: PathBuf,
+    k_path: PathBuf,
+    intensities_path: PathBuf,
+}
+
+/// The output's folder and the files written beside it; refused where an output is one of the
+/// inputs (the images or their list), which it would replace.
+fn outputs(config: &NearCalibrateConfig, images: &[PathBuf]) -> Result<Outputs> {
     let dir = out_dir(&config.output);
     let stem = config
         .output
@@ -253,8 +289,27 @@ pub fn calibrate_near(
             }
         }
     }
+    Ok(Outputs {
+        dir,
+        json_path,
+        k_path,
+        intensities_path,
+    })
+}
+
+/// The images every stage decodes, with their size, how they are decoded and how many are
+/// decoded at once (within [`DECODE_MEMORY`]).
+struct Capture<'a> {
+    images: &'a [PathBuf],
+    size: (usize, usize),
+    opts: DecodeOptions,
+    at_once: usize,
+}
+
+/// The images' size (from the first image's header), every circle given checked to fit it, and
+/// the batch size: before any image is decoded whole.
+fn capture<'a>(config: &NearCalibrateConfig, images: &'a [PathBuf]) -> Result<Capture<'a>> {
     let opts = config.decode.clone();
-    let stopped = || ctl.stop.load(std::sync::atomic::Ordering::SeqCst);
     let (w, h) = image_size(&images[0], &opts)?;
     for (what, c) in config
         .spheres
@@ -272,13 +327,23 @@ pub fn calibrate_near(
         }
     }
     let at_once = (DECODE_MEMORY / (4 * w * h)).max(1);
+    Ok(Capture {
+        images,
+        size: (w, h),
+        opts,
+        at_once,
+    })
+}
 
-    // The mean image and each image's brightest pixel: the spheres are found, and their
-    // outlines fitted, in the mean.
+/// The mean image and each image's brightest pixel, decoded in parallel batches with the stop
+/// flag polled between them: the spheres are found, and their outlines fitted, in the mean.
+fn mean_and_brightest(cap: &Capture, ctl: &Control) -> Result<(Vec<f32>, Vec<usize>)> {
+    let (images, (w, h), opts) = (cap.images, cap.size, &cap.opts);
+    let stopped = || ctl.stop.load(std::sync::atomic::Ordering::SeqCst);
     let mut mean = vec![0.0f32; w * h];
     let mut brightest = Vec::with_capacity(images.len());
     let key = |v: f32| if v.is_finite() { v } else { f32::INFINITY };
-    for batch in images.chunks(at_once) {
+    for batch in images.chunks(cap.at_once) {
         if stopped() {
             return Err(Interrupted.into());
         }
@@ -286,7 +351,7 @@ pub fn calibrate_near(
             .par_iter()
             .map(|p| -> Result<(Vec<f32>, usize)> {
                 let mut own = Vec::with_capacity(w * h);
-                read_grey(p, &opts, (w, h), &mut |_, g, _| own.extend_from_slice(g))?;
+                read_grey(p, opts, (w, h), &mut |_, g, _| own.extend_from_slice(g))?;
                 let best = (0..own.len())
                     .max_by(|&a, &b| key(own[a]).total_cmp(&key(own[b])))
                     .unwrap_or(0);
@@ -301,9 +366,19 @@ pub fn calibrate_near(
             brightest.push(best);
         }
     }
+    Ok((mean, brightest))
+}
 
+/// The chrome spheres' circles and where they came from: `given`, or `detected` in the mean
+/// image (two or more, the matte sphere left out, sorted left to right).
+fn chrome_circles(
+    config: &NearCalibrateConfig,
+    (w, h): (usize, usize),
+    mean: &[f32],
+    brightest: &[usize],
+) -> Result<(Vec<Circle>, &'static str)> {
     let (circles, source): (Vec<Circle>, &'static str) = if config.spheres.is_empty() {
-        let found = Detection::find_all(w, h, &mean, &brightest, 0.05).map_err(|why| {
+        let found = Detection::find_all(w, h, mean, brightest, 0.05).map_err(|why| {
             anyhow::anyhow!(
                 "{}: cannot find the chrome spheres: {why}; give each circle with --sphere \
                  CX,CY,R",
@@ -344,10 +419,21 @@ pub fn calibrate_near(
     } else {
         (config.spheres.clone(), "given")
     };
+    Ok((circles, source))
+}
 
+/// Each chrome sphere placed in the camera frame by its outline in the mean image (its circle's
+/// rim, with a warning, where the image gives none) and the spheres' radius.
+fn place_spheres(
+    config: &NearCalibrateConfig,
+    camera: &Pinhole,
+    (mean, (w, h)): (&[f32], (usize, usize)),
+    (circles, source): (&[Circle], &'static str),
+    ctl: &Control,
+) -> Result<Vec<SphereRecord>> {
     let mut spheres = Vec::with_capacity(circles.len());
-    for c in &circles {
-        let (outline, rim) = match c.outline(w, h, &mean) {
+    for c in circles {
+        let (outline, rim) = match c.outline(w, h, mean) {
             Some((_, rim)) if rim.len() >= 16 => ("image", rim),
             _ => {
                 ctl.warn(&format!(
@@ -374,8 +460,22 @@ pub fn calibrate_near(
             centre: centre.to_array(),
         });
     }
+    Ok(spheres)
+}
 
-    // Each image's highlight on each sphere, from the spheres' rows.
+/// A highlight's centre on one sphere in pixels, or why none was found there.
+type Sighting = Result<[f64; 2], String>;
+
+/// Each image's highlight on each sphere, from the spheres' rows alone (decoded in parallel
+/// batches, the stop flag polled between them).
+fn find_highlights(
+    config: &NearCalibrateConfig,
+    cap: &Capture,
+    circles: &[Circle],
+    ctl: &Control,
+) -> Result<Vec<Vec<Sighting>>> {
+    let (images, (w, h), opts) = (cap.images, cap.size, &cap.opts);
+    let stopped = || ctl.stop.load(std::sync::atomic::Ordering::SeqCst);
     let rows = circles
         .iter()
         .map(|c| crate::calibrate::circle_rows(c, h))
@@ -385,16 +485,16 @@ pub fn calibrate_near(
         fraction: config.threshold,
         ..HighlightParams::default()
     };
-    let mut found: Vec<Vec<Result<[f64; 2], String>>> = Vec::with_capacity(images.len());
-    for batch in images.chunks(at_once) {
+    let mut found: Vec<Vec<Sighting>> = Vec::with_capacity(images.len());
+    for batch in images.chunks(cap.at_once) {
         if stopped() {
             return Err(Interrupted.into());
         }
         let done = batch
             .par_iter()
-            .map(|p| -> Result<Vec<Result<[f64; 2], String>>> {
+            .map(|p| -> Result<Vec<Sighting>> {
                 let mut g = vec![0.0f32; w * h];
-                read_grey(p, &opts, (w, h), &mut |y, band, _| {
+                read_grey(p, opts, (w, h), &mut |y, band, _| {
                     keep_rows(band, y, w, &rows, &mut g[rows.start * w..rows.end * w]);
                 })?;
                 Ok(circles
@@ -409,14 +509,29 @@ pub fn calibrate_near(
             .collect::<Result<Vec<_>>>()?;
         found.extend(done);
     }
+    Ok(found)
+}
 
+/// A light's position, its triangulation (where its rays gave one) and how it was placed
+/// (`triangulated` or `dome`).
+type Placed = (DVec3, Option<Triangulation>, &'static str);
+
+/// Each light placed from its highlights: triangulated where two or more rays fix it well; else
+/// (not `strict`) where its rays meet the sphere through the others, with a warning. Every
+/// entry is `Some` on return.
+fn place_lights(
+    config: &NearCalibrateConfig,
+    camera: &Pinhole,
+    images: &[PathBuf],
+    (spheres, found): (&[SphereRecord], &[Vec<Sighting>]),
+    ctl: &Control,
+) -> Result<Vec<Option<Placed>>> {
     // Triangulated lights first; lights seen once, or whose rays fix them poorly, are then
     // placed on the sphere through the others.
-    type Placed = (DVec3, Option<Triangulation>, &'static str);
     let centres: Vec<DVec3> = spheres.iter().map(|s| DVec3::from(s.centre)).collect();
     let mut placed: Vec<Option<Placed>> = Vec::with_capacity(images.len());
     let mut all_rays = Vec::with_capacity(images.len());
-    for (path, hls) in images.iter().zip(&found) {
+    for (path, hls) in images.iter().zip(found) {
         let rays: Vec<(DVec3, DVec3)> = hls
             .iter()
             .zip(&centres)
@@ -514,21 +629,36 @@ pub fn calibrate_near(
             placed[k] = Some((p, t, "dome"));
         }
     }
-    let positions: Vec<DVec3> = placed.iter().flatten().map(|(p, _, _)| *p).collect();
-    let matte = match config.matte_sphere {
-        Some(c) => Some(matte_intensities(
-            config,
-            &camera,
-            &images,
-            &mean,
-            (w, h),
-            at_once,
-            c,
-            &positions,
-            ctl,
-        )?),
-        None => None,
-    };
+    Ok(placed)
+}
+
+/// The matte sphere's record and each light's raw RGB intensity, in the images' order.
+type Matte = (MatteRecord, Vec<[f64; 3]>);
+
+/// What the stages found, for the report: the spheres, each image's highlights, each light
+/// placed and the positions.
+struct Findings {
+    spheres: Vec<SphereRecord>,
+    found: Vec<Vec<Sighting>>,
+    placed: Vec<Option<Placed>>,
+    positions: Vec<DVec3>,
+}
+
+/// The report (its `written` left empty) and the rows of `light_positions.txt`, one per image;
+/// nothing is written yet.
+fn assemble(
+    config: &NearCalibrateConfig,
+    camera: &Pinhole,
+    images: &[PathBuf],
+    findings: Findings,
+    matte: Option<&Matte>,
+) -> Result<(NearCalibrationReport, String)> {
+    let Findings {
+        spheres,
+        found,
+        placed,
+        positions,
+    } = findings;
     let mut records = Vec::with_capacity(images.len());
     let mut rows_out = String::new();
     let mut residuals = Vec::new();
@@ -548,7 +678,7 @@ pub fn calibrate_near(
             residual_rms: t.map(|t| t.residual_rms),
             residual_max: t.map(|t| t.residual_max),
             spread_deg: t.map(|t| t.spread_deg),
-            intensity: matte.as_ref().map(|m| m.1[records.len()]),
+            intensity: matte.map(|m| m.1[records.len()]),
         });
     }
     residuals.sort_by(f64::total_cmp);
@@ -562,13 +692,32 @@ pub fn calibrate_near(
         residual_rms_median: residuals.get(residuals.len() / 2).copied().unwrap_or(0.0),
         residual_rms_max: residuals.last().copied().unwrap_or(0.0),
         dome: PointLight::fit_sphere(&positions).map(|(c, r)| (c.to_array(), r)),
-        matte: matte.as_ref().map(|m| m.0.clone()),
+        matte: matte.map(|m| m.0.clone()),
         records,
         conventions: "pixels: x right, y down, centre of the top-left pixel (0.5, 0.5); \
                       positions: camera frame, x right, y up, z toward the camera, origin at \
                       the centre of projection, in the spheres' radius's unit",
         written: Vec::new(),
     };
+    Ok((report, rows_out))
+}
+
+/// Writes `K.txt` (where the folder has none), the JSON report, the intensities (with a matte
+/// sphere, normalised to a mean of 1) and the positions last; the report with what was written.
+fn write_files(
+    config: &NearCalibrateConfig,
+    camera: &Pinhole,
+    out: Outputs,
+    report: NearCalibrationReport,
+    rows_out: &str,
+    matte: Option<&Matte>,
+) -> Result<NearCalibrationReport> {
+    let Outputs {
+        dir,
+        json_path,
+        k_path,
+        intensities_path,
+    } = out;
     std::fs::create_dir_all(&dir)
         .with_context(|| format!("{}: cannot create folder", dir.display()))?;
     let mut written = vec![config.output.clone(), json_path.clone()];
@@ -584,7 +733,7 @@ pub fn calibrate_near(
         &json_path,
         (serde_json::to_string_pretty(&report)? + "\n").as_bytes(),
     )?;
-    if let Some((record, raw)) = &matte {
+    if let Some((record, raw)) = matte {
         let mean = record.intensity_mean_raw;
         let text: String = raw
             .iter()
@@ -606,18 +755,16 @@ const INTENSITIES: &str = "light_intensities.txt";
 /// lights); the record (the mean over lights and channels, which must be positive) and the raw
 /// intensities in the images' order. An image where too few of its pixels face the light is an
 /// error naming it.
-#[allow(clippy::too_many_arguments)]
 fn matte_intensities(
     config: &NearCalibrateConfig,
     camera: &Pinhole,
-    images: &[PathBuf],
+    cap: &Capture,
     mean: &[f32],
-    (w, h): (usize, usize),
-    at_once: usize,
     circle: Circle,
     positions: &[DVec3],
     ctl: &Control,
-) -> Result<(MatteRecord, Vec<[f64; 3]>)> {
+) -> Result<Matte> {
+    let (images, (w, h), at_once) = (cap.images, cap.size, cap.at_once);
     let radius = config.matte_radius.unwrap_or(config.radius);
     let (outline, rim) = match circle.outline(w, h, mean) {
         Some((_, rim)) if rim.len() >= 16 => ("image", rim),
