@@ -27,7 +27,8 @@
 
 use glam::DVec3;
 
-use super::fit::{squared_errors, FitParams, HoldoutError};
+use super::fit::{rms, squared_errors, FitParams, HoldoutError};
+use super::lm::{self, Bounds, Residuals, P};
 use crate::brdf::gltf::GltfPbr;
 
 /// The fitted glTF parameters of one pixel.
@@ -54,7 +55,7 @@ pub struct GltfFit {
 impl GltfFit {
     /// RMS error over the training samples and channels.
     pub fn rms(&self) -> f64 {
-        (self.sse / (3 * self.samples.max(1)) as f64).sqrt()
+        rms(self.sse, self.samples)
     }
 }
 
@@ -66,14 +67,11 @@ pub(crate) struct GltfSample {
     pub rgb: [f64; 3],
 }
 
-/// Nonlinear parameters `[m, ln r, s²]`.
-type P = [f64; 3];
-
-/// Per-thread buffers: the residuals at the current point and at the difference points.
+/// Per-thread buffers.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct Scratch {
-    r: Vec<f64>,
-    rj: [Vec<f64>; 3],
+    /// The residuals of the search.
+    res: Residuals,
     /// `(A, B) (n.l)` per sample at the point of the last [`project`].
     terms: Vec<[f64; 2]>,
 }
@@ -253,15 +251,19 @@ fn search(
     e: Option<f64>,
     scratch: &mut Scratch,
 ) -> (GltfFit, [f64; 3], f64) {
-    let lo = [0.0, params.roughness_min.ln(), 0.0];
-    let hi = [1.0, 0.0, if iso { 0.0 } else { 1.0 }];
-    let clamp = |p: P| -> P { std::array::from_fn(|j| p[j].clamp(lo[j], hi[j])) };
-    let cost_at = |p: P, t: &mut Vec<[f64; 2]>| project(samples, v, clamp(p), e, t, None).2;
+    // The nonlinear parameters `[m, ln r, s²]`.
+    let bounds = Bounds {
+        lo: [0.0, params.roughness_min.ln(), 0.0],
+        hi: [1.0, 0.0, if iso { 0.0 } else { 1.0 }],
+        // The strength is held at 0 without a tangent.
+        free: [true, true, !iso],
+    };
+    let cost_at = |p: P, t: &mut Vec<[f64; 2]>| project(samples, v, bounds.clamp(p), e, t, None).2;
 
     // Start: a coarse grid.
     let mut best = (f64::INFINITY, [0.0; 3]);
     let consider = |p: P, best: &mut (f64, P), t: &mut Vec<[f64; 2]>| {
-        let p = clamp(p);
+        let p = bounds.clamp(p);
         let c = cost_at(p, t);
         if c < best.0 {
             *best = (c, p);
@@ -281,52 +283,16 @@ fn search(
         }
     }
 
-    // Levenberg-Marquardt on the reduced residuals.
-    let n_par = if iso { 2 } else { 3 };
-    let mut p = best.1;
-    let mut cur = project(samples, v, p, e, &mut scratch.terms, Some(&mut scratch.r)).2;
-    let mut lambda = 1e-3;
-    let mut iterations = 0;
-    'outer: while iterations < params.max_iterations {
-        iterations += 1;
-        // Jacobian columns by forward differences (toward the inside at an upper bound).
-        let mut jtj = [[0.0f64; 3]; 3];
-        let mut g = [0.0f64; 3];
-        for j in 0..n_par {
-            let mut q = p;
-            let h = 1e-6 * if p[j] + 1e-6 > hi[j] { -1.0 } else { 1.0 };
-            q[j] += h;
-            let (rj, r0) = (&mut scratch.rj[j], &scratch.r);
-            project(samples, v, q, e, &mut scratch.terms, Some(rj));
-            for (a, b) in rj.iter_mut().zip(r0) {
-                *a = (*a - b) / h;
-            }
-        }
-        #[allow(clippy::needless_range_loop)] // a symmetric matrix filled by index pairs
-        for j in 0..n_par {
-            for k in j..n_par {
-                let s: f64 = scratch.rj[j]
-                    .iter()
-                    .zip(&scratch.rj[k])
-                    .map(|(a, b)| a * b)
-                    .sum();
-                jtj[j][k] = s;
-                jtj[k][j] = s;
-            }
-            g[j] = scratch.rj[j]
-                .iter()
-                .zip(&scratch.r)
-                .map(|(a, b)| a * b)
-                .sum();
-        }
-        // Parameters at a bound whose descent direction points out are held.
-        let free: [bool; 3] = std::array::from_fn(|j| {
-            j < n_par && !((p[j] <= lo[j] && g[j] > 0.0) || (p[j] >= hi[j] && g[j] < 0.0))
-        });
-        if !free.iter().any(|&f| f) {
-            break;
-        }
-        loop {
+    // Levenberg-Marquardt on the reduced residuals; the damped system solved whole, a held
+    // parameter's row the identity.
+    let terms = &mut scratch.terms;
+    let (p, iterations) = lm::minimise(
+        best.1,
+        &bounds,
+        params.max_iterations,
+        &mut scratch.res,
+        |p, out| project(samples, v, p, e, terms, out).2,
+        |jtj, g, free, lambda, p| {
             let mut a = [[0.0f64; 3]; 3];
             let mut b = [0.0f64; 3];
             for j in 0..3 {
@@ -343,35 +309,10 @@ fn search(
                     lambda * jtj[j][j].max(1e-12 * (jtj[0][0] + jtj[1][1] + jtj[2][2]) + 1e-300);
                 b[j] = -g[j];
             }
-            let Some(step) = solve3(a, b) else {
-                lambda *= 10.0;
-                if lambda > 1e12 {
-                    break 'outer;
-                }
-                continue;
-            };
-            let q = clamp(std::array::from_fn(|j| p[j] + step[j]));
-            let moved = (0..3).map(|j| (q[j] - p[j]).abs()).fold(0.0, f64::max);
-            if !moved.is_finite() || moved < 1e-10 {
-                break 'outer;
-            }
-            let next = cost_at(q, &mut scratch.terms);
-            if next < cur {
-                let gain = cur - next;
-                p = q;
-                cur = project(samples, v, p, e, &mut scratch.terms, Some(&mut scratch.r)).2;
-                lambda = (lambda / 3.0).max(1e-9);
-                if moved < 1e-8 || gain <= 1e-15 * cur.max(1e-300) {
-                    break 'outer;
-                }
-                break;
-            }
-            lambda *= 4.0;
-            if lambda > 1e12 {
-                break 'outer;
-            }
-        }
-    }
+            let step = solve3(a, b)?;
+            Some(std::array::from_fn(|j| p[j] + step[j]))
+        },
+    );
     let (coef, scale, _) = project(samples, v, p, e, &mut scratch.terms, None);
     let fit = GltfFit {
         base_color: coef,
@@ -412,17 +353,13 @@ pub(crate) fn sse(fit: &GltfFit, samples: &[GltfSample], v: DVec3, e: f64) -> (f
 
 /// The held-out error of a fit.
 pub(crate) fn holdout(fit: &GltfFit, test: &[GltfSample], v: DVec3, e: f64) -> HoldoutError {
-    let (sse, peak) = sse(fit, test, v, e);
-    HoldoutError {
-        sse,
-        samples: test.len(),
-        peak,
-    }
+    HoldoutError::of(sse(fit, test, v, e), test.len())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::appearance::fit::testutil::fit_one;
     use crate::appearance::fit::{FitModel, PixelFitter, PixelOutcome};
     use crate::frames::rig::uniform_cone_lights;
     use crate::geometry::tangent_basis;
@@ -461,10 +398,7 @@ mod tests {
             let truth = GltfPbr::new(base, m, r, s);
             let rgb = render_pixel(&truth, n, t, &lights, e);
             let params = params(e);
-            let PixelOutcome::FittedGltf(fit, _) =
-                PixelFitter::new(&lights, &params)
-                    .unwrap()
-                    .fit(n, Some(t), &rgb)
+            let PixelOutcome::FittedGltf(fit, _) = fit_one(&lights, &params, n, Some(t), &rgb)
             else {
                 panic!("not fitted")
             };
@@ -488,10 +422,7 @@ mod tests {
             holdout: crate::appearance::fit::FitParams::holdout_lights(400, 10).unwrap(),
             ..params(1.0)
         };
-        let PixelOutcome::FittedGltf(fit, hold) = PixelFitter::new(&lights, &params)
-            .unwrap()
-            .fit(n, None, &rgb)
-        else {
+        let PixelOutcome::FittedGltf(fit, hold) = fit_one(&lights, &params, n, None, &rgb) else {
             panic!("not fitted")
         };
         assert!(fit.isotropic && fit.anisotropy == 0.0);
@@ -506,11 +437,7 @@ mod tests {
         let lights = uniform_cone_lights(300, 65.0);
         let rgb = render_pixel(&GltfPbr::new([0.8; 3], 0.0, 0.4, 0.0), n, t, &lights, 4.0);
         let params = params(1.0);
-        let PixelOutcome::FittedGltf(fit, _) =
-            PixelFitter::new(&lights, &params)
-                .unwrap()
-                .fit(n, Some(t), &rgb)
-        else {
+        let PixelOutcome::FittedGltf(fit, _) = fit_one(&lights, &params, n, Some(t), &rgb) else {
             panic!("not fitted")
         };
         assert!(

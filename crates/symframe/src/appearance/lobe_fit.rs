@@ -24,8 +24,9 @@
 use glam::DVec3;
 use std::f64::consts::PI;
 
-use super::fit::{squared_errors, FitParams, HoldoutError};
+use super::fit::{rms, squared_errors, FitParams, HoldoutError};
 use super::gltf_fit::GltfSample;
+use super::lm::{self, Bounds, Residuals, P};
 use super::{clearcoat, woven};
 use crate::brdf::{Brdf, TangentAxis};
 
@@ -116,12 +117,9 @@ pub struct LobeFit {
 impl LobeFit {
     /// RMS error over the training samples and channels.
     pub fn rms(&self) -> f64 {
-        (self.sse / (3 * self.samples.max(1)) as f64).sqrt()
+        rms(self.sse, self.samples)
     }
 }
-
-/// Log-roughnesses: `[ln α_t, ln α_b, ln α_c]` (unused entries ignored).
-type P = [f64; 3];
 
 /// Per-thread buffers.
 #[derive(Debug, Clone, Default)]
@@ -130,11 +128,12 @@ pub(crate) struct Scratch {
     fixed: Vec<Option<clearcoat::Fixed>>,
     /// `b (n.l)` per sample at the point of the last [`project`].
     cols: Vec<[f64; 3]>,
-    r: Vec<f64>,
-    rj: [Vec<f64>; 3],
+    /// The residuals of the search.
+    res: Residuals,
 }
 
-/// The roughnesses of the nonlinear parameters `p`: `(α_t, α_b, α_c)`.
+/// The roughnesses of the nonlinear parameters `p`, the log-roughnesses
+/// `[ln α_t, ln α_b, ln α_c]` (unused entries ignored): `(α_t, α_b, α_c)`.
 fn alphas(kind: LobeKind, iso: bool, p: P) -> (f64, f64, f64) {
     let at = p[0].exp();
     let ab = if iso { at } else { p[1].exp() };
@@ -329,16 +328,30 @@ pub(crate) fn fit_samples(
     let brightest = samples.iter().flat_map(|s| s.rgb).fold(0.0f64, f64::max);
     let bound = params.max_peak_ratio * brightest;
     let (lo, hi) = (params.alpha_min.ln(), params.alpha_max.min(1.0).ln());
-    let free = free_params(kind, iso);
+    let bounds = Bounds {
+        lo: [lo; 3],
+        hi: [hi; 3],
+        free: free_params(kind, iso),
+    };
     // What of the basis does not depend on the roughnesses, once per sample (the coat's
     // Fresnel factors are unused by the woven model).
     let mut fixed_buf = std::mem::take(&mut scratch.fixed);
     fixed_buf.clear();
     fixed_buf.extend(samples.iter().map(|s| clearcoat::fixed(s.l, v)));
     let fixed = &fixed_buf[..];
-    let clamp = |p: P| -> P { p.map(|x| x.clamp(lo, hi)) };
     let cost_at = |p: P, cols: &mut Vec<[f64; 3]>| {
-        project(kind, samples, fixed, v, iso, clamp(p), bound, cols, None).1
+        project(
+            kind,
+            samples,
+            fixed,
+            v,
+            iso,
+            bounds.clamp(p),
+            bound,
+            cols,
+            None,
+        )
+        .1
     };
 
     // Start: a coarse grid, the tangent's roughness the wider.
@@ -351,7 +364,7 @@ pub(crate) fn fit_samples(
     for &c in coats {
         for (i, &a) in GRID.iter().enumerate() {
             for &b in if iso { &GRID[i..=i] } else { &GRID[..=i] } {
-                let p = clamp([a.ln(), b.ln(), c.ln()]);
+                let p = bounds.clamp([a.ln(), b.ln(), c.ln()]);
                 let cost = cost_at(p, &mut scratch.cols);
                 if cost < best.0 {
                     best = (cost, p);
@@ -360,71 +373,17 @@ pub(crate) fn fit_samples(
         }
     }
 
-    // Levenberg-Marquardt on the reduced residuals.
-    let mut p = best.1;
-    let mut cur = project(
-        kind,
-        samples,
-        fixed,
-        v,
-        iso,
-        p,
-        bound,
-        &mut scratch.cols,
-        Some(&mut scratch.r),
-    )
-    .1;
-    let mut lambda = 1e-3;
-    let mut iterations = 0;
-    'outer: while iterations < params.max_iterations {
-        iterations += 1;
-        let mut jtj = [[0.0f64; 3]; 3];
-        let mut g = [0.0f64; 3];
-        for j in (0..3).filter(|&j| free[j]) {
-            let mut q = p;
-            let h = 1e-6 * if p[j] + 1e-6 > hi { -1.0 } else { 1.0 };
-            q[j] += h;
-            let (rj, r0) = (&mut scratch.rj[j], &scratch.r);
-            project(
-                kind,
-                samples,
-                fixed,
-                v,
-                iso,
-                q,
-                bound,
-                &mut scratch.cols,
-                Some(rj),
-            );
-            for (a, b) in rj.iter_mut().zip(r0) {
-                *a = (*a - b) / h;
-            }
-        }
-        for j in (0..3).filter(|&j| free[j]) {
-            for k in (j..3).filter(|&k| free[k]) {
-                let s: f64 = scratch.rj[j]
-                    .iter()
-                    .zip(&scratch.rj[k])
-                    .map(|(a, b)| a * b)
-                    .sum();
-                jtj[j][k] = s;
-                jtj[k][j] = s;
-            }
-            g[j] = scratch.rj[j]
-                .iter()
-                .zip(&scratch.r)
-                .map(|(a, b)| a * b)
-                .sum();
-        }
-        // Parameters at a bound whose descent direction points out are held.
-        let active: [bool; 3] = std::array::from_fn(|j| {
-            free[j] && !((p[j] <= lo && g[j] > 0.0) || (p[j] >= hi && g[j] < 0.0))
-        });
-        if !active.iter().any(|&f| f) {
-            break;
-        }
-        let trace: f64 = (0..3).map(|j| jtj[j][j]).sum();
-        loop {
+    // Levenberg-Marquardt on the reduced residuals; the damped system solved over the
+    // parameters not held.
+    let cols = &mut scratch.cols;
+    let (p, iterations) = lm::minimise(
+        best.1,
+        &bounds,
+        params.max_iterations,
+        &mut scratch.res,
+        |p, out| project(kind, samples, fixed, v, iso, p, bound, cols, out).1,
+        |jtj, g, active, lambda, p| {
+            let trace: f64 = (0..3).map(|j| jtj[j][j]).sum();
             let idx: Vec<usize> = (0..3).filter(|&j| active[j]).collect();
             let mut a = [[0.0f64; 4]; 3];
             for (i, &j) in idx.iter().enumerate() {
@@ -434,50 +393,14 @@ pub(crate) fn fit_samples(
                 a[i][i] += lambda * jtj[j][j].max(1e-12 * trace + 1e-300);
                 a[i][3] = -g[j];
             }
-            let Some(sol) = solve(&mut a, idx.len()) else {
-                lambda *= 10.0;
-                if lambda > 1e12 {
-                    break 'outer;
-                }
-                continue;
-            };
+            let sol = solve(&mut a, idx.len())?;
             let mut q = p;
             for (i, &j) in idx.iter().enumerate() {
                 q[j] += sol[i];
             }
-            let q = clamp(q);
-            let moved = (0..3).map(|j| (q[j] - p[j]).abs()).fold(0.0, f64::max);
-            if !moved.is_finite() || moved < 1e-10 {
-                break 'outer;
-            }
-            let next = cost_at(q, &mut scratch.cols);
-            if next < cur {
-                let gain = cur - next;
-                p = q;
-                cur = project(
-                    kind,
-                    samples,
-                    fixed,
-                    v,
-                    iso,
-                    p,
-                    bound,
-                    &mut scratch.cols,
-                    Some(&mut scratch.r),
-                )
-                .1;
-                lambda = (lambda / 3.0).max(1e-9);
-                if moved < 1e-8 || gain <= 1e-15 * cur.max(1e-300) {
-                    break 'outer;
-                }
-                break;
-            }
-            lambda *= 4.0;
-            if lambda > 1e12 {
-                break 'outer;
-            }
-        }
-    }
+            Some(q)
+        },
+    );
     let (coef, _) = project(
         kind,
         samples,
@@ -522,18 +445,14 @@ pub(crate) fn sse(fit: &LobeFit, samples: &[GltfSample], v: DVec3) -> (f64, f64)
 
 /// The held-out error of a fit.
 pub(crate) fn holdout(fit: &LobeFit, test: &[GltfSample], v: DVec3) -> HoldoutError {
-    let (sse, peak) = sse(fit, test, v);
-    HoldoutError {
-        sse,
-        samples: test.len(),
-        peak,
-    }
+    HoldoutError::of(sse(fit, test, v), test.len())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::appearance::fit::{FitModel, PixelFitter, PixelOutcome};
+    use crate::appearance::fit::testutil::fit_one;
+    use crate::appearance::fit::{FitModel, PixelOutcome};
     use crate::brdf::{Ggx, Layered, Woven};
     use crate::frames::rig::uniform_cone_lights;
     use crate::geometry::tangent_basis;
@@ -551,10 +470,7 @@ mod tests {
             model,
             ..FitParams::default()
         };
-        match PixelFitter::new(lights, &params)
-            .unwrap()
-            .fit(n, Some(t), &rgb)
-        {
+        match fit_one(lights, &params, n, Some(t), &rgb) {
             PixelOutcome::FittedLobes(fit, _) => fit,
             other => panic!("not a two-lobe fit: {other:?}"),
         }
@@ -613,15 +529,12 @@ mod tests {
     /// truth (PSNR over the sphere).
     #[test]
     fn two_lobe_fits_relight_within_the_training_samples() {
-        use crate::appearance::fit::{ExposureChoice, PixelData};
+        use crate::appearance::fit::testutil::{choose_exposure, fit_scene, judge_relit};
         use crate::appearance::relight::{Edits, Relighter};
-        use crate::eval::vec_at;
         use crate::render::{Scene, TangentField};
         let lights = uniform_cone_lights(400, 65.0);
         let holdout = FitParams::holdout_lights(400, 12).unwrap();
         let scene = Scene::sphere(16, TangentField::Circular);
-        let (normals, tangents) = (scene.gt_normals(), scene.gt_tangents());
-        let np = scene.n_pixels();
         let car_paint = Layered::new(
             0.03,
             clearcoat::COAT_IOR,
@@ -635,61 +548,21 @@ mod tests {
         ];
         for (brdf, model, min_psnr) in cases {
             let stack = scene.render_stack(brdf, &lights);
-            let brightest: Vec<f32> = (0..np)
-                .map(|p| {
-                    let px = stack.pixel(p);
-                    (0..400)
-                        .filter(|i| !holdout.contains(i))
-                        .flat_map(|i| px[3 * i..3 * i + 3].iter().copied())
-                        .fold(0.0, f32::max)
-                })
-                .collect();
-            let peak = brightest.iter().copied().fold(0.0, f32::max);
             let mut params = FitParams {
                 model,
                 holdout: holdout.clone(),
                 ..FitParams::default()
             };
             if model.uses_gltf() {
-                let pixels: Vec<PixelData> = (0..np)
-                    .filter(|&p| scene.mask[p])
-                    .map(|p| PixelData {
-                        normal: vec_at(&normals, p).unwrap(),
-                        tangent: vec_at(&tangents, p),
-                        rgb: stack.pixel(p).to_vec(),
-                    })
-                    .collect();
-                params.exposure = ExposureChoice::select(&lights, &params, &pixels)
-                    .unwrap()
-                    .exposure;
+                params.exposure = choose_exposure(&lights, &params, &scene, &stack).exposure;
             }
-            let fit = params
-                .fit_stack(
-                    &stack,
-                    &lights,
-                    &normals,
-                    &tangents,
-                    Some(&scene.mask),
-                    &|_| {},
-                )
-                .unwrap();
+            let fit = fit_scene(&params, &scene, &stack, &lights);
             let relighter = Relighter::of_fit(&fit.ward, fit.gltf.as_ref(), &Edits::default())
                 .unwrap()
                 .with_lobes(fit.lobes.as_ref().unwrap(), &Edits::default())
                 .unwrap();
-            let (mut relit_ratio, mut truth_ratio, mut psnr) = (0.0f32, 0.0f32, 0.0);
-            for &i in &holdout {
-                let (relit, truth) = (relighter.render(lights[i]), stack.image(i));
-                psnr +=
-                    Relighter::image_psnr(&relit, &truth, Some(&scene.mask)) / holdout.len() as f64;
-                for p in (0..np).filter(|&p| scene.mask[p]) {
-                    let bound = brightest[p].max(1e-3 * peak);
-                    for c in 0..3 {
-                        relit_ratio = relit_ratio.max(relit[3 * p + c] / bound);
-                        truth_ratio = truth_ratio.max(truth[3 * p + c] / bound);
-                    }
-                }
-            }
+            let (relit_ratio, truth_ratio, psnr) =
+                judge_relit(&relighter, &scene, &stack, &lights, &holdout);
             assert!(
                 relit_ratio <= truth_ratio.max(2.0),
                 "{model:?}: relit {relit_ratio}, truth {truth_ratio}"

@@ -44,7 +44,7 @@
 
 use std::f64::consts::PI;
 
-use super::fit::{squared_errors, FitParams, WardFit};
+use super::fit::{squared_errors, FitParams, HoldoutError, WardFit};
 
 /// One usable sample, with everything a pass needs precomputed.
 #[derive(Debug, Clone, Copy, Default)]
@@ -318,6 +318,11 @@ fn predict(fit: &WardFit, s: &Sample) -> [f64; 3] {
 /// Sum of squared errors (direct, no cancellation) and the largest measurement.
 pub(crate) fn sse(fit: &WardFit, samples: &[Sample]) -> (f64, f64) {
     squared_errors(samples, |s| (predict(fit, s), s.rgb))
+}
+
+/// The held-out error of a fit.
+pub(crate) fn holdout(fit: &WardFit, test: &[Sample]) -> HoldoutError {
+    HoldoutError::of(sse(fit, test), test.len())
 }
 
 #[cfg(test)]

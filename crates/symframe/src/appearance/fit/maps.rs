@@ -2,8 +2,8 @@
 //! their collection from the pixels' outcomes ([`FitMaps`]).
 
 use super::{
-    psnr_db, FitParams, FitStatus, FitSummary, PixelOutcome, MODEL_CLEARCOAT, MODEL_GLTF,
-    MODEL_NONE, MODEL_WARD, MODEL_WOVEN,
+    check_exposure, psnr_db, rms, FitParams, FitStatus, FitSummary, PixelOutcome, MODEL_CLEARCOAT,
+    MODEL_GLTF, MODEL_NONE, MODEL_WARD, MODEL_WOVEN,
 };
 use crate::appearance::lobe_fit::{LobeKind, LobeModel};
 use crate::error::{Error, Result};
@@ -88,13 +88,7 @@ impl GltfMaps {
                 ("anisotropy_strength", self.anisotropy.len(), 1),
             ],
         )?;
-        if !(self.exposure > 0.0 && self.exposure.is_finite()) {
-            return Err(Error::BadParameter(format!(
-                "exposure must be positive and finite, got {}",
-                self.exposure
-            )));
-        }
-        Ok(())
+        check_exposure(self.exposure)
     }
 }
 
@@ -286,7 +280,7 @@ impl FitMaps {
         let (mut train_sse, mut hold_sse, mut hold_peak, mut iters) = (0.0, 0.0, 0.0f64, 0u64);
         for (p, outcome) in outcomes.into_iter().enumerate() {
             let s = &mut maps.summary;
-            // (isotropic, rms, sse, samples, iterations, held-out error) of a fitted pixel.
+            // (isotropic, sse, samples, iterations, held-out error) of a fitted pixel.
             let fitted = match outcome {
                 None => {
                     s.masked += 1;
@@ -313,14 +307,7 @@ impl FitMaps {
                     wm.alpha_b[p] = fit.alpha_b as f32;
                     maps.model[p] = MODEL_WARD;
                     s.ward_pixels += 1;
-                    (
-                        fit.isotropic,
-                        fit.rms(),
-                        fit.sse,
-                        fit.samples,
-                        fit.iterations,
-                        hold,
-                    )
+                    (fit.isotropic, fit.sse, fit.samples, fit.iterations, hold)
                 }
                 Some(PixelOutcome::FittedLobes(fit, hold)) => {
                     if let Some(l) = maps.lobes.as_mut() {
@@ -339,14 +326,7 @@ impl FitMaps {
                             MODEL_WOVEN
                         }
                     };
-                    (
-                        fit.isotropic,
-                        fit.rms(),
-                        fit.sse,
-                        fit.samples,
-                        fit.iterations,
-                        hold,
-                    )
+                    (fit.isotropic, fit.sse, fit.samples, fit.iterations, hold)
                 }
                 Some(PixelOutcome::FittedGltf(fit, hold)) => {
                     if let Some(g) = maps.gltf.as_mut() {
@@ -362,27 +342,20 @@ impl FitMaps {
                     }
                     maps.model[p] = MODEL_GLTF;
                     s.gltf_pixels += 1;
-                    (
-                        fit.isotropic,
-                        fit.rms(),
-                        fit.sse,
-                        fit.samples,
-                        fit.iterations,
-                        hold,
-                    )
+                    (fit.isotropic, fit.sse, fit.samples, fit.iterations, hold)
                 }
             };
-            let (isotropic, rms, fit_sse, samples, iterations, hold) = fitted;
+            let (isotropic, fit_sse, samples, iterations, hold) = fitted;
             if isotropic {
                 // The frame used has no tangent: keep the map saying so.
                 maps.ward.tangents[p * 3..p * 3 + 3].fill(f32::NAN);
             }
-            maps.residual[p] = rms as f32;
+            maps.residual[p] = rms(fit_sse, samples) as f32;
             train_sse += fit_sse;
             s.train_samples += samples;
             iters += iterations as u64;
             if hold.samples > 0 {
-                maps.holdout_residual[p] = (hold.sse / (3 * hold.samples) as f64).sqrt() as f32;
+                maps.holdout_residual[p] = rms(hold.sse, hold.samples) as f32;
                 hold_sse += hold.sse;
                 hold_peak = hold_peak.max(hold.peak);
                 s.holdout_samples += hold.samples;
@@ -397,10 +370,10 @@ impl FitMaps {
         }
         let s = &mut maps.summary;
         let fitted = s.anisotropic + s.isotropic;
-        s.train_rms = (train_sse / (3 * s.train_samples.max(1)) as f64).sqrt();
+        s.train_rms = rms(train_sse, s.train_samples);
         s.mean_iterations = iters as f64 / fitted.max(1) as f64;
         if s.holdout_samples > 0 {
-            let rms = (hold_sse / (3 * s.holdout_samples) as f64).sqrt();
+            let rms = rms(hold_sse, s.holdout_samples);
             s.holdout_rms = Some(rms);
             s.holdout_peak = Some(hold_peak);
             s.holdout_psnr_db = Some(psnr_db(hold_peak, rms));

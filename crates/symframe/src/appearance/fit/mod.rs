@@ -205,12 +205,7 @@ impl FitParams {
                 self.max_peak_ratio
             )));
         }
-        if !(self.exposure > 0.0 && self.exposure.is_finite()) {
-            return Err(Error::BadParameter(format!(
-                "exposure must be positive and finite, got {}",
-                self.exposure
-            )));
-        }
+        check_exposure(self.exposure)?;
         if !(self.roughness_min > 0.0 && self.roughness_min <= 1.0) {
             return Err(Error::BadParameter(format!(
                 "roughness_min must be in (0, 1], got {}",
@@ -374,15 +369,132 @@ impl FitParams {
     }
 }
 
+/// Checks that `exposure`, a glTF fit's light intensity, is positive and finite: the one rule
+/// for the parameters and the maps.
+pub(crate) fn check_exposure(exposure: f64) -> Result<()> {
+    if !(exposure > 0.0 && exposure.is_finite()) {
+        return Err(Error::BadParameter(format!(
+            "exposure must be positive and finite, got {exposure}"
+        )));
+    }
+    Ok(())
+}
+
+/// RMS error of the squared errors `sse` over `samples` RGB samples (none counted as one): the
+/// one formula of every model's fit and of the summary.
+pub(crate) fn rms(sse: f64, samples: usize) -> f64 {
+    (sse / (3 * samples.max(1)) as f64).sqrt()
+}
+
 /// `20 log10(peak / rms)`, infinite for a zero error.
 pub(crate) fn psnr_db(peak: f64, rms: f64) -> f64 {
     20.0 * (peak / rms).log10()
 }
 
+/// What the fits' tests share: one pixel fitted, a rendered scene fitted and judged relit.
+#[cfg(test)]
+pub(crate) mod testutil {
+    use glam::DVec3;
+
+    use super::{ExposureChoice, FitMaps, FitParams, PixelData, PixelFitter, PixelOutcome};
+    use crate::appearance::relight::Relighter;
+    use crate::eval::vec_at;
+    use crate::render::Scene;
+    use crate::stack::Stack;
+
+    /// The outcome of one pixel (`n`, `t`, samples `rgb`) fitted with `params` under `lights`.
+    pub(crate) fn fit_one(
+        lights: &[DVec3],
+        params: &FitParams,
+        n: DVec3,
+        t: Option<DVec3>,
+        rgb: &[f32],
+    ) -> PixelOutcome {
+        PixelFitter::new(lights, params).unwrap().fit(n, t, rgb)
+    }
+
+    /// The exposure [`ExposureChoice::select`] gives `stack`, a render of `scene` under
+    /// `lights`, from the pixels inside the mask in their true frames.
+    pub(crate) fn choose_exposure(
+        lights: &[DVec3],
+        params: &FitParams,
+        scene: &Scene,
+        stack: &Stack,
+    ) -> ExposureChoice {
+        let (normals, tangents) = (scene.gt_normals(), scene.gt_tangents());
+        let pixels: Vec<PixelData> = (0..scene.n_pixels())
+            .filter(|&p| scene.mask[p])
+            .map(|p| PixelData {
+                normal: vec_at(&normals, p).unwrap(),
+                tangent: vec_at(&tangents, p),
+                rgb: stack.pixel(p).to_vec(),
+            })
+            .collect();
+        ExposureChoice::select(lights, params, &pixels).unwrap()
+    }
+
+    /// `stack`, a render of `scene` under `lights`, fitted with `params` in the true frames
+    /// inside the mask.
+    pub(crate) fn fit_scene(
+        params: &FitParams,
+        scene: &Scene,
+        stack: &Stack,
+        lights: &[DVec3],
+    ) -> FitMaps {
+        let (normals, tangents) = (scene.gt_normals(), scene.gt_tangents());
+        params
+            .fit_stack(
+                stack,
+                lights,
+                &normals,
+                &tangents,
+                Some(&scene.mask),
+                &|_| {},
+            )
+            .unwrap()
+    }
+
+    /// Under the `holdout` lights, over the mask of `scene`: the largest relit and true values
+    /// over each pixel's brightest training sample (floored for pixels the training lights
+    /// leave dark), and the mean PSNR of the relit images against `stack`.
+    pub(crate) fn judge_relit(
+        relighter: &Relighter,
+        scene: &Scene,
+        stack: &Stack,
+        lights: &[DVec3],
+        holdout: &[usize],
+    ) -> (f32, f32, f64) {
+        let np = scene.n_pixels();
+        let brightest: Vec<f32> = (0..np)
+            .map(|p| {
+                let px = stack.pixel(p);
+                (0..stack.n_lights)
+                    .filter(|i| !holdout.contains(i))
+                    .flat_map(|i| px[3 * i..3 * i + 3].iter().copied())
+                    .fold(0.0, f32::max)
+            })
+            .collect();
+        let peak = brightest.iter().copied().fold(0.0, f32::max);
+        let (mut relit_ratio, mut truth_ratio, mut psnr) = (0.0f32, 0.0f32, 0.0);
+        for &i in holdout {
+            let (relit, truth) = (relighter.render(lights[i]), stack.image(i));
+            psnr += Relighter::image_psnr(&relit, &truth, Some(&scene.mask)) / holdout.len() as f64;
+            for p in (0..np).filter(|&p| scene.mask[p]) {
+                let bound = brightest[p].max(1e-3 * peak);
+                for c in 0..3 {
+                    relit_ratio = relit_ratio.max(relit[3 * p + c] / bound);
+                    truth_ratio = truth_ratio.max(truth[3 * p + c] / bound);
+                }
+            }
+        }
+        (relit_ratio, truth_ratio, psnr)
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    use super::testutil::{choose_exposure, fit_scene, judge_relit};
     use super::*;
-    use crate::eval::vec_at;
     use crate::frames::rig::uniform_cone_lights;
 
     /// Beckmann brushed gold (a lobe outside the glTF family, a coloured metal) under 400
@@ -401,60 +513,21 @@ mod tests {
         let scene = Scene::sphere(24, TangentField::Circular);
         let gold = Beckmann::new([0.0; 3], [1.0, 0.71, 0.29], 0.25, 0.06);
         let stack = scene.render_stack(&gold, &lights);
-        let (normals, tangents) = (scene.gt_normals(), scene.gt_tangents());
-        let np = scene.n_pixels();
-        let brightest: Vec<f32> = (0..np)
-            .map(|p| {
-                let px = stack.pixel(p);
-                (0..800)
-                    .filter(|i| !holdout.contains(i))
-                    .flat_map(|i| px[3 * i..3 * i + 3].iter().copied())
-                    .fold(0.0, f32::max)
-            })
-            .collect();
-        let peak = brightest.iter().copied().fold(0.0, f32::max);
         for model in [FitModel::Gltf, FitModel::Auto] {
             let mut params = FitParams {
                 model,
                 holdout: holdout.clone(),
                 ..FitParams::default()
             };
-            let pixels: Vec<PixelData> = (0..np)
-                .filter(|&p| scene.mask[p])
-                .map(|p| PixelData {
-                    normal: vec_at(&normals, p).unwrap(),
-                    tangent: vec_at(&tangents, p),
-                    rgb: stack.pixel(p).to_vec(),
-                })
-                .collect();
-            let choice = ExposureChoice::select(&lights, &params, &pixels).unwrap();
+            let choice = choose_exposure(&lights, &params, &scene, &stack);
             assert!((0.7..1.42).contains(&choice.exposure), "{choice:?}");
             params.exposure = choice.exposure;
-            let fit = params
-                .fit_stack(
-                    &stack,
-                    &lights,
-                    &normals,
-                    &tangents,
-                    Some(&scene.mask),
-                    &|_| {},
-                )
-                .unwrap();
+            let fit = fit_scene(&params, &scene, &stack, &lights);
             let relighter =
                 Relighter::of_fit(&fit.ward, fit.gltf.as_ref(), &Edits::default()).unwrap();
             // The largest relit and true values over the brightest training sample.
-            let (mut relit_ratio, mut truth_ratio) = (0.0f32, 0.0f32);
-            for &i in &holdout {
-                let (relit, truth) = (relighter.render(lights[i]), stack.image(i));
-                for p in (0..np).filter(|&p| scene.mask[p]) {
-                    // A floor for pixels the training lights leave dark.
-                    let bound = brightest[p].max(1e-3 * peak);
-                    for c in 0..3 {
-                        relit_ratio = relit_ratio.max(relit[3 * p + c] / bound);
-                        truth_ratio = truth_ratio.max(truth[3 * p + c] / bound);
-                    }
-                }
-            }
+            let (relit_ratio, truth_ratio, _) =
+                judge_relit(&relighter, &scene, &stack, &lights, &holdout);
             assert!(
                 truth_ratio <= 1.5 && relit_ratio <= 2.0,
                 "{model:?}: relit {relit_ratio}, truth {truth_ratio}"

@@ -7,10 +7,10 @@ use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
-use super::{validation_lights, FitModel, FitParams, TWO_LOBE_FLOOR, TWO_LOBE_GAIN};
+use super::{rms, validation_lights, FitModel, FitParams, TWO_LOBE_FLOOR, TWO_LOBE_GAIN};
 use crate::appearance::gltf_fit::{self, GltfFit, GltfSample};
 use crate::appearance::lobe_fit::{self, LobeFit, LobeKind};
-use crate::appearance::ward_fit::{fit_samples, sse, Sample};
+use crate::appearance::ward_fit::{self, fit_samples, sse, Sample};
 use crate::error::{Error, Result};
 use crate::eval::vec_at;
 use crate::geometry::tangent_basis;
@@ -40,7 +40,7 @@ pub struct WardFit {
 impl WardFit {
     /// RMS error over the training samples and channels.
     pub fn rms(&self) -> f64 {
-        (self.sse / (3 * self.samples.max(1)) as f64).sqrt()
+        rms(self.sse, self.samples)
     }
 }
 
@@ -53,6 +53,14 @@ pub struct HoldoutError {
     pub samples: usize,
     /// Largest held-out measurement.
     pub peak: f64,
+}
+
+impl HoldoutError {
+    /// The error of `samples` held-out samples from their `(sse, peak)` as each model's `sse`
+    /// returns them: one constructor for every model's `holdout`.
+    pub(crate) fn of((sse, peak): (f64, f64), samples: usize) -> Self {
+        HoldoutError { sse, samples, peak }
+    }
 }
 
 /// The outcome of fitting one pixel.
@@ -96,14 +104,10 @@ pub struct PixelFitter<'a> {
     held_out: Vec<bool>,
     /// Per light: a validation light ([`validation_lights`]).
     validation: Vec<bool>,
-    train: Vec<Sample>,
-    /// Per training sample of `train`: from a validation light.
-    train_val: Vec<bool>,
-    test: Vec<Sample>,
-    gtrain: Vec<GltfSample>,
-    /// Per training sample of `gtrain`: from a validation light.
-    gtrain_val: Vec<bool>,
-    gtest: Vec<GltfSample>,
+    /// The samples of the Ward fit.
+    wsamples: Samples<Sample>,
+    /// The samples of the glTF and two-lobe fits.
+    gsamples: Samples<GltfSample>,
     gscratch: gltf_fit::Scratch,
     lscratch: lobe_fit::Scratch,
     /// The split of the training samples for a choice: fitted on, judged on.
@@ -131,12 +135,8 @@ impl<'a> PixelFitter<'a> {
             params,
             validation: validation_lights(lights.len(), &params.holdout),
             held_out,
-            train: Vec::new(),
-            train_val: Vec::new(),
-            test: Vec::new(),
-            gtrain: Vec::new(),
-            gtrain_val: Vec::new(),
-            gtest: Vec::new(),
+            wsamples: Samples::default(),
+            gsamples: Samples::default(),
             gscratch: gltf_fit::Scratch::default(),
             lscratch: lobe_fit::Scratch::default(),
             wfit: Vec::new(),
@@ -149,14 +149,9 @@ impl<'a> PixelFitter<'a> {
     /// Fits one pixel: `normal` and `tangent` (camera frame; `tangent = None` fits one
     /// roughness), `rgb` the pixel's samples (`3 * lights.len()` values, NaN = invalid).
     pub fn fit(&mut self, normal: DVec3, tangent: Option<DVec3>, rgb: &[f32]) -> PixelOutcome {
-        let Some(n) = normal.try_normalize().filter(|n| n.z > 0.0) else {
+        let Some((n, t, iso)) = pixel_frame(normal, tangent) else {
             return PixelOutcome::NoFrame;
         };
-        let t = tangent
-            .map(|t| t - t.dot(n) * n)
-            .and_then(|t| t.try_normalize());
-        let iso = t.is_none();
-        let t = t.unwrap_or_else(|| tangent_basis(n).0);
         let b = n.cross(t);
         match self.params.model {
             FitModel::Gltf => self.fit_gltf(n, t, b, iso, rgb),
@@ -168,15 +163,84 @@ impl<'a> PixelFitter<'a> {
     }
 }
 
-/// Splits `all` by `flag` into `(fit, val)`: the samples without the flag and those with it.
-fn split_by<S: Copy>(all: &[S], flag: &[bool], fit: &mut Vec<S>, val: &mut Vec<S>) {
-    fit.clear();
-    val.clear();
-    for (s, &f) in all.iter().zip(flag) {
-        if f {
-            val.push(*s);
-        } else {
-            fit.push(*s);
+/// The frame of a pixel with `normal` and `tangent` (camera frame): the unit normal, the unit
+/// tangent (made up where there is none) and whether there was none; `None` without a normal
+/// facing the view. The one reading of a pixel's frame for every fit.
+fn pixel_frame(normal: DVec3, tangent: Option<DVec3>) -> Option<(DVec3, DVec3, bool)> {
+    let n = normal.try_normalize().filter(|n| n.z > 0.0)?;
+    let t = tangent
+        .map(|t| t - t.dot(n) * n)
+        .and_then(|t| t.try_normalize());
+    let iso = t.is_none();
+    let t = t.unwrap_or_else(|| tangent_basis(n).0);
+    Some((n, t, iso))
+}
+
+/// One pixel's usable samples for one family of models.
+#[derive(Debug, Clone)]
+struct Samples<S> {
+    /// The samples of the training lights.
+    train: Vec<S>,
+    /// Per sample of `train`: from a validation light.
+    train_val: Vec<bool>,
+    /// The samples of the held-out lights.
+    test: Vec<S>,
+}
+
+impl<S> Default for Samples<S> {
+    fn default() -> Self {
+        Self {
+            train: Vec::new(),
+            train_val: Vec::new(),
+            test: Vec::new(),
+        }
+    }
+}
+
+impl<S> Samples<S> {
+    /// Replaces the samples with `make(l, rgb)` of each light `l` whose `rgb` in the pixel's
+    /// samples is finite (`None`: not usable), split by `held_out` and flagged by `validation`:
+    /// the same split for every model.
+    fn collect(
+        &mut self,
+        lights: &[DVec3],
+        held_out: &[bool],
+        validation: &[bool],
+        rgb: &[f32],
+        mut make: impl FnMut(DVec3, [f64; 3]) -> Option<S>,
+    ) {
+        self.train.clear();
+        self.train_val.clear();
+        self.test.clear();
+        for (i, (l, px)) in lights.iter().zip(rgb.chunks_exact(3)).enumerate() {
+            if !px.iter().all(|v| v.is_finite()) {
+                continue;
+            }
+            let Some(s) = make(*l, [px[0] as f64, px[1] as f64, px[2] as f64]) else {
+                continue;
+            };
+            if held_out[i] {
+                self.test.push(s);
+            } else {
+                self.train.push(s);
+                self.train_val.push(validation[i]);
+            }
+        }
+    }
+}
+
+impl<S: Copy> Samples<S> {
+    /// Splits the training samples into `(fit, val)`: those not from validation lights and
+    /// those from them.
+    fn split(&self, fit: &mut Vec<S>, val: &mut Vec<S>) {
+        fit.clear();
+        val.clear();
+        for (s, &f) in self.train.iter().zip(&self.train_val) {
+            if f {
+                val.push(*s);
+            } else {
+                fit.push(*s);
+            }
         }
     }
 }
@@ -185,54 +249,47 @@ impl PixelFitter<'_> {
     /// Collects the usable samples of one pixel for the Ward fit in the frame `(t, b, n)`.
     fn ward_samples(&mut self, n: DVec3, t: DVec3, b: DVec3, rgb: &[f32]) {
         let nv = n.z;
-        self.train.clear();
-        self.train_val.clear();
-        self.test.clear();
-        for (i, (l, px)) in self.lights.iter().zip(rgb.chunks_exact(3)).enumerate() {
-            if !px.iter().all(|v| v.is_finite()) {
-                continue;
-            }
-            let nl = n.dot(*l);
-            if nl <= 0.0 {
-                continue;
-            }
-            let h = (*l + DVec3::Z).normalize();
-            let hn = h.dot(n);
-            if hn <= 0.0 {
-                continue;
-            }
-            let s = Sample {
-                diffuse: nl / PI,
-                spec: (nl / nv).sqrt(),
-                xt: (h.dot(t) / hn).powi(2),
-                xb: (h.dot(b) / hn).powi(2),
-                rgb: [px[0] as f64, px[1] as f64, px[2] as f64],
-            };
-            if self.held_out[i] {
-                self.test.push(s);
-            } else {
-                self.train.push(s);
-                self.train_val.push(self.validation[i]);
-            }
-        }
+        let (lights, held_out, validation) = (self.lights, &self.held_out, &self.validation);
+        self.wsamples
+            .collect(lights, held_out, validation, rgb, |l, rgb| {
+                let nl = n.dot(l);
+                if nl <= 0.0 {
+                    return None;
+                }
+                let h = (l + DVec3::Z).normalize();
+                let hn = h.dot(n);
+                if hn <= 0.0 {
+                    return None;
+                }
+                Some(Sample {
+                    diffuse: nl / PI,
+                    spec: (nl / nv).sqrt(),
+                    xt: (h.dot(t) / hn).powi(2),
+                    xb: (h.dot(b) / hn).powi(2),
+                    rgb,
+                })
+            });
     }
 
     /// The Ward fit of one pixel in the frame `(t, b, n)`.
     fn fit_ward(&mut self, n: DVec3, t: DVec3, b: DVec3, iso: bool, rgb: &[f32]) -> PixelOutcome {
         self.ward_samples(n, t, b, rgb);
-        if self.train.len() < self.params.min_samples {
+        if self.wsamples.train.len() < self.params.min_samples {
             return PixelOutcome::TooFewSamples;
         }
-        let fit = fit_samples(&self.train, iso, self.params);
-        let (hsse, peak) = sse(&fit, &self.test);
-        PixelOutcome::Fitted(
-            fit,
-            HoldoutError {
-                sse: hsse,
-                samples: self.test.len(),
-                peak,
-            },
-        )
+        self.ward_outcome(iso, None)
+    }
+
+    /// The Ward outcome of the pixel whose samples were collected: `fit`, or where `None` the
+    /// fit on every training sample, judged on the held-out ones (a forced model's fit and an
+    /// automatic choice's alike).
+    fn ward_outcome(&mut self, iso: bool, fit: Option<WardFit>) -> PixelOutcome {
+        let fit = match fit {
+            Some(fit) => fit,
+            None => fit_samples(&self.wsamples.train, iso, self.params),
+        };
+        let hold = ward_fit::holdout(&fit, &self.wsamples.test);
+        PixelOutcome::Fitted(fit, hold)
     }
 }
 
@@ -241,24 +298,14 @@ impl PixelFitter<'_> {
     /// returns the view in that frame.
     fn gltf_samples(&mut self, n: DVec3, t: DVec3, b: DVec3, rgb: &[f32]) -> DVec3 {
         let local = |d: DVec3| DVec3::new(d.dot(t), d.dot(b), d.dot(n));
-        self.gtrain.clear();
-        self.gtrain_val.clear();
-        self.gtest.clear();
-        for (i, (l, px)) in self.lights.iter().zip(rgb.chunks_exact(3)).enumerate() {
-            if !px.iter().all(|v| v.is_finite()) || n.dot(*l) <= 0.0 {
-                continue;
-            }
-            let s = GltfSample {
-                l: local(*l),
-                rgb: [px[0] as f64, px[1] as f64, px[2] as f64],
-            };
-            if self.held_out[i] {
-                self.gtest.push(s);
-            } else {
-                self.gtrain.push(s);
-                self.gtrain_val.push(self.validation[i]);
-            }
-        }
+        let (lights, held_out, validation) = (self.lights, &self.held_out, &self.validation);
+        self.gsamples
+            .collect(lights, held_out, validation, rgb, |l, rgb| {
+                if n.dot(l) <= 0.0 {
+                    return None;
+                }
+                Some(GltfSample { l: local(l), rgb })
+            });
         local(DVec3::Z)
     }
 
@@ -273,17 +320,12 @@ impl PixelFitter<'_> {
         let v = self.gltf_samples(n, t, b, rgb);
         self.ward_samples(n, t, b, rgb);
         let min = self.params.min_samples;
-        if self.train.len() < min || self.gtrain.len() < min {
+        if self.wsamples.train.len() < min || self.gsamples.train.len() < min {
             return PixelOutcome::TooFewSamples;
         }
         let e = self.params.exposure;
-        split_by(&self.train, &self.train_val, &mut self.wfit, &mut self.wval);
-        split_by(
-            &self.gtrain,
-            &self.gtrain_val,
-            &mut self.gfit,
-            &mut self.gval,
-        );
+        self.wsamples.split(&mut self.wfit, &mut self.wval);
+        self.gsamples.split(&mut self.gfit, &mut self.gval);
         let by_validation = !self.wval.is_empty()
             && !self.gval.is_empty()
             && self.wfit.len() >= min
@@ -291,7 +333,7 @@ impl PixelFitter<'_> {
         let (wtrain, gtrain) = if by_validation {
             (&self.wfit, &self.gfit)
         } else {
-            (&self.train, &self.gtrain)
+            (&self.wsamples.train, &self.gsamples.train)
         };
         let params = self.params;
         let ward = fit_samples(wtrain, iso, params);
@@ -317,7 +359,7 @@ impl PixelFitter<'_> {
         let judged = if by_validation {
             &self.gval
         } else {
-            &self.gtrain
+            &self.gsamples.train
         };
         let signal: f64 = judged.iter().flat_map(|s| s.rgb).map(|v| v * v).sum();
         let floor = TWO_LOBE_FLOOR * signal;
@@ -326,42 +368,14 @@ impl PixelFitter<'_> {
         } else {
             single
         };
+        // The one kept, refitted on every training sample where it was fitted on fewer.
+        let kept = !by_validation;
         match choice {
-            0 => {
-                let fit = if by_validation {
-                    gltf_fit::fit_samples(&self.gtrain, v, iso, params, &mut self.gscratch)
-                } else {
-                    gltf
-                };
-                let hold = gltf_fit::holdout(&fit, &self.gtest, v, e);
-                PixelOutcome::FittedGltf(fit, hold)
-            }
-            1 => {
-                let fit = if by_validation {
-                    fit_samples(&self.train, iso, params)
-                } else {
-                    ward
-                };
-                let (hsse, peak) = sse(&fit, &self.test);
-                PixelOutcome::Fitted(
-                    fit,
-                    HoldoutError {
-                        sse: hsse,
-                        samples: self.test.len(),
-                        peak,
-                    },
-                )
-            }
+            0 => self.gltf_outcome(v, iso, kept.then_some(gltf)),
+            1 => self.ward_outcome(iso, kept.then_some(ward)),
             k => {
                 let lobe = lobes[k - 2];
-                let fit = if by_validation {
-                    let kind = lobe.model.kind;
-                    lobe_fit::fit_samples(kind, &self.gtrain, v, iso, params, &mut self.lscratch)
-                } else {
-                    lobe
-                };
-                let hold = lobe_fit::holdout(&fit, &self.gtest, v);
-                PixelOutcome::FittedLobes(fit, hold)
+                self.lobe_outcome(lobe.model.kind, v, iso, kept.then_some(lobe))
             }
         }
     }
@@ -377,12 +391,28 @@ impl PixelFitter<'_> {
         rgb: &[f32],
     ) -> PixelOutcome {
         let v = self.gltf_samples(n, t, b, rgb);
-        if self.gtrain.len() < self.params.min_samples {
+        if self.gsamples.train.len() < self.params.min_samples {
             return PixelOutcome::TooFewSamples;
         }
-        let fit =
-            lobe_fit::fit_samples(kind, &self.gtrain, v, iso, self.params, &mut self.lscratch);
-        let hold = lobe_fit::holdout(&fit, &self.gtest, v);
+        self.lobe_outcome(kind, v, iso, None)
+    }
+
+    /// The two-lobe outcome of the pixel whose samples were collected (`v` the view in its
+    /// frame): `fit`, or where `None` the `kind` fit on every training sample, judged on the
+    /// held-out ones (a forced model's fit and an automatic choice's alike).
+    fn lobe_outcome(
+        &mut self,
+        kind: LobeKind,
+        v: DVec3,
+        iso: bool,
+        fit: Option<LobeFit>,
+    ) -> PixelOutcome {
+        let (train, params) = (&self.gsamples.train, self.params);
+        let fit = match fit {
+            Some(fit) => fit,
+            None => lobe_fit::fit_samples(kind, train, v, iso, params, &mut self.lscratch),
+        };
+        let hold = lobe_fit::holdout(&fit, &self.gsamples.test, v);
         PixelOutcome::FittedLobes(fit, hold)
     }
 
@@ -397,19 +427,9 @@ impl PixelFitter<'_> {
         rgb: &[f32],
         exposure: f64,
     ) -> Option<(f64, usize)> {
-        let n = normal.try_normalize().filter(|n| n.z > 0.0)?;
-        let t = tangent
-            .map(|t| t - t.dot(n) * n)
-            .and_then(|t| t.try_normalize());
-        let iso = t.is_none();
-        let t = t.unwrap_or_else(|| tangent_basis(n).0);
+        let (n, t, iso) = pixel_frame(normal, tangent)?;
         let v = self.gltf_samples(n, t, n.cross(t), rgb);
-        split_by(
-            &self.gtrain,
-            &self.gtrain_val,
-            &mut self.gfit,
-            &mut self.gval,
-        );
+        self.gsamples.split(&mut self.gfit, &mut self.gval);
         if self.gfit.len() < self.params.min_samples || self.gval.is_empty() {
             return None;
         }
@@ -427,11 +447,22 @@ impl PixelFitter<'_> {
     /// The glTF fit of one pixel in the frame `(t, b, n)`.
     fn fit_gltf(&mut self, n: DVec3, t: DVec3, b: DVec3, iso: bool, rgb: &[f32]) -> PixelOutcome {
         let v = self.gltf_samples(n, t, b, rgb);
-        if self.gtrain.len() < self.params.min_samples {
+        if self.gsamples.train.len() < self.params.min_samples {
             return PixelOutcome::TooFewSamples;
         }
-        let fit = gltf_fit::fit_samples(&self.gtrain, v, iso, self.params, &mut self.gscratch);
-        let hold = gltf_fit::holdout(&fit, &self.gtest, v, self.params.exposure);
+        self.gltf_outcome(v, iso, None)
+    }
+
+    /// The glTF outcome of the pixel whose samples were collected (`v` the view in its
+    /// frame): `fit`, or where `None` the fit on every training sample, judged on the held-out
+    /// ones (a forced model's fit and an automatic choice's alike).
+    fn gltf_outcome(&mut self, v: DVec3, iso: bool, fit: Option<GltfFit>) -> PixelOutcome {
+        let (train, params) = (&self.gsamples.train, self.params);
+        let fit = match fit {
+            Some(fit) => fit,
+            None => gltf_fit::fit_samples(train, v, iso, params, &mut self.gscratch),
+        };
+        let hold = gltf_fit::holdout(&fit, &self.gsamples.test, v, params.exposure);
         PixelOutcome::FittedGltf(fit, hold)
     }
 
@@ -444,18 +475,13 @@ impl PixelFitter<'_> {
         tangent: Option<DVec3>,
         rgb: &[f32],
     ) -> Option<gltf_fit::PixelScale> {
-        let n = normal.try_normalize().filter(|n| n.z > 0.0)?;
-        let t = tangent
-            .map(|t| t - t.dot(n) * n)
-            .and_then(|t| t.try_normalize());
-        let iso = t.is_none();
-        let t = t.unwrap_or_else(|| tangent_basis(n).0);
+        let (n, t, iso) = pixel_frame(normal, tangent)?;
         let v = self.gltf_samples(n, t, n.cross(t), rgb);
-        if self.gtrain.len() < self.params.min_samples {
+        if self.gsamples.train.len() < self.params.min_samples {
             return None;
         }
         Some(gltf_fit::fit_exposure(
-            &self.gtrain,
+            &self.gsamples.train,
             v,
             iso,
             self.params,
@@ -659,6 +685,7 @@ impl<'a> PixelMethod for FitMethod<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::appearance::fit::testutil::fit_one;
     use crate::brdf::ward::Ward;
     use crate::frames::rig::uniform_cone_lights;
 
@@ -700,8 +727,8 @@ mod tests {
             sse: 0.0,
             iterations: 0,
         };
-        let (err, peak) = sse(&fit, &f.train);
-        assert!(f.train.len() > 100);
+        let (err, peak) = sse(&fit, &f.wsamples.train);
+        assert!(f.wsamples.train.len() > 100);
         assert!(err < 1e-10 * peak * peak, "{err} {peak}");
     }
 
@@ -718,11 +745,7 @@ mod tests {
             let w = Ward::new(kd, ks, at, ab);
             let rgb = render_pixel(&w, n, t, &lights);
             let params = ward_params();
-            let PixelOutcome::Fitted(fit, _) =
-                PixelFitter::new(&lights, &params)
-                    .unwrap()
-                    .fit(n, Some(t), &rgb)
-            else {
+            let PixelOutcome::Fitted(fit, _) = fit_one(&lights, &params, n, Some(t), &rgb) else {
                 panic!("not fitted")
             };
             for c in 0..3 {
@@ -744,10 +767,7 @@ mod tests {
         let w = Ward::isotropic([0.2, 0.3, 0.4], [0.5, 0.4, 0.3], 0.12);
         let rgb = render_pixel(&w, n, t, &lights);
         let params = ward_params();
-        let PixelOutcome::Fitted(fit, _) = PixelFitter::new(&lights, &params)
-            .unwrap()
-            .fit(n, None, &rgb)
-        else {
+        let PixelOutcome::Fitted(fit, _) = fit_one(&lights, &params, n, None, &rgb) else {
             panic!("not fitted")
         };
         assert!(fit.isotropic);
@@ -770,11 +790,7 @@ mod tests {
             holdout: FitParams::holdout_lights(300, 10).unwrap(),
             ..ward_params()
         };
-        let PixelOutcome::Fitted(fit, hold) =
-            PixelFitter::new(&lights, &params)
-                .unwrap()
-                .fit(n, Some(t), &rgb)
-        else {
+        let PixelOutcome::Fitted(fit, hold) = fit_one(&lights, &params, n, Some(t), &rgb) else {
             panic!("not fitted")
         };
         assert!((fit.alpha_t / 0.2 - 1.0).abs() < 1e-3, "{fit:?}");
