@@ -493,10 +493,17 @@ pub(crate) fn lobe_limit(s: &LobeSettings, f: &LobeFit) -> f64 {
         .max(NoiseShare::of_lobe(f).at(s.noise_z) + s.model_floor)
 }
 
+/// Whether the lobe `f` describes the samples to their noise: it leaves less than
+/// [`lobe_limit`]. Its own slice then stands for the pixel's, and the reconstruction's bias is
+/// read on it (docs/method.md, "Confidence").
+pub(crate) fn lobe_describes(s: &LobeSettings, f: &LobeFit) -> bool {
+    f.residual < lobe_limit(s, f)
+}
+
 /// Whether the lobe `f` explains the pixel: it leaves less than [`LobeSettings::explains`],
 /// or less than [`lobe_limit`] with its centre determined ([`LobeSettings::noise_determined`]).
 pub(crate) fn lobe_explains(s: &LobeSettings, f: &LobeFit) -> bool {
-    f.residual < s.explains || (f.residual < lobe_limit(s, f) && centre_determined(s, f))
+    f.residual < s.explains || (lobe_describes(s, f) && centre_determined(s, f))
 }
 
 /// Whether the samples determine the lobe's centre to [`LobeSettings::noise_determined`].

@@ -33,7 +33,7 @@ mod lobe_answer;
 mod search;
 
 use censored::{clipped_in_colour, Censoring};
-use confidence::within_confident;
+use confidence::{within_confident, ModelSlice};
 use diffuse::{diffuse_noise_share, unexplained_share};
 use search::{brightest_sample, centre_observed, highlight_wider_along, TangentSearch};
 
@@ -224,6 +224,7 @@ impl<'a> Estimator<'a> {
             lobe_input,
             base_input,
             coloured,
+            model,
         } = scratch;
         let raw = slice;
         // Clipped samples read through the censoring map: the clipped top of a highlight stays
@@ -299,7 +300,7 @@ impl<'a> Estimator<'a> {
         // Where one lobe leaves the samples unexplained, two sharing its frame may explain them
         // (a coat over a base, a woven cross): the pair then stands for the lobe, with the axis
         // of the lobe that has one (docs/method.md, "Two lobes").
-        let fitted = match fitted {
+        let (fitted, paired) = match fitted {
             // A pixel the Lambertian fit explains but for a spike the rig undersamples is left
             // to it, as with one lobe.
             Some(f)
@@ -309,17 +310,18 @@ impl<'a> Estimator<'a> {
                 match fit_lobe_pair(&f, self.rig, self.params.noise.light_error_deg, lobe) {
                     Some(p) if policy::pair_explains(&self.policy.lobe, &p, &f) => {
                         let l = p.as_lobe(|l| self.lobe_has_tangent(l));
-                        Some(LobeFit {
+                        let pair = LobeFit {
                             evals: f.evals + p.evals,
                             noise_share: f.noise_share,
                             noise_share_sd: f.noise_share_sd,
                             ..l
-                        })
+                        };
+                        (Some(pair), true)
                     }
-                    _ => Some(f),
+                    _ => (Some(f), false),
                 }
             }
-            other => other,
+            other => (other, false),
         };
         // Under a sharp coat one lobe cannot explain coat and base together: the base, fitted
         // without the coat's samples (those at or above the highlight level of the brightest),
@@ -342,7 +344,11 @@ impl<'a> Estimator<'a> {
             }
             _ => None,
         };
-        let lobes = Lobes { fitted, base };
+        let lobes = Lobes {
+            fitted,
+            base,
+            paired,
+        };
         let evidence = (share, diffuse_noise);
         let answer = |e: PixelEstimate| self.or_fallback(e, &fit, share, moments, fitted.as_ref());
         // The symmetry of a pixel with clipped samples reads them in the highlight's colour
@@ -357,11 +363,13 @@ impl<'a> Estimator<'a> {
         match self.params.interpolation {
             Interpolation::Exact => {
                 let objective = ExactObjective::new(self.rig, symmetric);
-                answer(self.solve(slice, &objective, &fit, evidence, moments, lobes))
+                let pixel = (slice, &mut *model);
+                answer(self.solve(pixel, &objective, &fit, evidence, moments, lobes))
             }
             Interpolation::Fast => {
                 let objective = fast.prepare(self.rig, symmetric);
-                answer(self.solve(slice, &objective, &fit, evidence, moments, lobes))
+                let pixel = (slice, &mut *model);
+                answer(self.solve(pixel, &objective, &fit, evidence, moments, lobes))
             }
         }
     }
@@ -470,7 +478,7 @@ impl<'a> Estimator<'a> {
     /// term's unexplained share, default measure only) and `moments` as computed once per pixel.
     fn solve<O: Objective>(
         &self,
-        slice: &[f32],
+        (slice, model): (&[f32], &mut ModelSlice),
         objective: &O,
         fit: &BaselinePixel,
         (share, diffuse_noise): (Option<f64>, Option<NoiseShare>),
@@ -559,7 +567,14 @@ impl<'a> Estimator<'a> {
             self.tangent_by_evidence(objective, n, &found, moments, sharp, lobes);
         // Confidence: how sure the slice's symmetry is of the answer, whichever rule gave it
         // (docs/method.md, "Confidence").
-        let sd = self.answer_sd(objective, n, cosine, &term_n, fitted.as_ref(), &mut evals);
+        let sd = self.answer_sd(
+            objective,
+            (n, &term_n),
+            cosine,
+            (fitted.as_ref(), lobes.paired),
+            (slice, model),
+            &mut evals,
+        );
         let coverage = self.coverage(slice, n, &term_n);
         let confidence = (coverage * within_confident(sd)) as f32;
         // A search that doubts its own answer gives way to a lobe fit that nearly explains the
@@ -619,7 +634,7 @@ impl<'a> Estimator<'a> {
         found: &TangentSearch,
         moments: Option<HighlightMoments>,
         sharp: bool,
-        Lobes { fitted, base }: Lobes,
+        Lobes { fitted, base, .. }: Lobes,
     ) -> (Option<DVec3>, TangentEvidence) {
         let moments_elongated = moments
             .is_some_and(|m| m.has_tangent(self.policy.tangent.min_moment_elongation))
@@ -671,6 +686,9 @@ impl<'a> Estimator<'a> {
 struct Lobes {
     fitted: Option<LobeFit>,
     base: Option<LobeFit>,
+    /// Whether `fitted` stands for two lobes sharing the frame (its parameters are one of
+    /// them).
+    paired: bool,
 }
 
 /// Per-thread buffers of the per-pixel estimator (the fast path's samples and light
@@ -695,6 +713,8 @@ pub struct PixelScratch {
     base_input: Vec<f32>,
     /// What the symmetry reads of a pixel with clipped samples ([`clipped_in_colour`]).
     coloured: Vec<f32>,
+    /// The fitted lobe's own slice, read for the reconstruction's bias.
+    model: ModelSlice,
 }
 
 impl PixelScratch {
@@ -712,6 +732,7 @@ impl PixelScratch {
             lobe_input: Vec::with_capacity(rig.n_used() * 3),
             base_input: Vec::with_capacity(rig.n_used() * 3),
             coloured: Vec::with_capacity(rig.n_used() * 3),
+            model: ModelSlice::new(rig),
         }
     }
 }
