@@ -23,11 +23,11 @@
 //! Tangent: the axis of the larger α.
 
 use super::microfacet::{
-    beckmann_d, cos_theta_d, fresnel_schlick, half_vector_above, smith_g2_beckmann_correlated,
+    assert_roughness, beckmann_d, cos_theta_d, diffuse_plus_schlick_lobe, half_vector_above,
+    smith_g2_beckmann_correlated,
 };
 use super::{Brdf, TangentAxis};
 use glam::DVec3;
-use std::f64::consts::PI;
 
 /// Anisotropic Beckmann microfacet BRDF with a coloured Schlick Fresnel.
 #[derive(Debug, Clone, PartialEq)]
@@ -45,10 +45,7 @@ pub struct Beckmann {
 impl Beckmann {
     /// An anisotropic Beckmann BRDF. Panics if a roughness is not positive and finite.
     pub fn new(kd: [f64; 3], f0: [f64; 3], alpha_x: f64, alpha_y: f64) -> Self {
-        assert!(
-            alpha_x > 0.0 && alpha_y > 0.0 && alpha_x.is_finite() && alpha_y.is_finite(),
-            "Beckmann roughness must be positive and finite, got {alpha_x}, {alpha_y}"
-        );
+        assert_roughness("Beckmann", alpha_x, alpha_y);
         Beckmann {
             kd,
             f0,
@@ -67,8 +64,7 @@ impl Brdf for Beckmann {
         let (ax, ay) = (self.alpha_x, self.alpha_y);
         let s = beckmann_d(h, ax, ay) * smith_g2_beckmann_correlated(l, v, h, ax, ay)
             / (4.0 * l.z * v.z);
-        let lh = cos_theta_d(l, v);
-        std::array::from_fn(|c| self.kd[c] / PI + s * fresnel_schlick(lh, self.f0[c]))
+        diffuse_plus_schlick_lobe(&self.kd, &self.f0, cos_theta_d(l, v), s)
     }
 
     fn tangent_axis(&self) -> TangentAxis {
@@ -91,6 +87,7 @@ impl Brdf for Beckmann {
 mod tests {
     use super::*;
     use crate::brdf::testutil::*;
+    use std::f64::consts::PI;
 
     #[test]
     fn peak_value_and_properties() {

@@ -28,11 +28,11 @@
 //! equal).
 
 use super::microfacet::{
-    cos_theta_d, fresnel_schlick, ggx_d, half_vector_above, smith_g2_ggx_correlated,
+    assert_roughness, cos_theta_d, diffuse_plus_schlick_lobe, ggx_d, half_vector_above,
+    smith_g2_ggx_correlated,
 };
 use super::{Brdf, TangentAxis};
 use glam::DVec3;
-use std::f64::consts::PI;
 
 /// Anisotropic GGX microfacet BRDF plus Lambertian diffuse.
 #[derive(Debug, Clone, PartialEq)]
@@ -50,10 +50,7 @@ pub struct Ggx {
 impl Ggx {
     /// An anisotropic GGX BRDF. Panics if a roughness is not positive and finite.
     pub fn new(kd: [f64; 3], f0: [f64; 3], alpha_x: f64, alpha_y: f64) -> Self {
-        assert!(
-            alpha_x > 0.0 && alpha_y > 0.0 && alpha_x.is_finite() && alpha_y.is_finite(),
-            "GGX roughness must be positive and finite, got {alpha_x}, {alpha_y}"
-        );
+        assert_roughness("GGX", alpha_x, alpha_y);
         Ggx {
             kd,
             f0,
@@ -76,8 +73,7 @@ impl Brdf for Ggx {
         };
         let (ax, ay) = (self.alpha_x, self.alpha_y);
         let s = ggx_d(h, ax, ay) * smith_g2_ggx_correlated(l, v, h, ax, ay) / (4.0 * l.z * v.z);
-        let lh = cos_theta_d(l, v);
-        std::array::from_fn(|c| self.kd[c] / PI + s * fresnel_schlick(lh, self.f0[c]))
+        diffuse_plus_schlick_lobe(&self.kd, &self.f0, cos_theta_d(l, v), s)
     }
 
     fn tangent_axis(&self) -> TangentAxis {
@@ -100,6 +96,7 @@ impl Brdf for Ggx {
 mod tests {
     use super::*;
     use crate::brdf::testutil::*;
+    use std::f64::consts::PI;
 
     #[test]
     fn peak_value() {

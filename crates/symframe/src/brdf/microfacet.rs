@@ -53,6 +53,26 @@ pub(crate) fn diffuse_plus_lobe(kd: &[f64; 3], ks: &[f64; 3], lobe: f64) -> [f64
     std::array::from_fn(|c| kd[c] / std::f64::consts::PI + ks[c] * lobe)
 }
 
+/// `kd / π + lobe F_schlick(cosθ_d, f0)` per channel: the Beckmann and GGX models' one shape.
+#[inline]
+pub(crate) fn diffuse_plus_schlick_lobe(
+    kd: &[f64; 3],
+    f0: &[f64; 3],
+    cos_theta_d: f64,
+    lobe: f64,
+) -> [f64; 3] {
+    std::array::from_fn(|c| kd[c] / PI + lobe * fresnel_schlick(cos_theta_d, f0[c]))
+}
+
+/// Panics unless both roughnesses are positive and finite: Beckmann's, GGX's and Ward's check.
+#[track_caller]
+pub(crate) fn assert_roughness(model: &str, alpha_x: f64, alpha_y: f64) {
+    assert!(
+        alpha_x > 0.0 && alpha_y > 0.0 && alpha_x.is_finite() && alpha_y.is_finite(),
+        "{model} roughness must be positive and finite, got {alpha_x}, {alpha_y}"
+    );
+}
+
 /// The halfway vector of two directions that are both above the horizon (`z > 0`), or `None`
 /// when either is at or below it. Every model uses this to return zero below the horizon.
 #[inline]
@@ -156,24 +176,37 @@ fn facet_visible(w: DVec3, h: DVec3) -> bool {
     w.z > 0.0 && w.dot(h) > 0.0
 }
 
+/// Smith `G1(w, h) = χ⁺ / (1 + Λ(w))` for a given `Λ`: Beckmann's and GGX's.
+#[inline]
+#[cfg(test)]
+fn smith_g1(w: DVec3, h: DVec3, lambda: impl Fn(DVec3) -> f64) -> f64 {
+    if !facet_visible(w, h) {
+        return 0.0;
+    }
+    1.0 / (1.0 + lambda(w))
+}
+
+/// Height-correlated Smith `G2 = χ⁺ / (1 + Λ(l) + Λ(v))` for a given `Λ`: Beckmann's and GGX's.
+#[inline]
+fn smith_g2_correlated(l: DVec3, v: DVec3, h: DVec3, lambda: impl Fn(DVec3) -> f64) -> f64 {
+    if !facet_visible(l, h) || !facet_visible(v, h) {
+        return 0.0;
+    }
+    1.0 / (1.0 + lambda(l) + lambda(v))
+}
+
 /// Smith `G1(w, h)` for Beckmann.
 #[inline]
 #[cfg(test)]
 pub(crate) fn smith_g1_beckmann(w: DVec3, h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
-    if !facet_visible(w, h) {
-        return 0.0;
-    }
-    1.0 / (1.0 + beckmann_lambda(w, alpha_x, alpha_y))
+    smith_g1(w, h, |w| beckmann_lambda(w, alpha_x, alpha_y))
 }
 
 /// Smith `G1(w, h)` for GGX.
 #[inline]
 #[cfg(test)]
 pub(crate) fn smith_g1_ggx(w: DVec3, h: DVec3, alpha_x: f64, alpha_y: f64) -> f64 {
-    if !facet_visible(w, h) {
-        return 0.0;
-    }
-    1.0 / (1.0 + ggx_lambda(w, alpha_x, alpha_y))
+    smith_g1(w, h, |w| ggx_lambda(w, alpha_x, alpha_y))
 }
 
 /// Height-correlated Smith `G2(l, v, h) = 1 / (1 + Λ(l) + Λ(v))` for GGX (Heitz 2014, eq. 99).
@@ -185,10 +218,7 @@ pub(crate) fn smith_g2_ggx_correlated(
     alpha_x: f64,
     alpha_y: f64,
 ) -> f64 {
-    if !facet_visible(l, h) || !facet_visible(v, h) {
-        return 0.0;
-    }
-    1.0 / (1.0 + ggx_lambda(l, alpha_x, alpha_y) + ggx_lambda(v, alpha_x, alpha_y))
+    smith_g2_correlated(l, v, h, |w| ggx_lambda(w, alpha_x, alpha_y))
 }
 
 /// Height-correlated Smith `G2(l, v, h) = 1 / (1 + Λ(l) + Λ(v))` for Beckmann.
@@ -200,10 +230,7 @@ pub(crate) fn smith_g2_beckmann_correlated(
     alpha_x: f64,
     alpha_y: f64,
 ) -> f64 {
-    if !facet_visible(l, h) || !facet_visible(v, h) {
-        return 0.0;
-    }
-    1.0 / (1.0 + beckmann_lambda(l, alpha_x, alpha_y) + beckmann_lambda(v, alpha_x, alpha_y))
+    smith_g2_correlated(l, v, h, |w| beckmann_lambda(w, alpha_x, alpha_y))
 }
 
 /// V-cavity `G1(w, h) = min(1, 2 (n·h)(n·w) / (w·h))` (Heitz 2014, section 4).

@@ -27,7 +27,7 @@
 //! Tangent: the axis of the larger α (`X` if `alpha_x > alpha_y`, `Y` if smaller, `None` when
 //! equal).
 
-use super::microfacet::{aniso_slope2, diffuse_plus_lobe, half_vector_above};
+use super::microfacet::{aniso_slope2, assert_roughness, diffuse_plus_lobe, half_vector_above};
 use super::{Brdf, TangentAxis};
 use glam::DVec3;
 use std::f64::consts::PI;
@@ -48,10 +48,7 @@ pub struct Ward {
 impl Ward {
     /// An anisotropic Ward BRDF. Panics if a roughness is not positive and finite.
     pub fn new(kd: [f64; 3], ks: [f64; 3], alpha_x: f64, alpha_y: f64) -> Self {
-        assert!(
-            alpha_x > 0.0 && alpha_y > 0.0 && alpha_x.is_finite() && alpha_y.is_finite(),
-            "Ward roughness must be positive and finite, got {alpha_x}, {alpha_y}"
-        );
+        assert_roughness("Ward", alpha_x, alpha_y);
         Ward {
             kd,
             ks,

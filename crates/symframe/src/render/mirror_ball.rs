@@ -137,26 +137,60 @@ impl MirrorBall {
                 // A pixel that sees the lamp: where, on a grid eight times finer (the lamp's
                 // reflection is a fraction of a pixel across).
                 if lit {
-                    let m = 8 * k;
-                    let share = 1.0 / (m * m) as f64;
-                    for q in 0..m * m {
-                        let (i, j) = (q / m, q % m);
-                        let px = col as f64 + (j as f64 + 0.5) / m as f64;
-                        let py = row as f64 + (i as f64 + 0.5) / m as f64;
-                        if let Some((_, true)) = self.at(px, py, light, cos_lamp) {
-                            hits.push((px, py, share * self.reflectance * self.lamp));
-                        }
-                    }
+                    lamp_hits(
+                        col,
+                        row,
+                        k,
+                        self.reflectance,
+                        self.lamp,
+                        &mut hits,
+                        |px, py| matches!(self.at(px, py, light, cos_lamp), Some((_, true))),
+                    );
                 }
             }
         }
-        let mut out: Vec<f32> = room.iter().map(|&v| v as f32).collect();
-        blur(&mut out, width, height, self.blur);
-        for (px, py, value) in hits {
-            splat(&mut out, width, height, px, py, value, self.blur);
-        }
-        out
+        develop(&room, &hits, width, height, self.blur)
     }
+}
+
+/// Pushes to `hits` the points of pixel `(col, row)`, on a grid `8k` x `8k`, that `sees_lamp`,
+/// each with its share of `reflectance * lamp`: one lamp reading for both mirror renders.
+pub(super) fn lamp_hits(
+    col: usize,
+    row: usize,
+    k: usize,
+    reflectance: f64,
+    lamp: f64,
+    hits: &mut Vec<(f64, f64, f64)>,
+    sees_lamp: impl Fn(f64, f64) -> bool,
+) {
+    let m = 8 * k;
+    let share = 1.0 / (m * m) as f64;
+    for q in 0..m * m {
+        let (i, j) = (q / m, q % m);
+        let px = col as f64 + (j as f64 + 0.5) / m as f64;
+        let py = row as f64 + (i as f64 + 0.5) / m as f64;
+        if sees_lamp(px, py) {
+            hits.push((px, py, share * reflectance * lamp));
+        }
+    }
+}
+
+/// The room's pixel means blurred by the lens plus the lamp's `hits` splatted by the same blur,
+/// as `f32`: one ending for both mirror renders.
+pub(super) fn develop(
+    room: &[f64],
+    hits: &[(f64, f64, f64)],
+    width: usize,
+    height: usize,
+    sigma: f64,
+) -> Vec<f32> {
+    let mut out: Vec<f32> = room.iter().map(|&v| v as f32).collect();
+    blur(&mut out, width, height, sigma);
+    for &(px, py, value) in hits {
+        splat(&mut out, width, height, px, py, value, sigma);
+    }
+    out
 }
 
 /// Adds `value` at image point `(x, y)` spread by a Gaussian of standard deviation `sigma`

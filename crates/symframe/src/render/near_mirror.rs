@@ -18,7 +18,7 @@
 
 use glam::DVec3;
 
-use super::mirror_ball::{blur, pixel_points, splat};
+use super::mirror_ball::{develop, lamp_hits, pixel_points};
 use crate::near::Pinhole;
 
 /// Mirror spheres before a pinhole camera, and what they reflect.
@@ -181,25 +181,19 @@ impl NearMirrorBalls {
                     .sum::<f64>()
                     * share;
                 if near_lamp {
-                    let m = 8 * k;
-                    let share = 1.0 / (m * m) as f64;
-                    for q in 0..m * m {
-                        let (i, j) = (q / m, q % m);
-                        let px = col as f64 + (j as f64 + 0.5) / m as f64;
-                        let py = row as f64 + (i as f64 + 0.5) / m as f64;
-                        if self.at(px, py, light).is_some_and(|s| s.lamp) {
-                            hits.push((px, py, share * self.reflectance * self.lamp));
-                        }
-                    }
+                    lamp_hits(
+                        col,
+                        row,
+                        k,
+                        self.reflectance,
+                        self.lamp,
+                        &mut hits,
+                        |px, py| self.at(px, py, light).is_some_and(|s| s.lamp),
+                    );
                 }
             }
         }
-        let mut out: Vec<f32> = room.iter().map(|&v| v as f32).collect();
-        blur(&mut out, width, height, self.blur);
-        for (px, py, value) in hits {
-            splat(&mut out, width, height, px, py, value, self.blur);
-        }
-        out
+        develop(&room, &hits, width, height, self.blur)
     }
 }
 
