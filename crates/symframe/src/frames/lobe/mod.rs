@@ -53,7 +53,7 @@ use search::{levenberg_marquardt, search_subset, COARSE_RELATIVE_GAIN, RELATIVE_
 
 pub(crate) use pair::{fit_lobe_pair, LobePair};
 
-use subset::Subset;
+use subset::{choose_lights, Subset};
 
 /// Range of the lobe widths `a_t`, `a_b` (slope units): below, a lobe is a single sample's
 /// spike; above, no highlight is left to locate.
@@ -466,106 +466,18 @@ pub(crate) fn fit_lobe(
     scratch: &mut LobeScratch,
 ) -> Option<LobeFit> {
     let light_error = noise.light_error_deg.to_radians();
-    let (lights, halfways, spread) = (
-        rig.lights_in_camera(),
-        rig.halfway_in_camera(),
-        rig.query_order(),
-    );
+    let brightest = choose_lights(samples, rig, scratch)?;
     let LobeScratch {
         fine,
         coarse,
         every,
         buffers,
-        chosen,
         greys,
         fine_lights,
-        coarse_lights,
         ..
     } = scratch;
-    // The grey values once (NaN where invalid): the passes below read them several times.
-    greys.clear();
-    greys.extend(
-        samples[..lights.len() * 3]
-            .chunks_exact(3)
-            .map(|s| s[0] as f64 + s[1] as f64 + s[2] as f64),
-    );
-    let greys = &*greys;
-    let grey = |j: usize| {
-        let v = greys[j];
-        v.is_finite().then_some(v)
-    };
-    let (mut max, mut brightest) = (0.0, 0);
-    for j in 0..lights.len() {
-        if let Some(v) = grey(j).filter(|&v| v > max) {
-            (max, brightest) = (v, j);
-        }
-    }
-    if max <= 0.0 {
-        return None;
-    }
-    // 0: not read; 1: the fine subset; 2: the coarse one too.
-    chosen.clear();
-    chosen.resize(lights.len(), 0);
-    for (k, &j) in spread.iter().take(SPREAD_LIGHTS).enumerate() {
-        chosen[j as usize] = if k < COARSE_SPREAD { 2 } else { 1 };
-    }
-    // A broad highlight under a dense rig holds hundreds of lights: at most HIGHLIGHT_LIGHTS of
-    // them are read, the first in the spread order (so evenly over the highlight).
-    let mut highlight = 0;
-    for &j in spread {
-        let j = j as usize;
-        if chosen[j] != 0 || !grey(j).is_some_and(|v| v >= HIGHLIGHT_SHARE * max) {
-            continue;
-        }
-        if highlight == HIGHLIGHT_LIGHTS {
-            break;
-        }
-        chosen[j] = if highlight < COARSE_HIGHLIGHT { 2 } else { 1 };
-        highlight += 1;
-    }
-    // The chosen valid lights, in rig order.
-    fine_lights.clear();
-    coarse_lights.clear();
-    for (j, &c) in chosen.iter().enumerate() {
-        if c == 0 || grey(j).is_none() {
-            continue;
-        }
-        fine_lights.push(j as u32);
-        if c == 2 {
-            coarse_lights.push(j as u32);
-        }
-    }
-    fine.gather(fine_lights, lights, halfways, greys);
-    coarse.gather(coarse_lights, lights, halfways, greys);
-    if coarse.len() < 8 {
-        return None;
-    }
-    let swapped = LobeStart {
-        tangent: start.normal.cross(start.tangent),
-        ..start
-    };
-    let brightest_start = LobeStart {
-        normal: halfways[brightest],
-        ..start
-    };
-    // Broad lobes from the same centre, both ways: a highlight cut by the rig's edge (its peak
-    // outside the lights) has moments far narrower than the lobe, and a start that narrow
-    // converges to a spurious fit (docs/method.md, "Lobe fit").
-    let broad = LobeStart {
-        alpha: [BROAD_START.0, BROAD_START.1],
-        ..start
-    };
-    let broad_swapped = LobeStart {
-        alpha: [BROAD_START.0, BROAD_START.1],
-        ..swapped
-    };
-    let mut starts = [start, swapped, brightest_start, broad, broad_swapped];
-    // The brightest sample is often the moments' centre already.
-    let distinct = brightest_start.normal.angle_between(start.normal) > 1e-3;
-    if !distinct {
-        starts[2] = broad_swapped;
-    }
-    let starts = &starts[..if distinct { 5 } else { 4 }];
+    let (starts, count) = starts_from(start, rig.halfway_in_camera()[brightest]);
+    let starts = &starts[..count];
     // The coarse subset pays where it is much smaller than the whole one (dense rigs); under a
     // sparse rig the search reads every light: a lobe sampled by few lights can alias in a
     // subset (docs/performance.md, "Coarse-to-fine").
@@ -592,69 +504,18 @@ pub(crate) fn fit_lobe(
         evals += e;
         (state, linear) = (polished, polished_linear);
     }
-    // The noise-weighted polish (docs/method.md, "Lobe fit", "The noise-weighted fit"): where
-    // the capture is noisy and the fit explains the samples to the noise, it is repeated from
-    // its answer with each sample weighted by the inverse of its variance under the noise
-    // model, the lights' error included.
-    // How far the weighting moved the normal: a misfit the noise hides moves it, a lobe the
-    // family describes moves it within the noise (the normal's uncertainty reads it below).
-    let mut moved2 = 0.0;
-    let parameters = fitted_parameters(&free, &linear);
-    let scatter_sd = tilt_sd(
-        &buffers.jtj,
-        linear.cost,
-        fine.len() as f64 - parameters as f64,
+    let moved2 = weighted_polish(
+        (fine, every),
+        (&mut state, &mut linear),
+        free,
+        noise,
+        buffers,
+        &mut evals,
     );
-    if scatter_sd >= WEIGHTED_SD_FLOOR
-        && noise_weights(fine, &state, linear.coefficients, noise, buffers)
-    {
-        let unweighted = state.normal;
-        every.weighted(fine, &buffers.weight);
-        buffers.fit(every);
-        let (weighted, _, e) =
-            levenberg_marquardt(every, state, None, free, RELATIVE_GAIN, buffers);
-        moved2 = weighted.normal.angle_between(unweighted).powi(2);
-        state = weighted;
-        // The unweighted linear part and Gauss-Newton system at the new answer, as every
-        // figure below reads them.
-        buffers.fit(fine);
-        let m = Model::of(&state);
-        let Buffers {
-            lobe, kept, jtj, ..
-        } = &mut *buffers;
-        linear = project(&m, fine, lobe, kept);
-        *jtj = normal_equations(&m, &linear, free, fine, kept).0;
-        evals += e + 2;
-    }
     let syy = fine.energy();
     let m = Model::of(&state);
-    // The normal's uncertainty from the last Gauss-Newton system over the whole subset (at
-    // the answer, or a step too small to take before it).
-    let normal_sd = {
-        let parameters = fitted_parameters(&free, &linear);
-        let sd = tilt_sd(
-            &buffers.jtj,
-            linear.cost,
-            fine.len() as f64 - parameters as f64,
-        );
-        // Split: the fit repeated from the answer on every k-th sample. Its normal's distance
-        // from the whole fit's estimates the whole fit's error, what the lights' sampling of
-        // the lobe leaves (a lobe the model does not describe, read between few lights) as well
-        // as the noise: for nested fits `var(n_k - n) = var(n_k) - var(n)`, and a k-th of the
-        // samples has k times the variance, so `var(n) = var(n_k - n) / (k - 1)`. One
-        // distance is one draw of two degrees of freedom whatever k: a dense rig's fit is
-        // split every fourth sample (at least SPLIT_SAMPLES in the part), at a quarter of a
-        // pass's cost, a sparse rig's in halves.
-        // One Gauss-Newton step from the answer on the part gives its normal to first order
-        // (two passes over its samples instead of a fit). And where the noise-weighted polish
-        // ran, how far it moved the normal: both fits estimate the same normal where the
-        // lobe describes the material, so a move beyond the noise is the model's error.
-        let k = (fine.len() / SPLIT_SAMPLES).clamp(2, 4);
-        every.gather_every(fine, k);
-        let split2 = tilt_step2(&m, every, free, buffers) / (k - 1) as f64;
-        evals += 2;
-        (sd * sd + split2 + moved2).sqrt()
-    };
+    let normal_sd = tilt_uncertainty(&m, (fine, every), (&linear, free), moved2, buffers);
+    evals += 2;
     // The lights' uncertainty, and what they add to each sample's variance (for the noise
     // share below).
     buffers.light_var.clear();
@@ -709,6 +570,118 @@ pub(crate) fn fit_lobe(
         noise_share_sd,
         evals,
     })
+}
+
+/// The fit's starts from `start` and the brightest sample's halfway vector, and how many of
+/// them to try: the start, its axes swapped, the brightest sample's centre (where it is not
+/// the start's), and broad lobes from the same centre both ways. A highlight cut by the rig's
+/// edge (its peak outside the lights) has moments far narrower than the lobe, and a start that
+/// narrow converges to a spurious fit (docs/method.md, "Lobe fit").
+fn starts_from(start: LobeStart, brightest: DVec3) -> ([LobeStart; 5], usize) {
+    let swapped = LobeStart {
+        tangent: start.normal.cross(start.tangent),
+        ..start
+    };
+    let brightest_start = LobeStart {
+        normal: brightest,
+        ..start
+    };
+    let broad = LobeStart {
+        alpha: [BROAD_START.0, BROAD_START.1],
+        ..start
+    };
+    let broad_swapped = LobeStart {
+        alpha: [BROAD_START.0, BROAD_START.1],
+        ..swapped
+    };
+    let mut starts = [start, swapped, brightest_start, broad, broad_swapped];
+    // The brightest sample is often the moments' centre already.
+    let distinct = brightest_start.normal.angle_between(start.normal) > 1e-3;
+    if !distinct {
+        starts[2] = broad_swapped;
+    }
+    (starts, if distinct { 5 } else { 4 })
+}
+
+/// The noise-weighted polish (docs/method.md, "Lobe fit", "The noise-weighted fit"): where the
+/// capture is noisy and the fit explains the samples to the noise, the fit on `fine` is
+/// repeated from its answer with each sample weighted by the inverse of its variance under the
+/// noise model, the lights' error included (into `every`); `state` and `linear` become its
+/// answer, the unweighted linear part and Gauss-Newton system at it. Returns how far the
+/// weighting moved the normal, squared: a misfit the noise hides moves it, a lobe the family
+/// describes moves it within the noise (the normal's uncertainty reads it). 0 where it did not
+/// run.
+fn weighted_polish(
+    (fine, every): (&Subset, &mut Subset),
+    (state, linear): (&mut State, &mut Linear),
+    free: [bool; P],
+    noise: &NoiseModel,
+    buffers: &mut Buffers,
+    evals: &mut u32,
+) -> f64 {
+    let parameters = fitted_parameters(&free, linear);
+    let scatter_sd = tilt_sd(
+        &buffers.jtj,
+        linear.cost,
+        fine.len() as f64 - parameters as f64,
+    );
+    if !(scatter_sd >= WEIGHTED_SD_FLOOR
+        && noise_weights(fine, state, linear.coefficients, noise, buffers))
+    {
+        return 0.0;
+    }
+    let unweighted = state.normal;
+    every.weighted(fine, &buffers.weight);
+    buffers.fit(every);
+    let (weighted, _, e) = levenberg_marquardt(every, *state, None, free, RELATIVE_GAIN, buffers);
+    let moved2 = weighted.normal.angle_between(unweighted).powi(2);
+    *state = weighted;
+    // The unweighted linear part and Gauss-Newton system at the new answer, as every
+    // figure after it reads them.
+    buffers.fit(fine);
+    let m = Model::of(state);
+    let Buffers {
+        lobe, kept, jtj, ..
+    } = &mut *buffers;
+    *linear = project(&m, fine, lobe, kept);
+    *jtj = normal_equations(&m, linear, free, fine, kept).0;
+    *evals += e + 2;
+    moved2
+}
+
+/// The normal's standard deviation (radians, both tilts) at the answer `m`, from the last
+/// Gauss-Newton system over the whole subset `fine` (at the answer, or a step too small to
+/// take before it), the split and the noise-weighted polish's move `moved2`; two passes over
+/// the part's samples (in `every`).
+///
+/// Split: the fit repeated from the answer on every k-th sample. Its normal's distance from
+/// the whole fit's estimates the whole fit's error, what the lights' sampling of the lobe
+/// leaves (a lobe the model does not describe, read between few lights) as well as the noise:
+/// for nested fits `var(n_k - n) = var(n_k) - var(n)`, and a k-th of the samples has k times
+/// the variance, so `var(n) = var(n_k - n) / (k - 1)`. One distance is one draw of two degrees
+/// of freedom whatever k: a dense rig's fit is split every fourth sample (at least
+/// SPLIT_SAMPLES in the part), at a quarter of a pass's cost, a sparse rig's in halves. One
+/// Gauss-Newton step from the answer on the part gives its normal to first order (two passes
+/// over its samples instead of a fit). And where the noise-weighted polish ran, how far it
+/// moved the normal: both fits estimate the same normal where the lobe describes the
+/// material, so a move beyond the noise is the model's error.
+fn tilt_uncertainty(
+    m: &Model,
+    (fine, every): (&Subset, &mut Subset),
+    (linear, free): (&Linear, [bool; P]),
+    moved2: f64,
+    buffers: &mut Buffers,
+) -> f64 {
+    let parameters = fitted_parameters(&free, linear);
+    let sd = tilt_sd(
+        &buffers.jtj,
+        linear.cost,
+        fine.len() as f64 - parameters as f64,
+    );
+    let k = (fine.len() / SPLIT_SAMPLES).clamp(2, 4);
+    every.gather_every(fine, k);
+    let split2 = tilt_step2(m, every, free, buffers) / (k - 1) as f64;
+    (sd * sd + split2 + moved2).sqrt()
 }
 
 /// The grey value (the sum of the channels) the fitted lobe `fit` predicts under each light

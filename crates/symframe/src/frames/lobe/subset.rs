@@ -1,12 +1,17 @@
 //! The samples a lobe fit reads ([`Subset`]): one subset of a pixel's lights as columns (light
 //! and halfway vectors, Fresnel weight, grey value, weight), padded to whole blocks of
-//! [`LANES`] for the sample loops (`kernel`), and the same samples under turned lights.
+//! [`LANES`] for the sample loops (`kernel`), and the same samples under turned lights; which
+//! of a pixel's lights a fit reads ([`choose_lights`]).
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use glam::DVec3;
 
 use super::lanes::LANES;
+use super::{
+    LobeScratch, COARSE_HIGHLIGHT, COARSE_SPREAD, HIGHLIGHT_LIGHTS, HIGHLIGHT_SHARE, SPREAD_LIGHTS,
+};
+use crate::frames::rig::Rig;
 
 /// The samples of one subset of the lights, as columns: light and halfway vectors (camera
 /// frame), Schlick's Fresnel weight of the halfway vector, the grey value and a weight (1 for a
@@ -27,6 +32,87 @@ pub(super) struct Subset {
 fn next_id() -> u64 {
     static NEXT: AtomicU64 = AtomicU64::new(1);
     NEXT.fetch_add(1, Ordering::Relaxed)
+}
+
+/// The lights the fit reads, gathered into `scratch`'s fine and coarse subsets (with their
+/// grey values, NaN where invalid): an evenly spread prefix of the rig's query order, and the
+/// highlight's lights (at most `HIGHLIGHT_LIGHTS`, evenly over it); the brightest sample's
+/// light, or `None` where nothing is lit or the coarse subset has fewer than eight samples.
+pub(super) fn choose_lights(
+    samples: &[f32],
+    rig: &Rig,
+    scratch: &mut LobeScratch,
+) -> Option<usize> {
+    let (lights, halfways, spread) = (
+        rig.lights_in_camera(),
+        rig.halfway_in_camera(),
+        rig.query_order(),
+    );
+    let LobeScratch {
+        fine,
+        coarse,
+        chosen,
+        greys,
+        fine_lights,
+        coarse_lights,
+        ..
+    } = scratch;
+    // The grey values once (NaN where invalid): the passes below read them several times.
+    greys.clear();
+    greys.extend(
+        samples[..lights.len() * 3]
+            .chunks_exact(3)
+            .map(|s| s[0] as f64 + s[1] as f64 + s[2] as f64),
+    );
+    let greys = &*greys;
+    let grey = |j: usize| {
+        let v = greys[j];
+        v.is_finite().then_some(v)
+    };
+    let (mut max, mut brightest) = (0.0, 0);
+    for j in 0..lights.len() {
+        if let Some(v) = grey(j).filter(|&v| v > max) {
+            (max, brightest) = (v, j);
+        }
+    }
+    if max <= 0.0 {
+        return None;
+    }
+    // 0: not read; 1: the fine subset; 2: the coarse one too.
+    chosen.clear();
+    chosen.resize(lights.len(), 0);
+    for (k, &j) in spread.iter().take(SPREAD_LIGHTS).enumerate() {
+        chosen[j as usize] = if k < COARSE_SPREAD { 2 } else { 1 };
+    }
+    // A broad highlight under a dense rig holds hundreds of lights: at most HIGHLIGHT_LIGHTS of
+    // them are read, the first in the spread order (so evenly over the highlight).
+    let mut highlight = 0;
+    for &j in spread {
+        let j = j as usize;
+        if chosen[j] != 0 || !grey(j).is_some_and(|v| v >= HIGHLIGHT_SHARE * max) {
+            continue;
+        }
+        if highlight == HIGHLIGHT_LIGHTS {
+            break;
+        }
+        chosen[j] = if highlight < COARSE_HIGHLIGHT { 2 } else { 1 };
+        highlight += 1;
+    }
+    // The chosen valid lights, in rig order.
+    fine_lights.clear();
+    coarse_lights.clear();
+    for (j, &c) in chosen.iter().enumerate() {
+        if c == 0 || grey(j).is_none() {
+            continue;
+        }
+        fine_lights.push(j as u32);
+        if c == 2 {
+            coarse_lights.push(j as u32);
+        }
+    }
+    fine.gather(fine_lights, lights, halfways, greys);
+    coarse.gather(coarse_lights, lights, halfways, greys);
+    (coarse.len() >= 8).then_some(brightest)
 }
 
 impl Subset {
