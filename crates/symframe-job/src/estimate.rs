@@ -31,10 +31,10 @@ use crate::maps_out::{
     result_warnings, write_estimate_outputs, Sources, TileResults, WriteOptions,
 };
 use crate::merge::{write_manifest, ShardManifest, MANIFEST, MANIFEST_FORMAT, MANIFEST_VERSION};
-use crate::outdir::OutputDir;
+use crate::outdir::{in_locked_output, lock_warnings, OutputDir};
 use crate::pictures::LightsPlot;
 use crate::tiles::{peak_rss_bytes, run_tiles, shard_tiles, tile_path, TILES_DIR};
-use crate::{Checkpoint, Control, Interrupted};
+use crate::Control;
 
 /// Which method estimates the frames, with its parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -343,43 +343,6 @@ pub fn estimate(config: &EstimateConfig, ctl: &Control) -> Result<EstimateOutcom
     in_locked_output(&config.output, ctl, |ctl, out, warnings| {
         run(config, ctl, out, warnings)
     })
-}
-
-/// Runs a job's `run` into the output folder `output`, locked for the whole job: the warnings
-/// (the folder's recovery's first) collected for the job's report and told through `ctl`; on
-/// an error other than an interruption, what this job created and holds nothing to resume from
-/// is removed again.
-pub(crate) fn in_locked_output<T>(
-    output: &Path,
-    ctl: &Control,
-    run: impl FnOnce(&Control, &OutputDir, &Mutex<Vec<String>>) -> Result<T>,
-) -> Result<T> {
-    let out = OutputDir::lock(output)?;
-    (ctl.checkpoint)(Checkpoint::OutputLocked);
-    let warnings = Mutex::new(Vec::new());
-    let warn = |line: &str| {
-        lock_warnings(&warnings).push(line.to_string());
-        ctl.warn(line);
-    };
-    let counted = Control {
-        warning: &warn,
-        ..*ctl
-    };
-    for w in out.warnings() {
-        warn(w);
-    }
-    let result = run(&counted, &out, &warnings);
-    if let Err(e) = &result {
-        if !e.is::<Interrupted>() {
-            out.discard_unfinished();
-        }
-    }
-    result
-}
-
-/// The warnings collected so far (a poisoned lock still holds them).
-pub(crate) fn lock_warnings(w: &Mutex<Vec<String>>) -> std::sync::MutexGuard<'_, Vec<String>> {
-    w.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// The near-light geometry the job uses: the dataset's positions and camera unless the

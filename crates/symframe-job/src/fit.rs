@@ -14,10 +14,10 @@ use symframe_io::fingerprint::Fingerprint;
 use symframe_io::{CacheFormat, CacheOptions, Dataset, DecodeOptions, Fingerprints, StampKind};
 
 use crate::estimate::{
-    cache_dir, fingerprint_lights, fingerprint_mask, in_locked_output, lock_warnings, open_cache,
-    read_mask, remove_cache, CacheConfig, CacheReport, InputsRecord, CACHE_DIR,
+    cache_dir, fingerprint_lights, fingerprint_mask, open_cache, read_mask, remove_cache,
+    CacheConfig, CacheReport, InputsRecord, CACHE_DIR,
 };
-use crate::outdir::{OutputDir, OutputSet};
+use crate::outdir::{in_locked_output, lock_warnings, OutputDir, OutputSet};
 use crate::tiles::TILES_DIR;
 use crate::tiles::{read_tiles, run_tiles, tile_path, TileCounts};
 use crate::{Checkpoint, Control};

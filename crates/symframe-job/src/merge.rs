@@ -3,6 +3,7 @@
 
 use std::fs;
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
@@ -11,9 +12,9 @@ use symframe::{EstimateMaps, PixelCounts};
 use symframe_io::TileGrid;
 
 use crate::maps_out::{result_warnings, write_estimate_outputs, TileResults, WriteOptions};
-use crate::outdir::OutputDir;
+use crate::outdir::{in_locked_output, lock_warnings, OutputDir};
 use crate::tiles::{peak_rss_bytes, tile_path, TILES_DIR};
-use crate::{Checkpoint, Control, Interrupted, Progress, Stage};
+use crate::{Control, Progress, Stage};
 
 /// A shard's manifest, written once all its tiles are done.
 pub const MANIFEST: &str = "shard.json";
@@ -197,20 +198,16 @@ pub fn merge(
     keep_maps: bool,
     ctl: &Control,
 ) -> Result<MergeOutcome> {
-    let out = OutputDir::lock(output)?;
-    (ctl.checkpoint)(Checkpoint::OutputLocked);
-    let result = run(shards, &out, keep_maps, ctl);
-    if let Err(e) = &result {
-        if !e.is::<Interrupted>() {
-            out.discard_unfinished();
-        }
-    }
-    result
+    in_locked_output(output, ctl, |ctl, out, warnings| {
+        run(shards, (out, warnings), keep_maps, ctl)
+    })
 }
 
+/// The merge in the locked output folder `out`, `warnings` holding those told so far (the
+/// folder's recovery's).
 fn run(
     shards: &[PathBuf],
-    out: &OutputDir,
+    (out, warnings): (&OutputDir, &Mutex<Vec<String>>),
     keep_maps: bool,
     ctl: &Control,
 ) -> Result<MergeOutcome> {
@@ -372,11 +369,8 @@ fn run(
         "shards": first.of,
     });
     report["shards"] = serde_json::Value::Array(shard_timings);
-    let mut warnings: Vec<String> = Vec::new();
-    for w in out.warnings() {
-        ctl.warn(w);
-        warnings.push(w.clone());
-    }
+    // The recovery's warnings, told when the folder was locked, then the shards' own.
+    let mut warnings: Vec<String> = lock_warnings(warnings).clone();
     for (_, m) in &manifests {
         for w in m.report["warnings"].as_array().into_iter().flatten() {
             warnings.push(format!(

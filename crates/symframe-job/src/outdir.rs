@@ -3,8 +3,11 @@
 
 use std::fs;
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 
 use anyhow::{Context, Result};
+
+use crate::{Checkpoint, Control, Interrupted};
 
 /// A staging folder for the files of one output folder.
 pub struct Staging {
@@ -777,6 +780,43 @@ pub fn check_output_set(dir: &Path, report: &str) -> Result<String> {
         }
     }
     Ok(id)
+}
+
+/// Runs a job's `run` into the output folder `output`, locked for the whole job: the warnings
+/// (the folder's recovery's first) collected for the job's report and told through `ctl`; on
+/// an error other than an interruption, what this job created and holds nothing to resume from
+/// is removed again.
+pub(crate) fn in_locked_output<T>(
+    output: &Path,
+    ctl: &Control,
+    run: impl FnOnce(&Control, &OutputDir, &Mutex<Vec<String>>) -> Result<T>,
+) -> Result<T> {
+    let out = OutputDir::lock(output)?;
+    (ctl.checkpoint)(Checkpoint::OutputLocked);
+    let warnings = Mutex::new(Vec::new());
+    let warn = |line: &str| {
+        lock_warnings(&warnings).push(line.to_string());
+        ctl.warn(line);
+    };
+    let counted = Control {
+        warning: &warn,
+        ..*ctl
+    };
+    for w in out.warnings() {
+        warn(w);
+    }
+    let result = run(&counted, &out, &warnings);
+    if let Err(e) = &result {
+        if !e.is::<Interrupted>() {
+            out.discard_unfinished();
+        }
+    }
+    result
+}
+
+/// The warnings collected so far (a poisoned lock still holds them).
+pub(crate) fn lock_warnings(w: &Mutex<Vec<String>>) -> std::sync::MutexGuard<'_, Vec<String>> {
+    w.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 #[cfg(test)]
