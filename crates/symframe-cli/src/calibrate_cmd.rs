@@ -33,10 +33,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
         matte_sphere: args.matte_sphere,
         decode,
     };
-    let ctl = Control {
-        warning: &|line| eprintln!("symframe calibrate: warning: {line}"),
-        ..crate::control(&|_| {}, None)
-    };
+    let ctl = calibrate_control();
     let report =
         calibrate(&config, &ctl).map_err(|e| match e.downcast_ref::<SphereNotFound>() {
             Some(nf) => anyhow::anyhow!("{nf}; give its circle with --sphere CX,CY,R"),
@@ -105,10 +102,7 @@ fn run_near(
         matte_radius: args.matte_radius,
         decode,
     };
-    let ctl = Control {
-        warning: &|line| eprintln!("symframe calibrate: warning: {line}"),
-        ..crate::control(&|_| {}, None)
-    };
+    let ctl = calibrate_control();
     let report = calibrate_near(&config, &ctl)?;
     if !crate::progress::chatty() {
         return Ok(());
@@ -150,4 +144,12 @@ fn run_near(
         );
     }
     Ok(())
+}
+
+/// The calibrations' job control: warnings on stderr, no progress display.
+fn calibrate_control() -> Control<'static> {
+    Control {
+        warning: &|line| eprintln!("symframe calibrate: warning: {line}"),
+        ..crate::control(&|_| {}, None)
+    }
 }
