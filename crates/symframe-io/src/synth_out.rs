@@ -75,10 +75,7 @@ pub fn write_lp_dataset(
         let _ = writeln!(text, "{name} {:?} {:?} {:?}", l.x, l.y, l.z);
     }
     write_bytes(&lp, text.as_bytes())?;
-    write_bytes(
-        &dir.join(SYNTH_MARKER),
-        b"Written by symframe: a later `symframe synth -o` may replace this folder's dataset.\n",
-    )?;
+    write_synth_marker(dir)?;
     Ok(lp)
 }
 
@@ -213,11 +210,16 @@ pub fn write_near_dataset(
         t
     });
     write_bytes(&dir.join(crate::dataset::near::INTRINSICS), k.as_bytes())?;
+    write_synth_marker(dir)?;
+    Ok(dir.to_path_buf())
+}
+
+/// Writes the [`SYNTH_MARKER`] into `dir`: one text for the distant and the near datasets.
+fn write_synth_marker(dir: &Path) -> Result<()> {
     write_bytes(
         &dir.join(SYNTH_MARKER),
         b"Written by symframe: a later `symframe synth -o` may replace this folder's dataset.\n",
-    )?;
-    Ok(dir.to_path_buf())
+    )
 }
 
 /// The file that marks a folder as written by [`write_lp_dataset`] (`symframe synth`).

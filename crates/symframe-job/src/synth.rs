@@ -335,6 +335,16 @@ pub(crate) fn in_locked_target(
     result
 }
 
+/// The sensor degradation of `synth` and `synth --near`: exposure, noise and seed, the rest off.
+pub(crate) fn synth_degradation(exposure: f64, noise: Noise, seed: u64) -> Degradation {
+    Degradation {
+        exposure: exposure as f32,
+        noise,
+        seed,
+        ..Degradation::default()
+    }
+}
+
 /// Renders the dataset and writes it into the (locked) output folder.
 fn render_and_write(config: &SynthConfig, out: &OutputDir, ctl: &Control) -> Result<SynthOutcome> {
     let brdf: Box<dyn Brdf> = parse_model(&config.model).map_err(anyhow::Error::msg)?;
@@ -360,12 +370,7 @@ fn render_and_write(config: &SynthConfig, out: &OutputDir, ctl: &Control) -> Res
         );
     }
     let (scene, shape_json) = build_scene(config, field);
-    let degradation = Degradation {
-        exposure: config.exposure as f32,
-        noise,
-        seed: config.seed,
-        ..Degradation::default()
-    };
+    let degradation = synth_degradation(config.exposure, noise, config.seed);
     let n_lights = lights.len() as u64;
     let rendered = std::sync::atomic::AtomicU64::new(0);
     let stop = || ctl.stop.load(std::sync::atomic::Ordering::SeqCst);

@@ -24,7 +24,7 @@ use symframe::Pinhole;
 use symframe_io::{ImageFormat, NearFiles};
 
 use crate::outdir::Staging;
-use crate::synth::{in_locked_target, SynthOutcome};
+use crate::synth::{in_locked_target, synth_degradation, SynthOutcome};
 use crate::{Control, Interrupted, Progress, Stage};
 
 /// The pair of spheres' width (two unit spheres, centres 2.2 apart).
@@ -147,6 +147,32 @@ pub fn synth_near(config: &NearSynthConfig, ctl: &Control) -> Result<SynthOutcom
     })
 }
 
+/// One degraded image per light, rendered in parallel with progress and a stop check: the
+/// object's pass and the chrome spheres' pass alike.
+fn render_each<L: Sync>(
+    lights: &[L],
+    degradation: &Degradation,
+    ctl: &Control,
+    render: impl Fn(&L) -> Vec<f32> + Sync,
+) -> Result<Vec<Vec<f32>>> {
+    let n_lights = lights.len() as u64;
+    let rendered = std::sync::atomic::AtomicU64::new(0);
+    lights
+        .par_iter()
+        .enumerate()
+        .map(|(i, light)| -> Result<Vec<f32>> {
+            if ctl.stop.load(std::sync::atomic::Ordering::SeqCst) {
+                return Err(Interrupted.into());
+            }
+            let mut img = render(light);
+            degradation.apply(&mut img, i);
+            let done = rendered.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            ctl.report(Progress::new(Stage::Rendering, done, n_lights));
+            Ok(img)
+        })
+        .collect()
+}
+
 fn render_and_write(config: &NearSynthConfig, ctl: &Control) -> Result<SynthOutcome> {
     let models: Vec<Box<dyn Brdf>> = config
         .models
@@ -159,28 +185,10 @@ fn render_and_write(config: &NearSynthConfig, ctl: &Control) -> Result<SynthOutc
     let centre = config.centre();
     let radius = config.dome_ratio * PAIR_WIDTH;
     let lights = dome_lights(config.lights, centre, radius, 5.0, radius * radius);
-    let degradation = Degradation {
-        exposure: config.exposure as f32,
-        noise,
-        seed: config.seed,
-        ..Degradation::default()
-    };
-    let n_lights = lights.len() as u64;
-    let rendered = std::sync::atomic::AtomicU64::new(0);
-    let images: Vec<Vec<f32>> = lights
-        .par_iter()
-        .enumerate()
-        .map(|(i, light)| -> Result<Vec<f32>> {
-            if ctl.stop.load(std::sync::atomic::Ordering::SeqCst) {
-                return Err(Interrupted.into());
-            }
-            let mut img = scene.render(&materials, light);
-            degradation.apply(&mut img, i);
-            let done = rendered.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-            ctl.report(Progress::new(Stage::Rendering, done, n_lights));
-            Ok(img)
-        })
-        .collect::<Result<_>>()?;
+    let degradation = synth_degradation(config.exposure, noise, config.seed);
+    let images = render_each(&lights, &degradation, ctl, |light| {
+        scene.render(&materials, light)
+    })?;
     let positions: Vec<DVec3> = lights.iter().map(|l| l.position).collect();
     let directions: Vec<DVec3> = positions
         .iter()
@@ -212,25 +220,13 @@ fn render_and_write(config: &NearSynthConfig, ctl: &Control) -> Result<SynthOutc
             lamp_radius: CHROME_LAMP_RADIUS,
             ..NearMirrorBalls::new(scene.width, scene.height, scene.camera, &balls)
         };
-        let done = std::sync::atomic::AtomicU64::new(0);
-        let chrome: Vec<Vec<f32>> = lights
-            .par_iter()
-            .enumerate()
-            .map(|(i, light)| -> Result<Vec<f32>> {
-                if ctl.stop.load(std::sync::atomic::Ordering::SeqCst) {
-                    return Err(Interrupted.into());
-                }
-                let mut img: Vec<f32> = mirrors
-                    .render(light.position)
-                    .into_iter()
-                    .flat_map(|v| [v; 3])
-                    .collect();
-                degradation.apply(&mut img, i);
-                let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-                ctl.report(Progress::new(Stage::Rendering, k, n_lights));
-                Ok(img)
-            })
-            .collect::<Result<_>>()?;
+        let chrome = render_each(&lights, &degradation, ctl, |light| {
+            mirrors
+                .render(light.position)
+                .into_iter()
+                .flat_map(|v| [v; 3])
+                .collect()
+        })?;
         symframe_io::write_near_dataset(
             &staging.path(CHROME_FOLDER),
             &NearFiles {
