@@ -603,6 +603,17 @@ fn starts_from(start: LobeStart, brightest: DVec3) -> ([LobeStart; 5], usize) {
     (starts, if distinct { 5 } else { 4 })
 }
 
+/// The normal's standard deviation (radians, both tilts) the scatter of the samples of `fine`
+/// about the fit `linear` leaves, through the last Gauss-Newton system in `buffers`.
+fn scatter_sd(fine: &Subset, linear: &Linear, free: [bool; P], buffers: &Buffers) -> f64 {
+    let parameters = fitted_parameters(&free, linear);
+    tilt_sd(
+        &buffers.jtj,
+        linear.cost,
+        fine.len() as f64 - parameters as f64,
+    )
+}
+
 /// The noise-weighted polish (docs/method.md, "Lobe fit", "The noise-weighted fit"): where the
 /// capture is noisy and the fit explains the samples to the noise, the fit on `fine` is
 /// repeated from its answer with each sample weighted by the inverse of its variance under the
@@ -619,12 +630,7 @@ fn weighted_polish(
     buffers: &mut Buffers,
     evals: &mut u32,
 ) -> f64 {
-    let parameters = fitted_parameters(&free, linear);
-    let scatter_sd = tilt_sd(
-        &buffers.jtj,
-        linear.cost,
-        fine.len() as f64 - parameters as f64,
-    );
+    let scatter_sd = scatter_sd(fine, linear, free, buffers);
     if !(scatter_sd >= WEIGHTED_SD_FLOOR
         && noise_weights(fine, state, linear.coefficients, noise, buffers))
     {
@@ -672,12 +678,7 @@ fn tilt_uncertainty(
     moved2: f64,
     buffers: &mut Buffers,
 ) -> f64 {
-    let parameters = fitted_parameters(&free, linear);
-    let sd = tilt_sd(
-        &buffers.jtj,
-        linear.cost,
-        fine.len() as f64 - parameters as f64,
-    );
+    let sd = scatter_sd(fine, linear, free, buffers);
     let k = (fine.len() / SPLIT_SAMPLES).clamp(2, 4);
     every.gather_every(fine, k);
     let split2 = tilt_step2(m, every, free, buffers) / (k - 1) as f64;
