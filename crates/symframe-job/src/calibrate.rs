@@ -707,17 +707,22 @@ fn check_config(config: &CalibrateConfig) -> Result<()> {
             config.output.display()
         );
     }
-    if !(config.decode.saturation > 0.0 && config.decode.saturation <= 1.0) {
-        bail!(
-            "the saturation level must be in (0, 1], got {}",
-            config.decode.saturation
-        );
+    check_saturation(config.decode.saturation)?;
+    check_threshold(config.threshold)
+}
+
+/// Refuses a saturation level outside (0, 1] (calibrate and calibrate --K).
+pub(crate) fn check_saturation(saturation: f32) -> Result<()> {
+    if !(saturation > 0.0 && saturation <= 1.0) {
+        bail!("the saturation level must be in (0, 1], got {saturation}");
     }
-    if !(config.threshold > 0.0 && config.threshold < 1.0) {
-        bail!(
-            "the highlight threshold must be in (0, 1), got {}",
-            config.threshold
-        );
+    Ok(())
+}
+
+/// Refuses a highlight threshold outside (0, 1) (calibrate and calibrate --K).
+pub(crate) fn check_threshold(threshold: f64) -> Result<()> {
+    if !(threshold > 0.0 && threshold < 1.0) {
+        bail!("the highlight threshold must be in (0, 1), got {threshold}");
     }
     Ok(())
 }

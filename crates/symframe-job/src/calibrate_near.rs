@@ -19,7 +19,9 @@ use symframe::{
 };
 use symframe_io::DecodeOptions;
 
-use crate::calibrate::{image_list, image_size, keep_rows, read_grey, DECODE_MEMORY};
+use crate::calibrate::{
+    check_saturation, check_threshold, image_list, image_size, keep_rows, read_grey, DECODE_MEMORY,
+};
 use crate::{Control, Interrupted};
 
 /// Rays toward a light less than this many degrees apart fix it poorly along them (a tenth of a
@@ -172,18 +174,8 @@ fn check(config: &NearCalibrateConfig, camera: &Pinhole) -> Result<()> {
             config.radius
         );
     }
-    if !(config.threshold > 0.0 && config.threshold < 1.0) {
-        bail!(
-            "the highlight threshold must be in (0, 1), got {}",
-            config.threshold
-        );
-    }
-    if !(config.decode.saturation > 0.0 && config.decode.saturation <= 1.0) {
-        bail!(
-            "the saturation level must be in (0, 1], got {}",
-            config.decode.saturation
-        );
-    }
+    check_threshold(config.threshold)?;
+    check_saturation(config.decode.saturation)?;
     if let Some(r) = config.matte_radius {
         if !(r.is_finite() && r > 0.0) {
             bail!("the matte sphere's radius must be a positive number, got {r}");
