@@ -565,18 +565,7 @@ impl<'a> Estimator<'a> {
         };
         let (tangent, evidence) =
             self.tangent_by_evidence(objective, n, &found, moments, sharp, lobes);
-        // Confidence: how sure the slice's symmetry is of the answer, whichever rule gave it
-        // (docs/method.md, "Confidence").
-        let sd = self.answer_sd(
-            objective,
-            (n, &term_n),
-            cosine,
-            (fitted.as_ref(), lobes.paired),
-            (slice, model),
-            &mut evals,
-        );
         let coverage = self.coverage(slice, n, &term_n);
-        let confidence = (coverage * within_confident(sd)) as f32;
         // A search that doubts its own answer gives way to a lobe fit that nearly explains the
         // samples, within the reach (`frames::policy::search_gives_way`).
         let symmetry = sd_n + found.sd_nt + found.sd_nb;
@@ -601,6 +590,17 @@ impl<'a> Estimator<'a> {
                 }
             }
         }
+        // Confidence: how sure the slice's symmetry is of the answer, whichever rule gave it
+        // (docs/method.md, "Confidence"); read once the answer stands.
+        let sd = self.answer_sd(
+            objective,
+            (n, &term_n),
+            cosine,
+            (fitted.as_ref(), lobes.paired),
+            (slice, model),
+            &mut evals,
+        );
+        let confidence = (coverage * within_confident(sd)) as f32;
         let status = self.status_of(confidence);
         let keep = status == PixelStatus::Estimated;
         PixelEstimate {
