@@ -153,7 +153,7 @@ impl Estimator<'_> {
         (n, term_n): (DVec3, &SymmetryTerm),
         cosine: CosineMode,
         lobes: (Option<&LobeFit>, bool),
-        (slice, model): (&[f32], &mut ModelSlice),
+        (slice, model): (&[f32], ModelBuffers<'_>),
         evals: &mut u32,
     ) -> f64 {
         let (fitted, paired) = lobes;
@@ -192,10 +192,9 @@ impl Estimator<'_> {
         fit: &LobeFit,
         slice: &[f32],
         cosine: CosineMode,
-        model: &mut ModelSlice,
+        (probe, model): ModelBuffers<'_>,
     ) -> (f64, u32) {
         let ModelSlice {
-            probe,
             lights,
             greys,
             samples,
@@ -251,10 +250,13 @@ impl Estimator<'_> {
     }
 }
 
+/// What [`Estimator::reconstruction_bias`] samples a fitted lobe in: the pixel's lobe-fit
+/// buffers (their probe, [`predicted_greys`]'s) and the model slice's own.
+pub(super) type ModelBuffers<'s> = (&'s mut LobeScratch, &'s mut ModelSlice);
+
 /// The buffers [`Estimator::reconstruction_bias`] samples a fitted lobe in, per thread.
 #[derive(Debug, Clone)]
 pub(super) struct ModelSlice {
-    probe: LobeScratch,
     /// The lights where the pixel has samples, and the lobe's grey value there.
     lights: Vec<u32>,
     greys: Vec<f64>,
@@ -267,7 +269,6 @@ impl ModelSlice {
     /// Buffers sized for `rig`.
     pub(super) fn new(rig: &Rig) -> Self {
         Self {
-            probe: LobeScratch::default(),
             lights: Vec::with_capacity(rig.n_used()),
             greys: Vec::with_capacity(rig.n_used()),
             samples: Vec::with_capacity(rig.n_used() * 3),
@@ -441,7 +442,8 @@ mod tests {
         let data = ExactObjective::new(&rig, &samples);
         let (on_data, _) = estimator.offset_from(&data, n, cosine);
         let mut model = ModelSlice::new(&rig);
-        let (on_model, evals) = estimator.reconstruction_bias(&fit, &samples, cosine, &mut model);
+        let buffers = (&mut scratch, &mut model);
+        let (on_model, evals) = estimator.reconstruction_bias(&fit, &samples, cosine, buffers);
         assert!(evals >= 9);
         (on_data.sqrt().to_degrees(), on_model.sqrt().to_degrees())
     }

@@ -33,7 +33,7 @@ mod lobe_answer;
 mod search;
 
 use censored::{clipped_in_colour, Censoring};
-use confidence::{within_confident, ModelSlice};
+use confidence::{within_confident, ModelBuffers, ModelSlice};
 use diffuse::{diffuse_noise_share, unexplained_share};
 use search::{brightest_sample, centre_observed, highlight_wider_along, TangentSearch};
 
@@ -363,12 +363,12 @@ impl<'a> Estimator<'a> {
         match self.params.interpolation {
             Interpolation::Exact => {
                 let objective = ExactObjective::new(self.rig, symmetric);
-                let pixel = (slice, &mut *model);
+                let pixel = (slice, (&mut *lobe, &mut *model));
                 answer(self.solve(pixel, &objective, &fit, evidence, moments, lobes))
             }
             Interpolation::Fast => {
                 let objective = fast.prepare(self.rig, symmetric);
-                let pixel = (slice, &mut *model);
+                let pixel = (slice, (&mut *lobe, &mut *model));
                 answer(self.solve(pixel, &objective, &fit, evidence, moments, lobes))
             }
         }
@@ -478,7 +478,7 @@ impl<'a> Estimator<'a> {
     /// term's unexplained share, default measure only) and `moments` as computed once per pixel.
     fn solve<O: Objective>(
         &self,
-        (slice, model): (&[f32], &mut ModelSlice),
+        (slice, model): (&[f32], ModelBuffers<'_>),
         objective: &O,
         fit: &BaselinePixel,
         (share, diffuse_noise): (Option<f64>, Option<NoiseShare>),
