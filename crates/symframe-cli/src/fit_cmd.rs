@@ -46,6 +46,7 @@ pub fn config(args: &FitArgs) -> Result<FitConfig> {
             roughness_min: args.roughness_min,
             max_iterations: args.max_iterations,
             max_peak_ratio: args.max_peak_ratio,
+            choice_radius: args.choice_radius,
             ..FitParams::default()
         },
         mask: args.mask.clone(),

@@ -18,8 +18,8 @@ use crate::estimate::{
     CacheConfig, CacheReport, InputsRecord, CACHE_DIR,
 };
 use crate::outdir::{in_locked_output, lock_warnings, OutputDir, OutputSet};
-use crate::tiles::TILES_DIR;
 use crate::tiles::{read_tiles, run_tiles, tile_path, TileCounts};
+use crate::tiles::{EVIDENCE_DIR, TILES_DIR};
 use crate::{Checkpoint, Control};
 
 mod records;
@@ -152,6 +152,10 @@ pub struct FitReport {
     pub fit: FitSummary,
     /// Tiles computed by this run and reused from an interrupted one.
     pub tiles: TileCounts,
+    /// An automatic fit's first pass, which gathers each pixel's evidence for the choice of
+    /// its model: its tiles computed and reused, as for `tiles`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub evidence_tiles: Option<TileCounts>,
     /// The on-disk tile cache of the decoded images.
     pub cache: CacheReport,
     /// Wall-clock seconds per stage.
@@ -375,6 +379,38 @@ fn run(
     let t_fit = Instant::now();
     let tiles_dir = config.output.join(TILES_DIR);
     let all: Vec<usize> = (0..grid.n_tiles()).collect();
+    // An automatic fit chooses each pixel's model from its neighbourhood's evidence first: a
+    // pass of its own, in tiles of its own (resumable like the fit's).
+    let evidence_dir = config.output.join(EVIDENCE_DIR);
+    let mut evidence_tiles = None;
+    let choices = match method.evidence_pass() {
+        Some(pass) => {
+            let job = Fingerprint::new().u64(job).str("evidence").finish();
+            let dir = &evidence_dir;
+            evidence_tiles = Some(run_tiles(
+                &cache,
+                &pass,
+                mask.as_deref(),
+                job,
+                &all,
+                dir,
+                ctl,
+            )?);
+            let mut evidence = vec![None; w * h];
+            read_tiles(
+                &grid,
+                job,
+                |t| tile_path(&evidence_dir, t),
+                |p, r| evidence[p] = r,
+            )?;
+            Some(params.choose_models(&evidence, w, h)?)
+        }
+        None => None,
+    };
+    let method = match &choices {
+        Some(c) => method.with_choices(c)?,
+        None => method,
+    };
     let counts = run_tiles(&cache, &method, mask.as_deref(), job, &all, &tiles_dir, ctl)?;
     let cache_path = cache.path().to_path_buf();
     drop(cache);
@@ -409,6 +445,7 @@ fn run(
         height: h,
         fit: maps.summary,
         tiles: counts,
+        evidence_tiles,
         cache: CacheReport {
             info: cache_info,
             kept: !config.cache.remove_after,
@@ -424,6 +461,7 @@ fn run(
     report.warnings = lock_warnings(warnings).clone();
     write_outputs(out, &maps, &mut report, t0, ctl)?;
     crate::tiles::remove_tile_folder(&tiles_dir)?;
+    crate::tiles::remove_tile_folder(&evidence_dir)?;
     if config.cache.remove_after {
         remove_cache(&cache_path, &cache_dir)?;
     }

@@ -151,7 +151,11 @@ impl OutputDir {
             }
         };
         let mut existed = Vec::new();
-        for name in [crate::TILES_DIR, crate::CACHE_DIR] {
+        for name in [
+            crate::TILES_DIR,
+            crate::tiles::EVIDENCE_DIR,
+            crate::CACHE_DIR,
+        ] {
             let p = dir.join(name);
             match fs::symlink_metadata(&p) {
                 Ok(m) if m.file_type().is_symlink() => anyhow::bail!(

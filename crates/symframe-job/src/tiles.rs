@@ -24,6 +24,10 @@ use crate::{Control, Interrupted, Progress, Stage};
 /// Folder of the per-tile result files inside an output folder.
 pub const TILES_DIR: &str = ".symframe-tiles";
 
+/// Folder of an automatic fit's per-tile evidence (the pass that chooses each pixel's model)
+/// inside its output folder, removed like [`TILES_DIR`] when the fit is done.
+pub(crate) const EVIDENCE_DIR: &str = ".symframe-evidence-tiles";
+
 /// A per-pixel result that can be stored in a tile result file.
 pub(crate) trait TileRecord: Sized + Send {
     /// Writes tile `t`'s records atomically to `path`, tagged with the job's fingerprint.

@@ -66,10 +66,16 @@ fn the_tiled_fit_equals_the_in_memory_fit_and_resumes_after_a_stop() {
     let e = fit(&config, &stopped).unwrap_err();
     assert!(e.is::<Interrupted>(), "{e}");
     let resumed = fit(&config, &Control::default()).unwrap();
-    // At least the one tile was kept (the other workers may have finished theirs too).
-    let tiles = resumed.report.tiles;
+    // The automatic fit stopped in its first pass (each pixel's evidence for the choice of its
+    // model): at least the one tile was kept (the other workers may have finished theirs too),
+    // and the second pass (the fit) ran whole.
+    let tiles = resumed
+        .report
+        .evidence_tiles
+        .expect("an automatic fit gathers evidence");
     assert!(tiles.reused >= 1 && tiles.computed >= 1, "{tiles:?}");
     assert_eq!(tiles.reused + tiles.computed, 9);
+    assert_eq!(resumed.report.tiles.computed, 9);
     // The estimate's cache was read again, not rebuilt.
     assert!(resumed.report.cache.info.hit);
 

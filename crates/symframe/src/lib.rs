@@ -141,8 +141,9 @@ pub use maps::{EstimateMaps, PixelCounts, PixelRecord, PixelSource, PixelStatus}
 
 // Fitting a BRDF per pixel in the estimated frames, and relighting the fit.
 pub use appearance::fit::{
-    ExposureChoice, FitMaps, FitMethod, FitModel, FitParams, FitStatus, FitSummary, GltfMaps,
-    HoldoutError, LobeMaps, PixelData, PixelFitter, PixelOutcome, WardFit, WardMaps,
+    EvidenceMethod, ExposureChoice, FitMaps, FitMethod, FitModel, FitParams, FitStatus, FitSummary,
+    GltfMaps, HoldoutError, LobeMaps, ModelEvidence, PixelData, PixelFitter, PixelOutcome, WardFit,
+    WardMaps,
 };
 pub use appearance::gltf_fit::GltfFit;
 pub use appearance::lobe_fit::{LobeFit, LobeKind, LobeModel};

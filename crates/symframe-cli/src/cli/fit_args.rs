@@ -109,6 +109,11 @@ pub struct FitArgs {
     /// The fitted highlight's peak may be at most this many times the pixel's brightest sample.
     #[arg(long, default_value_t = FitParams::default().max_peak_ratio)]
     pub max_peak_ratio: f64,
+    /// auto model: each pixel's model is chosen from the evidence of the pixels within this
+    /// many rows and columns of it. Higher is steadier on a uniform material and blurs the line
+    /// between two materials; 0 judges each pixel alone (docs/method.md, "The automatic choice").
+    #[arg(long, default_value_t = FitParams::default().choice_radius, value_name = "PIXELS")]
+    pub choice_radius: usize,
     /// Where the tile cache goes and whether it stays.
     #[command(flatten)]
     pub cache: CacheFlags,

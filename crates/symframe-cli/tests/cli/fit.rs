@@ -670,6 +670,7 @@ fn fit_refuses_bad_model_flags() {
         ("--exposure", "bright", "--exposure"),
         ("--roughness-min", "0", "--roughness-min"),
         ("--roughness-min", "1.5", "--roughness-min"),
+        ("--choice-radius", "many", "--choice-radius"),
     ] {
         let o = symframe(&[
             "fit",
@@ -709,6 +710,31 @@ fn fit_refuses_bad_model_flags() {
         (Some(2.5), Some(false))
     );
     assert_eq!(r["parameters"]["model"], "gltf");
+    assert!(
+        r.get("evidence_tiles").is_none(),
+        "a forced model chooses nothing"
+    );
+    // The automatic choice's neighbourhood is recorded, and its first pass is counted.
+    let auto = tmp.path().join("auto");
+    let o = symframe(&[
+        "fit",
+        s(&lp),
+        "--frames",
+        s(&frames),
+        "-o",
+        s(&auto),
+        "--choice-radius",
+        "1",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = report_of(&auto);
+    assert_eq!(r["parameters"]["model"], "auto");
+    assert_eq!(r["parameters"]["choice_radius"], 1);
+    assert_eq!(
+        r["evidence_tiles"], r["tiles"],
+        "one pass each over the same tiles"
+    );
+    assert!(!auto.join(".symframe-evidence-tiles").exists());
 }
 
 /// The `fit.json` of a fit folder.

@@ -3,12 +3,14 @@
 
 use std::path::Path;
 
-use symframe::{GltfFit, HoldoutError, LobeFit, LobeKind, LobeModel, PixelOutcome, WardFit};
+use symframe::{
+    GltfFit, HoldoutError, LobeFit, LobeKind, LobeModel, ModelEvidence, PixelOutcome, WardFit,
+};
 use symframe_io::TileFile;
 
 use crate::tiles::TileRecord;
 
-/// Per-tile fit results: a 40-byte header (magic `SYMFFITR`, format version, the job's
+/// Per-tile fit outcomes: a 40-byte header (magic `SYMFFITR`, format version, the job's
 /// fingerprint, the tile index, the pixel count), then [`FIT_RECORD`] bytes per pixel
 /// (little-endian): outcome (1 byte: 0 masked, 1 no frame, 2 too few samples, 3 fitted Ward,
 /// 4 fitted glTF, 5 fitted clear coat, 6 fitted woven), isotropic (1 byte), 6 padding, twelve
@@ -16,23 +18,80 @@ use crate::tiles::TileRecord;
 /// roughness, strength, 0 x 5; two-lobe `kd`, `ka`, `kb`, `alpha_t`, `alpha_b`, `alpha_c`),
 /// training SSE (f64), training samples (u64), iterations (u32, 4 padding), held-out SSE
 /// (f64), held-out samples (u64), held-out peak (f64). Doubles, so the summary sums are those of an in-memory
-/// fit bit for bit.
-const FIT_MAGIC: &[u8; 8] = b"SYMFFITR";
-/// Format version of fit tile files.
+/// fit bit for bit. This is the format's version.
 pub(super) const FIT_TILE_VERSION: u32 = 3;
-const FIT_HEADER: usize = 40;
+/// Every fit tile file's header: magic, format version, job, tile, pixel count.
+const HEADER: usize = 40;
 const FIT_RECORD: usize = 152;
 /// Parameters per record.
 const FIT_PARAMS: usize = 12;
 
-fn fit_header(job: u64, t: usize, n: usize) -> [u8; FIT_HEADER] {
-    let mut b = [0u8; FIT_HEADER];
-    b[..8].copy_from_slice(FIT_MAGIC);
-    b[8..12].copy_from_slice(&FIT_TILE_VERSION.to_le_bytes());
+/// A per-pixel record of fixed size in a fit tile file: a [`HEADER`]-byte header (magic, format
+/// version, the job's fingerprint, the tile index, the pixel count), then `SIZE` bytes per pixel.
+trait FixedRecord: Sized {
+    /// The file's magic number.
+    const MAGIC: &'static [u8; 8];
+    /// The format's version.
+    const VERSION: u32;
+    /// Bytes per record.
+    const SIZE: usize;
+    /// Appends the record's `SIZE` bytes.
+    fn encode(&self, b: &mut Vec<u8>);
+    /// The record in `r` (`SIZE` bytes); `None` where they are not one.
+    fn decode(r: &[u8]) -> Option<Self>;
+}
+
+fn header<R: FixedRecord>(job: u64, t: usize, n: usize) -> [u8; HEADER] {
+    let mut b = [0u8; HEADER];
+    b[..8].copy_from_slice(R::MAGIC);
+    b[8..12].copy_from_slice(&R::VERSION.to_le_bytes());
     b[16..24].copy_from_slice(&job.to_le_bytes());
     b[24..32].copy_from_slice(&(t as u64).to_le_bytes());
     b[32..40].copy_from_slice(&(n as u64).to_le_bytes());
     b
+}
+
+impl FixedRecord for Option<PixelOutcome> {
+    const MAGIC: &'static [u8; 8] = b"SYMFFITR";
+    const VERSION: u32 = FIT_TILE_VERSION;
+    const SIZE: usize = FIT_RECORD;
+    fn encode(&self, b: &mut Vec<u8>) {
+        encode(self, b)
+    }
+    fn decode(r: &[u8]) -> Option<Self> {
+        decode(r)
+    }
+}
+
+/// An automatic fit's evidence per pixel (magic `SYMFEVID`): a tag (0 none, 1 evidence), 7
+/// padding, the four candidates' squared errors and the signal (f64, little-endian).
+impl FixedRecord for Option<ModelEvidence> {
+    const MAGIC: &'static [u8; 8] = b"SYMFEVID";
+    const VERSION: u32 = 1;
+    const SIZE: usize = 48;
+    fn encode(&self, b: &mut Vec<u8>) {
+        let start = b.len();
+        b.push(self.is_some() as u8);
+        b.resize(start + 8, 0);
+        if let Some(e) = self {
+            for v in e.sse.iter().chain([&e.signal]) {
+                b.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        b.resize(start + Self::SIZE, 0);
+    }
+    fn decode(r: &[u8]) -> Option<Self> {
+        let f =
+            |i: usize| f64::from_le_bytes(r[8 + 8 * i..16 + 8 * i].try_into().unwrap_or_default());
+        match r[0] {
+            0 => Some(None),
+            1 => Some(Some(ModelEvidence {
+                sse: [f(0), f(1), f(2), f(3)],
+                signal: f(4),
+            })),
+            _ => None,
+        }
+    }
 }
 
 fn encode(r: &Option<PixelOutcome>, b: &mut Vec<u8>) {
@@ -183,68 +242,90 @@ fn decode(r: &[u8]) -> Option<Option<PixelOutcome>> {
     })
 }
 
-impl TileRecord for Option<PixelOutcome> {
-    fn write(path: &Path, job: u64, t: usize, records: &[Self]) -> symframe_io::Result<()> {
-        let mut b = Vec::with_capacity(FIT_HEADER + FIT_RECORD * records.len());
-        b.extend_from_slice(&fit_header(job, t, records.len()));
-        for r in records {
-            encode(r, &mut b);
-        }
-        symframe_io::write_bytes(path, &b)
+fn write_records<R: FixedRecord>(
+    path: &Path,
+    job: u64,
+    t: usize,
+    records: &[R],
+) -> symframe_io::Result<()> {
+    let mut b = Vec::with_capacity(HEADER + R::SIZE * records.len());
+    b.extend_from_slice(&header::<R>(job, t, records.len()));
+    for r in records {
+        r.encode(&mut b);
     }
-
-    fn check(path: &Path, job: u64, t: usize, n: usize) -> TileFile {
-        // A link, FIFO, device or folder there is not a file this tool wrote: never opened
-        // (a FIFO would hang the resumed fit), recomputed with a warning.
-        let (f, len) = match symframe_io::open_own_file(path) {
-            Ok(Some(f)) => f,
-            Ok(None) => return TileFile::Missing,
-            Err(e) => return TileFile::Corrupt(e),
-        };
-        if fit_tile_done(f, len, job, t, n) {
-            TileFile::Done
-        } else {
-            TileFile::Stale
-        }
-    }
-    fn read(path: &Path, job: u64, t: usize, n: usize) -> symframe_io::Result<Vec<Self>> {
-        let invalid = |msg: String| symframe_io::Error::Invalid {
-            path: path.to_path_buf(),
-            msg,
-        };
-        let (f, len) =
-            symframe_io::open_own_file(path)?.ok_or_else(|| symframe_io::Error::Read {
-                path: path.to_path_buf(),
-                source: std::io::Error::from_raw_os_error(libc::ENOENT),
-            })?;
-        let expected = (FIT_HEADER + FIT_RECORD * n) as u64;
-        // The length is checked before anything is read; no more than it is read.
-        let b = if len == expected {
-            symframe_io::read_at_most(f, path, expected)?
-        } else {
-            Vec::new()
-        };
-        if b.len() as u64 != expected || b[..FIT_HEADER] != fit_header(job, t, n) {
-            return Err(invalid(format!(
-                "not the fit result of tile {t} ({n} pixels) of this job"
-            )));
-        }
-        b[FIT_HEADER..]
-            .chunks_exact(FIT_RECORD)
-            .map(|r| decode(r).ok_or_else(|| invalid("bad fit record".into())))
-            .collect()
-    }
+    symframe_io::write_bytes(path, &b)
 }
 
-/// Whether the file `f` of `len` bytes holds tile `t`'s `n` fit records of job `job` (length
-/// and header).
-fn fit_tile_done(f: std::fs::File, len: u64, job: u64, t: usize, n: usize) -> bool {
+fn check_records<R: FixedRecord>(path: &Path, job: u64, t: usize, n: usize) -> TileFile {
     use std::io::Read;
-    let mut b = [0u8; FIT_HEADER];
-    len == (FIT_HEADER + FIT_RECORD * n) as u64
-        && f.take(FIT_HEADER as u64).read_exact(&mut b).is_ok()
-        && b == fit_header(job, t, n)
+    // A link, FIFO, device or folder there is not a file this tool wrote: never opened
+    // (a FIFO would hang the resumed fit), recomputed with a warning.
+    let (f, len) = match symframe_io::open_own_file(path) {
+        Ok(Some(f)) => f,
+        Ok(None) => return TileFile::Missing,
+        Err(e) => return TileFile::Corrupt(e),
+    };
+    let mut b = [0u8; HEADER];
+    if len == (HEADER + R::SIZE * n) as u64
+        && f.take(HEADER as u64).read_exact(&mut b).is_ok()
+        && b == header::<R>(job, t, n)
+    {
+        TileFile::Done
+    } else {
+        TileFile::Stale
+    }
 }
+
+fn read_records<R: FixedRecord>(
+    path: &Path,
+    job: u64,
+    t: usize,
+    n: usize,
+) -> symframe_io::Result<Vec<R>> {
+    let invalid = |msg: String| symframe_io::Error::Invalid {
+        path: path.to_path_buf(),
+        msg,
+    };
+    let (f, len) = symframe_io::open_own_file(path)?.ok_or_else(|| symframe_io::Error::Read {
+        path: path.to_path_buf(),
+        source: std::io::Error::from_raw_os_error(libc::ENOENT),
+    })?;
+    let expected = (HEADER + R::SIZE * n) as u64;
+    let b = if len == expected {
+        symframe_io::read_at_most(f, path, expected)?
+    } else {
+        Vec::new()
+    };
+    if b.len() as u64 != expected || b[..HEADER] != header::<R>(job, t, n) {
+        return Err(invalid(format!(
+            "not the fit result of tile {t} ({n} pixels) of this job"
+        )));
+    }
+    b[HEADER..]
+        .chunks_exact(R::SIZE)
+        .map(|r| R::decode(r).ok_or_else(|| invalid("bad fit record".into())))
+        .collect()
+}
+
+/// The fit's outcomes and an automatic fit's evidence: the same file layout, told apart by
+/// their magic numbers.
+macro_rules! fixed_tile_record {
+    ($t:ty) => {
+        impl TileRecord for $t {
+            fn write(path: &Path, job: u64, t: usize, records: &[Self]) -> symframe_io::Result<()> {
+                write_records(path, job, t, records)
+            }
+            fn check(path: &Path, job: u64, t: usize, n: usize) -> TileFile {
+                check_records::<Self>(path, job, t, n)
+            }
+            fn read(path: &Path, job: u64, t: usize, n: usize) -> symframe_io::Result<Vec<Self>> {
+                read_records(path, job, t, n)
+            }
+        }
+    };
+}
+fixed_tile_record!(Option<PixelOutcome>);
+fixed_tile_record!(Option<ModelEvidence>);
 
 #[cfg(test)]
 mod tests {

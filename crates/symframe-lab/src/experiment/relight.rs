@@ -372,8 +372,9 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
          anisotropic Ward (`symframe fit --model ward`), glTF metallic-roughness with \
          `KHR_materials_anisotropy` (`--model gltf`), a clear coat over an anisotropic GGX base \
          (`--model clearcoat`), two perpendicular anisotropic GGX lobes (`--model woven`) and \
-         the automatic choice per pixel (`--model auto`, the default: whichever of the four \
-         predicts the pixel's validation lights, one training light in five, best), the glTF \
+         the automatic choice (`--model auto`, the default: per pixel, whichever of the four \
+         predicts the validation lights, one training light in five, best over the pixel's \
+         7 x 7 neighbourhood, in geometric mean of the errors), the glTF \
          part's light intensity chosen as `symframe fit` chooses it (by validation \
          lights; the renders' is 1). PSNR = `20 log10(peak / RMS)` with the peak the largest \
          true value; \"held-out samples\" is over every fitted pixel (fitted in the estimated \

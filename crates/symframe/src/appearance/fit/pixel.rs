@@ -7,7 +7,10 @@ use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
-use super::{rms, validation_lights, FitModel, FitParams, TWO_LOBE_FLOOR, TWO_LOBE_GAIN};
+use super::{
+    rms, validation_lights, FitModel, FitParams, MODEL_CLEARCOAT, MODEL_GLTF, MODEL_WARD,
+    MODEL_WOVEN, TWO_LOBE_FLOOR, TWO_LOBE_GAIN,
+};
 use crate::appearance::gltf_fit::{self, GltfFit, GltfSample};
 use crate::appearance::lobe_fit::{self, LobeFit, LobeKind};
 use crate::appearance::ward_fit::{self, fit_samples, sse, Sample};
@@ -96,6 +99,91 @@ pub(crate) fn squared_errors<S>(
     (sum, peak)
 }
 
+/// What the automatic choice reads at a pixel: each candidate's squared error on the
+/// pixel's validation samples, fitted on its other training samples ([`FitParams::holdout`]
+/// apart; fitted and judged on every training sample where the pixel has too few), and the
+/// squared signal judged. [`FitParams::choose_models`] pools it over neighbourhoods.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ModelEvidence {
+    /// Squared errors of glTF, Ward, the clear coat and the woven lobes, in that order.
+    pub sse: [f64; 4],
+    /// The sum of the squared samples judged on.
+    pub signal: f64,
+}
+
+impl ModelEvidence {
+    /// The model this pixel's errors alone choose ([`LogEvidence::choice`]), a model code of
+    /// [`FitMaps::model`](super::FitMaps::model).
+    pub fn choice(&self) -> u8 {
+        LogEvidence::of(self).choice()
+    }
+}
+
+/// Evidence in the form it is pooled over pixels: per candidate, the sum over pixels of the
+/// logarithm of its squared validation error (raised by [`TWO_LOBE_FLOOR`] of the pixel's
+/// signal), and the number of pixels summed.
+///
+/// Why logarithms: under Gaussian errors of a variance each pixel has and no one knows, a
+/// model's log-likelihood at a pixel is `-n/2 ln(SSE / n)` (the variance profiled out), so the
+/// sum of `ln SSE` over pixels compares the models on the pooled evidence of every pixel, and
+/// each pixel counts by the ratio of the models' errors there, not by its brightness: a few
+/// pixels a model fits badly (a specular pixel fitted in a wrong minimum) cannot outvote the
+/// rest, as they do in a sum of squared errors.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct LogEvidence {
+    log_sse: [f64; 4],
+    pixels: f64,
+}
+
+impl LogEvidence {
+    /// One pixel's evidence.
+    pub(crate) fn of(e: &ModelEvidence) -> Self {
+        let floor = TWO_LOBE_FLOOR * e.signal;
+        Self {
+            log_sse: e.sse.map(|v| (v + floor).max(f64::MIN_POSITIVE).ln()),
+            pixels: 1.0,
+        }
+    }
+
+    /// The model chosen ([`FitMaps::MODEL_GLTF`](super::FitMaps::MODEL_GLTF) and the others):
+    /// the single-lobe model (Ward or glTF) with the smaller pooled error, glTF on a tie,
+    /// unless the better two-lobe model's (the clear coat on a tie) is below
+    /// [`TWO_LOBE_GAIN`] times it in geometric mean over the pixels pooled. A pixel with no
+    /// evidence (`pixels == 0`) gets glTF.
+    pub(crate) fn choice(&self) -> u8 {
+        let e = &self.log_sse;
+        let single = if e[1] < e[0] { 1 } else { 0 };
+        let two = if e[3] < e[2] { 3 } else { 2 };
+        let k = if e[two] - e[single] < self.pixels * TWO_LOBE_GAIN.ln() {
+            two
+        } else {
+            single
+        };
+        [MODEL_GLTF, MODEL_WARD, MODEL_CLEARCOAT, MODEL_WOVEN][k]
+    }
+
+    /// The sum of two pieces of evidence.
+    pub(crate) fn add(self, o: Self) -> Self {
+        self.combine(o, 1.0)
+    }
+
+    /// The difference of two sums of evidence.
+    pub(crate) fn sub(self, o: Self) -> Self {
+        self.combine(o, -1.0)
+    }
+
+    fn combine(self, o: Self, sign: f64) -> Self {
+        let mut log_sse = self.log_sse;
+        for (a, b) in log_sse.iter_mut().zip(o.log_sse) {
+            *a += sign * b;
+        }
+        Self {
+            log_sse,
+            pixels: self.pixels + sign * o.pixels,
+        }
+    }
+}
+
 /// Fits pixels one at a time, reusing its sample buffers (one per thread).
 #[derive(Debug, Clone)]
 pub struct PixelFitter<'a> {
@@ -149,6 +237,18 @@ impl<'a> PixelFitter<'a> {
     /// Fits one pixel: `normal` and `tangent` (camera frame; `tangent = None` fits one
     /// roughness), `rgb` the pixel's samples (`3 * lights.len()` values, NaN = invalid).
     pub fn fit(&mut self, normal: DVec3, tangent: Option<DVec3>, rgb: &[f32]) -> PixelOutcome {
+        self.fit_as(None, normal, tangent, rgb)
+    }
+
+    /// [`PixelFitter::fit`], where `chosen` (a model code of [`FitMaps::model`]
+    /// (super::FitMaps::model)) stands for an automatic fit's own choice at the pixel.
+    fn fit_as(
+        &mut self,
+        chosen: Option<u8>,
+        normal: DVec3,
+        tangent: Option<DVec3>,
+        rgb: &[f32],
+    ) -> PixelOutcome {
         let Some((n, t, iso)) = pixel_frame(normal, tangent) else {
             return PixelOutcome::NoFrame;
         };
@@ -156,10 +256,25 @@ impl<'a> PixelFitter<'a> {
         match self.params.model {
             FitModel::Gltf => self.fit_gltf(n, t, b, iso, rgb),
             FitModel::Ward => self.fit_ward(n, t, b, iso, rgb),
-            FitModel::Auto => self.fit_auto(n, t, b, iso, rgb),
+            FitModel::Auto => match chosen {
+                Some(c) => self.fit_chosen(c, n, t, b, iso, rgb),
+                None => self.fit_auto(n, t, b, iso, rgb),
+            },
             FitModel::Clearcoat => self.fit_lobes(LobeKind::Clearcoat, n, t, b, iso, rgb),
             FitModel::Woven => self.fit_lobes(LobeKind::Woven, n, t, b, iso, rgb),
         }
+    }
+
+    /// The automatic choice's evidence at one pixel (frame and samples as for
+    /// [`PixelFitter::fit`]); `None` where it would not be fitted.
+    pub fn evidence(
+        &mut self,
+        normal: DVec3,
+        tangent: Option<DVec3>,
+        rgb: &[f32],
+    ) -> Option<ModelEvidence> {
+        let (n, t, iso) = pixel_frame(normal, tangent)?;
+        self.auto_evidence(n, t, n.cross(t), iso, rgb)
     }
 }
 
@@ -309,74 +424,107 @@ impl PixelFitter<'_> {
         local(DVec3::Z)
     }
 
-    /// The automatic choice at one pixel: every candidate (Ward, glTF, the clear coat, the
-    /// woven lobes) fitted on the training samples that are not from validation lights; the
-    /// single-lobe model (Ward or glTF) with the smaller squared error on the validation
-    /// samples, unless the better two-lobe model's is below [`TWO_LOBE_GAIN`] times it (both
-    /// raised by [`TWO_LOBE_FLOOR`] of the signal); the
-    /// one kept is refitted on every training sample. Without a validation sample, or with too
-    /// few others, the same rule on the training errors.
+    /// The automatic choice at one pixel judged alone (a [`PixelFitter::fit`] of one pixel;
+    /// a whole image pools its neighbourhoods' evidence, [`FitParams::choose_models`]): the
+    /// model its own [`ModelEvidence`] chooses, refitted on every training sample.
     fn fit_auto(&mut self, n: DVec3, t: DVec3, b: DVec3, iso: bool, rgb: &[f32]) -> PixelOutcome {
+        let Some(evidence) = self.auto_evidence(n, t, b, iso, rgb) else {
+            return PixelOutcome::TooFewSamples;
+        };
+        self.fit_chosen(evidence.choice(), n, t, b, iso, rgb)
+    }
+
+    /// The automatic choice's evidence at one pixel in the frame `(t, b, n)`: every candidate
+    /// fitted on the training samples that are not from validation lights and judged on the
+    /// validation samples (without a validation sample, or with too few others, fitted and
+    /// judged on every training sample); `None` where the pixel has too few samples.
+    fn auto_evidence(
+        &mut self,
+        n: DVec3,
+        t: DVec3,
+        b: DVec3,
+        iso: bool,
+        rgb: &[f32],
+    ) -> Option<ModelEvidence> {
         let v = self.gltf_samples(n, t, b, rgb);
         self.ward_samples(n, t, b, rgb);
         let min = self.params.min_samples;
         if self.wsamples.train.len() < min || self.gsamples.train.len() < min {
-            return PixelOutcome::TooFewSamples;
+            return None;
         }
+        Some(match self.validation_evidence(v, iso) {
+            Some(e) => e,
+            None => self.training_evidence(v, iso),
+        })
+    }
+
+    /// The evidence of the candidates fitted on the training samples that are not from
+    /// validation lights and judged on those that are (`v` the view in the pixel's frame);
+    /// `None` where there are none or too few others.
+    fn validation_evidence(&mut self, v: DVec3, iso: bool) -> Option<ModelEvidence> {
+        let min = self.params.min_samples;
         let e = self.params.exposure;
         self.wsamples.split(&mut self.wfit, &mut self.wval);
         self.gsamples.split(&mut self.gfit, &mut self.gval);
-        let by_validation = !self.wval.is_empty()
-            && !self.gval.is_empty()
-            && self.wfit.len() >= min
-            && self.gfit.len() >= min;
-        let (wtrain, gtrain) = if by_validation {
-            (&self.wfit, &self.gfit)
-        } else {
-            (&self.wsamples.train, &self.gsamples.train)
-        };
+        if self.wval.is_empty()
+            || self.gval.is_empty()
+            || self.wfit.len() < min
+            || self.gfit.len() < min
+        {
+            return None;
+        }
         let params = self.params;
-        let ward = fit_samples(wtrain, iso, params);
-        let gltf = gltf_fit::fit_samples(gtrain, v, iso, params, &mut self.gscratch);
+        let ward = fit_samples(&self.wfit, iso, params);
+        let gltf = gltf_fit::fit_samples(&self.gfit, v, iso, params, &mut self.gscratch);
         let lobes = [LobeKind::Clearcoat, LobeKind::Woven]
-            .map(|k| lobe_fit::fit_samples(k, gtrain, v, iso, params, &mut self.lscratch));
-        // Errors in the order glTF, Ward, clear coat, woven.
-        let errors = if by_validation {
-            [
-                gltf_fit::sse(&gltf, &self.gval, v, e).0,
-                sse(&ward, &self.wval).0,
-                lobe_fit::sse(&lobes[0], &self.gval, v).0,
-                lobe_fit::sse(&lobes[1], &self.gval, v).0,
-            ]
-        } else {
-            [gltf.sse, ward.sse, lobes[0].sse, lobes[1].sse]
-        };
-        // The better single-lobe model (glTF on a tie) and the better two-lobe one (the clear
-        // coat on a tie); the two-lobe one only where it predicts clearly better.
-        let single = if errors[1] < errors[0] { 1 } else { 0 };
-        let two = if errors[3] < errors[2] { 3 } else { 2 };
-        // Errors below TWO_LOBE_FLOOR of the signal are not told apart.
-        let judged = if by_validation {
-            &self.gval
-        } else {
-            &self.gsamples.train
-        };
-        let signal: f64 = judged.iter().flat_map(|s| s.rgb).map(|v| v * v).sum();
-        let floor = TWO_LOBE_FLOOR * signal;
-        let choice = if errors[two] + floor < TWO_LOBE_GAIN * (errors[single] + floor) {
-            two
-        } else {
-            single
-        };
-        // The one kept, refitted on every training sample where it was fitted on fewer.
-        let kept = !by_validation;
+            .map(|k| lobe_fit::fit_samples(k, &self.gfit, v, iso, params, &mut self.lscratch));
+        let sse = [
+            gltf_fit::sse(&gltf, &self.gval, v, e).0,
+            sse(&ward, &self.wval).0,
+            lobe_fit::sse(&lobes[0], &self.gval, v).0,
+            lobe_fit::sse(&lobes[1], &self.gval, v).0,
+        ];
+        let signal: f64 = self.gval.iter().flat_map(|s| s.rgb).map(|v| v * v).sum();
+        Some(ModelEvidence { sse, signal })
+    }
+
+    /// The evidence of the candidates fitted and judged on every training sample.
+    fn training_evidence(&mut self, v: DVec3, iso: bool) -> ModelEvidence {
+        let params = self.params;
+        let ward = fit_samples(&self.wsamples.train, iso, params);
+        let gltf = gltf_fit::fit_samples(&self.gsamples.train, v, iso, params, &mut self.gscratch);
+        let lobes = [LobeKind::Clearcoat, LobeKind::Woven].map(|k| {
+            lobe_fit::fit_samples(k, &self.gsamples.train, v, iso, params, &mut self.lscratch)
+        });
+        let sse = [gltf.sse, ward.sse, lobes[0].sse, lobes[1].sse];
+        let signal: f64 = self
+            .gsamples
+            .train
+            .iter()
+            .flat_map(|s| s.rgb)
+            .map(|v| v * v)
+            .sum();
+        ModelEvidence { sse, signal }
+    }
+
+    /// The fit of one pixel in the frame `(t, b, n)` with the model `choice`
+    /// ([`FitMaps::MODEL_WARD`](super::FitMaps::MODEL_WARD) and the others), on every training
+    /// sample.
+    fn fit_chosen(
+        &mut self,
+        choice: u8,
+        n: DVec3,
+        t: DVec3,
+        b: DVec3,
+        iso: bool,
+        rgb: &[f32],
+    ) -> PixelOutcome {
         match choice {
-            0 => self.gltf_outcome(v, iso, kept.then_some(gltf)),
-            1 => self.ward_outcome(iso, kept.then_some(ward)),
-            k => {
-                let lobe = lobes[k - 2];
-                self.lobe_outcome(lobe.model.kind, v, iso, kept.then_some(lobe))
-            }
+            MODEL_WARD => self.fit_ward(n, t, b, iso, rgb),
+            MODEL_CLEARCOAT => self.fit_lobes(LobeKind::Clearcoat, n, t, b, iso, rgb),
+            MODEL_WOVEN => self.fit_lobes(LobeKind::Woven, n, t, b, iso, rgb),
+            MODEL_GLTF => self.fit_gltf(n, t, b, iso, rgb),
+            _ => PixelOutcome::TooFewSamples,
         }
     }
 
@@ -627,6 +775,9 @@ pub struct FitMethod<'a> {
     params: &'a FitParams,
     normals: &'a [f32],
     tangents: &'a [f32],
+    /// An automatic fit's model per pixel, chosen from the evidence of its neighbourhood
+    /// ([`FitMethod::with_choices`]); `None`: each pixel's own evidence.
+    choices: Option<&'a [u8]>,
 }
 
 impl<'a> FitMethod<'a> {
@@ -654,7 +805,62 @@ impl<'a> FitMethod<'a> {
             params,
             normals,
             tangents,
+            choices: None,
         })
+    }
+
+    /// The pass that gathers an automatic fit's evidence, pixel by pixel
+    /// ([`FitParams::choose_models`] turns it into the model of each pixel); `None` where the
+    /// fit does not choose (a forced model).
+    pub fn evidence_pass(&self) -> Option<EvidenceMethod<'a>> {
+        (self.params.model == FitModel::Auto).then_some(EvidenceMethod(*self))
+    }
+
+    /// This fit with an automatic fit's model at each pixel given by `choices` (`H x W`, from
+    /// [`FitParams::choose_models`]).
+    ///
+    /// # Errors
+    /// When `choices` is not one per pixel.
+    pub fn with_choices(self, choices: &'a [u8]) -> Result<Self> {
+        if choices.len() * 3 != self.normals.len() {
+            return Err(Error::BadParameter(format!(
+                "{} model choices for {} pixels",
+                choices.len(),
+                self.normals.len() / 3
+            )));
+        }
+        Ok(Self {
+            choices: Some(choices),
+            ..self
+        })
+    }
+}
+
+/// The evidence pass of an automatic fit ([`FitMethod::evidence_pass`]) as a
+/// [`PixelMethod`]: each pixel's [`ModelEvidence`]; `None` outside the mask or where the
+/// pixel would not be fitted.
+#[derive(Debug, Clone, Copy)]
+pub struct EvidenceMethod<'a>(FitMethod<'a>);
+
+impl<'a> PixelMethod for EvidenceMethod<'a> {
+    type Scratch = PixelFitter<'a>;
+    type Output = Option<ModelEvidence>;
+
+    fn lights(&self) -> Option<&[usize]> {
+        None
+    }
+
+    fn scratch(&self) -> PixelFitter<'a> {
+        self.0.scratch()
+    }
+
+    fn pixel(&self, p: usize, samples: &[f32], fitter: &mut PixelFitter<'a>) -> Self::Output {
+        let normal = vec_at(self.0.normals, p)?;
+        fitter.evidence(normal, vec_at(self.0.tangents, p), samples)
+    }
+
+    fn masked(&self) -> Self::Output {
+        None
     }
 }
 
@@ -674,7 +880,8 @@ impl<'a> PixelMethod for FitMethod<'a> {
         let Some(normal) = vec_at(self.normals, p) else {
             return Some(PixelOutcome::NoFrame);
         };
-        Some(fitter.fit(normal, vec_at(self.tangents, p), samples))
+        let chosen = self.choices.map(|c| c[p]);
+        Some(fitter.fit_as(chosen, normal, vec_at(self.tangents, p), samples))
     }
 
     fn masked(&self) -> Self::Output {
