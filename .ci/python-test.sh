@@ -15,9 +15,15 @@ python3 -m venv "$venv"
 export PATH="$PWD/$venv/bin:$PATH"
 "$venv/bin/pip" install --quiet --upgrade pip
 "$venv/bin/pip" install --quiet "maturin>=1,<2" numpy pytest
-# The binary the tests compare with (already built by `cargo test`).
-cargo build --locked --quiet -p symframe-cli
-export SYMFRAME_BIN="$PWD/target/debug/symframe"
+# The binary the tests compare with: $SYMFRAME where set (.ci/run gives the one `cargo test`
+# built), else the debug build.
+if [ -n "${SYMFRAME:-}" ]; then
+    SYMFRAME_BIN="$(realpath "$SYMFRAME")"
+else
+    cargo build --locked --quiet -p symframe-cli
+    SYMFRAME_BIN="$PWD/target/debug/symframe"
+fi
+export SYMFRAME_BIN
 # --no-build-isolation: maturin from the venv above, no second download. The dev profile (optimised
 # in this workspace) reuses what `cargo test` built instead of a second, release build.
 MATURIN_PEP517_ARGS="--profile dev" "$venv/bin/pip" install --quiet --no-build-isolation ./crates/symframe-py

@@ -10,6 +10,7 @@
 #   .ci/viewer-test.sh [--size N] [--screenshot FILE.png]
 # --screenshot also saves a picture of the whole viewer (the README's docs/viewer.png is made
 # with --size 224 --screenshot docs/viewer.png).
+# SYMFRAME=path/to/symframe uses that binary instead of building the debug one.
 #
 # Needs Chromium (Debian's `chromium`, installed here with apt-get when missing and running as
 # root), node and npm (playwright-core and pngjs from npm, into target/viewer-test-node).
@@ -45,8 +46,12 @@ fi
 export NODE_PATH="$node_dir/node_modules"
 
 start=$(date +%s)
-(cd "$root" && cargo build --locked -q -p symframe-cli)
-sf="$root/target/debug/symframe"
+if [ -n "${SYMFRAME:-}" ]; then
+    sf="$(realpath "$SYMFRAME")"
+else
+    (cd "$root" && cargo build --locked -q -p symframe-cli)
+    sf="$root/target/debug/symframe"
+fi
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 "$sf" -q synth -o "$work/data" --size "$size" --rig cone:200 --model ward
