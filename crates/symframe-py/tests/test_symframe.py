@@ -224,6 +224,9 @@ def test_ctrl_c_raises_keyboard_interrupt(tmp_path):
     script = f"""
 import os, signal, sys
 import symframe
+# Python keeps SIGINT ignored when it started ignored (a job started with `&` by a shell):
+# Ctrl-C's own handler, whatever this process inherited.
+signal.signal(signal.SIGINT, signal.default_int_handler)
 lp = symframe.synth({str(tmp_path / 'ds')!r}, size=128, lights=120)
 sent = []
 def ctrl_c(stage, done, total):
