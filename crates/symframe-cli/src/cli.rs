@@ -70,7 +70,7 @@ pub enum GammaArg {
     Linear,
 }
 
-/// The decoding flags of `estimate`, `fit` and `calibrate`.
+/// The decoding flags of `estimate`, `fit`, `calibrate` and `relight --from-samples`.
 #[derive(Debug, Clone, Args)]
 pub struct DecodeFlags {
     /// Transfer curve of 8- and 16-bit PNG, TIFF and JPEG images: `srgb` (e.g. 16-bit files

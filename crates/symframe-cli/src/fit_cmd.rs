@@ -131,6 +131,10 @@ pub fn relight_config(args: &RelightArgs) -> Result<RelightConfig> {
                 .clone()
                 .unwrap_or_else(|| args.fit_dir.join("depth.npy"))
         }),
+        from_samples: match &args.from_samples {
+            Some(capture) => Some((capture.clone(), args.decode.options()?)),
+            None => None,
+        },
     })
 }
 

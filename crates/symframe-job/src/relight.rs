@@ -7,7 +7,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use serde::Serialize;
-use symframe::{Edits, GltfMaps, LobeMaps, Relighter, WardMaps};
+use symframe::{Edits, GltfMaps, LobeMaps, Relighter, Rig, RigOptions, SampleRelighter, WardMaps};
+use symframe_io::DecodeOptions;
 
 use crate::outdir::{OutputDir, OutputSet};
 
@@ -37,6 +38,10 @@ pub struct RelightConfig {
     /// none) whose cast shadows darken the relit images: a pixel the relief hides from a
     /// light gets no light from it (ray-marched per pixel toward the light).
     pub shadows: Option<PathBuf>,
+    /// Relight the capture's own samples in the fit's frames, with no model
+    /// ([`symframe::SampleRelighter`]), instead of the fitted parameters: the capture, decoded
+    /// with these options. No edits: there are no parameters to edit.
+    pub from_samples: Option<(PathBuf, DecodeOptions)>,
 }
 
 /// What a relight job wrote.
@@ -66,6 +71,9 @@ struct RelightReport<'a> {
     /// The height map whose cast shadows were applied.
     #[serde(skip_serializing_if = "Option::is_none")]
     shadows: Option<&'a Path>,
+    /// The capture whose samples were relit, with no model (`--from-samples`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    from_samples: Option<&'a Path>,
     /// Every warning of the run, as printed (what taking the output folder's lock left alone).
     warnings: &'a [String],
 }
@@ -321,7 +329,7 @@ pub fn read_ward_maps(dir: &Path) -> Result<WardMaps> {
 }
 
 impl RelightConfig {
-    /// No edits, exposure 0, no lights yet.
+    /// No edits, exposure 0, no lights yet, the fitted models.
     pub fn new(fit_dir: impl Into<PathBuf>, output: impl Into<PathBuf>) -> Self {
         let e = Edits::default();
         Self {
@@ -335,6 +343,7 @@ impl RelightConfig {
             region: None,
             exposure: 0.0,
             shadows: None,
+            from_samples: None,
         }
     }
 }
@@ -354,7 +363,27 @@ pub fn relight(config: &RelightConfig) -> Result<RelightOutcome> {
             None => None,
         },
     };
-    let relighter = fit_relighter(&maps, &config.fit_dir, &edits)?;
+    // What renders a light: the capture's own samples (`--from-samples`), or the fitted
+    // models with the edits; and the edited tangent map where the tangents are turned.
+    type Render = Box<dyn Fn(DVec3) -> Vec<f32> + Sync>;
+    let (render, edited_tangents): (Render, Option<Vec<f32>>) = match &config.from_samples {
+        Some((capture, decode)) => {
+            if edits != Edits::default() {
+                bail!(
+                    "--from-samples relights the photographs as they are: the edits \
+                     (--diffuse-scale, --specular-scale, --roughness-scale, --rotate-tangents, \
+                     --region) need a fitted model"
+                );
+            }
+            let r = sample_relighter(capture, decode, maps.normals(), maps.tangents(), (w, h))?;
+            (Box::new(move |l| r.render(l)), None)
+        }
+        None => {
+            let r = fit_relighter(&maps, &config.fit_dir, &edits)?;
+            let tangents = config.rotate_tangents.map(|_| r.tangents());
+            (Box::new(move |l| r.render(l)), tangents)
+        }
+    };
     let heights = match &config.shadows {
         Some(p) => {
             let (shape, depth) = symframe_io::read_npy_f32(p)?;
@@ -383,7 +412,7 @@ pub fn relight(config: &RelightConfig) -> Result<RelightOutcome> {
                 config,
                 &out,
                 (w, h),
-                &relighter,
+                (&*render, edited_tangents.as_deref()),
                 &lights,
                 &edits,
                 heights.as_deref(),
@@ -393,6 +422,32 @@ pub fn relight(config: &RelightConfig) -> Result<RelightOutcome> {
         out.discard_unfinished();
     }
     result
+}
+
+/// The relighter of `capture`'s own samples (decoded with `decode`, loaded whole) in the
+/// frames `normals` and `tangents` of a fit of size `(w, h)`.
+fn sample_relighter(
+    capture: &Path,
+    decode: &DecodeOptions,
+    normals: &[f32],
+    tangents: &[f32],
+    (w, h): (usize, usize),
+) -> Result<SampleRelighter> {
+    let ds = symframe_io::open_dataset(capture)?;
+    let stack = symframe_io::load_stack(&ds, decode, &|| {})?;
+    if (stack.width, stack.height) != (w, h) {
+        bail!(
+            "{}: its images are {} x {}, the fit's maps {w} x {h}",
+            capture.display(),
+            stack.width,
+            stack.height
+        );
+    }
+    let rig = Rig::new(&ds.lights, RigOptions::default())
+        .with_context(|| capture.display().to_string())?;
+    // The fit's frames are NaN outside the mask it was made with: those pixels stay dark.
+    SampleRelighter::new(&stack, rig, normals, tangents, None)
+        .with_context(|| capture.display().to_string())
 }
 
 /// Files an earlier relight into the same folder may have left that this one may not write:
@@ -410,7 +465,7 @@ fn write_relit(
     config: &RelightConfig,
     out: &OutputDir,
     (w, h): (usize, usize),
-    relighter: &Relighter,
+    (render, edited_tangents): (&(dyn Fn(DVec3) -> Vec<f32> + Sync), Option<&[f32]>),
     lights: &[DVec3],
     edits: &Edits,
     heights: Option<&[f64]>,
@@ -419,7 +474,7 @@ fn write_relit(
     let mut names = Vec::with_capacity(lights.len());
     for (i, &l) in lights.iter().enumerate() {
         let name = format!("relit_{i:03}");
-        let mut img = relighter.render(l);
+        let mut img = render(l);
         if let Some(hf) = heights {
             let shadowed = symframe::render::Scene::cast_shadows(hf, w, h, l);
             for (px, _) in img.chunks_exact_mut(3).zip(&shadowed).filter(|(_, &s)| s) {
@@ -436,12 +491,12 @@ fn write_relit(
         )?;
         names.push(name);
     }
-    if config.rotate_tangents.is_some() {
+    if let Some(tangents) = edited_tangents {
         symframe_io::write_png_rgb8(
             &staging.path("tangents_edited.png"),
             w,
             h,
-            &symframe_io::tangent_map_rgb8(&relighter.tangents()),
+            &symframe_io::tangent_map_rgb8(tangents),
         )?;
     }
     let report = RelightReport {
@@ -456,6 +511,7 @@ fn write_relit(
         region: config.region.as_deref(),
         exposure_stops: config.exposure,
         shadows: config.shadows.as_deref(),
+        from_samples: config.from_samples.as_ref().map(|(p, _)| p.as_path()),
         warnings: out.warnings(),
     };
     staging.commit("relight.json", serde_json::to_value(&report)?, &|_| {})?;

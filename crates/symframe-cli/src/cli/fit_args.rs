@@ -179,6 +179,15 @@ pub struct RelightArgs {
     /// FIT_DIR/depth.npy).
     #[arg(long, requires = "shadows")]
     pub depth: Option<PathBuf>,
+    /// Relight the photographs of this capture themselves, in the fit's frames, with no
+    /// model: each pixel's measured slice interpolated between the lights and read at its
+    /// mirror images outside the rig (docs/method.md, "Relighting from the samples"). Loads
+    /// the whole capture; no edits.
+    #[arg(long, value_name = "CAPTURE")]
+    pub from_samples: Option<PathBuf>,
+    /// How --from-samples decodes the capture's images.
+    #[command(flatten)]
+    pub decode: DecodeFlags,
 }
 
 /// Flags of `symframe view`.

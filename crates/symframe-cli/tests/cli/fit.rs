@@ -193,6 +193,55 @@ fn estimate_fit_relight_end_to_end() {
         }
     }
     assert!(changed > 50, "{changed}");
+
+    // From the samples themselves, with no model: at a photographed light, the photograph;
+    // between the lights, the true render. Edits are refused (no parameters to edit).
+    let between = (l0 + 0.05 * DVec3::X).normalize();
+    let samples = tmp.path().join("samples");
+    let light = |l: DVec3| format!("{},{},{}", l.x, l.y, l.z);
+    let o = symframe(&[
+        "relight",
+        s(&fit),
+        "-o",
+        s(&samples),
+        "--from-samples",
+        s(&lp),
+        "--light",
+        &light(l0),
+        "--light",
+        &light(between),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let photo = symframe::Relighter::image_psnr(
+        &read_exr(&samples.join("relit_000.exr")),
+        &scene.render(&w, l0),
+        Some(&inside),
+    );
+    assert!(photo > 60.0, "at a photographed light: {photo} dB");
+    let psnr = symframe::Relighter::image_psnr(
+        &read_exr(&samples.join("relit_001.exr")),
+        &scene.render(&w, between),
+        Some(&inside),
+    );
+    assert!(psnr > 30.0, "between the lights: {psnr} dB");
+    let report: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(samples.join("relight.json")).unwrap()).unwrap();
+    assert_eq!(report["from_samples"], s(&lp));
+    let o = symframe(&[
+        "relight",
+        s(&fit),
+        "-o",
+        s(&tmp.path().join("refused")),
+        "--from-samples",
+        s(&lp),
+        "--light",
+        &light(l0),
+        "--rotate-tangents",
+        "90",
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--from-samples"), "{}", stderr(&o));
+    assert!(!tmp.path().join("refused").join("relight.json").exists());
 }
 
 #[test]

@@ -17,7 +17,7 @@ use symframe::brdf::{parse_model, Brdf, Ggx, Layered, Woven};
 use symframe::render::{BumpParams, Scene, TangentField};
 use symframe::{
     estimate_stack, uniform_cone_lights, DepthMap, Edits, EstimatorParams, FitMaps, FitModel,
-    FitParams, IntegrateParams, PixelData, Relighter, Rig, RigOptions, Stack,
+    FitParams, IntegrateParams, PixelData, Relighter, Rig, RigOptions, SampleRelighter, Stack,
 };
 
 /// Models rendered on the sphere: a brushed Ward material (the Ward fit's own family), two GGX
@@ -161,6 +161,8 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
     let bumps = Scene::bumps(size, &BUMPS, TangentField::Swirl(30.0));
     let cos60 = 60f64.to_radians().cos();
     let mut rows = Vec::new();
+    // Per material, relit from the samples (no model): mean and worst PSNR, max / brightest.
+    let mut sample_rows: Vec<(f64, f64, f64)> = Vec::new();
     let mut picture = None;
     let mut ward_fit: Option<FitMaps> = None;
     let materials = materials()?;
@@ -221,6 +223,42 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
             })
             .collect();
         let peak = brightest.iter().copied().fold(0.0, f32::max);
+        let judge = |render: &dyn Fn(DVec3) -> Vec<f32>| {
+            let (mut over, mut truth_over) = (0.0f64, 0.0f64);
+            // The held-out lights that light some of the judged pixels (on the bumps, a light
+            // below the plane's horizon lights nothing: its PSNR is undefined).
+            let psnrs: Vec<f64> = holdout
+                .iter()
+                .filter(|&&i| {
+                    let truth = stack.image(i);
+                    (0..scene.n_pixels())
+                        .any(|p| within[p] && truth[3 * p..3 * p + 3].iter().any(|&v| v > 0.0))
+                })
+                .map(|&i| {
+                    let mut relit = render(lights[i]);
+                    if let Some(hf) = &heights {
+                        let shadowed = Scene::cast_shadows(hf, size, size, lights[i]);
+                        for (px, _) in relit.chunks_exact_mut(3).zip(&shadowed).filter(|p| *p.1) {
+                            px.fill(0.0);
+                        }
+                    }
+                    let truth = stack.image(i);
+                    for (p, (px, tx)) in
+                        relit.chunks_exact(3).zip(truth.chunks_exact(3)).enumerate()
+                    {
+                        if within[p] {
+                            let bound = brightest[p].max(1e-3 * peak) as f64;
+                            for (&v, &t) in px.iter().zip(tx) {
+                                over = over.max(v as f64 / bound);
+                                truth_over = truth_over.max(t as f64 / bound);
+                            }
+                        }
+                    }
+                    Relighter::image_psnr(&relit, &truth, Some(&within))
+                })
+                .collect();
+            (psnrs, over, truth_over)
+        };
         for model in FITS {
             // The exposure chosen as `symframe fit` chooses it (the renders' is 1).
             let mut params = FitParams {
@@ -262,39 +300,7 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
             if let Some(l) = &fit.lobes {
                 relighter = relighter.with_lobes(l, &Edits::default())?;
             }
-            let (mut over, mut truth_over) = (0.0f64, 0.0f64);
-            // The held-out lights that light some of the judged pixels (on the bumps, a light
-            // below the plane's horizon lights nothing: its PSNR is undefined).
-            let psnrs: Vec<f64> = holdout
-                .iter()
-                .filter(|&&i| {
-                    let truth = stack.image(i);
-                    (0..scene.n_pixels())
-                        .any(|p| within[p] && truth[3 * p..3 * p + 3].iter().any(|&v| v > 0.0))
-                })
-                .map(|&i| {
-                    let mut relit = relighter.render(lights[i]);
-                    if let Some(hf) = &heights {
-                        let shadowed = Scene::cast_shadows(hf, size, size, lights[i]);
-                        for (px, _) in relit.chunks_exact_mut(3).zip(&shadowed).filter(|p| *p.1) {
-                            px.fill(0.0);
-                        }
-                    }
-                    let truth = stack.image(i);
-                    for (p, (px, tx)) in
-                        relit.chunks_exact(3).zip(truth.chunks_exact(3)).enumerate()
-                    {
-                        if within[p] {
-                            let bound = brightest[p].max(1e-3 * peak) as f64;
-                            for (&v, &t) in px.iter().zip(tx) {
-                                over = over.max(v as f64 / bound);
-                                truth_over = truth_over.max(t as f64 / bound);
-                            }
-                        }
-                    }
-                    Relighter::image_psnr(&relit, &truth, Some(&within))
-                })
-                .collect();
+            let (psnrs, over, truth_over) = judge(&|l| relighter.render(l));
             rows.push(Row {
                 model: mat.label.clone(),
                 fit: model.name().into(),
@@ -318,6 +324,25 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
                 ward_fit = Some(fit);
             }
         }
+        // Relit from the samples themselves, no model (`SampleRelighter`): the training
+        // images as the fits saw them, in the same estimated frames.
+        let mut fitted = Stack::zeros(size, size, train.len());
+        for (j, &i) in train.iter().enumerate() {
+            fitted.set_image(j, &samples.image(i));
+        }
+        let from_samples = SampleRelighter::new(
+            &fitted,
+            rig.clone(),
+            &frames.normals,
+            &frames.tangents,
+            Some(&scene.mask),
+        )?;
+        let (psnrs, over, _) = judge(&|l| from_samples.render(l));
+        sample_rows.push((
+            psnrs.iter().sum::<f64>() / psnrs.len() as f64,
+            psnrs.iter().copied().fold(f64::INFINITY, f64::min),
+            over,
+        ));
         let fit = ward_fit.take().expect("the Ward fit ran");
         if picture.is_none() {
             // The paper's edit: tangents turned 90 degrees inside a region (a disc here).
@@ -509,6 +534,31 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
         materials.len(),
         rows.len()
     )?;
+    // Relit from the samples themselves, beside the automatic choice.
+    writeln!(
+        md,
+        "\nRelit from the samples themselves, with no model (`SampleRelighter`, docs/method.md, \
+         \"Relighting from the samples\": each pixel's slice interpolated on the rig's \
+         triangulation, read at its mirror images where the rig has no data), beside the \
+         automatic choice:\n"
+    )?;
+    writeln!(
+        md,
+        "| material | samples: mean / worst light (dB) | auto: mean / worst light (dB) | \
+         samples - auto (dB) | max / brightest: samples |"
+    )?;
+    writeln!(md, "| --- | --- | --- | --- | --- |")?;
+    for (m, &(mean, worst, over)) in rows.chunks_exact(FITS.len()).zip(&sample_rows) {
+        let a = &m[auto];
+        writeln!(
+            md,
+            "| {} | {mean:.1} / {worst:.1} | {:.1} / {:.1} | {:+.1} | {over:.2} |",
+            a.model,
+            a.relit_psnr,
+            a.relit_worst,
+            mean - a.relit_psnr
+        )?;
+    }
     if let Some([truth, relit, edited]) = picture {
         let path = out.join("relight_side_by_side.png");
         write_side_by_side(&path, size, &[truth, relit, edited])?;

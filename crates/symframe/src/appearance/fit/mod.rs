@@ -23,7 +23,7 @@ mod maps;
 mod pixel;
 
 pub use maps::{FitMaps, GltfMaps, LobeMaps, WardMaps};
-pub(crate) use pixel::{squared_errors, LogEvidence};
+pub(crate) use pixel::{check_frame_maps, squared_errors, LogEvidence};
 pub use pixel::{
     EvidenceMethod, ExposureChoice, FitMethod, HoldoutError, ModelEvidence, PixelData, PixelFitter,
     PixelOutcome, WardFit,

@@ -790,15 +790,7 @@ impl<'a> FitMethod<'a> {
         tangents: &'a [f32],
         n_pixels: usize,
     ) -> Result<Self> {
-        for (name, len) in [("normal", normals.len()), ("tangent", tangents.len())] {
-            if len != n_pixels * 3 {
-                return Err(Error::BadParameter(format!(
-                    "the {name} map has {len} values but the images have {n_pixels} pixels \
-                     ({} values expected)",
-                    n_pixels * 3
-                )));
-            }
-        }
+        check_frame_maps(normals, tangents, n_pixels)?;
         params.validate(lights.len())?;
         Ok(Self {
             lights,
@@ -834,6 +826,21 @@ impl<'a> FitMethod<'a> {
             ..self
         })
     }
+}
+
+/// Checks that the `normals` and `tangents` maps (`H x W x 3`) are of images of `n_pixels`
+/// pixels: the one check of every reader of frame maps beside a stack.
+pub(crate) fn check_frame_maps(normals: &[f32], tangents: &[f32], n_pixels: usize) -> Result<()> {
+    for (name, len) in [("normal", normals.len()), ("tangent", tangents.len())] {
+        if len != n_pixels * 3 {
+            return Err(Error::BadParameter(format!(
+                "the {name} map has {len} values but the images have {n_pixels} pixels \
+                 ({} values expected)",
+                n_pixels * 3
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// The evidence pass of an automatic fit ([`FitMethod::evidence_pass`]) as a
