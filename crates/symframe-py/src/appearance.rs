@@ -130,6 +130,9 @@ pub(crate) fn relight<'py>(
     config.region = o.get("region")?;
     config.exposure = o.or("exposure", config.exposure)?;
     config.shadows = o.get("shadows")?;
+    config.from_samples = o
+        .get::<PathBuf>("from_samples")?
+        .map(|capture| (capture, DecodeOptions::default()));
     o.finish()?;
     for (name, v) in [
         ("specular_scale", config.specular_scale),

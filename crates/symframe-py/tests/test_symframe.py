@@ -341,6 +341,17 @@ def test_fit_and_relight_equal_the_command_line(capture, cli, tmp_path):
     assert (tmp_path / "relit_py" / "relit_000.png").read_bytes() == cli_png
     with pytest.raises(ValueError, match="roughness_scale must be finite and > 0"):
         symframe.relight(tmp_path / "fit_py", tmp_path / "r2", light, roughness_scale=0)
+    # From the photographs themselves, as the command line's --from-samples.
+    cli("relight", tmp_path / "fit_cli", "-o", tmp_path / "samples_cli", "--light",
+        "0.3,0.2,0.9", "--from-samples", capture)
+    images = symframe.relight(tmp_path / "fit_py", tmp_path / "samples_py", light,
+                              from_samples=capture)
+    assert images.shape == (1, 40, 40, 3) and images.max() > 0
+    cli_png = (tmp_path / "samples_cli" / "relit_000.png").read_bytes()
+    assert (tmp_path / "samples_py" / "relit_000.png").read_bytes() == cli_png
+    with pytest.raises(symframe.SymframeError, match="--from-samples"):
+        symframe.relight(tmp_path / "fit_py", tmp_path / "r3", light, from_samples=capture,
+                         roughness_scale=0.5)
 
 
 def test_merge_of_shards_equals_an_unsharded_run(capture, cli, tmp_path):

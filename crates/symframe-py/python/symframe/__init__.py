@@ -266,7 +266,9 @@ def relight(fit_dir: PathLike, out: PathLike, lights: Any, **options: Any) -> np
     ``lights``: ``N x 3`` directions (or one ``(x, y, z)``). Options: ``diffuse_scale``,
     ``specular_scale``, ``roughness_scale``, ``rotate_tangents`` (degrees), ``region`` (mask
     image limiting the rotation), ``exposure`` (stops, pictures only), ``shadows`` (a
-    ``depth.npy`` of :func:`integrate` whose cast shadows darken the images). Writes
+    ``depth.npy`` of :func:`integrate` whose cast shadows darken the images),
+    ``from_samples`` (a capture: its photographs relit themselves in the fit's frames, with no
+    model and no edits, as ``symframe relight --from-samples``). Writes
     ``relit_NNN.exr``/``.png`` into ``out`` and returns the linear images, ``N x H x W x 3``
     float32.
     """
