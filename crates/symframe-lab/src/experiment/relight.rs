@@ -559,6 +559,20 @@ pub fn run(ctx: &Ctx) -> Result<Section<Vec<Row>>> {
             mean - a.relit_psnr
         )?;
     }
+    let better = rows
+        .chunks_exact(FITS.len())
+        .zip(&sample_rows)
+        .filter(|(m, s)| s.0 > m[auto].relit_psnr)
+        .count();
+    let highest = sample_rows.iter().map(|s| s.2).fold(0.0, f64::max);
+    writeln!(
+        md,
+        "\nThe samples relight better than the automatic choice on {better} of the {} \
+         materials, and no relit value is above {highest:.2} times the brightest training \
+         sample of its pixel (the slice is interpolated between the samples; only the new \
+         light's larger n.l can raise it above them).",
+        materials.len()
+    )?;
     if let Some([truth, relit, edited]) = picture {
         let path = out.join("relight_side_by_side.png");
         write_side_by_side(&path, size, &[truth, relit, edited])?;
