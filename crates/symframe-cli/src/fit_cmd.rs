@@ -70,11 +70,13 @@ pub fn run(args: &FitArgs) -> Result<FitOutcome> {
         };
         let model = match (done.report.model, done.report.exposure) {
             ("auto", Some(e)) => format!(
-                "Ward at {}, glTF at {} by validation lights, exposure {e:.4}",
-                s.ward_pixels, s.gltf_pixels
+                "Ward at {}, glTF at {}, clear coat at {}, woven at {} by validation lights, \
+                 exposure {e:.4}",
+                s.ward_pixels, s.gltf_pixels, s.clearcoat_pixels, s.woven_pixels
             ),
             (_, Some(e)) => format!("glTF, exposure {e:.4}"),
-            _ => "Ward".into(),
+            ("clearcoat", None) => "clear coat".into(),
+            (m, None) => m.replace("ward", "Ward"),
         };
         eprintln!(
             "symframe: {} pixels fitted ({model}; {} isotropic), {} without a frame, {} with too \

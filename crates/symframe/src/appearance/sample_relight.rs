@@ -142,16 +142,6 @@ impl SampleRelighter {
             });
         out
     }
-
-    /// Image width in pixels.
-    pub fn width(&self) -> usize {
-        self.width
-    }
-
-    /// Image height in pixels.
-    pub fn height(&self) -> usize {
-        self.height
-    }
 }
 
 /// The slice's RGB value at a unit halfway vector: the estimator's barycentric interpolation

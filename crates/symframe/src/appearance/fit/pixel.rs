@@ -114,7 +114,7 @@ pub struct ModelEvidence {
 impl ModelEvidence {
     /// The model this pixel's errors alone choose ([`LogEvidence::choice`]), a model code of
     /// [`FitMaps::model`](super::FitMaps::model).
-    pub fn choice(&self) -> u8 {
+    pub(crate) fn choice(&self) -> u8 {
         LogEvidence::of(self).choice()
     }
 }
@@ -267,7 +267,7 @@ impl<'a> PixelFitter<'a> {
 
     /// The automatic choice's evidence at one pixel (frame and samples as for
     /// [`PixelFitter::fit`]); `None` where it would not be fitted.
-    pub fn evidence(
+    fn evidence(
         &mut self,
         normal: DVec3,
         tangent: Option<DVec3>,
