@@ -144,6 +144,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let fit_dir = args.output.join("fit");
     let mut fit_config = FitConfig::new(&lp, &estimate_dir, &fit_dir);
     fit_config.holdout = (args.lights / 50).max(1);
+    // The paper's Ward fit, which the figures below compare with the rendered Ward material
+    // (`symframe fit` chooses among four models by default).
+    fit_config.params.model = symframe::FitModel::Ward;
     // The estimate's tile cache is read again here, then removed.
     fit_config.cache.remove_after = true;
     note!("symframe demo: fitting a Ward BRDF per pixel in the estimated frames");
