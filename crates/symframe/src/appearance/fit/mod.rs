@@ -422,6 +422,8 @@ impl FitParams {
 /// [`FitParams::choose_models`] on checked sizes: box sums through a summed-area table of the
 /// pixels' [`LogEvidence`] (one pass, whatever the radius).
 fn pool_choices(evidence: &[Option<ModelEvidence>], w: usize, h: usize, r: usize) -> Vec<u8> {
+    // A window wider than the image is the image (and `x + r + 1` cannot overflow).
+    let r = r.min(w.max(h));
     // table[y * (w + 1) + x]: the sum over rows < y and columns < x.
     let mut table = vec![LogEvidence::default(); (w + 1) * (h + 1)];
     for y in 0..h {
@@ -683,6 +685,9 @@ mod tests {
             assert_eq!(sum.choice(), got, "pixel {p}");
         }
         assert!(params(2).choose_models(&evidence, w, h + 1).is_err());
+        // Any radius is taken (a window wider than the image is the image).
+        let all = params(usize::MAX).choose_models(&evidence, w, h).unwrap();
+        assert_eq!(all, params(w).choose_models(&evidence, w, h).unwrap());
     }
 
     #[test]
