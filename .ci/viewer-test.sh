@@ -5,7 +5,9 @@
 # and compares each screenshot with the picture the command line makes of the same state:
 # `symframe relight` at three lights and with every edit, the fit's albedo pictures, and the
 # estimate's normal, tangent, confidence and source pictures; then relights by a change of the
-# URL fragment and by a mouse drag. Fails when a PSNR over the object is below 45 dB (30 dB is
+# URL fragment and by a mouse drag. The view `samples` (--from-samples) against `symframe
+# relight --from-samples`, also on a capture whose rig does not reach a light's halfway vector
+# (read at its mirror images). Fails when a PSNR over the object is below 45 dB (30 dB is
 # the requirement; about 67 dB is measured: pixels differ by at most one level in 255).
 #   .ci/viewer-test.sh [--size N] [--screenshot FILE.png]
 # --screenshot also saves a picture of the whole viewer (the README's docs/viewer.png is made
@@ -103,6 +105,25 @@ node "$here/viewer-test.js" --viewer "$work/viewer_est.html" --mask "$work/data/
     --case "view=confidence" "$work/est/confidence.png" \
     --case "view=source" "$work/est/source.png" \
     --nonblank "light=$l1"
+
+# The view `samples`: the capture's photographs relit themselves, against `symframe relight
+# --from-samples`, at lights inside the rig, and on a capture of halfway angles up to 30
+# degrees at a light whose halfway vector is outside it (the slice read at its mirror images).
+l4=-0.85,0.3,0.43
+"$sf" -q synth -o "$work/half" --size 48 --rig cone:120:30 --model ward
+"$sf" -q estimate "$work/half" -o "$work/half_est"
+"$sf" -q fit "$work/half" --frames "$work/half_est" -o "$work/half_fit" --model ward
+(cd "$work" && "$sf" -q view fit -o viewer_samples.html --from-samples data &&
+    "$sf" -q view half_fit -o viewer_half.html --from-samples half)
+"$sf" -q relight "$work/fit" -o "$work/srelit" --from-samples "$work/data" --light "$l1" --light "$l3"
+"$sf" -q relight "$work/half_fit" -o "$work/hrelit" --from-samples "$work/half" --light "$l4" --light "$l1"
+node "$here/viewer-test.js" --viewer "$work/viewer_samples.html" --mask "$work/data/mask.png" --min-psnr 45 \
+    --case "view=samples&light=$l1" "$work/srelit/relit_000.png" \
+    --case "view=samples&light=$l3&exposure=0" "$work/srelit/relit_001.png" \
+    --case "light=$l1" "$work/relit/relit_000.png"
+node "$here/viewer-test.js" --viewer "$work/viewer_half.html" --mask "$work/half/mask.png" --min-psnr 45 \
+    --case "view=samples&light=$l4" "$work/hrelit/relit_000.png" \
+    --case "view=samples&light=$l1" "$work/hrelit/relit_001.png"
 
 # The Ward fit as a pyramid of 16 px tiles (3 levels at 64 px: halving until one tile holds
 # the map): the coarse level at once, tiles on demand.

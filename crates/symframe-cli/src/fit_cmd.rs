@@ -157,7 +157,7 @@ pub fn relight(args: &RelightArgs) -> Result<RelightOutcome> {
 }
 
 /// The viewer the flags ask for.
-pub fn view_config(args: &ViewArgs) -> ViewConfig {
+pub fn view_config(args: &ViewArgs) -> Result<ViewConfig> {
     let mut config = ViewConfig::new(&args.fit_dir);
     if let Some(o) = &args.output {
         config.output = o.clone();
@@ -165,12 +165,16 @@ pub fn view_config(args: &ViewArgs) -> ViewConfig {
     config.frames = args.frames.clone();
     config.pyramid_above = args.pyramid_above;
     config.tile_size = args.tile_size;
-    config
+    config.samples = match &args.from_samples {
+        Some(capture) => Some((capture.clone(), args.decode.options()?)),
+        None => None,
+    };
+    Ok(config)
 }
 
 /// Runs `symframe view`: writes the page, prints its notes as warnings and a summary line.
 pub fn view(args: &ViewArgs) -> Result<ViewOutcome> {
-    let done = symframe_job::write_viewer(&view_config(args))?;
+    let done = symframe_job::write_viewer(&view_config(args)?)?;
     for note in &done.notes {
         eprintln!("warning: {note}");
     }

@@ -426,7 +426,7 @@ pub fn relight(config: &RelightConfig) -> Result<RelightOutcome> {
 
 /// The relighter of `capture`'s own samples (decoded with `decode`, loaded whole) in the
 /// frames `normals` and `tangents` of a fit of size `(w, h)`.
-fn sample_relighter(
+pub(crate) fn sample_relighter(
     capture: &Path,
     decode: &DecodeOptions,
     normals: &[f32],

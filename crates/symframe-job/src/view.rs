@@ -29,6 +29,7 @@
 mod npy;
 mod page;
 mod pyramid;
+mod samples;
 mod sources;
 
 use std::path::{Path, PathBuf};
@@ -48,6 +49,12 @@ const TEXTURE_NAMES: [&str; 5] = ["geom", "frame", "kd", "ks", "est"];
 /// Default of [`ViewConfig::pyramid_above`]: WebGL2 browsers take textures of 4096 pixels a
 /// side at least, and a page of larger maps would be hundreds of megabytes.
 pub const DEFAULT_PYRAMID_ABOVE: usize = 4096;
+/// The most lights the view `samples` takes: a WebGL2 browser takes texture arrays of 256
+/// layers at least, two of which hold the frames.
+pub(crate) const MAX_SAMPLE_LIGHTS: usize = 254;
+/// The most bytes of sample texels the view `samples` embeds (four half floats per pixel,
+/// light and frame layer): a page beyond that would not load in a browser tab.
+pub(crate) const MAX_SAMPLE_BYTES: usize = 512 << 20;
 /// Default of [`ViewConfig::tile_size`].
 pub const DEFAULT_TILE_SIZE: usize = 256;
 
@@ -67,6 +74,11 @@ pub struct ViewConfig {
     pub pyramid_above: usize,
     /// Side of the pyramid's square tiles, pixels.
     pub tile_size: usize,
+    /// Also relight the capture's own samples in the fit's frames, with no model (the view
+    /// `samples`, as `symframe relight --from-samples`): the capture, decoded with these
+    /// options. The samples go into the page whole: at most 254 lights and 512 MiB of texels
+    /// (four half floats per pixel and light), and no pyramid.
+    pub samples: Option<(PathBuf, symframe_io::DecodeOptions)>,
 }
 
 impl ViewConfig {
@@ -80,6 +92,7 @@ impl ViewConfig {
             frames: None,
             pyramid_above: DEFAULT_PYRAMID_ABOVE,
             tile_size: DEFAULT_TILE_SIZE,
+            samples: None,
         }
     }
 }
@@ -284,6 +297,25 @@ pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
     if views.is_empty() {
         views.push("relit");
     }
+    let samples = match &config.samples {
+        Some(_) if tiled => bail!(
+            "{}: the maps are {w} x {h}, above --pyramid-above {}: the view `samples` needs the \
+             whole capture in the page (no pyramid)",
+            config.fit_dir.display(),
+            config.pyramid_above
+        ),
+        Some((capture, decode)) => {
+            views.push("samples");
+            let estimate = model == "estimate";
+            Some(samples::page_samples(
+                config,
+                (capture, decode),
+                (w, h),
+                estimate,
+            )?)
+        }
+        None => None,
+    };
 
     // The folder as given (a full path would show where it was made, not what it is).
     let title = config.fit_dir.display().to_string();
@@ -306,6 +338,7 @@ pub fn write_viewer(config: &ViewConfig) -> Result<ViewOutcome> {
         source_colors: symframe_io::SOURCE_PALETTE.to_vec(),
         model,
         light_intensity,
+        samples,
     };
     let page = render_page(&title, &data)?;
     // The tiles move into place, then the page that loads them is written, then the old tiles
@@ -432,6 +465,7 @@ mod tests {
             source_colors: vec![],
             model: "ward",
             light_intensity: 1.0,
+            samples: None,
         };
         let page = render_page("a</script>", &data).unwrap();
         assert!(!page.contains("{{"), "a mark was left");

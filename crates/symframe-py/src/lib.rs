@@ -252,18 +252,20 @@ fn merge<'py>(
 /// The `symframe view` job: the viewer page of a fit folder; returns its path. What the command
 /// line prints as warnings (estimate maps not found) become `UserWarning`s.
 #[pyfunction]
-#[pyo3(signature = (fit_dir, out=None, frames=None))]
+#[pyo3(signature = (fit_dir, out=None, frames=None, from_samples=None))]
 fn view(
     py: Python<'_>,
     fit_dir: PathBuf,
     out: Option<PathBuf>,
     frames: Option<PathBuf>,
+    from_samples: Option<PathBuf>,
 ) -> PyResult<PathBuf> {
     let mut config = symframe_job::ViewConfig::new(fit_dir);
     if let Some(out) = out {
         config.output = out;
     }
     config.frames = frames;
+    config.samples = from_samples.map(|c| (c, symframe_io::DecodeOptions::default()));
     let done = py
         .detach(|| symframe_job::write_viewer(&config))
         .map_err(to_py)?;

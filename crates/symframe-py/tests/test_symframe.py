@@ -385,6 +385,11 @@ def test_view_writes_the_command_lines_page(capture, cli, tmp_path):
     cli("view", fit_dir, "-o", tmp_path / "cli.html")
     text = Path(page).read_text()
     assert text == (tmp_path / "cli.html").read_text()
+    # The view `samples`: the capture's own relighting, as the command line's page.
+    samples = symframe.view(fit_dir, tmp_path / "samples.html", from_samples=capture)
+    cli("view", fit_dir, "-o", tmp_path / "samples_cli.html", "--from-samples", capture)
+    assert Path(samples).read_text() == (tmp_path / "samples_cli.html").read_text()
+    assert '"source","samples"]' in Path(samples).read_text()
     # The default (automatic) fit holds both models' maps.
     assert "#version 300 es" in text and '"views":["relit","normal","tangent","kd","ks",' \
         '"base_color","confidence","anisotropy","source"]' in text

@@ -148,7 +148,7 @@ pub use appearance::fit::{
 pub use appearance::gltf_fit::GltfFit;
 pub use appearance::lobe_fit::{LobeFit, LobeKind, LobeModel};
 pub use appearance::relight::{Edits, Relighter};
-pub use appearance::sample_relight::SampleRelighter;
+pub use appearance::sample_relight::{SampleRelighter, SampleTables};
 
 // Depth from normals, and a mesh of it.
 pub use integrate::{DepthMap, IntegrateParams, Mesh, Solver};

@@ -211,4 +211,13 @@ pub struct ViewArgs {
     /// Side of the pyramid's square tiles, pixels (8 to 4096).
     #[arg(long, value_name = "PIXELS", default_value_t = symframe_job::DEFAULT_TILE_SIZE)]
     pub tile_size: usize,
+    /// Add the view `samples`: the photographs of this capture relit themselves in the maps'
+    /// frames, with no model, as `symframe relight --from-samples` (docs/method.md, "Relighting
+    /// from the samples"). The samples go into the page: up to 254 lights and 512 MiB of half
+    /// floats (pixels x (lights + 2) x 8 bytes), no pyramid.
+    #[arg(long, value_name = "CAPTURE")]
+    pub from_samples: Option<PathBuf>,
+    /// How --from-samples decodes the capture's images.
+    #[command(flatten)]
+    pub decode: DecodeFlags,
 }

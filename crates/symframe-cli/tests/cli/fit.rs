@@ -242,6 +242,12 @@ fn estimate_fit_relight_end_to_end() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--from-samples"), "{}", stderr(&o));
     assert!(!tmp.path().join("refused").join("relight.json").exists());
+    // The viewer's view `samples` holds at most 254 lights: this capture's 400 are refused
+    // in one line naming it, and no page is written.
+    let page = tmp.path().join("v.html");
+    let o = symframe(&["view", s(&fit), "-o", s(&page), "--from-samples", s(&lp)]);
+    crate::common::assert_one_line_error(&o, "400 lights");
+    assert!(!page.exists());
 }
 
 #[test]

@@ -78,6 +78,43 @@ fn writes_one_page_with_every_map() {
     }
 }
 
+/// `--from-samples`: the view `samples`, the capture's slices and the rig's triangles in the
+/// page (its relighting is checked in a browser against `symframe relight --from-samples` by
+/// `.ci/viewer-test.sh`).
+#[test]
+fn from_samples_adds_the_capture_s_own_relighting() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = fit_folder(dir.path());
+    let lights = symframe::uniform_cone_lights(40, 65.0);
+    let brdf = symframe::brdf::Ward::new([0.4, 0.3, 0.2], [0.3, 0.45, 0.6], 0.35, 0.1);
+    let images: Vec<Vec<f32>> = lights.iter().map(|&l| scene.render(&brdf, l)).collect();
+    let lp = symframe_io::write_lp_dataset(
+        &dir.path().join("data"),
+        &lights,
+        &images,
+        SIZE,
+        SIZE,
+        symframe_io::ImageFormat::Exr,
+        None,
+        None,
+        Some(&scene.mask),
+    )
+    .unwrap();
+    let (fit, out) = (dir.path().join("fit"), dir.path().join("v.html"));
+    let o = symframe(&["view", s(&fit), "-o", s(&out), "--from-samples", s(&lp)]);
+    ok(&o);
+    assert!(stderr(&o).contains(", samples)"), "{}", stderr(&o));
+    let data = page_data(&fs::read_to_string(&out).unwrap());
+    assert_eq!(data["views"].as_array().unwrap().last().unwrap(), "samples");
+    assert_eq!(data["samples"]["lights"], 40);
+    let triangles = data["samples"]["triangles"].as_array().unwrap();
+    assert!(triangles.len() > 40, "{}", triangles.len());
+    assert!(data["samples"]["layers"].as_str().unwrap().starts_with('e'));
+    // Without it, no samples in the page.
+    ok(&symframe(&["view", s(&fit), "-o", s(&out)]));
+    assert!(page_data(&fs::read_to_string(&out).unwrap())["samples"].is_null());
+}
+
 #[test]
 fn frames_flag_and_missing_estimate() {
     let dir = tempfile::tempdir().unwrap();

@@ -37,6 +37,8 @@ pub(super) struct PageData {
     pub(super) model: &'static str,
     /// A glTF fit's light intensity (1 for Ward).
     pub(super) light_intensity: f64,
+    /// The capture's samples for the view `samples`, if asked for.
+    pub(super) samples: Option<super::samples::PageSamples>,
 }
 
 /// The pyramid as the page sees it.

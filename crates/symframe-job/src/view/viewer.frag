@@ -21,7 +21,13 @@ uniform highp sampler2D uKd;     // Ward: kd, alpha_t; glTF: base colour, metall
 uniform highp sampler2D uKs;     // Ward: ks, alpha_b; glTF: roughness, strength, 0, 0
 uniform highp sampler2D uEst;    // confidence, anisotropy, source, flags (1, 2, 4)
 uniform int uView;               // 0 relit, 1 normal, 2 tangent, 3 kd, 4 ks, 5 confidence,
-                                 // 6 anisotropy, 7 source, 8 base colour
+                                 // 6 anisotropy, 7 source, 8 base colour, 9 samples
+// The view `samples` (view/samples.rs): layer 0 normal and 1 with a frame, layer 1 tangent,
+// layer 2 + k the RGB slice (radiance over n.l) under light k and 1 where valid; the rig's
+// triangles, three texels a row: a row of the spherical inverse and that corner's light.
+uniform highp sampler2DArray uSamples;
+uniform highp sampler2D uTris;
+uniform int uTriangles;
 uniform int uModel;              // 0 Ward (glTF where flag 3), 1 glTF, 2 an estimate
 uniform float uIntensity;        // glTF: the fitted light intensity
 uniform vec3 uLight;             // unit light direction, camera frame
@@ -152,6 +158,61 @@ vec3 estimateShade(vec3 n, vec4 frame, vec3 l) {
                 ay * uRoughness, l);
 }
 
+// The slice of pixel p at unit halfway vector h, as symframe::SampleRelighter reads it: the
+// first triangle holding h (no spherical barycentric weight below zero), its weights over the
+// corners with data renormalised; false outside the triangles or where no corner has data.
+bool sliceAt(ivec2 p, vec3 h, out vec3 value) {
+    for (int k = 0; k < uTriangles; k++) {
+        vec4 r0 = texelFetch(uTris, ivec2(0, k), 0);
+        vec4 r1 = texelFetch(uTris, ivec2(1, k), 0);
+        vec4 r2 = texelFetch(uTris, ivec2(2, k), 0);
+        vec3 w = vec3(dot(r0.xyz, h), dot(r1.xyz, h), dot(r2.xyz, h));
+        if (min(w.x, min(w.y, w.z)) < -1e-6) {
+            continue;
+        }
+        w /= w.x + w.y + w.z;
+        vec4 s0 = texelFetch(uSamples, ivec3(p, int(r0.w + 0.5) + 2), 0);
+        vec4 s1 = texelFetch(uSamples, ivec3(p, int(r1.w + 0.5) + 2), 0);
+        vec4 s2 = texelFetch(uSamples, ivec3(p, int(r2.w + 0.5) + 2), 0);
+        vec3 ws = vec3(w.x > 0.0 && s0.w > 0.5 ? w.x : 0.0, w.y > 0.0 && s1.w > 0.5 ? w.y : 0.0,
+                       w.z > 0.0 && s2.w > 0.5 ? w.z : 0.0);
+        float sum = ws.x + ws.y + ws.z;
+        if (sum <= 0.0) {
+            return false;
+        }
+        value = (ws.x * s0.rgb + ws.y * s1.rgb + ws.z * s2.rgb) / sum;
+        return true;
+    }
+    return false;
+}
+
+// The capture relit from its own samples (symframe::SampleRelighter::render): the slice at
+// the light's halfway vector, or at its mirror images in the pixel's frame, times n.l.
+vec3 samplesShade(ivec2 p, vec3 l) {
+    vec4 f0 = texelFetch(uSamples, ivec3(p, 0), 0);
+    if (f0.w < 0.5) {
+        return vec3(0.0);
+    }
+    vec3 n = normalize(f0.xyz);
+    vec3 t = texelFetch(uSamples, ivec3(p, 1), 0).xyz;
+    t = normalize(t - dot(t, n) * n);
+    float nl = dot(n, l);
+    vec3 hv = l + vec3(0.0, 0.0, 1.0);
+    if (nl <= 0.0 || dot(hv, hv) < 1e-12) {
+        return vec3(0.0);
+    }
+    vec3 h = normalize(hv);
+    vec3 b = cross(n, t);
+    vec3 ht = dot(h, t) * t;
+    vec3 hb = dot(h, b) * b;
+    vec3 v;
+    if (sliceAt(p, h, v) || sliceAt(p, h - 2.0 * hb, v) || sliceAt(p, h - 2.0 * ht, v)
+        || sliceAt(p, h - 2.0 * (ht + hb), v)) {
+        return max(v, 0.0) * nl;
+    }
+    return vec3(0.0);
+}
+
 void main() {
     ivec2 size = textureSize(uGeom, 0);
     // The canvas' y runs bottom to top, the map's and the textures' rows top to bottom.
@@ -183,6 +244,8 @@ void main() {
                        kd.a * uRoughness, ks.a * uRoughness, uLight);
             c = srgb3(rad * uGain);
         }
+    } else if (uView == 9) {
+        c = srgb3(samplesShade(p, normalize(uLight)) * uGain);
     } else if (uView == 1) {
         // symframe_io's normal picture, OpenGL convention: (n + 1) / 2.
         c = flag > 0 ? (n + 1.0) * 0.5 : vec3(0.0);

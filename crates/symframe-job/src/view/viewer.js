@@ -10,7 +10,8 @@
 //                    on its stand-in material)
 //   rotate=DEG       tangent rotation about the normal, degrees
 //   view=NAME        relit, normal, tangent, kd, ks (Ward) or base_color (glTF), confidence,
-//                    anisotropy, source
+//                    anisotropy, source, samples (the capture's photographs relit themselves,
+//                    where the page was written with --from-samples)
 //   zoom=Z           screen (CSS) pixels per map pixel (absent: the map fits the canvas)
 //   cx=X, cy=Y       the map point at the canvas' centre, map pixels from the top left corner
 //                    (default: the map's centre); zoom=1 in a canvas of the map's size shows
@@ -26,7 +27,7 @@
 
 (function () {
   const VIEWS = ["relit", "normal", "tangent", "kd", "ks", "confidence", "anisotropy", "source",
-                 "base_color"];
+                 "base_color", "samples"];
   const DEFAULTS = { light: [0, 0, 1], exposure: 0, diffuse: 1, specular: 1, roughness: 1,
                      rotate: 0, view: "relit", ui: 1, zoom: null, cx: null, cy: null };
   const $ = (id) => document.getElementById(id);
@@ -132,6 +133,36 @@
     gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA16F, w, h, 0, gl.RGBA, gl.HALF_FLOAT, px);
     return tex;
   }
+  function arrayTexture(w, h, layers, px) {
+    const tex = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_2D_ARRAY, tex);
+    for (const p of [gl.TEXTURE_MIN_FILTER, gl.TEXTURE_MAG_FILTER]) gl.texParameteri(gl.TEXTURE_2D_ARRAY, p, gl.NEAREST);
+    for (const p of [gl.TEXTURE_WRAP_S, gl.TEXTURE_WRAP_T]) gl.texParameteri(gl.TEXTURE_2D_ARRAY, p, gl.CLAMP_TO_EDGE);
+    gl.texImage3D(gl.TEXTURE_2D_ARRAY, 0, gl.RGBA16F, w, h, layers, 0, gl.RGBA, gl.HALF_FLOAT, px);
+    return tex;
+  }
+  function floatTexture(w, h, px) {
+    const tex = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_2D, tex);
+    for (const p of [gl.TEXTURE_MIN_FILTER, gl.TEXTURE_MAG_FILTER]) gl.texParameteri(gl.TEXTURE_2D, p, gl.NEAREST);
+    for (const p of [gl.TEXTURE_WRAP_S, gl.TEXTURE_WRAP_T]) gl.texParameteri(gl.TEXTURE_2D, p, gl.CLAMP_TO_EDGE);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, w, h, 0, gl.RGBA, gl.FLOAT, px);
+    return tex;
+  }
+  // The view `samples`: the frames and slices as one texture array (layer 0 normals, 1
+  // tangents, then one per light), the rig's triangles as three RGBA32F texels a row.
+  async function addSamples(smp) {
+    const layers = smp.lights + 2;
+    if (layers > gl.getParameter(gl.MAX_ARRAY_TEXTURE_LAYERS)) throw new Error(`the samples have ${smp.lights} lights; this browser's texture arrays take ${gl.getParameter(gl.MAX_ARRAY_TEXTURE_LAYERS) - 2}`);
+    const px = await decodeTexture(smp.layers, W, H * layers);
+    gl.activeTexture(gl.TEXTURE5);
+    gl.bindTexture(gl.TEXTURE_2D_ARRAY, arrayTexture(W, H, layers, px));
+    const tri = new Float32Array(smp.triangles.length * 12);
+    smp.triangles.forEach((rows, k) => rows.forEach((row, r) => tri.set(row, 12 * k + 4 * r)));
+    gl.activeTexture(gl.TEXTURE6);
+    gl.bindTexture(gl.TEXTURE_2D, floatTexture(3, smp.triangles.length, tri));
+    gl.uniform1i(uniforms.uTriangles, smp.triangles.length);
+  }
   function setup() {
     program = gl.createProgram();
     gl.attachShader(program, compile(gl.VERTEX_SHADER, $("vertex-shader").textContent));
@@ -141,12 +172,22 @@
     gl.useProgram(program);
     for (const name of SAMPLERS.concat(["uView", "uLight", "uGain", "uDiffuse", "uSpecular",
                                         "uRoughness", "uRotation", "uModel", "uIntensity", "uRect",
-                                        "uCenter", "uZoom", "uCanvas", "uOrigin", "uScale"])) {
+                                        "uCenter", "uZoom", "uCanvas", "uOrigin", "uScale",
+                                        "uSamples", "uTris", "uTriangles"])) {
       uniforms[name] = gl.getUniformLocation(program, name);
     }
     gl.uniform1i(uniforms.uModel, { ward: 0, gltf: 1, estimate: 2 }[data.model] || 0);
     gl.uniform1f(uniforms.uIntensity, data.light_intensity || 1);
     SAMPLERS.forEach((name, unit) => gl.uniform1i(uniforms[name], unit));
+    // The view `samples` reads units 5 (the texture array) and 6 (the triangulation); until
+    // (or unless) the samples are loaded, blank textures of the right kinds sit there.
+    gl.uniform1i(uniforms.uSamples, 5);
+    gl.uniform1i(uniforms.uTris, 6);
+    gl.uniform1i(uniforms.uTriangles, 0);
+    gl.activeTexture(gl.TEXTURE5);
+    gl.bindTexture(gl.TEXTURE_2D_ARRAY, arrayTexture(1, 1, 1, new Uint16Array(4)));
+    gl.activeTexture(gl.TEXTURE6);
+    gl.bindTexture(gl.TEXTURE_2D, floatTexture(1, 1, new Float32Array(4)));
     gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
     blank = texture(1, 1, new Uint16Array(4));
     gl.bindVertexArray(gl.createVertexArray());
@@ -683,6 +724,7 @@
     const t0 = performance.now();
     setup();
     await addTile(TOP, 0, 0, tw, th, data.textures);
+    if (data.samples) await addSamples(data.samples);
     // Only the controls of the model: a glTF fit has no free specular albedo.
     if (data.model === "gltf") $("specularRow").hidden = true;
     $("modelNote").textContent = { ward: "Anisotropic Ward fit.", gltf: "glTF metallic-roughness fit.",

@@ -279,7 +279,13 @@ def relight(fit_dir: PathLike, out: PathLike, lights: Any, **options: Any) -> np
     return _native.relight(os.fspath(fit_dir), os.fspath(out), lights, options)
 
 
-def view(fit_dir: PathLike, out: Optional[PathLike] = None, *, frames: Optional[PathLike] = None) -> str:
+def view(
+    fit_dir: PathLike,
+    out: Optional[PathLike] = None,
+    *,
+    frames: Optional[PathLike] = None,
+    from_samples: Optional[PathLike] = None,
+) -> str:
     """Runs ``symframe view``: writes one self-contained HTML page that relights the fit in
     ``fit_dir`` (a :func:`fit` output folder) in the browser, with the model and edits of
     :func:`relight`; returns its path.
@@ -288,12 +294,16 @@ def view(fit_dir: PathLike, out: Optional[PathLike] = None, *, frames: Optional[
     folder, for the confidence, anisotropy and source views (default: the one ``fit.json``
     records, if it is still there; otherwise a ``UserWarning`` says they are left out). The URL
     fragment sets the state, e.g. ``viewer.html#light=0.3,0.4,0.87&exposure=1``.
+    ``from_samples``: a capture whose photographs the view ``samples`` relights themselves in
+    the fit's frames, with no model, as :func:`relight` with ``from_samples`` (embedded in the
+    page: up to 254 lights and 512 MiB of half floats).
     """
     return os.fspath(
         _native.view(
             os.fspath(fit_dir),
             None if out is None else os.fspath(out),
             None if frames is None else os.fspath(frames),
+            None if from_samples is None else os.fspath(from_samples),
         )
     )
 

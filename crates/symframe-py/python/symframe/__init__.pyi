@@ -196,5 +196,11 @@ def relight(
 ) -> npt.NDArray[np.float32]:
     """The `symframe relight` job: N x H x W x 3 linear images, also written to `out`."""
 
-def view(fit_dir: PathLike, out: Optional[PathLike] = None, *, frames: Optional[PathLike] = None) -> str:
+def view(
+    fit_dir: PathLike,
+    out: Optional[PathLike] = None,
+    *,
+    frames: Optional[PathLike] = None,
+    from_samples: Optional[PathLike] = None,
+) -> str:
     """`symframe view`: the fit's self-contained HTML viewer page; returns its path."""

@@ -2,7 +2,7 @@
 //! halfway vectors on the disc, and a point-location grid. Built once per rig, shared by every
 //! pixel (the view is the same for every pixel of an orthographic camera).
 
-use glam::{DVec2, DVec3};
+use glam::{DMat3, DVec2, DVec3};
 
 use crate::error::{Error, Result};
 use crate::geometry::halfway_from_light;
@@ -316,6 +316,15 @@ impl Rig {
             .candidates(DVec2::new(halfway.x, halfway.y))
             .iter()
             .find_map(|&t| self.triangles[t as usize].weights(halfway))
+    }
+
+    /// The triangulation as [`Rig::locate`] reads it: per triangle, its corners (rig light
+    /// indices) and the inverse of the matrix whose columns are their halfway vectors (the
+    /// unnormalised spherical barycentric weights of `h` are its rows dotted with `h`).
+    pub(crate) fn triangles(&self) -> impl Iterator<Item = ([u32; 3], DMat3)> + '_ {
+        self.triangles
+            .iter()
+            .map(|t| (t.vertices, t.spherical_inverse))
     }
 
     /// The same lookup as [`Rig::locate`] by testing every triangle: the reference that tests
