@@ -7,7 +7,8 @@ Walks the crate's public paths from its root, following re-exports, and counts e
 named item once: modules, functions, structs, enums, traits, constants, statics, type aliases
 and macros. Enum variants, fields and methods are counted apart (methods: the public inherent
 methods of the counted types). --list prints every counted item's path.
-The JSON is built in target/public-items (cargo +nightly rustdoc ... --output-format json)."""
+The JSON is built in target/public-items (cargo +nightly rustdoc ... --output-format json, or the
+stable toolchain with RUSTC_BOOTSTRAP=1 where no nightly is installed)."""
 import json, os, subprocess, sys
 
 NAMED = {'module', 'function', 'struct', 'enum', 'trait', 'constant', 'static', 'type_alias',
@@ -15,9 +16,14 @@ NAMED = {'module', 'function', 'struct', 'enum', 'trait', 'constant', 'static', 
 
 def build(crate):
     target = os.path.join('target', 'public-items')
-    subprocess.run(['cargo', '+nightly', 'rustdoc', '-q', '-p', crate, '--lib', '--locked',
-                    '--', '-Z', 'unstable-options', '--output-format', 'json'],
-                   check=True, env={**os.environ, 'CARGO_TARGET_DIR': target})
+    args = ['rustdoc', '-q', '-p', crate, '--lib', '--locked', '--', '-Z', 'unstable-options',
+            '--output-format', 'json']
+    env = {**os.environ, 'CARGO_TARGET_DIR': target}
+    # A nightly toolchain where there is one; else the stable one with its unstable options
+    # unlocked (RUSTC_BOOTSTRAP), as on machines that can fetch no other toolchain.
+    if subprocess.run(['cargo', '+nightly'] + args, env=env,
+                      stderr=subprocess.DEVNULL).returncode != 0:
+        subprocess.run(['cargo'] + args, check=True, env={**env, 'RUSTC_BOOTSTRAP': '1'})
     return os.path.join(target, 'doc', crate.replace('-', '_') + '.json')
 
 def kind(item):
