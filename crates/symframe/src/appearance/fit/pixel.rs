@@ -452,59 +452,39 @@ impl PixelFitter<'_> {
         if self.wsamples.train.len() < min || self.gsamples.train.len() < min {
             return None;
         }
-        Some(match self.validation_evidence(v, iso) {
-            Some(e) => e,
-            None => self.training_evidence(v, iso),
-        })
-    }
-
-    /// The evidence of the candidates fitted on the training samples that are not from
-    /// validation lights and judged on those that are (`v` the view in the pixel's frame);
-    /// `None` where there are none or too few others.
-    fn validation_evidence(&mut self, v: DVec3, iso: bool) -> Option<ModelEvidence> {
-        let min = self.params.min_samples;
         let e = self.params.exposure;
         self.wsamples.split(&mut self.wfit, &mut self.wval);
         self.gsamples.split(&mut self.gfit, &mut self.gval);
-        if self.wval.is_empty()
-            || self.gval.is_empty()
-            || self.wfit.len() < min
-            || self.gfit.len() < min
-        {
-            return None;
-        }
+        let by_validation = !self.wval.is_empty()
+            && !self.gval.is_empty()
+            && self.wfit.len() >= min
+            && self.gfit.len() >= min;
+        let (wtrain, gtrain, judged) = if by_validation {
+            (&self.wfit, &self.gfit, &self.gval)
+        } else {
+            (
+                &self.wsamples.train,
+                &self.gsamples.train,
+                &self.gsamples.train,
+            )
+        };
         let params = self.params;
-        let ward = fit_samples(&self.wfit, iso, params);
-        let gltf = gltf_fit::fit_samples(&self.gfit, v, iso, params, &mut self.gscratch);
+        let ward = fit_samples(wtrain, iso, params);
+        let gltf = gltf_fit::fit_samples(gtrain, v, iso, params, &mut self.gscratch);
         let lobes = [LobeKind::Clearcoat, LobeKind::Woven]
-            .map(|k| lobe_fit::fit_samples(k, &self.gfit, v, iso, params, &mut self.lscratch));
-        let sse = [
-            gltf_fit::sse(&gltf, &self.gval, v, e).0,
-            sse(&ward, &self.wval).0,
-            lobe_fit::sse(&lobes[0], &self.gval, v).0,
-            lobe_fit::sse(&lobes[1], &self.gval, v).0,
-        ];
-        let signal: f64 = self.gval.iter().flat_map(|s| s.rgb).map(|v| v * v).sum();
+            .map(|k| lobe_fit::fit_samples(k, gtrain, v, iso, params, &mut self.lscratch));
+        let sse = if by_validation {
+            [
+                gltf_fit::sse(&gltf, &self.gval, v, e).0,
+                sse(&ward, &self.wval).0,
+                lobe_fit::sse(&lobes[0], &self.gval, v).0,
+                lobe_fit::sse(&lobes[1], &self.gval, v).0,
+            ]
+        } else {
+            [gltf.sse, ward.sse, lobes[0].sse, lobes[1].sse]
+        };
+        let signal: f64 = judged.iter().flat_map(|s| s.rgb).map(|v| v * v).sum();
         Some(ModelEvidence { sse, signal })
-    }
-
-    /// The evidence of the candidates fitted and judged on every training sample.
-    fn training_evidence(&mut self, v: DVec3, iso: bool) -> ModelEvidence {
-        let params = self.params;
-        let ward = fit_samples(&self.wsamples.train, iso, params);
-        let gltf = gltf_fit::fit_samples(&self.gsamples.train, v, iso, params, &mut self.gscratch);
-        let lobes = [LobeKind::Clearcoat, LobeKind::Woven].map(|k| {
-            lobe_fit::fit_samples(k, &self.gsamples.train, v, iso, params, &mut self.lscratch)
-        });
-        let sse = [gltf.sse, ward.sse, lobes[0].sse, lobes[1].sse];
-        let signal: f64 = self
-            .gsamples
-            .train
-            .iter()
-            .flat_map(|s| s.rgb)
-            .map(|v| v * v)
-            .sum();
-        ModelEvidence { sse, signal }
     }
 
     /// The fit of one pixel in the frame `(t, b, n)` with the model `choice`
