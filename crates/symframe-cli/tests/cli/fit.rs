@@ -62,18 +62,7 @@ fn estimate_fit_relight_end_to_end() {
     let o = symframe(&["estimate", s(&lp), "-o", s(&est)]);
     assert!(o.status.success(), "{}", stderr(&o));
     let fit = tmp.path().join("fit");
-    let o = symframe(&[
-        "fit",
-        s(&lp),
-        "--frames",
-        s(&est),
-        "-o",
-        s(&fit),
-        "--holdout",
-        "10",
-        "--model",
-        "ward",
-    ]);
+    let o = fit_with(&lp, &est, &fit, &["--holdout", "10", "--model", "ward"]);
     assert!(o.status.success(), "{}", stderr(&o));
     for f in [
         "kd.npy",
@@ -258,29 +247,20 @@ fn fit_refuses_mismatched_or_missing_frames() {
     let out = tmp.path().join("out");
     // Normals of another size.
     write_npy_f32(&frames.join("normals.npy"), &[10, 12, 3], &vec![0.0; 360]).unwrap();
-    let o = symframe(&["fit", s(&lp), "--frames", s(&frames), "-o", s(&out)]);
+    let o = fit_with(&lp, &frames, &out, &[]);
     assert_fails_keeping_cache(&o, "normals.npy", &out);
     // Tangents missing.
     true_frames(&frames, &scene);
     fs::remove_file(frames.join("tangents.npy")).unwrap();
-    let o = symframe(&["fit", s(&lp), "--frames", s(&frames), "-o", s(&out)]);
+    let o = fit_with(&lp, &frames, &out, &[]);
     assert_fails_keeping_cache(&o, "tangents.npy", &out);
     // Tangents not an array file.
     fs::write(frames.join("tangents.npy"), b"not npy").unwrap();
-    let o = symframe(&["fit", s(&lp), "--frames", s(&frames), "-o", s(&out)]);
+    let o = fit_with(&lp, &frames, &out, &[]);
     assert_fails_keeping_cache(&o, "tangents.npy", &out);
     // Too many lights held out; a missing dataset.
     true_frames(&frames, &scene);
-    let o = symframe(&[
-        "fit",
-        s(&lp),
-        "--frames",
-        s(&frames),
-        "-o",
-        s(&out),
-        "--holdout",
-        "40",
-    ]);
+    let o = fit_with(&lp, &frames, &out, &["--holdout", "40"]);
     assert_fails_keeping_cache(&o, "--holdout", &out);
     let o = symframe(&[
         "fit",
@@ -294,19 +274,10 @@ fn fit_refuses_mismatched_or_missing_frames() {
     // A wrong-size mask.
     let small = tmp.path().join("small.png");
     symframe_io::write_png8_rgb(&small, 5, 5, &[1.0; 75], false).unwrap();
-    let o = symframe(&[
-        "fit",
-        s(&lp),
-        "--frames",
-        s(&frames),
-        "-o",
-        s(&out),
-        "--mask",
-        s(&small),
-    ]);
+    let o = fit_with(&lp, &frames, &out, &["--mask", s(&small)]);
     assert_fails_keeping_cache(&o, "small.png: mask is 5x5 but the images are 12x12", &out);
     // And the good case works with true frames.
-    let o = symframe(&["fit", s(&lp), "--frames", s(&frames), "-o", s(&out)]);
+    let o = fit_with(&lp, &frames, &out, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(!out.join("holdout_residual.npy").exists());
 }
@@ -364,7 +335,7 @@ fn fit_refuses_frames_of_another_capture() {
     let cached = listing(&cache);
 
     let out = tmp.path().join("fit");
-    let o = symframe(&["fit", s(&lp_b), "--frames", s(&est), "-o", s(&out)]);
+    let o = fit_with(&lp_b, &est, &out, &[]);
     assert_fails_naming(
         &o,
         &format!(
@@ -425,16 +396,7 @@ fn relight_refuses_bad_fit_folders_regions_and_light_files() {
     let (scene, _, lp) = dataset(&tmp.path().join("data"), 12, 60);
     let frames = true_frames(&tmp.path().join("frames"), &scene);
     let fit = tmp.path().join("fit");
-    let o = symframe(&[
-        "fit",
-        s(&lp),
-        "--frames",
-        s(&frames),
-        "-o",
-        s(&fit),
-        "--model",
-        "ward",
-    ]);
+    let o = fit_with(&lp, &frames, &fit, &["--model", "ward"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = tmp.path().join("out");
     let relight = |extra: &[&str]| {
@@ -603,18 +565,7 @@ fn gltf_fit_relight_and_export_reproduce_a_brushed_gltf_metal_at_any_exposure() 
     let (scene, lp) = sphere_dataset(&p("data"), 24, 300, &truth, ImageFormat::Exr, 3.0, flags);
     let frames = true_frames(&p("frames"), &scene);
     let fit = p("fit");
-    let o = symframe(&[
-        "fit",
-        s(&lp),
-        "--frames",
-        s(&frames),
-        "-o",
-        s(&fit),
-        "--model",
-        "gltf",
-        "--holdout",
-        "10",
-    ]);
+    let o = fit_with(&lp, &frames, &fit, &["--model", "gltf", "--holdout", "10"]);
     assert!(o.status.success(), "{}", stderr(&o));
     for f in [
         "base_color.npy",
@@ -727,16 +678,7 @@ fn fit_refuses_bad_model_flags() {
         ("--roughness-min", "1.5", "--roughness-min"),
         ("--choice-radius", "many", "--choice-radius"),
     ] {
-        let o = symframe(&[
-            "fit",
-            s(&lp),
-            "--frames",
-            s(&frames),
-            "-o",
-            s(&out),
-            flag,
-            value,
-        ]);
+        let o = fit_with(&lp, &frames, &out, &[flag, value]);
         assert!(!o.status.success(), "{flag} {value}");
         assert!(
             stderr(&o).contains(needle),
@@ -746,18 +688,12 @@ fn fit_refuses_bad_model_flags() {
         assert!(!out.exists(), "{flag} {value}");
     }
     // An explicit exposure is used as given and recorded.
-    let o = symframe(&[
-        "fit",
-        s(&lp),
-        "--frames",
-        s(&frames),
-        "-o",
-        s(&out),
-        "--model",
-        "gltf",
-        "--exposure",
-        "2.5",
-    ]);
+    let o = fit_with(
+        &lp,
+        &frames,
+        &out,
+        &["--model", "gltf", "--exposure", "2.5"],
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     let r = report_of(&out);
     assert_eq!(
@@ -771,16 +707,7 @@ fn fit_refuses_bad_model_flags() {
     );
     // The automatic choice's neighbourhood is recorded, and its first pass is counted.
     let auto = tmp.path().join("auto");
-    let o = symframe(&[
-        "fit",
-        s(&lp),
-        "--frames",
-        s(&frames),
-        "-o",
-        s(&auto),
-        "--choice-radius",
-        "1",
-    ]);
+    let o = fit_with(&lp, &frames, &auto, &["--choice-radius", "1"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let r = report_of(&auto);
     assert_eq!(r["parameters"]["model"], "auto");
@@ -790,6 +717,11 @@ fn fit_refuses_bad_model_flags() {
         "one pass each over the same tiles"
     );
     assert!(!auto.join(".symframe-evidence-tiles").exists());
+}
+
+/// Runs `symframe fit LP --frames FRAMES -o OUT` with `extra` flags.
+fn fit_with(lp: &Path, frames: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
+    symframe(&[&["fit", s(lp), "--frames", s(frames), "-o", s(out)], extra].concat())
 }
 
 /// The `fit.json` of a fit folder.
