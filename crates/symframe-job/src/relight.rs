@@ -282,7 +282,7 @@ pub fn read_gltf_maps(dir: &Path) -> Result<GltfMaps> {
 }
 
 /// Reads one map of the fit folder, which must have the shape `expect`.
-fn read_map(dir: &Path, name: &str, expect: &[usize]) -> Result<Vec<f32>> {
+pub(crate) fn read_map(dir: &Path, name: &str, expect: &[usize]) -> Result<Vec<f32>> {
     let path = dir.join(format!("{name}.npy"));
     if !path.is_file() {
         bail!(
@@ -293,7 +293,7 @@ fn read_map(dir: &Path, name: &str, expect: &[usize]) -> Result<Vec<f32>> {
     let (shape, data) = symframe_io::read_npy_f32(&path)?;
     if shape != expect {
         bail!(
-            "{}: shape {shape:?} does not match the fit's other maps ({expect:?} expected)",
+            "{}: shape {shape:?} does not match the folder's other maps ({expect:?} expected)",
             path.display()
         );
     }

@@ -58,29 +58,23 @@ pub(super) fn page_samples(
             MAX_SAMPLE_BYTES >> 20
         );
     }
-    let (normals, tangents) = if estimate {
-        let read = |name: &str| -> Result<Option<Vec<f32>>> {
-            let path = config.fit_dir.join(name);
-            if !path.exists() {
-                return Ok(None);
-            }
-            let (shape, data) = symframe_io::read_npy_f32(&path)?;
-            if shape != [h, w, 3] {
-                bail!(
-                    "{}: shape {shape:?}, the maps are {h} x {w} x 3",
-                    path.display()
-                );
-            }
-            Ok(Some(data))
+    // The frames: an estimate folder's maps (no tangent map: every pixel isotropic), or a
+    // fit's.
+    let (estimated, fitted);
+    let (normals, tangents): (&[f32], &[f32]) = if estimate {
+        let read = |name| crate::relight::read_map(&config.fit_dir, name, &[h, w, 3]);
+        let tangents = if config.fit_dir.join("tangents.npy").is_file() {
+            read("tangents")?
+        } else {
+            vec![f32::NAN; w * h * 3]
         };
-        let normals = read("normals.npy")?.unwrap_or_default();
-        let tangents = read("tangents.npy")?.unwrap_or_else(|| vec![f32::NAN; w * h * 3]);
-        (normals, tangents)
+        estimated = (read("normals")?, tangents);
+        (&estimated.0, &estimated.1)
     } else {
-        let maps = crate::relight::read_fit_maps(&config.fit_dir)?;
-        (maps.normals().to_vec(), maps.tangents().to_vec())
+        fitted = crate::relight::read_fit_maps(&config.fit_dir)?;
+        (fitted.normals(), fitted.tangents())
     };
-    let relighter = crate::relight::sample_relighter(capture, decode, &normals, &tangents, (w, h))?;
+    let relighter = crate::relight::sample_relighter(capture, decode, normals, tangents, (w, h))?;
     let t = relighter.tables();
     let n = w * h;
     let mut halves = vec![0u16; n * (t.lights + 2) * 4];
