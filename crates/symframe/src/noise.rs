@@ -40,27 +40,24 @@ impl Quantisation {
                 step * step / 12.0
             }
             Quantisation::Srgb(bits) => {
-                // d(linear)/d(encoded) at v, times the encoded step.
-                let e = linear_to_srgb(v.clamp(0.0, 1.0));
-                let slope = if e <= 0.04045 {
-                    1.0 / 12.92
+                // d(linear)/d(encoded) at v, times the encoded step: linear = ((e + 0.055) /
+                // 1.055)^2.4 has the slope 2.4 / 1.055 ((e + 0.055) / 1.055)^1.4, which is
+                // 2.4 / 1.055 v^(7/12) above the linear toe; squared, one power of v.
+                let v = v.clamp(0.0, 1.0);
+                let step = 1.0 / ((1u64 << bits) - 1) as f64;
+                let slope2 = if v <= SRGB_TOE {
+                    1.0 / (12.92 * 12.92)
                 } else {
-                    2.4 / 1.055 * ((e + 0.055) / 1.055).powf(1.4)
+                    (2.4 / 1.055) * (2.4 / 1.055) * v.powf(7.0 / 6.0)
                 };
-                let step = slope / ((1u64 << bits) - 1) as f64;
-                step * step / 12.0
+                slope2 * step * step / 12.0
             }
         }
     }
 }
 
-fn linear_to_srgb(v: f64) -> f64 {
-    if v <= 0.003_130_8 {
-        v * 12.92
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    }
-}
+/// The linear value below which sRGB's encoding is linear (slope 12.92).
+const SRGB_TOE: f64 = 0.003_130_8;
 
 /// A capture's noise model, in the stack's units.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
@@ -361,6 +358,26 @@ mod tests {
         let s = Quantisation::Srgb(8);
         assert!(s.variance(0.01) < q && s.variance(0.9) > q);
         assert_eq!(Quantisation::Float.variance(0.5), 0.0);
+        // The sRGB step at each 16-bit code, read from the decoding itself: the linear values
+        // of the code and its neighbour, on both sides of the linear toe.
+        let decode = |e: f64| {
+            if e <= 0.040_45 {
+                e / 12.92
+            } else {
+                ((e + 0.055) / 1.055).powf(2.4)
+            }
+        };
+        let s16 = Quantisation::Srgb(16);
+        for code in [20u32, 2000, 2651, 2700, 30_000, 65_000] {
+            let (e0, e1) = (code as f64 / 65535.0, (code + 1) as f64 / 65535.0);
+            let (lo, hi) = (decode(e0), decode(e1));
+            let stepped = (hi - lo).powi(2) / 12.0;
+            let modelled = s16.variance(0.5 * (lo + hi));
+            assert!(
+                (modelled / stepped - 1.0).abs() < 1e-3,
+                "code {code}: {modelled} against {stepped}"
+            );
+        }
     }
 
     #[test]

@@ -11,6 +11,8 @@ pub(super) fn solve_spd<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -
 /// Solves `a x = b` over the leading `n` x `n` block of `a` by Cholesky, in place (`b` becomes
 /// `x`, `a` its factor); false where the `j`-th pivot is NaN or at most `floor(j)` (the block is
 /// not positive definite, or too near singular). The two-lobe fit's active-set solves share it.
+/// Each pivot's reciprocal is taken once and multiplied by: the Levenberg-Marquardt loop
+/// solves several of these per pass over the samples, and divisions are most of their time.
 // Index loops: the triangular recurrences read clearer as the textbook's indices.
 #[allow(clippy::needless_range_loop)]
 pub(super) fn cholesky_solve<const N: usize>(
@@ -19,6 +21,7 @@ pub(super) fn cholesky_solve<const N: usize>(
     n: usize,
     floor: impl Fn(usize) -> f64,
 ) -> bool {
+    let mut inv = [0.0; N];
     for j in 0..n {
         let mut d = a[j][j];
         for k in 0..j {
@@ -29,12 +32,13 @@ pub(super) fn cholesky_solve<const N: usize>(
         }
         let d = d.sqrt();
         a[j][j] = d;
+        inv[j] = 1.0 / d;
         for i in j + 1..n {
             let mut v = a[i][j];
             for k in 0..j {
                 v -= a[i][k] * a[j][k];
             }
-            a[i][j] = v / d;
+            a[i][j] = v * inv[j];
         }
     }
     for i in 0..n {
@@ -42,14 +46,14 @@ pub(super) fn cholesky_solve<const N: usize>(
         for k in 0..i {
             v -= a[i][k] * b[k];
         }
-        b[i] = v / a[i][i];
+        b[i] = v * inv[i];
     }
     for i in (0..n).rev() {
         let mut v = b[i];
         for k in i + 1..n {
             v -= a[k][i] * b[k];
         }
-        b[i] = v / a[i][i];
+        b[i] = v * inv[i];
     }
     true
 }
