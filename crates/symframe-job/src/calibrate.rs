@@ -9,9 +9,7 @@ use std::path::{Component, Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
-use symframe::{
-    Circle, Detection, Highlight, HighlightError, HighlightParams, MatteError, MatteParams,
-};
+use symframe::{CalibrationError, CalibrationParams, Circle, Detection, Highlight};
 use symframe_io::DecodeOptions;
 
 use crate::{Control, Interrupted};
@@ -32,7 +30,7 @@ pub struct CalibrateConfig {
     /// Fail on the first image without a single clear highlight (else drop it with a warning).
     pub strict: bool,
     /// A diffuse (matte, grey) sphere's circle: per light, its RGB intensity is measured there
-    /// ([`symframe::MatteParams::intensity`]) and written as `light_intensities.txt` beside
+    /// ([`symframe::CalibrationParams::intensity`]) and written as `light_intensities.txt` beside
     /// the `.lp`, normalised to a mean of 1 over every light and channel.
     pub matte_sphere: Option<Circle>,
     /// How images are decoded.
@@ -280,7 +278,7 @@ pub(crate) fn read_grey(
 }
 
 /// The rows a circle's pixels lie in, clipped to an image of `height` rows (as
-/// [`MatteParams::intensity`] and [`Highlight::find`] bound their pixels).
+/// [`CalibrationParams::intensity`] and [`Highlight::find`] bound their pixels).
 pub(crate) fn circle_rows(c: &Circle, height: usize) -> std::ops::Range<usize> {
     let y0 = (c.cy - c.r).floor().max(0.0) as usize;
     let y1 = ((c.cy + c.r).ceil().max(0.0) as usize).min(height);
@@ -473,15 +471,15 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
         Some(c) => (c, "given", None),
         None => detect_sphere(config, &images, (w, h), at_once, &stopped)?,
     };
-    let params = HighlightParams {
-        fraction: config.threshold,
-        ..HighlightParams::default()
+    let params = CalibrationParams {
+        highlight_fraction: config.threshold,
+        ..CalibrationParams::default()
     };
     // The brightest of all images (NaN where any was saturated), for the picture.
     let max_image = std::sync::Mutex::new(vec![0.0f32; w * h]);
     type Outcome = (
-        Result<Highlight, HighlightError>,
-        Option<Result<[f64; 3], MatteError>>,
+        Result<Highlight, CalibrationError>,
+        Option<Result<[f64; 3], CalibrationError>>,
     );
     let sphere_rows = circle_rows(&circle, h);
     let mut results: Vec<Outcome> = Vec::with_capacity(images.len());
@@ -514,7 +512,7 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
                 // The matte sphere from its rows alone: its circle moved up by their first
                 // (a whole number of rows: every pixel's offset from the centre is the same).
                 let matte = match (&res, &config.matte_sphere) {
-                    (Ok(hl), Some(c)) => Some(MatteParams::default().intensity(
+                    (Ok(hl), Some(c)) => Some(CalibrationParams::default().intensity(
                         w,
                         matte_rows.len(),
                         &rgb,
@@ -552,7 +550,7 @@ pub fn calibrate(config: &CalibrateConfig, ctl: &Control) -> Result<CalibrationR
             }
             (Ok(hl), None) => Ok((hl, None)),
             (Err(e), _) => {
-                if let HighlightError::Several { x1, y1, x2, y2, .. } = e {
+                if let CalibrationError::Several { x1, y1, x2, y2, .. } = e {
                     bad.extend([(x1, y1), (x2, y2)]);
                 }
                 Err(e.to_string())

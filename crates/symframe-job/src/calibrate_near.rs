@@ -5,7 +5,7 @@
 //! ([`symframe::Pinhole::sphere_from_rim`], [`symframe::Triangulation::from_rays`]); the
 //! highlights and the spheres' outlines too. With a matte sphere in the images, each light's
 //! radiant intensity is measured on it with the light's falloff from its position
-//! ([`symframe::MatteParams::near_sphere_intensity`]) and written as `light_intensities.txt`.
+//! ([`symframe::CalibrationParams::near_sphere_intensity`]) and written as `light_intensities.txt`.
 //! This module reads the images and writes the files.
 
 use std::path::{Path, PathBuf};
@@ -15,7 +15,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use serde::Serialize;
 use symframe::{
-    Circle, Detection, Highlight, HighlightParams, MatteParams, Pinhole, PointLight, Triangulation,
+    CalibrationParams, Circle, Detection, Highlight, Pinhole, PointLight, Triangulation,
 };
 use symframe_io::DecodeOptions;
 
@@ -473,9 +473,9 @@ fn find_highlights(
         .map(|c| crate::calibrate::circle_rows(c, h))
         .fold(h..0, |a, r| a.start.min(r.start)..a.end.max(r.end));
     let rows = if rows.start < rows.end { rows } else { 0..0 };
-    let params = HighlightParams {
-        fraction: config.threshold,
-        ..HighlightParams::default()
+    let params = CalibrationParams {
+        highlight_fraction: config.threshold,
+        ..CalibrationParams::default()
     };
     let mut found: Vec<Vec<Sighting>> = Vec::with_capacity(images.len());
     for batch in images.chunks(cap.at_once) {
@@ -743,7 +743,7 @@ const INTENSITIES: &str = "light_intensities.txt";
 
 /// The matte sphere placed by its outline in the mean image (or its circle's rim) and
 /// `radius`, then each image's RGB rows of it read again and each light's intensity measured
-/// with its falloff from `positions` ([`MatteParams::near_sphere_intensity`], isotropic
+/// with its falloff from `positions` ([`CalibrationParams::near_sphere_intensity`], isotropic
 /// lights); the record (the mean over lights and channels, which must be positive) and the raw
 /// intensities in the images' order. An image where too few of its pixels face the light is an
 /// error naming it.
@@ -784,7 +784,7 @@ fn matte_intensities(
     k[1][2] -= rows.start as f64;
     let crop = Pinhole::from_k(k).map_err(anyhow::Error::msg)?;
     let opts = config.decode.clone();
-    let params = MatteParams::default();
+    let params = CalibrationParams::default();
     let mut raw: Vec<[f64; 3]> = Vec::with_capacity(images.len());
     let at_once = at_once.max(1);
     for (b, batch) in images.chunks(at_once).enumerate() {

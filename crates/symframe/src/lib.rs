@@ -20,7 +20,7 @@
 //! - Integrate: a depth map from the normals ([`DepthMap::integrate`]; seen through a pinhole,
 //!   [`Pinhole::integrate`]) and its mesh ([`DepthMap::mesh`]).
 //! - Calibrate: light directions from chrome and matte spheres ([`Highlight::find`],
-//!   [`Detection::find`], [`MatteParams::intensity`]); near lights and perspective cameras
+//!   [`Detection::find`], [`CalibrationParams::intensity`]); near lights and perspective cameras
 //!   ([`Pinhole`], [`PointLight`], [`NearParams`], [`Triangulation`]).
 //! - [`brdf`] (reflectance models) and [`render`] (the synthetic renderer that tests and
 //!   experiments measure against).
@@ -141,22 +141,19 @@ pub use maps::{EstimateMaps, PixelCounts, PixelRecord, PixelSource, PixelStatus}
 
 // Fitting a BRDF per pixel in the estimated frames, and relighting the fit.
 pub use appearance::fit::{
-    EvidenceMethod, ExposureChoice, FitMaps, FitMethod, FitModel, FitParams, FitStatus, FitSummary,
-    GltfMaps, HoldoutError, LobeMaps, ModelEvidence, PixelData, PixelFitter, PixelOutcome, WardFit,
-    WardMaps,
+    ExposureChoice, FitMaps, FitMethod, FitModel, FitParams, FitSummary, GltfMaps, HoldoutError,
+    LobeMaps, ModelEvidence, PixelData, PixelFitter, PixelOutcome, WardFit, WardMaps,
 };
 pub use appearance::gltf_fit::GltfFit;
 pub use appearance::lobe_fit::{LobeFit, LobeKind, LobeModel};
 pub use appearance::relight::{Edits, Relighter};
-pub use appearance::sample_relight::{SampleRelighter, SampleTables};
+pub use appearance::sample_relight::SampleRelighter;
 
 // Depth from normals, and a mesh of it.
 pub use integrate::{DepthMap, IntegrateParams, Mesh, Solver};
 
 // Light calibration: chrome and matte spheres.
-pub use calibrate::{
-    Circle, Detection, Highlight, HighlightError, HighlightParams, MatteError, MatteParams,
-};
+pub use calibrate::{CalibrationError, CalibrationParams, Circle, Detection, Highlight};
 
 // Near lights and perspective cameras.
 pub use near::chrome::Triangulation;

@@ -75,12 +75,12 @@ pub(super) fn page_samples(
         (fitted.normals(), fitted.tangents())
     };
     let relighter = crate::relight::sample_relighter(capture, decode, normals, tangents, (w, h))?;
-    let t = relighter.tables();
+    let lights = relighter.lights();
     let n = w * h;
-    let mut halves = vec![0u16; n * (t.lights + 2) * 4];
+    let mut halves = vec![0u16; n * (lights + 2) * 4];
     let (frames, slices) = halves.split_at_mut(n * 8);
     let (normal_layer, tangent_layer) = frames.split_at_mut(n * 4);
-    for (p, frame) in t.frames.iter().enumerate() {
+    for (p, frame) in relighter.frames().iter().enumerate() {
         if let Some((normal, tangent)) = frame {
             for c in 0..3 {
                 normal_layer[4 * p + c] = half_bits(normal[c] as f32);
@@ -89,7 +89,11 @@ pub(super) fn page_samples(
             normal_layer[4 * p + 3] = half_bits(1.0);
         }
     }
-    for (p, slice) in t.slices.chunks_exact(t.lights.max(1) * 3).enumerate() {
+    for (p, slice) in relighter
+        .slices()
+        .chunks_exact(lights.max(1) * 3)
+        .enumerate()
+    {
         for (k, rgb) in slice.chunks_exact(3).enumerate() {
             if rgb.iter().all(|v| v.is_finite()) {
                 let o = 4 * (k * n + p);
@@ -100,9 +104,8 @@ pub(super) fn page_samples(
             }
         }
     }
-    let triangles = t
-        .triangles
-        .iter()
+    let triangles = relighter
+        .triangles()
         .map(|(corners, inverse)| {
             let rows = inverse.transpose();
             [0, 1, 2].map(|r| {
@@ -112,7 +115,7 @@ pub(super) fn page_samples(
         })
         .collect();
     Ok(PageSamples {
-        lights: t.lights,
+        lights,
         layers: encode_halves(&halves, 6)?,
         triangles,
     })
@@ -181,10 +184,10 @@ mod tests {
             None,
         )
         .unwrap();
-        let t = r.tables();
+        let triangles: Vec<_> = r.triangles().collect();
         assert_eq!(page.lights, 30);
-        assert_eq!(page.triangles.len(), t.triangles.len());
-        for ((corners, inverse), rows) in t.triangles.iter().zip(&page.triangles) {
+        assert_eq!(page.triangles.len(), triangles.len());
+        for ((corners, inverse), rows) in triangles.iter().zip(&page.triangles) {
             for r in 0..3 {
                 assert_eq!(rows[r][3], corners[r] as f32);
                 assert_eq!(rows[r][0], inverse.col(0)[r] as f32);
@@ -202,7 +205,7 @@ mod tests {
             |i: usize| half::f16::from_bits(u16::from_le_bytes([raw[i], raw[n + i]])).to_f32();
         let mut valid = 0;
         for p in 0..100 {
-            match t.frames[p] {
+            match r.frames()[p] {
                 Some((normal, _)) => {
                     assert_eq!(half(4 * p + 3), 1.0);
                     assert!((half(4 * p + 2) - normal.z as f32).abs() < 1e-3);
@@ -211,7 +214,7 @@ mod tests {
             }
             for k in 0..30 {
                 let o = 4 * ((k + 2) * 100 + p);
-                let rgb = &t.slices[(p * 30 + k) * 3..(p * 30 + k) * 3 + 3];
+                let rgb = &r.slices()[(p * 30 + k) * 3..(p * 30 + k) * 3 + 3];
                 if rgb[0].is_finite() {
                     valid += 1;
                     assert_eq!(half(o + 3), 1.0);

@@ -143,35 +143,33 @@ impl SampleRelighter {
         out
     }
 
-    /// The slices, frames and triangulation [`SampleRelighter::render`] reads, for a renderer
-    /// elsewhere (the viewer's shader) to relight the same way.
-    pub fn tables(&self) -> SampleTables<'_> {
-        SampleTables {
-            lights: self.rig.n_used(),
-            frames: &self.frames,
-            slices: &self.slices,
-            triangles: self.rig.triangles().collect(),
-        }
-    }
-}
+    // What a renderer elsewhere (the viewer's shader) reads to relight as
+    // [`SampleRelighter::render`] does: the slices, the frames and the triangulation.
 
-/// What a renderer outside this crate (the viewer's shader) needs to relight as
-/// [`SampleRelighter::render`] does ([`SampleRelighter::tables`]).
-#[derive(Debug, Clone)]
-pub struct SampleTables<'a> {
     /// The lights of the slices (the rig's, in its order).
-    pub lights: usize,
+    pub fn lights(&self) -> usize {
+        self.rig.n_used()
+    }
+
     /// Per pixel (rows top to bottom): the unit normal and tangent (camera frame), `None`
     /// without a frame.
-    pub frames: &'a [Option<(DVec3, DVec3)>],
-    /// Per pixel, per light (`lights` of them): the RGB slice, radiance over `n.l`; NaN where
-    /// the sample is invalid or the light is behind the surface.
-    pub slices: &'a [f32],
+    pub fn frames(&self) -> &[Option<(DVec3, DVec3)>] {
+        &self.frames
+    }
+
+    /// Per pixel, per light ([`SampleRelighter::lights`] of them): the RGB slice, radiance
+    /// over `n.l`; NaN where the sample is invalid or the light is behind the surface.
+    pub fn slices(&self) -> &[f32] {
+        &self.slices
+    }
+
     /// The rig's triangulation of the halfway vectors: per triangle, its corners (indices of
     /// the slices' lights) and the inverse of the matrix whose columns are their halfway
     /// vectors (its rows dotted with a halfway vector give the unnormalised spherical
     /// barycentric weights; the triangle holds the vector where none is negative).
-    pub triangles: Vec<([u32; 3], DMat3)>,
+    pub fn triangles(&self) -> impl Iterator<Item = ([u32; 3], DMat3)> + '_ {
+        self.rig.triangles()
+    }
 }
 
 /// The slice's RGB value at a unit halfway vector: the estimator's barycentric interpolation

@@ -4,30 +4,7 @@
 
 use glam::DVec3;
 
-use super::{light_from_normal, Circle};
-
-/// Thresholds of [`Highlight::find`].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct HighlightParams {
-    /// The spot is the pixels above `median + fraction * (peak - median)`.
-    pub fraction: f64,
-    /// The peak must be at least this many times the sphere's median (plus a small floor),
-    /// or be saturated.
-    pub min_contrast: f64,
-    /// A second spot with at least this share of the main spot's weight makes the image
-    /// ambiguous.
-    pub several_ratio: f64,
-}
-
-impl Default for HighlightParams {
-    fn default() -> Self {
-        Self {
-            fraction: 0.3,
-            min_contrast: 5.0,
-            several_ratio: 0.2,
-        }
-    }
-}
+use super::{light_from_normal, CalibrationError, CalibrationParams, Circle};
 
 /// A located highlight.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -46,43 +23,6 @@ pub struct Highlight {
     pub saturated: usize,
     /// Peak value over the sphere's median.
     pub contrast: f64,
-}
-
-/// Why no highlight was taken from an image.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum HighlightError {
-    /// No sphere pixel in the image.
-    #[error("the sphere's circle holds no pixel of the image")]
-    OffImage,
-    /// Nothing on the sphere stands out.
-    #[error(
-        "no highlight on the sphere (peak {contrast:.1}x the sphere's median, {min:.0}x needed)"
-    )]
-    None {
-        /// Peak over median.
-        contrast: f64,
-        /// The contrast asked for.
-        min: f64,
-    },
-    /// Two or more comparable spots.
-    #[error(
-        "{count} highlights on the sphere (the second has {share:.0}% of the first's weight); \
-         near ({x1:.1}, {y1:.1}) and ({x2:.1}, {y2:.1})"
-    )]
-    Several {
-        /// Spots above the threshold.
-        count: usize,
-        /// Weight of the second spot over the first's, percent.
-        share: f64,
-        /// Centre of the first, x.
-        x1: f64,
-        /// Centre of the first, y.
-        y1: f64,
-        /// Centre of the second, x.
-        x2: f64,
-        /// Centre of the second, y.
-        y2: f64,
-    },
 }
 
 /// The margin in pixels around a highlight's spot its centroid reads: three standard
@@ -104,8 +44,8 @@ impl Highlight {
         height: usize,
         grey: &[f32],
         circle: &Circle,
-        params: &HighlightParams,
-    ) -> Result<Highlight, HighlightError> {
+        params: &CalibrationParams,
+    ) -> Result<Highlight, CalibrationError> {
         let (c0, c1, r0, r1) = circle.bounds(width, height);
         let mut inside = Vec::new();
         for row in r0..r1 {
@@ -116,7 +56,7 @@ impl Highlight {
             }
         }
         if inside.is_empty() {
-            return Err(HighlightError::OffImage);
+            return Err(CalibrationError::OffImage);
         }
         let mut finite: Vec<f32> = inside
             .iter()
@@ -133,20 +73,20 @@ impl Highlight {
         let peak = finite.last().copied().unwrap_or(0.0) as f64;
         // Saturated pixels are at least as bright as anything measured, and stand out.
         let top = if saturated_any {
-            peak.max(median * params.min_contrast).max(1e-6)
+            peak.max(median * params.highlight_min_contrast).max(1e-6)
         } else {
             peak.max(median)
         };
         let floor = 1e-6 * top.max(1e-12);
         let contrast = top / (median + floor);
-        let stands_out = contrast >= params.min_contrast && top > 0.0;
+        let stands_out = contrast >= params.highlight_min_contrast && top > 0.0;
         if !(saturated_any || stands_out) {
-            return Err(HighlightError::None {
+            return Err(CalibrationError::None {
                 contrast,
-                min: params.min_contrast,
+                min: params.highlight_min_contrast,
             });
         }
-        let threshold = median + params.fraction * (top - median);
+        let threshold = median + params.highlight_fraction * (top - median);
         let value = |i: usize| -> f64 {
             let v = grey[i];
             if v.is_finite() {
@@ -284,10 +224,10 @@ impl Highlight {
         let (main_w, main) = &spots[0];
         let (normal, saturated) = centre(0);
         if let Some((second_w, _)) = spots.get(1) {
-            if *second_w > params.several_ratio * main_w {
+            if *second_w > params.highlight_several_ratio * main_w {
                 let (n2, _) = centre(1);
                 let ((x1, y1), (x2, y2)) = (circle.point_of(normal), circle.point_of(n2));
-                return Err(HighlightError::Several {
+                return Err(CalibrationError::Several {
                     count: spots.len(),
                     share: 100.0 * second_w / main_w,
                     x1,

@@ -1,50 +1,14 @@
-//! Light intensities from a matte (Lambertian) sphere or plane ([`MatteParams`]): the
+//! Light intensities from a matte (Lambertian) sphere or plane ([`CalibrationParams`]): the
 //! least-squares Lambertian fit of the pixels a light reaches, the rim left out.
 
 use glam::DVec3;
 
-use super::Circle;
-
-/// What [`MatteParams::intensity`] needs besides the image.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct MatteParams {
-    /// Pixels where the light is this close to grazing (`n.l` below it) are left out: their
-    /// values are small, and a cast shadow or a slightly wrong normal there weighs most.
-    pub min_cosine: f64,
-    /// Pixels within this many pixels of the rim are left out (partly covered by the sphere).
-    pub rim_margin: f64,
-    /// Fewest usable pixels for a fit.
-    pub min_pixels: usize,
-}
-
-impl Default for MatteParams {
-    fn default() -> Self {
-        Self {
-            min_cosine: 0.2,
-            rim_margin: 1.5,
-            min_pixels: 20,
-        }
-    }
-}
-
-/// Why no intensity was measured on the matte sphere for one light.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum MatteError {
-    /// Too few sphere pixels face the light (a light far behind the sphere) or are usable, or
-    /// their normals are too alike to fix the light.
-    #[error("only {pixels} pixels of the matte sphere face the light usably ({needed} needed)")]
-    TooFewPixels {
-        /// Usable pixels.
-        pixels: usize,
-        /// Pixels needed.
-        needed: usize,
-    },
-}
+use super::{CalibrationError, CalibrationParams, Circle};
 
 /// The RGB intensity (times the sphere's albedo) of the light `light` from a diffuse sphere of
 /// circle `circle` in an RGB image (`width x height x 3`, `NaN` where saturated). The lit
 /// pixels are chosen with `light` (inside the circle by at least
-/// [`MatteParams::rim_margin`], `n.l` at least [`MatteParams::min_cosine`], not saturated);
+/// [`CalibrationParams::rim_margin`], `n.l` at least [`CalibrationParams::min_cosine`], not saturated);
 /// then, per channel, `I = b . n` is fitted by least squares over them (`n` the sphere's normal
 /// at the pixel centre), refitted once without the pixels whose residual exceeds three times
 /// the median one (a shadow, a highlight, a bad rim pixel), and the intensity is `|b|`. The
@@ -56,11 +20,11 @@ pub(crate) fn matte_intensity(
     rgb: &[f32],
     circle: &Circle,
     light: DVec3,
-    params: &MatteParams,
-) -> Result<[f64; 3], MatteError> {
+    params: &CalibrationParams,
+) -> Result<[f64; 3], CalibrationError> {
     let l = light.normalize();
     let inner = Circle {
-        r: (circle.r - params.rim_margin).max(0.0),
+        r: (circle.r - params.matte_rim_margin).max(0.0),
         ..*circle
     };
     let (x0, x1) = (
@@ -82,14 +46,14 @@ pub(crate) fn matte_intensity(
                 continue;
             };
             let px = &rgb[3 * (row * width + col)..3 * (row * width + col) + 3];
-            if n.dot(l) < params.min_cosine || !px.iter().all(|v| v.is_finite()) {
+            if n.dot(l) < params.matte_min_cosine || !px.iter().all(|v| v.is_finite()) {
                 continue;
             }
             samples.push((n, [px[0] as f64, px[1] as f64, px[2] as f64]));
         }
     }
-    let needed = params.min_pixels.max(3);
-    let too_few = |pixels: usize| MatteError::TooFewPixels { pixels, needed };
+    let needed = params.matte_min_pixels.max(3);
+    let too_few = |pixels: usize| CalibrationError::TooFewPixels { pixels, needed };
     if samples.len() < needed {
         return Err(too_few(samples.len()));
     }
@@ -119,7 +83,7 @@ pub(crate) fn matte_intensity(
     Ok(out)
 }
 
-impl MatteParams {
+impl CalibrationParams {
     /// The RGB intensity (times the sphere's albedo) of the distant light `light` from a
     /// diffuse sphere of circle `circle` in an RGB image (`width x height x 3`, `NaN` where
     /// saturated): `I = b . n` fitted per channel over the lit pixels, refitted without the
@@ -131,14 +95,14 @@ impl MatteParams {
         rgb: &[f32],
         circle: &Circle,
         light: DVec3,
-    ) -> Result<[f64; 3], MatteError> {
+    ) -> Result<[f64; 3], CalibrationError> {
         matte_intensity(width, height, rgb, circle, light, self)
     }
 
     /// The radiant intensity (RGB, times the sphere's albedo) of the near light `light` from a
     /// diffuse sphere of centre `centre` and radius `radius` (the camera frame of `camera`, in
     /// the light's length unit) in an RGB image (`width x height x 3`, `NaN` where saturated):
-    /// `MatteParams::near_intensity` with the sphere's surface.
+    /// `CalibrationParams::near_intensity` with the sphere's surface.
     #[allow(clippy::too_many_arguments)]
     pub fn near_sphere_intensity(
         &self,
@@ -149,7 +113,7 @@ impl MatteParams {
         centre: DVec3,
         radius: f64,
         light: &crate::PointLight,
-    ) -> Result<[f64; 3], MatteError> {
+    ) -> Result<[f64; 3], CalibrationError> {
         self.near_intensity(width, height, rgb, camera, light, &|ray: DVec3| {
             // The nearer intersection of the ray `t * ray` with the sphere.
             let (a, b, c) = (
@@ -176,7 +140,7 @@ impl MatteParams {
     /// The radiant intensity (RGB, times the plane's albedo) of the near light `light` from a
     /// diffuse plane through `point` with unit normal `normal` (toward the camera), seen by
     /// `camera` in an RGB image (`width x height x 3`, `NaN` where saturated):
-    /// `MatteParams::near_intensity` with the plane's surface.
+    /// `CalibrationParams::near_intensity` with the plane's surface.
     #[allow(clippy::too_many_arguments)]
     pub fn near_plane_intensity(
         &self,
@@ -187,7 +151,7 @@ impl MatteParams {
         point: DVec3,
         normal: DVec3,
         light: &crate::PointLight,
-    ) -> Result<[f64; 3], MatteError> {
+    ) -> Result<[f64; 3], CalibrationError> {
         let n = normal.normalize_or_zero();
         self.near_intensity(width, height, rgb, camera, light, &|ray: DVec3| {
             let d = ray.dot(n);
@@ -201,7 +165,7 @@ impl MatteParams {
 
     /// The radiant intensity of a near light from a Lambertian surface in the frame: each pixel
     /// `(col, row)` sees the point and normal `surface(ray)` gives for its ray (`None`: not on
-    /// the surface); a pixel is used where the light is at least [`MatteParams::min_cosine`]
+    /// the surface); a pixel is used where the light is at least [`CalibrationParams::min_cosine`]
     /// above the surface and the camera sees its lit side; there the value is modelled as
     /// `I * E(p) * (n . l)`, `E` the light's `cos^mu / r^2` at the point
     /// ([`crate::PointLight::at`]), and `I` is fitted per channel by least squares, refitted
@@ -215,7 +179,7 @@ impl MatteParams {
         camera: &crate::Pinhole,
         light: &crate::PointLight,
         surface: &dyn Fn(DVec3) -> Option<(DVec3, DVec3)>,
-    ) -> Result<[f64; 3], MatteError> {
+    ) -> Result<[f64; 3], CalibrationError> {
         let mut samples: Vec<(f64, [f64; 3])> = Vec::new();
         for row in 0..height {
             for col in 0..width {
@@ -228,7 +192,7 @@ impl MatteParams {
                 };
                 let px = &rgb[3 * (row * width + col)..3 * (row * width + col) + 3];
                 let cos = n.dot(l);
-                if cos < self.min_cosine
+                if cos < self.matte_min_cosine
                     || n.dot(-p) <= 0.0
                     || e <= 0.0
                     || !px.iter().all(|v| v.is_finite())
@@ -238,8 +202,8 @@ impl MatteParams {
                 samples.push((e * cos, [px[0] as f64, px[1] as f64, px[2] as f64]));
             }
         }
-        let needed = self.min_pixels.max(3);
-        let too_few = |pixels: usize| MatteError::TooFewPixels { pixels, needed };
+        let needed = self.matte_min_pixels.max(3);
+        let too_few = |pixels: usize| CalibrationError::TooFewPixels { pixels, needed };
         if samples.len() < needed {
             return Err(too_few(samples.len()));
         }
@@ -344,7 +308,7 @@ mod tests {
             }
             rgb
         };
-        let params = MatteParams::default();
+        let params = CalibrationParams::default();
         let got = params
             .near_sphere_intensity(w, h, &render(false), &camera, centre, radius, &led)
             .unwrap();
@@ -368,7 +332,7 @@ mod tests {
         let behind = PointLight::isotropic(DVec3::new(0.3, -0.2, -12.0));
         assert!(matches!(
             params.near_sphere_intensity(w, h, &render(false), &camera, centre, radius, &behind),
-            Err(MatteError::TooFewPixels { .. })
+            Err(CalibrationError::TooFewPixels { .. })
         ));
     }
 
@@ -397,15 +361,15 @@ mod tests {
             rgb[p..p + 3].fill(f32::NAN);
         }
         rgb[3 * (18 * w + 22)..3 * (18 * w + 22) + 3].fill(0.0);
-        let got = matte_intensity(w, h, &rgb, &c, l, &MatteParams::default()).unwrap();
+        let got = matte_intensity(w, h, &rgb, &c, l, &CalibrationParams::default()).unwrap();
         for k in 0..3 {
             assert!((got[k] - e[k]).abs() < 1e-5, "{got:?}");
         }
         // A light from behind leaves too few pixels.
         let back = DVec3::new(0.0, 0.0, -1.0);
         assert!(matches!(
-            matte_intensity(w, h, &rgb, &c, back, &MatteParams::default()),
-            Err(MatteError::TooFewPixels { .. })
+            matte_intensity(w, h, &rgb, &c, back, &CalibrationParams::default()),
+            Err(CalibrationError::TooFewPixels { .. })
         ));
     }
 }

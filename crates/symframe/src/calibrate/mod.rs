@@ -33,8 +33,91 @@ mod highlight;
 mod matte;
 mod sphere;
 
-pub use highlight::{Highlight, HighlightError, HighlightParams};
-pub use matte::{MatteError, MatteParams};
+pub use highlight::Highlight;
+
+/// The settings of light calibration: how a chrome sphere's highlight is told from the rest
+/// ([`Highlight::find`]) and which pixels of a matte sphere or plane measure a light's intensity
+/// ([`CalibrationParams::intensity`] and its near-light forms).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CalibrationParams {
+    /// The highlight's spot is the pixels above `median + highlight_fraction * (peak -
+    /// median)`. Higher: a smaller spot, nearer the peak.
+    pub highlight_fraction: f64,
+    /// The highlight's peak must be at least this many times the sphere's median (plus a small
+    /// floor), or be saturated. Higher: more images refused as having no highlight.
+    pub highlight_min_contrast: f64,
+    /// A second spot with at least this share of the main spot's weight makes the image
+    /// ambiguous. Lower: more images refused as having several highlights.
+    pub highlight_several_ratio: f64,
+    /// Matte pixels where the light is this close to grazing (`n.l` below it) are left out:
+    /// their values are small, and a cast shadow or a slightly wrong normal there weighs most.
+    pub matte_min_cosine: f64,
+    /// Matte pixels within this many pixels of the rim are left out (partly covered by the
+    /// sphere).
+    pub matte_rim_margin: f64,
+    /// Fewest usable matte pixels for a fit.
+    pub matte_min_pixels: usize,
+}
+
+impl Default for CalibrationParams {
+    fn default() -> Self {
+        Self {
+            highlight_fraction: 0.3,
+            highlight_min_contrast: 5.0,
+            highlight_several_ratio: 0.2,
+            matte_min_cosine: 0.2,
+            matte_rim_margin: 1.5,
+            matte_min_pixels: 20,
+        }
+    }
+}
+
+/// Why a light was not measured in one image: no single highlight on the chrome sphere, or
+/// too few usable pixels on the matte one.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CalibrationError {
+    /// No sphere pixel in the image.
+    #[error("the sphere's circle holds no pixel of the image")]
+    OffImage,
+    /// Nothing on the sphere stands out.
+    #[error(
+        "no highlight on the sphere (peak {contrast:.1}x the sphere's median, {min:.0}x needed)"
+    )]
+    None {
+        /// Peak over median.
+        contrast: f64,
+        /// The contrast asked for.
+        min: f64,
+    },
+    /// Two or more comparable spots.
+    #[error(
+        "{count} highlights on the sphere (the second has {share:.0}% of the first's weight); \
+         near ({x1:.1}, {y1:.1}) and ({x2:.1}, {y2:.1})"
+    )]
+    Several {
+        /// Spots above the threshold.
+        count: usize,
+        /// Weight of the second spot over the first's, percent.
+        share: f64,
+        /// Centre of the first, x.
+        x1: f64,
+        /// Centre of the first, y.
+        y1: f64,
+        /// Centre of the second, x.
+        x2: f64,
+        /// Centre of the second, y.
+        y2: f64,
+    },
+    /// Too few matte-sphere pixels face the light (a light far behind the sphere) or are
+    /// usable, or their normals are too alike to fix the light.
+    #[error("only {pixels} pixels of the matte sphere face the light usably ({needed} needed)")]
+    TooFewPixels {
+        /// Usable pixels.
+        pixels: usize,
+        /// Pixels needed.
+        needed: usize,
+    },
+}
 #[cfg(test)]
 pub(crate) use sphere::outline_points;
 pub use sphere::Detection;
@@ -237,7 +320,7 @@ mod tests {
             );
             let l = light_from_normal(n);
             let img = grey(&scene.render(&chrome as &dyn Brdf, l));
-            let h = Highlight::find(size, size, &img, &circle, &HighlightParams::default())
+            let h = Highlight::find(size, size, &img, &circle, &CalibrationParams::default())
                 .unwrap_or_else(|e| panic!("theta {theta}: {e}"));
             worst = worst.max(angle_deg(h.light, l));
         }
@@ -295,7 +378,7 @@ mod tests {
                 .iter()
                 .zip(&lights)
                 .map(|(img, &l)| {
-                    match Highlight::find(size, size, img, &circle, &HighlightParams::default()) {
+                    match Highlight::find(size, size, img, &circle, &CalibrationParams::default()) {
                         Ok(h) => angle_deg(h.light, l),
                         Err(e) => panic!("light {l}: {e}"),
                     }
@@ -337,7 +420,7 @@ mod tests {
             cy: 32.0,
             r: 32.0,
         };
-        let p = HighlightParams::default();
+        let p = CalibrationParams::default();
         // A flat, dim sphere: no highlight.
         let mut img = vec![0.0f32; size * size];
         for (i, v) in img.iter_mut().enumerate() {
@@ -347,7 +430,7 @@ mod tests {
         }
         assert!(matches!(
             Highlight::find(size, size, &img, &circle, &p),
-            Err(HighlightError::None { .. })
+            Err(CalibrationError::None { .. })
         ));
         // A saturated 3 x 3 core (NaN) at pixel (40, 20): its centre.
         let mut sat = img.clone();
@@ -370,7 +453,10 @@ mod tests {
             }
         }
         let e = Highlight::find(size, size, &two, &circle, &p).unwrap_err();
-        assert!(matches!(e, HighlightError::Several { count: 2, .. }), "{e}");
+        assert!(
+            matches!(e, CalibrationError::Several { count: 2, .. }),
+            "{e}"
+        );
         assert!(e.to_string().contains("2 highlights"));
         // A faint second spot (a tenth of the weight) does not matter.
         let mut faint = sat;
@@ -384,7 +470,7 @@ mod tests {
         };
         assert_eq!(
             Highlight::find(size, size, &img, &off, &p),
-            Err(HighlightError::OffImage)
+            Err(CalibrationError::OffImage)
         );
     }
 

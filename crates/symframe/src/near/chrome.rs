@@ -319,7 +319,7 @@ mod tests {
     /// radius.
     #[test]
     fn chrome_balls_under_a_dome_give_the_lamps_within_a_percent_of_its_radius() {
-        use crate::calibrate::{outline_points, Detection, Highlight, HighlightParams};
+        use crate::calibrate::{outline_points, CalibrationParams, Detection, Highlight};
         use crate::render::perspective::dome_lights;
         use crate::render::NearMirrorBalls;
         let (w, h) = (640, 320);
@@ -369,7 +369,7 @@ mod tests {
                 .iter()
                 .filter_map(|(circle, c)| {
                     let hl =
-                        Highlight::find(w, h, img, circle, &HighlightParams::default()).ok()?;
+                        Highlight::find(w, h, img, circle, &CalibrationParams::default()).ok()?;
                     Some(camera.reflected_ray(*c, 1.0, hl.x, hl.y))
                 })
                 .collect();

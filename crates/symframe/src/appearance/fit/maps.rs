@@ -2,8 +2,8 @@
 //! their collection from the pixels' outcomes ([`FitMaps`]).
 
 use super::{
-    check_exposure, psnr_db, rms, FitParams, FitStatus, FitSummary, PixelOutcome, MODEL_CLEARCOAT,
-    MODEL_GLTF, MODEL_NONE, MODEL_WARD, MODEL_WOVEN,
+    check_exposure, psnr_db, rms, FitParams, FitSummary, PixelOutcome, MODEL_CLEARCOAT, MODEL_GLTF,
+    MODEL_NONE, MODEL_WARD, MODEL_WOVEN,
 };
 use crate::appearance::lobe_fit::{LobeKind, LobeModel};
 use crate::error::{Error, Result};
@@ -214,8 +214,6 @@ pub struct FitMaps {
     pub residual: Vec<f32>,
     /// RMS error on each pixel's held-out samples, `H x W` (NaN without any).
     pub holdout_residual: Vec<f32>,
-    /// Per-pixel status.
-    pub status: Vec<FitStatus>,
     /// Counts and error figures.
     pub summary: FitSummary,
 }
@@ -274,7 +272,6 @@ impl FitMaps {
             residual: vec![f32::NAN; n],
             holdout_residual: vec![f32::NAN; n],
             model: vec![MODEL_NONE; n],
-            status: Vec::with_capacity(n),
             summary: FitSummary::default(),
         };
         let (mut train_sse, mut hold_sse, mut hold_peak, mut iters) = (0.0, 0.0, 0.0f64, 0u64);
@@ -284,17 +281,14 @@ impl FitMaps {
             let fitted = match outcome {
                 None => {
                     s.masked += 1;
-                    maps.status.push(FitStatus::Masked);
                     continue;
                 }
                 Some(PixelOutcome::NoFrame) => {
                     s.no_frame += 1;
-                    maps.status.push(FitStatus::NoFrame);
                     continue;
                 }
                 Some(PixelOutcome::TooFewSamples) => {
                     s.too_few_samples += 1;
-                    maps.status.push(FitStatus::TooFewSamples);
                     continue;
                 }
                 Some(PixelOutcome::Fitted(fit, hold)) => {
@@ -362,10 +356,8 @@ impl FitMaps {
             }
             if isotropic {
                 s.isotropic += 1;
-                maps.status.push(FitStatus::Isotropic);
             } else {
                 s.anisotropic += 1;
-                maps.status.push(FitStatus::Anisotropic);
             }
         }
         let s = &mut maps.summary;

@@ -19,15 +19,14 @@ use crate::error::{Error, Result};
 use crate::method::run_stack;
 use crate::stack::Stack;
 
+mod exposure;
 mod maps;
 mod pixel;
 
+pub use exposure::{ExposureChoice, PixelData};
 pub use maps::{FitMaps, GltfMaps, LobeMaps, WardMaps};
 pub(crate) use pixel::{check_frame_maps, squared_errors, LogEvidence};
-pub use pixel::{
-    EvidenceMethod, ExposureChoice, FitMethod, HoldoutError, ModelEvidence, PixelData, PixelFitter,
-    PixelOutcome, WardFit,
-};
+pub use pixel::{FitMethod, HoldoutError, ModelEvidence, PixelFitter, PixelOutcome, WardFit};
 
 /// The reflectance model a fit estimates per pixel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -288,22 +287,6 @@ impl FitParams {
         }
         Ok((0..k).map(|j| (2 * j + 1) * n_lights / (2 * k)).collect())
     }
-}
-
-/// What happened at a pixel of [`FitParams::fit_stack`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum FitStatus {
-    /// Fitted with two roughnesses (the pixel has a tangent).
-    Anisotropic,
-    /// Fitted with one roughness (no tangent: isotropic slice).
-    Isotropic,
-    /// Outside the mask.
-    Masked,
-    /// No normal, or the normal faces away from the view.
-    NoFrame,
-    /// Fewer usable samples than [`FitParams::min_samples`].
-    TooFewSamples,
 }
 
 /// Counts and error figures of a whole-stack fit.

@@ -1,10 +1,8 @@
 //! One pixel's fit ([`PixelFitter`]): its samples split into fitting and validation lights,
-//! each model fitted and the automatic choice between them; the glTF light intensity chosen
-//! from sampled pixels ([`ExposureChoice`]); and the fit of a whole stack as a
+//! each model fitted and the automatic choice between them; and the fit of a whole stack as a
 //! [`PixelMethod`] ([`FitMethod`]).
 
 use glam::DVec3;
-use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
 use super::{
@@ -213,7 +211,7 @@ impl<'a> PixelFitter<'a> {
     }
 
     /// [`PixelFitter::new`] for parameters already validated against `lights`.
-    fn checked(lights: &'a [DVec3], params: &'a FitParams) -> Self {
+    pub(super) fn checked(lights: &'a [DVec3], params: &'a FitParams) -> Self {
         let mut held_out = vec![false; lights.len()];
         for &i in &params.holdout {
             held_out[i] = true;
@@ -547,7 +545,7 @@ impl PixelFitter<'_> {
     /// The squared error on the validation samples (`validation_lights`) of a glTF fit at
     /// `exposure` made on the pixel's other training samples, and the number of validation
     /// values (3 per sample); `None` where the pixel would not be fitted or has no validation
-    /// sample. What [`ExposureChoice::select`] sums over pixels.
+    /// sample. What [`super::ExposureChoice::select`] sums over pixels.
     pub fn gltf_validation_error(
         &mut self,
         normal: DVec3,
@@ -618,135 +616,6 @@ impl PixelFitter<'_> {
     }
 }
 
-/// One pixel's frame (camera frame; `tangent = None`: isotropic) and samples (`3 * lights`
-/// values, NaN = invalid), for [`ExposureChoice::select`].
-#[derive(Debug, Clone, PartialEq)]
-pub struct PixelData {
-    /// Unit normal.
-    pub normal: DVec3,
-    /// Unit tangent, if any.
-    pub tangent: Option<DVec3>,
-    /// The pixel's samples, RGB per light.
-    pub rgb: Vec<f32>,
-}
-
-/// The light intensity a glTF fit was given by [`ExposureChoice::select`], and the evidence.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ExposureChoice {
-    /// The intensity chosen.
-    pub exposure: f64,
-    /// Each intensity tried and the RMS error of the fits at it on the validation samples
-    /// of the pixels judged, in the order tried.
-    pub candidates: Vec<(f64, f64)>,
-    /// Pixels judged.
-    pub pixels: usize,
-}
-
-/// [`ExposureChoice::select`] keeps the lowest intensity whose validation RMS is within this share of
-/// the best one's.
-pub(crate) const EXPOSURE_TOLERANCE: f64 = 0.05;
-
-/// Pixels [`ExposureChoice::select`] judges each candidate intensity on, at most.
-pub(crate) const EXPOSURE_JUDGED_PIXELS: usize = 512;
-
-impl ExposureChoice {
-    /// The light intensity of a glTF fit (or of an automatic fit's glTF part) from sampled
-    /// pixels: the candidates are the lowest intensity that keeps 99% of the pixels' base colours
-    /// within 1 (from free-scale fits, `gltf_fit::exposure_bounds`) times `2^k`, `k = -8..=4`,
-    /// and the intensity the mostly dielectric pixels imply where there are enough of them, then
-    /// half steps (`2^(±1/2)`) either side of the best; each is judged by the squared error of fits at it on the validation lights
-    /// (`validation_lights`) of up to `EXPOSURE_JUDGED_PIXELS` of the pixels (spread over the
-    /// list), and the lowest intensity whose RMS error is within `EXPOSURE_TOLERANCE` of the
-    /// smallest wins.
-    ///
-    /// Why judged, not read off: the scale of a pixel's free fit rests on the strength of the
-    /// specular layer's Fresnel term, which a metal does not fix (a bare metal is also a black
-    /// dielectric under brighter lights); a lobe that is not GGX's (Beckmann brushed gold) is
-    /// fitted as such a dielectric under many times the true intensity, its shape bent by the
-    /// Fresnel term's growth toward grazing halfway angles, and predicts held-out lights with
-    /// errors many times the brightest sample. Whatever the intensity, that growth is then scaled
-    /// by it. Why the lowest of the near-best: a range of intensities predicts the validation
-    /// lights almost equally well (the Fresnel term's extra freedom fits a Beckmann lobe a little
-    /// better), and the higher ones put that freedom, times the intensity, into every light that
-    /// is not like the rig's (docs/method.md, "Choosing the exposure").
-    ///
-    /// # Errors
-    /// When no pixel can be fitted.
-    pub fn select(
-        lights: &[DVec3],
-        params: &FitParams,
-        pixels: &[PixelData],
-    ) -> Result<ExposureChoice> {
-        use rayon::prelude::*;
-        PixelFitter::new(lights, params)?;
-        let scales: Vec<gltf_fit::PixelScale> = pixels
-            .par_iter()
-            .map_init(
-                || PixelFitter::checked(lights, params),
-                |f, p| f.scale(p.normal, p.tangent, &p.rgb),
-            )
-            .flatten()
-            .collect();
-        let (dielectric, brightest) = gltf_fit::exposure_bounds(&scales);
-        let Some(base) = brightest.or(dielectric) else {
-            return Err(Error::BadParameter(
-                "no pixel to choose the exposure of the glTF fit from".into(),
-            ));
-        };
-        let stride = pixels.len().div_ceil(EXPOSURE_JUDGED_PIXELS).max(1);
-        let judged: Vec<&PixelData> = pixels.iter().step_by(stride).collect();
-        let mut tried: Vec<(f64, f64)> = Vec::new();
-        let judge = |e: f64, tried: &mut Vec<(f64, f64)>| {
-            let (sum, count) = judged
-                .par_iter()
-                .map_init(
-                    || PixelFitter::checked(lights, params),
-                    |f, p| f.gltf_validation_error(p.normal, p.tangent, &p.rgb, e),
-                )
-                .flatten()
-                .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-            if count > 0 {
-                tried.push((e, (sum / count as f64).sqrt()));
-            }
-        };
-        let best = |tried: &[(f64, f64)]| {
-            tried
-                .iter()
-                .min_by(|a, b| a.1.total_cmp(&b.1))
-                .map(|&(e, _)| e)
-        };
-        // Coarse: factors of 2 from 1/256 to 16 times the reading, and the dielectric reading;
-        // then half steps either side of the best.
-        for k in -8..=4 {
-            judge(base * 2f64.powi(k), &mut tried);
-        }
-        if let Some(d) = dielectric.filter(|&d| d != base) {
-            judge(d, &mut tried);
-        }
-        if let Some(e) = best(&tried) {
-            for f in [std::f64::consts::FRAC_1_SQRT_2, std::f64::consts::SQRT_2] {
-                judge(e * f, &mut tried);
-            }
-        }
-        // The lowest intensity that predicts the validation lights as well as the best to within
-        // EXPOSURE_TOLERANCE.
-        let exposure = match tried.iter().map(|t| t.1).min_by(f64::total_cmp) {
-            Some(least) => tried
-                .iter()
-                .filter(|t| t.1 <= (1.0 + EXPOSURE_TOLERANCE) * least)
-                .map(|t| t.0)
-                .min_by(f64::total_cmp)
-                .unwrap_or(base),
-            None => gltf_fit::choose_exposure(&scales).unwrap_or(base),
-        };
-        Ok(ExposureChoice {
-            exposure,
-            candidates: tried,
-            pixels: judged.len(),
-        })
-    }
-}
-
 /// The Ward fit as a [`PixelMethod`]: every pixel fitted in its frame of the `normals` and
 /// `tangents` maps (`H x W x 3`, NaN tangent = isotropic); `None` outside the mask.
 #[derive(Debug, Clone, Copy)]
@@ -784,7 +653,10 @@ impl<'a> FitMethod<'a> {
     /// The pass that gathers an automatic fit's evidence, pixel by pixel
     /// ([`FitParams::choose_models`] turns it into the model of each pixel); `None` where the
     /// fit does not choose (a forced model).
-    pub fn evidence_pass(&self) -> Option<EvidenceMethod<'a>> {
+    pub fn evidence_pass(
+        &self,
+    ) -> Option<impl PixelMethod<Scratch = PixelFitter<'a>, Output = Option<ModelEvidence>> + 'a>
+    {
         (self.params.model == FitModel::Auto).then_some(EvidenceMethod(*self))
     }
 
@@ -827,7 +699,7 @@ pub(crate) fn check_frame_maps(normals: &[f32], tangents: &[f32], n_pixels: usiz
 /// [`PixelMethod`]: each pixel's [`ModelEvidence`]; `None` outside the mask or where the
 /// pixel would not be fitted.
 #[derive(Debug, Clone, Copy)]
-pub struct EvidenceMethod<'a>(FitMethod<'a>);
+pub(crate) struct EvidenceMethod<'a>(FitMethod<'a>);
 
 impl<'a> PixelMethod for EvidenceMethod<'a> {
     type Scratch = PixelFitter<'a>;
