@@ -3,8 +3,8 @@
 
 /// Non-negative least squares of `y ~ c . x` over three basis functions from their Gram
 /// matrix `g`, the products `p` with `y` and `syy = y . y`: the coefficients, the residual
-/// sum of squares and the active set: the unconstrained solution where it is feasible, else
-/// the best of every active set (seven small solves). Exact, with no iterations.
+/// sum of squares and the active set: the unconstrained solution where every coefficient is
+/// positive, else the best of every active set (seven small solves). Exact, with no iterations.
 pub(super) fn nnls3(g: [[f64; 3]; 3], p: [f64; 3], syy: f64) -> Linear {
     let residual = |x: [f64; 3]| {
         let mut r = syy;
@@ -16,9 +16,10 @@ pub(super) fn nnls3(g: [[f64; 3]; 3], p: [f64; 3], syy: f64) -> Linear {
         }
         r
     };
-    // Where every coefficient of the unconstrained solution is non-negative it is the
-    // minimum over every active set (the Gram matrix is positive definite there): the other
-    // six solves are skipped, as most pixels' lobes allow.
+    // Where every coefficient of the unconstrained solution is positive it is the minimum
+    // over every active set (the Gram matrix is positive definite there), and every
+    // coefficient is free: the other six solves are skipped. A coefficient at exactly 0 is
+    // held there by the search below (its active set says so).
     if let Some(x) = ActiveSet::of(7).solve(&g, &p) {
         let r = residual(x);
         if x.iter().all(|&v| v > 0.0) && r < syy {
