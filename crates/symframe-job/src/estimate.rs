@@ -421,6 +421,7 @@ fn run(
         &|_| Ok(()),
     )?;
     let load_s = t_load.elapsed().as_secs_f64();
+    let load_peak_rss_bytes = peak_rss_bytes();
     let grid = *cache.grid();
     let (mask_path, mask) = read_mask(&config.mask, &ds, &grid)?;
     let blame = || match &mask_path {
@@ -508,6 +509,7 @@ fn run(
             write_s: 0.0,
             total_s: 0.0,
             peak_rss_bytes: None,
+            load_peak_rss_bytes,
         },
         warnings: Vec::new(),
         near: near.as_ref().map(|(r, _)| r.clone()),

@@ -13,7 +13,8 @@
 //! 8-bit sRGB JPEG as cameras write them, or 16-bit linear PNG), whose tile cache is then `u8`
 //! or `u16` by default. The figures are also
 //! written to `bench.json` in `--dir` (`total_s`, `decode_s`, `estimate_s`, `peak_rss_bytes`,
-//! `cache_bytes`, `woodham_s`, ...). `symframe-lab bench scaling` ([`scaling`]) sweeps size,
+//! `load_peak_rss_bytes` (the peak after decoding: which phase sets it), `cache_bytes`,
+//! `woodham_s`, ...). `symframe-lab bench scaling` ([`scaling`]) sweeps size,
 //! lights and threads with the same dataset and run code. `--near` ([`run_near`]) times the
 //! near-light estimate of a dome capture against the same scene under distant lights, a
 //! distant-light capture of as many pixels (in wall and CPU time) and, unless
@@ -188,6 +189,8 @@ pub(crate) struct Figures {
     pub estimated: f64,
     /// Peak resident memory of the run, bytes (NaN off Linux).
     pub peak_rss_bytes: f64,
+    /// The peak as it stood after decoding, bytes (NaN off Linux).
+    pub load_peak_rss_bytes: f64,
     /// Size of the tile cache, bytes.
     pub cache_bytes: f64,
     /// Whether the cache was reused (nothing decoded).
@@ -222,6 +225,7 @@ impl Figures {
                 .sum(),
             estimated: num("/pixels/estimated"),
             peak_rss_bytes: num("/timings/peak_rss_bytes"),
+            load_peak_rss_bytes: num("/timings/load_peak_rss_bytes"),
             cache_bytes: num("/cache/bytes"),
             cache_hit: report
                 .pointer("/cache/hit")
@@ -319,7 +323,7 @@ fn print_figures(name: &str, f: &Figures) {
     println!(
         "{name:>9}: wall {:.1} s | decode {:.1} s{} ({:.2} GiB cache, {:.0} images per batch) | \
          estimate {:.1} s | {:.0} pixels/s ({:.0} estimated of {:.0} in the mask) | peak RSS \
-         {:.0} MiB",
+         {:.0} MiB ({:.0} MiB after decoding)",
         f.wall_s,
         f.decode_s,
         if f.cache_hit { " (cache hit)" } else { "" },
@@ -329,7 +333,8 @@ fn print_figures(name: &str, f: &Figures) {
         f.pixels_per_s(),
         f.estimated,
         f.mask_pixels,
-        f.peak_rss_bytes / (1u64 << 20) as f64
+        f.peak_rss_bytes / (1u64 << 20) as f64,
+        f.load_peak_rss_bytes / (1u64 << 20) as f64
     );
 }
 
@@ -391,6 +396,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         "estimate_s": sym.estimate_s,
         "pixels_per_s": sym.pixels_per_s(),
         "peak_rss_bytes": sym.peak_rss_bytes,
+        "load_peak_rss_bytes": sym.load_peak_rss_bytes,
         "cache_bytes": sym.cache_bytes,
         "cache_bytes_per_pixel_per_light": (sym.cache_bytes / samples * 100.0).round() / 100.0,
         "woodham_s": serde_json::Value::Null,

@@ -114,7 +114,10 @@ fn tiled_result_equals_the_in_memory_result_exactly() {
         } else {
             assert!((2..LIGHTS).contains(&batch), "{batch}");
         }
-        assert!(r["timings"]["peak_rss_bytes"].as_u64().unwrap() > 0, "{r}");
+        let peak = r["timings"]["peak_rss_bytes"].as_u64().unwrap();
+        let after_load = r["timings"]["load_peak_rss_bytes"].as_u64().unwrap();
+        // The peak never falls: the run's is at least the one after decoding.
+        assert!(after_load > 0 && after_load <= peak, "{r}");
         if k == 1 {
             assert!(
                 maps.counts.culled > 0,

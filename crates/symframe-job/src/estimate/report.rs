@@ -171,6 +171,9 @@ pub struct Timings {
     pub total_s: f64,
     /// Peak resident memory of the process in bytes (`VmHWM`; Linux only).
     pub peak_rss_bytes: Option<u64>,
+    /// The same peak as it stood once the images were decoded (or the cache opened): which
+    /// phase sets the whole run's.
+    pub load_peak_rss_bytes: Option<u64>,
 }
 
 /// A finished job's maps and report.

@@ -448,6 +448,7 @@ fn recorded(path: &Path) -> Result<Recorded> {
                 mask_pixels: num("mask_pixels"),
                 estimated: num("estimated_pixels"),
                 peak_rss_bytes: num("peak_rss_bytes"),
+                load_peak_rss_bytes: num("load_peak_rss_bytes"),
                 cache_bytes: num("cache_bytes"),
                 cache_hit: false,
                 batch_images: num("batch_images"),
