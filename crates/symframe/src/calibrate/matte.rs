@@ -8,7 +8,8 @@ use super::{CalibrationError, CalibrationParams, Circle};
 /// The RGB intensity (times the sphere's albedo) of the light `light` from a diffuse sphere of
 /// circle `circle` in an RGB image (`width x height x 3`, `NaN` where saturated). The lit
 /// pixels are chosen with `light` (inside the circle by at least
-/// [`CalibrationParams::rim_margin`], `n.l` at least [`CalibrationParams::min_cosine`], not saturated);
+/// [`CalibrationParams::matte_rim_margin`], `n.l` at least
+/// [`CalibrationParams::matte_min_cosine`], not saturated);
 /// then, per channel, `I = b . n` is fitted by least squares over them (`n` the sphere's normal
 /// at the pixel centre), refitted once without the pixels whose residual exceeds three times
 /// the median one (a shadow, a highlight, a bad rim pixel), and the intensity is `|b|`. The
@@ -165,9 +166,9 @@ impl CalibrationParams {
 
     /// The radiant intensity of a near light from a Lambertian surface in the frame: each pixel
     /// `(col, row)` sees the point and normal `surface(ray)` gives for its ray (`None`: not on
-    /// the surface); a pixel is used where the light is at least [`CalibrationParams::min_cosine`]
-    /// above the surface and the camera sees its lit side; there the value is modelled as
-    /// `I * E(p) * (n . l)`, `E` the light's `cos^mu / r^2` at the point
+    /// the surface); a pixel is used where the light is at least
+    /// [`CalibrationParams::matte_min_cosine`] above the surface and the camera sees its lit
+    /// side; there the value is modelled as `I * E(p) * (n . l)`, `E` the light's `cos^mu / r^2` at the point
     /// ([`crate::PointLight::at`]), and `I` is fitted per channel by least squares, refitted
     /// once without the pixels whose residual exceeds three times the median one (a shadow, a
     /// highlight). The light's own intensity is not read.

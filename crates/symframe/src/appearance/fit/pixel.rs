@@ -238,7 +238,7 @@ impl<'a> PixelFitter<'a> {
         self.fit_as(None, normal, tangent, rgb)
     }
 
-    /// [`PixelFitter::fit`], where `chosen` (a model code of [`FitMaps::model`]
+    /// [`PixelFitter::fit`], where `chosen` (a model code of [`super::FitMaps::model`]
     /// (super::FitMaps::model)) stands for an automatic fit's own choice at the pixel.
     fn fit_as(
         &mut self,

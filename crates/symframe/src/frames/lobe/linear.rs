@@ -20,8 +20,8 @@ pub(super) fn nnls3(g: [[f64; 3]; 3], p: [f64; 3], syy: f64) -> Linear {
     // over every active set (the Gram matrix is positive definite there), and every
     // coefficient is free: the other six solves are skipped. A coefficient at exactly 0 is
     // held there by the search below (its active set says so).
-    if let Some(x) = ActiveSet::of(7).solve(&g, &p) {
-        let r = residual(x);
+    let full = ActiveSet::of(7).solve(&g, &p).map(|x| (x, residual(x)));
+    if let Some((x, r)) = full {
         if x.iter().all(|&v| v > 0.0) && r < syy {
             return Linear {
                 coefficients: x,
@@ -37,20 +37,19 @@ pub(super) fn nnls3(g: [[f64; 3]; 3], p: [f64; 3], syy: f64) -> Linear {
         set: 0,
         gram: g,
     };
-    for set in 1u8..8 {
-        let Some(x) = ActiveSet::of(set).solve(&g, &p) else {
-            continue;
-        };
-        if x.iter().all(|&v| v >= 0.0) {
-            let r = residual(x);
-            if r < best.cost {
-                best = Linear {
-                    coefficients: x,
-                    cost: r,
-                    set,
-                    gram: g,
-                };
-            }
+    // The full set last, as solved above: ties go to the smaller sets.
+    let subsets = (1u8..7).filter_map(|set| {
+        let x = ActiveSet::of(set).solve(&g, &p)?;
+        Some((set, x, residual(x)))
+    });
+    for (set, x, r) in subsets.chain(full.map(|(x, r)| (7, x, r))) {
+        if x.iter().all(|&v| v >= 0.0) && r < best.cost {
+            best = Linear {
+                coefficients: x,
+                cost: r,
+                set,
+                gram: g,
+            };
         }
     }
     best
