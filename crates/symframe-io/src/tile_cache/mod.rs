@@ -260,27 +260,40 @@ pub(super) fn block_sum(bytes: &[u8], exponent: i32, lights: &[u8]) -> u64 {
     h.digest()
 }
 
-/// The blocks of a complete cache whose checksum fails: `(tile, block)` pairs. `done(o, len)`
-/// is called with each block's byte range once summed.
+/// The blocks of a complete cache whose checksum fails: `(tile, block)` pairs. Tile by tile
+/// (a tile's blocks are contiguous in the file, its checksums `n_tiles` apart in the table);
+/// `done(o, len)` is called with each tile's byte range once its blocks are summed. A tile at a
+/// time, not a light block of every tile at a time: the system maps the pages around each one
+/// read (fault-around), and released a block at a time in the table's order the pages of each
+/// tile's next blocks stayed mapped until their turn, most of the cache at once
+/// (docs/performance.md, "Memory model").
 fn verify(map: &[u8], h: &Header, done: impl Fn(usize, usize) + Sync) -> Vec<(usize, usize)> {
     let grid = TileGrid::new(h.width, h.height, h.tile);
     let nb = h.n_blocks();
     let table = h.table_offset() as usize;
-    (0..grid.n_tiles() * nb)
+    (0..grid.n_tiles())
         .into_par_iter()
-        .filter_map(|k| {
-            let (b, t) = (k / grid.n_tiles(), k % grid.n_tiles());
-            let (o, len) = h.block_range(&grid, t, b);
-            let want =
-                u64::from_le_bytes(map[table + 8 * k..table + 8 * k + 8].try_into().unwrap());
-            let sum = block_sum(
-                &map[o..o + len],
-                h.scale_exponent(map, k),
-                h.block_lights(map, b),
-            );
-            let bad = sum != want;
-            done(o, len);
-            bad.then_some((t, b))
+        .flat_map_iter(|t| {
+            let bad: Vec<(usize, usize)> = (0..nb)
+                .filter(|&b| {
+                    let k = b * grid.n_tiles() + t;
+                    let (o, len) = h.block_range(&grid, t, b);
+                    let want = u64::from_le_bytes(
+                        map[table + 8 * k..table + 8 * k + 8].try_into().unwrap(),
+                    );
+                    let sum = block_sum(
+                        &map[o..o + len],
+                        h.scale_exponent(map, k),
+                        h.block_lights(map, b),
+                    );
+                    sum != want
+                })
+                .map(|b| (t, b))
+                .collect();
+            let (first, _) = h.block_range(&grid, t, 0);
+            let (last, len) = h.block_range(&grid, t, nb - 1);
+            done(first, last + len - first);
+            bad
         })
         .collect()
 }
@@ -910,6 +923,45 @@ mod tests {
             names[0].starts_with("test-") && names[0].ends_with(".stack"),
             "{names:?}"
         );
+    }
+
+    /// Verifying a reused cache releases its pages tile by tile: one range per tile, together
+    /// the whole of the samples with no gap or overlap (a block at a time in the file's
+    /// light-block order left the pages mapped around each block resident: docs/performance.md,
+    /// "Memory model").
+    #[test]
+    fn verifying_releases_each_tile_s_whole_range_once() {
+        let d = tempfile::tempdir().unwrap();
+        let ds = dataset(d.path(), 11, 6, 9);
+        let dir = d.path().join("cache");
+        let go = AtomicBool::new(false);
+        let copts = copts_batches_of_2(&ds);
+        let (cache, _) =
+            TileCache::open_or_build(&ds, &DecodeOptions::default(), &dir, copts, &go, &|| {})
+                .unwrap();
+        assert!(
+            cache.light_block() < cache.n_lights(),
+            "several light blocks a tile"
+        );
+        drop(cache);
+        let path = stack_file(&dir);
+        let (header, _) = read_header(&path).unwrap().unwrap();
+        let bytes = fs::read(&path).unwrap();
+        let released = std::sync::Mutex::new(Vec::new());
+        let bad = verify(&bytes, &header, |o, len| {
+            released.lock().unwrap().push((o, len))
+        });
+        assert!(bad.is_empty());
+        let mut released = released.into_inner().unwrap();
+        released.sort();
+        let grid = TileGrid::new(header.width, header.height, header.tile);
+        assert_eq!(released.len(), grid.n_tiles());
+        let mut end = HEADER_BYTES;
+        for (o, len) in released {
+            assert_eq!(o, end, "contiguous, one range a tile");
+            end = o + len;
+        }
+        assert_eq!(end as u64, header.table_offset());
     }
 
     /// The cache file of `dir` (the one `.stack`).
