@@ -354,8 +354,8 @@ fn open_complete(
         return Ok(None);
     };
     let t = Instant::now();
-    // Each block's pages are unmapped once summed, so verifying does not hold the whole cache
-    // resident, however large (docs/performance.md, "Paper scale").
+    // Each tile's pages are unmapped once its blocks are summed, so verifying does not hold the
+    // whole cache resident, however large (docs/performance.md, "Memory model").
     let bad = verify(&map, &header, |o, len| {
         #[cfg(unix)]
         {
