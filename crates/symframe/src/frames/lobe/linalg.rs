@@ -3,57 +3,59 @@
 use super::subset::Subset;
 use super::{normal_equations, project, Buffers, Model, P};
 
-/// Solves `a x = b` for a symmetric positive definite `a` (Cholesky); `None` if it is not.
+/// Solves `a x = b` for a symmetric positive definite `a`; `None` if it is not.
 pub(super) fn solve_spd<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
-    (cholesky_solve(&mut a, &mut b, N, |_| 0.0) && b.iter().all(|v| v.is_finite())).then_some(b)
+    (ldl_solve(&mut a, &mut b, N, |_| 0.0) && b.iter().all(|v| v.is_finite())).then_some(b)
 }
 
-/// Solves `a x = b` over the leading `n` x `n` block of `a` by Cholesky, in place (`b` becomes
-/// `x`, `a` its factor); false where the `j`-th pivot is NaN or at most `floor(j)` (the block is
-/// not positive definite, or too near singular). The two-lobe fit's active-set solves share it.
-/// Each pivot's reciprocal is taken once and multiplied by: the Levenberg-Marquardt loop
-/// solves several of these per pass over the samples, and divisions are most of their time.
+/// Solves `a x = b` over the leading `n` x `n` block of `a` by `L D L^T`, in place (`b`
+/// becomes `x`, `a` below its diagonal `L`); false where the `j`-th pivot `D[j]` is NaN or at
+/// most `floor(j)` (the block is not positive definite, or too near singular). The two-lobe
+/// fit's active-set solves share it. No square roots, one reciprocal per pivot: the
+/// Levenberg-Marquardt loop solves two or three of these per iteration, each pivot waiting on
+/// the one before, so their latency is the solve's time.
 // Index loops: the triangular recurrences read clearer as the textbook's indices.
 #[allow(clippy::needless_range_loop)]
-pub(super) fn cholesky_solve<const N: usize>(
+pub(super) fn ldl_solve<const N: usize>(
     a: &mut [[f64; N]; N],
     b: &mut [f64; N],
     n: usize,
     floor: impl Fn(usize) -> f64,
 ) -> bool {
+    // `diagonal` holds `D`, `inv` its reciprocals.
+    let mut diagonal = [0.0; N];
     let mut inv = [0.0; N];
+    let mut scaled = [0.0; N];
     for j in 0..n {
+        // `scaled[k] = L[j][k] D[k]`, shared by the pivot and the column below it.
         let mut d = a[j][j];
         for k in 0..j {
-            d -= a[j][k] * a[j][k];
+            scaled[k] = a[j][k] * diagonal[k];
+            d -= a[j][k] * scaled[k];
         }
         if d.is_nan() || d <= floor(j) {
             return false;
         }
-        let d = d.sqrt();
-        a[j][j] = d;
+        diagonal[j] = d;
         inv[j] = 1.0 / d;
         for i in j + 1..n {
             let mut v = a[i][j];
             for k in 0..j {
-                v -= a[i][k] * a[j][k];
+                v -= a[i][k] * scaled[k];
             }
             a[i][j] = v * inv[j];
         }
     }
     for i in 0..n {
-        let mut v = b[i];
         for k in 0..i {
-            v -= a[i][k] * b[k];
+            b[i] -= a[i][k] * b[k];
         }
-        b[i] = v * inv[i];
     }
     for i in (0..n).rev() {
-        let mut v = b[i];
+        b[i] *= inv[i];
         for k in i + 1..n {
-            v -= a[k][i] * b[k];
+            b[i] -= a[k][i] * b[k];
         }
-        b[i] = v * inv[i];
     }
     true
 }

@@ -84,52 +84,62 @@ impl ActiveSet {
         Self { members, len }
     }
 
-    /// The least-squares coefficients with only the members free (others zero), by Cramer's
-    /// rule on the members' Gram block; `None` where the block is singular.
+    /// The least-squares coefficients with only the members free (others zero):
+    /// [`ActiveSet::inverse`] times the products `p`; `None` where the block is singular.
     pub(super) fn solve(&self, g: &[[f64; 3]; 3], p: &[f64; 3]) -> Option<[f64; 3]> {
-        let m = &self.members[..self.len];
-        let mut x = [0.0; 3];
-        match *m {
+        Some(apply(&self.inverse(g)?, p)).filter(|x| x.iter().all(|v| v.is_finite()))
+    }
+
+    /// The inverse of the members' block of the (symmetric) Gram matrix `g`, zero outside it,
+    /// from its adjugate and one division: the Gauss-Newton system applies it to seven vectors
+    /// at every iteration. `None` where the block is singular (its determinant at most 1e-12
+    /// of its diagonal's product).
+    pub(super) fn inverse(&self, g: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
+        let mut inv = [[0.0; 3]; 3];
+        match self.members[..self.len] {
             [a] => {
                 if g[a][a] <= 0.0 {
                     return None;
                 }
-                x[a] = p[a] / g[a][a];
+                inv[a][a] = 1.0 / g[a][a];
             }
             [a, b] => {
                 let det = g[a][a] * g[b][b] - g[a][b] * g[a][b];
                 if det <= 1e-12 * g[a][a] * g[b][b] {
                     return None;
                 }
-                x[a] = (p[a] * g[b][b] - p[b] * g[a][b]) / det;
-                x[b] = (p[b] * g[a][a] - p[a] * g[a][b]) / det;
+                let r = 1.0 / det;
+                inv[a][a] = g[b][b] * r;
+                inv[b][b] = g[a][a] * r;
+                inv[a][b] = -g[a][b] * r;
+                inv[b][a] = inv[a][b];
             }
-            [a, b, c] => {
-                let det3 = |m: [[f64; 3]; 3]| {
-                    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-                        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-                        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-                };
-                let gm = [
-                    [g[a][a], g[a][b], g[a][c]],
-                    [g[b][a], g[b][b], g[b][c]],
-                    [g[c][a], g[c][b], g[c][c]],
-                ];
-                let det = det3(gm);
-                if det <= 1e-12 * g[a][a] * g[b][b] * g[c][c] {
+            [_, _, _] => {
+                // The cofactors of the symmetric matrix (its adjugate's upper triangle).
+                let c00 = g[1][1] * g[2][2] - g[1][2] * g[1][2];
+                let c01 = g[0][2] * g[1][2] - g[0][1] * g[2][2];
+                let c02 = g[0][1] * g[1][2] - g[0][2] * g[1][1];
+                let c11 = g[0][0] * g[2][2] - g[0][2] * g[0][2];
+                let c12 = g[0][1] * g[0][2] - g[0][0] * g[1][2];
+                let c22 = g[0][0] * g[1][1] - g[0][1] * g[0][1];
+                let det = g[0][0] * c00 + g[0][1] * c01 + g[0][2] * c02;
+                if det <= 1e-12 * g[0][0] * g[1][1] * g[2][2] {
                     return None;
                 }
-                let rhs = [p[a], p[b], p[c]];
-                for (k, &slot) in [a, b, c].iter().enumerate() {
-                    let mut mk = gm;
-                    for row in 0..3 {
-                        mk[row][k] = rhs[row];
-                    }
-                    x[slot] = det3(mk) / det;
-                }
+                let r = 1.0 / det;
+                inv = [
+                    [c00 * r, c01 * r, c02 * r],
+                    [c01 * r, c11 * r, c12 * r],
+                    [c02 * r, c12 * r, c22 * r],
+                ];
             }
             _ => return None,
         }
-        x.iter().all(|v| v.is_finite()).then_some(x)
+        Some(inv)
     }
+}
+
+/// `m u` for a 3 x 3 matrix.
+pub(super) fn apply(m: &[[f64; 3]; 3], u: &[f64; 3]) -> [f64; 3] {
+    m.map(|row| row[0] * u[0] + row[1] * u[1] + row[2] * u[2])
 }

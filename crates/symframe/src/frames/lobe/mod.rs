@@ -45,7 +45,7 @@ mod subset;
 
 use light_share::{light_draws_seed, light_share};
 use linalg::{tilt_sd, tilt_step2};
-use linear::{nnls3, ActiveSet, Linear};
+use linear::{apply, nnls3, ActiveSet, Linear};
 use noise_fit::{
     fitted_parameters, noise_cost, noise_variances, noise_weights, SETTLED_Z, WEIGHTED_SD_FLOOR,
 };
@@ -417,12 +417,13 @@ fn normal_equations(
     let kernel::GaussNewton { vtv, vtr, ftv } =
         kernel::gauss_newton(m, samples, linear.coefficients, free, kept);
     // J^T J = v^T v - (F_A^T v)^T (F_A^T F_A)^-1 (F_A^T v).
-    let set = ActiveSet::of(linear.set);
     let mut solved = [[0.0f64; 3]; P];
-    for (i, w) in solved.iter_mut().enumerate() {
-        if linear.set != 0 {
-            let u = [ftv[0][i], ftv[1][i], ftv[2][i]];
-            *w = set.solve(&linear.gram, &u).unwrap_or([0.0; 3]);
+    if let Some(inverse) = ActiveSet::of(linear.set).inverse(&linear.gram) {
+        for (i, w) in solved.iter_mut().enumerate() {
+            let x = apply(&inverse, &[ftv[0][i], ftv[1][i], ftv[2][i]]);
+            if x.iter().all(|v| v.is_finite()) {
+                *w = x;
+            }
         }
     }
     let mut jtj = [[0.0f64; P]; P];

@@ -166,13 +166,18 @@ pub(super) fn noise_weights(
         // Within the noise's spread but above its expectation: the variance `extra` that makes
         // the chi-square equal its degrees of freedom is added to every sample's (what the
         // model leaves beyond the noise, spread evenly). The chi-square falls as `extra`
-        // grows: bisection on a log scale up to a value that makes every residual noise.
+        // grows: bisection on a log scale up to a value that makes every residual noise, to a
+        // millionth of `extra` (the weights then to a millionth; the noise model itself is
+        // known to a few percent).
         let top = (0..n)
             .map(|i| (data.value(i) - predicted[i]).powi(2))
             .fold(0.0f64, f64::max)
             .max(f64::MIN_POSITIVE);
         let (mut lo, mut hi) = (top * 1e-12, top);
         for _ in 0..40 {
+            if hi <= lo * (1.0 + 1e-6) {
+                break;
+            }
             let mid = (lo * hi).sqrt();
             if chi2(mid) > dof {
                 lo = mid;

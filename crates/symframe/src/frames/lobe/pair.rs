@@ -21,7 +21,7 @@ use crate::frames::rig::Rig;
 
 use super::descent::{descend, hold_at_bound, Descent};
 use super::light_share::{light_draws_seed, moved_by_turned_lights};
-use super::linalg::{cholesky_solve, tilt_sd};
+use super::linalg::{ldl_solve, tilt_sd};
 use super::search::{COARSE_RELATIVE_GAIN, RELATIVE_GAIN};
 use super::subset::Subset;
 use super::{LobeFit, LobeScratch, ALPHA_RANGE, RETRY_RESIDUAL, SHAPE_RANGE};
@@ -304,7 +304,7 @@ struct Linear {
     gram: [[f64; C]; C],
 }
 
-/// Solves the Gram block of the `members` of `g` against `p` by Cholesky; `None` where the
+/// Solves the Gram block of the `members` of `g` against `p` (`L D L^T`); `None` where the
 /// block is (nearly) singular or a value is not finite.
 fn solve_members(g: &[[f64; C]; C], p: &[f64; C], members: &[usize]) -> Option<[f64; C]> {
     let n = members.len();
@@ -316,7 +316,7 @@ fn solve_members(g: &[[f64; C]; C], p: &[f64; C], members: &[usize]) -> Option<[
         }
         x[r] = p[i];
     }
-    if !cholesky_solve(&mut a, &mut x, n, |j| 1e-12 * g[members[j]][members[j]]) {
+    if !ldl_solve(&mut a, &mut x, n, |j| 1e-12 * g[members[j]][members[j]]) {
         return None;
     }
     let mut out = [0.0; C];
