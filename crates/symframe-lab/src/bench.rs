@@ -314,7 +314,7 @@ pub(crate) fn symmetry_config(
     }
     let mut config = EstimateConfig::new(lp, out);
     // As `symframe estimate`: the maps are written band by band, not also kept whole in
-    // memory (34 bytes a pixel: 1.6 GiB at 50 megapixels, which the peak would count).
+    // memory, which the peak would count (docs/performance.md, "Memory model").
     config.keep_maps = false;
     config.cache.dir = Some(cache);
     config.cache.options.batch_bytes = decode_memory_bytes(decode_memory_mib)?;
