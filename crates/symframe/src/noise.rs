@@ -57,7 +57,7 @@ impl Quantisation {
 }
 
 /// The linear value below which sRGB's encoding is linear (slope 12.92).
-const SRGB_TOE: f64 = 0.003_130_8;
+pub(crate) const SRGB_TOE: f64 = 0.003_130_8;
 
 /// A capture's noise model, in the stack's units.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
@@ -360,13 +360,7 @@ mod tests {
         assert_eq!(Quantisation::Float.variance(0.5), 0.0);
         // The sRGB step at each 16-bit code, read from the decoding itself: the linear values
         // of the code and its neighbour, on both sides of the linear toe.
-        let decode = |e: f64| {
-            if e <= 0.040_45 {
-                e / 12.92
-            } else {
-                ((e + 0.055) / 1.055).powf(2.4)
-            }
-        };
+        let decode = crate::render::noise::srgb_to_linear;
         let s16 = Quantisation::Srgb(16);
         for code in [20u32, 2000, 2651, 2700, 30_000, 65_000] {
             let (e0, e1) = (code as f64 / 65535.0, (code + 1) as f64 / 65535.0);

@@ -137,6 +137,15 @@ impl Header {
         }
     }
 
+    /// Byte range (from the file's start) of tile `t`: its light blocks, one after another.
+    pub(super) fn tile_range(&self, grid: &TileGrid, t: usize) -> (usize, usize) {
+        let stride = self.n_lights * self.format.pixel_bytes();
+        (
+            HEADER_BYTES + grid.first_pixel(t) * stride,
+            grid.tile_pixels(t) * stride,
+        )
+    }
+
     /// Byte range (from the file's start) of light block `b` of tile `t`.
     pub(super) fn block_range(&self, grid: &TileGrid, t: usize, b: usize) -> (usize, usize) {
         let np = grid.tile_pixels(t);

@@ -89,7 +89,7 @@ use codes::CodeTables;
 pub use grid::{TileGrid, TileRect};
 #[cfg(any(test, feature = "fuzzing"))]
 pub use header::check_cache_bytes;
-use header::{cache_stem, matches, read_header, read_warnings, Header, HEADER_BYTES};
+use header::{cache_stem, matches, read_header, read_warnings, Header};
 pub use header::{
     dataset_fingerprints, file_content_hash, inputs_fingerprint, resolve_format, Fingerprints,
     StampKind, CACHE_VERSION,
@@ -290,9 +290,8 @@ fn verify(map: &[u8], h: &Header, done: impl Fn(usize, usize) + Sync) -> Vec<(us
                 })
                 .map(|b| (t, b))
                 .collect();
-            let (first, _) = h.block_range(&grid, t, 0);
-            let (last, len) = h.block_range(&grid, t, nb - 1);
-            done(first, last + len - first);
+            let (o, len) = h.tile_range(&grid, t);
+            done(o, len);
             bad
         })
         .collect()
@@ -647,12 +646,7 @@ impl TileCache {
 
     /// Byte range of tile `t` in the file.
     fn range(&self, t: usize) -> (usize, usize) {
-        let stride = self.n_lights * self.header.format.pixel_bytes();
-        let p0 = self.grid.first_pixel(t);
-        (
-            HEADER_BYTES + p0 * stride,
-            self.grid.tile_pixels(t) * stride,
-        )
+        self.header.tile_range(&self.grid, t)
     }
 
     /// Lights per block inside a tile (all of them when the cache was built in one batch).
@@ -751,6 +745,7 @@ mod tests {
     use crate::codecs::{write_exr_rgb, Gamma};
     use crate::stack::load_stack;
     use glam::DVec3;
+    use header::HEADER_BYTES;
 
     #[test]
     fn grid_orders_every_pixel_once() {

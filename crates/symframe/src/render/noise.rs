@@ -12,6 +12,8 @@
 
 use std::fmt;
 
+use crate::noise::SRGB_TOE;
+
 /// A small deterministic random generator (SplitMix64) with Gaussian and Poisson samplers.
 #[derive(Debug, Clone)]
 pub struct Rng {
@@ -234,7 +236,7 @@ pub(crate) fn quantise_srgb(img: &mut [f32], bits: u32) {
 
 /// The sRGB transfer function (linear in `[0, 1]` to encoded).
 fn linear_to_srgb(v: f64) -> f64 {
-    if v <= 0.003_130_8 {
+    if v <= SRGB_TOE {
         v * 12.92
     } else {
         1.055 * v.powf(1.0 / 2.4) - 0.055
@@ -242,7 +244,7 @@ fn linear_to_srgb(v: f64) -> f64 {
 }
 
 /// Its inverse (encoded in `[0, 1]` to linear).
-fn srgb_to_linear(v: f64) -> f64 {
+pub(crate) fn srgb_to_linear(v: f64) -> f64 {
     if v <= 0.04045 {
         v / 12.92
     } else {
