@@ -386,48 +386,4 @@ mod tests {
         let q16 = c.quantisation.iter().find(|(l, _)| l == "16-bit").unwrap();
         assert!(c.noise[0].1[0] < 5.0 && q16.1[0] < 5.0, "{c:?}");
     }
-
-    #[test]
-    fn relight_predicts_held_out_lights_for_every_model() {
-        let dir = tempfile::tempdir().unwrap();
-        let s = relight::run(&quick(dir.path())).unwrap();
-        assert!(dir.path().join("relight_side_by_side.png").is_file());
-        // 14 materials (10 spheres, car paint, woven satin, the bumps two ways), 5 fits each
-        // (Ward, glTF, clear coat, woven, the automatic choice).
-        assert_eq!(s.figures.len(), 70);
-        for r in &s.figures {
-            // A two-lobe model forced onto a material of one lobe is a known weakness, not the
-            // product's answer (the automatic choice is): its figures are in the report
-            // (docs/validation.md, "Relighting from per-pixel Ward and glTF fits"), and here it
-            // is only held to a fit that ran (the forced clear coat of the Ward sphere falls
-            // below 20 dB and relights far above its training samples).
-            if r.fit == "clearcoat" || r.fit == "woven" {
-                assert!(r.holdout_psnr > 10.0 && r.relit_psnr > 10.0, "{r:?}");
-                continue;
-            }
-            // Bounds that catch a broken fit; the report states the figures.
-            assert!(
-                r.holdout_psnr > 20.0 && r.holdout_psnr_true_frames > 20.0,
-                "{r:?}"
-            );
-            assert!(r.relit_psnr > 20.0, "{r:?}");
-            // No fireflies: nothing relit far above what the pixel was seen at (4 times; with
-            // the default, automatic fit, twice), unless the truth itself rises as high (a
-            // sharp highlight between the training lights), to within 5%.
-            // The automatic fit's two-lobe picks are held to the single models' 4 times, not
-            // twice: a known defect (the Ashikhmin-Shirley sphere's clear-coat picks relight
-            // above twice their brightest training sample) until the choice bounds a
-            // candidate's unseen peak.
-            let two_lobe_picks = r.pixels[2] + r.pixels[3] > 0;
-            let allowed = if r.fit == "auto" && !two_lobe_picks {
-                2.0
-            } else {
-                4.0
-            };
-            assert!(
-                r.relit_over_brightest <= 1.05 * r.truth_over_brightest.max(allowed),
-                "{r:?}"
-            );
-        }
-    }
 }
