@@ -16,9 +16,7 @@ here="$(cd "$(dirname "$0")" && pwd)"
 root="$(dirname "$here")"
 if ! command -v blender >/dev/null && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
     echo "blender-check: installing Debian's blender"
-    export DEBIAN_FRONTEND=noninteractive
-    apt-get install -y -q blender python3-numpy >/dev/null 2>&1 ||
-        { apt-get update -q >/dev/null 2>&1 && apt-get install -y -q blender python3-numpy >/dev/null 2>&1; } || true
+    "$here/apt-install.sh" blender python3-numpy >/dev/null 2>&1 || true
 fi
 if ! command -v blender >/dev/null; then
     echo "blender-check: skipping the Blender import of the exported glTF assets: blender is not installed"

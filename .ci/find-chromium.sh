@@ -5,9 +5,7 @@ chromium="${CHROMIUM:-$(command -v chromium || true)}"
 if [ -z "$chromium" ]; then
     if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
         echo "installing Debian's chromium"
-        export DEBIAN_FRONTEND=noninteractive
-        apt-get install -y -q chromium >/dev/null 2>&1 ||
-            { apt-get update -q >/dev/null 2>&1 && apt-get install -y -q chromium >/dev/null 2>&1; } || true
+        "$(dirname "${BASH_SOURCE[0]}")/apt-install.sh" chromium >/dev/null 2>&1 || true
     fi
     chromium="$(command -v chromium || true)"
     [ -n "$chromium" ] || skip "chromium is not installed and apt-get could not install it"
