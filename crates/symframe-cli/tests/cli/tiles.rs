@@ -90,7 +90,8 @@ fn tiled_result_equals_the_in_memory_result_exactly() {
         }
         ok(&estimate(&lp, &out, &flags));
         // The job reads the capture's noise model from its images (report.json records it);
-        // the in-memory run is given the same one.
+        // the in-memory run is given the same one (read back exactly: the workspace's serde_json
+        // parses floats with `float_roundtrip`).
         let r = report(&out);
         let noise: NoiseModel = serde_json::from_value(r["parameters"]["noise"].clone()).unwrap();
         let params = EstimatorParams { noise, ..params };

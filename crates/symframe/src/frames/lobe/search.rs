@@ -17,6 +17,17 @@ pub(super) const RELATIVE_GAIN: f64 = 1e-4;
 /// default estimator with the lobe fit", "Fewer passes").
 pub(super) const COARSE_RELATIVE_GAIN: f64 = 1e-2;
 
+/// The largest turn of the frame one step of the search may take, in lobe widths (the geometric
+/// mean of `a_t` and `a_b`, radians), within [`MAX_TURN_RANGE`]: the step's model is the terms'
+/// first-order change with the frame's rotation (`lobe/kernel.rs`), and a turn of several widths
+/// leaves the lobe the step was computed on; the damping then needs several trial passes to
+/// shrink it, or the step lands in another basin (docs/performance.md, "The frame's turn per
+/// step").
+const MAX_TURN_WIDTHS: f64 = 2.0;
+
+/// The range of the largest turn, radians.
+const MAX_TURN_RANGE: (f64, f64) = (0.05, 1.5);
+
 /// Levenberg-Marquardt from `state` (whose linear part over `samples` is `known`, where the
 /// caller has it: one pass fewer) over the parameters marked `free`; returns the state, its
 /// linear part (the sum of squares and the coefficients) and the passes over the samples.
@@ -84,6 +95,16 @@ impl Descent<P> for OneLobe<'_> {
         step: &[f64; P],
         passes: &mut u32,
     ) -> Option<(State, Linear)> {
+        // The Gauss-Newton model is linear in the frame's rotation: a step that turns the frame
+        // by more than a few lobe widths is shortened along its direction to that turn.
+        let turn = (step[0] * step[0] + step[1] * step[1] + step[2] * step[2]).sqrt();
+        let max_turn =
+            (MAX_TURN_WIDTHS * self.model.alpha2.sqrt()).clamp(MAX_TURN_RANGE.0, MAX_TURN_RANGE.1);
+        let step = &if turn > max_turn {
+            step.map(|v| v * (max_turn / turn))
+        } else {
+            *step
+        };
         let trial = state.moved(step);
         self.trial = Model::of(&trial);
         *passes += 1;
