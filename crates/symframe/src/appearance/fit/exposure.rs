@@ -39,6 +39,13 @@ pub(crate) const EXPOSURE_TOLERANCE: f64 = 0.05;
 /// Pixels [`ExposureChoice::select`] judges each candidate intensity on, at most.
 pub(crate) const EXPOSURE_JUDGED_PIXELS: usize = 512;
 
+/// The share of the judged pixels, those with the largest validation errors at a candidate,
+/// that [`ExposureChoice::select`] leaves out of its figure: the intensity is one number for
+/// the whole capture, and a pixel the glTF lobe cannot explain (a wrong frame, an
+/// interreflection) has a validation error that grows with any intensity and would otherwise
+/// choose it alone. Higher is more robust to such pixels and reads fewer of the others.
+pub(crate) const EXPOSURE_TRIMMED: f64 = 0.05;
+
 impl ExposureChoice {
     /// The light intensity of a glTF fit (or of an automatic fit's glTF part) from sampled
     /// pixels: the candidates are the lowest intensity that keeps 99% of the pixels' base colours
@@ -46,8 +53,8 @@ impl ExposureChoice {
     /// and the intensity the mostly dielectric pixels imply where there are enough of them, then
     /// half steps (`2^(±1/2)`) either side of the best; each is judged by the squared error of fits at it on the validation lights
     /// (`validation_lights`) of up to `EXPOSURE_JUDGED_PIXELS` of the pixels (spread over the
-    /// list), and the lowest intensity whose RMS error is within `EXPOSURE_TOLERANCE` of the
-    /// smallest wins.
+    /// list), the worst `EXPOSURE_TRIMMED` of them left out, and the lowest intensity whose RMS
+    /// error is within `EXPOSURE_TOLERANCE` of the smallest wins.
     ///
     /// Why judged, not read off: the scale of a pixel's free fit rests on the strength of the
     /// specular layer's Fresnel term, which a metal does not fix (a bare metal is also a black
@@ -87,16 +94,17 @@ impl ExposureChoice {
         let judged: Vec<&PixelData> = pixels.iter().step_by(stride).collect();
         let mut tried: Vec<(f64, f64)> = Vec::new();
         let judge = |e: f64, tried: &mut Vec<(f64, f64)>| {
-            let (sum, count) = judged
+            let mut errors: Vec<(f64, usize)> = judged
                 .par_iter()
                 .map_init(
                     || PixelFitter::checked(lights, params),
                     |f, p| f.gltf_validation_error(p.normal, p.tangent, &p.rgb, e),
                 )
                 .flatten()
-                .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-            if count > 0 {
-                tried.push((e, (sum / count as f64).sqrt()));
+                .filter(|&(_, count)| count > 0)
+                .collect();
+            if let Some(rms) = trimmed_rms(&mut errors) {
+                tried.push((e, rms));
             }
         };
         let best = |tried: &[(f64, f64)]| {
@@ -134,5 +142,38 @@ impl ExposureChoice {
             candidates: tried,
             pixels: judged.len(),
         })
+    }
+}
+
+/// The RMS of the pixels' validation errors (`(sum of squares, samples)` per pixel) less the
+/// [`EXPOSURE_TRIMMED`] share of pixels with the largest mean squares; `None` without a pixel.
+fn trimmed_rms(errors: &mut [(f64, usize)]) -> Option<f64> {
+    if errors.is_empty() {
+        return None;
+    }
+    let mean_square = |e: &(f64, usize)| e.0 / e.1 as f64;
+    errors.sort_by(|a, b| mean_square(a).total_cmp(&mean_square(b)));
+    let kept = errors.len() - (errors.len() as f64 * EXPOSURE_TRIMMED).floor() as usize;
+    let (sum, count) = errors[..kept]
+        .iter()
+        .fold((0.0, 0), |(s, c), e| (s + e.0, c + e.1));
+    Some((sum / count as f64).sqrt())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_trimmed_rms_leaves_out_the_worst_pixels() {
+        // 40 pixels of mean square 0.01 over 10 samples each, and one of 1e4: the one is out.
+        let mut errors: Vec<(f64, usize)> = (0..40).map(|_| (0.1, 10)).collect();
+        errors.push((1e5, 10));
+        assert!((trimmed_rms(&mut errors).unwrap() - 0.1).abs() < 1e-12);
+        // Under 20 pixels nothing is left out (5% of them is less than one).
+        let mut few: Vec<(f64, usize)> = vec![(0.1, 10), (10.0, 10)];
+        let all = ((0.1 + 10.0) / 20.0f64).sqrt();
+        assert!((trimmed_rms(&mut few).unwrap() - all).abs() < 1e-12);
+        assert_eq!(trimmed_rms(&mut []), None);
     }
 }
