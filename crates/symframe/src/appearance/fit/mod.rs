@@ -561,13 +561,12 @@ mod tests {
     use super::*;
     use crate::frames::rig::uniform_cone_lights;
 
-    /// Beckmann brushed gold (a lobe outside the glTF family, a coloured metal) under 400
+    /// Beckmann brushed gold (a lobe outside the glTF family, a coloured metal) under 800
     /// lights, 12 of them held out: the exposure chosen by validation lights is the true one
     /// to within a factor of 2.83 (one and a half of the search's steps), and no relit pixel of
-    /// the glTF or automatic fit
-    /// under the held-out lights exceeds twice the brightest training sample of its pixel (the
-    /// true renders stay below that); the free-scale reading alone is far off on both counts
-    /// (docs/method.md, "Choosing the exposure").
+    /// the glTF or automatic fit under the held-out lights exceeds twice the brightest training
+    /// sample of its pixel (the true renders stay below that); the free-scale reading alone is
+    /// far off on both counts (docs/method.md, "Choosing the exposure").
     #[test]
     fn beckmann_gold_relit_without_fireflies() {
         use crate::appearance::relight::{Edits, Relighter};
